@@ -1,0 +1,151 @@
+//! A compute kernel: one entry point of a pass's WGSL with its own group(0) layout; group(1) is
+//! always the scene (`shaders/scene.wgsl`). Passes are small structs of these.
+
+use super::{Gpu, GpuError, shader};
+
+/// The kind of resource at one group(0) binding, in binding order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// `var<storage, read>`
+    Storage,
+    /// `var<storage, read_write>`
+    StorageReadWrite,
+    /// `texture_2d<u32>`
+    TextureUint,
+}
+
+impl Slot {
+    fn ty(self) -> wgpu::BindingType {
+        match self {
+            Slot::Storage | Slot::StorageReadWrite => wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage {
+                    read_only: self == Slot::Storage,
+                },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            Slot::TextureUint => wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Uint,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+        }
+    }
+}
+
+/// Compile a pass's WGSL (with the shared prelude) inside an error scope.
+pub fn module(gpu: &Gpu, label: &str, pass_wgsl: &str) -> Result<wgpu::ShaderModule, GpuError> {
+    let source = shader::source(pass_wgsl);
+    let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    match pollster::block_on(scope.pop()) {
+        None => Ok(module),
+        Some(e) => Err(GpuError::Pipeline {
+            label: label.to_owned(),
+            message: e.to_string(),
+        }),
+    }
+}
+
+/// One compute pipeline and its group(0) layout.
+pub struct Kernel {
+    label: String,
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl Kernel {
+    /// Build entry point `entry` of `module` with group(0) made of `slots` and group(1) the scene.
+    pub fn new(
+        gpu: &Gpu,
+        scene_layout: &wgpu::BindGroupLayout,
+        module: &wgpu::ShaderModule,
+        label: &str,
+        entry: &str,
+        slots: &[Slot],
+    ) -> Result<Self, GpuError> {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = slots
+            .iter()
+            .enumerate()
+            .map(|(i, s)| wgpu::BindGroupLayoutEntry {
+                binding: i as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: s.ty(),
+                count: None,
+            })
+            .collect();
+        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(&format!("{label}.layout")),
+            entries: &entries,
+        });
+        let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(&format!("{label}.pipeline_layout")),
+            bind_group_layouts: &[Some(&layout), Some(scene_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(&format!("{label}.pipeline")),
+            layout: Some(&pipeline_layout),
+            module,
+            entry_point: Some(entry),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline {
+                label: label.to_owned(),
+                message: e.to_string(),
+            });
+        }
+        Ok(Self {
+            label: label.to_owned(),
+            layout,
+            pipeline,
+        })
+    }
+
+    /// A group(0) bind group from resources in binding order.
+    pub fn bind(&self, gpu: &Gpu, resources: &[wgpu::BindingResource<'_>]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = resources
+            .iter()
+            .enumerate()
+            .map(|(i, r)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: r.clone(),
+            })
+            .collect();
+        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&format!("{}.bind_group", self.label)),
+            layout: &self.layout,
+            entries: &entries,
+        })
+    }
+
+    /// Record one dispatch in its own compute pass (with timestamps when given).
+    pub fn dispatch(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        group: &wgpu::BindGroup,
+        scene_group: &wgpu::BindGroup,
+        workgroups: [u32; 3],
+        timestamp_writes: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(&self.label),
+            timestamp_writes,
+        });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, group, &[]);
+        pass.set_bind_group(1, scene_group, &[]);
+        pass.dispatch_workgroups(workgroups[0], workgroups[1], workgroups[2]);
+    }
+}
+
+/// Workgroups needed to cover `n` items in groups of `size`.
+pub fn groups(n: u32, size: u32) -> u32 {
+    n.div_ceil(size)
+}

@@ -1,0 +1,214 @@
+//! The GPU side: one headless device, the scene's buffers, and one module per pass.
+//!
+//! Every pass owns its pipeline(s), bind-group layout and WGSL file, is built with
+//! `new(&Gpu, &GpuScene) -> Result<Self, GpuError>` and recorded with
+//! `record(&self, &mut CommandEncoder, ...)`. Passes that have a glossy variant expose two entry
+//! points, `main` and `main_glossy`; the glossy buffers are bound only by the latter and exist
+//! only when the scene has a glossy material.
+
+pub mod brute_force;
+pub mod direct;
+pub mod gather;
+pub mod interpolate;
+pub mod kernel;
+pub mod raw;
+pub mod renormalise;
+pub mod rsm;
+pub mod scene;
+pub mod shade;
+pub mod shader;
+pub mod timing;
+pub mod visibility;
+
+use bytemuck::Pod;
+
+/// Errors from the device and from pipeline creation.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter found (is a Vulkan driver installed? try `apt-get install mesa-vulkan-drivers libvulkan1`): {0}"
+    )]
+    NoAdapter(#[from] wgpu::RequestAdapterError),
+    #[error("could not open the GPU device: {0}")]
+    Device(#[from] wgpu::RequestDeviceError),
+    #[error("shader or pipeline `{label}` failed to build: {message}")]
+    Pipeline { label: String, message: String },
+    #[error("GPU validation error in {context}: {message}")]
+    Validation { context: String, message: String },
+    #[error("waiting for the GPU failed: {0}")]
+    Poll(#[from] wgpu::PollError),
+    #[error("mapping a readback buffer failed: {0}")]
+    Map(String),
+    #[error("{what} needs {needed} bytes, over the device limit of {limit}")]
+    TooLarge { what: String, needed: u64, limit: u64 },
+}
+
+/// A pair of per-lobe buffers: the diffuse one always, the glossy one only when the scene has a
+/// glossy material.
+pub struct Lobes {
+    pub diffuse: wgpu::Buffer,
+    pub glossy: Option<wgpu::Buffer>,
+}
+
+impl Lobes {
+    /// `count` elements of `T` per lobe, labelled `<label>_diffuse` / `<label>_glossy`.
+    pub fn new<T: Pod>(gpu: &Gpu, label: &str, count: usize, glossy: bool) -> Result<Self, GpuError> {
+        Ok(Self {
+            diffuse: gpu.storage_buffer_sized::<T>(&format!("{label}_diffuse"), count)?,
+            glossy: if glossy {
+                Some(gpu.storage_buffer_sized::<T>(&format!("{label}_glossy"), count)?)
+            } else {
+                None
+            },
+        })
+    }
+}
+
+/// The device, its queue and what the adapter can do. Owned by one thread; passes borrow it.
+pub struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter_info: wgpu::AdapterInfo,
+    /// Whether GPU timestamp queries (inside encoders) are available.
+    pub timestamps: bool,
+}
+
+impl Gpu {
+    /// Open the first adapter headlessly (backend choice honours `WGPU_BACKEND`).
+    pub fn new() -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<Self, GpuError> {
+        // Debug markers and validation layers are opt-in (WGPU_DEBUG=1, WGPU_VALIDATION=1): Mesa
+        // 22's lavapipe crashes in vkCmdBeginDebugUtilsLabelEXT, which wgpu's debug builds use.
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.flags = wgpu::InstanceFlags::empty().with_env();
+        desc.backends = wgpu::Backends::from_env().unwrap_or_default();
+        let instance = wgpu::Instance::new(desc);
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                ..Default::default()
+            })
+            .await?;
+        let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+        let timestamps = adapter.features().contains(wanted);
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("relume.device"),
+                required_features: if timestamps { wanted } else { wgpu::Features::empty() },
+                required_limits: adapter.limits(),
+                ..Default::default()
+            })
+            .await?;
+        Ok(Self {
+            device,
+            queue,
+            adapter_info: adapter.get_info(),
+            timestamps,
+        })
+    }
+
+    /// `"<name> (<backend>)"`, e.g. `"llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)"`.
+    pub fn adapter_name(&self) -> String {
+        format!("{} ({:?})", self.adapter_info.name, self.adapter_info.backend)
+    }
+
+    /// A storage buffer initialised from `data`, refusing sizes over the device limit.
+    pub fn storage_buffer<T: Pod>(
+        &self,
+        label: &str,
+        data: &[T],
+        extra: wgpu::BufferUsages,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        self.check_size(label, bytes.len() as u64)?;
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: (bytes.len() as u64).max(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+            mapped_at_creation: false,
+        });
+        self.queue.write_buffer(&buffer, 0, bytes);
+        Ok(buffer)
+    }
+
+    /// An uninitialised storage buffer of `count` elements of `T`.
+    pub fn storage_buffer_sized<T: Pod>(&self, label: &str, count: usize) -> Result<wgpu::Buffer, GpuError> {
+        let size = (count * std::mem::size_of::<T>()) as u64;
+        self.check_size(label, size)?;
+        Ok(self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.max(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        }))
+    }
+
+    fn check_size(&self, what: &str, needed: u64) -> Result<(), GpuError> {
+        let limits = self.device.limits();
+        let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        if needed > limit {
+            return Err(GpuError::TooLarge {
+                what: what.to_owned(),
+                needed,
+                limit,
+            });
+        }
+        Ok(())
+    }
+
+    /// Copy `count` elements of `T` out of `buffer` (which needs `COPY_SRC`) and wait for them.
+    pub fn read_buffer<T: Pod>(&self, buffer: &wgpu::Buffer, count: usize) -> Result<Vec<T>, GpuError> {
+        let size = (count * std::mem::size_of::<T>()) as u64;
+        if size == 0 {
+            return Ok(Vec::new());
+        }
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("relume.readback"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("relume.readback"),
+        });
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        self.queue.submit([encoder.finish()]);
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        rx.recv()
+            .map_err(|e| GpuError::Map(e.to_string()))?
+            .map_err(|e| GpuError::Map(e.to_string()))?;
+        let data = slice.get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?;
+        let out = bytemuck::cast_slice::<u8, T>(&data).to_vec();
+        drop(data);
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// Submit and wait until the device is idle.
+    pub fn submit_and_wait(&self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        self.queue.submit([encoder.finish()]);
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        Ok(())
+    }
+
+    /// Run `f` inside a validation error scope and turn any error into a `Result`.
+    pub fn validated<R>(&self, context: &str, f: impl FnOnce() -> R) -> Result<R, GpuError> {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let r = f();
+        match pollster::block_on(scope.pop()) {
+            None => Ok(r),
+            Some(e) => Err(GpuError::Validation {
+                context: context.to_owned(),
+                message: e.to_string(),
+            }),
+        }
+    }
+}

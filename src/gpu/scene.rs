@@ -1,0 +1,227 @@
+//! The scene flattened into world-space arrays (all meshes concatenated) and uploaded: the
+//! group(1) bind group every pass shares, plus the sparse points and vertex neighbours.
+
+use super::raw::{RawFrame, RawMaterial, RawSparsePoint, RawVertex};
+use super::{Gpu, GpuError};
+use crate::reference;
+use crate::scene::{NEIGHBOURS, Scene};
+use glam::{Mat3, Vec3};
+
+/// World-space arrays of a whole scene, as the GPU sees them (also the CPU twins' input).
+#[derive(Clone, Debug, Default)]
+pub struct FlatScene {
+    pub vertices: Vec<RawVertex>,
+    /// Three per triangle, into `vertices`.
+    pub indices: Vec<u32>,
+    pub triangle_materials: Vec<u32>,
+    pub materials: Vec<RawMaterial>,
+    pub sparse_points: Vec<RawSparsePoint>,
+    /// Per vertex, into `sparse_points`; `shader::NO_NEIGHBOUR` pads.
+    pub vertex_neighbours: Vec<[u32; NEIGHBOURS]>,
+}
+
+impl FlatScene {
+    /// Apply every mesh's model transform and concatenate.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let mut flat = FlatScene {
+            materials: scene
+                .materials
+                .iter()
+                .map(|m| RawMaterial {
+                    diffuse: m.diffuse.into(),
+                    exponent: m.exponent,
+                    specular: m.specular.into(),
+                    _pad0: 0.0,
+                })
+                .collect(),
+            ..Default::default()
+        };
+        for mesh in &scene.meshes {
+            let vertex_base = flat.vertices.len() as u32;
+            let sparse_base = flat.sparse_points.len() as u32;
+            let normal_matrix = Mat3::from_mat4(mesh.model_to_world).inverse().transpose();
+            let radius_scale = {
+                let m = Mat3::from_mat4(mesh.model_to_world);
+                m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length())
+            };
+            for (p, n) in mesh.world_positions().into_iter().zip(mesh.world_normals()) {
+                flat.vertices.push(RawVertex {
+                    position: p.into(),
+                    _pad0: 0.0,
+                    normal: n.into(),
+                    _pad1: 0.0,
+                });
+            }
+            for (t, m) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
+                flat.indices.extend(t.iter().map(|i| i + vertex_base));
+                flat.triangle_materials.push(*m);
+            }
+            let sparse = &mesh.sparse;
+            for i in 0..sparse.positions.len() {
+                let material = mesh.triangle_materials[sparse.triangles[i] as usize] as usize;
+                let normal = (normal_matrix * sparse.normals[i]).normalize_or(Vec3::Y);
+                flat.sparse_points.push(RawSparsePoint {
+                    position: mesh.model_to_world.transform_point3(sparse.positions[i]).into(),
+                    occluder_radius: sparse.occluder_radii[i] * radius_scale,
+                    normal: normal.into(),
+                    exponent: scene.materials[material].exponent,
+                });
+            }
+            for ids in &sparse.vertex_neighbours {
+                flat.vertex_neighbours
+                    .push(ids.map(|i| if i == u32::MAX { i } else { i + sparse_base }));
+            }
+        }
+        flat
+    }
+
+    pub fn vertex_count(&self) -> u32 {
+        self.vertices.len() as u32
+    }
+
+    pub fn triangle_count(&self) -> u32 {
+        self.triangle_materials.len() as u32
+    }
+
+    pub fn sparse_count(&self) -> u32 {
+        self.sparse_points.len() as u32
+    }
+
+    /// Interpolated surface of `triangle` at barycentrics `b`: (position, unit normal, material).
+    /// Twin of `surface_at` in `shaders/scene.wgsl`.
+    pub fn surface_at(&self, triangle: u32, b: glam::Vec2) -> (Vec3, Vec3, crate::reference::Surface) {
+        let t = 3 * triangle as usize;
+        let v = [0, 1, 2].map(|k| self.vertices[self.indices[t + k] as usize]);
+        let p = v.map(|v| Vec3::from(v.position));
+        let n = reference::barycentric(b, v[0].normal.into(), v[1].normal.into(), v[2].normal.into());
+        let normal = if n.length_squared() > 1e-20 {
+            n.normalize()
+        } else {
+            (p[1] - p[0]).cross(p[2] - p[0]).normalize()
+        };
+        let m = self.materials[self.triangle_materials[triangle as usize] as usize];
+        let surface = reference::Surface {
+            diffuse: m.diffuse.into(),
+            specular: m.specular.into(),
+            exponent: m.exponent,
+        };
+        (reference::barycentric(b, p[0], p[1], p[2]), normal, surface)
+    }
+
+    /// Centre and radius of a sphere bounding every vertex (m).
+    pub fn bounding_sphere(&self) -> (Vec3, f32) {
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for v in &self.vertices {
+            lo = lo.min(v.position.into());
+            hi = hi.max(v.position.into());
+        }
+        let centre = (lo + hi) * 0.5;
+        (centre, (hi - lo).length() * 0.5)
+    }
+}
+
+/// The uploaded scene.
+pub struct GpuScene {
+    pub flat: FlatScene,
+    /// Layout of group(1) (`shaders/scene.wgsl`).
+    pub layout: wgpu::BindGroupLayout,
+    pub bind_group: wgpu::BindGroup,
+    /// The `Frame` uniform, rewritten every frame.
+    pub frame: wgpu::Buffer,
+    pub vertices: wgpu::Buffer,
+    pub indices: wgpu::Buffer,
+    pub sparse_points: wgpu::Buffer,
+    pub vertex_neighbours: wgpu::Buffer,
+}
+
+impl GpuScene {
+    pub fn new(gpu: &Gpu, flat: FlatScene) -> Result<Self, GpuError> {
+        let frame = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("scene.frame"),
+            size: std::mem::size_of::<RawFrame>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let none = wgpu::BufferUsages::empty();
+        let vertices = gpu.storage_buffer("scene.vertices", &flat.vertices, none)?;
+        let indices = gpu.storage_buffer("scene.indices", &flat.indices, none)?;
+        let triangle_materials = gpu.storage_buffer("scene.triangle_materials", &flat.triangle_materials, none)?;
+        let materials = gpu.storage_buffer("scene.materials", &flat.materials, none)?;
+        let sparse_points = gpu.storage_buffer("scene.sparse_points", &flat.sparse_points, none)?;
+        let vertex_neighbours = gpu.storage_buffer("scene.vertex_neighbours", &flat.vertex_neighbours, none)?;
+        let visibility = wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
+        let storage = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("scene.layout"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage(1),
+                storage(2),
+                storage(3),
+                storage(4),
+            ],
+        });
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("scene.bind_group"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: frame.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: vertices.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: indices.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: triangle_materials.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: materials.as_entire_binding(),
+                },
+            ],
+        });
+        Ok(Self {
+            flat,
+            layout,
+            bind_group,
+            frame,
+            vertices,
+            indices,
+            sparse_points,
+            vertex_neighbours,
+        })
+    }
+
+    /// Whether any triangle's material has a specular albedo.
+    pub fn has_glossy_material(&self) -> bool {
+        self.flat.triangle_materials.iter().any(|&m| {
+            let s = self.flat.materials[m as usize].specular;
+            s.iter().any(|c| *c > 0.0)
+        })
+    }
+}

@@ -1,0 +1,64 @@
+//! WGSL assembly: the constants the shaders share with Rust are generated from the Rust
+//! definitions and prepended, followed by `common.wgsl`, `scene.wgsl` and the pass's own file.
+
+use crate::reference;
+
+/// Threads per workgroup of the 1-D passes.
+pub const WORKGROUP_SIZE: u32 = 64;
+/// VALs per workgroup-memory tile in the gather and the brute force (also their workgroup size).
+pub const TILE_SIZE: u32 = 64;
+/// Sparse neighbours interpolated per vertex.
+pub const NEIGHBOURS: u32 = crate::scene::NEIGHBOURS as u32;
+/// Padding value of a vertex's neighbour list.
+pub const NO_NEIGHBOUR: u32 = u32::MAX;
+/// Light distance written where an RSM texel sees nothing (m).
+pub const NO_SURFACE_DISTANCE: f32 = 3.0e38;
+/// Shadow-map depth bias in RSM texel footprints.
+pub const SHADOW_BIAS_TEXELS: f32 = 1.5;
+
+const COMMON: &str = include_str!("../../shaders/common.wgsl");
+const SCENE: &str = include_str!("../../shaders/scene.wgsl");
+
+fn header() -> String {
+    format!(
+        "const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\
+         const TILE_SIZE: u32 = {TILE_SIZE}u;\n\
+         const NEIGHBOURS: u32 = {NEIGHBOURS}u;\n\
+         const NO_NEIGHBOUR: u32 = {NO_NEIGHBOUR}u;\n\
+         const NO_SURFACE_DISTANCE: f32 = {NO_SURFACE_DISTANCE:e};\n\
+         const SHADOW_BIAS_TEXELS: f32 = {SHADOW_BIAS_TEXELS:e};\n\
+         const COINCIDENT_DISTANCE_SQ: f32 = {:e};\n\
+         const GATHER_EPSILON: f32 = {:e};\n\
+         const MIN_LIGHT_DISTANCE: f32 = {:e};\n\
+         const MIN_RENORMALISE_COSINE: f32 = {:e};\n\
+         const MIN_GLOSSY_RESPONSE: f32 = {:e};\n",
+        reference::COINCIDENT_DISTANCE_SQ,
+        reference::GATHER_EPSILON,
+        reference::MIN_LIGHT_DISTANCE,
+        reference::MIN_RENORMALISE_COSINE,
+        reference::MIN_GLOSSY_RESPONSE,
+    )
+}
+
+/// The full WGSL source of a pass whose own file is `pass`.
+pub fn source(pass: &str) -> String {
+    format!("{}\n{COMMON}\n{SCENE}\n{pass}", header())
+}
+
+/// Every pass's full source, by file name (for the layout and compilation tests).
+pub fn all_sources() -> Vec<(&'static str, String)> {
+    use super::*;
+    [
+        ("visibility.wgsl", visibility::WGSL),
+        ("rsm.wgsl", rsm::WGSL),
+        ("gather.wgsl", gather::WGSL),
+        ("renormalise.wgsl", renormalise::WGSL),
+        ("interpolate.wgsl", interpolate::WGSL),
+        ("shade.wgsl", shade::WGSL),
+        ("brute_force.wgsl", brute_force::WGSL),
+        ("direct.wgsl", direct::WGSL),
+    ]
+    .into_iter()
+    .map(|(name, text)| (name, source(text)))
+    .collect()
+}

@@ -1,0 +1,210 @@
+//! Linear HDR images, their tone mapping and output, and the error metrics that compare them.
+//!
+//! Tone mapping is deliberately simple and documented: multiply by the exposure, clip to
+//! [0, 1], encode as sRGB. Auto exposure maps the 99th-percentile luminance of covered pixels
+//! to 1.
+
+use crate::reference::luminance;
+use glam::Vec3;
+use std::path::Path;
+
+/// Errors writing images.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("writing {path}: {source}")]
+    Write { path: String, source: ::image::ImageError },
+}
+
+/// Linear radiance (W/(m² sr)) per pixel, row-major from the top; alpha is coverage (1 where
+/// geometry was hit, 0 for background).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearImage {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[f32; 4]>,
+}
+
+impl LinearImage {
+    pub fn rgb(&self, i: usize) -> Vec3 {
+        let p = self.pixels[i];
+        Vec3::new(p[0], p[1], p[2])
+    }
+
+    pub fn covered(&self, i: usize) -> bool {
+        self.pixels[i][3] > 0.0
+    }
+
+    /// Number of covered pixels.
+    pub fn coverage(&self) -> usize {
+        (0..self.pixels.len()).filter(|&i| self.covered(i)).count()
+    }
+
+    /// Pixel-wise sum (coverage is the union).
+    pub fn add(&self, other: &LinearImage) -> LinearImage {
+        let pixels = self
+            .pixels
+            .iter()
+            .zip(&other.pixels)
+            .map(|(a, b)| [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3].max(b[3])])
+            .collect();
+        LinearImage {
+            width: self.width,
+            height: self.height,
+            pixels,
+        }
+    }
+
+    /// Exposure that maps the 99th-percentile luminance of covered pixels to 1 (1 if dark).
+    pub fn auto_exposure(&self) -> f32 {
+        let mut y: Vec<f32> = (0..self.pixels.len())
+            .filter(|&i| self.covered(i))
+            .map(|i| luminance(self.rgb(i)))
+            .collect();
+        if y.is_empty() {
+            return 1.0;
+        }
+        y.sort_by(f32::total_cmp);
+        let p99 = y[((y.len() - 1) as f32 * 0.99) as usize];
+        if p99 > 0.0 && p99.is_finite() { 1.0 / p99 } else { 1.0 }
+    }
+
+    /// 8-bit sRGB after `exposure` and clipping.
+    pub fn tone_map(&self, exposure: f32) -> ::image::RgbImage {
+        let mut out = ::image::RgbImage::new(self.width, self.height);
+        for (i, px) in out.pixels_mut().enumerate() {
+            let c = self.rgb(i) * exposure;
+            *px = ::image::Rgb([encode_srgb(c.x), encode_srgb(c.y), encode_srgb(c.z)]);
+        }
+        out
+    }
+
+    pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), ImageError> {
+        self.tone_map(exposure).save(path).map_err(|source| ImageError::Write {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+
+    /// Linear float radiance as OpenEXR (RGBA f32; alpha = coverage).
+    pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
+        let data: Vec<f32> = self.pixels.iter().flatten().copied().collect();
+        let img =
+            ::image::Rgba32FImage::from_raw(self.width, self.height, data).expect("pixel count matches dimensions");
+        img.save(path).map_err(|source| ImageError::Write {
+            path: path.display().to_string(),
+            source,
+        })
+    }
+}
+
+/// Linear [0, 1] to 8-bit sRGB (values outside are clipped).
+pub fn encode_srgb(linear: f32) -> u8 {
+    let c = if linear.is_finite() {
+        linear.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let s = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// 8-bit sRGB to linear [0, 1].
+pub fn decode_srgb(encoded: u8) -> f32 {
+    let s = encoded as f32 / 255.0;
+    if s <= 0.040_45 {
+        s / 12.92
+    } else {
+        ((s + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Relative RMSE of `test` against `reference` over pixels the reference covers:
+/// `sqrt(sum |t - r|^2 / sum |r|^2)` over RGB. 0 when both are black.
+pub fn relative_rmse(test: &LinearImage, reference: &LinearImage) -> f64 {
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    for i in 0..reference.pixels.len() {
+        if !reference.covered(i) {
+            continue;
+        }
+        let (t, r) = (test.rgb(i), reference.rgb(i));
+        num += (t - r).length_squared() as f64;
+        den += r.length_squared() as f64;
+    }
+    if den > 0.0 {
+        (num / den).sqrt()
+    } else if num > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
+/// Mean FLIP error (0 = identical, 1 = maximal) between the tone-mapped images, both at the
+/// same `exposure`, averaged over pixels the reference covers.
+pub fn flip_mean(test: &LinearImage, reference: &LinearImage, exposure: f32) -> f64 {
+    let to_flip = |img: &LinearImage| {
+        let rgb = img.tone_map(exposure);
+        nv_flip::FlipImageRgb8::with_data(img.width, img.height, rgb.as_raw())
+    };
+    let error = nv_flip::flip(to_flip(reference), to_flip(test), nv_flip::DEFAULT_PIXELS_PER_DEGREE).to_vec();
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for (i, e) in error.iter().enumerate() {
+        if reference.covered(i) {
+            sum += *e as f64;
+            n += 1;
+        }
+    }
+    if n > 0 { sum / n as f64 } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(values: &[[f32; 4]]) -> LinearImage {
+        LinearImage {
+            width: values.len() as u32,
+            height: 1,
+            pixels: values.to_vec(),
+        }
+    }
+
+    #[test]
+    fn srgb_round_trips() {
+        for v in 0..=255u8 {
+            assert_eq!(encode_srgb(decode_srgb(v)), v);
+        }
+        assert_eq!(encode_srgb(f32::NAN), 0);
+        assert_eq!(encode_srgb(7.0), 255);
+    }
+
+    #[test]
+    fn relative_rmse_ignores_background_and_scales() {
+        let r = image(&[[1.0, 1.0, 1.0, 1.0], [5.0, 5.0, 5.0, 0.0]]);
+        let t = image(&[[1.1, 1.1, 1.1, 1.0], [0.0, 0.0, 0.0, 0.0]]);
+        assert!((relative_rmse(&t, &r) - 0.1).abs() < 1e-6);
+        assert_eq!(relative_rmse(&r, &r), 0.0);
+    }
+
+    #[test]
+    fn flip_is_zero_for_identical_and_positive_for_different() {
+        let w = 32;
+        let px: Vec<[f32; 4]> = (0..w * w).map(|i| [(i % w) as f32 / w as f32, 0.5, 0.2, 1.0]).collect();
+        let a = LinearImage {
+            width: w,
+            height: w,
+            pixels: px.clone(),
+        };
+        let b = LinearImage {
+            width: w,
+            height: w,
+            pixels: px.iter().map(|p| [p[0] * 0.5, p[1], p[2], 1.0]).collect(),
+        };
+        assert!(flip_mean(&a, &a, 1.0) < 1e-6);
+        assert!(flip_mean(&b, &a, 1.0) > 0.01);
+    }
+}

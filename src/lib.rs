@@ -1,0 +1,30 @@
+//! relume: one bounce of indirect light, diffuse and glossy, from thousands of virtual area
+//! lights (VALs), computed on the GPU with the sparse model-space shading method of Lensing &
+//! Broll 2013 (see `DESIGN.md` in the shared specification).
+//!
+//! # Conventions
+//!
+//! - Units: metres; flux in W, radiant intensity in W/sr, irradiance in W/m², radiance in
+//!   W/(m² sr); colours are linear RGB until an image is written (`image`).
+//! - Coordinates: right-handed world space, +Y up by convention of the fixtures; cameras look
+//!   down their local -Z; every pose is camera-to-world. Clip space is wgpu's (z in [0, 1]).
+//! - Angles in scene files are degrees; inside relume they are radians.
+//!
+//! # Layout
+//!
+//! - [`scene`]: scene files (JSON), OBJ/MTL loading, subdivision, sparse points and neighbours.
+//! - [`reference`]: the CPU twin of every GPU computation: the readable statement of the maths.
+//! - [`gpu`]: the device and one module per pass, each with its WGSL file in `shaders/`.
+//! - [`renderer`]: a frame, the passes called in order.
+//! - [`image`]: tone mapping, PNG/EXR output, error metrics.
+//!
+//! # Who owns the GPU
+//!
+//! One [`gpu::Gpu`] owns the wgpu device and queue and lives on one thread; passes and the
+//! renderer borrow it. Everything is headless.
+
+pub mod gpu;
+pub mod image;
+pub mod reference;
+pub mod renderer;
+pub mod scene;

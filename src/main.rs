@@ -1,0 +1,233 @@
+//! The `relume` command line.
+
+use anyhow::Context;
+use clap::{Parser, Subcommand, ValueEnum};
+use relume::gpu::Gpu;
+use relume::gpu::timing::TimingSource;
+use relume::image::{LinearImage, flip_mean, relative_rmse};
+use relume::renderer::{Method, Renderer, stage};
+use relume::scene::Scene;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Parser)]
+#[command(
+    name = "relume",
+    version,
+    about = "One-bounce global illumination from thousands of virtual area lights"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene file to a tone-mapped PNG (and optionally linear EXR).
+    Render {
+        /// Scene description (JSON).
+        scene: PathBuf,
+        /// Output PNG (8-bit sRGB after exposure and clipping).
+        #[arg(long, default_value = "out.png")]
+        out: PathBuf,
+        /// Also write linear float radiance (OpenEXR, RGBA f32, alpha = coverage).
+        #[arg(long)]
+        hdr: Option<PathBuf>,
+        /// Which light to write.
+        #[arg(long, value_enum, default_value_t = Component::Full)]
+        component: Component,
+        /// How the indirect light is computed.
+        #[arg(long, value_enum, default_value_t = Method::Sparse)]
+        method: Method,
+        #[command(flatten)]
+        size: Size,
+        /// Exposure multiplier before tone mapping (default: the scene's, else automatic).
+        #[arg(long)]
+        exposure: Option<f32>,
+    },
+    /// Render with the sparse method and the brute-force reference and print the error and cost.
+    Compare {
+        scene: PathBuf,
+        /// Print one JSON object (the only output format for now; kept for scripts).
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        size: Size,
+        /// Write sparse.png, brute_force.png and difference images of the indirect light here.
+        #[arg(long)]
+        images: Option<PathBuf>,
+    },
+}
+
+#[derive(clap::Args)]
+struct Size {
+    /// Override the camera's width in pixels (1..=8192).
+    #[arg(long)]
+    width: Option<u32>,
+    /// Override the camera's height in pixels (1..=8192).
+    #[arg(long)]
+    height: Option<u32>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Component {
+    Direct,
+    Indirect,
+    Full,
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()))
+        .with_writer(std::io::stderr)
+        .init();
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Render {
+            scene,
+            out,
+            hdr,
+            component,
+            method,
+            size,
+            exposure,
+        } => {
+            let scene = load(&scene)?;
+            let (w, h) = size.resolve(&scene)?;
+            let gpu = Gpu::new()?;
+            let mut renderer = Renderer::new(&gpu, &scene)?;
+            let frame = renderer.render(&gpu, method, w, h)?;
+            let image = match component {
+                Component::Direct => frame.direct,
+                Component::Indirect => frame.indirect,
+                Component::Full => frame.direct.add(&frame.indirect),
+            };
+            if let Some(e) = exposure {
+                anyhow::ensure!(
+                    e.is_finite() && e > 0.0,
+                    "--exposure: must be a positive number, got {e}"
+                );
+            }
+            let exposure = exposure
+                .or(scene.settings.exposure)
+                .unwrap_or_else(|| image.auto_exposure());
+            image.write_png(&out, exposure)?;
+            if let Some(hdr) = hdr {
+                image.write_exr(&hdr)?;
+            }
+            eprintln!(
+                "wrote {} ({w}x{h}, {} VALs, {} sparse points, exposure {exposure:.4}, {:?} {:.2} ms total)",
+                out.display(),
+                frame.val_count,
+                scene.sparse_point_count(),
+                frame.timings.source,
+                frame.timings.total()
+            );
+            Ok(())
+        }
+        Command::Compare {
+            scene,
+            json: _,
+            size,
+            images,
+        } => {
+            let scene = load(&scene)?;
+            let (w, h) = size.resolve(&scene)?;
+            let gpu = Gpu::new()?;
+            let start = Instant::now();
+            let mut renderer = Renderer::new(&gpu, &scene)?;
+            let setup_ms = start.elapsed().as_secs_f64() * 1e3;
+            // Warm-up renders compile and upload everything once; the measured ones follow.
+            renderer.render(&gpu, Method::Sparse, w, h)?;
+            renderer.render(&gpu, Method::BruteForce, w, h)?;
+            let sparse = renderer.render(&gpu, Method::Sparse, w, h)?;
+            let brute = renderer.render(&gpu, Method::BruteForce, w, h)?;
+            let exposure = brute.indirect.auto_exposure();
+            let sparse_ms = sparse.timings.total_of(stage::SPARSE_INDIRECT);
+            let brute_force_ms = brute.timings.total_of(stage::BRUTE_FORCE_INDIRECT);
+            if let Some(dir) = images {
+                write_comparison(&dir, &sparse.indirect, &brute.indirect, exposure)?;
+            }
+            let report = serde_json::json!({
+                "scene": scene_name(&scene),
+                "adapter": gpu.adapter_name(),
+                "timing": match sparse.timings.source { TimingSource::GpuTimestamps => "gpu_timestamps", TimingSource::WallClock => "wall_clock" },
+                "width": w,
+                "height": h,
+                "pixels": w as u64 * h as u64,
+                "covered_pixels": brute.indirect.coverage(),
+                "vals": sparse.val_count,
+                "rsm_resolution": scene.settings.rsm_resolution,
+                "sparse_points": scene.sparse_point_count(),
+                "triangles": scene.triangle_count(),
+                "vertices": scene.vertex_count(),
+                "glossy": renderer.glossy(),
+                "sparse_ms": sparse_ms,
+                "brute_force_ms": brute_force_ms,
+                "speedup": brute_force_ms / sparse_ms,
+                "indirect_rel_rmse": relative_rmse(&sparse.indirect, &brute.indirect),
+                "indirect_flip_mean": flip_mean(&sparse.indirect, &brute.indirect, exposure),
+                "exposure": exposure,
+                "setup_ms": setup_ms,
+                "sparse_stages_ms": sparse.timings.stages,
+                "brute_force_stages_ms": brute.timings.stages,
+            });
+            println!("{}", serde_json::to_string_pretty(&report)?);
+            Ok(())
+        }
+    }
+}
+
+impl Size {
+    fn resolve(&self, scene: &Scene) -> anyhow::Result<(u32, u32)> {
+        let check = |name: &str, v: u32| {
+            anyhow::ensure!((1..=8192).contains(&v), "--{name}: must be in 1..=8192, got {v}");
+            Ok(v)
+        };
+        Ok((
+            check("width", self.width.unwrap_or(scene.camera.width))?,
+            check("height", self.height.unwrap_or(scene.camera.height))?,
+        ))
+    }
+}
+
+fn load(path: &Path) -> anyhow::Result<Scene> {
+    Scene::load(path).with_context(|| format!("loading scene {}", path.display()))
+}
+
+fn scene_name(scene: &Scene) -> String {
+    scene
+        .meshes
+        .iter()
+        .map(|m| m.name.as_str())
+        .collect::<Vec<_>>()
+        .join("+")
+}
+
+fn write_comparison(dir: &Path, sparse: &LinearImage, brute: &LinearImage, exposure: f32) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    sparse.write_png(&dir.join("indirect_sparse.png"), exposure)?;
+    brute.write_png(&dir.join("indirect_brute_force.png"), exposure)?;
+    let diff = LinearImage {
+        width: sparse.width,
+        height: sparse.height,
+        pixels: sparse
+            .pixels
+            .iter()
+            .zip(&brute.pixels)
+            .map(|(s, b)| [(s[0] - b[0]).abs(), (s[1] - b[1]).abs(), (s[2] - b[2]).abs(), b[3]])
+            .collect(),
+    };
+    diff.write_png(&dir.join("indirect_difference.png"), exposure * 4.0)?;
+    Ok(())
+}

@@ -1,0 +1,1045 @@
+//! The scene file: serde types mirroring the JSON, their validation, and their conversion to the
+//! loaded types. The JSON speaks degrees and the loaded types radians; the conversion happens
+//! here, once.
+//!
+//! ```json
+//! {
+//!   "meshes": [{"obj": "cornell_box/CornellBox-Original.obj", "sparse_points": 1024,
+//!               "transform": {"translation": [0, 0, 0], "rotation_deg": [0, 0, 0], "scale": 1},
+//!               "material": {"diffuse": [0.5, 0.5, 0.5], "specular": [0, 0, 0], "exponent": 1},
+//!               "materials": {"leftWall": {"diffuse": [0.6, 0.1, 0.1]}},
+//!               "skip_groups": ["light"]}],
+//!   "light": {"position": [0, 1.9, 0], "direction": [0, -1, 0], "inner_angle_deg": 20,
+//!             "outer_angle_deg": 30, "intensity": [10, 10, 10]},
+//!   "camera": {"position": [0, 1, 3.5], "target": [0, 1, 0], "up": [0, 1, 0], "fov_y_deg": 40,
+//!              "width": 512, "height": 512},
+//!   "settings": {"rsm_resolution": 128, "glossy": true, "seed": 1, "exposure": null}
+//! }
+//! ```
+//!
+//! Unknown fields are errors. Every error names the field path, e.g.
+//! `meshes[0].transform.scale: must be > 0, got -1`.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use glam::{EulerRot, Mat4, Quat, Vec3};
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
+use serde::{Deserialize, Serialize};
+
+use super::{Camera, Material, SceneError, Settings, SpotLight};
+
+/// Most sparse points one mesh may have.
+pub const MAX_SPARSE_POINTS: u32 = 65_536;
+/// Largest image side, pixels.
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+/// Smallest and largest RSM side, texels.
+pub const RSM_RESOLUTION_RANGE: (u32, u32) = (8, 2048);
+/// Largest spot light outer half-angle, degrees.
+pub const MAX_OUTER_ANGLE_DEG: f32 = 80.0;
+/// Open interval of the vertical field of view, degrees.
+pub const FOV_Y_RANGE_DEG: (f32, f32) = (1.0, 170.0);
+
+/// Largest amount by which `diffuse + specular` may exceed 1 before it counts as an error
+/// (absorbs decimal-to-binary rounding of values such as 0.7 + 0.3).
+const ENERGY_TOLERANCE: f32 = 1e-6;
+
+/// A whole scene file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDescription {
+    /// The meshes (at least one).
+    pub meshes: Vec<MeshDescription>,
+    /// The spot light.
+    pub light: LightDescription,
+    /// The camera.
+    pub camera: CameraDescription,
+    /// Render settings; all have defaults.
+    #[serde(default)]
+    pub settings: SettingsDescription,
+}
+
+/// One mesh entry.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshDescription {
+    /// OBJ file, relative to the scene file's directory.
+    pub obj: String,
+    /// Model-to-world transform; identity when absent.
+    #[serde(default)]
+    pub transform: TransformDescription,
+    /// Number of sparse shading points on this mesh, in 1..=65536.
+    pub sparse_points: u32,
+    /// Replaces every material of the mesh (those from the MTL and the default one).
+    #[serde(default)]
+    pub material: Option<MaterialDescription>,
+    /// Replaces MTL materials by name; wins over `material`. Unknown names are errors.
+    #[serde(default)]
+    pub materials: BTreeMap<String, MaterialDescription>,
+    /// OBJ groups/objects (`g`/`o` names) not to load. Unknown names are errors.
+    #[serde(default)]
+    pub skip_groups: Vec<String>,
+}
+
+/// Scale, then rotation, then translation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransformDescription {
+    /// Translation, m.
+    #[serde(default)]
+    pub translation: [f32; 3],
+    /// Euler angles about X, then Y, then Z (glam `EulerRot::XYZ`), degrees.
+    #[serde(default)]
+    pub rotation_deg: [f32; 3],
+    /// Uniform or per-axis scale, each > 0.
+    #[serde(default)]
+    pub scale: ScaleDescription,
+}
+
+impl Default for TransformDescription {
+    fn default() -> Self {
+        TransformDescription {
+            translation: [0.0; 3],
+            rotation_deg: [0.0; 3],
+            scale: ScaleDescription::default(),
+        }
+    }
+}
+
+/// A scale: a single number, or `[x, y, z]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum ScaleDescription {
+    /// The same factor on every axis.
+    Uniform(f32),
+    /// One factor per axis.
+    PerAxis([f32; 3]),
+}
+
+impl Default for ScaleDescription {
+    fn default() -> Self {
+        ScaleDescription::Uniform(1.0)
+    }
+}
+
+impl ScaleDescription {
+    /// The per-axis factors.
+    pub fn to_vec3(self) -> Vec3 {
+        match self {
+            ScaleDescription::Uniform(s) => Vec3::splat(s),
+            ScaleDescription::PerAxis(s) => Vec3::from_array(s),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for ScaleDescription {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct ScaleVisitor;
+
+        impl<'de> Visitor<'de> for ScaleVisitor {
+            type Value = ScaleDescription;
+
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a number or an array [x, y, z]")
+            }
+
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<Self::Value, E> {
+                Ok(ScaleDescription::Uniform(v as f32))
+            }
+
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<Self::Value, E> {
+                Ok(ScaleDescription::Uniform(v as f32))
+            }
+
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<Self::Value, E> {
+                Ok(ScaleDescription::Uniform(v as f32))
+            }
+
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
+                let mut xyz = [0.0f32; 3];
+                for (i, value) in xyz.iter_mut().enumerate() {
+                    *value = seq.next_element()?.ok_or_else(|| de::Error::invalid_length(i, &self))?;
+                }
+                if seq.next_element::<de::IgnoredAny>()?.is_some() {
+                    return Err(de::Error::invalid_length(4, &self));
+                }
+                Ok(ScaleDescription::PerAxis(xyz))
+            }
+        }
+
+        deserializer.deserialize_any(ScaleVisitor)
+    }
+}
+
+/// A material. Each channel in [0, 1], `diffuse + specular <= 1` per channel.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialDescription {
+    /// Diffuse albedo `rho_d`, linear RGB; default 0.5 grey.
+    #[serde(default = "default_diffuse")]
+    pub diffuse: [f32; 3],
+    /// Specular albedo `rho_s`, linear RGB; default black.
+    #[serde(default)]
+    pub specular: [f32; 3],
+    /// Phong exponent `k`, in [0, 1e4]; default 1.
+    #[serde(default = "default_exponent")]
+    pub exponent: f32,
+}
+
+fn default_diffuse() -> [f32; 3] {
+    Material::DEFAULT.diffuse.to_array()
+}
+
+fn default_exponent() -> f32 {
+    Material::DEFAULT.exponent
+}
+
+impl Default for MaterialDescription {
+    fn default() -> Self {
+        MaterialDescription {
+            diffuse: default_diffuse(),
+            specular: [0.0; 3],
+            exponent: default_exponent(),
+        }
+    }
+}
+
+impl MaterialDescription {
+    /// The material (assumes [`MaterialDescription::validate`] passed).
+    pub fn to_material(&self) -> Material {
+        Material {
+            diffuse: Vec3::from_array(self.diffuse),
+            specular: Vec3::from_array(self.specular),
+            exponent: self.exponent,
+        }
+    }
+
+    /// Checks ranges and energy conservation; `field` is this material's path.
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        unit_interval3(self.diffuse, &format!("{field}.diffuse"))?;
+        unit_interval3(self.specular, &format!("{field}.specular"))?;
+        in_closed(self.exponent, 0.0, Material::MAX_EXPONENT, &format!("{field}.exponent"))?;
+        for (channel, name) in ["red", "green", "blue"].iter().enumerate() {
+            let (d, s) = (self.diffuse[channel], self.specular[channel]);
+            if d + s > 1.0 + ENERGY_TOLERANCE {
+                return Err(SceneError::field(
+                    format!("{field}.specular[{channel}]"),
+                    format!(
+                        "diffuse + specular must be <= 1 in every channel (energy conservation), \
+                         got {d} + {s} = {} in channel {channel} ({name})",
+                        d + s
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The spot light.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightDescription {
+    /// World-space position, m.
+    pub position: [f32; 3],
+    /// World-space axis direction; normalised on load, must be nonzero.
+    pub direction: [f32; 3],
+    /// Inner half-angle, degrees, in [0, `outer_angle_deg`].
+    pub inner_angle_deg: f32,
+    /// Outer half-angle, degrees, in (0, 80].
+    pub outer_angle_deg: f32,
+    /// Radiant intensity on the axis, W/sr, linear RGB, each >= 0.
+    pub intensity: [f32; 3],
+}
+
+impl LightDescription {
+    /// The light (assumes [`SceneDescription::validate`] passed).
+    pub fn to_spot_light(&self) -> SpotLight {
+        SpotLight {
+            position: Vec3::from_array(self.position),
+            direction: Vec3::from_array(self.direction).normalize_or(Vec3::NEG_Y),
+            inner_angle: self.inner_angle_deg.to_radians(),
+            outer_angle: self.outer_angle_deg.to_radians(),
+            intensity: Vec3::from_array(self.intensity),
+        }
+    }
+
+    fn validate(&self, field: &str) -> Result<(), SceneError> {
+        finite3(self.position, &format!("{field}.position"))?;
+        let direction_field = format!("{field}.direction");
+        finite3(self.direction, &direction_field)?;
+        if Vec3::from_array(self.direction).length() == 0.0 {
+            return Err(SceneError::field(direction_field, "must be nonzero, got [0, 0, 0]"));
+        }
+        let outer_field = format!("{field}.outer_angle_deg");
+        finite(self.outer_angle_deg, &outer_field)?;
+        if !(self.outer_angle_deg > 0.0 && self.outer_angle_deg <= MAX_OUTER_ANGLE_DEG) {
+            return Err(SceneError::field(
+                outer_field,
+                format!("must be in (0, {MAX_OUTER_ANGLE_DEG}], got {}", self.outer_angle_deg),
+            ));
+        }
+        let inner_field = format!("{field}.inner_angle_deg");
+        finite(self.inner_angle_deg, &inner_field)?;
+        if !(self.inner_angle_deg >= 0.0 && self.inner_angle_deg <= self.outer_angle_deg) {
+            return Err(SceneError::field(
+                inner_field,
+                format!(
+                    "must be in [0, outer_angle_deg = {}], got {}",
+                    self.outer_angle_deg, self.inner_angle_deg
+                ),
+            ));
+        }
+        let intensity_field = format!("{field}.intensity");
+        for (i, &value) in self.intensity.iter().enumerate() {
+            at_least(value, 0.0, &format!("{intensity_field}[{i}]"))?;
+        }
+        Ok(())
+    }
+}
+
+/// The camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDescription {
+    /// World-space eye position, m.
+    pub position: [f32; 3],
+    /// World-space point looked at, m.
+    pub target: [f32; 3],
+    /// World-space up direction; default +Y.
+    #[serde(default = "default_up")]
+    pub up: [f32; 3],
+    /// Vertical field of view (full angle), degrees, in (1, 170).
+    pub fov_y_deg: f32,
+    /// Image width, pixels, in 1..=8192.
+    pub width: u32,
+    /// Image height, pixels, in 1..=8192.
+    pub height: u32,
+}
+
+fn default_up() -> [f32; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+impl CameraDescription {
+    /// The camera (assumes [`SceneDescription::validate`] passed).
+    pub fn to_camera(&self) -> Camera {
+        Camera {
+            position: Vec3::from_array(self.position),
+            target: Vec3::from_array(self.target),
+            up: Vec3::from_array(self.up).normalize_or(Vec3::Y),
+            fov_y: self.fov_y_deg.to_radians(),
+            width: self.width,
+            height: self.height,
+        }
+    }
+
+    fn validate(&self, field: &str) -> Result<(), SceneError> {
+        finite3(self.position, &format!("{field}.position"))?;
+        let target_field = format!("{field}.target");
+        finite3(self.target, &target_field)?;
+        let up_field = format!("{field}.up");
+        finite3(self.up, &up_field)?;
+        let view = Vec3::from_array(self.target) - Vec3::from_array(self.position);
+        let Some(view) = view.try_normalize() else {
+            return Err(SceneError::field(
+                target_field,
+                format!("must differ from the camera position, got {:?}", self.target),
+            ));
+        };
+        let Some(up) = Vec3::from_array(self.up).try_normalize() else {
+            return Err(SceneError::field(
+                up_field,
+                format!("must be nonzero, got {:?}", self.up),
+            ));
+        };
+        // sin of the angle between view and up; below ~0.06 degrees the basis is ill-defined.
+        if view.cross(up).length() < 1e-3 {
+            return Err(SceneError::field(
+                up_field,
+                format!(
+                    "must not be parallel to the view direction (target - position), got {:?}",
+                    self.up
+                ),
+            ));
+        }
+        let fov_field = format!("{field}.fov_y_deg");
+        finite(self.fov_y_deg, &fov_field)?;
+        let (lo, hi) = FOV_Y_RANGE_DEG;
+        if !(self.fov_y_deg > lo && self.fov_y_deg < hi) {
+            return Err(SceneError::field(
+                fov_field,
+                format!("must be in ({lo}, {hi}), got {}", self.fov_y_deg),
+            ));
+        }
+        int_in(self.width, 1, MAX_IMAGE_SIDE, &format!("{field}.width"))?;
+        int_in(self.height, 1, MAX_IMAGE_SIDE, &format!("{field}.height"))?;
+        Ok(())
+    }
+}
+
+/// Render settings; every field has a default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SettingsDescription {
+    /// RSM side, texels, in 8..=2048; default 128.
+    #[serde(default = "default_rsm_resolution")]
+    pub rsm_resolution: u32,
+    /// Allow the glossy gather; default true.
+    #[serde(default = "default_glossy")]
+    pub glossy: bool,
+    /// Seed for sparse point placement; default 1.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Exposure multiplier (> 0) before tone mapping; default `null` (automatic).
+    #[serde(default)]
+    pub exposure: Option<f32>,
+}
+
+fn default_rsm_resolution() -> u32 {
+    128
+}
+
+fn default_glossy() -> bool {
+    true
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+impl Default for SettingsDescription {
+    fn default() -> Self {
+        SettingsDescription {
+            rsm_resolution: default_rsm_resolution(),
+            glossy: default_glossy(),
+            seed: default_seed(),
+            exposure: None,
+        }
+    }
+}
+
+impl SettingsDescription {
+    /// The settings (assumes [`SceneDescription::validate`] passed).
+    pub fn to_settings(&self) -> Settings {
+        Settings {
+            rsm_resolution: self.rsm_resolution,
+            glossy: self.glossy,
+            seed: self.seed,
+            exposure: self.exposure,
+        }
+    }
+
+    fn validate(&self, field: &str) -> Result<(), SceneError> {
+        let (lo, hi) = RSM_RESOLUTION_RANGE;
+        int_in(self.rsm_resolution, lo, hi, &format!("{field}.rsm_resolution"))?;
+        if let Some(exposure) = self.exposure {
+            positive(exposure, &format!("{field}.exposure"))?;
+        }
+        Ok(())
+    }
+}
+
+impl TransformDescription {
+    /// The model-to-world matrix: scale, then rotation, then translation.
+    pub fn to_matrix(&self) -> Mat4 {
+        let [x, y, z] = self.rotation_deg.map(f32::to_radians);
+        Mat4::from_scale_rotation_translation(
+            self.scale.to_vec3(),
+            Quat::from_euler(EulerRot::XYZ, x, y, z),
+            Vec3::from_array(self.translation),
+        )
+    }
+
+    fn validate(&self, field: &str) -> Result<(), SceneError> {
+        finite3(self.translation, &format!("{field}.translation"))?;
+        finite3(self.rotation_deg, &format!("{field}.rotation_deg"))?;
+        let scale_field = format!("{field}.scale");
+        match self.scale {
+            ScaleDescription::Uniform(s) => positive(s, &scale_field),
+            ScaleDescription::PerAxis(s) => {
+                for (i, &value) in s.iter().enumerate() {
+                    positive(value, &format!("{scale_field}[{i}]"))?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+impl MeshDescription {
+    fn validate(&self, field: &str) -> Result<(), SceneError> {
+        if self.obj.trim().is_empty() {
+            return Err(SceneError::field(
+                format!("{field}.obj"),
+                "must name an OBJ file, got an empty string",
+            ));
+        }
+        self.transform.validate(&format!("{field}.transform"))?;
+        int_in(
+            self.sparse_points,
+            1,
+            MAX_SPARSE_POINTS,
+            &format!("{field}.sparse_points"),
+        )?;
+        if let Some(material) = &self.material {
+            material.validate(&format!("{field}.material"))?;
+        }
+        for (name, material) in &self.materials {
+            material.validate(&key_path(&format!("{field}.materials"), name))?;
+        }
+        Ok(())
+    }
+}
+
+impl SceneDescription {
+    /// Parses scene JSON. Syntax errors, unknown or missing fields and wrong types name the
+    /// field path and the line and column. Does not [validate](Self::validate) ranges.
+    pub fn from_json_str(text: &str) -> Result<SceneDescription, SceneError> {
+        serde_json::from_str(text).map_err(|error| json_error(text, &error))
+    }
+
+    /// Checks every value's range and the consistency between values, naming the field path
+    /// of the first problem found. Does not look at the mesh files.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        if self.meshes.is_empty() {
+            return Err(SceneError::field("meshes", "at least one mesh is required, got none"));
+        }
+        for (i, mesh) in self.meshes.iter().enumerate() {
+            mesh.validate(&format!("meshes[{i}]"))?;
+        }
+        self.light.validate("light")?;
+        self.camera.validate("camera")?;
+        self.settings.validate("settings")
+    }
+}
+
+/// `parent.key`, or `parent["key"]` when the key is not a plain identifier.
+pub(crate) fn key_path(parent: &str, key: &str) -> String {
+    let plain = !key.is_empty() && key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    match (parent.is_empty(), plain) {
+        (true, true) => key.to_owned(),
+        (false, true) => format!("{parent}.{key}"),
+        (_, false) => format!("{parent}[{key:?}]"),
+    }
+}
+
+fn finite(value: f32, field: &str) -> Result<(), SceneError> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(SceneError::field(
+            field,
+            format!("must be a finite number, got {value}"),
+        ))
+    }
+}
+
+fn finite3(values: [f32; 3], field: &str) -> Result<(), SceneError> {
+    for (i, &value) in values.iter().enumerate() {
+        finite(value, &format!("{field}[{i}]"))?;
+    }
+    Ok(())
+}
+
+fn positive(value: f32, field: &str) -> Result<(), SceneError> {
+    finite(value, field)?;
+    if value > 0.0 {
+        Ok(())
+    } else {
+        Err(SceneError::field(field, format!("must be > 0, got {value}")))
+    }
+}
+
+fn at_least(value: f32, min: f32, field: &str) -> Result<(), SceneError> {
+    finite(value, field)?;
+    if value >= min {
+        Ok(())
+    } else {
+        Err(SceneError::field(field, format!("must be >= {min}, got {value}")))
+    }
+}
+
+fn in_closed(value: f32, lo: f32, hi: f32, field: &str) -> Result<(), SceneError> {
+    finite(value, field)?;
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(SceneError::field(
+            field,
+            format!("must be in [{lo}, {hi}], got {value}"),
+        ))
+    }
+}
+
+fn unit_interval3(values: [f32; 3], field: &str) -> Result<(), SceneError> {
+    for (i, &value) in values.iter().enumerate() {
+        in_closed(value, 0.0, 1.0, &format!("{field}[{i}]"))?;
+    }
+    Ok(())
+}
+
+fn int_in(value: u32, lo: u32, hi: u32, field: &str) -> Result<(), SceneError> {
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(SceneError::field(field, format!("must be in {lo}..={hi}, got {value}")))
+    }
+}
+
+/// Turns a serde_json error into a [`SceneError::Json`] naming the field path at the error's
+/// position.
+fn json_error(text: &str, error: &serde_json::Error) -> SceneError {
+    let (line, column) = (error.line(), error.column());
+    let mut message = error.to_string();
+    let suffix = format!(" at line {line} column {column}");
+    if let Some(stripped) = message.strip_suffix(&suffix) {
+        message = stripped.to_owned();
+    }
+    let mut offset = byte_offset(text, line, column);
+    // Syntax errors point at the offending character (which may close an object); data errors
+    // point just past what was read.
+    if error.is_syntax() {
+        offset = offset.saturating_sub(1);
+    }
+    let mut field = json_path_at(text, offset);
+    // serde reports a missing field at the end of the object that lacks it.
+    if let Some(name) = backticked_after(&message, "missing field ") {
+        field = key_path(&field, &name);
+        message = "required field is missing".to_owned();
+    }
+    if field.is_empty() {
+        field = "(root)".to_owned();
+    }
+    SceneError::Json {
+        field,
+        message,
+        line,
+        column,
+    }
+}
+
+/// The text between backticks right after `prefix` at the start of `message`.
+fn backticked_after(message: &str, prefix: &str) -> Option<String> {
+    let rest = message.strip_prefix(prefix)?.strip_prefix('`')?;
+    rest.split_once('`').map(|(name, _)| name.to_owned())
+}
+
+/// Byte offset just past the 1-based (line, column) character serde_json reports.
+fn byte_offset(text: &str, line: usize, column: usize) -> usize {
+    let line_start: usize = text
+        .split_inclusive('\n')
+        .take(line.saturating_sub(1))
+        .map(str::len)
+        .sum();
+    (line_start + column).min(text.len())
+}
+
+/// One step of a JSON path.
+enum Frame {
+    Object { key: Option<String>, expecting_key: bool },
+    Array { index: usize },
+}
+
+/// The path (`meshes[0].transform.scale`) of the value being read when a parser has consumed
+/// the first `offset` bytes of `text`. A small tokenizer that tracks the open objects and
+/// arrays; it does not validate.
+fn json_path_at(text: &str, offset: usize) -> String {
+    let bytes = &text.as_bytes()[..offset.min(text.len())];
+    let mut stack: Vec<Frame> = Vec::new();
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'{' => stack.push(Frame::Object {
+                key: None,
+                expecting_key: true,
+            }),
+            b'[' => stack.push(Frame::Array { index: 0 }),
+            b'}' | b']' => {
+                stack.pop();
+            }
+            b',' => match stack.last_mut() {
+                Some(Frame::Object { key, expecting_key }) => {
+                    *key = None;
+                    *expecting_key = true;
+                }
+                Some(Frame::Array { index }) => *index += 1,
+                None => {}
+            },
+            b'"' => {
+                let start = i + 1;
+                let mut end = start;
+                while end < bytes.len() && bytes[end] != b'"' {
+                    end += if bytes[end] == b'\\' { 2 } else { 1 };
+                }
+                if let Some(Frame::Object {
+                    key,
+                    expecting_key: expecting_key @ true,
+                }) = stack.last_mut()
+                {
+                    let raw = &bytes[start..end.min(bytes.len())];
+                    *key = Some(String::from_utf8_lossy(raw).into_owned());
+                    *expecting_key = false;
+                }
+                i = end;
+            }
+            _ => {}
+        }
+        i += 1;
+    }
+    let mut path = String::new();
+    for frame in &stack {
+        match frame {
+            Frame::Object { key: Some(key), .. } => path = key_path(&path, key),
+            Frame::Object { key: None, .. } => {}
+            Frame::Array { index } => path.push_str(&format!("[{index}]")),
+        }
+    }
+    path
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = r#"{
+        "meshes": [{"obj": "a.obj", "sparse_points": 16}],
+        "light": {"position": [0, 2, 0], "direction": [0, -1, 0],
+                  "inner_angle_deg": 20, "outer_angle_deg": 30, "intensity": [1, 1, 1]},
+        "camera": {"position": [0, 1, 3], "target": [0, 1, 0], "fov_y_deg": 45,
+                   "width": 64, "height": 48}
+    }"#;
+
+    /// Parses and validates, returning the error message.
+    fn error_of(text: &str) -> String {
+        match SceneDescription::from_json_str(text).and_then(|d| d.validate()) {
+            Ok(()) => panic!("expected an error for {text}"),
+            Err(error) => error.to_string(),
+        }
+    }
+
+    /// `MINIMAL` with `from` replaced by `to` (which must occur).
+    fn edit(from: &str, to: &str) -> String {
+        assert!(MINIMAL.contains(from), "fixture lacks {from}");
+        MINIMAL.replacen(from, to, 1)
+    }
+
+    #[test]
+    fn minimal_scene_gets_defaults() {
+        let description = SceneDescription::from_json_str(MINIMAL).expect("parses");
+        description.validate().expect("valid");
+        assert_eq!(description.settings, SettingsDescription::default());
+        let settings = description.settings.to_settings();
+        assert_eq!(settings.rsm_resolution, 128);
+        assert!(settings.glossy);
+        assert_eq!(settings.seed, 1);
+        assert_eq!(settings.exposure, None);
+        let camera = description.camera.to_camera();
+        assert_eq!(camera.up, Vec3::Y);
+        assert!((camera.fov_y - 45f32.to_radians()).abs() < 1e-6);
+        let mesh = &description.meshes[0];
+        assert_eq!(mesh.transform.to_matrix(), Mat4::IDENTITY);
+        assert!(mesh.material.is_none() && mesh.materials.is_empty());
+    }
+
+    #[test]
+    fn light_is_converted_to_radians_and_unit_direction() {
+        let text = edit(r#""direction": [0, -1, 0]"#, r#""direction": [0, -4, 3]"#);
+        let light = SceneDescription::from_json_str(&text)
+            .expect("parses")
+            .light
+            .to_spot_light();
+        assert!(light.direction.abs_diff_eq(Vec3::new(0.0, -0.8, 0.6), 1e-6));
+        assert!((light.inner_angle - 20f32.to_radians()).abs() < 1e-6);
+        assert!((light.outer_angle - 30f32.to_radians()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn unknown_fields_are_named_with_their_path() {
+        let message = error_of(&edit(r#""sparse_points": 16"#, r#""sparse_points": 16, "colour": 1"#));
+        assert!(
+            message.starts_with("meshes[0].colour: unknown field `colour`"),
+            "{message}"
+        );
+
+        let message = error_of(&edit(r#""width": 64"#, r#""width": 64, "zoom": 2"#));
+        assert!(message.starts_with("camera.zoom: unknown field"), "{message}");
+
+        let message = error_of(&edit("{\n", "{\n\"extra\": true,\n"));
+        assert!(message.starts_with("extra: unknown field"), "{message}");
+
+        let message = error_of(&edit(
+            r#""sparse_points": 16"#,
+            r#""sparse_points": 16, "transform": {"scale": 2, "shear": 1}"#,
+        ));
+        assert!(
+            message.starts_with("meshes[0].transform.shear: unknown field"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn missing_and_mistyped_fields_are_named() {
+        let message = error_of(&edit(r#""fov_y_deg": 45,"#, ""));
+        assert!(
+            message.starts_with("camera.fov_y_deg: required field is missing"),
+            "{message}"
+        );
+
+        let message = error_of(&edit(r#""obj": "a.obj", "#, ""));
+        assert!(
+            message.starts_with("meshes[0].obj: required field is missing"),
+            "{message}"
+        );
+
+        let message = error_of(&edit(r#""width": 64"#, r#""width": "wide""#));
+        assert!(message.starts_with("camera.width: invalid type"), "{message}");
+
+        let message = error_of(&edit(r#""sparse_points": 16"#, r#""sparse_points": -3"#));
+        assert!(message.starts_with("meshes[0].sparse_points:"), "{message}");
+
+        let message = error_of(&edit(r#""position": [0, 2, 0]"#, r#""position": [0, 2]"#));
+        assert!(message.starts_with("light.position"), "{message}");
+
+        let message = error_of(&edit(r#""intensity": [1, 1, 1]"#, r#""intensity": [1, "x", 1]"#));
+        assert!(message.starts_with("light.intensity[1]: invalid type"), "{message}");
+    }
+
+    #[test]
+    fn nan_and_infinity_are_rejected_with_their_path() {
+        // JSON has no NaN literal: the parser rejects it, at the field.
+        let message = error_of(&edit(r#""fov_y_deg": 45"#, r#""fov_y_deg": NaN"#));
+        assert!(message.starts_with("camera.fov_y_deg:"), "{message}");
+        // A number too large for f32 becomes infinite and is rejected by validation.
+        let message = error_of(&edit(r#""target": [0, 1, 0]"#, r#""target": [0, 1e39, 0]"#));
+        assert_eq!(message, "camera.target[1]: must be a finite number, got inf");
+        // Too large for f64: the parser rejects it.
+        let message = error_of(&edit(r#""intensity": [1, 1, 1]"#, r#""intensity": [1, 1e999, 1]"#));
+        assert!(message.starts_with("light.intensity[1]:"), "{message}");
+    }
+
+    #[test]
+    fn out_of_range_values_name_the_path() {
+        let cases = [
+            (
+                r#""sparse_points": 16"#,
+                r#""sparse_points": 16, "transform": {"scale": -1}"#,
+                "meshes[0].transform.scale: must be > 0, got -1",
+            ),
+            (
+                r#""sparse_points": 16"#,
+                r#""sparse_points": 16, "transform": {"scale": [1, 0, 1]}"#,
+                "meshes[0].transform.scale[1]: must be > 0, got 0",
+            ),
+            (
+                r#""sparse_points": 16"#,
+                r#""sparse_points": 0"#,
+                "meshes[0].sparse_points: must be in 1..=65536, got 0",
+            ),
+            (
+                r#""sparse_points": 16"#,
+                r#""sparse_points": 65537"#,
+                "meshes[0].sparse_points: must be in 1..=65536, got 65537",
+            ),
+            (
+                r#""outer_angle_deg": 30"#,
+                r#""outer_angle_deg": 85"#,
+                "light.outer_angle_deg: must be in (0, 80], got 85",
+            ),
+            (
+                r#""inner_angle_deg": 20"#,
+                r#""inner_angle_deg": 35"#,
+                "light.inner_angle_deg: must be in [0, outer_angle_deg = 30], got 35",
+            ),
+            (
+                r#""direction": [0, -1, 0]"#,
+                r#""direction": [0, 0, 0]"#,
+                "light.direction: must be nonzero, got [0, 0, 0]",
+            ),
+            (
+                r#""intensity": [1, 1, 1]"#,
+                r#""intensity": [1, -1, 1]"#,
+                "light.intensity[1]: must be >= 0, got -1",
+            ),
+            (
+                r#""fov_y_deg": 45"#,
+                r#""fov_y_deg": 170"#,
+                "camera.fov_y_deg: must be in (1, 170), got 170",
+            ),
+            (
+                r#""width": 64"#,
+                r#""width": 0"#,
+                "camera.width: must be in 1..=8192, got 0",
+            ),
+            (
+                r#""height": 48"#,
+                r#""height": 9000"#,
+                "camera.height: must be in 1..=8192, got 9000",
+            ),
+            (
+                r#""target": [0, 1, 0]"#,
+                r#""target": [0, 1, 3]"#,
+                "camera.target: must differ from the camera position",
+            ),
+            (
+                r#""fov_y_deg": 45"#,
+                r#""fov_y_deg": 45, "up": [0, 0, -2]"#,
+                "camera.up: must not be parallel to the view direction",
+            ),
+            (
+                r#""meshes": [{"obj": "a.obj", "sparse_points": 16}]"#,
+                r#""meshes": []"#,
+                "meshes: at least one mesh is required",
+            ),
+            (
+                r#""obj": "a.obj""#,
+                r#""obj": " ""#,
+                "meshes[0].obj: must name an OBJ file",
+            ),
+        ];
+        for (from, to, expected) in cases {
+            let message = error_of(&edit(from, to));
+            assert!(
+                message.starts_with(expected),
+                "{to}: got `{message}`, expected `{expected}`"
+            );
+        }
+    }
+
+    #[test]
+    fn settings_are_checked() {
+        let with_settings = |settings: &str| {
+            let text = MINIMAL.trim_end().trim_end_matches('}');
+            format!("{text}, \"settings\": {settings}}}")
+        };
+        let description = SceneDescription::from_json_str(&with_settings(
+            r#"{"rsm_resolution": 256, "glossy": false, "seed": 7, "exposure": 2.5}"#,
+        ))
+        .expect("parses");
+        description.validate().expect("valid");
+        let settings = description.settings.to_settings();
+        assert_eq!(
+            settings,
+            Settings {
+                rsm_resolution: 256,
+                glossy: false,
+                seed: 7,
+                exposure: Some(2.5)
+            }
+        );
+        let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
+        assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
+        let message = error_of(&with_settings(r#"{"exposure": 0}"#));
+        assert_eq!(message, "settings.exposure: must be > 0, got 0");
+        let message = error_of(&with_settings(r#"{"exposure": null, "gamma": 2.2}"#));
+        assert!(message.starts_with("settings.gamma: unknown field"), "{message}");
+    }
+
+    #[test]
+    fn json_materials_are_checked() {
+        let with_material = |material: &str| {
+            edit(
+                r#""sparse_points": 16"#,
+                &format!(r#""sparse_points": 16, "materials": {{"leftWall": {material}}}"#),
+            )
+        };
+        let message = error_of(&with_material(r#"{"diffuse": [0.5, 1.5, 0.5]}"#));
+        assert_eq!(
+            message,
+            "meshes[0].materials.leftWall.diffuse[1]: must be in [0, 1], got 1.5"
+        );
+        let message = error_of(&with_material(
+            r#"{"diffuse": [0.7, 0.5, 0.5], "specular": [0.4, 0, 0]}"#,
+        ));
+        assert!(
+            message.starts_with("meshes[0].materials.leftWall.specular[0]: diffuse + specular must be <= 1"),
+            "{message}"
+        );
+        let message = error_of(&with_material(r#"{"exponent": 20000}"#));
+        assert_eq!(
+            message,
+            "meshes[0].materials.leftWall.exponent: must be in [0, 10000], got 20000"
+        );
+        let message = error_of(&with_material(r#"{"roughness": 0.5}"#));
+        assert!(
+            message.starts_with("meshes[0].materials.leftWall.roughness: unknown field"),
+            "{message}"
+        );
+        // 0.7 + 0.3 is 1 up to rounding: accepted.
+        let text = with_material(r#"{"diffuse": [0.7, 0.7, 0.7], "specular": [0.3, 0.3, 0.3], "exponent": 0}"#);
+        let description = SceneDescription::from_json_str(&text).expect("parses");
+        description.validate().expect("valid");
+        let material = description.meshes[0].materials["leftWall"].to_material();
+        assert_eq!(material.specular, Vec3::splat(0.3));
+        assert_eq!(material.exponent, 0.0);
+    }
+
+    #[test]
+    fn transform_accepts_uniform_and_per_axis_scale() {
+        let text = edit(
+            r#""sparse_points": 16"#,
+            r#""sparse_points": 16, "transform": {"translation": [1, 2, 3], "rotation_deg": [0, 90, 0], "scale": [1, 2, 3]}"#,
+        );
+        let description = SceneDescription::from_json_str(&text).expect("parses");
+        description.validate().expect("valid");
+        let matrix = description.meshes[0].transform.to_matrix();
+        // +X scaled by 1 and rotated 90 degrees about Y goes to -Z.
+        let x = matrix.transform_vector3(Vec3::X);
+        assert!(x.abs_diff_eq(Vec3::NEG_Z, 1e-6), "{x}");
+        let y = matrix.transform_vector3(Vec3::Y);
+        assert!(y.abs_diff_eq(Vec3::new(0.0, 2.0, 0.0), 1e-6), "{y}");
+        assert!(
+            matrix
+                .transform_point3(Vec3::ZERO)
+                .abs_diff_eq(Vec3::new(1.0, 2.0, 3.0), 1e-6)
+        );
+
+        let message = error_of(&edit(
+            r#""sparse_points": 16"#,
+            r#""sparse_points": 16, "transform": {"scale": [1, 2]}"#,
+        ));
+        assert!(message.starts_with("meshes[0].transform.scale"), "{message}");
+        let message = error_of(&edit(
+            r#""sparse_points": 16"#,
+            r#""sparse_points": 16, "transform": {"scale": "big"}"#,
+        ));
+        assert!(message.contains("a number or an array [x, y, z]"), "{message}");
+    }
+
+    #[test]
+    fn syntax_errors_report_the_position() {
+        let error = SceneDescription::from_json_str("{\"meshes\": [\n  {\"obj\": }]}").expect_err("bad JSON");
+        match error {
+            SceneError::Json { field, line, .. } => {
+                assert_eq!(field, "meshes[0].obj");
+                assert_eq!(line, 2);
+            }
+            other => panic!("unexpected {other:?}"),
+        }
+        let message = error_of("");
+        assert!(message.starts_with("(root):"), "{message}");
+    }
+
+    #[test]
+    fn json_path_tracks_nesting() {
+        let text = r#"{"a": {"b": [1, {"c": "x,y"}, [2, 3]]}, "d": 4}"#;
+        let at = |needle: &str| json_path_at(text, text.find(needle).expect("needle") + needle.len());
+        assert_eq!(at(r#""c": "x"#), "a.b[1].c");
+        assert_eq!(at("[2"), "a.b[2][0]");
+        assert_eq!(at("3"), "a.b[2][1]");
+        assert_eq!(at(r#""d": 4"#), "d");
+        assert_eq!(json_path_at(r#"{"we ird": 1"#, 12), r#"["we ird"]"#);
+    }
+
+    #[test]
+    fn descriptions_round_trip_through_json() {
+        let text = edit(
+            r#""sparse_points": 16"#,
+            r#""sparse_points": 16, "transform": {"scale": [1, 2, 3]}, "material": {"exponent": 5}, "skip_groups": ["light"]"#,
+        );
+        let description = SceneDescription::from_json_str(&text).expect("parses");
+        let json = serde_json::to_string(&description).expect("serializes");
+        let again = SceneDescription::from_json_str(&json).expect("parses again");
+        assert_eq!(description, again);
+    }
+}

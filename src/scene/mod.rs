@@ -1,0 +1,686 @@
+//! Scene loading: a JSON scene description, its OBJ/MTL meshes, and the per-mesh data that the
+//! sparse model-space shading pipeline precomputes at load (DESIGN.md §1 and §4 step 0).
+//!
+//! Loading a mesh runs, in order:
+//!
+//! 1. `obj`: parse the OBJ with tobj (triangulated, single index), merge its groups into one
+//!    mesh, weld identical vertices, resolve MTL and JSON materials into the global table.
+//! 2. `normals`: keep the OBJ's normals, or compute area-weighted normals with a 45° crease
+//!    angle, splitting vertices so each vertex has exactly one normal.
+//! 3. `subdivide`: split every edge longer than the sparse point spacing
+//!    `sqrt(model area / sparse_points)` (conforming red-green refinement), so the per-vertex
+//!    interpolation of step 4 of the pipeline sees sparse points around every vertex.
+//! 4. `sparse`: blue-noise sparse points (weighted sample elimination over area-proportional
+//!    candidates), each vertex's 8 nearest sparse points, and each point's occluder radius.
+//!
+//! Everything a mesh stores is in model space; [`Mesh::model_to_world`] places it in the world.
+//! Lengths are metres (or the OBJ's units, scaled by the transform), angles are radians once
+//! loaded (the JSON speaks degrees), intensities are W/sr.
+
+mod description;
+mod error;
+mod hash;
+mod normals;
+mod obj;
+mod sparse;
+mod subdivide;
+
+use std::path::Path;
+
+use glam::{Mat3, Mat4, Vec3};
+
+pub use description::{
+    CameraDescription, LightDescription, MaterialDescription, MeshDescription, ScaleDescription, SceneDescription,
+    SettingsDescription, TransformDescription,
+};
+pub use error::SceneError;
+
+/// Number of sparse points each vertex interpolates from (paper eqs. 12-13).
+pub const NEIGHBOURS: usize = 8;
+
+/// Most triangles one mesh may have after subdivision; more is an error rather than a
+/// machine brought to its knees by a too-large `sparse_points`.
+pub const MAX_TRIANGLES_PER_MESH: usize = 4_000_000;
+
+/// A loaded, validated scene: meshes with their precomputed sparse points, the global material
+/// table, the spot light, the camera and the render settings.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The meshes, in the order of the description's `meshes` array.
+    pub meshes: Vec<Mesh>,
+    /// Global material table; [`Mesh::triangle_materials`] indexes into it. One entry per
+    /// (mesh, material name) that at least one loaded triangle uses.
+    pub materials: Vec<Material>,
+    /// The spot light that illuminates the scene and whose RSM provides the VALs.
+    pub light: SpotLight,
+    /// The camera the final image is rendered from.
+    pub camera: Camera,
+    /// Render settings.
+    pub settings: Settings,
+}
+
+/// Normalised modified Phong material (DESIGN.md §1):
+/// `f = rho_d / pi + rho_s (k + 2) / (2 pi) max(0, dot(reflect(w_i, n), w_o))^k`,
+/// with `diffuse + specular <= 1` per channel guaranteed by the loader.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Material {
+    /// Diffuse albedo `rho_d`, linear RGB, each channel in [0, 1].
+    pub diffuse: Vec3,
+    /// Specular albedo `rho_s`, linear RGB, each channel in [0, 1].
+    pub specular: Vec3,
+    /// Phong exponent `k`, in [0, 1e4].
+    pub exponent: f32,
+}
+
+impl Material {
+    /// The material of triangles without one: 50 % grey Lambertian, no specular lobe.
+    pub const DEFAULT: Material = Material {
+        diffuse: Vec3::splat(0.5),
+        specular: Vec3::ZERO,
+        exponent: 1.0,
+    };
+
+    /// Largest accepted Phong exponent.
+    pub const MAX_EXPONENT: f32 = 1.0e4;
+
+    /// Whether this material has a glossy lobe (`rho_s > 0` in any channel).
+    pub fn is_glossy(&self) -> bool {
+        self.specular.max_element() > 0.0
+    }
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A spot light: radiant intensity `intensity` on the axis, falling off linearly in angle from
+/// 1 at `inner_angle` to 0 at `outer_angle` (DESIGN.md §2).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpotLight {
+    /// World-space position of the light, m.
+    pub position: Vec3,
+    /// World-space unit axis direction.
+    pub direction: Vec3,
+    /// Inner half-angle (full intensity inside), radians, in [0, `outer_angle`].
+    pub inner_angle: f32,
+    /// Outer half-angle (zero intensity outside), radians, in (0, 80°].
+    pub outer_angle: f32,
+    /// Radiant intensity on the axis, W/sr, linear RGB, each channel >= 0.
+    pub intensity: Vec3,
+}
+
+/// A perspective camera (right-handed, looking from `position` toward `target`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// World-space eye position, m.
+    pub position: Vec3,
+    /// World-space point looked at, m (differs from `position`).
+    pub target: Vec3,
+    /// World-space unit up direction (not parallel to the view direction).
+    pub up: Vec3,
+    /// Vertical field of view (full angle), radians, in (1°, 170°).
+    pub fov_y: f32,
+    /// Image width, pixels, in 1..=8192.
+    pub width: u32,
+    /// Image height, pixels, in 1..=8192.
+    pub height: u32,
+}
+
+impl Camera {
+    /// World-to-view matrix (right-handed, the camera looks down -Z in view space).
+    pub fn world_to_view(&self) -> Mat4 {
+        glam::camera::rh::view::look_at_mat4(self.position, self.target, self.up)
+    }
+
+    /// Width over height.
+    pub fn aspect_ratio(&self) -> f32 {
+        self.width as f32 / self.height as f32
+    }
+}
+
+/// Render settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Side of the square reflective shadow map, texels, in 8..=2048.
+    pub rsm_resolution: u32,
+    /// Whether the glossy gather may run (it still only runs when a material is glossy).
+    pub glossy: bool,
+    /// Seed of every random choice made at load (sparse point placement).
+    pub seed: u64,
+    /// Exposure multiplier applied before tone mapping; `None` picks one automatically.
+    pub exposure: Option<f32>,
+}
+
+/// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its
+/// sparse points.
+#[derive(Clone, Debug)]
+pub struct Mesh {
+    /// Name, from the OBJ file's stem.
+    pub name: String,
+    /// Model-to-world transform (scale, then Euler XYZ rotation, then translation).
+    pub model_to_world: Mat4,
+    /// Model-space vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Model-space unit vertex normals, one per vertex.
+    pub normals: Vec<Vec3>,
+    /// Triangles as vertex indices, counter-clockwise as in the OBJ.
+    pub triangles: Vec<[u32; 3]>,
+    /// Per-triangle index into [`Scene::materials`].
+    pub triangle_materials: Vec<u32>,
+    /// The sparse points of this mesh and the vertex-to-point links.
+    pub sparse: SparsePoints,
+}
+
+/// Sparse shading points of one mesh (DESIGN.md §4 step 0). Points are stored as triangle +
+/// barycentrics, so they follow a deformation of the mesh; positions and normals are the
+/// model-space evaluation at load.
+#[derive(Clone, Debug, Default)]
+pub struct SparsePoints {
+    /// Triangle index (into [`Mesh::triangles`]) of each point.
+    pub triangles: Vec<u32>,
+    /// Barycentrics `(b1, b2)` of each point: `p = (1 - b1 - b2) p0 + b1 p1 + b2 p2`.
+    pub barycentrics: Vec<glam::Vec2>,
+    /// Model-space positions of the points.
+    pub positions: Vec<Vec3>,
+    /// Model-space unit normals (interpolated vertex normals, renormalised).
+    pub normals: Vec<Vec3>,
+    /// Model-space occluder-disc radius of each point: the largest distance to a mesh vertex
+    /// whose nearest sparse point it is; 0 when no vertex is nearest to it.
+    pub occluder_radii: Vec<f32>,
+    /// One entry per mesh vertex: indices of its [`NEIGHBOURS`] nearest sparse points, nearest
+    /// first, padded with `u32::MAX` when the mesh has fewer points.
+    pub vertex_neighbours: Vec<[u32; NEIGHBOURS]>,
+}
+
+impl SparsePoints {
+    /// Number of sparse points.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Whether there are no sparse points (never the case for a loaded mesh).
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+}
+
+impl Mesh {
+    /// Matrix that takes model-space normals to world space (inverse transpose of the upper
+    /// 3x3 of [`Mesh::model_to_world`]); results need renormalising.
+    pub fn normal_to_world(&self) -> Mat3 {
+        Mat3::from_mat4(self.model_to_world).inverse().transpose()
+    }
+
+    /// Vertex positions in world space, m.
+    pub fn world_positions(&self) -> Vec<Vec3> {
+        transform_points(self.model_to_world, &self.positions)
+    }
+
+    /// Unit vertex normals in world space.
+    pub fn world_normals(&self) -> Vec<Vec3> {
+        transform_normals(self.normal_to_world(), &self.normals)
+    }
+
+    /// Sparse point positions in world space, m.
+    pub fn sparse_world_positions(&self) -> Vec<Vec3> {
+        transform_points(self.model_to_world, &self.sparse.positions)
+    }
+
+    /// Unit sparse point normals in world space.
+    pub fn sparse_world_normals(&self) -> Vec<Vec3> {
+        transform_normals(self.normal_to_world(), &self.sparse.normals)
+    }
+
+    /// Occluder radii in world space, m: the model-space radii times the largest axis scale of
+    /// the transform (exact for uniform scale, conservative otherwise).
+    pub fn world_occluder_radii(&self) -> Vec<f32> {
+        let linear = Mat3::from_mat4(self.model_to_world);
+        let scale = linear
+            .x_axis
+            .length()
+            .max(linear.y_axis.length())
+            .max(linear.z_axis.length());
+        self.sparse.occluder_radii.iter().map(|r| r * scale).collect()
+    }
+}
+
+fn transform_points(matrix: Mat4, points: &[Vec3]) -> Vec<Vec3> {
+    points.iter().map(|&p| matrix.transform_point3(p)).collect()
+}
+
+fn transform_normals(normal_matrix: Mat3, normals: &[Vec3]) -> Vec<Vec3> {
+    normals.iter().map(|&n| (normal_matrix * n).normalize_or(n)).collect()
+}
+
+impl Scene {
+    /// Parses and validates scene JSON and loads every mesh it names; OBJ paths are relative to
+    /// `base_dir`.
+    pub fn from_json_str(text: &str, base_dir: &Path) -> Result<Scene, SceneError> {
+        let description = SceneDescription::from_json_str(text)?;
+        Self::from_description(&description, base_dir)
+    }
+
+    /// Reads a scene file; OBJ paths are relative to the directory that holds it.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
+        Self::from_json_str(&text, base_dir)
+    }
+
+    /// Validates a parsed description and loads every mesh it names; OBJ paths are relative to
+    /// `base_dir`.
+    pub fn from_description(description: &SceneDescription, base_dir: &Path) -> Result<Scene, SceneError> {
+        description.validate()?;
+        let settings = description.settings.to_settings();
+        let mut materials = Vec::new();
+        let mut meshes = Vec::with_capacity(description.meshes.len());
+        for (index, mesh_description) in description.meshes.iter().enumerate() {
+            let mesh = load_mesh(mesh_description, index, base_dir, settings.seed, &mut materials)?;
+            meshes.push(mesh);
+        }
+        Ok(Scene {
+            meshes,
+            materials,
+            light: description.light.to_spot_light(),
+            camera: description.camera.to_camera(),
+            settings,
+        })
+    }
+
+    /// Whether the glossy gather is needed: glossy is enabled and some triangle's material has
+    /// `rho_s > 0` in any channel.
+    pub fn needs_glossy(&self) -> bool {
+        self.settings.glossy
+            && self.meshes.iter().any(|mesh| {
+                mesh.triangle_materials
+                    .iter()
+                    .any(|&m| self.materials.get(m as usize).is_some_and(Material::is_glossy))
+            })
+    }
+
+    /// Sparse points over all meshes.
+    pub fn sparse_point_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.sparse.len()).sum()
+    }
+
+    /// Triangles over all meshes (after subdivision).
+    pub fn triangle_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.triangles.len()).sum()
+    }
+
+    /// Vertices over all meshes (after subdivision and crease splitting).
+    pub fn vertex_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.positions.len()).sum()
+    }
+}
+
+/// Loads mesh `index` of the description: OBJ, normals, subdivision, sparse points. Its
+/// materials are appended to `materials`.
+fn load_mesh(
+    description: &MeshDescription,
+    index: usize,
+    base_dir: &Path,
+    seed: u64,
+    materials: &mut Vec<Material>,
+) -> Result<Mesh, SceneError> {
+    let started = std::time::Instant::now();
+    let field = format!("meshes[{index}]");
+    let loaded = obj::load(description, &field, base_dir)?;
+    let file = loaded.file.clone();
+    let loaded_at = started.elapsed();
+    let material_offset = u32::try_from(materials.len()).map_err(|_| SceneError::Field {
+        field: field.clone(),
+        message: "too many materials in the scene".to_owned(),
+    })?;
+    materials.extend(loaded.materials.iter().copied());
+    let triangle_materials: Vec<u32> = loaded.triangle_materials.iter().map(|&m| m + material_offset).collect();
+
+    let mut geometry = match loaded.normals {
+        Some(normals) => normals::with_given_normals(loaded.positions, normals, loaded.triangles),
+        None => normals::crease_normals(
+            &loaded.positions,
+            &loaded.triangles,
+            normals::CREASE_ANGLE_DEG.to_radians(),
+        ),
+    };
+    geometry.triangle_materials = triangle_materials;
+
+    let area = geometry.area();
+    if area <= 0.0 || !area.is_finite() {
+        return Err(SceneError::Obj {
+            field: format!("{field}.obj"),
+            file,
+            line: None,
+            message: format!("the mesh has no usable surface area (total {area} square units)"),
+        });
+    }
+    let sparse_count = description.sparse_points as usize;
+    let spacing = (area / sparse_count as f64).sqrt() as f32;
+    let original_triangles = geometry.triangles.len();
+    let normals_at = started.elapsed();
+    subdivide::subdivide(&mut geometry, spacing, MAX_TRIANGLES_PER_MESH).map_err(|limit| SceneError::Obj {
+        field: format!("{field}.sparse_points"),
+        file: file.clone(),
+        line: None,
+        message: format!(
+            "subdividing to the sparse point spacing {spacing} would exceed {limit} \
+                 triangles; use fewer sparse points"
+        ),
+    })?;
+
+    let subdivided_at = started.elapsed();
+    let stream = index as u64;
+    let sparse = sparse::build(&geometry, sparse_count, seed, stream).map_err(|message| SceneError::Obj {
+        field: field.clone(),
+        file: file.clone(),
+        line: None,
+        message,
+    })?;
+
+    let name = file
+        .file_stem()
+        .map_or_else(|| format!("mesh{index}"), |s| s.to_string_lossy().into_owned());
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    tracing::debug!(
+        mesh = %name,
+        obj_ms = ms(loaded_at),
+        normals_ms = ms(normals_at - loaded_at),
+        subdivide_ms = ms(subdivided_at - normals_at),
+        sparse_ms = ms(started.elapsed() - subdivided_at),
+        "mesh load steps"
+    );
+    tracing::info!(
+        mesh = %name,
+        vertices = geometry.positions.len(),
+        triangles = geometry.triangles.len(),
+        obj_triangles = original_triangles,
+        sparse_points = sparse.len(),
+        spacing,
+        elapsed_ms = ms(started.elapsed()),
+        "loaded mesh"
+    );
+    Ok(Mesh {
+        name,
+        model_to_world: description.transform.to_matrix(),
+        positions: geometry.positions,
+        normals: geometry.normals,
+        triangles: geometry.triangles,
+        triangle_materials: geometry.triangle_materials,
+        sparse,
+    })
+}
+
+/// Indexed triangle geometry with one normal per vertex, as passed between the load steps.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Geometry {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Per triangle; any meaning (local or global material index), carried through untouched.
+    pub triangle_materials: Vec<u32>,
+}
+
+impl Geometry {
+    /// Corner positions of triangle `t`.
+    pub fn corners(&self, t: usize) -> [Vec3; 3] {
+        self.triangles[t].map(|v| self.positions[v as usize])
+    }
+
+    /// Area of triangle `t`, square model units.
+    pub fn triangle_area(&self, t: usize) -> f64 {
+        triangle_area(self.corners(t))
+    }
+
+    /// Total surface area, square model units.
+    pub fn area(&self) -> f64 {
+        (0..self.triangles.len()).map(|t| self.triangle_area(t)).sum()
+    }
+}
+
+/// Area of a triangle, computed in f64 so that large flat triangles keep their precision.
+pub(crate) fn triangle_area([a, b, c]: [Vec3; 3]) -> f64 {
+    let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+    0.5 * (b - a).cross(c - a).length()
+}
+
+#[cfg(test)]
+pub(crate) mod test_util {
+    //! Helpers for writing small scene fixtures to a unique temporary directory.
+
+    use std::path::{Path, PathBuf};
+    use std::sync::atomic::{AtomicU32, Ordering};
+
+    /// A temporary directory removed on drop.
+    pub struct TempDir(PathBuf);
+
+    impl TempDir {
+        pub fn new(tag: &str) -> TempDir {
+            static COUNTER: AtomicU32 = AtomicU32::new(0);
+            let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+            let dir = std::env::temp_dir().join(format!("relume-scene-test-{}-{tag}-{n}", std::process::id()));
+            std::fs::create_dir_all(&dir).expect("create temp dir");
+            TempDir(dir)
+        }
+
+        pub fn path(&self) -> &Path {
+            &self.0
+        }
+
+        pub fn write(&self, name: &str, text: &str) -> PathBuf {
+            let path = self.0.join(name);
+            std::fs::write(&path, text).expect("write fixture");
+            path
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    /// Light and camera JSON that pass validation, to complete a scene under test.
+    pub const LIGHT_AND_CAMERA: &str = r#"
+        "light": {"position": [0, 1.9, 0], "direction": [0, -1, 0],
+                  "inner_angle_deg": 20, "outer_angle_deg": 30, "intensity": [10, 10, 10]},
+        "camera": {"position": [0, 1, 3.5], "target": [0, 1, 0], "fov_y_deg": 40,
+                   "width": 64, "height": 64}"#;
+
+    /// A scene JSON with one mesh whose entry is `mesh` (the object body without braces).
+    pub fn scene_json(mesh: &str) -> String {
+        scene_json_with(mesh, "")
+    }
+
+    /// [`scene_json`] with `extra` (e.g. `, "settings": {...}`) appended to the top object.
+    pub fn scene_json_with(mesh: &str, extra: &str) -> String {
+        format!(r#"{{"meshes": [{{{mesh}}}], {LIGHT_AND_CAMERA}{extra}}}"#)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_util::{TempDir, scene_json, scene_json_with};
+    use super::*;
+
+    const CUBE_OBJ: &str = "\
+v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+
+    #[test]
+    fn loads_a_scene_end_to_end() {
+        let dir = TempDir::new("end-to-end");
+        dir.write("cube.obj", CUBE_OBJ);
+        let json = scene_json(
+            r#""obj": "cube.obj", "sparse_points": 64,
+               "transform": {"translation": [1, 2, 3], "scale": 2},
+               "material": {"diffuse": [0.2, 0.3, 0.4], "specular": [0.5, 0.5, 0.5], "exponent": 30}"#,
+        );
+        let scene = Scene::from_json_str(&json, dir.path()).expect("scene loads");
+        assert_eq!(scene.meshes.len(), 1);
+        let mesh = &scene.meshes[0];
+        assert_eq!(mesh.name, "cube");
+        assert_eq!(scene.sparse_point_count(), 64);
+        assert_eq!(mesh.normals.len(), mesh.positions.len());
+        assert_eq!(mesh.triangle_materials.len(), mesh.triangles.len());
+        assert_eq!(mesh.sparse.vertex_neighbours.len(), mesh.positions.len());
+        assert_eq!(scene.materials.len(), 1);
+        assert_eq!(scene.materials[0].exponent, 30.0);
+        assert!(scene.needs_glossy());
+        // World transform: the model-space corner (1, 1, 1) lands at 2 * (1, 1, 1) + (1, 2, 3).
+        let world = mesh.world_positions();
+        assert!(world.iter().any(|p| p.abs_diff_eq(Vec3::new(3.0, 4.0, 5.0), 1e-5)));
+        for n in mesh.world_normals() {
+            assert!((n.length() - 1.0).abs() < 1e-5);
+        }
+        let radii = mesh.world_occluder_radii();
+        for (world, model) in radii.iter().zip(&mesh.sparse.occluder_radii) {
+            assert!((world - 2.0 * model).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn world_normals_use_the_inverse_transpose() {
+        let n = Vec3::new(1.0, 1.0, 0.0).normalize();
+        let mesh = Mesh {
+            name: "plane".to_owned(),
+            model_to_world: Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0)),
+            positions: vec![Vec3::ZERO, Vec3::Z, Vec3::new(1.0, -1.0, 0.0)],
+            normals: vec![n; 3],
+            triangles: vec![[0, 1, 2]],
+            triangle_materials: vec![0],
+            sparse: SparsePoints {
+                positions: vec![Vec3::new(0.5, -0.5, 0.0)],
+                normals: vec![n],
+                occluder_radii: vec![0.25],
+                ..Default::default()
+            },
+        };
+        // The plane x + y = 0 stretched by 2 along y is x + y / 2 = 0: normal (1, 1/2, 0).
+        let expected = Vec3::new(1.0, 0.5, 0.0).normalize();
+        for world in mesh.world_normals().into_iter().chain(mesh.sparse_world_normals()) {
+            assert!(world.abs_diff_eq(expected, 1e-6), "{world}");
+        }
+        let world = mesh.world_positions();
+        let edge = world[2] - world[0];
+        assert!(
+            edge.dot(expected).abs() < 1e-6,
+            "the normal stays perpendicular to the surface"
+        );
+        assert_eq!(mesh.sparse_world_positions(), vec![Vec3::new(0.5, -1.0, 0.0)]);
+        assert_eq!(mesh.world_occluder_radii(), vec![0.5]);
+    }
+
+    #[test]
+    fn glossy_needs_the_setting_and_a_glossy_material() {
+        let dir = TempDir::new("glossy");
+        dir.write("cube.obj", CUBE_OBJ);
+        let diffuse_only = scene_json(r#""obj": "cube.obj", "sparse_points": 8"#);
+        let scene = Scene::from_json_str(&diffuse_only, dir.path()).expect("scene loads");
+        assert!(!scene.needs_glossy());
+        assert_eq!(scene.materials, vec![Material::DEFAULT]);
+
+        let glossy_mesh = r#""obj": "cube.obj", "sparse_points": 8, "material": {"specular": [0, 0.1, 0]}"#;
+        let scene = Scene::from_json_str(&scene_json(glossy_mesh), dir.path()).expect("loads");
+        assert!(scene.needs_glossy());
+        let glossy_off = scene_json_with(glossy_mesh, r#", "settings": {"glossy": false}"#);
+        let scene = Scene::from_json_str(&glossy_off, dir.path()).expect("scene loads");
+        assert!(!scene.settings.glossy);
+        assert!(!scene.needs_glossy());
+    }
+
+    #[test]
+    fn load_reads_relative_to_the_scene_file() {
+        let dir = TempDir::new("load");
+        std::fs::create_dir_all(dir.path().join("meshes")).expect("mkdir");
+        dir.write("meshes/cube.obj", CUBE_OBJ);
+        let scene_path = dir.write(
+            "scene.json",
+            &scene_json(r#""obj": "meshes/cube.obj", "sparse_points": 16"#),
+        );
+        let scene = Scene::load(&scene_path).expect("scene loads");
+        assert_eq!(scene.triangle_count(), scene.meshes[0].triangles.len());
+        assert_eq!(scene.vertex_count(), scene.meshes[0].positions.len());
+
+        let missing = Scene::load(&dir.path().join("nope.json")).expect_err("missing file");
+        assert!(missing.to_string().contains("nope.json"), "{missing}");
+    }
+
+    #[test]
+    fn missing_obj_names_the_field_and_file() {
+        let dir = TempDir::new("missing-obj");
+        let json = scene_json(r#""obj": "does-not-exist.obj", "sparse_points": 8"#);
+        let error = Scene::from_json_str(&json, dir.path()).expect_err("missing OBJ");
+        let message = error.to_string();
+        assert!(message.contains("meshes[0].obj"), "{message}");
+        assert!(message.contains("does-not-exist.obj"), "{message}");
+    }
+
+    /// The folder of a mesh shipped with the project (`fixtures/meshes/<name>`, else the shared
+    /// data set next to the checkout); `None`, with a note, when neither exists.
+    fn mesh_dir(name: &str) -> Option<std::path::PathBuf> {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let found = [
+            root.join("fixtures/meshes").join(name),
+            root.join("../shared/data/meshes").join(name),
+        ]
+        .into_iter()
+        .find(|dir| dir.is_dir());
+        if found.is_none() {
+            eprintln!("skipping: mesh folder {name} not found");
+        }
+        found
+    }
+
+    #[test]
+    fn cornell_box_loads_if_present() {
+        let Some(dir) = mesh_dir("cornell_box") else {
+            return;
+        };
+        let dir = dir.as_path();
+        let json = scene_json(
+            r#""obj": "CornellBox-Original.obj", "sparse_points": 1024,
+               "materials": {"tallBox": {"diffuse": [0.5, 0.5, 0.5], "specular": [0.3, 0.3, 0.3], "exponent": 50}}"#,
+        );
+        let started = std::time::Instant::now();
+        let scene = Scene::from_json_str(&json, dir).expect("Cornell box loads");
+        let elapsed = started.elapsed();
+        assert_eq!(scene.materials.len(), 8, "one entry per named material");
+        assert_eq!(scene.sparse_point_count(), 1024);
+        assert!(scene.needs_glossy());
+        let red = Vec3::new(0.63, 0.065, 0.05);
+        assert!(scene.materials.iter().any(|m| m.diffuse == red));
+        assert!(elapsed.as_secs_f32() < 10.0, "took {elapsed:?}");
+
+        let skip_light =
+            scene_json(r#""obj": "CornellBox-Original.obj", "sparse_points": 256, "skip_groups": ["light"]"#);
+        let scene = Scene::from_json_str(&skip_light, dir).expect("Cornell box loads");
+        assert_eq!(scene.materials.len(), 7);
+        assert!(!scene.needs_glossy());
+    }
+
+    #[test]
+    fn bunny_loads_fast_if_present() {
+        let Some(dir) = mesh_dir("stanford_bunny") else {
+            return;
+        };
+        let dir = dir.as_path();
+        let json = scene_json(r#""obj": "stanford-bunny.obj", "sparse_points": 4096"#);
+        let started = std::time::Instant::now();
+        let scene = Scene::from_json_str(&json, dir).expect("bunny loads");
+        let elapsed = started.elapsed();
+        eprintln!(
+            "bunny: {} vertices, {} triangles, {} sparse points in {elapsed:?}",
+            scene.vertex_count(),
+            scene.triangle_count(),
+            scene.sparse_point_count()
+        );
+        assert_eq!(scene.sparse_point_count(), 4096);
+        assert!(scene.triangle_count() >= 69_451);
+        assert!(elapsed.as_secs_f32() < 20.0, "took {elapsed:?}");
+    }
+}

@@ -1,0 +1,267 @@
+//! Vertex normals: the OBJ's own, or area-weighted normals with a crease angle.
+//!
+//! With a crease angle, two triangles around a vertex share its normal only when they are
+//! connected through edges at that vertex across which the faces bend by at most the crease
+//! angle; a vertex whose faces fall into several such groups is split into one vertex per
+//! group. Box edges and wall corners stay sharp, a scanned bunny stays smooth.
+
+use glam::Vec3;
+
+use super::Geometry;
+
+/// Dihedral angle above which an edge is a crease, degrees.
+pub(crate) const CREASE_ANGLE_DEG: f32 = 45.0;
+
+/// Normal given to a vertex that touches only zero-area triangles.
+const FALLBACK_NORMAL: Vec3 = Vec3::Y;
+
+/// Twice-area-weighted normal `(b - a) x (c - a)` of each triangle.
+fn face_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| positions[v as usize]);
+            (b - a).cross(c - a)
+        })
+        .collect()
+}
+
+/// Area-weighted normal of every vertex over all its triangles, ignoring creases; `None` where
+/// every incident triangle has zero area.
+fn smooth_normals(positions: &[Vec3], triangles: &[[u32; 3]], faces: &[Vec3]) -> Vec<Option<Vec3>> {
+    let mut sums = vec![Vec3::ZERO; positions.len()];
+    for (triangle, &face) in triangles.iter().zip(faces) {
+        for &v in triangle {
+            sums[v as usize] += face;
+        }
+    }
+    sums.into_iter().map(Vec3::try_normalize).collect()
+}
+
+/// Uses the OBJ's normals, renormalised. A zero or non-finite normal is replaced by the
+/// area-weighted normal of the vertex's triangles (or +Y when they all have zero area).
+pub(crate) fn with_given_normals(positions: Vec<Vec3>, mut normals: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Geometry {
+    let mut smooth: Option<Vec<Option<Vec3>>> = None;
+    let mut replaced = 0usize;
+    for (v, normal) in normals.iter_mut().enumerate() {
+        if let Some(unit) = normal.try_normalize() {
+            *normal = unit;
+            continue;
+        }
+        let smooth =
+            smooth.get_or_insert_with(|| smooth_normals(&positions, &triangles, &face_normals(&positions, &triangles)));
+        *normal = smooth[v].unwrap_or(FALLBACK_NORMAL);
+        replaced += 1;
+    }
+    if replaced > 0 {
+        tracing::warn!("{replaced} zero or non-finite OBJ normals replaced by face normals");
+    }
+    Geometry {
+        positions,
+        normals,
+        triangles,
+        triangle_materials: Vec::new(),
+    }
+}
+
+/// Computes area-weighted vertex normals with a crease angle (radians), splitting vertices so
+/// that each has a single normal. Triangles keep their order; only their indices change.
+pub(crate) fn crease_normals(positions: &[Vec3], triangles: &[[u32; 3]], crease_angle: f32) -> Geometry {
+    let faces = face_normals(positions, triangles);
+    let units: Vec<Option<Vec3>> = faces.iter().map(|f| f.try_normalize()).collect();
+    let cos_crease = crease_angle.cos();
+
+    // Every (edge, triangle) incidence, sorted so that the triangles of an edge are adjacent.
+    // Corners are numbered 3 * triangle + k.
+    let mut incidences: Vec<((u32, u32), u32, u32)> = Vec::with_capacity(3 * triangles.len());
+    for (t, triangle) in triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (u, w) = (triangle[k], triangle[(k + 1) % 3]);
+            let (corner_u, corner_w) = (3 * t + k, 3 * t + (k + 1) % 3);
+            let (key, lo, hi) = if u < w {
+                ((u, w), corner_u, corner_w)
+            } else {
+                ((w, u), corner_w, corner_u)
+            };
+            incidences.push((key, lo as u32, hi as u32));
+        }
+    }
+    incidences.sort_unstable();
+
+    let mut clusters = UnionFind::new(3 * triangles.len());
+    for run in incidences.chunk_by(|a, b| a.0 == b.0) {
+        for (i, &(_, lo_i, hi_i)) in run.iter().enumerate() {
+            for &(_, lo_j, hi_j) in &run[i + 1..] {
+                let (Some(a), Some(b)) = (units[lo_i as usize / 3], units[lo_j as usize / 3]) else {
+                    continue;
+                };
+                if a.dot(b) >= cos_crease {
+                    clusters.union(lo_i, lo_j);
+                    clusters.union(hi_i, hi_j);
+                }
+            }
+        }
+    }
+
+    // One new vertex per cluster, numbered in order of first corner.
+    const UNASSIGNED: u32 = u32::MAX;
+    let mut vertex_of_root = vec![UNASSIGNED; 3 * triangles.len()];
+    let mut new_positions = Vec::with_capacity(positions.len());
+    let mut sums: Vec<Vec3> = Vec::with_capacity(positions.len());
+    let mut original: Vec<u32> = Vec::with_capacity(positions.len());
+    let mut new_triangles = Vec::with_capacity(triangles.len());
+    for (t, triangle) in triangles.iter().enumerate() {
+        let mut new_triangle = [0u32; 3];
+        for k in 0..3 {
+            let root = clusters.find((3 * t + k) as u32) as usize;
+            if vertex_of_root[root] == UNASSIGNED {
+                vertex_of_root[root] = new_positions.len() as u32;
+                new_positions.push(positions[triangle[k] as usize]);
+                sums.push(Vec3::ZERO);
+                original.push(triangle[k]);
+            }
+            let vertex = vertex_of_root[root];
+            sums[vertex as usize] += faces[t];
+            new_triangle[k] = vertex;
+        }
+        new_triangles.push(new_triangle);
+    }
+
+    let mut smooth: Option<Vec<Option<Vec3>>> = None;
+    let normals = sums
+        .iter()
+        .zip(&original)
+        .map(|(sum, &v)| {
+            sum.try_normalize().unwrap_or_else(|| {
+                let smooth = smooth.get_or_insert_with(|| smooth_normals(positions, triangles, &faces));
+                smooth[v as usize].unwrap_or(FALLBACK_NORMAL)
+            })
+        })
+        .collect();
+    Geometry {
+        positions: new_positions,
+        normals,
+        triangles: new_triangles,
+        triangle_materials: Vec::new(),
+    }
+}
+
+/// Disjoint sets over `0..n` with path halving and union by index (deterministic roots).
+struct UnionFind {
+    parent: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> UnionFind {
+        UnionFind {
+            parent: (0..n as u32).collect(),
+        }
+    }
+
+    fn find(&mut self, mut x: u32) -> u32 {
+        while self.parent[x as usize] != x {
+            let grandparent = self.parent[self.parent[x as usize] as usize];
+            self.parent[x as usize] = grandparent;
+            x = grandparent;
+        }
+        x
+    }
+
+    fn union(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            let (keep, child) = if ra < rb { (ra, rb) } else { (rb, ra) };
+            self.parent[child as usize] = keep;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A unit cube with outward counter-clockwise quads, triangulated as tobj fans them.
+    fn cube() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let positions = (0..8)
+            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
+            .collect();
+        let quads = [
+            [0, 2, 3, 1], // z = 0, normal -Z
+            [4, 5, 7, 6], // z = 1, +Z
+            [0, 1, 5, 4], // y = 0, -Y
+            [2, 6, 7, 3], // y = 1, +Y
+            [0, 4, 6, 2], // x = 0, -X
+            [1, 3, 7, 5], // x = 1, +X
+        ];
+        let triangles = quads.iter().flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]]).collect();
+        (positions, triangles)
+    }
+
+    #[test]
+    fn cube_gets_24_vertices_with_axis_aligned_normals() {
+        let (positions, triangles) = cube();
+        let geometry = crease_normals(&positions, &triangles, CREASE_ANGLE_DEG.to_radians());
+        assert_eq!(geometry.positions.len(), 24);
+        assert_eq!(geometry.triangles.len(), 12);
+        for (t, triangle) in geometry.triangles.iter().enumerate() {
+            let face = {
+                let [a, b, c] = triangle.map(|v| geometry.positions[v as usize]);
+                (b - a).cross(c - a).normalize()
+            };
+            for &v in triangle {
+                let n = geometry.normals[v as usize];
+                assert_eq!(n, face, "triangle {t} vertex {v}");
+                assert_eq!(n.abs().max_element(), 1.0, "axis-aligned: {n}");
+            }
+            // Positions are unchanged by splitting.
+            let original = triangles[t].map(|v| positions[v as usize]);
+            assert_eq!(triangle.map(|v| geometry.positions[v as usize]), original);
+        }
+    }
+
+    #[test]
+    fn gentle_bends_stay_smooth() {
+        // Two triangles folded by 30 degrees along the shared edge 0-1.
+        let fold = 30f32.to_radians();
+        let positions = vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::new(0.5, 1.0, 0.0),
+            Vec3::new(0.5, -fold.cos(), fold.sin()),
+        ];
+        let triangles = vec![[0, 1, 2], [1, 0, 3]];
+        let geometry = crease_normals(&positions, &triangles, CREASE_ANGLE_DEG.to_radians());
+        assert_eq!(geometry.positions.len(), 4, "no split below the crease angle");
+        let sharp = crease_normals(&positions, &triangles, 20f32.to_radians());
+        assert_eq!(sharp.positions.len(), 6, "split above the crease angle");
+        for n in geometry.normals.iter().chain(&sharp.normals) {
+            assert!((n.length() - 1.0).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn degenerate_triangles_get_finite_normals() {
+        let positions = vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(5.0, 5.0, 5.0),
+        ];
+        // A good triangle, a zero-area sliver sharing its edge, and an isolated collapsed one.
+        let triangles = vec![[0, 1, 2], [0, 3, 1], [4, 4, 4]];
+        let geometry = crease_normals(&positions, &triangles, CREASE_ANGLE_DEG.to_radians());
+        for n in &geometry.normals {
+            assert!(n.is_finite() && (n.length() - 1.0).abs() < 1e-6, "{n}");
+        }
+        let given = with_given_normals(
+            positions.clone(),
+            vec![Vec3::ZERO, Vec3::NAN, Vec3::new(0.0, 0.0, 3.0), Vec3::Z, Vec3::ZERO],
+            triangles,
+        );
+        assert_eq!(given.normals[0], Vec3::Z);
+        assert_eq!(given.normals[1], Vec3::Z);
+        assert_eq!(given.normals[2], Vec3::Z);
+        assert_eq!(given.normals[4], FALLBACK_NORMAL);
+    }
+}

@@ -1,0 +1,833 @@
+//! OBJ and MTL loading with tobj: all groups of one OBJ merged into one indexed triangle mesh,
+//! identical vertices welded, and every triangle's material resolved (MTL, then JSON
+//! overrides) into a per-mesh table.
+//!
+//! tobj reports errors without a line number and accepts a few things relume must not (NaN
+//! coordinates, face indices it only checks at the end of a group, short `Kd` lines it panics
+//! on), so a light pre-scan of the text checks those first and names the file and line.
+
+use std::cell::RefCell;
+use std::collections::{BTreeSet, HashMap};
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+use super::description::{MeshDescription, key_path};
+use super::hash::fast_hash_map;
+use super::{Material, SceneError};
+
+/// One OBJ file as a single mesh, before normals, subdivision and sparse points.
+#[derive(Clone, Debug)]
+pub(crate) struct LoadedObj {
+    /// The OBJ file as opened (`base_dir` joined with the scene's path).
+    pub file: PathBuf,
+    /// Model-space positions, welded.
+    pub positions: Vec<Vec3>,
+    /// The OBJ's normals, one per vertex, when every loaded face has them.
+    pub normals: Option<Vec<Vec3>>,
+    /// Counter-clockwise triangles.
+    pub triangles: Vec<[u32; 3]>,
+    /// Per triangle, index into `materials`.
+    pub triangle_materials: Vec<u32>,
+    /// This mesh's materials, one per material name used (plus the default when some faces
+    /// have none), overrides applied.
+    pub materials: Vec<Material>,
+}
+
+/// A problem at a place in a file, before it is tied to a scene field.
+struct FileError {
+    file: PathBuf,
+    line: Option<usize>,
+    message: String,
+}
+
+impl FileError {
+    fn into_scene_error(self, field: &str) -> SceneError {
+        SceneError::Obj {
+            field: field.to_owned(),
+            file: self.file,
+            line: self.line,
+            message: self.message,
+        }
+    }
+}
+
+/// Loads the OBJ of mesh `field` (e.g. `meshes[0]`), relative to `base_dir`.
+pub(crate) fn load(description: &MeshDescription, field: &str, base_dir: &Path) -> Result<LoadedObj, SceneError> {
+    let obj_field = format!("{field}.obj");
+    let file = base_dir.join(&description.obj);
+    let file_error = |line: Option<usize>, message: String| SceneError::Obj {
+        field: obj_field.clone(),
+        file: file.clone(),
+        line,
+        message,
+    };
+    let bytes = std::fs::read(&file).map_err(|e| file_error(None, format!("cannot read: {e}")))?;
+    let text = String::from_utf8_lossy(&bytes);
+    let scan = prescan_obj(&text).map_err(|(line, message)| file_error(Some(line), message))?;
+
+    // tobj asks for each `mtllib`; load it relative to the OBJ and remember where each material
+    // is defined (for messages) and the first error (tobj would drop it).
+    let obj_dir = file.parent().unwrap_or_else(|| Path::new("."));
+    let mtl_files: RefCell<Vec<MtlFile>> = RefCell::new(Vec::new());
+    let mtl_error: RefCell<Option<FileError>> = RefCell::new(None);
+    let material_loader = |relative: &Path| -> tobj::MTLLoadResult {
+        let path = obj_dir.join(relative);
+        match load_mtl(&path) {
+            Ok((loaded, mtl)) => {
+                mtl_files.borrow_mut().push(mtl);
+                loaded
+            }
+            Err(error) => {
+                mtl_error.borrow_mut().get_or_insert(error);
+                Err(tobj::LoadError::OpenFileFailed)
+            }
+        }
+    };
+    let mut reader = Cursor::new(text.as_bytes());
+    let result = tobj::load_obj_buf(&mut reader, &tobj::GPU_LOAD_OPTIONS, material_loader);
+    if let Some(error) = mtl_error.into_inner() {
+        return Err(error.into_scene_error(&obj_field));
+    }
+    let (models, tobj_materials) = result.map_err(|e| {
+        let line = line_of_last_read(text.as_bytes(), reader.position());
+        file_error(Some(line), format!("cannot parse: {e}"))
+    })?;
+    // tobj only returns an error here when an MTL failed, which was reported above.
+    let tobj_materials = tobj_materials.unwrap_or_default();
+    let mtl_files = mtl_files.into_inner();
+
+    check_skip_groups(description, field, &file, &scan, &models)?;
+    check_material_overrides(description, field, &file, &tobj_materials)?;
+    let mut warned = BTreeSet::new();
+    for (name, line) in &scan.usemtl {
+        if !tobj_materials.iter().any(|m| &m.name == name) && warned.insert(name) {
+            tracing::warn!(
+                file = %file.display(),
+                line,
+                "usemtl `{name}` names no material of the OBJ's MTL files; \
+                 its faces get the default material"
+            );
+        }
+    }
+
+    let mut merged = Merged::default();
+    let mut resolver = MaterialResolver {
+        description,
+        field,
+        tobj_materials: &tobj_materials,
+        mtl_files: &mtl_files,
+        by_name: HashMap::new(),
+        materials: Vec::new(),
+    };
+    let skip: BTreeSet<&str> = description.skip_groups.iter().map(String::as_str).collect();
+    for model in models.iter().filter(|m| !skip.contains(m.name.as_str())) {
+        if model.mesh.indices.is_empty() {
+            continue;
+        }
+        let material = resolver.resolve(model.mesh.material_id)?;
+        merged
+            .append(&model.mesh, material)
+            .map_err(|message| file_error(None, format!("group `{}`: {message}", model.name)))?;
+    }
+    if merged.triangles.is_empty() {
+        let after = if skip.is_empty() { "" } else { " after skip_groups" };
+        return Err(file_error(None, format!("no triangles to load{after}")));
+    }
+    let normals = match (merged.faces_with_normals, merged.faces_without_normals) {
+        (0, _) => None,
+        (_, 0) => Some(merged.normals),
+        (with, without) => {
+            tracing::warn!(
+                file = %file.display(),
+                "{with} faces have normals and {without} do not; computing all normals"
+            );
+            None
+        }
+    };
+    let welded = weld(merged.positions, normals, merged.triangles, merged.triangle_materials);
+    Ok(LoadedObj {
+        file,
+        positions: welded.positions,
+        normals: welded.normals,
+        triangles: welded.triangles,
+        triangle_materials: welded.triangle_materials,
+        materials: resolver.materials,
+    })
+}
+
+/// What the pre-scan learned besides "no errors".
+#[derive(Debug, Default)]
+struct ObjScan {
+    /// Names of `g`/`o` statements, as tobj names its models.
+    groups: Vec<String>,
+    /// `usemtl` names and their lines.
+    usemtl: Vec<(String, usize)>,
+}
+
+/// Checks what tobj does not: finite coordinates, and face indices that refer to elements
+/// defined above them. Errors are (1-based line, message).
+fn prescan_obj(text: &str) -> Result<ObjScan, (usize, String)> {
+    let mut scan = ObjScan::default();
+    let (mut positions, mut texcoords, mut normals) = (0usize, 0usize, 0usize);
+    for (index, raw) in text.split('\n').enumerate() {
+        let line_number = index + 1;
+        let line = raw.strip_suffix('\r').unwrap_or(raw);
+        let mut words = line.split_whitespace();
+        let fail = |message: String| (line_number, message);
+        match words.next() {
+            Some("v") => {
+                let values: Vec<&str> = words.collect();
+                check_numbers(&values, "vertex position").map_err(fail)?;
+                if values.len() == 4 {
+                    // x y z w: tobj divides by w.
+                    match values[3].parse::<f32>() {
+                        Ok(w) if w.is_finite() && w != 0.0 => {}
+                        _ => {
+                            return Err(fail(format!(
+                                "vertex weight w must be a finite nonzero number, got `{}`",
+                                values[3]
+                            )));
+                        }
+                    }
+                }
+                positions += 1;
+            }
+            Some("vn") => {
+                let values: Vec<&str> = words.collect();
+                check_numbers(&values, "normal").map_err(fail)?;
+                normals += 1;
+            }
+            Some("vt") => texcoords += 1,
+            Some("f") => {
+                for vertex in words {
+                    check_face_vertex(vertex, positions, texcoords, normals).map_err(fail)?;
+                }
+            }
+            Some("g" | "o") => {
+                let first = line.chars().next().map_or(1, char::len_utf8);
+                let name = line[first..].trim();
+                let name = if name.is_empty() { "unnamed_object" } else { name };
+                scan.groups.push(name.to_owned());
+            }
+            Some("usemtl") => {
+                let name = line.split_once(' ').map_or("", |(_, rest)| rest).trim();
+                scan.usemtl.push((name.to_owned(), line_number));
+            }
+            _ => {}
+        }
+    }
+    Ok(scan)
+}
+
+/// The first three of `values` must be finite numbers.
+fn check_numbers(values: &[&str], what: &str) -> Result<(), String> {
+    if values.len() < 3 {
+        return Err(format!("{what} has {} coordinates, expected 3", values.len()));
+    }
+    for value in &values[..3] {
+        match value.parse::<f32>() {
+            Ok(x) if x.is_finite() => {}
+            Ok(_) => return Err(format!("{what} coordinate `{value}` is not finite")),
+            Err(_) => return Err(format!("{what} coordinate `{value}` is not a number")),
+        }
+    }
+    Ok(())
+}
+
+/// Checks one `v`, `v/vt`, `v//vn` or `v/vt/vn` face vertex against the element counts so far.
+fn check_face_vertex(vertex: &str, positions: usize, texcoords: usize, normals: usize) -> Result<(), String> {
+    let parts: Vec<&str> = vertex.split('/').collect();
+    if parts.len() > 3 || parts[0].is_empty() {
+        return Err(format!("malformed face vertex `{vertex}`"));
+    }
+    let kinds = [
+        ("vertex", positions),
+        ("texture coordinate", texcoords),
+        ("normal", normals),
+    ];
+    for (part, (kind, count)) in parts.iter().zip(kinds) {
+        if part.is_empty() {
+            continue;
+        }
+        let index: i64 = part.parse().map_err(|_| format!("malformed face vertex `{vertex}`"))?;
+        // 1..=count counts from the start, -count..=-1 back from the last one defined.
+        if index == 0 || index.unsigned_abs() > count as u64 {
+            return Err(format!(
+                "face {kind} index {index} is out of range: {count} {kind}s are defined above \
+                 this line (OBJ indices start at 1, negative ones count back)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The 1-based line of the last line a line reader read, after it consumed `consumed` bytes.
+fn line_of_last_read(text: &[u8], consumed: u64) -> usize {
+    let mut end = usize::try_from(consumed).unwrap_or(usize::MAX).min(text.len());
+    if end > 0 && text[end - 1] == b'\n' {
+        end -= 1;
+    }
+    text[..end].iter().filter(|&&b| b == b'\n').count() + 1
+}
+
+/// One MTL file: its path and the line of each `newmtl`.
+#[derive(Debug)]
+struct MtlFile {
+    path: PathBuf,
+    definitions: Vec<(String, usize)>,
+}
+
+impl MtlFile {
+    fn line_of(&self, name: &str) -> Option<usize> {
+        self.definitions
+            .iter()
+            .rev()
+            .find(|(n, _)| n == name)
+            .map(|&(_, line)| line)
+    }
+}
+
+/// Reads and parses one MTL file; the tobj result is always `Ok` (errors are [`FileError`]s).
+fn load_mtl(path: &Path) -> Result<(tobj::MTLLoadResult, MtlFile), FileError> {
+    let error = |line: Option<usize>, message: String| FileError {
+        file: path.to_path_buf(),
+        line,
+        message,
+    };
+    let bytes = std::fs::read(path).map_err(|e| error(None, format!("cannot read: {e}")))?;
+    let text = String::from_utf8_lossy(&bytes);
+    let mut definitions = Vec::new();
+    for (index, raw) in text.split('\n').enumerate() {
+        let line = raw.trim();
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("newmtl") => {
+                definitions.push((line["newmtl".len()..].trim().to_owned(), index + 1));
+            }
+            // tobj panics on fewer than three numbers.
+            Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if words.clone().count() < 3 => {
+                return Err(error(Some(index + 1), format!("`{key}` needs three numbers (r g b)")));
+            }
+            _ => {}
+        }
+    }
+    let mut reader = Cursor::new(text.as_bytes());
+    let parsed = tobj::load_mtl_buf(&mut reader).map_err(|e| {
+        let line = line_of_last_read(text.as_bytes(), reader.position());
+        error(Some(line), format!("cannot parse: {e}"))
+    })?;
+    Ok((
+        Ok(parsed),
+        MtlFile {
+            path: path.to_path_buf(),
+            definitions,
+        },
+    ))
+}
+
+fn check_skip_groups(
+    description: &MeshDescription,
+    field: &str,
+    file: &Path,
+    scan: &ObjScan,
+    models: &[tobj::Model],
+) -> Result<(), SceneError> {
+    let known: BTreeSet<&str> = scan
+        .groups
+        .iter()
+        .map(String::as_str)
+        .chain(models.iter().map(|m| m.name.as_str()))
+        .collect();
+    for (i, name) in description.skip_groups.iter().enumerate() {
+        if !known.contains(name.as_str()) {
+            return Err(SceneError::Obj {
+                field: format!("{field}.skip_groups[{i}]"),
+                file: file.to_path_buf(),
+                line: None,
+                message: format!(
+                    "no group or object named `{name}` (the file has: {})",
+                    list(known.iter())
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+fn check_material_overrides(
+    description: &MeshDescription,
+    field: &str,
+    file: &Path,
+    tobj_materials: &[tobj::Material],
+) -> Result<(), SceneError> {
+    let known: BTreeSet<&str> = tobj_materials.iter().map(|m| m.name.as_str()).collect();
+    for name in description.materials.keys() {
+        if !known.contains(name.as_str()) {
+            return Err(SceneError::Obj {
+                field: key_path(&format!("{field}.materials"), name),
+                file: file.to_path_buf(),
+                line: None,
+                message: format!(
+                    "no material named `{name}` in the OBJ's MTL files (they define: {})",
+                    list(known.iter())
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// `a, b, c`, or `nothing`.
+fn list<'a>(names: impl Iterator<Item = &'a &'a str>) -> String {
+    let names: Vec<&str> = names.copied().collect();
+    if names.is_empty() {
+        "nothing".to_owned()
+    } else {
+        names.join(", ")
+    }
+}
+
+/// Builds the per-mesh material table on demand, one entry per material name used.
+struct MaterialResolver<'a> {
+    description: &'a MeshDescription,
+    field: &'a str,
+    tobj_materials: &'a [tobj::Material],
+    mtl_files: &'a [MtlFile],
+    /// Material name (`None`: faces without a material) to index into `materials`.
+    by_name: HashMap<Option<String>, u32>,
+    materials: Vec<Material>,
+}
+
+impl MaterialResolver<'_> {
+    /// The local index of the material with tobj id `id`.
+    fn resolve(&mut self, id: Option<usize>) -> Result<u32, SceneError> {
+        let source = id.and_then(|id| self.tobj_materials.get(id));
+        let name = source.map(|m| m.name.clone());
+        if let Some(&index) = self.by_name.get(&name) {
+            return Ok(index);
+        }
+        let by_name_override = name.as_ref().and_then(|name| self.description.materials.get(name));
+        let material = match (by_name_override, &self.description.material, source) {
+            (Some(json), _, _) | (None, Some(json), _) => json.to_material(),
+            (None, None, Some(mtl)) => self.convert_mtl(mtl)?,
+            (None, None, None) => Material::DEFAULT,
+        };
+        let index = u32::try_from(self.materials.len()).unwrap_or(u32::MAX);
+        self.materials.push(material);
+        self.by_name.insert(name, index);
+        Ok(index)
+    }
+
+    /// Converts an MTL material: `Kd` to diffuse, `Ks` to specular, `Ns` to exponent; values
+    /// out of range are clamped and `Kd + Ks > 1` is scaled down to 1, each with a warning.
+    fn convert_mtl(&self, mtl: &tobj::Material) -> Result<Material, SceneError> {
+        let file = self.mtl_files.iter().rev().find(|f| f.line_of(&mtl.name).is_some());
+        let (path, line) = file.map_or((PathBuf::new(), None), |f| (f.path.clone(), f.line_of(&mtl.name)));
+        let name = &mtl.name;
+        let warn = |what: &str| {
+            tracing::warn!(
+                file = %path.display(),
+                line,
+                material = %name,
+                "{what}"
+            );
+        };
+        let diffuse = mtl.diffuse.map_or(Material::DEFAULT.diffuse, Vec3::from_array);
+        let specular = mtl.specular.map_or(Material::DEFAULT.specular, Vec3::from_array);
+        let exponent = mtl.shininess.unwrap_or(Material::DEFAULT.exponent);
+        if !diffuse.is_finite() || !specular.is_finite() || !exponent.is_finite() {
+            return Err(SceneError::Obj {
+                field: format!("{}.obj", self.field),
+                file: path,
+                line,
+                message: format!(
+                    "material `{name}` has a non-finite Kd, Ks or Ns \
+                     (Kd {diffuse}, Ks {specular}, Ns {exponent})"
+                ),
+            });
+        }
+        let mut material = Material {
+            diffuse: diffuse.clamp(Vec3::ZERO, Vec3::ONE),
+            specular: specular.clamp(Vec3::ZERO, Vec3::ONE),
+            exponent: exponent.clamp(0.0, Material::MAX_EXPONENT),
+        };
+        if material.diffuse != diffuse || material.specular != specular {
+            warn(&format!(
+                "Kd {diffuse} / Ks {specular} outside [0, 1]: clamped to Kd {} / Ks {}",
+                material.diffuse, material.specular
+            ));
+        }
+        if material.exponent != exponent {
+            warn(&format!(
+                "Ns {exponent} outside [0, {}]: clamped to {}",
+                Material::MAX_EXPONENT,
+                material.exponent
+            ));
+        }
+        let sum = material.diffuse + material.specular;
+        if sum.max_element() > 1.0 {
+            let scale = Vec3::ONE / sum.max(Vec3::ONE);
+            let before = material;
+            material.diffuse *= scale;
+            material.specular *= scale;
+            warn(&format!(
+                "Kd + Ks = {sum} exceeds 1 (not energy conserving): scaled down to Kd {} / Ks {} \
+                 (was Kd {} / Ks {})",
+                material.diffuse, material.specular, before.diffuse, before.specular
+            ));
+        }
+        if let Some(texture) = &mtl.diffuse_texture {
+            warn(&format!("map_Kd `{texture}` ignored: textures are not supported yet"));
+        }
+        if mtl.emissive.is_some_and(|ke| ke.iter().any(|&c| c > 0.0)) {
+            warn("Ke (emission) ignored: relume's only emitter is the spot light");
+        }
+        Ok(material)
+    }
+}
+
+/// The groups of an OBJ concatenated.
+#[derive(Default)]
+struct Merged {
+    positions: Vec<Vec3>,
+    /// Zero for vertices of groups without normals.
+    normals: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    triangle_materials: Vec<u32>,
+    faces_with_normals: usize,
+    faces_without_normals: usize,
+}
+
+impl Merged {
+    fn append(&mut self, mesh: &tobj::Mesh, material: u32) -> Result<(), String> {
+        let base = self.positions.len();
+        let count = mesh.positions.len() / 3;
+        if base + count >= u32::MAX as usize {
+            return Err("more than 2^32 vertices".to_owned());
+        }
+        self.positions
+            .extend(mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
+        if let Some(bad) = self.positions[base..].iter().find(|p| !p.is_finite()) {
+            return Err(format!("vertex position {bad} is not finite"));
+        }
+        let has_normals = mesh.normals.len() == mesh.positions.len();
+        if has_normals {
+            self.normals
+                .extend(mesh.normals.chunks_exact(3).map(|n| Vec3::new(n[0], n[1], n[2])));
+        } else {
+            self.normals.resize(self.positions.len(), Vec3::ZERO);
+        }
+        let faces = mesh.indices.len() / 3;
+        if has_normals {
+            self.faces_with_normals += faces;
+        } else {
+            self.faces_without_normals += faces;
+        }
+        for corners in mesh.indices.chunks_exact(3) {
+            if let Some(&bad) = corners.iter().find(|&&i| i as usize >= count) {
+                return Err(format!("face index {bad} out of range ({count} vertices)"));
+            }
+            // base + count < u32::MAX, checked above.
+            let offset = base as u32;
+            self.triangles
+                .push([corners[0] + offset, corners[1] + offset, corners[2] + offset]);
+            self.triangle_materials.push(material);
+        }
+        Ok(())
+    }
+}
+
+/// Welded geometry.
+struct Welded {
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    triangles: Vec<[u32; 3]>,
+    triangle_materials: Vec<u32>,
+}
+
+/// Merges vertices with bit-identical position (and normal, when there are normals), so that
+/// groups sharing positions share vertices; drops triangles that repeat a vertex.
+fn weld(
+    positions: Vec<Vec3>,
+    normals: Option<Vec<Vec3>>,
+    triangles: Vec<[u32; 3]>,
+    triangle_materials: Vec<u32>,
+) -> Welded {
+    // `+ 0.0` turns -0.0 into 0.0 so that the two compare equal as bits.
+    let bits = |v: Vec3| (v + Vec3::ZERO).to_array().map(f32::to_bits);
+    let mut map = fast_hash_map::<([u32; 3], [u32; 3]), u32>(positions.len());
+    let mut remap = Vec::with_capacity(positions.len());
+    let mut welded_positions = Vec::with_capacity(positions.len());
+    let mut welded_normals = Vec::with_capacity(positions.len());
+    for (i, &p) in positions.iter().enumerate() {
+        let n = normals.as_ref().map_or(Vec3::ZERO, |n| n[i]);
+        let next = welded_positions.len() as u32;
+        let index = *map.entry((bits(p), bits(n))).or_insert(next);
+        if index == next {
+            welded_positions.push(p);
+            welded_normals.push(n);
+        }
+        remap.push(index);
+    }
+    let mut welded_triangles = Vec::with_capacity(triangles.len());
+    let mut welded_materials = Vec::with_capacity(triangles.len());
+    for (triangle, material) in triangles.iter().zip(triangle_materials) {
+        let [a, b, c] = triangle.map(|v| remap[v as usize]);
+        if a != b && b != c && c != a {
+            welded_triangles.push([a, b, c]);
+            welded_materials.push(material);
+        }
+    }
+    let dropped = triangles.len() - welded_triangles.len();
+    if dropped > 0 {
+        tracing::debug!("dropped {dropped} triangles that repeat a vertex");
+    }
+    Welded {
+        positions: welded_positions,
+        normals: normals.map(|_| welded_normals),
+        triangles: welded_triangles,
+        triangle_materials: welded_materials,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::TempDir;
+    use super::*;
+
+    fn mesh(obj: &str) -> MeshDescription {
+        MeshDescription {
+            obj: obj.to_owned(),
+            transform: Default::default(),
+            sparse_points: 16,
+            material: None,
+            materials: Default::default(),
+            skip_groups: Vec::new(),
+        }
+    }
+
+    fn load_text(dir: &TempDir, obj: &str, description: &MeshDescription) -> Result<LoadedObj, SceneError> {
+        dir.write(&description.obj, obj);
+        load(description, "meshes[0]", dir.path())
+    }
+
+    const QUAD_MTL: &str = "\
+mtllib quad.mtl
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+g first
+usemtl shiny
+f 1 2 3
+g second
+usemtl matte
+f 1 3 4
+";
+
+    #[test]
+    fn groups_merge_with_materials_and_welding() {
+        let dir = TempDir::new("obj-merge");
+        dir.write(
+            "quad.mtl",
+            "newmtl shiny\nKd 0.2 0.2 0.2\nKs 0.5 0.5 0.5\nNs 40\nnewmtl matte\nKd 0.8 0.1 0.1\n",
+        );
+        let loaded = load_text(&dir, QUAD_MTL, &mesh("quad.obj")).expect("loads");
+        // Two groups with 3 vertices each, welded to the quad's 4.
+        assert_eq!(loaded.positions.len(), 4);
+        assert_eq!(loaded.triangles.len(), 2);
+        assert!(loaded.normals.is_none());
+        assert_eq!(loaded.materials.len(), 2);
+        let shiny = loaded.materials[loaded.triangle_materials[0] as usize];
+        let matte = loaded.materials[loaded.triangle_materials[1] as usize];
+        assert_eq!(shiny.specular, Vec3::splat(0.5));
+        assert_eq!(shiny.exponent, 40.0);
+        assert_eq!(matte.diffuse, Vec3::new(0.8, 0.1, 0.1));
+        assert_eq!(matte.specular, Vec3::ZERO);
+        assert_eq!(matte.exponent, Material::DEFAULT.exponent);
+    }
+
+    #[test]
+    fn mtl_energy_excess_is_clamped() {
+        let dir = TempDir::new("obj-clamp");
+        dir.write(
+            "quad.mtl",
+            "newmtl shiny\nKd 0.8 0.5 1.5\nKs 0.8 0.2 0\nNs 50000\nnewmtl matte\nKd 0.8 0.1 0.1\n",
+        );
+        let loaded = load_text(&dir, QUAD_MTL, &mesh("quad.obj")).expect("loads");
+        let shiny = loaded.materials[loaded.triangle_materials[0] as usize];
+        // Red: 0.8 + 0.8 scaled to 0.5 + 0.5; green 0.5 + 0.2 untouched; blue Kd clamped to 1.
+        assert!(shiny.diffuse.abs_diff_eq(Vec3::new(0.5, 0.5, 1.0), 1e-6), "{shiny:?}");
+        assert!(shiny.specular.abs_diff_eq(Vec3::new(0.5, 0.2, 0.0), 1e-6), "{shiny:?}");
+        assert_eq!(shiny.exponent, Material::MAX_EXPONENT);
+        let sum = shiny.diffuse + shiny.specular;
+        assert!(sum.max_element() <= 1.0 + 1e-6);
+    }
+
+    #[test]
+    fn json_overrides_replace_mtl_materials() {
+        let dir = TempDir::new("obj-override");
+        dir.write(
+            "quad.mtl",
+            "newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n",
+        );
+        let mut description = mesh("quad.obj");
+        let green = super::super::MaterialDescription {
+            diffuse: [0.1, 0.9, 0.1],
+            ..Default::default()
+        };
+        description.materials.insert("matte".to_owned(), green);
+        description.material = Some(super::super::MaterialDescription {
+            diffuse: [0.3, 0.3, 0.3],
+            ..Default::default()
+        });
+        let loaded = load_text(&dir, QUAD_MTL, &description).expect("loads");
+        assert_eq!(
+            loaded.materials[loaded.triangle_materials[0] as usize].diffuse,
+            Vec3::splat(0.3)
+        );
+        assert_eq!(
+            loaded.materials[loaded.triangle_materials[1] as usize].diffuse,
+            Vec3::new(0.1, 0.9, 0.1)
+        );
+
+        description.materials.insert("chrome".to_owned(), green);
+        let message = load_text(&dir, QUAD_MTL, &description)
+            .expect_err("unknown")
+            .to_string();
+        assert!(message.starts_with("meshes[0].materials.chrome:"), "{message}");
+        assert!(message.contains("matte, shiny"), "{message}");
+    }
+
+    #[test]
+    fn skip_groups_drop_faces_and_unknown_groups_are_errors() {
+        let dir = TempDir::new("obj-skip");
+        dir.write(
+            "quad.mtl",
+            "newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n",
+        );
+        let mut description = mesh("quad.obj");
+        description.skip_groups = vec!["second".to_owned()];
+        let loaded = load_text(&dir, QUAD_MTL, &description).expect("loads");
+        assert_eq!(loaded.triangles.len(), 1);
+        assert_eq!(loaded.materials.len(), 1);
+
+        description.skip_groups = vec!["second".to_owned(), "first".to_owned()];
+        let message = load_text(&dir, QUAD_MTL, &description).expect_err("empty").to_string();
+        assert!(message.contains("no triangles to load after skip_groups"), "{message}");
+
+        description.skip_groups = vec!["third".to_owned()];
+        let message = load_text(&dir, QUAD_MTL, &description)
+            .expect_err("unknown")
+            .to_string();
+        assert!(message.starts_with("meshes[0].skip_groups[0]:"), "{message}");
+        assert!(message.contains("first, second"), "{message}");
+    }
+
+    #[test]
+    fn obj_without_mtl_gets_the_default_material() {
+        let dir = TempDir::new("obj-default");
+        let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 2\nf 1//1 2//1 3//1\n";
+        let loaded = load_text(&dir, obj, &mesh("tri.obj")).expect("loads");
+        assert_eq!(loaded.materials, vec![Material::DEFAULT]);
+        assert_eq!(loaded.triangle_materials, vec![0]);
+        // Normals are kept as given (normalised later).
+        assert_eq!(loaded.normals, Some(vec![Vec3::new(0.0, 0.0, 2.0); 3]));
+    }
+
+    #[test]
+    fn crlf_files_load() {
+        let dir = TempDir::new("obj-crlf");
+        dir.write(
+            "quad.mtl",
+            &"newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n".replace('\n', "\r\n"),
+        );
+        let obj = QUAD_MTL.replace('\n', "\r\n");
+        let mut description = mesh("quad.obj");
+        description.skip_groups = vec!["first".to_owned()];
+        let loaded = load_text(&dir, &obj, &description).expect("loads");
+        assert_eq!(loaded.triangles.len(), 1);
+        assert_eq!(loaded.materials[0].diffuse, Vec3::new(0.8, 0.1, 0.1));
+    }
+
+    #[test]
+    fn bad_files_name_the_file_and_line() {
+        let dir = TempDir::new("obj-errors");
+        let cases = [
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n",
+                ":4: face vertex index 4 is out of range",
+            ),
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n",
+                ":4: face vertex index 0 is out of range",
+            ),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", ":4: face vertex index -4"),
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/1 3/1\n",
+                ":4: face texture coordinate index 1",
+            ),
+            (
+                "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n",
+                ":2: vertex position coordinate `nan` is not finite",
+            ),
+            (
+                "v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n",
+                ":2: vertex position has 2 coordinates",
+            ),
+            (
+                "v 0 0 0\r\nv 1 0 0\r\nvn 0 inf 0\r\n",
+                ":3: normal coordinate `inf` is not finite",
+            ),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", ":4: malformed face vertex `x`"),
+            ("# nothing\n", "no triangles to load"),
+            ("v 0 0 0\nv 1 0 0\nf 1 2\n", "no triangles to load"),
+        ];
+        for (obj, expected) in cases {
+            let message = load_text(&dir, obj, &mesh("bad.obj")).expect_err(obj).to_string();
+            assert!(message.starts_with("meshes[0].obj: "), "{message}");
+            assert!(message.contains("bad.obj"), "{message}");
+            assert!(
+                message.contains(expected),
+                "{obj:?}: got `{message}`, expected `{expected}`"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_mtl_files_name_the_file_and_line() {
+        let dir = TempDir::new("mtl-errors");
+        let cases = [
+            ("newmtl shiny\nKd 0.5\n", "quad.mtl:2: `Kd` needs three numbers"),
+            ("newmtl shiny\nKd 0.5 x 0.5\n", "quad.mtl:2: cannot parse"),
+            (
+                "newmtl shiny\nKd 0.5 NaN 0.5\nnewmtl matte\n",
+                "quad.mtl:1: material `shiny` has a non-finite",
+            ),
+        ];
+        for (mtl, expected) in cases {
+            dir.write("quad.mtl", mtl);
+            let message = load_text(&dir, QUAD_MTL, &mesh("quad.obj")).expect_err(mtl).to_string();
+            assert!(
+                message.contains(expected),
+                "{mtl:?}: got `{message}`, expected `{expected}`"
+            );
+        }
+        std::fs::remove_file(dir.path().join("quad.mtl")).expect("remove");
+        let message = load_text(&dir, QUAD_MTL, &mesh("quad.obj"))
+            .expect_err("missing MTL")
+            .to_string();
+        assert!(message.contains("quad.mtl: cannot read"), "{message}");
+    }
+
+    #[test]
+    fn line_of_last_read_counts_lines() {
+        let text = b"a\nbb\nccc";
+        assert_eq!(line_of_last_read(text, 2), 1);
+        assert_eq!(line_of_last_read(text, 5), 2);
+        assert_eq!(line_of_last_read(text, 8), 3);
+        assert_eq!(line_of_last_read(b"", 0), 1);
+    }
+}

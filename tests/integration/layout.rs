@@ -1,0 +1,92 @@
+//! The hand-mirrored `#[repr(C)]` structs match the WGSL structs, field by field (naga parses
+//! the shaders; no drift like kajiya's HLSL/Rust copies), and every shader validates.
+
+use relume::gpu::raw::*;
+use relume::gpu::shader;
+use std::mem::{offset_of, size_of};
+
+fn module() -> naga::Module {
+    let sources = shader::all_sources();
+    let (_, source) = sources
+        .iter()
+        .find(|(n, _)| *n == "gather.wgsl")
+        .expect("gather shader");
+    naga::front::wgsl::parse_str(source).expect("gather.wgsl parses")
+}
+
+fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).expect("layout");
+    for (handle, ty) in module.types.iter() {
+        if ty.name.as_deref() == Some(name) {
+            if let naga::TypeInner::Struct { members, span } = &ty.inner {
+                let _ = layouter[handle];
+                return (
+                    *span,
+                    members
+                        .iter()
+                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                        .collect(),
+                );
+            }
+        }
+    }
+    panic!("struct {name} not found in WGSL");
+}
+
+macro_rules! check {
+    ($module:expr, $wgsl:literal, $rust:ty, [$($field:ident),* $(,)?]) => {{
+        let (size, members) = wgsl_layout(&$module, $wgsl);
+        assert_eq!(size as usize, size_of::<$rust>(), "size of {}", $wgsl);
+        let rust: Vec<(String, u32)> = vec![$((stringify!($field).to_string(), offset_of!($rust, $field) as u32)),*];
+        assert_eq!(members, rust, "fields of {}", $wgsl);
+    }};
+}
+
+#[test]
+fn rust_structs_match_wgsl() {
+    let m = module();
+    check!(m, "Val", RawVal, [position, area, normal, _pad0, flux, _pad1]);
+    check!(m, "Vertex", RawVertex, [position, _pad0, normal, _pad1]);
+    check!(m, "Material", RawMaterial, [diffuse, exponent, specular, _pad0]);
+    check!(
+        m,
+        "SparsePoint",
+        RawSparsePoint,
+        [position, occluder_radius, normal, exponent]
+    );
+    check!(m, "Gathered", RawGathered, [irradiance, _pad0, position, _pad1]);
+    check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, _pad1]);
+    check!(
+        m,
+        "Frame",
+        RawFrame,
+        [
+            world_to_clip,
+            light_world_to_clip,
+            eye,
+            width,
+            light_position,
+            height,
+            light_direction,
+            rsm_resolution,
+            light_intensity,
+            light_inner_angle,
+            light_outer_angle,
+            sparse_count,
+            vertex_count,
+            triangle_count,
+        ]
+    );
+}
+
+#[test]
+fn every_shader_validates() {
+    for (name, source) in shader::all_sources() {
+        let module =
+            naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+    }
+}

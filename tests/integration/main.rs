@@ -1,0 +1,41 @@
+//! relume's integration tests: one binary (as ripgrep does), one module per concern. GPU tests
+//! run on whatever adapter wgpu finds; in CI that is Mesa's lavapipe.
+
+mod layout;
+mod rsm;
+mod twins;
+
+use relume::gpu::Gpu;
+use relume::scene::Scene;
+use std::path::PathBuf;
+
+pub fn fixture(path: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(path)
+}
+
+pub fn load_scene(name: &str) -> Scene {
+    let path = fixture(&format!("scenes/{name}.json"));
+    Scene::load(&path).unwrap_or_else(|e| panic!("loading {}: {e}", path.display()))
+}
+
+pub fn gpu() -> Gpu {
+    Gpu::new().expect("a GPU adapter (lavapipe in CI: apt-get install mesa-vulkan-drivers)")
+}
+
+/// A fresh directory under the target dir for a test's files.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+/// `|a - b| <= rel * scale + abs` component-wise, with a message naming `what`.
+#[track_caller]
+pub fn assert_close(a: glam::Vec3, b: glam::Vec3, rel: f32, scale: f32, abs: f32, what: &str) {
+    let tol = rel * scale + abs;
+    assert!(
+        (a - b).abs().max_element() <= tol,
+        "{what}: GPU {a} vs CPU {b} (tolerance {tol})"
+    );
+}

@@ -1,0 +1,310 @@
+//! Every GPU pass against its CPU twin in `relume::reference`, on the same inputs: each pass's
+//! input is read back from the GPU, fed to the twin, and the outputs compared.
+//!
+//! Tolerances: lavapipe evaluates `inverseSqrt`, `exp2`/`log2` and `acos` with a few ulp of
+//! error and may contract multiply-adds, so quantities agree to ~1e-5 relative; we allow 1e-3 of
+//! the largest value of the compared buffer (plus a tiny absolute floor for zeros), which is
+//! still far below anything visible and far below the sparse method's own error.
+
+use super::{assert_close, gpu, load_scene};
+use glam::Vec3;
+use relume::gpu::raw::RawPointLight;
+use relume::reference::{self, PointLight, Val};
+use relume::renderer::{Method, Renderer};
+
+const REL: f32 = 1e-3;
+
+fn max_of(v: impl Iterator<Item = Vec3>) -> f32 {
+    v.map(|x| x.max_element()).fold(0.0, f32::max)
+}
+
+fn light(r: &RawPointLight) -> PointLight {
+    r.into()
+}
+
+#[test]
+fn sparse_pipeline_matches_cpu_twins() {
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    assert!(renderer.glossy(), "the small fixture has glossy materials");
+    let (w, h) = (48, 40);
+    let frame = renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let vals: Vec<Val> = renderer.read_vals(&gpu).unwrap();
+    assert!(vals.len() > 100, "the spot must produce VALs, got {}", vals.len());
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let flat = &renderer.scene.flat;
+    let eye = renderer.camera().position;
+
+    // Step 1: gather.
+    let cpu: Vec<reference::Gathered> = flat
+        .sparse_points
+        .iter()
+        .map(|p| reference::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, &vals))
+        .collect();
+    let scale_e = max_of(cpu.iter().map(|g| g.irradiance));
+    let scale_g = max_of(cpu.iter().map(|g| g.glossy_irradiance));
+    assert!(scale_e > 0.0 && scale_g > 0.0);
+    for (i, c) in cpu.iter().enumerate() {
+        let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
+        assert_close(
+            gd.irradiance.into(),
+            c.irradiance,
+            REL,
+            scale_e,
+            1e-9,
+            &format!("E at sparse point {i}"),
+        );
+        assert_close(
+            gg.irradiance.into(),
+            c.glossy_irradiance,
+            REL,
+            scale_g,
+            1e-9,
+            &format!("G at sparse point {i}"),
+        );
+        if c.irradiance.max_element() > 1e-3 * scale_e {
+            assert_close(
+                gd.position.into(),
+                c.diffuse_position,
+                1e-3,
+                1.0,
+                1e-4,
+                &format!("l'_d at {i}"),
+            );
+        }
+    }
+
+    // Step 2: renormalisation, from the GPU's own gathered values.
+    let mut cpu_sparse = (Vec::new(), Vec::new());
+    for (i, p) in flat.sparse_points.iter().enumerate() {
+        let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
+        let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
+        cpu_sparse.0.push(reference::renormalise_diffuse(
+            x,
+            n,
+            gd.irradiance.into(),
+            gd.position.into(),
+        ));
+        cpu_sparse.1.push(reference::renormalise_glossy(
+            x,
+            n,
+            p.exponent,
+            eye,
+            gg.irradiance.into(),
+            gg.position.into(),
+        ));
+    }
+    for (cpu, gpu_lights, what) in [
+        (&cpu_sparse.0, &mid.sparse_diffuse, "I_d"),
+        (&cpu_sparse.1, &mid.sparse_glossy, "I_s"),
+    ] {
+        let scale = max_of(cpu.iter().map(|l| l.intensity));
+        for (i, (c, g)) in cpu.iter().zip(gpu_lights).enumerate() {
+            let g = light(g);
+            assert_close(
+                g.intensity,
+                c.intensity,
+                REL,
+                scale,
+                1e-9,
+                &format!("{what} at sparse point {i}"),
+            );
+            if c.intensity.max_element() > 1e-3 * scale {
+                assert_close(
+                    g.position,
+                    c.position,
+                    1e-3,
+                    1.0,
+                    1e-4,
+                    &format!("{what} position at {i}"),
+                );
+            }
+        }
+    }
+
+    // Step 4: interpolation, from the GPU's own sparse lights.
+    let sparse_d: Vec<PointLight> = mid.sparse_diffuse.iter().map(light).collect();
+    let sparse_s: Vec<PointLight> = mid.sparse_glossy.iter().map(light).collect();
+    let scale = max_of(sparse_d.iter().map(|l| l.intensity));
+    for (v, ids) in flat.vertex_neighbours.iter().enumerate() {
+        let vertex = flat.vertices[v];
+        let ids: Vec<usize> = ids
+            .iter()
+            .take_while(|&&i| i != u32::MAX)
+            .map(|&i| i as usize)
+            .collect();
+        let sp = |i: usize| flat.sparse_points[i];
+        let distances: Vec<f32> = ids
+            .iter()
+            .map(|&i| Vec3::from(vertex.position).distance(sp(i).position.into()))
+            .collect();
+        let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
+        let w = reference::interpolation_weights(vertex.normal.into(), &distances, &normals);
+        let d = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>());
+        let s = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>());
+        assert_close(
+            light(&mid.vertex_diffuse[v]).intensity,
+            d.intensity,
+            REL,
+            scale,
+            1e-9,
+            &format!("vertex {v} I_d"),
+        );
+        assert_close(
+            light(&mid.vertex_glossy[v]).position,
+            s.position,
+            1e-3,
+            1.0,
+            1e-4,
+            &format!("vertex {v} l_s"),
+        );
+    }
+
+    // Step 5: per-pixel shading, from the GPU's visibility buffer and vertex lights.
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let vd: Vec<PointLight> = mid.vertex_diffuse.iter().map(light).collect();
+    let vs: Vec<PointLight> = mid.vertex_glossy.iter().map(light).collect();
+    let mut expected = Vec::new();
+    for hit in &hits {
+        expected.push(hit.map(|h| {
+            let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+            let t = 3 * h.triangle as usize;
+            let corners = [0, 1, 2].map(|k| flat.indices[t + k] as usize);
+            let lerp = |l: &[PointLight]| PointLight {
+                position: reference::barycentric(
+                    h.barycentrics,
+                    l[corners[0]].position,
+                    l[corners[1]].position,
+                    l[corners[2]].position,
+                ),
+                intensity: reference::barycentric(
+                    h.barycentrics,
+                    l[corners[0]].intensity,
+                    l[corners[1]].intensity,
+                    l[corners[2]].intensity,
+                ),
+            };
+            reference::shade_sparse(p, n, &surface, eye, &lerp(&vd), Some(&lerp(&vs)))
+        }));
+    }
+    let scale = max_of(expected.iter().flatten().copied());
+    assert!(scale > 0.0, "some pixel must receive indirect light");
+    for (i, e) in expected.iter().enumerate() {
+        assert_eq!(e.is_some(), frame.indirect.covered(i), "coverage of pixel {i}");
+        if let Some(e) = e {
+            assert_close(
+                frame.indirect.rgb(i),
+                *e,
+                REL,
+                scale,
+                1e-9,
+                &format!("indirect pixel {i}"),
+            );
+        }
+    }
+
+    // Direct light: wherever the shadow test passes, the GPU equals the twin.
+    let spot = renderer.spot();
+    let direct: Vec<Option<Vec3>> = hits
+        .iter()
+        .map(|hit| {
+            hit.map(|h| {
+                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+                reference::rsm::direct_radiance(p, n, &surface, eye, &spot)
+            })
+        })
+        .collect();
+    let scale = max_of(direct.iter().flatten().copied());
+    let mut lit = 0;
+    for (i, want) in direct.iter().enumerate() {
+        let got = frame.direct.rgb(i);
+        if let (Some(want), true) = (want, got.max_element() > 0.0) {
+            lit += 1;
+            assert_close(got, *want, REL, scale, 1e-9, &format!("direct pixel {i}"));
+        }
+    }
+    assert!(lit > 20, "the spot must light some visible pixels directly, lit {lit}");
+}
+
+#[test]
+fn brute_force_matches_cpu_twin() {
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let (w, h) = (32, 24);
+    let frame = renderer.render(&gpu, Method::BruteForce, w, h).unwrap();
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let flat = &renderer.scene.flat;
+    let eye = renderer.camera().position;
+    let expected: Vec<Option<Vec3>> = hits
+        .iter()
+        .map(|hit| {
+            hit.map(|h| {
+                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+                reference::shade_brute_force(p, n, &surface, eye, &vals, renderer.glossy())
+            })
+        })
+        .collect();
+    let scale = max_of(expected.iter().flatten().copied());
+    assert!(scale > 0.0);
+    for (i, e) in expected.iter().enumerate() {
+        assert_eq!(e.is_some(), frame.indirect.covered(i));
+        if let Some(e) = e {
+            assert_close(
+                frame.indirect.rgb(i),
+                *e,
+                REL,
+                scale,
+                1e-9,
+                &format!("brute-force pixel {i}"),
+            );
+        }
+    }
+}
+
+#[test]
+fn rsm_vals_match_cpu_twin() {
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
+    let gpu_vals = renderer.read_vals(&gpu).unwrap();
+    let hits = renderer.rsm_view.read(&gpu).unwrap();
+    let r = renderer.rsm_view.width;
+    let flat = &renderer.scene.flat;
+    let spot = renderer.spot();
+    let mut cpu_vals = Vec::new();
+    for (t, hit) in hits.iter().enumerate() {
+        if let Some(h) = hit {
+            let (y, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+            let ndc = reference::rsm::rsm_texel_ndc(t as u32 % r, t as u32 / r, r);
+            let v = reference::rsm::rsm_texel_val(ndc, r, &spot, y, n, surface.diffuse);
+            if v.flux.max_element() > 0.0 {
+                cpu_vals.push(v);
+            }
+        }
+    }
+    assert_eq!(gpu_vals.len(), cpu_vals.len(), "VAL count");
+    // The GPU appends in no fixed order: match by position.
+    let positions: Vec<[f32; 3]> = gpu_vals.iter().map(|v| v.position.to_array()).collect();
+    let tree: kiddo::ImmutableKdTree<f32, 3> = kiddo::ImmutableKdTree::new_from_slice(&positions).unwrap();
+    let scale = max_of(cpu_vals.iter().map(|v| v.flux));
+    for c in &cpu_vals {
+        let nearest = tree
+            .query(&c.position.to_array())
+            .nearest_one::<kiddo::SquaredEuclidean<f32>>()
+            .execute();
+        let g = gpu_vals[nearest.item as usize];
+        assert!(nearest.distance < 1e-8, "no GPU VAL at {}", c.position);
+        assert_close(g.flux, c.flux, REL, scale, 1e-12, "VAL flux");
+        assert!(
+            (g.area - c.area).abs() <= 1e-3 * c.area + 1e-12,
+            "VAL area {} vs {}",
+            g.area,
+            c.area
+        );
+        assert_close(g.normal, c.normal, 1e-3, 1.0, 0.0, "VAL normal");
+    }
+}
