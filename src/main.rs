@@ -147,9 +147,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let start = Instant::now();
             let mut renderer = Renderer::new(&gpu, &scene)?;
             let setup_ms = start.elapsed().as_secs_f64() * 1e3;
-            // Warm-up renders compile and upload everything once; the measured ones follow.
+            // A warm-up frame settles first-use allocations; brute force is too slow to repeat
+            // and its single frame is dominated by its own arithmetic.
             renderer.render(&gpu, Method::Sparse, w, h)?;
-            renderer.render(&gpu, Method::BruteForce, w, h)?;
             let sparse = renderer.render(&gpu, Method::Sparse, w, h)?;
             let brute = renderer.render(&gpu, Method::BruteForce, w, h)?;
             let exposure = brute.indirect.auto_exposure();

@@ -112,6 +112,9 @@ impl<'g> Recorder<'g> {
         );
         let index = self.names.len() as u32;
         self.names.push(name.to_owned());
+        if self.queries.is_none() {
+            self.flush()?;
+        }
         self.encoder.push_debug_group(name);
         match &self.queries {
             Some((set, _)) => {
@@ -120,7 +123,6 @@ impl<'g> Recorder<'g> {
                 Ok(r)
             }
             None => {
-                self.flush()?;
                 let start = Instant::now();
                 let r = f(&mut self.encoder, None);
                 self.encoder.pop_debug_group();
