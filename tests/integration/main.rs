@@ -1,6 +1,8 @@
 //! relume's integration tests: one binary (as ripgrep does), one module per concern. GPU tests
 //! run on whatever adapter wgpu finds; in CI that is Mesa's lavapipe.
 
+mod accuracy;
+mod cli;
 mod layout;
 mod rsm;
 mod twins;

@@ -1,0 +1,100 @@
+//! The `relume` binary: outputs on success, and clear errors naming the offending field or flag.
+
+use super::{fixture, scratch};
+use std::process::{Command, Output};
+
+fn relume(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(args)
+        .output()
+        .expect("running relume")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn render_writes_png_and_exr_of_the_requested_size() {
+    let dir = scratch("cli_render");
+    let (png, exr) = (dir.join("x.png"), dir.join("x.exr"));
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let o = relume(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+        "--hdr",
+        exr.to_str().unwrap(),
+        "--component",
+        "indirect",
+        "--width",
+        "40",
+        "--height",
+        "30",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (40, 30));
+    let hdr = image::open(&exr).unwrap().into_rgba32f();
+    assert_eq!((hdr.width(), hdr.height()), (40, 30));
+    assert!(hdr.pixels().all(|p| p.0.iter().all(|c| c.is_finite() && *c >= 0.0)));
+    assert!(hdr.pixels().any(|p| p.0[0] > 0.0), "indirect light reaches the image");
+}
+
+#[test]
+fn compare_prints_the_documented_fields() {
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let o = relume(&[
+        "compare",
+        scene.to_str().unwrap(),
+        "--json",
+        "--width",
+        "32",
+        "--height",
+        "32",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    for key in ["sparse_ms", "brute_force_ms", "indirect_rel_rmse", "indirect_flip_mean"] {
+        let x = v[key].as_f64().unwrap_or_else(|| panic!("{key} missing: {v}"));
+        assert!(x.is_finite() && x >= 0.0, "{key} = {x}");
+    }
+    assert!(
+        v["timing"]
+            .as_str()
+            .is_some_and(|t| t == "gpu_timestamps" || t == "wall_clock")
+    );
+    assert!(v["vals"].as_u64().unwrap() > 0);
+    assert_eq!(v["pixels"].as_u64(), Some(1024));
+    assert_eq!(v["sparse_points"].as_u64(), Some(768));
+    assert!(v["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+}
+
+#[test]
+fn bad_inputs_fail_with_a_message_naming_the_field() {
+    let dir = scratch("cli_errors");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let o = relume(&["render", scene.to_str().unwrap(), "--width", "0"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--width"), "{}", stderr(&o));
+
+    let text = std::fs::read_to_string(&scene)
+        .unwrap()
+        .replace("\"rsm_resolution\"", "\"rsm_resolutoin\"");
+    let bad = dir.join("bad.json");
+    std::fs::write(&bad, text).unwrap();
+    let o = relume(&[
+        "render",
+        bad.to_str().unwrap(),
+        "--out",
+        dir.join("x.png").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("rsm_resolutoin"), "{}", stderr(&o));
+
+    let o = relume(&["render", dir.join("missing.json").to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("missing.json"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+}
