@@ -15,7 +15,7 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
     if inside {
         hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
     }
-    var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0));
+    var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1));
     if hit.covered {
         s = surface_at(hit.triangle, hit.barycentrics);
     }

@@ -15,20 +15,22 @@ struct Val {
     _pad1: f32,
 }
 
-// A mesh vertex in world space.
+// A mesh vertex in world space, with its texture coordinates (t from the top row).
 struct Vertex {
     position: vec3<f32>,
-    _pad0: f32,
+    s: f32,
     normal: vec3<f32>,
-    _pad1: f32,
+    t: f32,
 }
 
 // Normalised modified Phong (DESIGN.md §1).
+// `diffuse_texture` is a layer of the scene's texture array, or -1; the albedo is
+// `diffuse * texture` (linear).
 struct Material {
     diffuse: vec3<f32>,
     exponent: f32,
     specular: vec3<f32>,
-    _pad0: f32,
+    diffuse_texture: i32,
 }
 
 // A sparse shading point in world space this frame.

@@ -19,7 +19,10 @@ fn surface_at(triangle: u32, b: vec2<f32>) -> Surface {
     if len2 > 1e-20 {
         normal = n * inverseSqrt(len2);
     }
-    return Surface(position, normal, materials[triangle_materials[triangle]]);
+    var material = materials[triangle_materials[triangle]];
+    let st = barycentric(b, vec3<f32>(v0.s, v0.t, 0.0), vec3<f32>(v1.s, v1.t, 0.0), vec3<f32>(v2.s, v2.t, 0.0)).xy;
+    material.diffuse = diffuse_albedo(material, st);
+    return Surface(position, normal, material);
 }
 
 // A texel of a visibility buffer: triangle + 1 (0 = nothing), then the barycentrics' bits.

@@ -47,19 +47,13 @@ impl LinearImage {
             .zip(&other.pixels)
             .map(|(a, b)| [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3].max(b[3])])
             .collect();
-        LinearImage {
-            width: self.width,
-            height: self.height,
-            pixels,
-        }
+        LinearImage { width: self.width, height: self.height, pixels }
     }
 
     /// Exposure that maps the 99th-percentile luminance of covered pixels to 1 (1 if dark).
     pub fn auto_exposure(&self) -> f32 {
-        let mut y: Vec<f32> = (0..self.pixels.len())
-            .filter(|&i| self.covered(i))
-            .map(|i| luminance(self.rgb(i)))
-            .collect();
+        let mut y: Vec<f32> =
+            (0..self.pixels.len()).filter(|&i| self.covered(i)).map(|i| luminance(self.rgb(i))).collect();
         if y.is_empty() {
             return 1.0;
         }
@@ -79,10 +73,9 @@ impl LinearImage {
     }
 
     pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), ImageError> {
-        self.tone_map(exposure).save(path).map_err(|source| ImageError::Write {
-            path: path.display().to_string(),
-            source,
-        })
+        self.tone_map(exposure)
+            .save(path)
+            .map_err(|source| ImageError::Write { path: path.display().to_string(), source })
     }
 
     /// Linear float radiance as OpenEXR (RGBA f32; alpha = coverage).
@@ -90,36 +83,21 @@ impl LinearImage {
         let data: Vec<f32> = self.pixels.iter().flatten().copied().collect();
         let img =
             ::image::Rgba32FImage::from_raw(self.width, self.height, data).expect("pixel count matches dimensions");
-        img.save(path).map_err(|source| ImageError::Write {
-            path: path.display().to_string(),
-            source,
-        })
+        img.save(path).map_err(|source| ImageError::Write { path: path.display().to_string(), source })
     }
 }
 
 /// Linear [0, 1] to 8-bit sRGB (values outside are clipped).
 pub fn encode_srgb(linear: f32) -> u8 {
-    let c = if linear.is_finite() {
-        linear.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let s = if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
+    let c = if linear.is_finite() { linear.clamp(0.0, 1.0) } else { 0.0 };
+    let s = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
     (s * 255.0 + 0.5) as u8
 }
 
 /// 8-bit sRGB to linear [0, 1].
 pub fn decode_srgb(encoded: u8) -> f32 {
     let s = encoded as f32 / 255.0;
-    if s <= 0.040_45 {
-        s / 12.92
-    } else {
-        ((s + 0.055) / 1.055).powf(2.4)
-    }
+    if s <= 0.040_45 { s / 12.92 } else { ((s + 0.055) / 1.055).powf(2.4) }
 }
 
 /// Relative RMSE of `test` against `reference` over pixels the reference covers:
@@ -166,11 +144,7 @@ mod tests {
     use super::*;
 
     fn image(values: &[[f32; 4]]) -> LinearImage {
-        LinearImage {
-            width: values.len() as u32,
-            height: 1,
-            pixels: values.to_vec(),
-        }
+        LinearImage { width: values.len() as u32, height: 1, pixels: values.to_vec() }
     }
 
     #[test]
@@ -194,16 +168,8 @@ mod tests {
     fn flip_is_zero_for_identical_and_positive_for_different() {
         let w = 32;
         let px: Vec<[f32; 4]> = (0..w * w).map(|i| [(i % w) as f32 / w as f32, 0.5, 0.2, 1.0]).collect();
-        let a = LinearImage {
-            width: w,
-            height: w,
-            pixels: px.clone(),
-        };
-        let b = LinearImage {
-            width: w,
-            height: w,
-            pixels: px.iter().map(|p| [p[0] * 0.5, p[1], p[2], 1.0]).collect(),
-        };
+        let a = LinearImage { width: w, height: w, pixels: px.clone() };
+        let b = LinearImage { width: w, height: w, pixels: px.iter().map(|p| [p[0] * 0.5, p[1], p[2], 1.0]).collect() };
         assert!(flip_mean(&a, &a, 1.0) < 1e-6);
         assert!(flip_mean(&b, &a, 1.0) > 0.01);
     }

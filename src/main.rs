@@ -12,11 +12,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 #[derive(Parser)]
-#[command(
-    name = "relume",
-    version,
-    about = "One-bounce global illumination from thousands of virtual area lights"
-)]
+#[command(name = "relume", version, about = "One-bounce global illumination from thousands of virtual area lights")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -93,15 +89,7 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Render {
-            scene,
-            out,
-            hdr,
-            component,
-            method,
-            size,
-            exposure,
-        } => {
+        Command::Render { scene, out, hdr, component, method, size, exposure } => {
             let scene = load(&scene)?;
             let (w, h) = size.resolve(&scene)?;
             let gpu = Gpu::new()?;
@@ -113,14 +101,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 Component::Full => frame.direct.add(&frame.indirect),
             };
             if let Some(e) = exposure {
-                anyhow::ensure!(
-                    e.is_finite() && e > 0.0,
-                    "--exposure: must be a positive number, got {e}"
-                );
+                anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure: must be a positive number, got {e}");
             }
-            let exposure = exposure
-                .or(scene.settings.exposure)
-                .unwrap_or_else(|| image.auto_exposure());
+            let exposure = exposure.or(scene.settings.exposure).unwrap_or_else(|| image.auto_exposure());
             image.write_png(&out, exposure)?;
             if let Some(hdr) = hdr {
                 image.write_exr(&hdr)?;
@@ -135,12 +118,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             Ok(())
         }
-        Command::Compare {
-            scene,
-            json: _,
-            size,
-            images,
-        } => {
+        Command::Compare { scene, json: _, size, images } => {
             let scene = load(&scene)?;
             let (w, h) = size.resolve(&scene)?;
             let gpu = Gpu::new()?;
@@ -206,12 +184,7 @@ fn load(path: &Path) -> anyhow::Result<Scene> {
 }
 
 fn scene_name(scene: &Scene) -> String {
-    scene
-        .meshes
-        .iter()
-        .map(|m| m.name.as_str())
-        .collect::<Vec<_>>()
-        .join("+")
+    scene.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+")
 }
 
 fn write_comparison(dir: &Path, sparse: &LinearImage, brute: &LinearImage, exposure: f32) -> anyhow::Result<()> {

@@ -147,59 +147,36 @@ impl Renderer {
 
         let mut rec = Recorder::new(gpu, "relume.frame", 12);
         let scene = &self.scene;
-        rec.stage(stage::RSM_RASTER, |e, s| {
-            self.visibility.record(gpu, e, scene, &self.rsm_view, light_to_clip, s)
-        })?;
-        let rsm_out = RsmOutputs {
-            vals: &self.vals,
-            val_count: &self.val_count,
-            light_distance: &self.light_distance,
-        };
-        rec.stage(stage::RSM_VALS, |e, s| {
-            self.rsm.record(gpu, e, scene, &self.rsm_view, &rsm_out, s)
-        })?;
+        rec.stage(stage::RSM_RASTER, |e, s| self.visibility.record(gpu, e, scene, &self.rsm_view, light_to_clip, s))?;
+        let rsm_out = RsmOutputs { vals: &self.vals, val_count: &self.val_count, light_distance: &self.light_distance };
+        rec.stage(stage::RSM_VALS, |e, s| self.rsm.record(gpu, e, scene, &self.rsm_view, &rsm_out, s))?;
         let target = self.target.as_ref().expect("prepared above");
-        rec.stage(stage::VISIBILITY, |e, s| {
-            self.visibility.record(gpu, e, scene, &target.view, camera_to_clip, s)
-        })?;
+        rec.stage(stage::VISIBILITY, |e, s| self.visibility.record(gpu, e, scene, &target.view, camera_to_clip, s))?;
         match method {
             Method::Sparse => {
                 let p = self.sparse.as_ref().expect("prepared above");
                 rec.stage(stage::GATHER, |e, s| {
-                    p.gather
-                        .record(gpu, e, scene, &self.vals, &self.val_count, &p.gathered, s)
+                    p.gather.record(gpu, e, scene, &self.vals, &self.val_count, &p.gathered, s)
                 })?;
                 rec.stage(stage::RENORMALISE, |e, s| {
                     p.renormalise.record(gpu, e, scene, &p.gathered, &p.sparse_lights, s)
                 })?;
                 rec.stage(stage::INTERPOLATE, |e, s| {
-                    p.interpolate
-                        .record(gpu, e, scene, &p.sparse_lights, &p.vertex_lights, s)
+                    p.interpolate.record(gpu, e, scene, &p.sparse_lights, &p.vertex_lights, s)
                 })?;
                 rec.stage(stage::SHADE, |e, s| {
-                    p.shade
-                        .record(gpu, e, scene, &target.view, &p.vertex_lights, &target.indirect, s)
+                    p.shade.record(gpu, e, scene, &target.view, &p.vertex_lights, &target.indirect, s)
                 })?;
             }
             Method::BruteForce => {
                 let b = self.brute_force.as_ref().expect("prepared above");
                 rec.stage(stage::BRUTE_FORCE, |e, s| {
-                    b.record(
-                        gpu,
-                        e,
-                        scene,
-                        &target.view,
-                        &self.vals,
-                        &self.val_count,
-                        &target.indirect,
-                        s,
-                    )
+                    b.record(gpu, e, scene, &target.view, &self.vals, &self.val_count, &target.indirect, s)
                 })?;
             }
         }
         rec.stage(stage::DIRECT, |e, s| {
-            self.direct
-                .record(gpu, e, scene, &target.view, &self.light_distance, &target.direct, s)
+            self.direct.record(gpu, e, scene, &target.view, &self.light_distance, &target.direct, s)
         })?;
         let timings = rec.finish()?;
 
@@ -208,16 +185,8 @@ impl Renderer {
         let direct = gpu.read_buffer::<[f32; 4]>(&target.direct, pixels)?;
         let val_count = gpu.read_buffer::<u32>(&self.val_count, 1)?[0];
         Ok(Rendered {
-            direct: LinearImage {
-                width,
-                height,
-                pixels: direct,
-            },
-            indirect: LinearImage {
-                width,
-                height,
-                pixels: indirect,
-            },
+            direct: LinearImage { width, height, pixels: direct },
+            indirect: LinearImage { width, height, pixels: indirect },
             timings,
             val_count,
         })
@@ -246,10 +215,7 @@ impl Renderer {
             }
             _ => {}
         }
-        let size_matches = self
-            .target
-            .as_ref()
-            .is_some_and(|t| t.view.width == width && t.view.height == height);
+        let size_matches = self.target.as_ref().is_some_and(|t| t.view.width == width && t.view.height == height);
         if !size_matches {
             let pixels = (width * height) as usize;
             self.target = Some(CameraTarget {
@@ -308,11 +274,7 @@ impl Renderer {
     /// The live VALs of the last frame (for the CPU twins and diagnostics).
     pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::reference::Val>, GpuError> {
         let n = gpu.read_buffer::<u32>(&self.val_count, 1)?[0] as usize;
-        Ok(gpu
-            .read_buffer::<RawVal>(&self.vals, n)?
-            .iter()
-            .map(Into::into)
-            .collect())
+        Ok(gpu.read_buffer::<RawVal>(&self.vals, n)?.iter().map(Into::into).collect())
     }
 
     /// The last sparse frame's intermediate buffers: (gathered, sparse lights, vertex lights),

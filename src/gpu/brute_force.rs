@@ -1,7 +1,7 @@
 //! Brute-force reference (`shaders/brute_force.wgsl`, DESIGN.md §5). Rust twin:
 //! `reference::shade_brute_force`.
 
-use super::kernel::{Kernel, Slot, groups, module};
+use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::shader::TILE_SIZE;
 use super::timing::Span;
@@ -16,12 +16,16 @@ pub struct BruteForce {
 
 impl BruteForce {
     pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool) -> Result<Self, GpuError> {
-        let m = module(gpu, "brute_force", WGSL)?;
-        let slots = [Slot::TextureUint, Slot::StorageReadWrite, Slot::Storage, Slot::Storage];
-        let entry = if glossy { "main_glossy" } else { "main" };
-        Ok(Self {
-            kernel: Kernel::new(gpu, &scene.layout, &m, "brute_force", entry, &slots)?,
-        })
+        let kernel = Kernel::pass(
+            gpu,
+            scene,
+            "brute_force",
+            WGSL,
+            &[Slot::TextureUint, Slot::StorageReadWrite, Slot::Storage, Slot::Storage],
+            &[],
+            glossy,
+        )?;
+        Ok(Self { kernel })
     }
 
     pub fn record(
@@ -45,7 +49,6 @@ impl BruteForce {
             ],
         );
         let wg = [groups(camera.width, 8), groups(camera.height, TILE_SIZE / 8), 1];
-        self.kernel
-            .dispatch(encoder, &group, &scene.bind_group, wg, span.as_ref().map(Span::compute));
+        self.kernel.dispatch(encoder, &group, &scene.bind_group, wg, span.as_ref().map(Span::compute));
     }
 }

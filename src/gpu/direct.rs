@@ -1,7 +1,7 @@
 //! Direct spot light with the RSM shadow map (`shaders/direct.wgsl`, DESIGN.md §4 step 6).
 //! Rust twin (without the shadow test): `reference::rsm::direct_radiance`.
 
-use super::kernel::{Kernel, Slot, groups, module};
+use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::timing::Span;
 use super::visibility::VisibilityTarget;
@@ -15,11 +15,16 @@ pub struct Direct {
 
 impl Direct {
     pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
-        let m = module(gpu, "direct", WGSL)?;
-        let slots = [Slot::TextureUint, Slot::StorageReadWrite, Slot::Storage];
-        Ok(Self {
-            kernel: Kernel::new(gpu, &scene.layout, &m, "direct", "main", &slots)?,
-        })
+        let kernel = Kernel::pass(
+            gpu,
+            scene,
+            "direct",
+            WGSL,
+            &[Slot::TextureUint, Slot::StorageReadWrite, Slot::Storage],
+            &[],
+            false,
+        )?;
+        Ok(Self { kernel })
     }
 
     pub fn record(
@@ -41,7 +46,6 @@ impl Direct {
             ],
         );
         let wg = [groups(camera.width, 8), groups(camera.height, 8), 1];
-        self.kernel
-            .dispatch(encoder, &group, &scene.bind_group, wg, span.as_ref().map(Span::compute));
+        self.kernel.dispatch(encoder, &group, &scene.bind_group, wg, span.as_ref().map(Span::compute));
     }
 }

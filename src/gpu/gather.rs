@@ -1,7 +1,7 @@
 //! Gather at sparse points (`shaders/gather.wgsl`, DESIGN.md §4 step 1). Rust twin:
 //! `reference::gather_point`.
 
-use super::kernel::{Kernel, Slot, groups, module};
+use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::shader::TILE_SIZE;
 use super::timing::Span;
@@ -16,15 +16,16 @@ pub struct Gather {
 impl Gather {
     /// `glossy` builds the entry point that also gathers the Phong lobe.
     pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool) -> Result<Self, GpuError> {
-        let m = module(gpu, "gather", WGSL)?;
-        let mut slots = vec![Slot::Storage, Slot::Storage, Slot::Storage, Slot::StorageReadWrite];
-        if glossy {
-            slots.push(Slot::StorageReadWrite);
-        }
-        let entry = if glossy { "main_glossy" } else { "main" };
-        Ok(Self {
-            kernel: Kernel::new(gpu, &scene.layout, &m, "gather", entry, &slots)?,
-        })
+        let kernel = Kernel::pass(
+            gpu,
+            scene,
+            "gather",
+            WGSL,
+            &[Slot::Storage, Slot::Storage, Slot::Storage, Slot::StorageReadWrite],
+            &[Slot::StorageReadWrite],
+            glossy,
+        )?;
+        Ok(Self { kernel })
     }
 
     /// Gather `vals` (`val_count` of them) at every sparse point into `gathered`.

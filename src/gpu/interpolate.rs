@@ -1,7 +1,7 @@
 //! Per-vertex interpolation (`shaders/interpolate.wgsl`, DESIGN.md §4 step 4). Rust twins:
 //! `reference::interpolation_weights`, `reference::interpolate_lights`.
 
-use super::kernel::{Kernel, Slot, groups, module};
+use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::shader::WORKGROUP_SIZE;
 use super::timing::Span;
@@ -15,15 +15,16 @@ pub struct Interpolate {
 
 impl Interpolate {
     pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool) -> Result<Self, GpuError> {
-        let m = module(gpu, "interpolate", WGSL)?;
-        let mut slots = vec![Slot::Storage, Slot::Storage, Slot::Storage, Slot::StorageReadWrite];
-        if glossy {
-            slots.extend([Slot::Storage, Slot::StorageReadWrite]);
-        }
-        let entry = if glossy { "main_glossy" } else { "main" };
-        Ok(Self {
-            kernel: Kernel::new(gpu, &scene.layout, &m, "interpolate", entry, &slots)?,
-        })
+        let kernel = Kernel::pass(
+            gpu,
+            scene,
+            "interpolate",
+            WGSL,
+            &[Slot::Storage, Slot::Storage, Slot::Storage, Slot::StorageReadWrite],
+            &[Slot::Storage, Slot::StorageReadWrite],
+            glossy,
+        )?;
+        Ok(Self { kernel })
     }
 
     /// Interpolate per-sparse-point `sparse` lights to per-vertex `vertex` lights.

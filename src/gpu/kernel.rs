@@ -1,6 +1,7 @@
 //! A compute kernel: one entry point of a pass's WGSL with its own group(0) layout; group(1) is
 //! always the scene (`shaders/scene.wgsl`). Passes are small structs of these.
 
+use super::scene::GpuScene;
 use super::{Gpu, GpuError, shader};
 
 /// The kind of resource at one group(0) binding, in binding order.
@@ -18,9 +19,7 @@ impl Slot {
     fn ty(self) -> wgpu::BindingType {
         match self {
             Slot::Storage | Slot::StorageReadWrite => wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage {
-                    read_only: self == Slot::Storage,
-                },
+                ty: wgpu::BufferBindingType::Storage { read_only: self == Slot::Storage },
                 has_dynamic_offset: false,
                 min_binding_size: None,
             },
@@ -33,9 +32,9 @@ impl Slot {
     }
 }
 
-/// Compile a pass's WGSL (with the shared prelude) inside an error scope.
-pub fn module(gpu: &Gpu, label: &str, pass_wgsl: &str) -> Result<wgpu::ShaderModule, GpuError> {
-    let source = shader::source(pass_wgsl);
+/// Compile a pass's WGSL (with the shared prelude for `scene`) inside an error scope.
+pub fn module(gpu: &Gpu, scene: &GpuScene, label: &str, pass_wgsl: &str) -> Result<wgpu::ShaderModule, GpuError> {
+    let source = shader::source(pass_wgsl, scene.textured());
     let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
     let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
@@ -43,10 +42,7 @@ pub fn module(gpu: &Gpu, label: &str, pass_wgsl: &str) -> Result<wgpu::ShaderMod
     });
     match pollster::block_on(scope.pop()) {
         None => Ok(module),
-        Some(e) => Err(GpuError::Pipeline {
-            label: label.to_owned(),
-            message: e.to_string(),
-        }),
+        Some(e) => Err(GpuError::Pipeline { label: label.to_owned(), message: e.to_string() }),
     }
 }
 
@@ -96,16 +92,29 @@ impl Kernel {
             cache: None,
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Pipeline {
-                label: label.to_owned(),
-                message: e.to_string(),
-            });
+            return Err(GpuError::Pipeline { label: label.to_owned(), message: e.to_string() });
         }
-        Ok(Self {
-            label: label.to_owned(),
-            layout,
-            pipeline,
-        })
+        Ok(Self { label: label.to_owned(), layout, pipeline })
+    }
+
+    /// Build pass `label` from `wgsl`: entry point `main` with group(0) `slots`, or, when
+    /// `glossy`, `main_glossy` with `slots` followed by `glossy_slots` (the glossy buffers exist
+    /// only then).
+    pub fn pass(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        label: &str,
+        wgsl: &str,
+        slots: &[Slot],
+        glossy_slots: &[Slot],
+        glossy: bool,
+    ) -> Result<Self, GpuError> {
+        let m = module(gpu, scene, label, wgsl)?;
+        let mut all = slots.to_vec();
+        if glossy {
+            all.extend_from_slice(glossy_slots);
+        }
+        Self::new(gpu, &scene.layout, &m, label, if glossy { "main_glossy" } else { "main" }, &all)
     }
 
     /// A group(0) bind group from resources in binding order.
@@ -113,10 +122,7 @@ impl Kernel {
         let entries: Vec<wgpu::BindGroupEntry> = resources
             .iter()
             .enumerate()
-            .map(|(i, r)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: r.clone(),
-            })
+            .map(|(i, r)| wgpu::BindGroupEntry { binding: i as u32, resource: r.clone() })
             .collect();
         gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(&format!("{}.bind_group", self.label)),
@@ -134,10 +140,8 @@ impl Kernel {
         workgroups: [u32; 3],
         timestamp_writes: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some(&self.label),
-            timestamp_writes,
-        });
+        let mut pass =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, group, &[]);
         pass.set_bind_group(1, scene_group, &[]);

@@ -55,11 +55,7 @@ impl Lobes {
     pub fn new<T: Pod>(gpu: &Gpu, label: &str, count: usize, glossy: bool) -> Result<Self, GpuError> {
         Ok(Self {
             diffuse: gpu.storage_buffer_sized::<T>(&format!("{label}_diffuse"), count)?,
-            glossy: if glossy {
-                Some(gpu.storage_buffer_sized::<T>(&format!("{label}_glossy"), count)?)
-            } else {
-                None
-            },
+            glossy: if glossy { Some(gpu.storage_buffer_sized::<T>(&format!("{label}_glossy"), count)?) } else { None },
         })
     }
 }
@@ -111,12 +107,7 @@ impl Gpu {
                 ..Default::default()
             })
             .await?;
-        Ok(Self {
-            device,
-            queue,
-            adapter_info: adapter.get_info(),
-            timestamps,
-        })
+        Ok(Self { device, queue, adapter_info: adapter.get_info(), timestamps })
     }
 
     /// `"<name> (<backend>)"`, e.g. `"llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)"`.
@@ -159,11 +150,7 @@ impl Gpu {
         let limits = self.device.limits();
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if needed > limit {
-            return Err(GpuError::TooLarge {
-                what: what.to_owned(),
-                needed,
-                limit,
-            });
+            return Err(GpuError::TooLarge { what: what.to_owned(), needed, limit });
         }
         Ok(())
     }
@@ -180,9 +167,8 @@ impl Gpu {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let mut encoder = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("relume.readback"),
-        });
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("relume.readback") });
         encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
         self.queue.submit([encoder.finish()]);
         let slice = staging.slice(..);
@@ -191,9 +177,7 @@ impl Gpu {
             let _ = tx.send(r);
         });
         self.device.poll(wgpu::PollType::wait_indefinitely())?;
-        rx.recv()
-            .map_err(|e| GpuError::Map(e.to_string()))?
-            .map_err(|e| GpuError::Map(e.to_string()))?;
+        rx.recv().map_err(|e| GpuError::Map(e.to_string()))?.map_err(|e| GpuError::Map(e.to_string()))?;
         let data = slice.get_mapped_range().map_err(|e| GpuError::Map(e.to_string()))?;
         let out = bytemuck::cast_slice::<u8, T>(&data).to_vec();
         drop(data);
@@ -214,10 +198,7 @@ impl Gpu {
         let r = f();
         match pollster::block_on(scope.pop()) {
             None => Ok(r),
-            Some(e) => Err(GpuError::Validation {
-                context: context.to_owned(),
-                message: e.to_string(),
-            }),
+            Some(e) => Err(GpuError::Validation { context: context.to_owned(), message: e.to_string() }),
         }
     }
 }

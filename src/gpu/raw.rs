@@ -31,12 +31,7 @@ impl From<&reference::Val> for RawVal {
 
 impl From<&RawVal> for reference::Val {
     fn from(v: &RawVal) -> Self {
-        Self {
-            position: v.position.into(),
-            normal: v.normal.into(),
-            area: v.area,
-            flux: v.flux.into(),
-        }
+        Self { position: v.position.into(), normal: v.normal.into(), area: v.area, flux: v.flux.into() }
     }
 }
 
@@ -45,9 +40,11 @@ impl From<&RawVal> for reference::Val {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RawVertex {
     pub position: [f32; 3],
-    pub _pad0: f32,
+    /// Texture coordinate s (left to right).
+    pub s: f32,
     pub normal: [f32; 3],
-    pub _pad1: f32,
+    /// Texture coordinate t (top to bottom: OBJ's `1 - v`).
+    pub t: f32,
 }
 
 /// WGSL `Material`.
@@ -57,7 +54,8 @@ pub struct RawMaterial {
     pub diffuse: [f32; 3],
     pub exponent: f32,
     pub specular: [f32; 3],
-    pub _pad0: f32,
+    /// Layer of the scene's texture array, or -1.
+    pub diffuse_texture: i32,
 }
 
 /// WGSL `SparsePoint` (world space).
@@ -92,21 +90,13 @@ pub struct RawPointLight {
 
 impl From<&RawPointLight> for reference::PointLight {
     fn from(p: &RawPointLight) -> Self {
-        Self {
-            position: p.position.into(),
-            intensity: p.intensity.into(),
-        }
+        Self { position: p.position.into(), intensity: p.intensity.into() }
     }
 }
 
 impl From<&reference::PointLight> for RawPointLight {
     fn from(p: &reference::PointLight) -> Self {
-        Self {
-            position: p.position.into(),
-            _pad0: 0.0,
-            intensity: p.intensity.into(),
-            _pad1: 0.0,
-        }
+        Self { position: p.position.into(), _pad0: 0.0, intensity: p.intensity.into(), _pad1: 0.0 }
     }
 }
 

@@ -1,7 +1,7 @@
 //! Renormalisation (`shaders/renormalise.wgsl`, DESIGN.md §4 step 2). Rust twins:
 //! `reference::renormalise_diffuse`, `reference::renormalise_glossy`.
 
-use super::kernel::{Kernel, Slot, groups, module};
+use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::shader::WORKGROUP_SIZE;
 use super::timing::Span;
@@ -15,15 +15,16 @@ pub struct Renormalise {
 
 impl Renormalise {
     pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool) -> Result<Self, GpuError> {
-        let m = module(gpu, "renormalise", WGSL)?;
-        let mut slots = vec![Slot::Storage, Slot::Storage, Slot::StorageReadWrite];
-        if glossy {
-            slots.extend([Slot::Storage, Slot::StorageReadWrite]);
-        }
-        let entry = if glossy { "main_glossy" } else { "main" };
-        Ok(Self {
-            kernel: Kernel::new(gpu, &scene.layout, &m, "renormalise", entry, &slots)?,
-        })
+        let kernel = Kernel::pass(
+            gpu,
+            scene,
+            "renormalise",
+            WGSL,
+            &[Slot::Storage, Slot::Storage, Slot::StorageReadWrite],
+            &[Slot::Storage, Slot::StorageReadWrite],
+            glossy,
+        )?;
+        Ok(Self { kernel })
     }
 
     /// Turn `gathered` sums into per-sparse-point point lights `lights`.

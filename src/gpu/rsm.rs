@@ -1,7 +1,7 @@
 //! RSM to VALs (`shaders/rsm.wgsl`): the light's visibility buffer becomes a compacted VAL list
 //! and a distance-to-light shadow map. Rust twin: `reference::rsm::rsm_texel_val`.
 
-use super::kernel::{Kernel, Slot, groups, module};
+use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::timing::Span;
 use super::visibility::VisibilityTarget;
@@ -25,16 +25,16 @@ pub struct RsmOutputs<'a> {
 
 impl Rsm {
     pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
-        let m = module(gpu, "rsm", WGSL)?;
-        let slots = [
-            Slot::TextureUint,
-            Slot::StorageReadWrite,
-            Slot::StorageReadWrite,
-            Slot::StorageReadWrite,
-        ];
-        Ok(Self {
-            kernel: Kernel::new(gpu, &scene.layout, &m, "rsm", "main", &slots)?,
-        })
+        let kernel = Kernel::pass(
+            gpu,
+            scene,
+            "rsm",
+            WGSL,
+            &[Slot::TextureUint, Slot::StorageReadWrite, Slot::StorageReadWrite, Slot::StorageReadWrite],
+            &[],
+            false,
+        )?;
+        Ok(Self { kernel })
     }
 
     pub fn record(

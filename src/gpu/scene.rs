@@ -18,6 +18,35 @@ pub struct FlatScene {
     pub sparse_points: Vec<RawSparsePoint>,
     /// Per vertex, into `sparse_points`; `shader::NO_NEIGHBOUR` pads.
     pub vertex_neighbours: Vec<[u32; NEIGHBOURS]>,
+    /// Every diffuse texture, resized to one size; `None` when the scene has none.
+    pub textures: Option<TextureArray>,
+}
+
+/// Diffuse textures as layers of one size: sRGB-encoded RGBA8, rows from the top.
+#[derive(Clone, Debug)]
+pub struct TextureArray {
+    pub width: u32,
+    pub height: u32,
+    pub layers: Vec<Vec<u8>>,
+}
+
+impl TextureArray {
+    /// Layers at the largest width and height among `textures` (others resized bilinearly).
+    fn from_textures(textures: &[crate::scene::Texture]) -> Option<Self> {
+        let width = textures.iter().map(|t| t.width).max()?;
+        let height = textures.iter().map(|t| t.height).max()?;
+        let layers = textures
+            .iter()
+            .map(|t| match ::image::RgbaImage::from_raw(t.width, t.height, t.rgba8.clone()) {
+                Some(img) if (t.width, t.height) != (width, height) => {
+                    ::image::imageops::resize(&img, width, height, ::image::imageops::FilterType::Triangle).into_raw()
+                }
+                Some(img) => img.into_raw(),
+                None => vec![255; (4 * width * height) as usize],
+            })
+            .collect();
+        Some(Self { width, height, layers })
+    }
 }
 
 impl FlatScene {
@@ -31,9 +60,10 @@ impl FlatScene {
                     diffuse: m.diffuse.into(),
                     exponent: m.exponent,
                     specular: m.specular.into(),
-                    _pad0: 0.0,
+                    diffuse_texture: m.diffuse_texture.map_or(-1, |t| t as i32),
                 })
                 .collect(),
+            textures: TextureArray::from_textures(&scene.textures),
             ..Default::default()
         };
         for mesh in &scene.meshes {
@@ -44,13 +74,9 @@ impl FlatScene {
                 let m = Mat3::from_mat4(mesh.model_to_world);
                 m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length())
             };
-            for (p, n) in mesh.world_positions().into_iter().zip(mesh.world_normals()) {
-                flat.vertices.push(RawVertex {
-                    position: p.into(),
-                    _pad0: 0.0,
-                    normal: n.into(),
-                    _pad1: 0.0,
-                });
+            let world = mesh.world_positions().into_iter().zip(mesh.world_normals());
+            for ((p, n), uv) in world.zip(&mesh.texcoords) {
+                flat.vertices.push(RawVertex { position: p.into(), s: uv.x, normal: n.into(), t: 1.0 - uv.y });
             }
             for (t, m) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
                 flat.indices.extend(t.iter().map(|i| i + vertex_base));
@@ -68,8 +94,7 @@ impl FlatScene {
                 });
             }
             for ids in &sparse.vertex_neighbours {
-                flat.vertex_neighbours
-                    .push(ids.map(|i| if i == u32::MAX { i } else { i + sparse_base }));
+                flat.vertex_neighbours.push(ids.map(|i| if i == u32::MAX { i } else { i + sparse_base }));
             }
         }
         flat
@@ -94,17 +119,16 @@ impl FlatScene {
         let v = [0, 1, 2].map(|k| self.vertices[self.indices[t + k] as usize]);
         let p = v.map(|v| Vec3::from(v.position));
         let n = reference::barycentric(b, v[0].normal.into(), v[1].normal.into(), v[2].normal.into());
-        let normal = if n.length_squared() > 1e-20 {
-            n.normalize()
-        } else {
-            (p[1] - p[0]).cross(p[2] - p[0]).normalize()
-        };
+        let normal =
+            if n.length_squared() > 1e-20 { n.normalize() } else { (p[1] - p[0]).cross(p[2] - p[0]).normalize() };
         let m = self.materials[self.triangle_materials[triangle as usize] as usize];
-        let surface = reference::Surface {
-            diffuse: m.diffuse.into(),
-            specular: m.specular.into(),
-            exponent: m.exponent,
-        };
+        let mut diffuse = Vec3::from(m.diffuse);
+        if let (Ok(layer), Some(textures)) = (usize::try_from(m.diffuse_texture), &self.textures) {
+            let st = |v: RawVertex| Vec3::new(v.s, v.t, 0.0);
+            let st = reference::barycentric(b, st(v[0]), st(v[1]), st(v[2])).truncate();
+            diffuse *= reference::sample_bilinear(&textures.layers[layer], textures.width, textures.height, st);
+        }
+        let surface = reference::Surface { diffuse, specular: m.specular.into(), exponent: m.exponent };
         (reference::barycentric(b, p[0], p[1], p[2]), normal, surface)
     }
 
@@ -149,72 +173,57 @@ impl GpuScene {
         let materials = gpu.storage_buffer("scene.materials", &flat.materials, none)?;
         let sparse_points = gpu.storage_buffer("scene.sparse_points", &flat.sparse_points, none)?;
         let vertex_neighbours = gpu.storage_buffer("scene.vertex_neighbours", &flat.vertex_neighbours, none)?;
-        let visibility = wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
-        let storage = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
+        let textures = match &flat.textures {
+            Some(t) => Some(upload_textures(gpu, t)?),
+            None => None,
         };
+
+        let visibility = wgpu::ShaderStages::COMPUTE | wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
+        let entry = |binding, ty| wgpu::BindGroupLayoutEntry { binding, visibility, ty, count: None };
+        let buffer = |ty| wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None };
+        let storage = buffer(wgpu::BufferBindingType::Storage { read_only: true });
+        let mut layout_entries = vec![
+            entry(0, buffer(wgpu::BufferBindingType::Uniform)),
+            entry(1, storage),
+            entry(2, storage),
+            entry(3, storage),
+            entry(4, storage),
+        ];
+        let mut entries = vec![
+            wgpu::BindGroupEntry { binding: 0, resource: frame.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: vertices.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: indices.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 3, resource: triangle_materials.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 4, resource: materials.as_entire_binding() },
+        ];
+        if let Some((view, sampler)) = &textures {
+            layout_entries.push(entry(
+                5,
+                wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2Array,
+                    multisampled: false,
+                },
+            ));
+            layout_entries.push(entry(6, wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)));
+            entries.push(wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(view) });
+            entries.push(wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::Sampler(sampler) });
+        }
         let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("scene.layout"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                storage(1),
-                storage(2),
-                storage(3),
-                storage(4),
-            ],
+            entries: &layout_entries,
         });
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("scene.bind_group"),
             layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: frame.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: vertices.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: indices.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: triangle_materials.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: materials.as_entire_binding(),
-                },
-            ],
+            entries: &entries,
         });
-        Ok(Self {
-            flat,
-            layout,
-            bind_group,
-            frame,
-            vertices,
-            indices,
-            sparse_points,
-            vertex_neighbours,
-        })
+        Ok(Self { flat, layout, bind_group, frame, vertices, indices, sparse_points, vertex_neighbours })
+    }
+
+    /// Whether the scene binds diffuse textures (`shaders/scene_textures.wgsl`).
+    pub fn textured(&self) -> bool {
+        self.flat.textures.is_some()
     }
 
     /// Whether any triangle's material has a specular albedo.
@@ -224,4 +233,54 @@ impl GpuScene {
             s.iter().any(|c| *c > 0.0)
         })
     }
+}
+
+/// The texture array (sRGB, one layer per texture) and its bilinear repeat sampler.
+fn upload_textures(gpu: &Gpu, t: &TextureArray) -> Result<(wgpu::TextureView, wgpu::Sampler), GpuError> {
+    let limits = gpu.device.limits();
+    let (side, layers) = (t.width.max(t.height), t.layers.len() as u32);
+    if side > limits.max_texture_dimension_2d || layers > limits.max_texture_array_layers {
+        return Err(GpuError::TooLarge {
+            what: format!("{layers} diffuse textures of {}x{}", t.width, t.height),
+            needed: side.max(layers) as u64,
+            limit: limits.max_texture_dimension_2d.min(limits.max_texture_array_layers) as u64,
+        });
+    }
+    let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("scene.diffuse_textures"),
+        size: wgpu::Extent3d { width: t.width, height: t.height, depth_or_array_layers: layers },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8UnormSrgb,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    for (layer, data) in t.layers.iter().enumerate() {
+        gpu.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d { x: 0, y: 0, z: layer as u32 },
+                aspect: wgpu::TextureAspect::All,
+            },
+            data,
+            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(4 * t.width), rows_per_image: Some(t.height) },
+            wgpu::Extent3d { width: t.width, height: t.height, depth_or_array_layers: 1 },
+        );
+    }
+    let view = texture.create_view(&wgpu::TextureViewDescriptor {
+        label: Some("scene.diffuse_textures.view"),
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    let sampler = gpu.device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("scene.diffuse_sampler"),
+        address_mode_u: wgpu::AddressMode::Repeat,
+        address_mode_v: wgpu::AddressMode::Repeat,
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    });
+    Ok((view, sampler))
 }

@@ -1,7 +1,7 @@
 //! Per-pixel sparse shading (`shaders/shade.wgsl`, DESIGN.md §4 step 5). Rust twin:
 //! `reference::shade_sparse`.
 
-use super::kernel::{Kernel, Slot, groups, module};
+use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::timing::Span;
 use super::visibility::VisibilityTarget;
@@ -15,15 +15,16 @@ pub struct Shade {
 
 impl Shade {
     pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool) -> Result<Self, GpuError> {
-        let m = module(gpu, "shade", WGSL)?;
-        let mut slots = vec![Slot::TextureUint, Slot::StorageReadWrite, Slot::Storage];
-        if glossy {
-            slots.push(Slot::Storage);
-        }
-        let entry = if glossy { "main_glossy" } else { "main" };
-        Ok(Self {
-            kernel: Kernel::new(gpu, &scene.layout, &m, "shade", entry, &slots)?,
-        })
+        let kernel = Kernel::pass(
+            gpu,
+            scene,
+            "shade",
+            WGSL,
+            &[Slot::TextureUint, Slot::StorageReadWrite, Slot::Storage],
+            &[Slot::Storage],
+            glossy,
+        )?;
+        Ok(Self { kernel })
     }
 
     /// Shade every pixel of `camera` with the per-vertex lights into `indirect` (RGBA f32).
@@ -45,7 +46,6 @@ impl Shade {
         resources.extend(vertex_lights.glossy.as_ref().map(|b| b.as_entire_binding()));
         let group = self.kernel.bind(gpu, &resources);
         let wg = [groups(camera.width, 8), groups(camera.height, 8), 1];
-        self.kernel
-            .dispatch(encoder, &group, &scene.bind_group, wg, span.as_ref().map(Span::compute));
+        self.kernel.dispatch(encoder, &group, &scene.bind_group, wg, span.as_ref().map(Span::compute));
     }
 }

@@ -18,6 +18,8 @@ pub const SHADOW_BIAS_TEXELS: f32 = 1.5;
 
 const COMMON: &str = include_str!("../../shaders/common.wgsl");
 const SCENE: &str = include_str!("../../shaders/scene.wgsl");
+const SCENE_TEXTURES: &str = include_str!("../../shaders/scene_textures.wgsl");
+const SCENE_UNTEXTURED: &str = include_str!("../../shaders/scene_untextured.wgsl");
 
 fn header() -> String {
     format!(
@@ -40,13 +42,15 @@ fn header() -> String {
     )
 }
 
-/// The full WGSL source of a pass whose own file is `pass`.
-pub fn source(pass: &str) -> String {
-    format!("{}\n{COMMON}\n{SCENE}\n{pass}", header())
+/// The full WGSL source of a pass whose own file is `pass`; `textured` scenes bind the texture
+/// array, others have no texture binding at all.
+pub fn source(pass: &str, textured: bool) -> String {
+    let textures = if textured { SCENE_TEXTURES } else { SCENE_UNTEXTURED };
+    format!("{}\n{COMMON}\n{textures}\n{SCENE}\n{pass}", header())
 }
 
 /// Every pass's full source, by file name (for the layout and compilation tests).
-pub fn all_sources() -> Vec<(&'static str, String)> {
+pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
     use super::*;
     [
         ("visibility.wgsl", visibility::WGSL),
@@ -59,6 +63,6 @@ pub fn all_sources() -> Vec<(&'static str, String)> {
         ("direct.wgsl", direct::WGSL),
     ]
     .into_iter()
-    .map(|(name, text)| (name, source(text)))
+    .map(|(name, text)| (name, source(text, textured)))
     .collect()
 }

@@ -22,11 +22,7 @@ pub struct StageTimings {
 impl StageTimings {
     /// Sum of the stages whose names are in `names` (ms).
     pub fn total_of(&self, names: &[&str]) -> f64 {
-        self.stages
-            .iter()
-            .filter(|(n, _)| names.contains(&n.as_str()))
-            .map(|(_, ms)| ms)
-            .sum()
+        self.stages.iter().filter(|(n, _)| names.contains(&n.as_str())).map(|(_, ms)| ms).sum()
     }
 
     pub fn total(&self) -> f64 {
@@ -85,17 +81,8 @@ impl<'g> Recorder<'g> {
             });
             (set, resolve)
         });
-        let encoder = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
-        Self {
-            gpu,
-            encoder,
-            queries,
-            capacity,
-            names: Vec::new(),
-            wall: Vec::new(),
-        }
+        let encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        Self { gpu, encoder, queries, capacity, names: Vec::new(), wall: Vec::new() }
     }
 
     /// Record stage `name`: `f` gets the encoder and, with timestamps, the span to pass to its
@@ -105,11 +92,7 @@ impl<'g> Recorder<'g> {
         name: &str,
         f: impl FnOnce(&mut wgpu::CommandEncoder, Option<Span<'_>>) -> R,
     ) -> Result<R, GpuError> {
-        assert!(
-            (self.names.len() as u32) < self.capacity,
-            "Recorder capacity {} exceeded",
-            self.capacity
-        );
+        assert!((self.names.len() as u32) < self.capacity, "Recorder capacity {} exceeded", self.capacity);
         let index = self.names.len() as u32;
         self.names.push(name.to_owned());
         if self.queries.is_none() {
@@ -141,9 +124,7 @@ impl<'g> Recorder<'g> {
     fn flush(&mut self) -> Result<(), GpuError> {
         let encoder = std::mem::replace(
             &mut self.encoder,
-            self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("relume.frame"),
-            }),
+            self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("relume.frame") }),
         );
         self.gpu.submit_and_wait(encoder)
     }
@@ -161,17 +142,11 @@ impl<'g> Recorder<'g> {
             Some((_, resolve)) => {
                 let ticks: Vec<u64> = self.gpu.read_buffer(resolve, 2 * n as usize)?;
                 let period = self.gpu.queue.get_timestamp_period() as f64;
-                let ms = ticks
-                    .chunks(2)
-                    .map(|t| t[1].saturating_sub(t[0]) as f64 * period * 1e-6)
-                    .collect();
+                let ms = ticks.chunks(2).map(|t| t[1].saturating_sub(t[0]) as f64 * period * 1e-6).collect();
                 (TimingSource::GpuTimestamps, ms)
             }
             None => (TimingSource::WallClock, self.wall),
         };
-        Ok(StageTimings {
-            source,
-            stages: self.names.into_iter().zip(ms).collect(),
-        })
+        Ok(StageTimings { source, stages: self.names.into_iter().zip(ms).collect() })
     }
 }

@@ -30,7 +30,7 @@ pub struct VisibilityTarget {
 
 impl Visibility {
     pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
-        let module = super::kernel::module(gpu, "visibility", WGSL)?;
+        let module = super::kernel::module(gpu, scene, "visibility", WGSL)?;
         let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("visibility.layout"),
@@ -59,10 +59,7 @@ impl Visibility {
                 compilation_options: Default::default(),
                 buffers: &[],
             },
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
+            primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
             depth_stencil: Some(wgpu::DepthStencilState {
                 format: DEPTH_FORMAT,
                 depth_write_enabled: Some(true),
@@ -85,10 +82,7 @@ impl Visibility {
             cache: None,
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Pipeline {
-                label: "visibility".into(),
-                message: e.to_string(),
-            });
+            return Err(GpuError::Pipeline { label: "visibility".into(), message: e.to_string() });
         }
         Ok(Self { layout, pipeline })
     }
@@ -98,11 +92,7 @@ impl Visibility {
         let texture = |name: &str, format, usage| {
             gpu.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(&format!("{label}.{name}")),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
+                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
@@ -124,10 +114,7 @@ impl Visibility {
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(&format!("{label}.bind_group")),
             layout: &self.layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: world_to_clip.as_entire_binding(),
-            }],
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: world_to_clip.as_entire_binding() }],
         });
         VisibilityTarget {
             label: label.to_owned(),
@@ -152,11 +139,7 @@ impl Visibility {
         world_to_clip: Mat4,
         span: Option<Span<'_>>,
     ) {
-        gpu.queue.write_buffer(
-            &target.world_to_clip,
-            0,
-            bytemuck::bytes_of(&world_to_clip.to_cols_array_2d()),
-        );
+        gpu.queue.write_buffer(&target.world_to_clip, 0, bytemuck::bytes_of(&world_to_clip.to_cols_array_2d()));
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some(&target.label),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -170,10 +153,7 @@ impl Visibility {
             })],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &target.depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
+                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
                 stencil_ops: None,
             }),
             timestamp_writes: span.as_ref().map(Span::render),
@@ -199,24 +179,15 @@ impl VisibilityTarget {
     pub fn read(&self, gpu: &Gpu) -> Result<Vec<Option<Hit>>, GpuError> {
         let row = (self.width * 16).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let buffer = gpu.storage_buffer_sized::<u8>("visibility.readback", (row * self.height) as usize)?;
-        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("visibility.readback"),
-        });
+        let mut encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("visibility.readback") });
         encoder.copy_texture_to_buffer(
             self.texture.as_image_copy(),
             wgpu::TexelCopyBufferInfo {
                 buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: None,
-                },
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: None },
             },
-            wgpu::Extent3d {
-                width: self.width,
-                height: self.height,
-                depth_or_array_layers: 1,
-            },
+            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
         );
         gpu.submit_and_wait(encoder)?;
         let words: Vec<u32> = gpu.read_buffer(&buffer, (row / 4 * self.height) as usize)?;

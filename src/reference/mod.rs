@@ -72,20 +72,12 @@ pub fn val_geometry(x: Vec3, n_x: Vec3, val_position: Vec3, val_normal: Vec3, va
     let v = val_position - x;
     let d2 = v.length_squared();
     if d2 <= COINCIDENT_DISTANCE_SQ {
-        return ValGeometry {
-            direction: n_x,
-            cos_receiver: 0.0,
-            weight: 0.0,
-        };
+        return ValGeometry { direction: n_x, cos_receiver: 0.0, weight: 0.0 };
     }
     let w = v / d2.sqrt();
     let cos_receiver = n_x.dot(w).max(0.0);
     let cos_val = (-val_normal.dot(w)).max(0.0);
-    ValGeometry {
-        direction: w,
-        cos_receiver,
-        weight: cos_val / (PI * d2 + val_area.max(0.0)),
-    }
+    ValGeometry { direction: w, cos_receiver, weight: cos_val / (PI * d2 + val_area.max(0.0)) }
 }
 
 /// Irradiance (W/m²) at `x` from one Lambertian disc VAL of flux `flux` (W).
@@ -147,23 +139,14 @@ pub fn gather_point(x: Vec3, n_x: Vec3, k: f32, eye: Vec3, vals: &[Val]) -> Gath
         wd += gd;
         ws += gs;
     }
-    Gathered {
-        irradiance: e,
-        diffuse_position: ld / wd,
-        glossy_irradiance: g,
-        glossy_position: ls / ws,
-    }
+    Gathered { irradiance: e, diffuse_position: ld / wd, glossy_irradiance: g, glossy_position: ls / ws }
 }
 
 /// Unit direction from `x` toward the eye; the normal when the eye sits on `x`.
 pub fn view_direction(x: Vec3, n_x: Vec3, eye: Vec3) -> Vec3 {
     let v = eye - x;
     let d2 = v.length_squared();
-    if d2 <= COINCIDENT_DISTANCE_SQ {
-        n_x
-    } else {
-        v / d2.sqrt()
-    }
+    if d2 <= COINCIDENT_DISTANCE_SQ { n_x } else { v / d2.sqrt() }
 }
 
 /// A point light with intensity (W/sr, RGB): a renormalised averaged VPL.
@@ -186,11 +169,7 @@ pub fn renormalise_direction(x: Vec3, n: Vec3, target: Vec3) -> (Vec3, f32) {
     }
     let tangent = w - c * n;
     let t2 = tangent.length_squared();
-    let t = if t2 > 1e-12 {
-        tangent / t2.sqrt()
-    } else {
-        any_perpendicular(n)
-    };
+    let t = if t2 > 1e-12 { tangent / t2.sqrt() } else { any_perpendicular(n) };
     let s = (1.0 - MIN_RENORMALISE_COSINE * MIN_RENORMALISE_COSINE).sqrt();
     (t * s + n * MIN_RENORMALISE_COSINE, d.max(MIN_LIGHT_DISTANCE))
 }
@@ -206,10 +185,7 @@ pub fn any_perpendicular(n: Vec3) -> Vec3 {
 pub fn renormalise_diffuse(x: Vec3, n: Vec3, e: Vec3, averaged_position: Vec3) -> PointLight {
     let (w, d) = renormalise_direction(x, n, averaged_position);
     let cos = n.dot(w);
-    PointLight {
-        position: x + w * d,
-        intensity: (e * (d * d / cos)).max(Vec3::ZERO),
-    }
+    PointLight { position: x + w * d, intensity: (e * (d * d / cos)).max(Vec3::ZERO) }
 }
 
 /// Glossy renormalisation: a point light that, applied at `x` with the Phong lobe toward
@@ -228,15 +204,8 @@ pub fn renormalise_glossy(x: Vec3, n: Vec3, k: f32, eye: Vec3, g: Vec3, averaged
             response = r_response;
         }
     }
-    let intensity = if n.dot(w_o) > 0.0 {
-        g * (d * d / response.max(MIN_GLOSSY_RESPONSE))
-    } else {
-        Vec3::ZERO
-    };
-    PointLight {
-        position: x + w * d,
-        intensity: intensity.max(Vec3::ZERO),
-    }
+    let intensity = if n.dot(w_o) > 0.0 { g * (d * d / response.max(MIN_GLOSSY_RESPONSE)) } else { Vec3::ZERO };
+    PointLight { position: x + w * d, intensity: intensity.max(Vec3::ZERO) }
 }
 
 /// Interpolation weights of a vertex's sparse neighbours (DESIGN.md §4 step 4, paper eq. 12):
@@ -326,6 +295,26 @@ pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Surface, eye: Vec3, vals: &
         }
     }
     l
+}
+
+/// Bilinear sample of an sRGB-encoded RGBA8 image (`width` x `height`, rows from the top) at
+/// texture coordinates `st` (s right, t down, texel centres at (i + 0.5) / size), with repeat
+/// addressing; texels are decoded to linear before filtering, as GPUs do for sRGB formats.
+pub fn sample_bilinear(rgba8: &[u8], width: u32, height: u32, st: Vec2) -> Vec3 {
+    let (w, h) = (width as i64, height as i64);
+    let x = st.x * width as f32 - 0.5;
+    let y = st.y * height as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let texel = |i: i64, j: i64| {
+        let k = 4 * (j.rem_euclid(h) * w + i.rem_euclid(w)) as usize;
+        let d = crate::image::decode_srgb;
+        Vec3::new(d(rgba8[k]), d(rgba8[k + 1]), d(rgba8[k + 2]))
+    };
+    let (i, j) = (x0 as i64, y0 as i64);
+    let top = texel(i, j).lerp(texel(i + 1, j), fx);
+    let bottom = texel(i, j + 1).lerp(texel(i + 1, j + 1), fx);
+    top.lerp(bottom, fy)
 }
 
 /// Barycentric interpolation `(1 - b.x - b.y) a + b.x b + b.y c`.

@@ -66,9 +66,7 @@ pub fn rsm_texel_val(ndc: Vec2, resolution: u32, spot: &Spot, y: Vec3, n_y: Vec3
 /// Irradiance (W/m²) at (`p`, `n`) straight from the spot, without visibility.
 pub fn spot_irradiance(p: Vec3, n: Vec3, spot: &Spot) -> Vec3 {
     let v = spot.position - p;
-    let d2 = v
-        .length_squared()
-        .max(super::MIN_LIGHT_DISTANCE * super::MIN_LIGHT_DISTANCE);
+    let d2 = v.length_squared().max(super::MIN_LIGHT_DISTANCE * super::MIN_LIGHT_DISTANCE);
     let w = v / d2.sqrt();
     let falloff = spot_falloff((-w).dot(spot.direction), spot.inner_angle, spot.outer_angle);
     spot.intensity * (falloff * n.dot(w).max(0.0) / d2)

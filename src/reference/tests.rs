@@ -54,16 +54,8 @@ fn disc_form_factor_matches_numerical_integration_off_axis() {
         let g = val_geometry(Vec3::ZERO, Vec3::Y, centre, normal, PI * r * r);
         let approx = (g.weight * g.cos_receiver * PI * r * r) as f64;
         let err = (approx - integral).abs() / integral;
-        let bound = if radii >= 16.0 {
-            0.005
-        } else {
-            1.0 / (radii * radii) as f64
-        };
-        assert!(
-            err <= bound,
-            "{radii} radii: {approx} vs {integral} ({:.2} %)",
-            err * 100.0
-        );
+        let bound = if radii >= 16.0 { 0.005 } else { 1.0 / (radii * radii) as f64 };
+        assert!(err <= bound, "{radii} radii: {approx} vs {integral} ({:.2} %)", err * 100.0);
     }
 }
 
@@ -78,19 +70,11 @@ fn furnace_sphere_of_vals_gives_pi_l() {
     let radiance = Vec3::new(1.0, 0.5, 0.25);
     let vals: Vec<Val> = fibonacci_sphere(n)
         .into_iter()
-        .map(|d| Val {
-            position: d * radius,
-            normal: -d,
-            area,
-            flux: PI * radiance * area,
-        })
+        .map(|d| Val { position: d * radius, normal: -d, area, flux: PI * radiance * area })
         .collect();
     let e: Vec3 = vals.iter().map(|v| val_irradiance(Vec3::ZERO, Vec3::Y, v)).sum();
     let expected = PI * radiance;
-    assert!(
-        (e - expected).abs().max_element() <= 0.01 * expected.max_element(),
-        "{e} vs {expected}"
-    );
+    assert!((e - expected).abs().max_element() <= 0.01 * expected.max_element(), "{e} vs {expected}");
 }
 
 fn random_vals(seed: u64, n: usize) -> Vec<Val> {
@@ -98,26 +82,14 @@ fn random_vals(seed: u64, n: usize) -> Vec<Val> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     (0..n)
         .map(|_| {
-            let p = Vec3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(0.2..2.0),
-                rng.random_range(-1.0..1.0),
-            );
-            let nrm = Vec3::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..-0.1),
-                rng.random_range(-1.0..1.0),
-            )
-            .normalize();
+            let p = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(0.2..2.0), rng.random_range(-1.0..1.0));
+            let nrm = Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..-0.1), rng.random_range(-1.0..1.0))
+                .normalize();
             Val {
                 position: p,
                 normal: nrm,
                 area: rng.random_range(0.0..0.01),
-                flux: Vec3::new(
-                    rng.random_range(0.0..1.0),
-                    rng.random_range(0.0..1.0),
-                    rng.random_range(0.0..1.0),
-                ),
+                flux: Vec3::new(rng.random_range(0.0..1.0), rng.random_range(0.0..1.0), rng.random_range(0.0..1.0)),
             }
         })
         .collect()
@@ -130,25 +102,15 @@ fn renormalisation_reproduces_gathered_light_at_the_point() {
     let (x, n, eye) = (Vec3::new(0.1, 0.0, -0.2), Vec3::Y, Vec3::new(0.5, 1.5, 3.0));
     for k in [0.0f32, 1.0, 10.0, 100.0] {
         let g = gather_point(x, n, k, eye, &vals);
-        let surface = Surface {
-            diffuse: Vec3::ONE,
-            specular: Vec3::ONE,
-            exponent: k,
-        };
+        let surface = Surface { diffuse: Vec3::ONE, specular: Vec3::ONE, exponent: k };
         let d = renormalise_diffuse(x, n, g.irradiance, g.diffuse_position);
         let l = point_light_radiance(x, n, &surface, eye, &d, false);
         let want = g.irradiance / PI;
-        assert!(
-            (l - want).abs().max_element() <= 1e-4 * want.max_element(),
-            "k={k}: {l} vs {want}"
-        );
+        assert!((l - want).abs().max_element() <= 1e-4 * want.max_element(), "k={k}: {l} vs {want}");
         let s = renormalise_glossy(x, n, k, eye, g.glossy_irradiance, g.glossy_position);
         let l = point_light_radiance(x, n, &surface, eye, &s, true);
         let want = g.glossy_irradiance * phong_normalisation(k);
-        assert!(
-            (l - want).abs().max_element() <= 1e-3 * want.max_element().max(1e-12),
-            "k={k}: {l} vs {want}"
-        );
+        assert!((l - want).abs().max_element() <= 1e-3 * want.max_element().max(1e-12), "k={k}: {l} vs {want}");
     }
 }
 
@@ -157,11 +119,7 @@ fn renormalisation_reproduces_gathered_light_at_the_point() {
 fn brute_force_equals_gather_at_the_point() {
     let vals = random_vals(3, 200);
     let (x, n, eye) = (Vec3::ZERO, Vec3::Y, Vec3::new(0.0, 2.0, 2.0));
-    let s = Surface {
-        diffuse: Vec3::splat(0.5),
-        specular: Vec3::splat(0.3),
-        exponent: 20.0,
-    };
+    let s = Surface { diffuse: Vec3::splat(0.5), specular: Vec3::splat(0.3), exponent: 20.0 };
     let g = gather_point(x, n, s.exponent, eye, &vals);
     let brute = shade_brute_force(x, n, &s, eye, &vals, true);
     let via_gather = s.diffuse / PI * g.irradiance + s.specular * phong_normalisation(s.exponent) * g.glossy_irradiance;
@@ -192,13 +150,8 @@ fn phong_lobe_is_defined_everywhere() {
 
 #[test]
 fn spot_cone_flux_matches_closed_form_for_a_hard_edge() {
-    let spot = Spot {
-        position: Vec3::ZERO,
-        direction: -Vec3::Y,
-        inner_angle: 0.5,
-        outer_angle: 0.5,
-        intensity: Vec3::ONE,
-    };
+    let spot =
+        Spot { position: Vec3::ZERO, direction: -Vec3::Y, inner_angle: 0.5, outer_angle: 0.5, intensity: Vec3::ONE };
     let got = spot_cone_flux(&spot, 10_000).x;
     let want = 2.0 * PI * (1.0 - 0.5f32.cos());
     assert!((got - want).abs() < 1e-3 * want, "{got} vs {want}");
@@ -229,10 +182,7 @@ fn rsm_flux_sums_to_cone_flux_on_a_plane() {
         }
     }
     let want = rho * spot_cone_flux(&spot, 10_000);
-    assert!(
-        (total - want).abs().max_element() <= 0.005 * want.max_element(),
-        "{total} vs {want}"
-    );
+    assert!((total - want).abs().max_element() <= 0.005 * want.max_element(), "{total} vs {want}");
 }
 
 fn finite_non_negative(v: Vec3) -> bool {

@@ -7,7 +7,8 @@
 //!   "meshes": [{"obj": "cornell_box/CornellBox-Original.obj", "sparse_points": 1024,
 //!               "transform": {"translation": [0, 0, 0], "rotation_deg": [0, 0, 0], "scale": 1},
 //!               "material": {"diffuse": [0.5, 0.5, 0.5], "specular": [0, 0, 0], "exponent": 1},
-//!               "materials": {"leftWall": {"diffuse": [0.6, 0.1, 0.1]}},
+//!               "materials": {"leftWall": {"diffuse": [0.6, 0.1, 0.1]},
+//!                             "floor": {"diffuse": [1, 1, 1], "diffuse_texture": "tiles.png"}},
 //!               "skip_groups": ["light"]}],
 //!   "light": {"position": [0, 1.9, 0], "direction": [0, -1, 0], "inner_angle_deg": 20,
 //!             "outer_angle_deg": 30, "intensity": [10, 10, 10]},
@@ -98,11 +99,7 @@ pub struct TransformDescription {
 
 impl Default for TransformDescription {
     fn default() -> Self {
-        TransformDescription {
-            translation: [0.0; 3],
-            rotation_deg: [0.0; 3],
-            scale: ScaleDescription::default(),
-        }
+        TransformDescription { translation: [0.0; 3], rotation_deg: [0.0; 3], scale: ScaleDescription::default() }
     }
 }
 
@@ -172,7 +169,7 @@ impl<'de> Deserialize<'de> for ScaleDescription {
 }
 
 /// A material. Each channel in [0, 1], `diffuse + specular <= 1` per channel.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialDescription {
     /// Diffuse albedo `rho_d`, linear RGB; default 0.5 grey.
@@ -184,6 +181,10 @@ pub struct MaterialDescription {
     /// Phong exponent `k`, in [0, 1e4]; default 1.
     #[serde(default = "default_exponent")]
     pub exponent: f32,
+    /// Diffuse texture (PNG or OpenEXR), relative to the scene file's directory; the albedo is
+    /// `diffuse` times the texture. Default none (the MTL's `map_Kd` is replaced too).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diffuse_texture: Option<String>,
 }
 
 fn default_diffuse() -> [f32; 3] {
@@ -200,17 +201,20 @@ impl Default for MaterialDescription {
             diffuse: default_diffuse(),
             specular: [0.0; 3],
             exponent: default_exponent(),
+            diffuse_texture: None,
         }
     }
 }
 
 impl MaterialDescription {
-    /// The material (assumes [`MaterialDescription::validate`] passed).
+    /// The material (assumes [`MaterialDescription::validate`] passed), without its texture:
+    /// `diffuse_texture` is `None` here and set by the loader, which owns the texture table.
     pub fn to_material(&self) -> Material {
         Material {
             diffuse: Vec3::from_array(self.diffuse),
             specular: Vec3::from_array(self.specular),
             exponent: self.exponent,
+            diffuse_texture: None,
         }
     }
 
@@ -219,6 +223,12 @@ impl MaterialDescription {
         unit_interval3(self.diffuse, &format!("{field}.diffuse"))?;
         unit_interval3(self.specular, &format!("{field}.specular"))?;
         in_closed(self.exponent, 0.0, Material::MAX_EXPONENT, &format!("{field}.exponent"))?;
+        if self.diffuse_texture.as_ref().is_some_and(|path| path.trim().is_empty()) {
+            return Err(SceneError::field(
+                format!("{field}.diffuse_texture"),
+                "must name an image file, got an empty string",
+            ));
+        }
         for (channel, name) in ["red", "green", "blue"].iter().enumerate() {
             let (d, s) = (self.diffuse[channel], self.specular[channel]);
             if d + s > 1.0 + ENERGY_TOLERANCE {
@@ -284,10 +294,7 @@ impl LightDescription {
         if !(self.inner_angle_deg >= 0.0 && self.inner_angle_deg <= self.outer_angle_deg) {
             return Err(SceneError::field(
                 inner_field,
-                format!(
-                    "must be in [0, outer_angle_deg = {}], got {}",
-                    self.outer_angle_deg, self.inner_angle_deg
-                ),
+                format!("must be in [0, outer_angle_deg = {}], got {}", self.outer_angle_deg, self.inner_angle_deg),
             ));
         }
         let intensity_field = format!("{field}.intensity");
@@ -348,29 +355,20 @@ impl CameraDescription {
             ));
         };
         let Some(up) = Vec3::from_array(self.up).try_normalize() else {
-            return Err(SceneError::field(
-                up_field,
-                format!("must be nonzero, got {:?}", self.up),
-            ));
+            return Err(SceneError::field(up_field, format!("must be nonzero, got {:?}", self.up)));
         };
         // sin of the angle between view and up; below ~0.06 degrees the basis is ill-defined.
         if view.cross(up).length() < 1e-3 {
             return Err(SceneError::field(
                 up_field,
-                format!(
-                    "must not be parallel to the view direction (target - position), got {:?}",
-                    self.up
-                ),
+                format!("must not be parallel to the view direction (target - position), got {:?}", self.up),
             ));
         }
         let fov_field = format!("{field}.fov_y_deg");
         finite(self.fov_y_deg, &fov_field)?;
         let (lo, hi) = FOV_Y_RANGE_DEG;
         if !(self.fov_y_deg > lo && self.fov_y_deg < hi) {
-            return Err(SceneError::field(
-                fov_field,
-                format!("must be in ({lo}, {hi}), got {}", self.fov_y_deg),
-            ));
+            return Err(SceneError::field(fov_field, format!("must be in ({lo}, {hi}), got {}", self.fov_y_deg)));
         }
         int_in(self.width, 1, MAX_IMAGE_SIDE, &format!("{field}.width"))?;
         int_in(self.height, 1, MAX_IMAGE_SIDE, &format!("{field}.height"))?;
@@ -422,12 +420,7 @@ impl Default for SettingsDescription {
 impl SettingsDescription {
     /// The settings (assumes [`SceneDescription::validate`] passed).
     pub fn to_settings(&self) -> Settings {
-        Settings {
-            rsm_resolution: self.rsm_resolution,
-            glossy: self.glossy,
-            seed: self.seed,
-            exposure: self.exposure,
-        }
+        Settings { rsm_resolution: self.rsm_resolution, glossy: self.glossy, seed: self.seed, exposure: self.exposure }
     }
 
     fn validate(&self, field: &str) -> Result<(), SceneError> {
@@ -470,18 +463,10 @@ impl TransformDescription {
 impl MeshDescription {
     fn validate(&self, field: &str) -> Result<(), SceneError> {
         if self.obj.trim().is_empty() {
-            return Err(SceneError::field(
-                format!("{field}.obj"),
-                "must name an OBJ file, got an empty string",
-            ));
+            return Err(SceneError::field(format!("{field}.obj"), "must name an OBJ file, got an empty string"));
         }
         self.transform.validate(&format!("{field}.transform"))?;
-        int_in(
-            self.sparse_points,
-            1,
-            MAX_SPARSE_POINTS,
-            &format!("{field}.sparse_points"),
-        )?;
+        int_in(self.sparse_points, 1, MAX_SPARSE_POINTS, &format!("{field}.sparse_points"))?;
         if let Some(material) = &self.material {
             material.validate(&format!("{field}.material"))?;
         }
@@ -528,10 +513,7 @@ fn finite(value: f32, field: &str) -> Result<(), SceneError> {
     if value.is_finite() {
         Ok(())
     } else {
-        Err(SceneError::field(
-            field,
-            format!("must be a finite number, got {value}"),
-        ))
+        Err(SceneError::field(field, format!("must be a finite number, got {value}")))
     }
 }
 
@@ -544,20 +526,12 @@ fn finite3(values: [f32; 3], field: &str) -> Result<(), SceneError> {
 
 fn positive(value: f32, field: &str) -> Result<(), SceneError> {
     finite(value, field)?;
-    if value > 0.0 {
-        Ok(())
-    } else {
-        Err(SceneError::field(field, format!("must be > 0, got {value}")))
-    }
+    if value > 0.0 { Ok(()) } else { Err(SceneError::field(field, format!("must be > 0, got {value}"))) }
 }
 
 fn at_least(value: f32, min: f32, field: &str) -> Result<(), SceneError> {
     finite(value, field)?;
-    if value >= min {
-        Ok(())
-    } else {
-        Err(SceneError::field(field, format!("must be >= {min}, got {value}")))
-    }
+    if value >= min { Ok(()) } else { Err(SceneError::field(field, format!("must be >= {min}, got {value}"))) }
 }
 
 fn in_closed(value: f32, lo: f32, hi: f32, field: &str) -> Result<(), SceneError> {
@@ -565,10 +539,7 @@ fn in_closed(value: f32, lo: f32, hi: f32, field: &str) -> Result<(), SceneError
     if (lo..=hi).contains(&value) {
         Ok(())
     } else {
-        Err(SceneError::field(
-            field,
-            format!("must be in [{lo}, {hi}], got {value}"),
-        ))
+        Err(SceneError::field(field, format!("must be in [{lo}, {hi}], got {value}")))
     }
 }
 
@@ -611,12 +582,7 @@ fn json_error(text: &str, error: &serde_json::Error) -> SceneError {
     if field.is_empty() {
         field = "(root)".to_owned();
     }
-    SceneError::Json {
-        field,
-        message,
-        line,
-        column,
-    }
+    SceneError::Json { field, message, line, column }
 }
 
 /// The text between backticks right after `prefix` at the start of `message`.
@@ -627,11 +593,7 @@ fn backticked_after(message: &str, prefix: &str) -> Option<String> {
 
 /// Byte offset just past the 1-based (line, column) character serde_json reports.
 fn byte_offset(text: &str, line: usize, column: usize) -> usize {
-    let line_start: usize = text
-        .split_inclusive('\n')
-        .take(line.saturating_sub(1))
-        .map(str::len)
-        .sum();
+    let line_start: usize = text.split_inclusive('\n').take(line.saturating_sub(1)).map(str::len).sum();
     (line_start + column).min(text.len())
 }
 
@@ -650,10 +612,7 @@ fn json_path_at(text: &str, offset: usize) -> String {
     let mut i = 0;
     while i < bytes.len() {
         match bytes[i] {
-            b'{' => stack.push(Frame::Object {
-                key: None,
-                expecting_key: true,
-            }),
+            b'{' => stack.push(Frame::Object { key: None, expecting_key: true }),
             b'[' => stack.push(Frame::Array { index: 0 }),
             b'}' | b']' => {
                 stack.pop();
@@ -672,11 +631,7 @@ fn json_path_at(text: &str, offset: usize) -> String {
                 while end < bytes.len() && bytes[end] != b'"' {
                     end += if bytes[end] == b'\\' { 2 } else { 1 };
                 }
-                if let Some(Frame::Object {
-                    key,
-                    expecting_key: expecting_key @ true,
-                }) = stack.last_mut()
-                {
+                if let Some(Frame::Object { key, expecting_key: expecting_key @ true }) = stack.last_mut() {
                     let raw = &bytes[start..end.min(bytes.len())];
                     *key = Some(String::from_utf8_lossy(raw).into_owned());
                     *expecting_key = false;
@@ -745,10 +700,7 @@ mod tests {
     #[test]
     fn light_is_converted_to_radians_and_unit_direction() {
         let text = edit(r#""direction": [0, -1, 0]"#, r#""direction": [0, -4, 3]"#);
-        let light = SceneDescription::from_json_str(&text)
-            .expect("parses")
-            .light
-            .to_spot_light();
+        let light = SceneDescription::from_json_str(&text).expect("parses").light.to_spot_light();
         assert!(light.direction.abs_diff_eq(Vec3::new(0.0, -0.8, 0.6), 1e-6));
         assert!((light.inner_angle - 20f32.to_radians()).abs() < 1e-6);
         assert!((light.outer_angle - 30f32.to_radians()).abs() < 1e-6);
@@ -757,10 +709,7 @@ mod tests {
     #[test]
     fn unknown_fields_are_named_with_their_path() {
         let message = error_of(&edit(r#""sparse_points": 16"#, r#""sparse_points": 16, "colour": 1"#));
-        assert!(
-            message.starts_with("meshes[0].colour: unknown field `colour`"),
-            "{message}"
-        );
+        assert!(message.starts_with("meshes[0].colour: unknown field `colour`"), "{message}");
 
         let message = error_of(&edit(r#""width": 64"#, r#""width": 64, "zoom": 2"#));
         assert!(message.starts_with("camera.zoom: unknown field"), "{message}");
@@ -768,29 +717,18 @@ mod tests {
         let message = error_of(&edit("{\n", "{\n\"extra\": true,\n"));
         assert!(message.starts_with("extra: unknown field"), "{message}");
 
-        let message = error_of(&edit(
-            r#""sparse_points": 16"#,
-            r#""sparse_points": 16, "transform": {"scale": 2, "shear": 1}"#,
-        ));
-        assert!(
-            message.starts_with("meshes[0].transform.shear: unknown field"),
-            "{message}"
-        );
+        let message =
+            error_of(&edit(r#""sparse_points": 16"#, r#""sparse_points": 16, "transform": {"scale": 2, "shear": 1}"#));
+        assert!(message.starts_with("meshes[0].transform.shear: unknown field"), "{message}");
     }
 
     #[test]
     fn missing_and_mistyped_fields_are_named() {
         let message = error_of(&edit(r#""fov_y_deg": 45,"#, ""));
-        assert!(
-            message.starts_with("camera.fov_y_deg: required field is missing"),
-            "{message}"
-        );
+        assert!(message.starts_with("camera.fov_y_deg: required field is missing"), "{message}");
 
         let message = error_of(&edit(r#""obj": "a.obj", "#, ""));
-        assert!(
-            message.starts_with("meshes[0].obj: required field is missing"),
-            "{message}"
-        );
+        assert!(message.starts_with("meshes[0].obj: required field is missing"), "{message}");
 
         let message = error_of(&edit(r#""width": 64"#, r#""width": "wide""#));
         assert!(message.starts_with("camera.width: invalid type"), "{message}");
@@ -831,11 +769,7 @@ mod tests {
                 r#""sparse_points": 16, "transform": {"scale": [1, 0, 1]}"#,
                 "meshes[0].transform.scale[1]: must be > 0, got 0",
             ),
-            (
-                r#""sparse_points": 16"#,
-                r#""sparse_points": 0"#,
-                "meshes[0].sparse_points: must be in 1..=65536, got 0",
-            ),
+            (r#""sparse_points": 16"#, r#""sparse_points": 0"#, "meshes[0].sparse_points: must be in 1..=65536, got 0"),
             (
                 r#""sparse_points": 16"#,
                 r#""sparse_points": 65537"#,
@@ -856,31 +790,11 @@ mod tests {
                 r#""direction": [0, 0, 0]"#,
                 "light.direction: must be nonzero, got [0, 0, 0]",
             ),
-            (
-                r#""intensity": [1, 1, 1]"#,
-                r#""intensity": [1, -1, 1]"#,
-                "light.intensity[1]: must be >= 0, got -1",
-            ),
-            (
-                r#""fov_y_deg": 45"#,
-                r#""fov_y_deg": 170"#,
-                "camera.fov_y_deg: must be in (1, 170), got 170",
-            ),
-            (
-                r#""width": 64"#,
-                r#""width": 0"#,
-                "camera.width: must be in 1..=8192, got 0",
-            ),
-            (
-                r#""height": 48"#,
-                r#""height": 9000"#,
-                "camera.height: must be in 1..=8192, got 9000",
-            ),
-            (
-                r#""target": [0, 1, 0]"#,
-                r#""target": [0, 1, 3]"#,
-                "camera.target: must differ from the camera position",
-            ),
+            (r#""intensity": [1, 1, 1]"#, r#""intensity": [1, -1, 1]"#, "light.intensity[1]: must be >= 0, got -1"),
+            (r#""fov_y_deg": 45"#, r#""fov_y_deg": 170"#, "camera.fov_y_deg: must be in (1, 170), got 170"),
+            (r#""width": 64"#, r#""width": 0"#, "camera.width: must be in 1..=8192, got 0"),
+            (r#""height": 48"#, r#""height": 9000"#, "camera.height: must be in 1..=8192, got 9000"),
+            (r#""target": [0, 1, 0]"#, r#""target": [0, 1, 3]"#, "camera.target: must differ from the camera position"),
             (
                 r#""fov_y_deg": 45"#,
                 r#""fov_y_deg": 45, "up": [0, 0, -2]"#,
@@ -891,18 +805,11 @@ mod tests {
                 r#""meshes": []"#,
                 "meshes: at least one mesh is required",
             ),
-            (
-                r#""obj": "a.obj""#,
-                r#""obj": " ""#,
-                "meshes[0].obj: must name an OBJ file",
-            ),
+            (r#""obj": "a.obj""#, r#""obj": " ""#, "meshes[0].obj: must name an OBJ file"),
         ];
         for (from, to, expected) in cases {
             let message = error_of(&edit(from, to));
-            assert!(
-                message.starts_with(expected),
-                "{to}: got `{message}`, expected `{expected}`"
-            );
+            assert!(message.starts_with(expected), "{to}: got `{message}`, expected `{expected}`");
         }
     }
 
@@ -918,15 +825,7 @@ mod tests {
         .expect("parses");
         description.validate().expect("valid");
         let settings = description.settings.to_settings();
-        assert_eq!(
-            settings,
-            Settings {
-                rsm_resolution: 256,
-                glossy: false,
-                seed: 7,
-                exposure: Some(2.5)
-            }
-        );
+        assert_eq!(settings, Settings { rsm_resolution: 256, glossy: false, seed: 7, exposure: Some(2.5) });
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
         let message = error_of(&with_settings(r#"{"exposure": 0}"#));
@@ -938,33 +837,19 @@ mod tests {
     #[test]
     fn json_materials_are_checked() {
         let with_material = |material: &str| {
-            edit(
-                r#""sparse_points": 16"#,
-                &format!(r#""sparse_points": 16, "materials": {{"leftWall": {material}}}"#),
-            )
+            edit(r#""sparse_points": 16"#, &format!(r#""sparse_points": 16, "materials": {{"leftWall": {material}}}"#))
         };
         let message = error_of(&with_material(r#"{"diffuse": [0.5, 1.5, 0.5]}"#));
-        assert_eq!(
-            message,
-            "meshes[0].materials.leftWall.diffuse[1]: must be in [0, 1], got 1.5"
-        );
-        let message = error_of(&with_material(
-            r#"{"diffuse": [0.7, 0.5, 0.5], "specular": [0.4, 0, 0]}"#,
-        ));
+        assert_eq!(message, "meshes[0].materials.leftWall.diffuse[1]: must be in [0, 1], got 1.5");
+        let message = error_of(&with_material(r#"{"diffuse": [0.7, 0.5, 0.5], "specular": [0.4, 0, 0]}"#));
         assert!(
             message.starts_with("meshes[0].materials.leftWall.specular[0]: diffuse + specular must be <= 1"),
             "{message}"
         );
         let message = error_of(&with_material(r#"{"exponent": 20000}"#));
-        assert_eq!(
-            message,
-            "meshes[0].materials.leftWall.exponent: must be in [0, 10000], got 20000"
-        );
+        assert_eq!(message, "meshes[0].materials.leftWall.exponent: must be in [0, 10000], got 20000");
         let message = error_of(&with_material(r#"{"roughness": 0.5}"#));
-        assert!(
-            message.starts_with("meshes[0].materials.leftWall.roughness: unknown field"),
-            "{message}"
-        );
+        assert!(message.starts_with("meshes[0].materials.leftWall.roughness: unknown field"), "{message}");
         // 0.7 + 0.3 is 1 up to rounding: accepted.
         let text = with_material(r#"{"diffuse": [0.7, 0.7, 0.7], "specular": [0.3, 0.3, 0.3], "exponent": 0}"#);
         let description = SceneDescription::from_json_str(&text).expect("parses");
@@ -972,6 +857,19 @@ mod tests {
         let material = description.meshes[0].materials["leftWall"].to_material();
         assert_eq!(material.specular, Vec3::splat(0.3));
         assert_eq!(material.exponent, 0.0);
+
+        let message = error_of(&with_material(r#"{"diffuse_texture": " "}"#));
+        assert_eq!(
+            message,
+            "meshes[0].materials.leftWall.diffuse_texture: must name an image file, got an empty string"
+        );
+        let text = with_material(r#"{"diffuse_texture": "tex/wall.png"}"#);
+        let description = SceneDescription::from_json_str(&text).expect("parses");
+        description.validate().expect("valid");
+        let material = &description.meshes[0].materials["leftWall"];
+        assert_eq!(material.diffuse_texture.as_deref(), Some("tex/wall.png"));
+        let json = serde_json::to_string(&description).expect("serializes");
+        assert_eq!(SceneDescription::from_json_str(&json).expect("parses again"), description);
     }
 
     #[test]
@@ -988,21 +886,13 @@ mod tests {
         assert!(x.abs_diff_eq(Vec3::NEG_Z, 1e-6), "{x}");
         let y = matrix.transform_vector3(Vec3::Y);
         assert!(y.abs_diff_eq(Vec3::new(0.0, 2.0, 0.0), 1e-6), "{y}");
-        assert!(
-            matrix
-                .transform_point3(Vec3::ZERO)
-                .abs_diff_eq(Vec3::new(1.0, 2.0, 3.0), 1e-6)
-        );
+        assert!(matrix.transform_point3(Vec3::ZERO).abs_diff_eq(Vec3::new(1.0, 2.0, 3.0), 1e-6));
 
-        let message = error_of(&edit(
-            r#""sparse_points": 16"#,
-            r#""sparse_points": 16, "transform": {"scale": [1, 2]}"#,
-        ));
+        let message =
+            error_of(&edit(r#""sparse_points": 16"#, r#""sparse_points": 16, "transform": {"scale": [1, 2]}"#));
         assert!(message.starts_with("meshes[0].transform.scale"), "{message}");
-        let message = error_of(&edit(
-            r#""sparse_points": 16"#,
-            r#""sparse_points": 16, "transform": {"scale": "big"}"#,
-        ));
+        let message =
+            error_of(&edit(r#""sparse_points": 16"#, r#""sparse_points": 16, "transform": {"scale": "big"}"#));
         assert!(message.contains("a number or an array [x, y, z]"), "{message}");
     }
 

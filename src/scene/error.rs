@@ -37,12 +37,12 @@ pub enum SceneError {
         /// What is wrong, with the value found.
         message: String,
     },
-    /// A mesh or material file named by the scene cannot be used.
+    /// A mesh, material or texture file named by the scene cannot be used.
     #[error("{field}: {}: {message}", FileLine(file, *line))]
     Obj {
         /// Path of the scene field that led to the file, e.g. `meshes[0].obj`.
         field: String,
-        /// The OBJ or MTL file.
+        /// The OBJ, MTL or texture file.
         file: PathBuf,
         /// 1-based line in `file`, when the problem is on one line.
         line: Option<usize>,
@@ -54,10 +54,7 @@ pub enum SceneError {
 impl SceneError {
     /// A [`SceneError::Field`].
     pub(crate) fn field(field: impl Into<String>, message: impl Into<String>) -> SceneError {
-        SceneError::Field {
-            field: field.into(),
-            message: message.into(),
-        }
+        SceneError::Field { field: field.into(), message: message.into() }
     }
 
     /// The JSON field path the error is about.

@@ -4,9 +4,11 @@
 //! Loading a mesh runs, in order:
 //!
 //! 1. `obj`: parse the OBJ with tobj (triangulated, single index), merge its groups into one
-//!    mesh, weld identical vertices, resolve MTL and JSON materials into the global table.
+//!    mesh, weld identical vertices (same position, normal and texture coordinates), resolve
+//!    MTL and JSON materials into the global table and load their diffuse textures (`texture`).
 //! 2. `normals`: keep the OBJ's normals, or compute area-weighted normals with a 45° crease
-//!    angle, splitting vertices so each vertex has exactly one normal.
+//!    angle, splitting vertices so each vertex has exactly one normal. Vertices split by a UV
+//!    seam share their normal where the surface is smooth across the seam.
 //! 3. `subdivide`: split every edge longer than the sparse point spacing
 //!    `sqrt(model area / sparse_points)` (conforming red-green refinement), so the per-vertex
 //!    interpolation of step 4 of the pipeline sees sparse points around every vertex.
@@ -24,16 +26,18 @@ mod normals;
 mod obj;
 mod sparse;
 mod subdivide;
+mod texture;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use glam::{Mat3, Mat4, Vec3};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
     CameraDescription, LightDescription, MaterialDescription, MeshDescription, ScaleDescription, SceneDescription,
     SettingsDescription, TransformDescription,
 };
 pub use error::SceneError;
+pub use texture::MAX_TEXTURE_SIDE;
 
 /// Number of sparse points each vertex interpolates from (paper eqs. 12-13).
 pub const NEIGHBOURS: usize = 8;
@@ -51,6 +55,10 @@ pub struct Scene {
     /// Global material table; [`Mesh::triangle_materials`] indexes into it. One entry per
     /// (mesh, material name) that at least one loaded triangle uses.
     pub materials: Vec<Material>,
+    /// Diffuse textures; [`Material::diffuse_texture`] indexes into it. One entry per file
+    /// (deduplicated by resolved path), only those of materials in `materials`; empty when no
+    /// material has one.
+    pub textures: Vec<Texture>,
     /// The spot light that illuminates the scene and whose RSM provides the VALs.
     pub light: SpotLight,
     /// The camera the final image is rendered from.
@@ -64,21 +72,23 @@ pub struct Scene {
 /// with `diffuse + specular <= 1` per channel guaranteed by the loader.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Material {
-    /// Diffuse albedo `rho_d`, linear RGB, each channel in [0, 1].
+    /// Diffuse albedo `rho_d`, linear RGB, each channel in [0, 1]. With a texture, the albedo
+    /// is `diffuse * texture(uv)` (the texture decoded from sRGB to linear): `diffuse` scales
+    /// the texture, and `diffuse + specular <= 1` still bounds the energy.
     pub diffuse: Vec3,
     /// Specular albedo `rho_s`, linear RGB, each channel in [0, 1].
     pub specular: Vec3,
     /// Phong exponent `k`, in [0, 1e4].
     pub exponent: f32,
+    /// Index into [`Scene::textures`] of the diffuse texture (MTL `map_Kd`), sampled at
+    /// [`Mesh::texcoords`].
+    pub diffuse_texture: Option<u32>,
 }
 
 impl Material {
     /// The material of triangles without one: 50 % grey Lambertian, no specular lobe.
-    pub const DEFAULT: Material = Material {
-        diffuse: Vec3::splat(0.5),
-        specular: Vec3::ZERO,
-        exponent: 1.0,
-    };
+    pub const DEFAULT: Material =
+        Material { diffuse: Vec3::splat(0.5), specular: Vec3::ZERO, exponent: 1.0, diffuse_texture: None };
 
     /// Largest accepted Phong exponent.
     pub const MAX_EXPONENT: f32 = 1.0e4;
@@ -92,6 +102,33 @@ impl Material {
 impl Default for Material {
     fn default() -> Self {
         Self::DEFAULT
+    }
+}
+
+/// A diffuse texture, as stored in its file.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Texture {
+    /// The file, as resolved from the MTL (its directory joined with the `map_Kd` path) or the
+    /// scene file (its directory joined with `diffuse_texture`).
+    pub path: PathBuf,
+    /// Width, texels, in 1..=[`MAX_TEXTURE_SIDE`].
+    pub width: u32,
+    /// Height, texels, in 1..=[`MAX_TEXTURE_SIDE`].
+    pub height: u32,
+    /// `width * height * 4` bytes of RGBA, row-major from the top row, sRGB-encoded as stored
+    /// in the file (linear floating-point files are sRGB-encoded); alpha 255 where the file has
+    /// none.
+    pub rgba8: Vec<u8>,
+}
+
+impl std::fmt::Debug for Texture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Texture")
+            .field("path", &self.path)
+            .field("width", &self.width)
+            .field("height", &self.height)
+            .field("rgba8", &format_args!("[{} bytes]", self.rgba8.len()))
+            .finish()
     }
 }
 
@@ -165,6 +202,10 @@ pub struct Mesh {
     pub positions: Vec<Vec3>,
     /// Model-space unit vertex normals, one per vertex.
     pub normals: Vec<Vec3>,
+    /// Texture coordinates, one per vertex, in the OBJ's `vt` convention (v up, as in the
+    /// file); zero where the OBJ has none. Vertices at one position with different texture
+    /// coordinates (a UV seam) stay separate vertices.
+    pub texcoords: Vec<Vec2>,
     /// Triangles as vertex indices, counter-clockwise as in the OBJ.
     pub triangles: Vec<[u32; 3]>,
     /// Per-triangle index into [`Scene::materials`].
@@ -237,11 +278,7 @@ impl Mesh {
     /// the transform (exact for uniform scale, conservative otherwise).
     pub fn world_occluder_radii(&self) -> Vec<f32> {
         let linear = Mat3::from_mat4(self.model_to_world);
-        let scale = linear
-            .x_axis
-            .length()
-            .max(linear.y_axis.length())
-            .max(linear.z_axis.length());
+        let scale = linear.x_axis.length().max(linear.y_axis.length()).max(linear.z_axis.length());
         self.sparse.occluder_radii.iter().map(|r| r * scale).collect()
     }
 }
@@ -264,10 +301,8 @@ impl Scene {
 
     /// Reads a scene file; OBJ paths are relative to the directory that holds it.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|source| SceneError::Read { path: path.to_path_buf(), source })?;
         let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
         Self::from_json_str(&text, base_dir)
     }
@@ -278,14 +313,16 @@ impl Scene {
         description.validate()?;
         let settings = description.settings.to_settings();
         let mut materials = Vec::new();
+        let mut textures = texture::Textures::default();
         let mut meshes = Vec::with_capacity(description.meshes.len());
         for (index, mesh_description) in description.meshes.iter().enumerate() {
-            let mesh = load_mesh(mesh_description, index, base_dir, settings.seed, &mut materials)?;
+            let mesh = load_mesh(mesh_description, index, base_dir, settings.seed, &mut materials, &mut textures)?;
             meshes.push(mesh);
         }
         Ok(Scene {
             meshes,
             materials,
+            textures: textures.textures,
             light: description.light.to_spot_light(),
             camera: description.camera.to_camera(),
             settings,
@@ -297,9 +334,7 @@ impl Scene {
     pub fn needs_glossy(&self) -> bool {
         self.settings.glossy
             && self.meshes.iter().any(|mesh| {
-                mesh.triangle_materials
-                    .iter()
-                    .any(|&m| self.materials.get(m as usize).is_some_and(Material::is_glossy))
+                mesh.triangle_materials.iter().any(|&m| self.materials.get(m as usize).is_some_and(Material::is_glossy))
             })
     }
 
@@ -320,17 +355,18 @@ impl Scene {
 }
 
 /// Loads mesh `index` of the description: OBJ, normals, subdivision, sparse points. Its
-/// materials are appended to `materials`.
+/// materials are appended to `materials`, their textures to `textures`.
 fn load_mesh(
     description: &MeshDescription,
     index: usize,
     base_dir: &Path,
     seed: u64,
     materials: &mut Vec<Material>,
+    textures: &mut texture::Textures,
 ) -> Result<Mesh, SceneError> {
     let started = std::time::Instant::now();
     let field = format!("meshes[{index}]");
-    let loaded = obj::load(description, &field, base_dir)?;
+    let loaded = obj::load(description, &field, base_dir, textures)?;
     let file = loaded.file.clone();
     let loaded_at = started.elapsed();
     let material_offset = u32::try_from(materials.len()).map_err(|_| SceneError::Field {
@@ -341,9 +377,10 @@ fn load_mesh(
     let triangle_materials: Vec<u32> = loaded.triangle_materials.iter().map(|&m| m + material_offset).collect();
 
     let mut geometry = match loaded.normals {
-        Some(normals) => normals::with_given_normals(loaded.positions, normals, loaded.triangles),
+        Some(normals) => normals::with_given_normals(loaded.positions, normals, loaded.texcoords, loaded.triangles),
         None => normals::crease_normals(
             &loaded.positions,
+            &loaded.texcoords,
             &loaded.triangles,
             normals::CREASE_ANGLE_DEG.to_radians(),
         ),
@@ -382,9 +419,7 @@ fn load_mesh(
         message,
     })?;
 
-    let name = file
-        .file_stem()
-        .map_or_else(|| format!("mesh{index}"), |s| s.to_string_lossy().into_owned());
+    let name = file.file_stem().map_or_else(|| format!("mesh{index}"), |s| s.to_string_lossy().into_owned());
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     tracing::debug!(
         mesh = %name,
@@ -409,17 +444,20 @@ fn load_mesh(
         model_to_world: description.transform.to_matrix(),
         positions: geometry.positions,
         normals: geometry.normals,
+        texcoords: geometry.texcoords,
         triangles: geometry.triangles,
         triangle_materials: geometry.triangle_materials,
         sparse,
     })
 }
 
-/// Indexed triangle geometry with one normal per vertex, as passed between the load steps.
+/// Indexed triangle geometry with one normal and one texture coordinate per vertex, as passed
+/// between the load steps.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Geometry {
     pub positions: Vec<Vec3>,
     pub normals: Vec<Vec3>,
+    pub texcoords: Vec<Vec2>,
     pub triangles: Vec<[u32; 3]>,
     /// Per triangle; any meaning (local or global material index), carried through untouched.
     pub triangle_materials: Vec<u32>,
@@ -551,6 +589,7 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
             model_to_world: Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0)),
             positions: vec![Vec3::ZERO, Vec3::Z, Vec3::new(1.0, -1.0, 0.0)],
             normals: vec![n; 3],
+            texcoords: vec![Vec2::ZERO; 3],
             triangles: vec![[0, 1, 2]],
             triangle_materials: vec![0],
             sparse: SparsePoints {
@@ -567,10 +606,7 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         }
         let world = mesh.world_positions();
         let edge = world[2] - world[0];
-        assert!(
-            edge.dot(expected).abs() < 1e-6,
-            "the normal stays perpendicular to the surface"
-        );
+        assert!(edge.dot(expected).abs() < 1e-6, "the normal stays perpendicular to the surface");
         assert_eq!(mesh.sparse_world_positions(), vec![Vec3::new(0.5, -1.0, 0.0)]);
         assert_eq!(mesh.world_occluder_radii(), vec![0.5]);
     }
@@ -598,10 +634,7 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         let dir = TempDir::new("load");
         std::fs::create_dir_all(dir.path().join("meshes")).expect("mkdir");
         dir.write("meshes/cube.obj", CUBE_OBJ);
-        let scene_path = dir.write(
-            "scene.json",
-            &scene_json(r#""obj": "meshes/cube.obj", "sparse_points": 16"#),
-        );
+        let scene_path = dir.write("scene.json", &scene_json(r#""obj": "meshes/cube.obj", "sparse_points": 16"#));
         let scene = Scene::load(&scene_path).expect("scene loads");
         assert_eq!(scene.triangle_count(), scene.meshes[0].triangles.len());
         assert_eq!(scene.vertex_count(), scene.meshes[0].positions.len());
@@ -620,16 +653,202 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         assert!(message.contains("does-not-exist.obj"), "{message}");
     }
 
+    /// A 2 x 1 quad in z = 0 whose texture coordinates are `uv = (x / 2, y)`, split into two
+    /// groups with materials `left` and `right` (defined in `quad.mtl`).
+    const TEXTURED_QUAD_OBJ: &str = "\
+mtllib quad.mtl
+v 0 0 0\nv 1 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 0 1 0
+vt 0 0\nvt 0.5 0\nvt 1 0\nvt 1 1\nvt 0.5 1\nvt 0 1
+g left
+usemtl left
+f 1/1 2/2 5/5 6/6
+g right
+usemtl right
+f 2/2 3/3 4/4 5/5
+";
+
+    /// Writes a `width` x `height` RGBA PNG whose texel (x, y) is `[x, y, 7, 200]`.
+    fn write_rgba_png(dir: &TempDir, name: &str, width: u32, height: u32) -> std::path::PathBuf {
+        let path = dir.path().join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).expect("mkdir");
+        }
+        image::RgbaImage::from_fn(width, height, |x, y| image::Rgba([x as u8, y as u8, 7, 200]))
+            .save(&path)
+            .expect("write PNG");
+        path
+    }
+
+    /// Asserts that every vertex's texture coordinates are `uv(position)`.
+    fn assert_uv_is(mesh: &Mesh, uv: impl Fn(Vec3) -> Vec2) {
+        assert_eq!(mesh.texcoords.len(), mesh.positions.len());
+        for (p, t) in mesh.positions.iter().zip(&mesh.texcoords) {
+            assert!(t.abs_diff_eq(uv(*p), 1e-5), "vertex at {p} has uv {t}, expected {}", uv(*p));
+        }
+    }
+
+    #[test]
+    fn map_kd_textures_load_with_their_texcoords() {
+        let dir = TempDir::new("map-kd");
+        write_rgba_png(&dir, "textures/bricks.png", 3, 2);
+        let rgb = dir.path().join("plain.png");
+        image::RgbImage::from_pixel(1, 1, image::Rgb([10, 20, 30])).save(&rgb).expect("write PNG");
+        dir.write(
+            "quad.mtl",
+            "newmtl left\nKd 0.5 0.5 0.5\nmap_Kd textures/bricks.png\n\
+             newmtl right\nKd 1 1 1\nmap_Kd -s 1 1 1 plain.png\n",
+        );
+        dir.write("quad.obj", TEXTURED_QUAD_OBJ);
+        let json = scene_json(r#""obj": "quad.obj", "sparse_points": 4"#);
+        let scene = Scene::from_json_str(&json, dir.path()).expect("scene loads");
+
+        assert_eq!(scene.textures.len(), 2);
+        let bricks = &scene.textures[0];
+        assert_eq!(bricks.path, dir.path().join("textures/bricks.png"));
+        assert_eq!((bricks.width, bricks.height), (3, 2));
+        assert_eq!(bricks.rgba8.len(), 3 * 2 * 4);
+        // Row-major from the top row: texel (x = 2, y = 1) starts at byte 4 * (1 * 3 + 2).
+        assert_eq!(&bricks.rgba8[..4], &[0, 0, 7, 200]);
+        assert_eq!(&bricks.rgba8[20..24], &[2, 1, 7, 200]);
+        let plain = &scene.textures[1];
+        assert_eq!(plain.rgba8, vec![10, 20, 30, 255], "alpha 255 when the file has none");
+
+        let mesh = &scene.meshes[0];
+        for (t, &m) in mesh.triangle_materials.iter().enumerate() {
+            let material = scene.materials[m as usize];
+            let centre = mesh.triangles[t].iter().map(|&v| mesh.positions[v as usize]).sum::<Vec3>() / 3.0;
+            if centre.x < 1.0 {
+                assert_eq!(material.diffuse_texture, Some(0));
+                assert_eq!(material.diffuse, Vec3::splat(0.5));
+            } else {
+                assert_eq!(material.diffuse_texture, Some(1));
+            }
+        }
+        assert_uv_is(mesh, |p| Vec2::new(p.x / 2.0, p.y));
+        // The shared edge x = 1 has the same texture coordinates on both sides: welded.
+        assert_eq!(mesh.positions.iter().filter(|p| p.x == 1.0 && p.y == 0.0).count(), 1);
+    }
+
+    #[test]
+    fn materials_sharing_a_png_share_one_texture() {
+        let dir = TempDir::new("shared-texture");
+        write_rgba_png(&dir, "tex/shared.png", 2, 2);
+        std::fs::create_dir_all(dir.path().join("mtl")).expect("mkdir");
+        // Two spellings of one file.
+        dir.write("mtl/quad.mtl", "newmtl left\nmap_Kd ../tex/shared.png\nnewmtl right\nmap_Kd ../tex/./shared.png\n");
+        dir.write("quad.obj", &TEXTURED_QUAD_OBJ.replace("mtllib quad.mtl", "mtllib mtl/quad.mtl"));
+        // Two meshes, and a JSON material with the same file: still one texture.
+        let mesh = r#"{"obj": "quad.obj", "sparse_points": 4}"#;
+        let json_mesh = r#"{"obj": "quad.obj", "sparse_points": 4,
+                            "material": {"diffuse_texture": "tex/shared.png"}}"#;
+        let json = format!(r#"{{"meshes": [{mesh}, {mesh}, {json_mesh}], {}}}"#, super::test_util::LIGHT_AND_CAMERA);
+        let scene = Scene::from_json_str(&json, dir.path()).expect("scene loads");
+        assert_eq!(scene.textures.len(), 1);
+        assert_eq!(scene.textures[0].path, dir.path().join("mtl/../tex/shared.png"));
+        // One entry per (mesh, material name), as without textures.
+        assert_eq!(scene.materials.len(), 6);
+        assert!(scene.materials.iter().all(|m| m.diffuse_texture == Some(0)));
+    }
+
+    #[test]
+    fn missing_textures_name_the_mtl_and_the_texture() {
+        let dir = TempDir::new("missing-texture");
+        dir.write("quad.mtl", "newmtl left\nKd 1 1 1\n\nmap_Kd textures/nope.png\nnewmtl right\n");
+        dir.write("quad.obj", TEXTURED_QUAD_OBJ);
+        let json = scene_json(r#""obj": "quad.obj", "sparse_points": 4"#);
+        let message = Scene::from_json_str(&json, dir.path()).expect_err("missing texture").to_string();
+        assert!(message.starts_with("meshes[0].obj: "), "{message}");
+        assert!(message.contains("quad.mtl:4: material `left`: map_Kd"), "{message}");
+        assert!(message.contains("textures/nope.png"), "{message}");
+
+        // An unreadable one (not an image) is an error too.
+        std::fs::create_dir_all(dir.path().join("textures")).expect("mkdir");
+        dir.write("textures/nope.png", "not a PNG");
+        let message = Scene::from_json_str(&json, dir.path()).expect_err("bad texture").to_string();
+        assert!(message.contains("nope.png"), "{message}");
+        assert!(message.contains("not an image file"), "{message}");
+
+        // A JSON material's missing texture names the field and the file.
+        let json = scene_json(r#""obj": "quad.obj", "sparse_points": 4, "material": {"diffuse_texture": "gone.png"}"#);
+        let message = Scene::from_json_str(&json, dir.path()).expect_err("missing JSON texture").to_string();
+        assert!(message.starts_with("meshes[0].material.diffuse_texture: "), "{message}");
+        assert!(message.contains("gone.png"), "{message}");
+    }
+
+    #[test]
+    fn subdivision_keeps_texcoords_affine_in_position() {
+        let dir = TempDir::new("subdivide-uv");
+        write_rgba_png(&dir, "t.png", 4, 4);
+        dir.write("quad.mtl", "newmtl left\nmap_Kd t.png\nnewmtl right\nmap_Kd t.png\n");
+        // The quad scaled to 20 x 10 and sheared in uv: uv = (0.1 + 0.04 x - 0.02 y, 0.05 x + 0.1 y).
+        let uv = |p: Vec3| Vec2::new(0.1 + 0.04 * p.x - 0.02 * p.y, 0.05 * p.x + 0.1 * p.y);
+        let mut obj = String::from("mtllib quad.mtl\n");
+        let corners = [[0, 0], [10, 0], [20, 0], [20, 10], [10, 10], [0, 10]];
+        for [x, y] in corners {
+            obj.push_str(&format!("v {x} {y} 0\n"));
+        }
+        for [x, y] in corners {
+            let t = uv(Vec3::new(x as f32, y as f32, 0.0));
+            obj.push_str(&format!("vt {} {}\n", t.x, t.y));
+        }
+        obj.push_str("usemtl left\nf 1/1 2/2 5/5 6/6\nusemtl right\nf 2/2 3/3 4/4 5/5\n");
+        dir.write("quad.obj", &obj);
+        let json = scene_json(r#""obj": "quad.obj", "sparse_points": 512"#);
+        let scene = Scene::from_json_str(&json, dir.path()).expect("scene loads");
+        let mesh = &scene.meshes[0];
+        assert!(mesh.triangles.len() > 500, "subdivided: {} triangles", mesh.triangles.len());
+        assert_uv_is(mesh, uv);
+        assert_eq!(scene.textures.len(), 1);
+    }
+
+    #[test]
+    fn json_diffuse_texture_replaces_the_mtl_material() {
+        let dir = TempDir::new("json-texture");
+        write_rgba_png(&dir, "scene-tex/wood.png", 5, 3);
+        write_rgba_png(&dir, "mtl-tex.png", 2, 2);
+        std::fs::create_dir_all(dir.path().join("meshes")).expect("mkdir");
+        dir.write("meshes/quad.mtl", "newmtl left\nmap_Kd ../mtl-tex.png\nnewmtl right\nmap_Kd ../mtl-tex.png\n");
+        dir.write("meshes/quad.obj", TEXTURED_QUAD_OBJ);
+        let scene_path = dir.write(
+            "scene.json",
+            &scene_json(
+                r#""obj": "meshes/quad.obj", "sparse_points": 4,
+                   "materials": {"left": {"diffuse": [0.8, 0.8, 0.8], "diffuse_texture": "scene-tex/wood.png"},
+                                 "right": {"diffuse": [0.2, 0.3, 0.4]}}"#,
+            ),
+        );
+        let scene = Scene::load(&scene_path).expect("scene loads");
+        // Only the JSON texture: the MTL materials, and their map_Kd, are replaced.
+        assert_eq!(scene.textures.len(), 1);
+        assert_eq!(scene.textures[0].path, dir.path().join("scene-tex/wood.png"));
+        assert_eq!((scene.textures[0].width, scene.textures[0].height), (5, 3));
+        let mut materials = scene.materials.clone();
+        materials.sort_by(|a, b| b.diffuse.x.total_cmp(&a.diffuse.x));
+        assert_eq!(materials[0].diffuse, Vec3::splat(0.8));
+        assert_eq!(materials[0].diffuse_texture, Some(0));
+        assert_eq!(materials[1].diffuse_texture, None);
+        assert_uv_is(&scene.meshes[0], |p| Vec2::new(p.x / 2.0, p.y));
+    }
+
+    #[test]
+    fn meshes_without_texcoords_get_zeros() {
+        let dir = TempDir::new("no-texcoords");
+        dir.write("cube.obj", CUBE_OBJ);
+        let scene = Scene::from_json_str(&scene_json(r#""obj": "cube.obj", "sparse_points": 32"#), dir.path())
+            .expect("scene loads");
+        let mesh = &scene.meshes[0];
+        assert_eq!(mesh.texcoords, vec![Vec2::ZERO; mesh.positions.len()]);
+        assert!(scene.textures.is_empty());
+        assert_eq!(scene.materials[0].diffuse_texture, None);
+    }
+
     /// The folder of a mesh shipped with the project (`fixtures/meshes/<name>`, else the shared
     /// data set next to the checkout); `None`, with a note, when neither exists.
     fn mesh_dir(name: &str) -> Option<std::path::PathBuf> {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-        let found = [
-            root.join("fixtures/meshes").join(name),
-            root.join("../shared/data/meshes").join(name),
-        ]
-        .into_iter()
-        .find(|dir| dir.is_dir());
+        let found = [root.join("fixtures/meshes").join(name), root.join("../shared/data/meshes").join(name)]
+            .into_iter()
+            .find(|dir| dir.is_dir());
         if found.is_none() {
             eprintln!("skipping: mesh folder {name} not found");
         }

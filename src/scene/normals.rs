@@ -4,10 +4,15 @@
 //! connected through edges at that vertex across which the faces bend by at most the crease
 //! angle; a vertex whose faces fall into several such groups is split into one vertex per
 //! group. Box edges and wall corners stay sharp, a scanned bunny stays smooth.
+//!
+//! Faces are adjacent when they share an edge in position, whatever the texture coordinates
+//! of its ends: the vertices on either side of a UV seam keep their own texture coordinates
+//! but get one normal where the surface is smooth across the seam.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use super::Geometry;
+use super::hash::fast_hash_map;
 
 /// Dihedral angle above which an edge is a crease, degrees.
 pub(crate) const CREASE_ANGLE_DEG: f32 = 45.0;
@@ -40,7 +45,12 @@ fn smooth_normals(positions: &[Vec3], triangles: &[[u32; 3]], faces: &[Vec3]) ->
 
 /// Uses the OBJ's normals, renormalised. A zero or non-finite normal is replaced by the
 /// area-weighted normal of the vertex's triangles (or +Y when they all have zero area).
-pub(crate) fn with_given_normals(positions: Vec<Vec3>, mut normals: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Geometry {
+pub(crate) fn with_given_normals(
+    positions: Vec<Vec3>,
+    mut normals: Vec<Vec3>,
+    texcoords: Vec<Vec2>,
+    triangles: Vec<[u32; 3]>,
+) -> Geometry {
     let mut smooth: Option<Vec<Option<Vec3>>> = None;
     let mut replaced = 0usize;
     for (v, normal) in normals.iter_mut().enumerate() {
@@ -56,33 +66,33 @@ pub(crate) fn with_given_normals(positions: Vec<Vec3>, mut normals: Vec<Vec3>, t
     if replaced > 0 {
         tracing::warn!("{replaced} zero or non-finite OBJ normals replaced by face normals");
     }
-    Geometry {
-        positions,
-        normals,
-        triangles,
-        triangle_materials: Vec::new(),
-    }
+    Geometry { positions, normals, texcoords, triangles, triangle_materials: Vec::new() }
 }
 
 /// Computes area-weighted vertex normals with a crease angle (radians), splitting vertices so
 /// that each has a single normal. Triangles keep their order; only their indices change.
-pub(crate) fn crease_normals(positions: &[Vec3], triangles: &[[u32; 3]], crease_angle: f32) -> Geometry {
+/// Vertices with the same position are one point of the surface for adjacency and normals;
+/// they stay distinct vertices (with their own texture coordinates) in the result.
+pub(crate) fn crease_normals(
+    positions: &[Vec3],
+    texcoords: &[Vec2],
+    triangles: &[[u32; 3]],
+    crease_angle: f32,
+) -> Geometry {
     let faces = face_normals(positions, triangles);
     let units: Vec<Option<Vec3>> = faces.iter().map(|f| f.try_normalize()).collect();
     let cos_crease = crease_angle.cos();
+    // Triangles over points: each vertex replaced by the first vertex at its position.
+    let points = point_triangles(positions, triangles);
 
     // Every (edge, triangle) incidence, sorted so that the triangles of an edge are adjacent.
     // Corners are numbered 3 * triangle + k.
     let mut incidences: Vec<((u32, u32), u32, u32)> = Vec::with_capacity(3 * triangles.len());
-    for (t, triangle) in triangles.iter().enumerate() {
+    for (t, triangle) in points.iter().enumerate() {
         for k in 0..3 {
             let (u, w) = (triangle[k], triangle[(k + 1) % 3]);
             let (corner_u, corner_w) = (3 * t + k, 3 * t + (k + 1) % 3);
-            let (key, lo, hi) = if u < w {
-                ((u, w), corner_u, corner_w)
-            } else {
-                ((w, u), corner_w, corner_u)
-            };
+            let (key, lo, hi) = if u < w { ((u, w), corner_u, corner_w) } else { ((w, u), corner_w, corner_u) };
             incidences.push((key, lo as u32, hi as u32));
         }
     }
@@ -103,47 +113,69 @@ pub(crate) fn crease_normals(positions: &[Vec3], triangles: &[[u32; 3]], crease_
         }
     }
 
-    // One new vertex per cluster, numbered in order of first corner.
+    // One normal per cluster of corners, and one new vertex per (cluster, original vertex):
+    // the corners of a cluster share a position but may differ in texture coordinates. Both
+    // are numbered in order of first corner.
     const UNASSIGNED: u32 = u32::MAX;
-    let mut vertex_of_root = vec![UNASSIGNED; 3 * triangles.len()];
-    let mut new_positions = Vec::with_capacity(positions.len());
+    let mut cluster_of_root = vec![UNASSIGNED; 3 * triangles.len()];
     let mut sums: Vec<Vec3> = Vec::with_capacity(positions.len());
-    let mut original: Vec<u32> = Vec::with_capacity(positions.len());
+    let mut cluster_point: Vec<u32> = Vec::with_capacity(positions.len());
+    let mut vertex_of = fast_hash_map::<(u32, u32), u32>(positions.len());
+    let mut new_positions = Vec::with_capacity(positions.len());
+    let mut new_texcoords = Vec::with_capacity(positions.len());
+    let mut vertex_cluster: Vec<u32> = Vec::with_capacity(positions.len());
     let mut new_triangles = Vec::with_capacity(triangles.len());
     for (t, triangle) in triangles.iter().enumerate() {
         let mut new_triangle = [0u32; 3];
         for k in 0..3 {
             let root = clusters.find((3 * t + k) as u32) as usize;
-            if vertex_of_root[root] == UNASSIGNED {
-                vertex_of_root[root] = new_positions.len() as u32;
-                new_positions.push(positions[triangle[k] as usize]);
+            if cluster_of_root[root] == UNASSIGNED {
+                cluster_of_root[root] = sums.len() as u32;
                 sums.push(Vec3::ZERO);
-                original.push(triangle[k]);
+                cluster_point.push(points[t][k]);
             }
-            let vertex = vertex_of_root[root];
-            sums[vertex as usize] += faces[t];
+            let cluster = cluster_of_root[root];
+            sums[cluster as usize] += faces[t];
+            let original = triangle[k];
+            let vertex = *vertex_of.entry((cluster, original)).or_insert_with(|| {
+                new_positions.push(positions[original as usize]);
+                new_texcoords.push(texcoords[original as usize]);
+                vertex_cluster.push(cluster);
+                (new_positions.len() - 1) as u32
+            });
             new_triangle[k] = vertex;
         }
         new_triangles.push(new_triangle);
     }
 
     let mut smooth: Option<Vec<Option<Vec3>>> = None;
-    let normals = sums
+    let cluster_normals: Vec<Vec3> = sums
         .iter()
-        .zip(&original)
-        .map(|(sum, &v)| {
+        .zip(&cluster_point)
+        .map(|(sum, &point)| {
             sum.try_normalize().unwrap_or_else(|| {
-                let smooth = smooth.get_or_insert_with(|| smooth_normals(positions, triangles, &faces));
-                smooth[v as usize].unwrap_or(FALLBACK_NORMAL)
+                let smooth = smooth.get_or_insert_with(|| smooth_normals(positions, &points, &faces));
+                smooth[point as usize].unwrap_or(FALLBACK_NORMAL)
             })
         })
         .collect();
     Geometry {
         positions: new_positions,
-        normals,
+        normals: vertex_cluster.iter().map(|&c| cluster_normals[c as usize]).collect(),
+        texcoords: new_texcoords,
         triangles: new_triangles,
         triangle_materials: Vec::new(),
     }
+}
+
+/// `triangles` with each vertex replaced by the first vertex with a bit-identical position
+/// (`-0.0` and `0.0` alike).
+fn point_triangles(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<[u32; 3]> {
+    let bits = |v: Vec3| (v + Vec3::ZERO).to_array().map(f32::to_bits);
+    let mut first = fast_hash_map::<[u32; 3], u32>(positions.len());
+    let point: Vec<u32> =
+        positions.iter().enumerate().map(|(i, &p)| *first.entry(bits(p)).or_insert(i as u32)).collect();
+    triangles.iter().map(|t| t.map(|v| point[v as usize])).collect()
 }
 
 /// Disjoint sets over `0..n` with path halving and union by index (deterministic roots).
@@ -153,9 +185,7 @@ struct UnionFind {
 
 impl UnionFind {
     fn new(n: usize) -> UnionFind {
-        UnionFind {
-            parent: (0..n as u32).collect(),
-        }
+        UnionFind { parent: (0..n as u32).collect() }
     }
 
     fn find(&mut self, mut x: u32) -> u32 {
@@ -180,11 +210,15 @@ impl UnionFind {
 mod tests {
     use super::*;
 
+    /// Zero texture coordinates for `positions`.
+    fn zeros(positions: &[Vec3]) -> Vec<Vec2> {
+        vec![Vec2::ZERO; positions.len()]
+    }
+
     /// A unit cube with outward counter-clockwise quads, triangulated as tobj fans them.
     fn cube() -> (Vec<Vec3>, Vec<[u32; 3]>) {
-        let positions = (0..8)
-            .map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32))
-            .collect();
+        let positions =
+            (0..8).map(|i| Vec3::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32)).collect();
         let quads = [
             [0, 2, 3, 1], // z = 0, normal -Z
             [4, 5, 7, 6], // z = 1, +Z
@@ -200,7 +234,7 @@ mod tests {
     #[test]
     fn cube_gets_24_vertices_with_axis_aligned_normals() {
         let (positions, triangles) = cube();
-        let geometry = crease_normals(&positions, &triangles, CREASE_ANGLE_DEG.to_radians());
+        let geometry = crease_normals(&positions, &zeros(&positions), &triangles, CREASE_ANGLE_DEG.to_radians());
         assert_eq!(geometry.positions.len(), 24);
         assert_eq!(geometry.triangles.len(), 12);
         for (t, triangle) in geometry.triangles.iter().enumerate() {
@@ -223,16 +257,11 @@ mod tests {
     fn gentle_bends_stay_smooth() {
         // Two triangles folded by 30 degrees along the shared edge 0-1.
         let fold = 30f32.to_radians();
-        let positions = vec![
-            Vec3::ZERO,
-            Vec3::X,
-            Vec3::new(0.5, 1.0, 0.0),
-            Vec3::new(0.5, -fold.cos(), fold.sin()),
-        ];
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::new(0.5, 1.0, 0.0), Vec3::new(0.5, -fold.cos(), fold.sin())];
         let triangles = vec![[0, 1, 2], [1, 0, 3]];
-        let geometry = crease_normals(&positions, &triangles, CREASE_ANGLE_DEG.to_radians());
+        let geometry = crease_normals(&positions, &zeros(&positions), &triangles, CREASE_ANGLE_DEG.to_radians());
         assert_eq!(geometry.positions.len(), 4, "no split below the crease angle");
-        let sharp = crease_normals(&positions, &triangles, 20f32.to_radians());
+        let sharp = crease_normals(&positions, &zeros(&positions), &triangles, 20f32.to_radians());
         assert_eq!(sharp.positions.len(), 6, "split above the crease angle");
         for n in geometry.normals.iter().chain(&sharp.normals) {
             assert!((n.length() - 1.0).abs() < 1e-6);
@@ -241,27 +270,66 @@ mod tests {
 
     #[test]
     fn degenerate_triangles_get_finite_normals() {
-        let positions = vec![
-            Vec3::ZERO,
-            Vec3::X,
-            Vec3::Y,
-            Vec3::new(2.0, 0.0, 0.0),
-            Vec3::new(5.0, 5.0, 5.0),
-        ];
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(2.0, 0.0, 0.0), Vec3::new(5.0, 5.0, 5.0)];
         // A good triangle, a zero-area sliver sharing its edge, and an isolated collapsed one.
         let triangles = vec![[0, 1, 2], [0, 3, 1], [4, 4, 4]];
-        let geometry = crease_normals(&positions, &triangles, CREASE_ANGLE_DEG.to_radians());
+        let geometry = crease_normals(&positions, &zeros(&positions), &triangles, CREASE_ANGLE_DEG.to_radians());
         for n in &geometry.normals {
             assert!(n.is_finite() && (n.length() - 1.0).abs() < 1e-6, "{n}");
         }
         let given = with_given_normals(
             positions.clone(),
             vec![Vec3::ZERO, Vec3::NAN, Vec3::new(0.0, 0.0, 3.0), Vec3::Z, Vec3::ZERO],
+            zeros(&positions),
             triangles,
         );
         assert_eq!(given.normals[0], Vec3::Z);
         assert_eq!(given.normals[1], Vec3::Z);
         assert_eq!(given.normals[2], Vec3::Z);
         assert_eq!(given.normals[4], FALLBACK_NORMAL);
+    }
+
+    #[test]
+    fn uv_seams_keep_their_texcoords_and_share_smooth_normals() {
+        // The 30-degree fold of `gentle_bends_stay_smooth`, with the fold edge 0-1 a UV seam:
+        // the second triangle has its own copies 4, 5 of vertices 0, 1.
+        let fold = 30f32.to_radians();
+        let positions = vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::new(0.5, 1.0, 0.0),
+            Vec3::new(0.5, -fold.cos(), fold.sin()),
+            Vec3::ZERO,
+            Vec3::X,
+        ];
+        let texcoords = vec![
+            Vec2::new(0.0, 0.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(0.5, 1.0),
+            Vec2::new(0.5, 0.5),
+            Vec2::new(0.0, 0.9),
+            Vec2::new(1.0, 0.9),
+        ];
+        let triangles = vec![[0, 1, 2], [5, 4, 3]];
+        let geometry = crease_normals(&positions, &texcoords, &triangles, CREASE_ANGLE_DEG.to_radians());
+        assert_eq!(geometry.positions.len(), 6, "the seam stays split");
+        assert_eq!(geometry.texcoords.len(), 6);
+        for (t, triangle) in geometry.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (new, old) = (triangle[k] as usize, triangles[t][k] as usize);
+                assert_eq!(geometry.positions[new], positions[old]);
+                assert_eq!(geometry.texcoords[new], texcoords[old]);
+            }
+        }
+        // Smooth across the seam: the two copies of each seam vertex have one normal.
+        let normal_at = |t: usize, k: usize| geometry.normals[geometry.triangles[t][k] as usize];
+        assert_eq!(normal_at(0, 0), normal_at(1, 1));
+        assert_eq!(normal_at(0, 1), normal_at(1, 0));
+        assert!(normal_at(0, 0).dot(Vec3::Z) < 0.999, "averaged over both faces");
+
+        // Sharp across the seam: each side keeps its face normal.
+        let sharp = crease_normals(&positions, &texcoords, &triangles, 20f32.to_radians());
+        assert_eq!(sharp.positions.len(), 6);
+        assert_eq!(sharp.normals[sharp.triangles[0][0] as usize], Vec3::Z);
     }
 }

@@ -1,6 +1,7 @@
 //! OBJ and MTL loading with tobj: all groups of one OBJ merged into one indexed triangle mesh,
 //! identical vertices welded, and every triangle's material resolved (MTL, then JSON
-//! overrides) into a per-mesh table.
+//! overrides) into a per-mesh table, its diffuse texture (`map_Kd`, or the JSON
+//! `diffuse_texture`) loaded into the scene's texture table.
 //!
 //! tobj reports errors without a line number and accepts a few things relume must not (NaN
 //! coordinates, face indices it only checks at the end of a group, short `Kd` lines it panics
@@ -11,10 +12,11 @@ use std::collections::{BTreeSet, HashMap};
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
-use super::description::{MeshDescription, key_path};
+use super::description::{MaterialDescription, MeshDescription, key_path};
 use super::hash::fast_hash_map;
+use super::texture::{Textures, parse_map_statement};
 use super::{Material, SceneError};
 
 /// One OBJ file as a single mesh, before normals, subdivision and sparse points.
@@ -26,12 +28,14 @@ pub(crate) struct LoadedObj {
     pub positions: Vec<Vec3>,
     /// The OBJ's normals, one per vertex, when every loaded face has them.
     pub normals: Option<Vec<Vec3>>,
+    /// Texture coordinates, one per vertex; zero for vertices of faces without `vt`.
+    pub texcoords: Vec<Vec2>,
     /// Counter-clockwise triangles.
     pub triangles: Vec<[u32; 3]>,
     /// Per triangle, index into `materials`.
     pub triangle_materials: Vec<u32>,
     /// This mesh's materials, one per material name used (plus the default when some faces
-    /// have none), overrides applied.
+    /// have none), overrides applied; texture indices are into the scene's table.
     pub materials: Vec<Material>,
 }
 
@@ -44,17 +48,18 @@ struct FileError {
 
 impl FileError {
     fn into_scene_error(self, field: &str) -> SceneError {
-        SceneError::Obj {
-            field: field.to_owned(),
-            file: self.file,
-            line: self.line,
-            message: self.message,
-        }
+        SceneError::Obj { field: field.to_owned(), file: self.file, line: self.line, message: self.message }
     }
 }
 
-/// Loads the OBJ of mesh `field` (e.g. `meshes[0]`), relative to `base_dir`.
-pub(crate) fn load(description: &MeshDescription, field: &str, base_dir: &Path) -> Result<LoadedObj, SceneError> {
+/// Loads the OBJ of mesh `field` (e.g. `meshes[0]`), relative to `base_dir` (the scene file's
+/// directory); the textures of the materials its triangles use are added to `textures`.
+pub(crate) fn load(
+    description: &MeshDescription,
+    field: &str,
+    base_dir: &Path,
+    textures: &mut Textures,
+) -> Result<LoadedObj, SceneError> {
     let obj_field = format!("{field}.obj");
     let file = base_dir.join(&description.obj);
     let file_error = |line: Option<usize>, message: String| SceneError::Obj {
@@ -116,8 +121,10 @@ pub(crate) fn load(description: &MeshDescription, field: &str, base_dir: &Path) 
     let mut resolver = MaterialResolver {
         description,
         field,
+        base_dir,
         tobj_materials: &tobj_materials,
         mtl_files: &mtl_files,
+        textures,
         by_name: HashMap::new(),
         materials: Vec::new(),
     };
@@ -127,9 +134,19 @@ pub(crate) fn load(description: &MeshDescription, field: &str, base_dir: &Path) 
             continue;
         }
         let material = resolver.resolve(model.mesh.material_id)?;
-        merged
+        let texcoords = merged
             .append(&model.mesh, material)
             .map_err(|message| file_error(None, format!("group `{}`: {message}", model.name)))?;
+        let textured = resolver.materials[material as usize].diffuse_texture.is_some();
+        if textured && texcoords != Texcoords::All {
+            tracing::warn!(
+                file = %file.display(),
+                "group `{}` has a textured material but {} of its faces lack texture \
+                 coordinates (`vt`); they sample the texture at (0, 0)",
+                model.name,
+                if texcoords == Texcoords::None { "all" } else { "some" }
+            );
+        }
     }
     if merged.triangles.is_empty() {
         let after = if skip.is_empty() { "" } else { " after skip_groups" };
@@ -146,11 +163,12 @@ pub(crate) fn load(description: &MeshDescription, field: &str, base_dir: &Path) 
             None
         }
     };
-    let welded = weld(merged.positions, normals, merged.triangles, merged.triangle_materials);
+    let welded = weld(merged.positions, normals, merged.texcoords, merged.triangles, merged.triangle_materials);
     Ok(LoadedObj {
         file,
         positions: welded.positions,
         normals: welded.normals,
+        texcoords: welded.texcoords,
         triangles: welded.triangles,
         triangle_materials: welded.triangle_materials,
         materials: resolver.materials,
@@ -179,7 +197,7 @@ fn prescan_obj(text: &str) -> Result<ObjScan, (usize, String)> {
         match words.next() {
             Some("v") => {
                 let values: Vec<&str> = words.collect();
-                check_numbers(&values, "vertex position").map_err(fail)?;
+                check_numbers(&values, 3, "vertex position").map_err(fail)?;
                 if values.len() == 4 {
                     // x y z w: tobj divides by w.
                     match values[3].parse::<f32>() {
@@ -196,10 +214,14 @@ fn prescan_obj(text: &str) -> Result<ObjScan, (usize, String)> {
             }
             Some("vn") => {
                 let values: Vec<&str> = words.collect();
-                check_numbers(&values, "normal").map_err(fail)?;
+                check_numbers(&values, 3, "normal").map_err(fail)?;
                 normals += 1;
             }
-            Some("vt") => texcoords += 1,
+            Some("vt") => {
+                let values: Vec<&str> = words.collect();
+                check_numbers(&values, 2, "`vt`").map_err(fail)?;
+                texcoords += 1;
+            }
             Some("f") => {
                 for vertex in words {
                     check_face_vertex(vertex, positions, texcoords, normals).map_err(fail)?;
@@ -221,12 +243,12 @@ fn prescan_obj(text: &str) -> Result<ObjScan, (usize, String)> {
     Ok(scan)
 }
 
-/// The first three of `values` must be finite numbers.
-fn check_numbers(values: &[&str], what: &str) -> Result<(), String> {
-    if values.len() < 3 {
-        return Err(format!("{what} has {} coordinates, expected 3", values.len()));
+/// The first `count` of `values` must be finite numbers.
+fn check_numbers(values: &[&str], count: usize, what: &str) -> Result<(), String> {
+    if values.len() < count {
+        return Err(format!("{what} has {} coordinates, expected {count}", values.len()));
     }
-    for value in &values[..3] {
+    for value in &values[..count] {
         match value.parse::<f32>() {
             Ok(x) if x.is_finite() => {}
             Ok(_) => return Err(format!("{what} coordinate `{value}` is not finite")),
@@ -242,11 +264,7 @@ fn check_face_vertex(vertex: &str, positions: usize, texcoords: usize, normals: 
     if parts.len() > 3 || parts[0].is_empty() {
         return Err(format!("malformed face vertex `{vertex}`"));
     }
-    let kinds = [
-        ("vertex", positions),
-        ("texture coordinate", texcoords),
-        ("normal", normals),
-    ];
+    let kinds = [("vertex", positions), ("texture coordinate", texcoords), ("normal", normals)];
     for (part, (kind, count)) in parts.iter().zip(kinds) {
         if part.is_empty() {
             continue;
@@ -272,39 +290,47 @@ fn line_of_last_read(text: &[u8], consumed: u64) -> usize {
     text[..end].iter().filter(|&&b| b == b'\n').count() + 1
 }
 
-/// One MTL file: its path and the line of each `newmtl`.
+/// One MTL file: its path, the line of each `newmtl`, and the line of each `map_Kd` with the
+/// material it belongs to.
 #[derive(Debug)]
 struct MtlFile {
     path: PathBuf,
     definitions: Vec<(String, usize)>,
+    diffuse_maps: Vec<(String, usize)>,
 }
 
 impl MtlFile {
     fn line_of(&self, name: &str) -> Option<usize> {
-        self.definitions
-            .iter()
-            .rev()
-            .find(|(n, _)| n == name)
-            .map(|&(_, line)| line)
+        Self::last_line(&self.definitions, name)
+    }
+
+    fn map_kd_line_of(&self, name: &str) -> Option<usize> {
+        Self::last_line(&self.diffuse_maps, name)
+    }
+
+    fn last_line(lines: &[(String, usize)], name: &str) -> Option<usize> {
+        lines.iter().rev().find(|(n, _)| n == name).map(|&(_, line)| line)
     }
 }
 
 /// Reads and parses one MTL file; the tobj result is always `Ok` (errors are [`FileError`]s).
 fn load_mtl(path: &Path) -> Result<(tobj::MTLLoadResult, MtlFile), FileError> {
-    let error = |line: Option<usize>, message: String| FileError {
-        file: path.to_path_buf(),
-        line,
-        message,
-    };
+    let error = |line: Option<usize>, message: String| FileError { file: path.to_path_buf(), line, message };
     let bytes = std::fs::read(path).map_err(|e| error(None, format!("cannot read: {e}")))?;
     let text = String::from_utf8_lossy(&bytes);
-    let mut definitions = Vec::new();
+    let mut definitions: Vec<(String, usize)> = Vec::new();
+    let mut diffuse_maps = Vec::new();
     for (index, raw) in text.split('\n').enumerate() {
         let line = raw.trim();
         let mut words = line.split_whitespace();
         match words.next() {
             Some("newmtl") => {
                 definitions.push((line["newmtl".len()..].trim().to_owned(), index + 1));
+            }
+            Some("map_Kd") => {
+                if let Some((name, _)) = definitions.last() {
+                    diffuse_maps.push((name.clone(), index + 1));
+                }
             }
             // tobj panics on fewer than three numbers.
             Some(key @ ("Ka" | "Kd" | "Ks" | "Ke")) if words.clone().count() < 3 => {
@@ -318,13 +344,7 @@ fn load_mtl(path: &Path) -> Result<(tobj::MTLLoadResult, MtlFile), FileError> {
         let line = line_of_last_read(text.as_bytes(), reader.position());
         error(Some(line), format!("cannot parse: {e}"))
     })?;
-    Ok((
-        Ok(parsed),
-        MtlFile {
-            path: path.to_path_buf(),
-            definitions,
-        },
-    ))
+    Ok((Ok(parsed), MtlFile { path: path.to_path_buf(), definitions, diffuse_maps }))
 }
 
 fn check_skip_groups(
@@ -334,22 +354,15 @@ fn check_skip_groups(
     scan: &ObjScan,
     models: &[tobj::Model],
 ) -> Result<(), SceneError> {
-    let known: BTreeSet<&str> = scan
-        .groups
-        .iter()
-        .map(String::as_str)
-        .chain(models.iter().map(|m| m.name.as_str()))
-        .collect();
+    let known: BTreeSet<&str> =
+        scan.groups.iter().map(String::as_str).chain(models.iter().map(|m| m.name.as_str())).collect();
     for (i, name) in description.skip_groups.iter().enumerate() {
         if !known.contains(name.as_str()) {
             return Err(SceneError::Obj {
                 field: format!("{field}.skip_groups[{i}]"),
                 file: file.to_path_buf(),
                 line: None,
-                message: format!(
-                    "no group or object named `{name}` (the file has: {})",
-                    list(known.iter())
-                ),
+                message: format!("no group or object named `{name}` (the file has: {})", list(known.iter())),
             });
         }
     }
@@ -382,19 +395,19 @@ fn check_material_overrides(
 /// `a, b, c`, or `nothing`.
 fn list<'a>(names: impl Iterator<Item = &'a &'a str>) -> String {
     let names: Vec<&str> = names.copied().collect();
-    if names.is_empty() {
-        "nothing".to_owned()
-    } else {
-        names.join(", ")
-    }
+    if names.is_empty() { "nothing".to_owned() } else { names.join(", ") }
 }
 
-/// Builds the per-mesh material table on demand, one entry per material name used.
+/// Builds the per-mesh material table on demand, one entry per material name used, loading
+/// the textures of those materials.
 struct MaterialResolver<'a> {
     description: &'a MeshDescription,
     field: &'a str,
+    /// The scene file's directory, which JSON texture paths are relative to.
+    base_dir: &'a Path,
     tobj_materials: &'a [tobj::Material],
     mtl_files: &'a [MtlFile],
+    textures: &'a mut Textures,
     /// Material name (`None`: faces without a material) to index into `materials`.
     by_name: HashMap<Option<String>, u32>,
     materials: Vec<Material>,
@@ -408,9 +421,13 @@ impl MaterialResolver<'_> {
         if let Some(&index) = self.by_name.get(&name) {
             return Ok(index);
         }
-        let by_name_override = name.as_ref().and_then(|name| self.description.materials.get(name));
-        let material = match (by_name_override, &self.description.material, source) {
-            (Some(json), _, _) | (None, Some(json), _) => json.to_material(),
+        let description = self.description;
+        let by_name_override = name.as_ref().and_then(|name| Some((name, description.materials.get(name)?)));
+        let material = match (by_name_override, &description.material, source) {
+            (Some((name, json)), _, _) => {
+                self.convert_json(json, &key_path(&format!("{}.materials", self.field), name))?
+            }
+            (None, Some(json), _) => self.convert_json(json, &format!("{}.material", self.field))?,
             (None, None, Some(mtl)) => self.convert_mtl(mtl)?,
             (None, None, None) => Material::DEFAULT,
         };
@@ -420,9 +437,27 @@ impl MaterialResolver<'_> {
         Ok(index)
     }
 
-    /// Converts an MTL material: `Kd` to diffuse, `Ks` to specular, `Ns` to exponent; values
-    /// out of range are clamped and `Kd + Ks > 1` is scaled down to 1, each with a warning.
-    fn convert_mtl(&self, mtl: &tobj::Material) -> Result<Material, SceneError> {
+    /// Converts a JSON material (validated already), loading its texture relative to the
+    /// scene file's directory; `field` is the material's path.
+    fn convert_json(&mut self, json: &MaterialDescription, field: &str) -> Result<Material, SceneError> {
+        let mut material = json.to_material();
+        if let Some(texture) = &json.diffuse_texture {
+            let path = self.base_dir.join(texture);
+            let index = self.textures.load(&path).map_err(|message| SceneError::Obj {
+                field: format!("{field}.diffuse_texture"),
+                file: path.clone(),
+                line: None,
+                message,
+            })?;
+            material.diffuse_texture = Some(index);
+        }
+        Ok(material)
+    }
+
+    /// Converts an MTL material: `Kd` to diffuse, `Ks` to specular, `Ns` to exponent, `map_Kd`
+    /// (relative to the MTL file's directory) to the diffuse texture; values out of range are
+    /// clamped and `Kd + Ks > 1` is scaled down to 1, each with a warning.
+    fn convert_mtl(&mut self, mtl: &tobj::Material) -> Result<Material, SceneError> {
         let file = self.mtl_files.iter().rev().find(|f| f.line_of(&mtl.name).is_some());
         let (path, line) = file.map_or((PathBuf::new(), None), |f| (f.path.clone(), f.line_of(&mtl.name)));
         let name = &mtl.name;
@@ -452,6 +487,7 @@ impl MaterialResolver<'_> {
             diffuse: diffuse.clamp(Vec3::ZERO, Vec3::ONE),
             specular: specular.clamp(Vec3::ZERO, Vec3::ONE),
             exponent: exponent.clamp(0.0, Material::MAX_EXPONENT),
+            diffuse_texture: None,
         };
         if material.diffuse != diffuse || material.specular != specular {
             warn(&format!(
@@ -460,11 +496,7 @@ impl MaterialResolver<'_> {
             ));
         }
         if material.exponent != exponent {
-            warn(&format!(
-                "Ns {exponent} outside [0, {}]: clamped to {}",
-                Material::MAX_EXPONENT,
-                material.exponent
-            ));
+            warn(&format!("Ns {exponent} outside [0, {}]: clamped to {}", Material::MAX_EXPONENT, material.exponent));
         }
         let sum = material.diffuse + material.specular;
         if sum.max_element() > 1.0 {
@@ -478,14 +510,41 @@ impl MaterialResolver<'_> {
                 material.diffuse, material.specular, before.diffuse, before.specular
             ));
         }
-        if let Some(texture) = &mtl.diffuse_texture {
-            warn(&format!("map_Kd `{texture}` ignored: textures are not supported yet"));
-        }
         if mtl.emissive.is_some_and(|ke| ke.iter().any(|&c| c > 0.0)) {
             warn("Ke (emission) ignored: relume's only emitter is the spot light");
         }
+        if let Some(statement) = &mtl.diffuse_texture {
+            let map_line = file.and_then(|f| f.map_kd_line_of(name)).or(line);
+            let error = |message: String| SceneError::Obj {
+                field: format!("{}.obj", self.field),
+                file: path.clone(),
+                line: map_line,
+                message: format!("material `{name}`: map_Kd {message}"),
+            };
+            let (relative, options) = parse_map_statement(statement);
+            if relative.is_empty() {
+                return Err(error(format!("`{statement}` names no file")));
+            }
+            if !options.is_empty() {
+                warn(&format!("map_Kd options `{options}` ignored"));
+            }
+            let mtl_dir = path.parent().unwrap_or_else(|| Path::new("."));
+            let index = self
+                .textures
+                .load(&mtl_dir.join(&relative))
+                .map_err(|message| error(format!("`{relative}`: {message}")))?;
+            material.diffuse_texture = Some(index);
+        }
         Ok(material)
     }
+}
+
+/// Which faces of a group have texture coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Texcoords {
+    All,
+    Some,
+    None,
 }
 
 /// The groups of an OBJ concatenated.
@@ -494,6 +553,8 @@ struct Merged {
     positions: Vec<Vec3>,
     /// Zero for vertices of groups without normals.
     normals: Vec<Vec3>,
+    /// Zero for vertices of groups without texture coordinates.
+    texcoords: Vec<Vec2>,
     triangles: Vec<[u32; 3]>,
     triangle_materials: Vec<u32>,
     faces_with_normals: usize,
@@ -501,23 +562,38 @@ struct Merged {
 }
 
 impl Merged {
-    fn append(&mut self, mesh: &tobj::Mesh, material: u32) -> Result<(), String> {
+    /// Appends a group's vertices and triangles; says which of its faces have texture
+    /// coordinates.
+    fn append(&mut self, mesh: &tobj::Mesh, material: u32) -> Result<Texcoords, String> {
         let base = self.positions.len();
         let count = mesh.positions.len() / 3;
         if base + count >= u32::MAX as usize {
             return Err("more than 2^32 vertices".to_owned());
         }
-        self.positions
-            .extend(mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
+        self.positions.extend(mesh.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
         if let Some(bad) = self.positions[base..].iter().find(|p| !p.is_finite()) {
             return Err(format!("vertex position {bad} is not finite"));
         }
         let has_normals = mesh.normals.len() == mesh.positions.len();
         if has_normals {
-            self.normals
-                .extend(mesh.normals.chunks_exact(3).map(|n| Vec3::new(n[0], n[1], n[2])));
+            self.normals.extend(mesh.normals.chunks_exact(3).map(|n| Vec3::new(n[0], n[1], n[2])));
         } else {
             self.normals.resize(self.positions.len(), Vec3::ZERO);
+        }
+        // tobj gives texture coordinates only for the vertices that have them, so they can be
+        // matched to vertices only when all or none do.
+        let texcoords = match mesh.texcoords.len() {
+            0 => Texcoords::None,
+            n if n == 2 * count => Texcoords::All,
+            _ => Texcoords::Some,
+        };
+        if texcoords == Texcoords::All {
+            self.texcoords.extend(mesh.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], t[1])));
+            if let Some(bad) = self.texcoords[base..].iter().find(|t| !t.is_finite()) {
+                return Err(format!("texture coordinate {bad} is not finite"));
+            }
+        } else {
+            self.texcoords.resize(self.positions.len(), Vec2::ZERO);
         }
         let faces = mesh.indices.len() / 3;
         if has_normals {
@@ -531,11 +607,10 @@ impl Merged {
             }
             // base + count < u32::MAX, checked above.
             let offset = base as u32;
-            self.triangles
-                .push([corners[0] + offset, corners[1] + offset, corners[2] + offset]);
+            self.triangles.push([corners[0] + offset, corners[1] + offset, corners[2] + offset]);
             self.triangle_materials.push(material);
         }
-        Ok(())
+        Ok(texcoords)
     }
 }
 
@@ -543,50 +618,60 @@ impl Merged {
 struct Welded {
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
+    texcoords: Vec<Vec2>,
     triangles: Vec<[u32; 3]>,
     triangle_materials: Vec<u32>,
 }
 
-/// Merges vertices with bit-identical position (and normal, when there are normals), so that
-/// groups sharing positions share vertices; drops triangles that repeat a vertex.
+/// Merges vertices with bit-identical position, texture coordinates and (when there are
+/// normals) normal, so that groups sharing positions share vertices while UV seams and hard
+/// edges stay split; drops triangles with two corners at one position.
 fn weld(
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
+    texcoords: Vec<Vec2>,
     triangles: Vec<[u32; 3]>,
     triangle_materials: Vec<u32>,
 ) -> Welded {
     // `+ 0.0` turns -0.0 into 0.0 so that the two compare equal as bits.
     let bits = |v: Vec3| (v + Vec3::ZERO).to_array().map(f32::to_bits);
-    let mut map = fast_hash_map::<([u32; 3], [u32; 3]), u32>(positions.len());
+    let bits2 = |v: Vec2| (v + Vec2::ZERO).to_array().map(f32::to_bits);
+    type Key = ([u32; 3], [u32; 3], [u32; 2]);
+    let mut map = fast_hash_map::<Key, u32>(positions.len());
     let mut remap = Vec::with_capacity(positions.len());
     let mut welded_positions = Vec::with_capacity(positions.len());
     let mut welded_normals = Vec::with_capacity(positions.len());
-    for (i, &p) in positions.iter().enumerate() {
+    let mut welded_texcoords = Vec::with_capacity(positions.len());
+    for (i, (&p, &uv)) in positions.iter().zip(&texcoords).enumerate() {
         let n = normals.as_ref().map_or(Vec3::ZERO, |n| n[i]);
         let next = welded_positions.len() as u32;
-        let index = *map.entry((bits(p), bits(n))).or_insert(next);
+        let index = *map.entry((bits(p), bits(n), bits2(uv))).or_insert(next);
         if index == next {
             welded_positions.push(p);
             welded_normals.push(n);
+            welded_texcoords.push(uv);
         }
         remap.push(index);
     }
     let mut welded_triangles = Vec::with_capacity(triangles.len());
     let mut welded_materials = Vec::with_capacity(triangles.len());
     for (triangle, material) in triangles.iter().zip(triangle_materials) {
-        let [a, b, c] = triangle.map(|v| remap[v as usize]);
+        let corners = triangle.map(|v| remap[v as usize]);
+        // Positions are finite, so `==` is bit equality up to the sign of zero.
+        let [a, b, c] = corners.map(|v| welded_positions[v as usize]);
         if a != b && b != c && c != a {
-            welded_triangles.push([a, b, c]);
+            welded_triangles.push(corners);
             welded_materials.push(material);
         }
     }
     let dropped = triangles.len() - welded_triangles.len();
     if dropped > 0 {
-        tracing::debug!("dropped {dropped} triangles that repeat a vertex");
+        tracing::debug!("dropped {dropped} triangles with two corners at one position");
     }
     Welded {
         positions: welded_positions,
         normals: normals.map(|_| welded_normals),
+        texcoords: welded_texcoords,
         triangles: welded_triangles,
         triangle_materials: welded_materials,
     }
@@ -610,7 +695,7 @@ mod tests {
 
     fn load_text(dir: &TempDir, obj: &str, description: &MeshDescription) -> Result<LoadedObj, SceneError> {
         dir.write(&description.obj, obj);
-        load(description, "meshes[0]", dir.path())
+        load(description, "meshes[0]", dir.path(), &mut Textures::default())
     }
 
     const QUAD_MTL: &str = "\
@@ -630,10 +715,7 @@ f 1 3 4
     #[test]
     fn groups_merge_with_materials_and_welding() {
         let dir = TempDir::new("obj-merge");
-        dir.write(
-            "quad.mtl",
-            "newmtl shiny\nKd 0.2 0.2 0.2\nKs 0.5 0.5 0.5\nNs 40\nnewmtl matte\nKd 0.8 0.1 0.1\n",
-        );
+        dir.write("quad.mtl", "newmtl shiny\nKd 0.2 0.2 0.2\nKs 0.5 0.5 0.5\nNs 40\nnewmtl matte\nKd 0.8 0.1 0.1\n");
         let loaded = load_text(&dir, QUAD_MTL, &mesh("quad.obj")).expect("loads");
         // Two groups with 3 vertices each, welded to the quad's 4.
         assert_eq!(loaded.positions.len(), 4);
@@ -652,10 +734,7 @@ f 1 3 4
     #[test]
     fn mtl_energy_excess_is_clamped() {
         let dir = TempDir::new("obj-clamp");
-        dir.write(
-            "quad.mtl",
-            "newmtl shiny\nKd 0.8 0.5 1.5\nKs 0.8 0.2 0\nNs 50000\nnewmtl matte\nKd 0.8 0.1 0.1\n",
-        );
+        dir.write("quad.mtl", "newmtl shiny\nKd 0.8 0.5 1.5\nKs 0.8 0.2 0\nNs 50000\nnewmtl matte\nKd 0.8 0.1 0.1\n");
         let loaded = load_text(&dir, QUAD_MTL, &mesh("quad.obj")).expect("loads");
         let shiny = loaded.materials[loaded.triangle_materials[0] as usize];
         // Red: 0.8 + 0.8 scaled to 0.5 + 0.5; green 0.5 + 0.2 untouched; blue Kd clamped to 1.
@@ -667,36 +746,93 @@ f 1 3 4
     }
 
     #[test]
+    fn texcoords_are_read_and_uv_seams_are_not_welded() {
+        let dir = TempDir::new("obj-uv");
+        // Two groups sharing the edge 2-3 in position; the second group's faces use other
+        // texture coordinates at vertex 3 (a UV seam there) and the same ones at vertex 2.
+        let obj = "\
+v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\n\
+vt 0 0\nvt 0.5 0\nvt 0.5 1\nvt 0 1\nvt 0.9 0.9\nvt 1 0\n\
+g a\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n\
+g b\nf 2/2 5/6 3/5\n";
+        let loaded = load_text(&dir, obj, &mesh("uv.obj")).expect("loads");
+        // 5 positions; vertex 3 (1, 1, 0) appears with uv (0.5, 1) and (0.9, 0.9).
+        assert_eq!(loaded.positions.len(), 6);
+        assert_eq!(loaded.texcoords.len(), 6);
+        let expected = [
+            ([0.0, 0.0, 0.0], [0.0, 0.0]),
+            ([1.0, 0.0, 0.0], [0.5, 0.0]),
+            ([1.0, 1.0, 0.0], [0.5, 1.0]),
+            ([0.0, 1.0, 0.0], [0.0, 1.0]),
+            ([2.0, 0.0, 0.0], [1.0, 0.0]),
+            ([1.0, 1.0, 0.0], [0.9, 0.9]),
+        ]
+        .map(|(p, t)| (Vec3::from_array(p), Vec2::from_array(t)));
+        for (position, texcoord) in expected {
+            let found = loaded
+                .positions
+                .iter()
+                .zip(&loaded.texcoords)
+                .filter(|&(&p, &t)| p == position && t == texcoord)
+                .count();
+            assert_eq!(found, 1, "vertex {position} with uv {texcoord}");
+        }
+        // Every corner keeps the texture coordinates of its face vertex.
+        let corner = |t: usize, k: usize| loaded.texcoords[loaded.triangles[t][k] as usize];
+        assert_eq!(corner(2, 2), Vec2::new(0.9, 0.9));
+        assert_eq!(corner(0, 2), Vec2::new(0.5, 1.0));
+        // The shared vertex 2 (same position and uv in both groups) is welded.
+        assert_eq!(loaded.triangles[0][1], loaded.triangles[2][0]);
+    }
+
+    #[test]
+    fn faces_without_texcoords_get_zeros() {
+        let dir = TempDir::new("obj-no-uv");
+        // Group a has texture coordinates, b none, c only on one of its faces.
+        let obj = "\
+v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvt 0.25 0.75\n\
+g a\nf 1/1 2/1 3/1\n\
+g b\nf 2 4 3\n\
+g c\nf 1/1 2/1 4/1\nf 1 4 3\n";
+        let loaded = load_text(&dir, obj, &mesh("mixed.obj")).expect("loads");
+        let corners = |t: usize| loaded.triangles[t].map(|v| loaded.texcoords[v as usize]);
+        assert_eq!(corners(0), [Vec2::new(0.25, 0.75); 3]);
+        assert_eq!(corners(1), [Vec2::ZERO; 3]);
+        assert_eq!(corners(2), [Vec2::ZERO; 3], "a group with only some texcoords gets none");
+        assert_eq!(corners(3), [Vec2::ZERO; 3]);
+
+        let message = load_text(&dir, "v 0 0 0\nvt 0 nan\n", &mesh("nan.obj")).expect_err("NaN uv").to_string();
+        assert!(message.contains("nan.obj:2: `vt` coordinate `nan` is not finite"), "{message}");
+        let message = load_text(&dir, "v 0 0 0\nvt 0.5\n", &mesh("short.obj")).expect_err("short uv").to_string();
+        assert!(message.contains("short.obj:2: `vt` has 1 coordinates, expected 2"), "{message}");
+    }
+
+    #[test]
+    fn welding_drops_triangles_with_two_corners_at_one_position() {
+        // Vertices 1 and 3 share a position but not texture coordinates.
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::X];
+        let texcoords = vec![Vec2::ZERO, Vec2::X, Vec2::Y, Vec2::ONE];
+        let welded = weld(positions, None, texcoords, vec![[0, 1, 2], [0, 1, 3], [3, 2, 0]], vec![0, 1, 2]);
+        assert_eq!(welded.positions.len(), 4);
+        assert_eq!(welded.triangles, vec![[0, 1, 2], [3, 2, 0]]);
+        assert_eq!(welded.triangle_materials, vec![0, 2]);
+    }
+
+    #[test]
     fn json_overrides_replace_mtl_materials() {
         let dir = TempDir::new("obj-override");
-        dir.write(
-            "quad.mtl",
-            "newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n",
-        );
+        dir.write("quad.mtl", "newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n");
         let mut description = mesh("quad.obj");
-        let green = super::super::MaterialDescription {
-            diffuse: [0.1, 0.9, 0.1],
-            ..Default::default()
-        };
-        description.materials.insert("matte".to_owned(), green);
-        description.material = Some(super::super::MaterialDescription {
-            diffuse: [0.3, 0.3, 0.3],
-            ..Default::default()
-        });
+        let green = super::super::MaterialDescription { diffuse: [0.1, 0.9, 0.1], ..Default::default() };
+        description.materials.insert("matte".to_owned(), green.clone());
+        description.material =
+            Some(super::super::MaterialDescription { diffuse: [0.3, 0.3, 0.3], ..Default::default() });
         let loaded = load_text(&dir, QUAD_MTL, &description).expect("loads");
-        assert_eq!(
-            loaded.materials[loaded.triangle_materials[0] as usize].diffuse,
-            Vec3::splat(0.3)
-        );
-        assert_eq!(
-            loaded.materials[loaded.triangle_materials[1] as usize].diffuse,
-            Vec3::new(0.1, 0.9, 0.1)
-        );
+        assert_eq!(loaded.materials[loaded.triangle_materials[0] as usize].diffuse, Vec3::splat(0.3));
+        assert_eq!(loaded.materials[loaded.triangle_materials[1] as usize].diffuse, Vec3::new(0.1, 0.9, 0.1));
 
         description.materials.insert("chrome".to_owned(), green);
-        let message = load_text(&dir, QUAD_MTL, &description)
-            .expect_err("unknown")
-            .to_string();
+        let message = load_text(&dir, QUAD_MTL, &description).expect_err("unknown").to_string();
         assert!(message.starts_with("meshes[0].materials.chrome:"), "{message}");
         assert!(message.contains("matte, shiny"), "{message}");
     }
@@ -704,10 +840,7 @@ f 1 3 4
     #[test]
     fn skip_groups_drop_faces_and_unknown_groups_are_errors() {
         let dir = TempDir::new("obj-skip");
-        dir.write(
-            "quad.mtl",
-            "newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n",
-        );
+        dir.write("quad.mtl", "newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n");
         let mut description = mesh("quad.obj");
         description.skip_groups = vec!["second".to_owned()];
         let loaded = load_text(&dir, QUAD_MTL, &description).expect("loads");
@@ -719,9 +852,7 @@ f 1 3 4
         assert!(message.contains("no triangles to load after skip_groups"), "{message}");
 
         description.skip_groups = vec!["third".to_owned()];
-        let message = load_text(&dir, QUAD_MTL, &description)
-            .expect_err("unknown")
-            .to_string();
+        let message = load_text(&dir, QUAD_MTL, &description).expect_err("unknown").to_string();
         assert!(message.starts_with("meshes[0].skip_groups[0]:"), "{message}");
         assert!(message.contains("first, second"), "{message}");
     }
@@ -740,10 +871,7 @@ f 1 3 4
     #[test]
     fn crlf_files_load() {
         let dir = TempDir::new("obj-crlf");
-        dir.write(
-            "quad.mtl",
-            &"newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n".replace('\n', "\r\n"),
-        );
+        dir.write("quad.mtl", &"newmtl shiny\nKd 0.2 0.2 0.2\nnewmtl matte\nKd 0.8 0.1 0.1\n".replace('\n', "\r\n"));
         let obj = QUAD_MTL.replace('\n', "\r\n");
         let mut description = mesh("quad.obj");
         description.skip_groups = vec!["first".to_owned()];
@@ -756,31 +884,13 @@ f 1 3 4
     fn bad_files_name_the_file_and_line() {
         let dir = TempDir::new("obj-errors");
         let cases = [
-            (
-                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n",
-                ":4: face vertex index 4 is out of range",
-            ),
-            (
-                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n",
-                ":4: face vertex index 0 is out of range",
-            ),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", ":4: face vertex index 4 is out of range"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", ":4: face vertex index 0 is out of range"),
             ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", ":4: face vertex index -4"),
-            (
-                "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/1 3/1\n",
-                ":4: face texture coordinate index 1",
-            ),
-            (
-                "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n",
-                ":2: vertex position coordinate `nan` is not finite",
-            ),
-            (
-                "v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n",
-                ":2: vertex position has 2 coordinates",
-            ),
-            (
-                "v 0 0 0\r\nv 1 0 0\r\nvn 0 inf 0\r\n",
-                ":3: normal coordinate `inf` is not finite",
-            ),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2/1 3/1\n", ":4: face texture coordinate index 1"),
+            ("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", ":2: vertex position coordinate `nan` is not finite"),
+            ("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", ":2: vertex position has 2 coordinates"),
+            ("v 0 0 0\r\nv 1 0 0\r\nvn 0 inf 0\r\n", ":3: normal coordinate `inf` is not finite"),
             ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", ":4: malformed face vertex `x`"),
             ("# nothing\n", "no triangles to load"),
             ("v 0 0 0\nv 1 0 0\nf 1 2\n", "no triangles to load"),
@@ -789,10 +899,7 @@ f 1 3 4
             let message = load_text(&dir, obj, &mesh("bad.obj")).expect_err(obj).to_string();
             assert!(message.starts_with("meshes[0].obj: "), "{message}");
             assert!(message.contains("bad.obj"), "{message}");
-            assert!(
-                message.contains(expected),
-                "{obj:?}: got `{message}`, expected `{expected}`"
-            );
+            assert!(message.contains(expected), "{obj:?}: got `{message}`, expected `{expected}`");
         }
     }
 
@@ -802,23 +909,15 @@ f 1 3 4
         let cases = [
             ("newmtl shiny\nKd 0.5\n", "quad.mtl:2: `Kd` needs three numbers"),
             ("newmtl shiny\nKd 0.5 x 0.5\n", "quad.mtl:2: cannot parse"),
-            (
-                "newmtl shiny\nKd 0.5 NaN 0.5\nnewmtl matte\n",
-                "quad.mtl:1: material `shiny` has a non-finite",
-            ),
+            ("newmtl shiny\nKd 0.5 NaN 0.5\nnewmtl matte\n", "quad.mtl:1: material `shiny` has a non-finite"),
         ];
         for (mtl, expected) in cases {
             dir.write("quad.mtl", mtl);
             let message = load_text(&dir, QUAD_MTL, &mesh("quad.obj")).expect_err(mtl).to_string();
-            assert!(
-                message.contains(expected),
-                "{mtl:?}: got `{message}`, expected `{expected}`"
-            );
+            assert!(message.contains(expected), "{mtl:?}: got `{message}`, expected `{expected}`");
         }
         std::fs::remove_file(dir.path().join("quad.mtl")).expect("remove");
-        let message = load_text(&dir, QUAD_MTL, &mesh("quad.obj"))
-            .expect_err("missing MTL")
-            .to_string();
+        let message = load_text(&dir, QUAD_MTL, &mesh("quad.obj")).expect_err("missing MTL").to_string();
         assert!(message.contains("quad.mtl: cannot read"), "{message}");
     }
 

@@ -84,9 +84,7 @@ pub(crate) fn evaluate(geometry: &Geometry, t: u32, b: Vec2) -> (Vec3, Vec3) {
 /// Chooses `count` (triangle, barycentrics) samples: area-proportional candidates thinned to
 /// blue noise.
 fn place(geometry: &Geometry, count: usize, seed: u64, stream: u64) -> Result<Vec<(u32, Vec2)>, String> {
-    let areas: Vec<f64> = (0..geometry.triangles.len())
-        .map(|t| geometry.triangle_area(t))
-        .collect();
+    let areas: Vec<f64> = (0..geometry.triangles.len()).map(|t| geometry.triangle_area(t)).collect();
     let mut cdf = Vec::with_capacity(areas.len());
     let mut total = 0.0f64;
     for &area in &areas {
@@ -151,15 +149,12 @@ fn eliminate(positions: &[Vec3], normals: &[Vec3], area: f64, count: usize) -> R
     offsets.push(0usize);
     for i in 0..m {
         let start = neighbours.len();
-        tree.query(&points[i])
-            .within::<SquaredEuclidean<f32>>(radius_squared)
-            .unsorted()
-            .visit(|found| {
-                let j = found.item;
-                if j as usize != i && normals[i].dot(normals[j as usize]) >= MIN_NEIGHBOUR_COS {
-                    neighbours.push(j);
-                }
-            });
+        tree.query(&points[i]).within::<SquaredEuclidean<f32>>(radius_squared).unsorted().visit(|found| {
+            let j = found.item;
+            if j as usize != i && normals[i].dot(normals[j as usize]) >= MIN_NEIGHBOUR_COS {
+                neighbours.push(j);
+            }
+        });
         // Sort for a summation order independent of the tree's layout.
         neighbours[start..].sort_unstable();
         weights[i] = neighbours[start..].iter().map(|&j| weight(i, j as usize)).sum();
@@ -197,11 +192,7 @@ struct IndexedMaxHeap {
 impl IndexedMaxHeap {
     fn new(keys: Vec<f64>) -> IndexedMaxHeap {
         let n = keys.len();
-        let mut heap = IndexedMaxHeap {
-            keys,
-            heap: (0..n as u32).collect(),
-            slot: (0..n as u32).collect(),
-        };
+        let mut heap = IndexedMaxHeap { keys, heap: (0..n as u32).collect(), slot: (0..n as u32).collect() };
         for position in (0..n / 2).rev() {
             heap.sift_down(position);
         }
@@ -276,10 +267,7 @@ fn link_vertices(vertices: &[Vec3], points: &[Vec3]) -> Result<(Vec<[u32; NEIGHB
     let mut neighbours = Vec::with_capacity(vertices.len());
     let mut nearest: Vec<(f32, u32)> = Vec::with_capacity(NEIGHBOURS);
     for vertex in vertices {
-        let found = tree
-            .query(&(frame * *vertex).to_array())
-            .nearest_n::<SquaredEuclidean<f32>>(k)
-            .execute();
+        let found = tree.query(&(frame * *vertex).to_array()).nearest_n::<SquaredEuclidean<f32>>(k).execute();
         // Re-rank by the distance in model space, which the radii and the shaders use.
         nearest.clear();
         nearest.extend(found.iter().map(|r| (vertex.distance(points[r.item as usize]), r.item)));
@@ -310,9 +298,8 @@ mod tests {
             Vec3::new(min.x, max.y, 0.0),
         ]);
         geometry.normals.extend([Vec3::Z; 4]);
-        geometry
-            .triangles
-            .extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
+        geometry.texcoords.extend([Vec2::ZERO; 4]);
+        geometry.triangles.extend([[base, base + 1, base + 2], [base, base + 2, base + 3]]);
         geometry.triangle_materials.extend([0, 0]);
     }
 
@@ -415,27 +402,17 @@ mod tests {
             sorted.sort_unstable();
             sorted.dedup();
             assert_eq!(sorted.len(), 3, "distinct: {row:?}");
-            let d: Vec<f32> = row[..3]
-                .iter()
-                .map(|&i| g.positions[v].distance(sparse.positions[i as usize]))
-                .collect();
+            let d: Vec<f32> = row[..3].iter().map(|&i| g.positions[v].distance(sparse.positions[i as usize])).collect();
             assert!(d.windows(2).all(|w| w[0] <= w[1]), "vertex {v}: {d:?}");
         }
 
         let sparse = build(&g, 64, 2, 0).expect("builds");
         for (v, row) in sparse.vertex_neighbours.iter().enumerate() {
             assert!(row.iter().all(|&i| i < 64), "{row:?}");
-            let d: Vec<f32> = row
-                .iter()
-                .map(|&i| g.positions[v].distance(sparse.positions[i as usize]))
-                .collect();
+            let d: Vec<f32> = row.iter().map(|&i| g.positions[v].distance(sparse.positions[i as usize])).collect();
             assert!(d.windows(2).all(|w| w[0] <= w[1]), "vertex {v}: {d:?}");
             // The first is the nearest of all points.
-            let nearest = sparse
-                .positions
-                .iter()
-                .map(|p| g.positions[v].distance(*p))
-                .fold(f32::INFINITY, f32::min);
+            let nearest = sparse.positions.iter().map(|p| g.positions[v].distance(*p)).fold(f32::INFINITY, f32::min);
             assert_eq!(d[0], nearest);
         }
     }
@@ -465,9 +442,8 @@ mod tests {
     #[test]
     fn indexed_heap_pops_in_key_order() {
         let mut rng = ChaCha8Rng::seed_from_u64(9);
-        let keys: Vec<f64> = (0..200)
-            .map(|i| f64::from(rng.random_range(0..50u32)) + if i % 7 == 0 { 0.0 } else { 0.5 })
-            .collect();
+        let keys: Vec<f64> =
+            (0..200).map(|i| f64::from(rng.random_range(0..50u32)) + if i % 7 == 0 { 0.0 } else { 0.5 }).collect();
         let mut reference = keys.clone();
         let mut alive = vec![true; keys.len()];
         let mut heap = IndexedMaxHeap::new(keys);
@@ -496,6 +472,7 @@ mod tests {
         let g = Geometry {
             positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(2.0, 0.0, 0.0)],
             normals: vec![Vec3::Z; 3],
+            texcoords: vec![Vec2::ZERO; 3],
             triangles: vec![[0, 1, 2]],
             triangle_materials: vec![0],
         };

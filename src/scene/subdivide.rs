@@ -18,7 +18,9 @@ use super::hash::fast_hash_map;
 const MAX_ROUNDS: usize = 256;
 
 /// Splits edges longer than `max_edge` (model units) until none is. Midpoint normals are the
-/// renormalised mean of the edge's vertex normals; triangles keep their material and winding.
+/// renormalised mean of the edge's vertex normals, midpoint texture coordinates the mean of the
+/// edge's; triangles keep their material and winding. A UV seam stays split: its two sides
+/// are different edges (different vertices), each split at its own midpoint vertex.
 /// Returns the number of rounds, or `Err(max_triangles)` when the result would exceed
 /// `max_triangles`.
 pub(crate) fn subdivide(geometry: &mut Geometry, max_edge: f32, max_triangles: usize) -> Result<usize, usize> {
@@ -44,8 +46,10 @@ pub(crate) fn subdivide(geometry: &mut Geometry, max_edge: f32, max_triangles: u
                     let position = (geometry.positions[lo] + geometry.positions[hi]) * 0.5;
                     let (n_lo, n_hi) = (geometry.normals[lo], geometry.normals[hi]);
                     let normal = (n_lo + n_hi).try_normalize().unwrap_or(n_lo);
+                    let texcoord = (geometry.texcoords[lo] + geometry.texcoords[hi]) * 0.5;
                     geometry.positions.push(position);
                     geometry.normals.push(normal);
+                    geometry.texcoords.push(texcoord);
                     (geometry.positions.len() - 1) as u32
                 });
             }
@@ -124,13 +128,9 @@ mod tests {
 
     fn geometry(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Geometry {
         let normals = vec![Vec3::Z; positions.len()];
+        let texcoords = vec![glam::Vec2::ZERO; positions.len()];
         let triangle_materials = (0..triangles.len() as u32).collect();
-        Geometry {
-            positions,
-            normals,
-            triangles,
-            triangle_materials,
-        }
+        Geometry { positions, normals, texcoords, triangles, triangle_materials }
     }
 
     /// Counts how many triangles use each undirected edge.
@@ -205,12 +205,33 @@ mod tests {
         let mut g = geometry(vec![Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::Y], vec![[0, 1, 2]]);
         g.normals = vec![Vec3::Z, Vec3::X, Vec3::Z];
         subdivide(&mut g, 1.5, 100).expect("within the cap");
-        let m = g
-            .positions
-            .iter()
-            .position(|&p| p == Vec3::X)
-            .expect("midpoint of the long edge");
+        let m = g.positions.iter().position(|&p| p == Vec3::X).expect("midpoint of the long edge");
         assert!(g.normals[m].abs_diff_eq(Vec3::new(1.0, 0.0, 1.0).normalize(), 1e-6));
+    }
+
+    #[test]
+    fn midpoint_texcoords_are_interpolated_and_seams_stay_split() {
+        // Two triangles of a square meeting at the diagonal 0-2, which is a UV seam: the
+        // second triangle uses copies 3, 4 of vertices 0, 2 with other texture coordinates.
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::ONE.with_z(0.0), Vec3::ZERO, Vec3::ONE.with_z(0.0), Vec3::Y];
+        let mut g = geometry(positions, vec![[0, 1, 2], [3, 4, 5]]);
+        g.texcoords = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [2.0, 0.0], [3.0, 1.0], [2.0, 1.0]]
+            .map(glam::Vec2::from_array)
+            .to_vec();
+        subdivide(&mut g, 0.3, 1000).expect("within the cap");
+        // Each side's texture coordinates stay the affine map of position of its triangle.
+        let first = |p: Vec3| glam::Vec2::new(p.x, p.y);
+        let second = |p: Vec3| glam::Vec2::new(2.0 + p.x, p.y);
+        for (t, triangle) in g.triangles.iter().enumerate() {
+            let expected = if g.triangle_materials[t] == 0 { first } else { second };
+            for &v in triangle {
+                let (p, uv) = (g.positions[v as usize], g.texcoords[v as usize]);
+                assert!(uv.abs_diff_eq(expected(p), 1e-6), "triangle {t}: {p} has {uv}");
+            }
+        }
+        // The diagonal's midpoint exists twice, once per side.
+        let centre = Vec3::new(0.5, 0.5, 0.0);
+        assert_eq!(g.positions.iter().filter(|&&p| p == centre).count(), 2);
     }
 
     #[test]

@@ -29,8 +29,5 @@ fn sparse_converges_toward_brute_force() {
     let fine = rel_rmse_with_sparse_points(2048, 1024);
     eprintln!("relative RMSE: {coarse:.4} with 768 sparse points, {fine:.4} with 3072");
     assert!(coarse < 0.2, "768 sparse points: relative RMSE {coarse}");
-    assert!(
-        fine < 0.8 * coarse,
-        "4x the sparse points must cut the error: {fine} vs {coarse}"
-    );
+    assert!(fine < 0.8 * coarse, "4x the sparse points must cut the error: {fine} vs {coarse}");
 }

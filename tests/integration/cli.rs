@@ -4,10 +4,7 @@ use super::{fixture, scratch};
 use std::process::{Command, Output};
 
 fn relume(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_relume"))
-        .args(args)
-        .output()
-        .expect("running relume")
+    Command::new(env!("CARGO_BIN_EXE_relume")).args(args).output().expect("running relume")
 }
 
 fn stderr(o: &Output) -> String {
@@ -45,26 +42,14 @@ fn render_writes_png_and_exr_of_the_requested_size() {
 #[test]
 fn compare_prints_the_documented_fields() {
     let scene = fixture("scenes/cornell_bunny_small.json");
-    let o = relume(&[
-        "compare",
-        scene.to_str().unwrap(),
-        "--json",
-        "--width",
-        "32",
-        "--height",
-        "32",
-    ]);
+    let o = relume(&["compare", scene.to_str().unwrap(), "--json", "--width", "32", "--height", "32"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     for key in ["sparse_ms", "brute_force_ms", "indirect_rel_rmse", "indirect_flip_mean"] {
         let x = v[key].as_f64().unwrap_or_else(|| panic!("{key} missing: {v}"));
         assert!(x.is_finite() && x >= 0.0, "{key} = {x}");
     }
-    assert!(
-        v["timing"]
-            .as_str()
-            .is_some_and(|t| t == "gpu_timestamps" || t == "wall_clock")
-    );
+    assert!(v["timing"].as_str().is_some_and(|t| t == "gpu_timestamps" || t == "wall_clock"));
     assert!(v["vals"].as_u64().unwrap() > 0);
     assert_eq!(v["pixels"].as_u64(), Some(1024));
     assert_eq!(v["sparse_points"].as_u64(), Some(768));
@@ -79,17 +64,10 @@ fn bad_inputs_fail_with_a_message_naming_the_field() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--width"), "{}", stderr(&o));
 
-    let text = std::fs::read_to_string(&scene)
-        .unwrap()
-        .replace("\"rsm_resolution\"", "\"rsm_resolutoin\"");
+    let text = std::fs::read_to_string(&scene).unwrap().replace("\"rsm_resolution\"", "\"rsm_resolutoin\"");
     let bad = dir.join("bad.json");
     std::fs::write(&bad, text).unwrap();
-    let o = relume(&[
-        "render",
-        bad.to_str().unwrap(),
-        "--out",
-        dir.join("x.png").to_str().unwrap(),
-    ]);
+    let o = relume(&["render", bad.to_str().unwrap(), "--out", dir.join("x.png").to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("rsm_resolutoin"), "{}", stderr(&o));
 

@@ -6,11 +6,8 @@ use relume::gpu::shader;
 use std::mem::{offset_of, size_of};
 
 fn module() -> naga::Module {
-    let sources = shader::all_sources();
-    let (_, source) = sources
-        .iter()
-        .find(|(n, _)| *n == "gather.wgsl")
-        .expect("gather shader");
+    let sources = shader::all_sources(true);
+    let (_, source) = sources.iter().find(|(n, _)| *n == "gather.wgsl").expect("gather shader");
     naga::front::wgsl::parse_str(source).expect("gather.wgsl parses")
 }
 
@@ -21,13 +18,7 @@ fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
         if ty.name.as_deref() == Some(name) {
             if let naga::TypeInner::Struct { members, span } = &ty.inner {
                 let _ = layouter[handle];
-                return (
-                    *span,
-                    members
-                        .iter()
-                        .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
-                        .collect(),
-                );
+                return (*span, members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).collect());
             }
         }
     }
@@ -47,14 +38,9 @@ macro_rules! check {
 fn rust_structs_match_wgsl() {
     let m = module();
     check!(m, "Val", RawVal, [position, area, normal, _pad0, flux, _pad1]);
-    check!(m, "Vertex", RawVertex, [position, _pad0, normal, _pad1]);
-    check!(m, "Material", RawMaterial, [diffuse, exponent, specular, _pad0]);
-    check!(
-        m,
-        "SparsePoint",
-        RawSparsePoint,
-        [position, occluder_radius, normal, exponent]
-    );
+    check!(m, "Vertex", RawVertex, [position, s, normal, t]);
+    check!(m, "Material", RawMaterial, [diffuse, exponent, specular, diffuse_texture]);
+    check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
     check!(m, "Gathered", RawGathered, [irradiance, _pad0, position, _pad1]);
     check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, _pad1]);
     check!(
@@ -82,7 +68,7 @@ fn rust_structs_match_wgsl() {
 
 #[test]
 fn every_shader_validates() {
-    for (name, source) in shader::all_sources() {
+    for (name, source) in shader::all_sources(false).into_iter().chain(shader::all_sources(true)) {
         let module =
             naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(&source)));
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())

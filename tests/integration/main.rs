@@ -5,6 +5,7 @@ mod accuracy;
 mod cli;
 mod layout;
 mod rsm;
+mod textures;
 mod twins;
 
 use relume::gpu::Gpu;
@@ -36,8 +37,21 @@ pub fn scratch(name: &str) -> PathBuf {
 #[track_caller]
 pub fn assert_close(a: glam::Vec3, b: glam::Vec3, rel: f32, scale: f32, abs: f32, what: &str) {
     let tol = rel * scale + abs;
-    assert!(
-        (a - b).abs().max_element() <= tol,
-        "{what}: GPU {a} vs CPU {b} (tolerance {tol})"
-    );
+    assert!((a - b).abs().max_element() <= tol, "{what}: GPU {a} vs CPU {b} (tolerance {tol})");
+}
+
+/// CPU twin values at every visibility texel that hit geometry: `f(position, normal, surface)`.
+pub fn per_hit(
+    flat: &relume::gpu::scene::FlatScene,
+    hits: &[Option<relume::gpu::visibility::Hit>],
+    f: impl Fn(glam::Vec3, glam::Vec3, &relume::reference::Surface) -> glam::Vec3,
+) -> Vec<Option<glam::Vec3>> {
+    hits.iter()
+        .map(|hit| {
+            hit.map(|h| {
+                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+                f(p, n, &surface)
+            })
+        })
+        .collect()
 }

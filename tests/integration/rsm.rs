@@ -13,11 +13,8 @@ use relume::scene::Scene;
 #[test]
 fn rsm_flux_equals_analytic_cone_flux_on_a_plane() {
     let dir = scratch("rsm_plane");
-    std::fs::write(
-        dir.join("plane.obj"),
-        "v -100 0 -100\nv 100 0 -100\nv 100 0 100\nv -100 0 100\nf 1 3 2\nf 1 4 3\n",
-    )
-    .unwrap();
+    std::fs::write(dir.join("plane.obj"), "v -100 0 -100\nv 100 0 -100\nv 100 0 100\nv -100 0 100\nf 1 3 2\nf 1 4 3\n")
+        .unwrap();
     let json = r#"{
         "meshes": [{ "obj": "plane.obj", "sparse_points": 16, "material": { "diffuse": [0.8, 0.5, 0.2] } }],
         "light": { "position": [0, 2, 0], "direction": [0, -1, 0], "inner_angle_deg": 20, "outer_angle_deg": 35, "intensity": [3, 2, 1] },
@@ -38,9 +35,5 @@ fn rsm_flux_equals_analytic_cone_flux_on_a_plane() {
     };
     let want = Vec3::new(0.8, 0.5, 0.2) * spot_cone_flux(&spot, 100_000);
     let err = ((total - want) / want).abs().max_element();
-    assert!(
-        err <= 0.005,
-        "VAL flux {total} vs analytic {want}: {:.3} % off",
-        err * 100.0
-    );
+    assert!(err <= 0.005, "VAL flux {total} vs analytic {want}: {:.3} % off", err * 100.0);
 }

@@ -47,31 +47,10 @@ fn sparse_pipeline_matches_cpu_twins() {
     assert!(scale_e > 0.0 && scale_g > 0.0);
     for (i, c) in cpu.iter().enumerate() {
         let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
-        assert_close(
-            gd.irradiance.into(),
-            c.irradiance,
-            REL,
-            scale_e,
-            1e-9,
-            &format!("E at sparse point {i}"),
-        );
-        assert_close(
-            gg.irradiance.into(),
-            c.glossy_irradiance,
-            REL,
-            scale_g,
-            1e-9,
-            &format!("G at sparse point {i}"),
-        );
+        assert_close(gd.irradiance.into(), c.irradiance, REL, scale_e, 1e-9, &format!("E at sparse point {i}"));
+        assert_close(gg.irradiance.into(), c.glossy_irradiance, REL, scale_g, 1e-9, &format!("G at sparse point {i}"));
         if c.irradiance.max_element() > 1e-3 * scale_e {
-            assert_close(
-                gd.position.into(),
-                c.diffuse_position,
-                1e-3,
-                1.0,
-                1e-4,
-                &format!("l'_d at {i}"),
-            );
+            assert_close(gd.position.into(), c.diffuse_position, 1e-3, 1.0, 1e-4, &format!("l'_d at {i}"));
         }
     }
 
@@ -80,12 +59,7 @@ fn sparse_pipeline_matches_cpu_twins() {
     for (i, p) in flat.sparse_points.iter().enumerate() {
         let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
         let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
-        cpu_sparse.0.push(reference::renormalise_diffuse(
-            x,
-            n,
-            gd.irradiance.into(),
-            gd.position.into(),
-        ));
+        cpu_sparse.0.push(reference::renormalise_diffuse(x, n, gd.irradiance.into(), gd.position.into()));
         cpu_sparse.1.push(reference::renormalise_glossy(
             x,
             n,
@@ -95,30 +69,15 @@ fn sparse_pipeline_matches_cpu_twins() {
             gg.position.into(),
         ));
     }
-    for (cpu, gpu_lights, what) in [
-        (&cpu_sparse.0, &mid.sparse_diffuse, "I_d"),
-        (&cpu_sparse.1, &mid.sparse_glossy, "I_s"),
-    ] {
+    for (cpu, gpu_lights, what) in
+        [(&cpu_sparse.0, &mid.sparse_diffuse, "I_d"), (&cpu_sparse.1, &mid.sparse_glossy, "I_s")]
+    {
         let scale = max_of(cpu.iter().map(|l| l.intensity));
         for (i, (c, g)) in cpu.iter().zip(gpu_lights).enumerate() {
             let g = light(g);
-            assert_close(
-                g.intensity,
-                c.intensity,
-                REL,
-                scale,
-                1e-9,
-                &format!("{what} at sparse point {i}"),
-            );
+            assert_close(g.intensity, c.intensity, REL, scale, 1e-9, &format!("{what} at sparse point {i}"));
             if c.intensity.max_element() > 1e-3 * scale {
-                assert_close(
-                    g.position,
-                    c.position,
-                    1e-3,
-                    1.0,
-                    1e-4,
-                    &format!("{what} position at {i}"),
-                );
+                assert_close(g.position, c.position, 1e-3, 1.0, 1e-4, &format!("{what} position at {i}"));
             }
         }
     }
@@ -129,16 +88,10 @@ fn sparse_pipeline_matches_cpu_twins() {
     let scale = max_of(sparse_d.iter().map(|l| l.intensity));
     for (v, ids) in flat.vertex_neighbours.iter().enumerate() {
         let vertex = flat.vertices[v];
-        let ids: Vec<usize> = ids
-            .iter()
-            .take_while(|&&i| i != u32::MAX)
-            .map(|&i| i as usize)
-            .collect();
+        let ids: Vec<usize> = ids.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
         let sp = |i: usize| flat.sparse_points[i];
-        let distances: Vec<f32> = ids
-            .iter()
-            .map(|&i| Vec3::from(vertex.position).distance(sp(i).position.into()))
-            .collect();
+        let distances: Vec<f32> =
+            ids.iter().map(|&i| Vec3::from(vertex.position).distance(sp(i).position.into())).collect();
         let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
         let w = reference::interpolation_weights(vertex.normal.into(), &distances, &normals);
         let d = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>());
@@ -151,14 +104,7 @@ fn sparse_pipeline_matches_cpu_twins() {
             1e-9,
             &format!("vertex {v} I_d"),
         );
-        assert_close(
-            light(&mid.vertex_glossy[v]).position,
-            s.position,
-            1e-3,
-            1.0,
-            1e-4,
-            &format!("vertex {v} l_s"),
-        );
+        assert_close(light(&mid.vertex_glossy[v]).position, s.position, 1e-3, 1.0, 1e-4, &format!("vertex {v} l_s"));
     }
 
     // Step 5: per-pixel shading, from the GPU's visibility buffer and vertex lights.
@@ -193,28 +139,14 @@ fn sparse_pipeline_matches_cpu_twins() {
     for (i, e) in expected.iter().enumerate() {
         assert_eq!(e.is_some(), frame.indirect.covered(i), "coverage of pixel {i}");
         if let Some(e) = e {
-            assert_close(
-                frame.indirect.rgb(i),
-                *e,
-                REL,
-                scale,
-                1e-9,
-                &format!("indirect pixel {i}"),
-            );
+            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("indirect pixel {i}"));
         }
     }
 
     // Direct light: wherever the shadow test passes, the GPU equals the twin.
     let spot = renderer.spot();
-    let direct: Vec<Option<Vec3>> = hits
-        .iter()
-        .map(|hit| {
-            hit.map(|h| {
-                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
-                reference::rsm::direct_radiance(p, n, &surface, eye, &spot)
-            })
-        })
-        .collect();
+    let direct =
+        super::per_hit(flat, &hits, |p, n, surface| reference::rsm::direct_radiance(p, n, surface, eye, &spot));
     let scale = max_of(direct.iter().flatten().copied());
     let mut lit = 0;
     for (i, want) in direct.iter().enumerate() {
@@ -238,28 +170,15 @@ fn brute_force_matches_cpu_twin() {
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let flat = &renderer.scene.flat;
     let eye = renderer.camera().position;
-    let expected: Vec<Option<Vec3>> = hits
-        .iter()
-        .map(|hit| {
-            hit.map(|h| {
-                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
-                reference::shade_brute_force(p, n, &surface, eye, &vals, renderer.glossy())
-            })
-        })
-        .collect();
+    let expected = super::per_hit(flat, &hits, |p, n, surface| {
+        reference::shade_brute_force(p, n, surface, eye, &vals, renderer.glossy())
+    });
     let scale = max_of(expected.iter().flatten().copied());
     assert!(scale > 0.0);
     for (i, e) in expected.iter().enumerate() {
         assert_eq!(e.is_some(), frame.indirect.covered(i));
         if let Some(e) = e {
-            assert_close(
-                frame.indirect.rgb(i),
-                *e,
-                REL,
-                scale,
-                1e-9,
-                &format!("brute-force pixel {i}"),
-            );
+            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("brute-force pixel {i}"));
         }
     }
 }
@@ -292,19 +211,11 @@ fn rsm_vals_match_cpu_twin() {
     let tree: kiddo::ImmutableKdTree<f32, 3> = kiddo::ImmutableKdTree::new_from_slice(&positions).unwrap();
     let scale = max_of(cpu_vals.iter().map(|v| v.flux));
     for c in &cpu_vals {
-        let nearest = tree
-            .query(&c.position.to_array())
-            .nearest_one::<kiddo::SquaredEuclidean<f32>>()
-            .execute();
+        let nearest = tree.query(&c.position.to_array()).nearest_one::<kiddo::SquaredEuclidean<f32>>().execute();
         let g = gpu_vals[nearest.item as usize];
         assert!(nearest.distance < 1e-8, "no GPU VAL at {}", c.position);
         assert_close(g.flux, c.flux, REL, scale, 1e-12, "VAL flux");
-        assert!(
-            (g.area - c.area).abs() <= 1e-3 * c.area + 1e-12,
-            "VAL area {} vs {}",
-            g.area,
-            c.area
-        );
+        assert!((g.area - c.area).abs() <= 1e-3 * c.area + 1e-12, "VAL area {} vs {}", g.area, c.area);
         assert_close(g.normal, c.normal, 1e-3, 1.0, 0.0, "VAL normal");
     }
 }
@@ -327,25 +238,13 @@ fn extreme_materials_render_finite_and_non_negative() {
         let f = renderer.render(&gpu, method, 24, 24).unwrap();
         for img in [&f.indirect, &f.direct] {
             for (i, p) in img.pixels.iter().enumerate() {
-                assert!(
-                    p.iter().all(|c| c.is_finite() && *c >= 0.0),
-                    "{method:?} pixel {i}: {p:?}"
-                );
+                assert!(p.iter().all(|c| c.is_finite() && *c >= 0.0), "{method:?} pixel {i}: {p:?}");
             }
         }
     }
     let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
-    for l in mid
-        .sparse_diffuse
-        .iter()
-        .chain(&mid.sparse_glossy)
-        .chain(&mid.vertex_diffuse)
-        .chain(&mid.vertex_glossy)
-    {
+    for l in mid.sparse_diffuse.iter().chain(&mid.sparse_glossy).chain(&mid.vertex_diffuse).chain(&mid.vertex_glossy) {
         let l = light(l);
-        assert!(
-            l.position.is_finite() && l.intensity.is_finite() && l.intensity.min_element() >= 0.0,
-            "{l:?}"
-        );
+        assert!(l.position.is_finite() && l.intensity.is_finite() && l.intensity.min_element() >= 0.0, "{l:?}");
     }
 }
