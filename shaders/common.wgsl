@@ -41,12 +41,16 @@ struct SparsePoint {
     exponent: f32,
 }
 
-// Gather output for one lobe: summed irradiance (W/m²) and averaged VAL position (m).
+// Gather output for one lobe: summed irradiance (W/m²), averaged VAL position (m) and the
+// same average of the squared position (m², per axis: the spread of the light, used by the
+// occlusion pass's light sphere).
 struct Gathered {
     irradiance: vec3<f32>,
     _pad0: f32,
     position: vec3<f32>,
     _pad1: f32,
+    second_moment: vec3<f32>,
+    _pad2: f32,
 }
 
 // A renormalised point light: position (m) and intensity (W/sr).

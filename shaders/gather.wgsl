@@ -15,13 +15,14 @@ struct Sums {
     e: vec3<f32>,
     g: vec3<f32>,
     ld: vec3<f32>,
+    ld2: vec3<f32>,
     ls: vec3<f32>,
     wd: f32,
     ws: f32,
 }
 
 fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
-    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
     var p = SparsePoint(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0);
     if index < frame.sparse_count {
         p = sparse_points[index];
@@ -43,6 +44,7 @@ fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
             s.e += e_j;
             let gd = y + GATHER_EPSILON;
             s.ld += gd * val.position;
+            s.ld2 += gd * val.position * val.position;
             s.wd += gd;
             if glossy {
                 let lobe = phong_lobe(dot(mirror(geo.direction, p.normal), w_o), p.exponent);
@@ -58,7 +60,8 @@ fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
 }
 
 fn diffuse_result(s: Sums) -> Gathered {
-    return Gathered(s.e, 0.0, s.ld / max(s.wd, GATHER_EPSILON), 0.0);
+    let w = max(s.wd, GATHER_EPSILON);
+    return Gathered(s.e, 0.0, s.ld / w, 0.0, s.ld2 / w, 0.0);
 }
 
 @compute @workgroup_size(TILE_SIZE)
@@ -74,6 +77,6 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invo
     let s = gather_tiles(id.x, local, true);
     if id.x < frame.sparse_count {
         gathered_diffuse[id.x] = diffuse_result(s);
-        gathered_glossy[id.x] = Gathered(s.g, 0.0, s.ls / max(s.ws, GATHER_EPSILON), 0.0);
+        gathered_glossy[id.x] = Gathered(s.g, 0.0, s.ls / max(s.ws, GATHER_EPSILON), 0.0, vec3<f32>(0.0), 0.0);
     }
 }

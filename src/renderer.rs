@@ -6,6 +6,7 @@ use crate::gpu::brute_force::BruteForce;
 use crate::gpu::direct::Direct;
 use crate::gpu::gather::Gather;
 use crate::gpu::interpolate::Interpolate;
+use crate::gpu::occlusion::Occlusion;
 use crate::gpu::raw::{RawFrame, RawGathered, RawPointLight, RawVal};
 use crate::gpu::renormalise::Renormalise;
 use crate::gpu::rsm::{Rsm, RsmOutputs};
@@ -16,7 +17,7 @@ use crate::gpu::visibility::{Visibility, VisibilityTarget};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::image::LinearImage;
 use crate::reference::rsm::Spot;
-use crate::scene::{Camera, Scene};
+use crate::scene::{self, Camera, Scene};
 use glam::{Mat4, Vec3};
 
 /// How the indirect light is computed.
@@ -35,13 +36,14 @@ pub mod stage {
     pub const RSM_VALS: &str = "rsm_vals";
     pub const VISIBILITY: &str = "visibility";
     pub const GATHER: &str = "gather";
+    pub const OCCLUSION: &str = "occlusion";
     pub const RENORMALISE: &str = "renormalise";
     pub const INTERPOLATE: &str = "interpolate";
     pub const SHADE: &str = "shade";
     pub const BRUTE_FORCE: &str = "brute_force";
     pub const DIRECT: &str = "direct";
     /// The stages that compute indirect light with the sparse method.
-    pub const SPARSE_INDIRECT: &[&str] = &[GATHER, RENORMALISE, INTERPOLATE, SHADE];
+    pub const SPARSE_INDIRECT: &[&str] = &[GATHER, OCCLUSION, RENORMALISE, INTERPOLATE, SHADE];
     /// The stages that compute indirect light by brute force.
     pub const BRUTE_FORCE_INDIRECT: &[&str] = &[BRUTE_FORCE];
 }
@@ -57,6 +59,8 @@ pub struct Rendered {
 
 struct SparsePasses {
     gather: Gather,
+    /// Only when the scene asks for occlusion.
+    occlusion: Option<Occlusion>,
     renormalise: Renormalise,
     interpolate: Interpolate,
     shade: Shade,
@@ -77,6 +81,8 @@ pub struct Renderer {
     spot: Spot,
     camera: Camera,
     rsm_resolution: u32,
+    occlusion: scene::Occlusion,
+    occlusion_rule: scene::OcclusionRule,
     visibility: Visibility,
     rsm: Rsm,
     direct: Direct,
@@ -118,6 +124,8 @@ impl Renderer {
             },
             camera: scene.camera,
             rsm_resolution: r,
+            occlusion: scene.settings.occlusion,
+            occlusion_rule: scene.settings.occlusion_rule,
             scene: scene_gpu,
             sparse: None,
             brute_force: None,
@@ -158,6 +166,9 @@ impl Renderer {
                 rec.stage(stage::GATHER, |e, s| {
                     p.gather.record(gpu, e, scene, &self.vals, &self.val_count, &p.gathered, s)
                 })?;
+                if let Some(o) = &p.occlusion {
+                    rec.stage(stage::OCCLUSION, |e, s| o.record(gpu, e, scene, &p.gathered, s))?;
+                }
                 rec.stage(stage::RENORMALISE, |e, s| {
                     p.renormalise.record(gpu, e, scene, &p.gathered, &p.sparse_lights, s)
                 })?;
@@ -202,6 +213,13 @@ impl Renderer {
                 let v = scene.flat.vertices.len();
                 self.sparse = Some(SparsePasses {
                     gather: Gather::new(gpu, scene, glossy)?,
+                    occlusion: match self.occlusion {
+                        scene::Occlusion::Off => None,
+                        scene::Occlusion::Disks => {
+                            let product = self.occlusion_rule == scene::OcclusionRule::Product;
+                            Some(Occlusion::new(gpu, scene, glossy, product)?)
+                        }
+                    },
                     renormalise: Renormalise::new(gpu, scene, glossy)?,
                     interpolate: Interpolate::new(gpu, scene, glossy)?,
                     shade: Shade::new(gpu, scene, glossy)?,

@@ -11,6 +11,7 @@ pub mod direct;
 pub mod gather;
 pub mod interpolate;
 pub mod kernel;
+pub mod occlusion;
 pub mod raw;
 pub mod renormalise;
 pub mod rsm;

@@ -76,6 +76,9 @@ pub struct RawGathered {
     pub _pad0: f32,
     pub position: [f32; 3],
     pub _pad1: f32,
+    /// Weighted mean of the squared VAL positions, per axis (m²).
+    pub second_moment: [f32; 3],
+    pub _pad2: f32,
 }
 
 /// WGSL `PointLight`: position (m) and intensity (W/sr).

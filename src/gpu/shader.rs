@@ -64,5 +64,6 @@ pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
     ]
     .into_iter()
     .map(|(name, text)| (name, source(text, textured)))
+    .chain([("occlusion.wgsl", source(&occlusion::source(false), textured))])
     .collect()
 }

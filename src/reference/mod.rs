@@ -10,6 +10,7 @@
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
+pub mod occlusion;
 pub mod rsm;
 
 /// Squared distance under which a VAL and a receiver are treated as coincident: the direction
@@ -113,6 +114,8 @@ pub struct Gathered {
     pub irradiance: Vec3,
     /// `l'_d`: luminance-and-geometry weighted mean VAL position (m).
     pub diffuse_position: Vec3,
+    /// The same weighted mean of the squared VAL positions, per axis (m²).
+    pub diffuse_second_moment: Vec3,
     /// `G_x`: irradiance weighted by the Phong lobe toward the eye (W/m²).
     pub glossy_irradiance: Vec3,
     /// `l'_s`: lobe-weighted mean VAL position (m).
@@ -123,7 +126,7 @@ pub struct Gathered {
 pub fn gather_point(x: Vec3, n_x: Vec3, k: f32, eye: Vec3, vals: &[Val]) -> Gathered {
     let w_o = view_direction(x, n_x, eye);
     let (mut e, mut g) = (Vec3::ZERO, Vec3::ZERO);
-    let (mut ld, mut ls) = (Vec3::ZERO, Vec3::ZERO);
+    let (mut ld, mut ld2, mut ls) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     let (mut wd, mut ws) = (0.0f32, 0.0f32);
     for val in vals {
         let geo = val_geometry(x, n_x, val.position, val.normal, val.area);
@@ -135,11 +138,18 @@ pub fn gather_point(x: Vec3, n_x: Vec3, k: f32, eye: Vec3, vals: &[Val]) -> Gath
         let gd = y + GATHER_EPSILON;
         let gs = y * lobe + GATHER_EPSILON;
         ld += gd * val.position;
+        ld2 += gd * val.position * val.position;
         ls += gs * val.position;
         wd += gd;
         ws += gs;
     }
-    Gathered { irradiance: e, diffuse_position: ld / wd, glossy_irradiance: g, glossy_position: ls / ws }
+    Gathered {
+        irradiance: e,
+        diffuse_position: ld / wd,
+        diffuse_second_moment: ld2 / wd,
+        glossy_irradiance: g,
+        glossy_position: ls / ws,
+    }
 }
 
 /// Unit direction from `x` toward the eye; the normal when the eye sits on `x`.

@@ -392,6 +392,32 @@ pub struct SettingsDescription {
     /// Exposure multiplier (> 0) before tone mapping; default `null` (automatic).
     #[serde(default)]
     pub exposure: Option<f32>,
+    /// Indirect occlusion: `"off"` (default) or `"disks"` (DESIGN.md §4 step 3).
+    #[serde(default)]
+    pub occlusion: Occlusion,
+    /// How disc occluders combine: `"sum"` (the paper, default) or `"product"`.
+    #[serde(default)]
+    pub occlusion_rule: OcclusionRule,
+}
+
+/// Indirect occlusion mode.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Occlusion {
+    #[default]
+    Off,
+    Disks,
+}
+
+/// Combination rule of disc occluders.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OcclusionRule {
+    /// `clamp(sum o_i, 0, 1)`: the paper's; double-counts overlapping occluders.
+    #[default]
+    Sum,
+    /// `1 - prod(1 - o_i)`.
+    Product,
 }
 
 fn default_rsm_resolution() -> u32 {
@@ -413,6 +439,8 @@ impl Default for SettingsDescription {
             glossy: default_glossy(),
             seed: default_seed(),
             exposure: None,
+            occlusion: Occlusion::Off,
+            occlusion_rule: OcclusionRule::Sum,
         }
     }
 }
@@ -420,7 +448,14 @@ impl Default for SettingsDescription {
 impl SettingsDescription {
     /// The settings (assumes [`SceneDescription::validate`] passed).
     pub fn to_settings(&self) -> Settings {
-        Settings { rsm_resolution: self.rsm_resolution, glossy: self.glossy, seed: self.seed, exposure: self.exposure }
+        Settings {
+            rsm_resolution: self.rsm_resolution,
+            glossy: self.glossy,
+            seed: self.seed,
+            exposure: self.exposure,
+            occlusion: self.occlusion,
+            occlusion_rule: self.occlusion_rule,
+        }
     }
 
     fn validate(&self, field: &str) -> Result<(), SceneError> {
@@ -825,7 +860,17 @@ mod tests {
         .expect("parses");
         description.validate().expect("valid");
         let settings = description.settings.to_settings();
-        assert_eq!(settings, Settings { rsm_resolution: 256, glossy: false, seed: 7, exposure: Some(2.5) });
+        assert_eq!(
+            settings,
+            Settings {
+                rsm_resolution: 256,
+                glossy: false,
+                seed: 7,
+                exposure: Some(2.5),
+                occlusion: Occlusion::Off,
+                occlusion_rule: OcclusionRule::Sum
+            }
+        );
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
         let message = error_of(&with_settings(r#"{"exposure": 0}"#));

@@ -33,8 +33,8 @@ use std::path::{Path, PathBuf};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
-    CameraDescription, LightDescription, MaterialDescription, MeshDescription, ScaleDescription, SceneDescription,
-    SettingsDescription, TransformDescription,
+    CameraDescription, LightDescription, MaterialDescription, MeshDescription, Occlusion, OcclusionRule,
+    ScaleDescription, SceneDescription, SettingsDescription, TransformDescription,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
@@ -188,6 +188,9 @@ pub struct Settings {
     pub seed: u64,
     /// Exposure multiplier applied before tone mapping; `None` picks one automatically.
     pub exposure: Option<f32>,
+    /// Indirect occlusion by disc occluders (DESIGN.md §4 step 3).
+    pub occlusion: Occlusion,
+    pub occlusion_rule: OcclusionRule,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its

@@ -248,3 +248,50 @@ fn extreme_materials_render_finite_and_non_negative() {
         assert!(l.position.is_finite() && l.intensity.is_finite() && l.intensity.min_element() >= 0.0, "{l:?}");
     }
 }
+
+/// The occlusion pass against `reference::occlusion` for both combination rules: the GPU's
+/// gathered irradiance after occlusion equals the CPU gather times the CPU visibility of the
+/// GPU's own light sphere (same 1e-3 tolerance as the other twins).
+#[test]
+fn occlusion_matches_cpu_twin() {
+    use reference::occlusion::{Combine, Disc, light_sphere, visibility};
+    let dir = super::fixture("scenes");
+    let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    for (rule, combine) in [("sum", Combine::Sum), ("product", Combine::Product)] {
+        let json = base.replace(
+            "\"rsm_resolution\": 32",
+            &format!("\"rsm_resolution\": 32, \"occlusion\": \"disks\", \"occlusion_rule\": \"{rule}\""),
+        );
+        let scene = relume::scene::Scene::from_json_str(&json, &dir).unwrap();
+        let gpu = gpu();
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+        assert!(frame.timings.stages.iter().any(|(n, _)| n == "occlusion"));
+        let vals = renderer.read_vals(&gpu).unwrap();
+        let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+        let flat = &renderer.scene.flat;
+        let eye = renderer.camera().position;
+        let discs: Vec<Disc> = flat
+            .sparse_points
+            .iter()
+            .map(|p| Disc { position: p.position.into(), normal: p.normal.into(), radius: p.occluder_radius })
+            .collect();
+        let mut expected = Vec::new();
+        let mut occluded = 0;
+        for (i, p) in flat.sparse_points.iter().enumerate() {
+            let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
+            let g = reference::gather_point(x, n, p.exponent, eye, &vals);
+            let gd = &mid.gathered_diffuse[i];
+            let sphere = light_sphere(gd.position.into(), gd.second_moment.into());
+            let others: Vec<Disc> = discs.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, d)| *d).collect();
+            let v = visibility(x, n, &sphere, &others, combine);
+            occluded += usize::from(v < 0.9);
+            expected.push(g.irradiance * v);
+        }
+        assert!(occluded > 10, "{rule}: some sparse points must be occluded, got {occluded}");
+        let scale = max_of(expected.iter().copied());
+        for (i, e) in expected.iter().enumerate() {
+            assert_close(mid.gathered_diffuse[i].irradiance.into(), *e, REL, scale, 1e-9, &format!("{rule}: E at {i}"));
+        }
+    }
+}
