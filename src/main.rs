@@ -108,13 +108,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if let Some(hdr) = hdr {
                 image.write_exr(&hdr)?;
             }
+            let stages: Vec<String> = frame.timings.stages.iter().map(|(n, ms)| format!("{n} {ms:.2}")).collect();
             eprintln!(
-                "wrote {} ({w}x{h}, {} VALs, {} sparse points, exposure {exposure:.4}, {:?} {:.2} ms total)",
+                "wrote {} ({w}x{h}, {} VALs, {} sparse points, exposure {exposure:.4}); {:?} ms: {}",
                 out.display(),
                 frame.val_count,
                 scene.sparse_point_count(),
                 frame.timings.source,
-                frame.timings.total()
+                stages.join(", ")
             );
             Ok(())
         }
