@@ -35,15 +35,12 @@ impl Slot {
 /// Compile a pass's WGSL (with the shared prelude for `scene`) inside an error scope.
 pub fn module(gpu: &Gpu, scene: &GpuScene, label: &str, pass_wgsl: &str) -> Result<wgpu::ShaderModule, GpuError> {
     let source = shader::source(pass_wgsl, scene.textured());
-    let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(label),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
-    match pollster::block_on(scope.pop()) {
-        None => Ok(module),
-        Some(e) => Err(GpuError::Pipeline { label: label.to_owned(), message: e.to_string() }),
-    }
+    gpu.build_checked(label, || {
+        gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        })
+    })
 }
 
 /// One compute pipeline and its group(0) layout.
@@ -73,27 +70,26 @@ impl Kernel {
                 count: None,
             })
             .collect();
-        let scope = gpu.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some(&format!("{label}.layout")),
-            entries: &entries,
-        });
-        let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some(&format!("{label}.pipeline_layout")),
-            bind_group_layouts: &[Some(&layout), Some(scene_layout)],
-            immediate_size: 0,
-        });
-        let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(&format!("{label}.pipeline")),
-            layout: Some(&pipeline_layout),
-            module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Pipeline { label: label.to_owned(), message: e.to_string() });
-        }
+        let (layout, pipeline) = gpu.build_checked(label, || {
+            let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(&format!("{label}.layout")),
+                entries: &entries,
+            });
+            let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(&format!("{label}.pipeline_layout")),
+                bind_group_layouts: &[Some(&layout), Some(scene_layout)],
+                immediate_size: 0,
+            });
+            let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(&format!("{label}.pipeline")),
+                layout: Some(&pipeline_layout),
+                module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+            (layout, pipeline)
+        })?;
         Ok(Self { label: label.to_owned(), layout, pipeline })
     }
 

@@ -34,8 +34,6 @@ pub enum GpuError {
     Device(#[from] wgpu::RequestDeviceError),
     #[error("shader or pipeline `{label}` failed to build: {message}")]
     Pipeline { label: String, message: String },
-    #[error("GPU validation error in {context}: {message}")]
-    Validation { context: String, message: String },
     #[error("waiting for the GPU failed: {0}")]
     Poll(#[from] wgpu::PollError),
     #[error("mapping a readback buffer failed: {0}")]
@@ -108,7 +106,7 @@ impl Gpu {
                 ..Default::default()
             })
             .await?;
-        Ok(Self { device, queue, adapter_info: adapter.get_info(), timestamps })
+        Ok(Self { device, queue, adapter_info: info, timestamps })
     }
 
     /// `"<name> (<backend>)"`, e.g. `"llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)"`.
@@ -193,13 +191,14 @@ impl Gpu {
         Ok(())
     }
 
-    /// Run `f` inside a validation error scope and turn any error into a `Result`.
-    pub fn validated<R>(&self, context: &str, f: impl FnOnce() -> R) -> Result<R, GpuError> {
+    /// Build shader modules, layouts or pipelines in `f` inside a validation error scope, so
+    /// that a shader or pipeline error comes back as [`GpuError::Pipeline`] for `label`.
+    pub fn build_checked<R>(&self, label: &str, f: impl FnOnce() -> R) -> Result<R, GpuError> {
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let r = f();
         match pollster::block_on(scope.pop()) {
             None => Ok(r),
-            Some(e) => Err(GpuError::Validation { context: context.to_owned(), message: e.to_string() }),
+            Some(e) => Err(GpuError::Pipeline { label: label.to_owned(), message: e.to_string() }),
         }
     }
 }

@@ -5,7 +5,7 @@ use super::raw::{RawFrame, RawMaterial, RawSparsePoint, RawVertex};
 use super::{Gpu, GpuError};
 use crate::reference;
 use crate::scene::{NEIGHBOURS, Scene};
-use glam::{Mat3, Vec3};
+use glam::Vec3;
 
 /// World-space arrays of a whole scene, as the GPU sees them (also the CPU twins' input).
 #[derive(Clone, Debug, Default)]
@@ -69,11 +69,6 @@ impl FlatScene {
         for mesh in &scene.meshes {
             let vertex_base = flat.vertices.len() as u32;
             let sparse_base = flat.sparse_points.len() as u32;
-            let normal_matrix = Mat3::from_mat4(mesh.model_to_world).inverse().transpose();
-            let radius_scale = {
-                let m = Mat3::from_mat4(mesh.model_to_world);
-                m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length())
-            };
             let world = mesh.world_positions().into_iter().zip(mesh.world_normals());
             for ((p, n), uv) in world.zip(&mesh.texcoords) {
                 flat.vertices.push(RawVertex { position: p.into(), s: uv.x, normal: n.into(), t: 1.0 - uv.y });
@@ -83,13 +78,13 @@ impl FlatScene {
                 flat.triangle_materials.push(*m);
             }
             let sparse = &mesh.sparse;
-            for i in 0..sparse.positions.len() {
-                let material = mesh.triangle_materials[sparse.triangles[i] as usize] as usize;
-                let normal = (normal_matrix * sparse.normals[i]).normalize_or(Vec3::Y);
+            let world = mesh.sparse_world_positions().into_iter().zip(mesh.sparse_world_normals());
+            for (((p, n), radius), triangle) in world.zip(mesh.world_occluder_radii()).zip(&sparse.triangles) {
+                let material = mesh.triangle_materials[*triangle as usize] as usize;
                 flat.sparse_points.push(RawSparsePoint {
-                    position: mesh.model_to_world.transform_point3(sparse.positions[i]).into(),
-                    occluder_radius: sparse.occluder_radii[i] * radius_scale,
-                    normal: normal.into(),
+                    position: p.into(),
+                    occluder_radius: radius,
+                    normal: n.into(),
                     exponent: scene.materials[material].exponent,
                 });
             }

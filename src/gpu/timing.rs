@@ -24,10 +24,6 @@ impl StageTimings {
     pub fn total_of(&self, names: &[&str]) -> f64 {
         self.stages.iter().filter(|(n, _)| names.contains(&n.as_str())).map(|(_, ms)| ms).sum()
     }
-
-    pub fn total(&self) -> f64 {
-        self.stages.iter().map(|(_, ms)| ms).sum()
-    }
 }
 
 /// The timestamp pair of one stage.
