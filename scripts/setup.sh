@@ -7,12 +7,17 @@ have_lavapipe() {
     ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 && ldconfig -p | grep -q libvulkan.so.1
 }
 
-if ! have_lavapipe; then
+# nv-flip (the FLIP metric) builds its C++ with the system compiler.
+packages=""
+have_lavapipe || packages="mesa-vulkan-drivers libvulkan1"
+command -v c++ >/dev/null || packages="$packages g++"
+if [ -n "$packages" ]; then
     sudo=""
     if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
     export DEBIAN_FRONTEND=noninteractive
     $sudo apt-get update -qq
-    $sudo apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null
+    # shellcheck disable=SC2086
+    $sudo apt-get install -y -qq $packages >/dev/null
 fi
 command -v cargo >/dev/null || { echo "setup: cargo not found; install Rust (https://rustup.rs)" >&2; exit 1; }
 # Mesa warns twice without a runtime dir; give it one.
