@@ -41,6 +41,9 @@ enum Command {
         /// Exposure multiplier before tone mapping (default: the scene's, else automatic).
         #[arg(long)]
         exposure: Option<f32>,
+        /// With --method exact: use every N-th VAL (flux x N), for large scenes.
+        #[arg(long, default_value_t = 1)]
+        val_stride: u32,
     },
     /// Render with the sparse method and the brute-force reference and print the error and cost.
     Compare {
@@ -53,7 +56,19 @@ enum Command {
         /// Write sparse.png, brute_force.png and difference images of the indirect light here.
         #[arg(long)]
         images: Option<PathBuf>,
+        /// Also compare against exact visibility: sparse with occlusion off, "sum" and
+        /// "product" against the ray-traced reference.
+        #[arg(long, value_enum)]
+        reference: Option<Reference>,
+        /// Exact reference: use every N-th VAL (flux x N); reported in the output.
+        #[arg(long, default_value_t = 1)]
+        val_stride: u32,
     },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Reference {
+    Exact,
 }
 
 #[derive(clap::Args)]
@@ -89,11 +104,13 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Render { scene, out, hdr, component, method, size, exposure } => {
+        Command::Render { scene, out, hdr, component, method, size, exposure, val_stride } => {
+            anyhow::ensure!(val_stride >= 1, "--val-stride: must be at least 1, got {val_stride}");
             let scene = load(&scene)?;
             let (w, h) = size.resolve(&scene)?;
             let gpu = Gpu::new()?;
             let mut renderer = Renderer::new(&gpu, &scene)?;
+            renderer.set_exact_val_stride(val_stride);
             let frame = renderer.render(&gpu, method, w, h)?;
             let image = match component {
                 Component::Direct => frame.direct,
@@ -119,7 +136,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             Ok(())
         }
-        Command::Compare { scene, json: _, size, images } => {
+        Command::Compare { scene, json: _, size, images, reference, val_stride } => {
+            anyhow::ensure!(val_stride >= 1, "--val-stride: must be at least 1, got {val_stride}");
             let scene = load(&scene)?;
             let (w, h) = size.resolve(&scene)?;
             let gpu = Gpu::new()?;
@@ -137,7 +155,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if let Some(dir) = images {
                 write_comparison(&dir, &sparse.indirect, &brute.indirect, exposure)?;
             }
-            let report = serde_json::json!({
+            let mut report = serde_json::json!({
                 "scene": scene_name(&scene),
                 "adapter": gpu.adapter_name(),
                 "timing": match sparse.timings.source { TimingSource::GpuTimestamps => "gpu_timestamps", TimingSource::WallClock => "wall_clock" },
@@ -161,6 +179,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "sparse_stages_ms": sparse.timings.stages,
                 "brute_force_stages_ms": brute.timings.stages,
             });
+            if reference.is_some() {
+                add_exact_comparison(&mut report, &gpu, &mut renderer, &scene, (w, h), val_stride)?;
+            }
             println!("{}", serde_json::to_string_pretty(&report)?);
             Ok(())
         }
@@ -182,6 +203,41 @@ impl Size {
 
 fn load(path: &Path) -> anyhow::Result<Scene> {
     Scene::load(path).with_context(|| format!("loading scene {}", path.display()))
+}
+
+/// Sparse with occlusion off, "sum" and "product" against the exact-visibility reference.
+fn add_exact_comparison(
+    report: &mut serde_json::Value,
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    scene: &Scene,
+    (w, h): (u32, u32),
+    val_stride: u32,
+) -> anyhow::Result<()> {
+    use relume::scene::{Occlusion, OcclusionRule};
+    renderer.set_exact_val_stride(val_stride);
+    let exact = renderer.render(gpu, Method::Exact, w, h)?;
+    let exposure = exact.indirect.auto_exposure();
+    report["exact_ms"] = exact.timings.total_of(&[stage::EXACT]).into();
+    report["exact_val_stride"] = val_stride.into();
+    report["exact_vals_used"] = (exact.val_count / val_stride).into();
+    for (key, occlusion, rule) in [
+        ("off", Occlusion::Off, OcclusionRule::Sum),
+        ("sum", Occlusion::Disks, OcclusionRule::Sum),
+        ("product", Occlusion::Disks, OcclusionRule::Product),
+    ] {
+        renderer.set_occlusion(occlusion, rule);
+        let sparse = renderer.render(gpu, Method::Sparse, w, h)?;
+        report[format!("indirect_rel_rmse_vs_exact_{key}")] = relative_rmse(&sparse.indirect, &exact.indirect).into();
+        report[format!("indirect_flip_mean_vs_exact_{key}")] =
+            flip_mean(&sparse.indirect, &exact.indirect, exposure).into();
+        if key == "sum" {
+            report["occlusion_ms"] = sparse.timings.total_of(&[stage::OCCLUSION]).into();
+            report["gather_ms"] = sparse.timings.total_of(&[stage::GATHER]).into();
+        }
+    }
+    renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
+    Ok(())
 }
 
 fn scene_name(scene: &Scene) -> String {

@@ -4,6 +4,7 @@
 
 use crate::gpu::brute_force::BruteForce;
 use crate::gpu::direct::Direct;
+use crate::gpu::exact::Exact;
 use crate::gpu::gather::Gather;
 use crate::gpu::interpolate::Interpolate;
 use crate::gpu::occlusion::Occlusion;
@@ -28,6 +29,9 @@ pub enum Method {
     Sparse,
     /// Every VAL at every visible pixel (DESIGN.md §5).
     BruteForce,
+    /// Brute force with a shadow ray per pixel and VAL through a BVH (DESIGN.md §5); see
+    /// [`Renderer::set_exact_val_stride`].
+    Exact,
 }
 
 /// Stage names, as reported in timings.
@@ -41,6 +45,7 @@ pub mod stage {
     pub const INTERPOLATE: &str = "interpolate";
     pub const SHADE: &str = "shade";
     pub const BRUTE_FORCE: &str = "brute_force";
+    pub const EXACT: &str = "exact";
     pub const DIRECT: &str = "direct";
     /// The stages that compute indirect light with the sparse method.
     pub const SPARSE_INDIRECT: &[&str] = &[GATHER, OCCLUSION, RENORMALISE, INTERPOLATE, SHADE];
@@ -95,6 +100,8 @@ pub struct Renderer {
     light_distance: wgpu::Buffer,
     sparse: Option<SparsePasses>,
     brute_force: Option<BruteForce>,
+    exact: Option<Exact>,
+    exact_val_stride: u32,
     target: Option<CameraTarget>,
 }
 
@@ -129,8 +136,28 @@ impl Renderer {
             scene: scene_gpu,
             sparse: None,
             brute_force: None,
+            exact: None,
+            exact_val_stride: 1,
             target: None,
         })
+    }
+
+    /// Use every `stride`-th VAL (flux scaled by `stride`) in the exact reference, whose cost
+    /// is pixels x VALs x BVH traversal. 1 (the default) uses them all.
+    pub fn set_exact_val_stride(&mut self, stride: u32) {
+        if stride.max(1) != self.exact_val_stride {
+            self.exact_val_stride = stride.max(1);
+            self.exact = None;
+        }
+    }
+
+    /// Change the occlusion mode; the sparse passes are rebuilt on the next sparse frame.
+    pub fn set_occlusion(&mut self, occlusion: scene::Occlusion, rule: scene::OcclusionRule) {
+        if (occlusion, rule) != (self.occlusion, self.occlusion_rule) {
+            self.occlusion = occlusion;
+            self.occlusion_rule = rule;
+            self.sparse = None;
+        }
     }
 
     /// Whether the glossy stages run for this scene.
@@ -185,6 +212,12 @@ impl Renderer {
                     b.record(gpu, e, scene, &target.view, &self.vals, &self.val_count, &target.indirect, s)
                 })?;
             }
+            Method::Exact => {
+                let x = self.exact.as_ref().expect("prepared above");
+                rec.stage(stage::EXACT, |e, s| {
+                    x.record(gpu, e, scene, &target.view, &self.vals, &self.val_count, &target.indirect, s)
+                })?;
+            }
         }
         rec.stage(stage::DIRECT, |e, s| {
             self.direct.record(gpu, e, scene, &target.view, &self.light_distance, &target.direct, s)
@@ -230,6 +263,9 @@ impl Renderer {
             }
             Method::BruteForce if self.brute_force.is_none() => {
                 self.brute_force = Some(BruteForce::new(gpu, scene, self.glossy)?);
+            }
+            Method::Exact if self.exact.is_none() => {
+                self.exact = Some(Exact::new(gpu, scene, self.glossy, self.exact_val_stride)?);
             }
             _ => {}
         }

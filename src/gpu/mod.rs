@@ -8,6 +8,7 @@
 
 pub mod brute_force;
 pub mod direct;
+pub mod exact;
 pub mod gather;
 pub mod interpolate;
 pub mod kernel;

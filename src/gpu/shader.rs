@@ -15,6 +15,8 @@ pub const NO_NEIGHBOUR: u32 = u32::MAX;
 pub const NO_SURFACE_DISTANCE: f32 = 3.0e38;
 /// Shadow-map depth bias in RSM texel footprints.
 pub const SHADOW_BIAS_TEXELS: f32 = 1.5;
+/// Exact visibility: shadow rays start and end this far off the surfaces along their normals (m).
+pub const RAY_OFFSET: f32 = 1e-3;
 
 const COMMON: &str = include_str!("../../shaders/common.wgsl");
 const SCENE: &str = include_str!("../../shaders/scene.wgsl");
@@ -29,11 +31,14 @@ fn header() -> String {
          const NO_NEIGHBOUR: u32 = {NO_NEIGHBOUR}u;\n\
          const NO_SURFACE_DISTANCE: f32 = {NO_SURFACE_DISTANCE:e};\n\
          const SHADOW_BIAS_TEXELS: f32 = {SHADOW_BIAS_TEXELS:e};\n\
+         const RAY_OFFSET: f32 = {RAY_OFFSET:e};\n\
+         const BVH_MAX_DEPTH: u32 = {}u;\n\
          const COINCIDENT_DISTANCE_SQ: f32 = {:e};\n\
          const GATHER_EPSILON: f32 = {:e};\n\
          const MIN_LIGHT_DISTANCE: f32 = {:e};\n\
          const MIN_RENORMALISE_COSINE: f32 = {:e};\n\
          const MIN_GLOSSY_RESPONSE: f32 = {:e};\n",
+        reference::bvh::MAX_DEPTH,
         reference::COINCIDENT_DISTANCE_SQ,
         reference::GATHER_EPSILON,
         reference::MIN_LIGHT_DISTANCE,
@@ -60,6 +65,7 @@ pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
         ("interpolate.wgsl", interpolate::WGSL),
         ("shade.wgsl", shade::WGSL),
         ("brute_force.wgsl", brute_force::WGSL),
+        ("exact.wgsl", &exact::source(4)),
         ("direct.wgsl", direct::WGSL),
     ]
     .into_iter()

@@ -295,3 +295,79 @@ fn occlusion_matches_cpu_twin() {
         }
     }
 }
+
+/// The exact-visibility reference against its CPU twin: per pixel, the brute-force sum over the
+/// same VAL subsample (every 4th, flux x 4, in the GPU's own VAL order) of the VALs that the
+/// BVH twin finds unoccluded. A shadow ray grazing a triangle edge may be decided differently
+/// by the two float pipelines, so up to 2 % of pixels may differ beyond the 1e-3 tolerance.
+/// Occlusion only removes light: the exact image is darker than the plain brute force.
+#[test]
+fn exact_visibility_matches_cpu_twin() {
+    use relume::gpu::shader::RAY_OFFSET;
+    use relume::reference::bvh::Bvh;
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let stride = 4;
+    renderer.set_exact_val_stride(stride);
+    let (w, h) = (20, 16);
+    let exact = renderer.render(&gpu, Method::Exact, w, h).unwrap();
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let brute = renderer.render(&gpu, Method::BruteForce, w, h).unwrap();
+    let flat = &renderer.scene.flat;
+    let eye = renderer.camera().position;
+    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
+    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let bvh = Bvh::build(&positions, &triangles);
+    let subsample: Vec<Val> = vals
+        .iter()
+        .step_by(stride as usize)
+        .take(vals.len() / stride as usize)
+        .map(|v| Val { flux: v.flux * stride as f32, ..*v })
+        .collect();
+    let expected = super::per_hit(flat, &hits, |p, n, surface| {
+        let visible: Vec<Val> = subsample
+            .iter()
+            .filter(|v| {
+                std::env::var("NOOCC").is_ok()
+                    || !bvh.occluded(&positions, &triangles, p + n * RAY_OFFSET, v.position + v.normal * RAY_OFFSET)
+            })
+            .copied()
+            .collect();
+        reference::shade_brute_force(p, n, surface, eye, &visible, renderer.glossy())
+    });
+    let scale = max_of(expected.iter().flatten().copied());
+    let mut differing = 0;
+    for (i, e) in expected.iter().enumerate() {
+        if let Some(e) = e {
+            let got = exact.indirect.rgb(i);
+            let bad = (got - *e).abs().max_element() > REL * scale + 1e-9;
+            if bad && differing < 5 {
+                eprintln!("pixel {i}: GPU {got} CPU {e} unoccluded {}", brute.indirect.rgb(i));
+            }
+            differing += usize::from(bad);
+        }
+    }
+    for y in 0..h as usize {
+        let row: String = (0..w as usize)
+            .map(|x| {
+                let i = y * w as usize + x;
+                if !exact.indirect.covered(i) {
+                    '.'
+                } else if exact.indirect.rgb(i).max_element() == 0.0 {
+                    '0'
+                } else {
+                    '#'
+                }
+            })
+            .collect();
+        eprintln!("{row}");
+    }
+    let covered = exact.indirect.coverage();
+    assert!(differing * 50 <= covered, "{differing} of {covered} pixels differ from the twin");
+    let (sum_exact, sum_brute): (f32, f32) = (0..exact.indirect.pixels.len())
+        .map(|i| (exact.indirect.rgb(i).element_sum(), brute.indirect.rgb(i).element_sum()))
+        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    assert!(sum_exact < 0.95 * sum_brute, "exact {sum_exact} vs unoccluded {sum_brute}");
+}
