@@ -17,7 +17,9 @@ fn ray_triangle(origin: vec3<f32>, d: vec3<f32>, a: vec3<f32>, b: vec3<f32>, c: 
     let e2 = c - a;
     let p = cross(d, e2);
     let det = dot(e1, p);
-    if abs(det) < 1e-12 {
+    // Relative test: a degenerate (collinear) triangle's det is rounding noise, which FMA
+    // contraction turns into phantom hits; grazing rays are treated as misses too.
+    if abs(det) <= RAY_PARALLEL_EPSILON * length(e1) * length(e2) * length(d) {
         return -1.0;
     }
     let inv_det = 1.0 / det;

@@ -6,6 +6,9 @@ use glam::Vec3;
 
 /// Triangles per leaf at most.
 pub const LEAF_SIZE: usize = 4;
+/// `|det|` below this fraction of `|e1| |e2| |d|` (the sine of the angle between the ray and the
+/// triangle's plane, times the sine of the triangle's smallest angle) counts as parallel.
+pub const RAY_PARALLEL_EPSILON: f32 = 1e-5;
 /// Depth of the traversal stack in `shaders/bvh.wgsl`; the build never exceeds it.
 pub const MAX_DEPTH: usize = 32;
 
@@ -124,7 +127,9 @@ pub fn ray_triangle(origin: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<
     let e2 = c - a;
     let p = d.cross(e2);
     let det = e1.dot(p);
-    if det.abs() < 1e-12 {
+    // Relative: a degenerate (collinear) triangle's det is rounding noise whose sign and size
+    // depend on the float pipeline (FMA contraction made it a phantom hit on the GPU).
+    if det.abs() <= RAY_PARALLEL_EPSILON * e1.length() * e2.length() * d.length() {
         return None;
     }
     let inv_det = 1.0 / det;
