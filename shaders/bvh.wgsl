@@ -46,32 +46,35 @@ fn segment_hits_box(origin: vec3<f32>, inv: vec3<f32>, lo: vec3<f32>, hi: vec3<f
     return near <= far;
 }
 
+// Stackless: nodes are depth-first, a leaf is followed by `index + 1` and an inner node's
+// `first` is its miss link (see `reference::bvh::BvhNode`). One flat loop over nodes and leaf
+// triangles, with no early exit from nested loops.
 fn occluded(origin: vec3<f32>, target_position: vec3<f32>) -> bool {
     let d = target_position - origin;
     let inv = 1.0 / d;
-    var stack: array<u32, BVH_MAX_DEPTH>;
-    var top = 1u;
-    stack[0] = 0u;
+    let n = arrayLength(&bvh_nodes);
+    var index = 0u;
+    var k = 0u;
+    var end = 0u;
     var hit = false;
-    while top > 0u && !hit {
-        top -= 1u;
-        let index = stack[top];
-        let node = bvh_nodes[index];
-        if segment_hits_box(origin, inv, node.min, node.max) {
-            if node.count > 0u {
-                for (var k = node.first; k < node.first + node.count; k++) {
-                    let t = 3u * bvh_triangles[k];
-                    let a = vertices[indices[t]].position;
-                    let b = vertices[indices[t + 1u]].position;
-                    let c = vertices[indices[t + 2u]].position;
-                    let s = ray_triangle(origin, d, a, b, c);
-                    hit = hit || (s > 0.0 && s < 1.0);
-                }
-            } else if top + 2u <= BVH_MAX_DEPTH {
-                stack[top] = index + 1u;
-                stack[top + 1u] = node.first;
-                top += 2u;
+    while !hit && (k < end || index < n) {
+        if k < end {
+            let t = 3u * bvh_triangles[k];
+            let a = vertices[indices[t]].position;
+            let b = vertices[indices[t + 1u]].position;
+            let c = vertices[indices[t + 2u]].position;
+            let s = ray_triangle(origin, d, a, b, c);
+            hit = s > 0.0 && s < 1.0;
+            k += 1u;
+        } else {
+            let node = bvh_nodes[index];
+            let enter = segment_hits_box(origin, inv, node.min, node.max);
+            if enter && node.count > 0u {
+                k = node.first;
+                end = node.first + node.count;
             }
+            // The max() makes termination independent of the data (a zero-filled node).
+            index = select(max(node.first, index + 1u), index + 1u, enter || node.count > 0u);
         }
     }
     return hit;

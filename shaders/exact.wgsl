@@ -1,8 +1,9 @@
 // Exact-visibility reference (DESIGN.md §5): the brute force of `brute_force.wgsl` with a
 // shadow ray per pixel and VAL through the BVH (`bvh.wgsl`). Every VAL_STRIDE-th VAL is used,
 // its flux scaled by VAL_STRIDE: an unbiased subsample, since the VAL list is in no spatial
-// order. Unlike the brute force it does not tile VALs through workgroup memory: on lavapipe,
-// workgroup barriers around the BVH traversal lost whole invocations' writes.
+// order. Unlike the brute force it does not tile VALs through workgroup memory (an earlier tiled
+// version lost writes on lavapipe; the culprit was probably the traversal's nested loops, since
+// replaced by the flat loop of `bvh.wgsl`, but the tiled version has not been measured again).
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;

@@ -32,14 +32,12 @@ fn header() -> String {
          const NO_SURFACE_DISTANCE: f32 = {NO_SURFACE_DISTANCE:e};\n\
          const SHADOW_BIAS_TEXELS: f32 = {SHADOW_BIAS_TEXELS:e};\n\
          const RAY_OFFSET: f32 = {RAY_OFFSET:e};\n\
-         const BVH_MAX_DEPTH: u32 = {}u;\n\
          const RAY_PARALLEL_EPSILON: f32 = {:e};\n\
          const COINCIDENT_DISTANCE_SQ: f32 = {:e};\n\
          const GATHER_EPSILON: f32 = {:e};\n\
          const MIN_LIGHT_DISTANCE: f32 = {:e};\n\
          const MIN_RENORMALISE_COSINE: f32 = {:e};\n\
          const MIN_GLOSSY_RESPONSE: f32 = {:e};\n",
-        reference::bvh::MAX_DEPTH,
         reference::bvh::RAY_PARALLEL_EPSILON,
         reference::COINCIDENT_DISTANCE_SQ,
         reference::GATHER_EPSILON,

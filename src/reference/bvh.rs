@@ -9,11 +9,14 @@ pub const LEAF_SIZE: usize = 4;
 /// `|det|` below this fraction of `|e1| |e2| |d|` (the sine of the angle between the ray and the
 /// triangle's plane, times the sine of the triangle's smallest angle) counts as parallel.
 pub const RAY_PARALLEL_EPSILON: f32 = 1e-5;
-/// Depth of the traversal stack in `shaders/bvh.wgsl`; the build never exceeds it.
+/// Depth of the tree at most (a bound on the build's recursion).
 pub const MAX_DEPTH: usize = 32;
 
-/// One node, as the GPU reads it (`BvhNode` in `shaders/bvh.wgsl`): an inner node's children
-/// are `index + 1` and `first`; a leaf (`count > 0`) holds `order[first .. first + count]`.
+/// One node, as the GPU reads it (`BvhNode` in `shaders/bvh.wgsl`). Nodes are in depth-first
+/// order, so an inner node's first child is `index + 1`. A leaf (`count > 0`) holds
+/// `order[first .. first + count]` and is followed by `index + 1`; an inner node's `first` is
+/// its miss link, the index just past its subtree. Traversal therefore needs no stack: on lavapipe
+/// a dynamically indexed per-invocation stack lost hits under divergence.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct BvhNode {
@@ -71,9 +74,8 @@ impl Bvh {
         self.order[lo..hi]
             .select_nth_unstable_by(mid - lo, |a, b| c[*a as usize][axis].total_cmp(&c[*b as usize][axis]));
         self.split(p, tris, c, lo, mid, depth + 1);
-        let right = self.nodes.len() as u32;
         self.split(p, tris, c, mid, hi, depth + 1);
-        self.nodes[index].first = right;
+        self.nodes[index].first = self.nodes.len() as u32;
         self.nodes[index].count = 0;
     }
 
@@ -85,27 +87,19 @@ impl Bvh {
         }
         let d = target - origin;
         let inv = d.recip();
-        let mut stack = [0u32; MAX_DEPTH];
-        let mut top = 1;
-        while top > 0 {
-            top -= 1;
-            let index = stack[top];
-            let node = self.nodes[index as usize];
-            if !segment_hits_box(origin, inv, node.min.into(), node.max.into()) {
-                continue;
-            }
-            if node.count > 0 {
+        let mut index = 0;
+        while index < self.nodes.len() {
+            let node = self.nodes[index];
+            let enter = segment_hits_box(origin, inv, node.min.into(), node.max.into());
+            if enter && node.count > 0 {
                 for &t in &self.order[node.first as usize..(node.first + node.count) as usize] {
                     let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize]);
                     if ray_triangle(origin, d, a, b, c).is_some_and(|t| t > 0.0 && t < 1.0) {
                         return true;
                     }
                 }
-            } else {
-                stack[top] = index + 1;
-                stack[top + 1] = node.first;
-                top += 2;
             }
+            index = if enter || node.count > 0 { index + 1 } else { (node.first as usize).max(index + 1) };
         }
         false
     }

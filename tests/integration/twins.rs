@@ -298,8 +298,9 @@ fn occlusion_matches_cpu_twin() {
 
 /// The exact-visibility reference against its CPU twin: per pixel, the brute-force sum over the
 /// same VAL subsample (every 4th, flux x 4, in the GPU's own VAL order) of the VALs that the
-/// BVH twin finds unoccluded. A shadow ray grazing a triangle edge may be decided differently
-/// by the two float pipelines, so up to 2 % of pixels may differ beyond the 1e-3 tolerance.
+/// BVH twin finds unoccluded. A shadow ray through a shared triangle edge may be decided
+/// differently by the two float pipelines, so up to 1 % of pixels may differ beyond the
+/// tolerance (none did when this was written).
 /// Occlusion only removes light: the exact image is darker than the plain brute force.
 #[test]
 fn exact_visibility_matches_cpu_twin() {
@@ -329,10 +330,7 @@ fn exact_visibility_matches_cpu_twin() {
     let expected = super::per_hit(flat, &hits, |p, n, surface| {
         let visible: Vec<Val> = subsample
             .iter()
-            .filter(|v| {
-                std::env::var("NOOCC").is_ok()
-                    || !bvh.occluded(&positions, &triangles, p + n * RAY_OFFSET, v.position + v.normal * RAY_OFFSET)
-            })
+            .filter(|v| !bvh.occluded(&positions, &triangles, p + n * RAY_OFFSET, v.position + v.normal * RAY_OFFSET))
             .copied()
             .collect();
         reference::shade_brute_force(p, n, surface, eye, &visible, renderer.glossy())
@@ -349,23 +347,8 @@ fn exact_visibility_matches_cpu_twin() {
             differing += usize::from(bad);
         }
     }
-    for y in 0..h as usize {
-        let row: String = (0..w as usize)
-            .map(|x| {
-                let i = y * w as usize + x;
-                if !exact.indirect.covered(i) {
-                    '.'
-                } else if exact.indirect.rgb(i).max_element() == 0.0 {
-                    '0'
-                } else {
-                    '#'
-                }
-            })
-            .collect();
-        eprintln!("{row}");
-    }
     let covered = exact.indirect.coverage();
-    assert!(differing * 50 <= covered, "{differing} of {covered} pixels differ from the twin");
+    assert!(differing * 100 <= covered, "{differing} of {covered} pixels differ from the twin");
     let (sum_exact, sum_brute): (f32, f32) = (0..exact.indirect.pixels.len())
         .map(|i| (exact.indirect.rgb(i).element_sum(), brute.indirect.rgb(i).element_sum()))
         .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
