@@ -27,4 +27,5 @@ pub mod gpu;
 pub mod image;
 pub mod reference;
 pub mod renderer;
+pub mod rgbd;
 pub mod scene;
