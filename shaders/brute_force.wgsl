@@ -22,7 +22,7 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
     let w_o = view_direction(s.position, s.normal, frame.eye);
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
     var l = vec3<f32>(0.0);
-    let count = val_count;
+    let count = min(val_count, arrayLength(&vals));
     for (var base = 0u; base < count; base += TILE_SIZE) {
         if base + local < count {
             tile[local] = vals[base + local];

@@ -25,7 +25,7 @@ fn exact(id: vec2<u32>, glossy: bool) {
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
     let origin = s.position + s.normal * RAY_OFFSET;
     var l = vec3<f32>(0.0);
-    let count = val_count / VAL_STRIDE;
+    let count = min(val_count, arrayLength(&vals)) / VAL_STRIDE;
     for (var j = 0u; j < count; j++) {
         let val = vals[j * VAL_STRIDE];
         let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);

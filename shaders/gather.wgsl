@@ -28,7 +28,7 @@ fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
         p = sparse_points[index];
     }
     let w_o = view_direction(p.position, p.normal, frame.eye);
-    let count = val_count;
+    let count = min(val_count, arrayLength(&vals));
     for (var base = 0u; base < count; base += TILE_SIZE) {
         if base + local < count {
             tile[local] = vals[base + local];

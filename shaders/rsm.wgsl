@@ -24,6 +24,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     light_distance[texel] = distance(s.position, frame.light_position);
     let val = rsm_texel_val(rsm_texel_ndc(id.x, id.y, r), r, frame_spot(frame), s.position, s.normal, s.material.diffuse);
     if max(val.flux.x, max(val.flux.y, val.flux.z)) > 0.0 {
-        vals[atomicAdd(&val_count, 1u)] = val;
+        // Appends after whatever an earlier source wrote; the count may pass the capacity,
+        // which every reader clamps (`live_val_count`).
+        let index = atomicAdd(&val_count, 1u);
+        if index < arrayLength(&vals) {
+            vals[index] = val;
+        }
     }
 }

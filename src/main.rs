@@ -106,7 +106,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Render { scene, out, hdr, component, method, size, exposure, val_stride } => {
             anyhow::ensure!(val_stride >= 1, "--val-stride: must be at least 1, got {val_stride}");
-            let scene = load(&scene)?;
+            let scene = load_lit(&scene)?;
             let (w, h) = size.resolve(&scene)?;
             let gpu = Gpu::new()?;
             let mut renderer = Renderer::new(&gpu, &scene)?;
@@ -138,7 +138,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Compare { scene, json: _, size, images, reference, val_stride } => {
             anyhow::ensure!(val_stride >= 1, "--val-stride: must be at least 1, got {val_stride}");
-            let scene = load(&scene)?;
+            let scene = load_lit(&scene)?;
             let (w, h) = size.resolve(&scene)?;
             let gpu = Gpu::new()?;
             let start = Instant::now();
@@ -203,6 +203,17 @@ impl Size {
 
 fn load(path: &Path) -> anyhow::Result<Scene> {
     Scene::load(path).with_context(|| format!("loading scene {}", path.display()))
+}
+
+/// A scene for `render` and `compare`, which are lit by the scene's own spot light.
+fn load_lit(path: &Path) -> anyhow::Result<Scene> {
+    let scene = load(path)?;
+    anyhow::ensure!(
+        scene.light.is_some(),
+        "{}: light: required by this command (a scene without one is lit by RGB-D frames: use `replay`)",
+        path.display()
+    );
+    Ok(scene)
 }
 
 /// Sparse with occlusion off, "sum" and "product" against the exact-visibility reference.

@@ -18,8 +18,9 @@ use crate::gpu::visibility::{Visibility, VisibilityTarget};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::image::LinearImage;
 use crate::reference::rsm::Spot;
+use crate::rgbd::Intrinsics;
 use crate::scene::{self, Camera, Scene};
-use glam::{Mat4, Vec3};
+use glam::{Affine3A, Mat4, Vec3, Vec4};
 
 /// How the indirect light is computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -80,24 +81,53 @@ struct CameraTarget {
     direct: wgpu::Buffer,
 }
 
-pub struct Renderer {
-    pub scene: GpuScene,
-    glossy: bool,
+/// The spot light's stages and buffers: only for scenes with a spot light.
+struct SpotPasses {
     spot: Spot,
-    camera: Camera,
-    rsm_resolution: u32,
-    occlusion: scene::Occlusion,
-    occlusion_rule: scene::OcclusionRule,
-    visibility: Visibility,
+    resolution: u32,
     rsm: Rsm,
     direct: Direct,
     /// The light's visibility buffer (the RSM).
-    pub rsm_view: VisibilityTarget,
-    /// `array<Val>` with capacity R².
-    pub vals: wgpu::Buffer,
-    /// One `u32`: how many of `vals` are live.
-    pub val_count: wgpu::Buffer,
+    view: VisibilityTarget,
+    /// Distance from the light to the surface each RSM texel sees: the direct pass's shadow map.
     light_distance: wgpu::Buffer,
+}
+
+/// Where the camera image is rendered from.
+#[derive(Clone, Copy, Debug)]
+pub enum View {
+    /// The scene file's perspective camera.
+    Scene(Camera),
+    /// A pinhole camera (an RGB-D frame's): intrinsics, scaled to the render size, and a
+    /// camera-to-world pose in optical axes (x right, y down, z forward).
+    Pinhole { intrinsics: Intrinsics, camera_to_world: Affine3A },
+}
+
+impl View {
+    /// World-space position of the eye.
+    pub fn eye(&self) -> Vec3 {
+        match self {
+            View::Scene(c) => c.position,
+            View::Pinhole { camera_to_world, .. } => camera_to_world.translation.into(),
+        }
+    }
+}
+
+pub struct Renderer {
+    pub scene: GpuScene,
+    glossy: bool,
+    view: View,
+    occlusion: scene::Occlusion,
+    occlusion_rule: scene::OcclusionRule,
+    visibility: Visibility,
+    spot: Option<SpotPasses>,
+    /// `array<Val>`: the spot light's VALs (R² at most) after the uploaded ones.
+    pub vals: wgpu::Buffer,
+    val_capacity: u32,
+    /// One `u32`: how many VALs were appended (readers clamp it to the capacity).
+    pub val_count: wgpu::Buffer,
+    /// VALs uploaded by [`Renderer::set_vals`], kept at the front of `vals` every frame.
+    uploaded_vals: u32,
     sparse: Option<SparsePasses>,
     brute_force: Option<BruteForce>,
     exact: Option<Exact>,
@@ -109,28 +139,37 @@ impl Renderer {
     pub fn new(gpu: &Gpu, scene: &Scene) -> Result<Self, GpuError> {
         let scene_gpu = GpuScene::new(gpu, FlatScene::from_scene(scene))?;
         let glossy = scene.settings.glossy && scene_gpu.has_glossy_material();
-        let r = scene.settings.rsm_resolution;
-        let texels = (r * r) as usize;
         let visibility = Visibility::new(gpu, &scene_gpu)?;
-        let rsm_view = visibility.target(gpu, "rsm", r, r);
+        let spot = match &scene.light {
+            None => None,
+            Some(light) => {
+                let r = scene.settings.rsm_resolution;
+                Some(SpotPasses {
+                    spot: Spot {
+                        position: light.position,
+                        direction: light.direction,
+                        inner_angle: light.inner_angle,
+                        outer_angle: light.outer_angle,
+                        intensity: light.intensity,
+                    },
+                    resolution: r,
+                    rsm: Rsm::new(gpu, &scene_gpu)?,
+                    direct: Direct::new(gpu, &scene_gpu)?,
+                    view: visibility.target(gpu, "rsm", r, r),
+                    light_distance: gpu.storage_buffer_sized::<f32>("rsm.light_distance", (r * r) as usize)?,
+                })
+            }
+        };
+        let val_capacity = spot.as_ref().map_or(1, |s| s.resolution * s.resolution);
         Ok(Self {
-            rsm: Rsm::new(gpu, &scene_gpu)?,
-            direct: Direct::new(gpu, &scene_gpu)?,
-            vals: gpu.storage_buffer_sized::<RawVal>("rsm.vals", texels)?,
-            val_count: gpu.storage_buffer_sized::<u32>("rsm.val_count", 1)?,
-            light_distance: gpu.storage_buffer_sized::<f32>("rsm.light_distance", texels)?,
+            vals: gpu.storage_buffer_sized::<RawVal>("vals", val_capacity as usize)?,
+            val_capacity,
+            val_count: gpu.storage_buffer_sized::<u32>("val_count", 1)?,
+            uploaded_vals: 0,
             visibility,
-            rsm_view,
+            spot,
             glossy,
-            spot: Spot {
-                position: scene.light.position,
-                direction: scene.light.direction,
-                inner_angle: scene.light.inner_angle,
-                outer_angle: scene.light.outer_angle,
-                intensity: scene.light.intensity,
-            },
-            camera: scene.camera,
-            rsm_resolution: r,
+            view: View::Scene(scene.camera),
             occlusion: scene.settings.occlusion,
             occlusion_rule: scene.settings.occlusion_rule,
             scene: scene_gpu,
@@ -165,26 +204,61 @@ impl Renderer {
         self.glossy
     }
 
-    pub fn spot(&self) -> Spot {
-        self.spot
+    /// The spot light, when the scene has one.
+    pub fn spot(&self) -> Option<Spot> {
+        self.spot.as_ref().map(|s| s.spot)
     }
 
-    pub fn camera(&self) -> &Camera {
-        &self.camera
+    /// The spot light's visibility buffer (its RSM), when the scene has a spot light.
+    pub fn rsm_view(&self) -> Option<&VisibilityTarget> {
+        self.spot.as_ref().map(|s| &s.view)
+    }
+
+    pub fn view(&self) -> &View {
+        &self.view
+    }
+
+    /// Render from `view` from now on.
+    pub fn set_view(&mut self, view: View) {
+        self.view = view;
+    }
+
+    /// Light every following frame with `vals` (e.g. RGB-D VALs accumulated over frames), plus
+    /// the spot light's when the scene has one. An empty slice removes them.
+    pub fn set_vals(&mut self, gpu: &Gpu, vals: &[crate::reference::Val]) -> Result<(), GpuError> {
+        let rsm = self.spot.as_ref().map_or(0, |s| s.resolution * s.resolution);
+        let needed = vals.len() as u32 + rsm;
+        if needed > self.val_capacity {
+            self.val_capacity = needed.next_power_of_two();
+            self.vals = gpu.storage_buffer_sized::<RawVal>("vals", self.val_capacity as usize)?;
+        }
+        let raw: Vec<RawVal> = vals.iter().map(RawVal::from).collect();
+        if !raw.is_empty() {
+            gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&raw));
+        }
+        self.uploaded_vals = raw.len() as u32;
+        Ok(())
     }
 
     /// Render at `width` x `height` with the scene's camera.
     pub fn render(&mut self, gpu: &Gpu, method: Method, width: u32, height: u32) -> Result<Rendered, GpuError> {
         self.prepare(gpu, method, width, height)?;
         let (camera_to_clip, light_to_clip) = self.view_transforms(width, height);
-        let frame = self.frame_uniforms(camera_to_clip, light_to_clip, width, height);
+        let frame = self.frame_uniforms(camera_to_clip, light_to_clip.unwrap_or(Mat4::IDENTITY), width, height);
         gpu.queue.write_buffer(&self.scene.frame, 0, bytemuck::bytes_of(&frame));
+
+        // Uploaded VALs stay at the front; the spot light's are appended after them.
+        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&self.uploaded_vals));
 
         let mut rec = Recorder::new(gpu, "relume.frame", 12);
         let scene = &self.scene;
-        rec.stage(stage::RSM_RASTER, |e, s| self.visibility.record(gpu, e, scene, &self.rsm_view, light_to_clip, s))?;
-        let rsm_out = RsmOutputs { vals: &self.vals, val_count: &self.val_count, light_distance: &self.light_distance };
-        rec.stage(stage::RSM_VALS, |e, s| self.rsm.record(gpu, e, scene, &self.rsm_view, &rsm_out, s))?;
+        if let Some(sp) = &self.spot {
+            let light_to_clip = light_to_clip.expect("a spot light has a view");
+            rec.stage(stage::RSM_RASTER, |e, s| self.visibility.record(gpu, e, scene, &sp.view, light_to_clip, s))?;
+            let rsm_out =
+                RsmOutputs { vals: &self.vals, val_count: &self.val_count, light_distance: &sp.light_distance };
+            rec.stage(stage::RSM_VALS, |e, s| sp.rsm.record(gpu, e, scene, &sp.view, &rsm_out, s))?;
+        }
         let target = self.target.as_ref().expect("prepared above");
         rec.stage(stage::VISIBILITY, |e, s| self.visibility.record(gpu, e, scene, &target.view, camera_to_clip, s))?;
         match method {
@@ -219,15 +293,21 @@ impl Renderer {
                 })?;
             }
         }
-        rec.stage(stage::DIRECT, |e, s| {
-            self.direct.record(gpu, e, scene, &target.view, &self.light_distance, &target.direct, s)
-        })?;
+        if let Some(sp) = &self.spot {
+            rec.stage(stage::DIRECT, |e, s| {
+                sp.direct.record(gpu, e, scene, &target.view, &sp.light_distance, &target.direct, s)
+            })?;
+        }
         let timings = rec.finish()?;
 
         let pixels = (width * height) as usize;
         let indirect = gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?;
-        let direct = gpu.read_buffer::<[f32; 4]>(&target.direct, pixels)?;
-        let val_count = gpu.read_buffer::<u32>(&self.val_count, 1)?[0];
+        let direct = match self.spot {
+            Some(_) => gpu.read_buffer::<[f32; 4]>(&target.direct, pixels)?,
+            // No light of its own: the direct image is black where the geometry is.
+            None => indirect.iter().map(|p| [0.0, 0.0, 0.0, p[3]]).collect(),
+        };
+        let val_count = self.live_val_count(gpu)?;
         Ok(Rendered {
             direct: LinearImage { width, height, pixels: direct },
             indirect: LinearImage { width, height, pixels: indirect },
@@ -281,39 +361,63 @@ impl Renderer {
         Ok(())
     }
 
-    /// (camera world-to-clip, light world-to-clip), with near and far planes fitted to the scene.
-    pub fn view_transforms(&self, width: u32, height: u32) -> (Mat4, Mat4) {
+    /// (camera world-to-clip, light world-to-clip when there is a spot light), with near and far
+    /// planes fitted to the scene.
+    pub fn view_transforms(&self, width: u32, height: u32) -> (Mat4, Option<Mat4>) {
         let (centre, radius) = self.scene.flat.bounding_sphere();
         let fit = |eye: Vec3| {
             let far = (eye.distance(centre) + radius).max(1e-3) * 1.01;
             (far * 1e-4, far)
         };
-        let c = &self.camera;
-        let (near, far) = fit(c.position);
-        let camera = glam::camera::rh::proj::directx::perspective(c.fov_y, width as f32 / height as f32, near, far)
-            * glam::camera::rh::view::look_at_mat4(c.position, c.target, c.up);
-        let s = &self.spot;
-        let up = if s.direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
-        let (near, far) = fit(s.position);
-        let light = glam::camera::rh::proj::directx::perspective(2.0 * s.outer_angle, 1.0, near, far)
-            * glam::camera::rh::view::look_at_mat4(s.position, s.position + s.direction, up);
+        let (near, far) = fit(self.view.eye());
+        let camera = match &self.view {
+            View::Scene(c) => {
+                glam::camera::rh::proj::directx::perspective(c.fov_y, width as f32 / height as f32, near, far)
+                    * glam::camera::rh::view::look_at_mat4(c.position, c.target, c.up)
+            }
+            View::Pinhole { intrinsics, camera_to_world } => {
+                pinhole_to_clip(&intrinsics.scaled_to(width, height), near, far)
+                    * Mat4::from(camera_to_world.inverse())
+            }
+        };
+        let light = self.spot.as_ref().map(|sp| {
+            let s = &sp.spot;
+            let up = if s.direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+            let (near, far) = fit(s.position);
+            glam::camera::rh::proj::directx::perspective(2.0 * s.outer_angle, 1.0, near, far)
+                * glam::camera::rh::view::look_at_mat4(s.position, s.position + s.direction, up)
+        });
         (camera, light)
     }
 
     fn frame_uniforms(&self, camera: Mat4, light: Mat4, width: u32, height: u32) -> RawFrame {
         let flat = &self.scene.flat;
+        // Without a spot light its fields are unused: zero intensity, a valid cone.
+        let (spot, resolution) = match &self.spot {
+            Some(sp) => (sp.spot, sp.resolution),
+            None => (
+                Spot {
+                    position: Vec3::ZERO,
+                    direction: Vec3::NEG_Y,
+                    inner_angle: 0.0,
+                    outer_angle: 0.5,
+                    intensity: Vec3::ZERO,
+                },
+                0,
+            ),
+        };
         RawFrame {
             world_to_clip: camera.to_cols_array_2d(),
             light_world_to_clip: light.to_cols_array_2d(),
-            eye: self.camera.position.into(),
+            eye: self.view.eye().into(),
             width,
-            light_position: self.spot.position.into(),
+            light_position: spot.position.into(),
             height,
-            light_direction: self.spot.direction.into(),
-            rsm_resolution: self.rsm_resolution,
-            light_intensity: self.spot.intensity.into(),
-            light_inner_angle: self.spot.inner_angle,
-            light_outer_angle: self.spot.outer_angle,
+            light_direction: spot.direction.into(),
+            rsm_resolution: resolution,
+            light_intensity: spot.intensity.into(),
+            light_inner_angle: spot.inner_angle,
+            light_outer_angle: spot.outer_angle,
             sparse_count: flat.sparse_count(),
             vertex_count: flat.vertex_count(),
             triangle_count: flat.triangle_count(),
@@ -325,9 +429,14 @@ impl Renderer {
         self.target.as_ref().map(|t| &t.view)
     }
 
+    /// How many VALs lit the last frame (appends past the capacity are dropped).
+    fn live_val_count(&self, gpu: &Gpu) -> Result<u32, GpuError> {
+        Ok(gpu.read_buffer::<u32>(&self.val_count, 1)?[0].min(self.val_capacity))
+    }
+
     /// The live VALs of the last frame (for the CPU twins and diagnostics).
     pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::reference::Val>, GpuError> {
-        let n = gpu.read_buffer::<u32>(&self.val_count, 1)?[0] as usize;
+        let n = self.live_val_count(gpu)? as usize;
         Ok(gpu.read_buffer::<RawVal>(&self.vals, n)?.iter().map(Into::into).collect())
     }
 
@@ -371,4 +480,53 @@ pub struct SparseIntermediates {
     pub sparse_glossy: Vec<RawPointLight>,
     pub vertex_diffuse: Vec<RawPointLight>,
     pub vertex_glossy: Vec<RawPointLight>,
+}
+
+/// Optical camera coordinates (x right, y down, z forward) to wgpu clip space for a pinhole
+/// camera whose pixel centres sit at integer coordinates: the image spans u in [-0.5, w - 0.5].
+/// Depth maps `near..far` to `0..1` like `perspective` (DirectX convention).
+pub fn pinhole_to_clip(k: &Intrinsics, near: f32, far: f32) -> Mat4 {
+    let (w, h) = (k.width as f32, k.height as f32);
+    let depth = far / (far - near);
+    Mat4::from_cols(
+        Vec4::new(2.0 * k.fx / w, 0.0, 0.0, 0.0),
+        Vec4::new(0.0, -2.0 * k.fy / h, 0.0, 0.0),
+        Vec4::new(2.0 * (k.cx + 0.5) / w - 1.0, 1.0 - 2.0 * (k.cy + 0.5) / h, depth, 1.0),
+        Vec4::new(0.0, 0.0, -near * depth, 0.0),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The clip transform lands a point on the pixel the intrinsics project it to, and maps the
+    /// near and far planes to depth 0 and 1.
+    #[test]
+    fn pinhole_to_clip_matches_intrinsics() {
+        let k = Intrinsics { width: 64, height: 48, fx: 50.0, fy: 55.0, cx: 30.2, cy: 25.7 };
+        let m = pinhole_to_clip(&k, 0.1, 10.0);
+        for p in [Vec3::new(0.3, -0.2, 1.5), Vec3::new(-1.0, 0.7, 4.0), Vec3::new(0.0, 0.0, 0.1)] {
+            let clip = m * p.extend(1.0);
+            let ndc = clip.truncate() / clip.w;
+            let pixel = glam::Vec2::new((ndc.x + 1.0) * 0.5 * 64.0 - 0.5, (1.0 - ndc.y) * 0.5 * 48.0 - 0.5);
+            assert!((pixel - k.project(p)).abs().max_element() < 1e-4, "{p}: {pixel} vs {}", k.project(p));
+        }
+        let depth = |z: f32| {
+            let c = m * Vec4::new(0.0, 0.0, z, 1.0);
+            c.z / c.w
+        };
+        assert!(depth(0.1).abs() < 1e-6 && (depth(10.0) - 1.0).abs() < 1e-6);
+    }
+
+    /// Scaling the intrinsics keeps the image of a point at the same fraction of the image.
+    #[test]
+    fn scaled_intrinsics_keep_image_fractions() {
+        let k = Intrinsics::TUM;
+        let half = k.scaled_to(320, 240);
+        let p = Vec3::new(0.4, -0.3, 2.0);
+        let (a, b) = (k.project(p), half.project(p));
+        assert!(((a.x + 0.5) / 640.0 - (b.x + 0.5) / 320.0).abs() < 1e-6);
+        assert!(((a.y + 0.5) / 480.0 - (b.y + 0.5) / 240.0).abs() < 1e-6);
+    }
 }

@@ -15,9 +15,9 @@ pub struct Rsm {
 
 /// Outputs of the RSM pass.
 pub struct RsmOutputs<'a> {
-    /// `array<Val>`, capacity R².
+    /// `array<Val>`; appends stop at its capacity.
     pub vals: &'a wgpu::Buffer,
-    /// One `u32`: VALs appended (cleared by this pass).
+    /// One `u32`: VALs appended after those already counted (the caller clears it).
     pub val_count: &'a wgpu::Buffer,
     /// `array<f32>`, R²: distance from the light to the surface each texel sees (m).
     pub light_distance: &'a wgpu::Buffer,
@@ -46,7 +46,6 @@ impl Rsm {
         out: &RsmOutputs<'_>,
         span: Option<Span<'_>>,
     ) {
-        encoder.clear_buffer(out.val_count, 0, None);
         let group = self.kernel.bind(
             gpu,
             &[

@@ -28,6 +28,24 @@ pub struct Intrinsics {
 impl Intrinsics {
     /// TUM RGB-D's registered depth (ECOSYSTEM.md): 640x480, fx = fy = 525, cx = 319.5, cy = 239.5.
     pub const TUM: Intrinsics = Intrinsics { width: 640, height: 480, fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 };
+
+    /// The same camera imaged at `width x height` (pixel centres stay at integer coordinates).
+    pub fn scaled_to(&self, width: u32, height: u32) -> Intrinsics {
+        let (sx, sy) = (width as f32 / self.width as f32, height as f32 / self.height as f32);
+        Intrinsics {
+            width,
+            height,
+            fx: self.fx * sx,
+            fy: self.fy * sy,
+            cx: (self.cx + 0.5) * sx - 0.5,
+            cy: (self.cy + 0.5) * sy - 0.5,
+        }
+    }
+
+    /// Pixel coordinates of an optical-frame point (x right, y down, z forward), z > 0.
+    pub fn project(&self, p: glam::Vec3) -> glam::Vec2 {
+        glam::Vec2::new(self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy)
+    }
 }
 
 /// One RGB-D frame in memory, depth already converted to metres.

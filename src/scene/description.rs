@@ -27,6 +27,7 @@ use std::fmt;
 use glam::{EulerRot, Mat4, Quat, Vec3};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
+use crate::rgbd::RgbdSettings;
 
 use super::{Camera, Material, SceneError, Settings, SpotLight};
 
@@ -51,9 +52,15 @@ const ENERGY_TOLERANCE: f32 = 1e-6;
 pub struct SceneDescription {
     /// The meshes (at least one).
     pub meshes: Vec<MeshDescription>,
-    /// The spot light.
-    pub light: LightDescription,
-    /// The camera.
+    /// The spot light whose RSM provides VALs; optional when an RGB-D recording or stream
+    /// provides them instead (a scene with neither renders no indirect light).
+    #[serde(default)]
+    pub light: Option<LightDescription>,
+    /// Where the virtual content sits in the world, applied after every mesh's own transform:
+    /// in mixed reality, the placement in the recorded room's world frame. Default: identity.
+    #[serde(default)]
+    pub anchor: Option<TransformDescription>,
+    /// The camera (for RGB-D replay and streams, each frame's camera replaces it).
     pub camera: CameraDescription,
     /// Render settings; all have defaults.
     #[serde(default)]
@@ -398,6 +405,9 @@ pub struct SettingsDescription {
     /// How disc occluders combine: `"sum"` (the paper, default) or `"product"`.
     #[serde(default)]
     pub occlusion_rule: OcclusionRule,
+    /// How RGB-D frames become VALs (replay and streams); every field has a default.
+    #[serde(default)]
+    pub rgbd: RgbdSettings,
 }
 
 /// Indirect occlusion mode.
@@ -441,6 +451,7 @@ impl Default for SettingsDescription {
             exposure: None,
             occlusion: Occlusion::Off,
             occlusion_rule: OcclusionRule::Sum,
+            rgbd: RgbdSettings::default(),
         }
     }
 }
@@ -455,6 +466,7 @@ impl SettingsDescription {
             exposure: self.exposure,
             occlusion: self.occlusion,
             occlusion_rule: self.occlusion_rule,
+            rgbd: self.rgbd,
         }
     }
 
@@ -464,8 +476,25 @@ impl SettingsDescription {
         if let Some(exposure) = self.exposure {
             positive(exposure, &format!("{field}.exposure"))?;
         }
-        Ok(())
+        validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))
     }
+}
+
+/// Ranges of [`RgbdSettings`], naming the field of the first value out of range.
+pub fn validate_rgbd(r: &RgbdSettings, field: &str) -> Result<(), SceneError> {
+    int_in(r.grid_step, 1, 64, &format!("{field}.grid_step"))?;
+    positive(r.min_depth, &format!("{field}.min_depth"))?;
+    positive(r.max_depth, &format!("{field}.max_depth"))?;
+    if r.max_depth <= r.min_depth {
+        return Err(SceneError::field(
+            format!("{field}.max_depth"),
+            format!("must be > min_depth ({}), got {}", r.min_depth, r.max_depth),
+        ));
+    }
+    at_least(r.radiance_scale, 0.0, &format!("{field}.radiance_scale"))?;
+    int_in(r.bilateral_radius, 0, 16, &format!("{field}.bilateral_radius"))?;
+    positive(r.bilateral_depth_sigma, &format!("{field}.bilateral_depth_sigma"))?;
+    in_closed(r.min_cosine, 1e-3, 1.0, &format!("{field}.min_cosine"))
 }
 
 impl TransformDescription {
@@ -528,7 +557,12 @@ impl SceneDescription {
         for (i, mesh) in self.meshes.iter().enumerate() {
             mesh.validate(&format!("meshes[{i}]"))?;
         }
-        self.light.validate("light")?;
+        if let Some(light) = &self.light {
+            light.validate("light")?;
+        }
+        if let Some(anchor) = &self.anchor {
+            anchor.validate("anchor")?;
+        }
         self.camera.validate("camera")?;
         self.settings.validate("settings")
     }
@@ -735,7 +769,7 @@ mod tests {
     #[test]
     fn light_is_converted_to_radians_and_unit_direction() {
         let text = edit(r#""direction": [0, -1, 0]"#, r#""direction": [0, -4, 3]"#);
-        let light = SceneDescription::from_json_str(&text).expect("parses").light.to_spot_light();
+        let light = SceneDescription::from_json_str(&text).expect("parses").light.expect("has a light").to_spot_light();
         assert!(light.direction.abs_diff_eq(Vec3::new(0.0, -0.8, 0.6), 1e-6));
         assert!((light.inner_angle - 20f32.to_radians()).abs() < 1e-6);
         assert!((light.outer_angle - 30f32.to_radians()).abs() < 1e-6);
@@ -868,9 +902,14 @@ mod tests {
                 seed: 7,
                 exposure: Some(2.5),
                 occlusion: Occlusion::Off,
-                occlusion_rule: OcclusionRule::Sum
+                occlusion_rule: OcclusionRule::Sum,
+                rgbd: RgbdSettings::default(),
             }
         );
+        let message = error_of(&with_settings(r#"{"rgbd": {"min_depth": 2, "max_depth": 1}}"#));
+        assert_eq!(message, "settings.rgbd.max_depth: must be > min_depth (2), got 1");
+        let message = error_of(&with_settings(r#"{"rgbd": {"grid_step": 0}}"#));
+        assert_eq!(message, "settings.rgbd.grid_step: must be in 1..=64, got 0");
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
         let message = error_of(&with_settings(r#"{"exposure": 0}"#));

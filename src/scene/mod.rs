@@ -59,8 +59,8 @@ pub struct Scene {
     /// (deduplicated by resolved path), only those of materials in `materials`; empty when no
     /// material has one.
     pub textures: Vec<Texture>,
-    /// The spot light that illuminates the scene and whose RSM provides the VALs.
-    pub light: SpotLight,
+    /// The spot light whose RSM provides VALs, if any (RGB-D frames may provide them instead).
+    pub light: Option<SpotLight>,
     /// The camera the final image is rendered from.
     pub camera: Camera,
     /// Render settings.
@@ -191,6 +191,8 @@ pub struct Settings {
     /// Indirect occlusion by disc occluders (DESIGN.md §4 step 3).
     pub occlusion: Occlusion,
     pub occlusion_rule: OcclusionRule,
+    /// How RGB-D frames become VALs.
+    pub rgbd: crate::rgbd::RgbdSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its
@@ -318,15 +320,17 @@ impl Scene {
         let mut materials = Vec::new();
         let mut textures = texture::Textures::default();
         let mut meshes = Vec::with_capacity(description.meshes.len());
+        let anchor = description.anchor.as_ref().map_or(Mat4::IDENTITY, |a| a.to_matrix());
         for (index, mesh_description) in description.meshes.iter().enumerate() {
-            let mesh = load_mesh(mesh_description, index, base_dir, settings.seed, &mut materials, &mut textures)?;
+            let mut mesh = load_mesh(mesh_description, index, base_dir, settings.seed, &mut materials, &mut textures)?;
+            mesh.model_to_world = anchor * mesh.model_to_world;
             meshes.push(mesh);
         }
         Ok(Scene {
             meshes,
             materials,
             textures: textures.textures,
-            light: description.light.to_spot_light(),
+            light: description.light.as_ref().map(|l| l.to_spot_light()),
             camera: description.camera.to_camera(),
             settings,
         })

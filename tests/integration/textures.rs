@@ -40,7 +40,7 @@ fn textured_albedo_matches_cpu_twin() {
     let frame = renderer.render(&gpu, Method::Sparse, 48, 48).unwrap();
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let flat = &renderer.scene.flat;
-    let (eye, spot) = (renderer.camera().position, renderer.spot());
+    let (eye, spot) = (renderer.view().eye(), renderer.spot().unwrap());
     let expected =
         super::per_hit(flat, &hits, |p, n, surface| reference::rsm::direct_radiance(p, n, surface, eye, &spot));
     let scale = expected.iter().flatten().map(|v| v.max_element()).fold(0.0, f32::max);

@@ -34,7 +34,7 @@ fn sparse_pipeline_matches_cpu_twins() {
     assert!(vals.len() > 100, "the spot must produce VALs, got {}", vals.len());
     let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
     let flat = &renderer.scene.flat;
-    let eye = renderer.camera().position;
+    let eye = renderer.view().eye();
 
     // Step 1: gather.
     let cpu: Vec<reference::Gathered> = flat
@@ -144,7 +144,7 @@ fn sparse_pipeline_matches_cpu_twins() {
     }
 
     // Direct light: wherever the shadow test passes, the GPU equals the twin.
-    let spot = renderer.spot();
+    let spot = renderer.spot().unwrap();
     let direct =
         super::per_hit(flat, &hits, |p, n, surface| reference::rsm::direct_radiance(p, n, surface, eye, &spot));
     let scale = max_of(direct.iter().flatten().copied());
@@ -169,7 +169,7 @@ fn brute_force_matches_cpu_twin() {
     let vals = renderer.read_vals(&gpu).unwrap();
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let flat = &renderer.scene.flat;
-    let eye = renderer.camera().position;
+    let eye = renderer.view().eye();
     let expected = super::per_hit(flat, &hits, |p, n, surface| {
         reference::shade_brute_force(p, n, surface, eye, &vals, renderer.glossy())
     });
@@ -190,10 +190,10 @@ fn rsm_vals_match_cpu_twin() {
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
     let gpu_vals = renderer.read_vals(&gpu).unwrap();
-    let hits = renderer.rsm_view.read(&gpu).unwrap();
-    let r = renderer.rsm_view.width;
+    let hits = renderer.rsm_view().unwrap().read(&gpu).unwrap();
+    let r = renderer.rsm_view().unwrap().width;
     let flat = &renderer.scene.flat;
-    let spot = renderer.spot();
+    let spot = renderer.spot().unwrap();
     let mut cpu_vals = Vec::new();
     for (t, hit) in hits.iter().enumerate() {
         if let Some(h) = hit {
@@ -270,7 +270,7 @@ fn occlusion_matches_cpu_twin() {
         let vals = renderer.read_vals(&gpu).unwrap();
         let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
         let flat = &renderer.scene.flat;
-        let eye = renderer.camera().position;
+        let eye = renderer.view().eye();
         let discs: Vec<Disc> = flat
             .sparse_points
             .iter()
@@ -317,7 +317,7 @@ fn exact_visibility_matches_cpu_twin() {
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let brute = renderer.render(&gpu, Method::BruteForce, w, h).unwrap();
     let flat = &renderer.scene.flat;
-    let eye = renderer.camera().position;
+    let eye = renderer.view().eye();
     let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
     let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
     let bvh = Bvh::build(&positions, &triangles);
