@@ -144,6 +144,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let start = Instant::now();
             let mut renderer = Renderer::new(&gpu, &scene)?;
             let setup_ms = start.elapsed().as_secs_f64() * 1e3;
+            // The brute force has no visibility, so it is compared with sparse without occlusion;
+            // `--reference exact` measures occlusion.
+            renderer.set_occlusion(relume::scene::Occlusion::Off, scene.settings.occlusion_rule);
             // A warm-up frame settles first-use allocations; brute force is too slow to repeat
             // and its single frame is dominated by its own arithmetic.
             renderer.render(&gpu, Method::Sparse, w, h)?;
@@ -152,8 +155,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let exposure = brute.indirect.auto_exposure();
             let sparse_ms = sparse.timings.total_of(stage::SPARSE_INDIRECT);
             let brute_force_ms = brute.timings.total_of(stage::BRUTE_FORCE_INDIRECT);
-            if let Some(dir) = images {
-                write_comparison(&dir, &sparse.indirect, &brute.indirect, exposure)?;
+            if let Some(dir) = &images {
+                write_comparison(dir, &sparse.indirect, &brute.indirect, exposure)?;
             }
             let mut report = serde_json::json!({
                 "scene": scene_name(&scene),
@@ -169,6 +172,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "triangles": scene.triangle_count(),
                 "vertices": scene.vertex_count(),
                 "glossy": renderer.glossy(),
+                "occlusion_setting": scene.settings.occlusion,
+                "occlusion_rule_setting": scene.settings.occlusion_rule,
                 "sparse_ms": sparse_ms,
                 "brute_force_ms": brute_force_ms,
                 "speedup": brute_force_ms / sparse_ms,
@@ -180,7 +185,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "brute_force_stages_ms": brute.timings.stages,
             });
             if reference.is_some() {
-                add_exact_comparison(&mut report, &gpu, &mut renderer, &scene, (w, h), val_stride)?;
+                add_exact_comparison(&mut report, &gpu, &mut renderer, &scene, (w, h), val_stride, images.as_deref())?;
             }
             println!("{}", serde_json::to_string_pretty(&report)?);
             Ok(())
@@ -224,6 +229,7 @@ fn add_exact_comparison(
     scene: &Scene,
     (w, h): (u32, u32),
     val_stride: u32,
+    images: Option<&Path>,
 ) -> anyhow::Result<()> {
     use relume::scene::{Occlusion, OcclusionRule};
     renderer.set_exact_val_stride(val_stride);
@@ -232,6 +238,9 @@ fn add_exact_comparison(
     report["exact_ms"] = exact.timings.total_of(&[stage::EXACT]).into();
     report["exact_val_stride"] = val_stride.into();
     report["exact_vals_used"] = (exact.val_count / val_stride).into();
+    if let Some(dir) = images {
+        exact.indirect.write_png(&dir.join("indirect_exact.png"), exposure)?;
+    }
     for (key, occlusion, rule) in [
         ("off", Occlusion::Off, OcclusionRule::Sum),
         ("sum", Occlusion::Disks, OcclusionRule::Sum),
@@ -239,6 +248,9 @@ fn add_exact_comparison(
     ] {
         renderer.set_occlusion(occlusion, rule);
         let sparse = renderer.render(gpu, Method::Sparse, w, h)?;
+        if let Some(dir) = images {
+            sparse.indirect.write_png(&dir.join(format!("indirect_sparse_occlusion_{key}.png")), exposure)?;
+        }
         report[format!("indirect_rel_rmse_vs_exact_{key}")] = relative_rmse(&sparse.indirect, &exact.indirect).into();
         report[format!("indirect_flip_mean_vs_exact_{key}")] =
             flip_mean(&sparse.indirect, &exact.indirect, exposure).into();

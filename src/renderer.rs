@@ -376,8 +376,7 @@ impl Renderer {
                     * glam::camera::rh::view::look_at_mat4(c.position, c.target, c.up)
             }
             View::Pinhole { intrinsics, camera_to_world } => {
-                pinhole_to_clip(&intrinsics.scaled_to(width, height), near, far)
-                    * Mat4::from(camera_to_world.inverse())
+                pinhole_to_clip(&intrinsics.scaled_to(width, height), near, far) * Mat4::from(camera_to_world.inverse())
             }
         };
         let light = self.spot.as_ref().map(|sp| {

@@ -24,10 +24,10 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
+use crate::rgbd::RgbdSettings;
 use glam::{EulerRot, Mat4, Quat, Vec3};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
-use crate::rgbd::RgbdSettings;
 
 use super::{Camera, Material, SceneError, Settings, SpotLight};
 
@@ -399,9 +399,11 @@ pub struct SettingsDescription {
     /// Exposure multiplier (> 0) before tone mapping; default `null` (automatic).
     #[serde(default)]
     pub exposure: Option<f32>,
-    /// Indirect occlusion: `"off"` (default) or `"disks"` (DESIGN.md §4 step 3).
+    /// Indirect occlusion: `"auto"` (default), `"off"` or `"disks"` (DESIGN.md §4 step 3).
+    /// `"auto"` is `"disks"` when the scene can occlude itself: more than one mesh, or a mesh
+    /// that is neither a convex object nor a convex room ([`crate::scene::Scene`]).
     #[serde(default)]
-    pub occlusion: Occlusion,
+    pub occlusion: OcclusionSetting,
     /// How disc occluders combine: `"sum"` (the paper, default) or `"product"`.
     #[serde(default)]
     pub occlusion_rule: OcclusionRule,
@@ -415,6 +417,17 @@ pub struct SettingsDescription {
 #[serde(rename_all = "snake_case")]
 pub enum Occlusion {
     #[default]
+    Off,
+    Disks,
+}
+
+/// Indirect occlusion as a scene file asks for it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OcclusionSetting {
+    /// Disks when the scene can occlude itself, else off.
+    #[default]
+    Auto,
     Off,
     Disks,
 }
@@ -449,7 +462,7 @@ impl Default for SettingsDescription {
             glossy: default_glossy(),
             seed: default_seed(),
             exposure: None,
-            occlusion: Occlusion::Off,
+            occlusion: OcclusionSetting::Auto,
             occlusion_rule: OcclusionRule::Sum,
             rgbd: RgbdSettings::default(),
         }
@@ -457,14 +470,20 @@ impl Default for SettingsDescription {
 }
 
 impl SettingsDescription {
-    /// The settings (assumes [`SceneDescription::validate`] passed).
-    pub fn to_settings(&self) -> Settings {
+    /// The settings (assumes [`SceneDescription::validate`] passed); `self_occluding` resolves
+    /// `"auto"` occlusion.
+    pub fn to_settings(&self, self_occluding: bool) -> Settings {
         Settings {
             rsm_resolution: self.rsm_resolution,
             glossy: self.glossy,
             seed: self.seed,
             exposure: self.exposure,
-            occlusion: self.occlusion,
+            occlusion: match self.occlusion {
+                OcclusionSetting::Off => Occlusion::Off,
+                OcclusionSetting::Disks => Occlusion::Disks,
+                OcclusionSetting::Auto if self_occluding => Occlusion::Disks,
+                OcclusionSetting::Auto => Occlusion::Off,
+            },
             occlusion_rule: self.occlusion_rule,
             rgbd: self.rgbd,
         }
@@ -753,7 +772,7 @@ mod tests {
         let description = SceneDescription::from_json_str(MINIMAL).expect("parses");
         description.validate().expect("valid");
         assert_eq!(description.settings, SettingsDescription::default());
-        let settings = description.settings.to_settings();
+        let settings = description.settings.to_settings(false);
         assert_eq!(settings.rsm_resolution, 128);
         assert!(settings.glossy);
         assert_eq!(settings.seed, 1);
@@ -893,7 +912,7 @@ mod tests {
         ))
         .expect("parses");
         description.validate().expect("valid");
-        let settings = description.settings.to_settings();
+        let settings = description.settings.to_settings(false);
         assert_eq!(
             settings,
             Settings {

@@ -31,3 +31,17 @@ fn sparse_converges_toward_brute_force() {
     assert!(coarse < 0.2, "768 sparse points: relative RMSE {coarse}");
     assert!(fine < 0.8 * coarse, "4x the sparse points must cut the error: {fine} vs {coarse}");
 }
+
+/// `"occlusion": "auto"` (the default) turns disc occlusion on for the Cornell box + bunny (two
+/// meshes; the bunny alone is not convex either) and leaves it off for a convex object.
+#[test]
+fn auto_occlusion_follows_the_scene() {
+    use relume::scene::Occlusion;
+    let dir = fixture("scenes");
+    let json = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let auto = json.replace(r#", "occlusion": "off""#, "");
+    assert_ne!(auto, json, "the fixture names its occlusion setting");
+    let scene = Scene::from_json_str(&auto, &dir).unwrap();
+    assert_eq!(scene.settings.occlusion, Occlusion::Disks);
+    assert!(scene.meshes[1].may_occlude_itself(), "the bunny has concave parts (ears, legs)");
+}
