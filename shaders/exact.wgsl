@@ -41,12 +41,12 @@ fn exact(id: vec2<u32>, glossy: bool) {
     indirect[pixel] = vec4<f32>(l, 1.0);
 }
 
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(EXACT_WORKGROUP_SIDE, EXACT_WORKGROUP_SIDE)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     exact(id.xy, false);
 }
 
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(EXACT_WORKGROUP_SIDE, EXACT_WORKGROUP_SIDE)
 fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
     exact(id.xy, true);
 }

@@ -12,13 +12,21 @@ use crate::reference::bvh::Bvh;
 pub const WGSL: &str = include_str!("../../shaders/exact.wgsl");
 const BVH: &str = include_str!("../../shaders/bvh.wgsl");
 
-/// The pass's WGSL using every `val_stride`-th VAL.
-pub fn source(val_stride: u32) -> String {
-    format!("const VAL_STRIDE: u32 = {val_stride}u;\n{BVH}\n{WGSL}")
+/// The pass's WGSL using every `val_stride`-th VAL, with `side x side` workgroups.
+pub fn source(val_stride: u32, side: u32) -> String {
+    format!("const VAL_STRIDE: u32 = {val_stride}u;\nconst EXACT_WORKGROUP_SIDE: u32 = {side}u;\n{BVH}\n{WGSL}")
+}
+
+/// Workgroup side: 8 on GPUs. On CPU adapters 1: llvmpipe runs a workgroup's invocations as
+/// SIMD lanes, and with lanes diverging in the BVH traversal whole 8x8 blocks came out wrong
+/// (bright squares on the bunny at 192x192; single invocations were always right).
+fn workgroup_side(gpu: &Gpu) -> u32 {
+    if gpu.is_cpu() { 1 } else { 8 }
 }
 
 pub struct Exact {
     kernel: Kernel,
+    side: u32,
     nodes: wgpu::Buffer,
     order: wgpu::Buffer,
 }
@@ -35,8 +43,9 @@ impl Exact {
         let order = gpu.storage_buffer("exact.bvh_triangles", &bvh.order, none)?;
         let slots =
             [Slot::TextureUint, Slot::StorageReadWrite, Slot::Storage, Slot::Storage, Slot::Storage, Slot::Storage];
-        let kernel = Kernel::pass(gpu, scene, "exact", &source(val_stride.max(1)), &slots, &[], glossy)?;
-        Ok(Self { kernel, nodes, order })
+        let side = workgroup_side(gpu);
+        let kernel = Kernel::pass(gpu, scene, "exact", &source(val_stride.max(1), side), &slots, &[], glossy)?;
+        Ok(Self { kernel, side, nodes, order })
     }
 
     pub fn record(
@@ -61,7 +70,7 @@ impl Exact {
                 self.order.as_entire_binding(),
             ],
         );
-        let wg = [groups(camera.width, 8), groups(camera.height, 8), 1];
+        let wg = [groups(camera.width, self.side), groups(camera.height, self.side), 1];
         self.kernel.dispatch(encoder, &group, &scene.bind_group, wg, span.as_ref().map(Span::compute));
     }
 }

@@ -110,6 +110,11 @@ impl Gpu {
         Ok(Self { device, queue, adapter_info: info, timestamps })
     }
 
+    /// Whether the adapter runs on the CPU (lavapipe / llvmpipe).
+    pub fn is_cpu(&self) -> bool {
+        self.adapter_info.device_type == wgpu::DeviceType::Cpu
+    }
+
     /// `"<name> (<backend>)"`, e.g. `"llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)"`.
     pub fn adapter_name(&self) -> String {
         format!("{} ({:?})", self.adapter_info.name, self.adapter_info.backend)

@@ -65,7 +65,7 @@ pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
         ("interpolate.wgsl", interpolate::WGSL),
         ("shade.wgsl", shade::WGSL),
         ("brute_force.wgsl", brute_force::WGSL),
-        ("exact.wgsl", &exact::source(4)),
+        ("exact.wgsl", &exact::source(4, 8)),
         ("direct.wgsl", direct::WGSL),
     ]
     .into_iter()
