@@ -4,6 +4,7 @@
 mod accuracy;
 mod cli;
 mod layout;
+mod rgbd;
 mod rsm;
 mod textures;
 mod twins;
