@@ -15,6 +15,7 @@ pub mod kernel;
 pub mod occlusion;
 pub mod raw;
 pub mod renormalise;
+pub mod rgbd;
 pub mod rsm;
 pub mod scene;
 pub mod shade;
@@ -41,6 +42,8 @@ pub enum GpuError {
     Map(String),
     #[error("{what} needs {needed} bytes, over the device limit of {limit}")]
     TooLarge { what: String, needed: u64, limit: u64 },
+    #[error("RGB-D frame does not fit: {0}")]
+    FrameMismatch(String),
 }
 
 /// A pair of per-lobe buffers: the diffuse one always, the glossy one only when the scene has a

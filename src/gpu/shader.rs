@@ -67,6 +67,7 @@ pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
         ("brute_force.wgsl", brute_force::WGSL),
         ("exact.wgsl", &exact::source(4, 8)),
         ("direct.wgsl", direct::WGSL),
+        ("rgbd.wgsl", &rgbd::source()),
     ]
     .into_iter()
     .map(|(name, text)| (name, source(text, textured)))

@@ -12,6 +12,7 @@ use std::f32::consts::PI;
 
 pub mod bvh;
 pub mod occlusion;
+pub mod rgbd;
 pub mod rsm;
 
 /// Squared distance under which a VAL and a receiver are treated as coincident: the direction

@@ -6,9 +6,13 @@ use relume::gpu::shader;
 use std::mem::{offset_of, size_of};
 
 fn module() -> naga::Module {
+    module_of("gather.wgsl")
+}
+
+fn module_of(name: &str) -> naga::Module {
     let sources = shader::all_sources(true);
-    let (_, source) = sources.iter().find(|(n, _)| *n == "gather.wgsl").expect("gather shader");
-    naga::front::wgsl::parse_str(source).expect("gather.wgsl parses")
+    let (_, source) = sources.iter().find(|(n, _)| *n == name).unwrap_or_else(|| panic!("{name} shader"));
+    naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name} parses: {e}"))
 }
 
 fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
@@ -64,6 +68,20 @@ fn rust_structs_match_wgsl() {
             triangle_count,
         ]
     );
+}
+
+#[test]
+fn rgbd_structs_match_wgsl() {
+    use relume::gpu::rgbd::{RawIntrinsics, RawRgbdParams, RawRgbdSettings};
+    let m = module_of("rgbd.wgsl");
+    check!(m, "Intrinsics", RawIntrinsics, [width, height, fx, fy, cx, cy]);
+    check!(
+        m,
+        "RgbdSettings",
+        RawRgbdSettings,
+        [grid_step, min_depth, max_depth, radiance_scale, bilateral_radius, bilateral_depth_sigma, min_cosine]
+    );
+    check!(m, "RgbdParams", RawRgbdParams, [camera_to_world, intrinsics, settings, _pad0, _pad1, _pad2]);
 }
 
 #[test]
