@@ -16,6 +16,7 @@
 //! - [`reference`]: the CPU twin of every GPU computation: the readable statement of the maths.
 //! - [`gpu`]: the device and one module per pass, each with its WGSL file in `shaders/`.
 //! - [`renderer`]: a frame, the passes called in order.
+//! - [`rgbd`]: RGB-D recordings and frames as light sources; [`mr`]: relighting them (mixed reality).
 //! - [`image`]: tone mapping, PNG/EXR output, error metrics.
 //!
 //! # Who owns the GPU
@@ -25,7 +26,9 @@
 
 pub mod gpu;
 pub mod image;
+pub mod mr;
 pub mod reference;
 pub mod renderer;
+pub mod replay;
 pub mod rgbd;
 pub mod scene;

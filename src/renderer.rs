@@ -10,6 +10,7 @@ use crate::gpu::interpolate::Interpolate;
 use crate::gpu::occlusion::Occlusion;
 use crate::gpu::raw::{RawFrame, RawGathered, RawPointLight, RawVal};
 use crate::gpu::renormalise::Renormalise;
+use crate::gpu::rgbd::RgbdVals;
 use crate::gpu::rsm::{Rsm, RsmOutputs};
 use crate::gpu::scene::{FlatScene, GpuScene};
 use crate::gpu::shade::Shade;
@@ -18,7 +19,7 @@ use crate::gpu::visibility::{Visibility, VisibilityTarget};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::image::LinearImage;
 use crate::reference::rsm::Spot;
-use crate::rgbd::Intrinsics;
+use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
 use crate::scene::{self, Camera, Scene};
 use glam::{Affine3A, Mat4, Vec3, Vec4};
 
@@ -39,6 +40,7 @@ pub enum Method {
 pub mod stage {
     pub const RSM_RASTER: &str = "rsm_raster";
     pub const RSM_VALS: &str = "rsm_vals";
+    pub const RGBD_VALS: &str = "rgbd_vals";
     pub const VISIBILITY: &str = "visibility";
     pub const GATHER: &str = "gather";
     pub const OCCLUSION: &str = "occlusion";
@@ -126,8 +128,13 @@ pub struct Renderer {
     val_capacity: u32,
     /// One `u32`: how many VALs were appended (readers clamp it to the capacity).
     pub val_count: wgpu::Buffer,
-    /// VALs uploaded by [`Renderer::set_vals`], kept at the front of `vals` every frame.
-    uploaded_vals: u32,
+    /// VALs uploaded by [`Renderer::set_vals`], kept at the front of `vals` every frame (and
+    /// here, to upload again when `vals` grows).
+    uploaded_vals: Vec<RawVal>,
+    /// The RGB-D VAL pass, once a frame was given; it runs while `rgbd_active`.
+    rgbd: Option<RgbdVals>,
+    rgbd_key: Option<(Intrinsics, RgbdSettings)>,
+    rgbd_active: bool,
     sparse: Option<SparsePasses>,
     brute_force: Option<BruteForce>,
     exact: Option<Exact>,
@@ -165,7 +172,10 @@ impl Renderer {
             vals: gpu.storage_buffer_sized::<RawVal>("vals", val_capacity as usize)?,
             val_capacity,
             val_count: gpu.storage_buffer_sized::<u32>("val_count", 1)?,
-            uploaded_vals: 0,
+            uploaded_vals: Vec::new(),
+            rgbd: None,
+            rgbd_key: None,
+            rgbd_active: false,
             visibility,
             spot,
             glossy,
@@ -224,19 +234,62 @@ impl Renderer {
     }
 
     /// Light every following frame with `vals` (e.g. RGB-D VALs accumulated over frames), plus
-    /// the spot light's when the scene has one. An empty slice removes them.
+    /// the spot light's when the scene has one, instead of an RGB-D frame's. An empty slice
+    /// removes them.
     pub fn set_vals(&mut self, gpu: &Gpu, vals: &[crate::reference::Val]) -> Result<(), GpuError> {
+        self.rgbd_active = false;
+        self.uploaded_vals = vals.iter().map(RawVal::from).collect();
+        self.ensure_val_capacity(gpu)?;
+        if !self.uploaded_vals.is_empty() {
+            gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&self.uploaded_vals));
+        }
+        Ok(())
+    }
+
+    /// Light every following frame with `frame`'s VALs (DESIGN.md §2 "RGB-D frames"), made on
+    /// the GPU in the frame's `rgbd_vals` stage, plus the spot light's when the scene has one.
+    pub fn set_rgbd_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame, settings: &RgbdSettings) -> Result<(), GpuError> {
+        let key = (frame.intrinsics, *settings);
+        if self.rgbd_key != Some(key) {
+            self.rgbd = Some(RgbdVals::new(gpu, &self.scene, frame.intrinsics, settings)?);
+            self.rgbd_key = Some(key);
+        }
+        self.uploaded_vals.clear();
+        self.rgbd_active = true;
+        self.ensure_val_capacity(gpu)?;
+        self.rgbd.as_ref().expect("built above").upload(gpu, frame)
+    }
+
+    /// `frame`'s VALs alone, made on the GPU and read back (for accumulation across frames).
+    /// The RGB-D stage stays off for the following frames: give them VALs with `set_vals`.
+    pub fn rgbd_frame_vals(
+        &mut self,
+        gpu: &Gpu,
+        frame: &RgbdFrame,
+        settings: &RgbdSettings,
+    ) -> Result<Vec<crate::reference::Val>, GpuError> {
+        self.set_rgbd_frame(gpu, frame, settings)?;
+        self.rgbd_active = false;
+        let pass = self.rgbd.as_ref().expect("built above");
+        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&0u32));
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        pass.record(gpu, &mut encoder, &self.vals, &self.val_count, self.val_capacity, None);
+        gpu.submit_and_wait(encoder)?;
+        self.read_vals(gpu)
+    }
+
+    /// Grow `vals` to hold the uploaded VALs, the RGB-D frame's and the spot light's.
+    fn ensure_val_capacity(&mut self, gpu: &Gpu) -> Result<(), GpuError> {
         let rsm = self.spot.as_ref().map_or(0, |s| s.resolution * s.resolution);
-        let needed = vals.len() as u32 + rsm;
+        let rgbd = if self.rgbd_active { self.rgbd.as_ref().map_or(0, RgbdVals::max_vals) } else { 0 };
+        let needed = self.uploaded_vals.len() as u32 + rgbd + rsm;
         if needed > self.val_capacity {
             self.val_capacity = needed.next_power_of_two();
             self.vals = gpu.storage_buffer_sized::<RawVal>("vals", self.val_capacity as usize)?;
+            if !self.uploaded_vals.is_empty() {
+                gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&self.uploaded_vals));
+            }
         }
-        let raw: Vec<RawVal> = vals.iter().map(RawVal::from).collect();
-        if !raw.is_empty() {
-            gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&raw));
-        }
-        self.uploaded_vals = raw.len() as u32;
         Ok(())
     }
 
@@ -247,8 +300,9 @@ impl Renderer {
         let frame = self.frame_uniforms(camera_to_clip, light_to_clip.unwrap_or(Mat4::IDENTITY), width, height);
         gpu.queue.write_buffer(&self.scene.frame, 0, bytemuck::bytes_of(&frame));
 
-        // Uploaded VALs stay at the front; the spot light's are appended after them.
-        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&self.uploaded_vals));
+        // Uploaded VALs stay at the front; the RGB-D frame's and the spot light's are appended.
+        let uploaded = self.uploaded_vals.len() as u32;
+        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&uploaded));
 
         let mut rec = Recorder::new(gpu, "relume.frame", 12);
         let scene = &self.scene;
@@ -258,6 +312,9 @@ impl Renderer {
             let rsm_out =
                 RsmOutputs { vals: &self.vals, val_count: &self.val_count, light_distance: &sp.light_distance };
             rec.stage(stage::RSM_VALS, |e, s| sp.rsm.record(gpu, e, scene, &sp.view, &rsm_out, s))?;
+        }
+        if let (true, Some(pass)) = (self.rgbd_active, &self.rgbd) {
+            rec.stage(stage::RGBD_VALS, |e, s| pass.record(gpu, e, &self.vals, &self.val_count, self.val_capacity, s))?;
         }
         let target = self.target.as_ref().expect("prepared above");
         rec.stage(stage::VISIBILITY, |e, s| self.visibility.record(gpu, e, scene, &target.view, camera_to_clip, s))?;

@@ -5,6 +5,7 @@ mod accuracy;
 mod cli;
 mod layout;
 mod recording;
+mod replay;
 mod rgbd;
 mod rsm;
 mod textures;

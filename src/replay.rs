@@ -1,0 +1,161 @@
+//! `relume replay`: relight every frame of a recorded RGB-D sequence (DESIGN.md §6) and write
+//! the composited frames, the indirect-only images and a timing and stability summary.
+
+use crate::gpu::Gpu;
+use crate::gpu::timing::TimingSource;
+use crate::image::LinearImage;
+use crate::mr::{AccumulateOptions, MrOptions, MrRenderer, relative_change};
+use crate::rgbd::recording::{Recording, RecordingOptions};
+use crate::scene::Scene;
+use anyhow::Context;
+use glam::Vec3;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What to replay and how.
+#[derive(Clone, Debug)]
+pub struct ReplayOptions {
+    pub recording: PathBuf,
+    pub recording_options: RecordingOptions,
+    pub scene: PathBuf,
+    /// Output directory: `composited/NNNN.png`, `indirect/NNNN.png`, `summary.json`.
+    pub out: PathBuf,
+    /// Output size (default: the recording's).
+    pub size: Option<(u32, u32)>,
+    /// Replay the first N frames only.
+    pub frames: Option<usize>,
+    pub accumulate: Option<AccumulateOptions>,
+    /// Exposure of the virtual object in the composite (see [`MrOptions::exposure`]).
+    pub exposure: f32,
+    /// Draw a progress bar on standard error.
+    pub progress: bool,
+}
+
+/// Figures of one replay, written as `summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReplaySummary {
+    pub adapter: String,
+    pub timing: &'static str,
+    pub frames: usize,
+    pub width: u32,
+    pub height: u32,
+    pub accumulate: bool,
+    /// VALs that lit each frame.
+    pub vals_per_frame: Vec<u32>,
+    /// Milliseconds per stage, one entry per frame.
+    pub stage_ms: BTreeMap<String, Vec<f64>>,
+    /// Wall time per frame, from frame loaded to images read back (ms).
+    pub frame_ms: Vec<f64>,
+    /// Relative change of the object's per-sparse-point diffuse irradiance from the previous
+    /// frame ([`relative_change`]); one entry per frame after the first.
+    pub irradiance_change: Vec<f64>,
+    /// Mean of `irradiance_change`.
+    pub mean_irradiance_change: f64,
+    /// Exposure used for the indirect-only images (fixed from the first lit frame on).
+    pub indirect_exposure: f32,
+}
+
+/// Replay `options.recording` on `gpu`, writing images as it goes.
+pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummary> {
+    let recording = Recording::open(&options.recording, &options.recording_options)?;
+    let scene = Scene::load(&options.scene).with_context(|| format!("loading scene {}", options.scene.display()))?;
+    let intrinsics = recording.intrinsics();
+    let (width, height) = options.size.unwrap_or((intrinsics.width, intrinsics.height));
+    let frames = options.frames.unwrap_or(usize::MAX).min(recording.len());
+    let mr_options = MrOptions { width, height, exposure: options.exposure, accumulate: options.accumulate };
+    let mut mr = MrRenderer::new(gpu, &scene, mr_options)?;
+    let composited_dir = options.out.join("composited");
+    let indirect_dir = options.out.join("indirect");
+    for dir in [&composited_dir, &indirect_dir] {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let bar = progress_bar(options.progress, frames as u64);
+    let mut summary = ReplaySummary {
+        adapter: gpu.adapter_name(),
+        timing: "",
+        frames,
+        width,
+        height,
+        accumulate: options.accumulate.is_some(),
+        vals_per_frame: Vec::new(),
+        stage_ms: BTreeMap::new(),
+        frame_ms: Vec::new(),
+        irradiance_change: Vec::new(),
+        mean_irradiance_change: 0.0,
+        indirect_exposure: 0.0,
+    };
+    let mut previous: Option<Vec<Vec3>> = None;
+    let mut indirect_exposure = None;
+    for i in 0..frames {
+        let frame = recording.frame(i)?;
+        let start = Instant::now();
+        let out = mr.render_frame(gpu, &frame)?;
+        summary.frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        summary.timing = match out.timings.source {
+            TimingSource::GpuTimestamps => "gpu_timestamps",
+            TimingSource::WallClock => "wall_clock",
+        };
+        for (stage, ms) in &out.timings.stages {
+            summary.stage_ms.entry(stage.clone()).or_default().push(*ms);
+        }
+        summary.vals_per_frame.push(out.val_count);
+        if let Some(p) = &previous {
+            summary.irradiance_change.push(relative_change(p, &out.sparse_irradiance));
+        }
+        previous = Some(out.sparse_irradiance);
+        let exposure = *indirect_exposure.get_or_insert_with(|| out.indirect.auto_exposure());
+        let name = format!("{i:04}.png");
+        write_rgb(&composited_dir.join(&name), width, height, &out.composited)?;
+        write_indirect(&indirect_dir.join(&name), &out.indirect, exposure)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let n = summary.irradiance_change.len().max(1) as f64;
+    summary.mean_irradiance_change = summary.irradiance_change.iter().fold(0.0, |a, b| a + b) / n;
+    summary.indirect_exposure = indirect_exposure.unwrap_or(1.0);
+    let json = serde_json::to_string_pretty(&summary)?;
+    let path = options.out.join("summary.json");
+    std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;
+    Ok(summary)
+}
+
+fn progress_bar(visible: bool, frames: u64) -> indicatif::ProgressBar {
+    if !visible {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(frames);
+    let style = indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames, {elapsed} elapsed, eta {eta}")
+        .expect("a valid template");
+    bar.set_style(style);
+    bar
+}
+
+fn write_rgb(path: &Path, width: u32, height: u32, pixels: &[[u8; 3]]) -> anyhow::Result<()> {
+    let image = ::image::RgbImage::from_raw(width, height, pixels.iter().flatten().copied().collect())
+        .context("composited image of the wrong size")?;
+    image.save(path).with_context(|| format!("writing {}", path.display()))
+}
+
+fn write_indirect(path: &Path, image: &LinearImage, exposure: f32) -> anyhow::Result<()> {
+    image.write_png(path, exposure).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Mean, median and maximum of each stage's per-frame times, as printed after a replay.
+pub fn stage_table(summary: &ReplaySummary) -> String {
+    let mut lines = vec![format!("{:<14} {:>10} {:>10} {:>10}", "stage", "mean ms", "median ms", "max ms")];
+    let mut row = |name: &str, v: &[f64]| {
+        let mut sorted = v.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+        let max = sorted.last().copied().unwrap_or(0.0);
+        lines.push(format!("{name:<14} {mean:>10.2} {median:>10.2} {max:>10.2}"));
+    };
+    for (stage, v) in &summary.stage_ms {
+        row(stage, v);
+    }
+    row("frame (wall)", &summary.frame_ms);
+    lines.join("\n")
+}

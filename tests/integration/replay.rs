@@ -1,0 +1,153 @@
+//! Mixed-reality replay of the fixture recording (issue: RGB-D frames as light sources): the
+//! virtual bunny receives the room's light, takes on its colour, and the composite is the
+//! camera image wherever the bunny is not drawn.
+
+use super::{fixture, gpu, load_scene, scratch};
+use relume::mr::{MrOptions, MrRenderer};
+use relume::rgbd::RgbdFrame;
+use relume::rgbd::recording::{Recording, RecordingOptions};
+use relume::scene::Scene;
+
+/// Small and coarse so the test stays fast on lavapipe: 160x120 output, one VAL per 16x16
+/// depth pixels (about 1,200 VALs).
+fn small_scene() -> Scene {
+    let mut scene = load_scene("mr_bunny");
+    scene.settings.rgbd.grid_step = 16;
+    scene
+}
+
+fn options() -> MrOptions {
+    MrOptions { width: 160, height: 120, exposure: 1.0, accumulate: None }
+}
+
+fn recording() -> Recording {
+    Recording::open(&fixture("recordings/tum_fr1_xyz"), &RecordingOptions::default()).unwrap()
+}
+
+/// `r / (r + g + b)` of a summed colour.
+fn red_share(c: glam::Vec3) -> f32 {
+    c.x / c.element_sum()
+}
+
+#[test]
+fn bunny_is_lit_by_the_room_and_composited_over_the_camera_image() {
+    let gpu = gpu();
+    let scene = small_scene();
+    let frame = recording().frame(0).unwrap();
+    let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
+    let out = mr.render_frame(&gpu, &frame).unwrap();
+    assert!(out.val_count > 500, "the room gives VALs: {}", out.val_count);
+    let covered: Vec<usize> = (0..out.indirect.pixels.len()).filter(|&i| out.indirect.covered(i)).collect();
+    assert!(covered.len() > 100, "the bunny is in view: {} pixels", covered.len());
+    let lit = covered.iter().filter(|&&i| out.indirect.rgb(i).max_element() > 0.0).count();
+    assert!(lit * 2 > covered.len(), "most of the bunny receives indirect light: {lit} of {}", covered.len());
+    assert!(out.sparse_irradiance.iter().any(|e| e.max_element() > 0.0));
+
+    // Where the bunny is not drawn, the composite is the camera image (nearest pixel of the
+    // 640x480 frame for each 160x120 output pixel), exactly.
+    let (w, fw) = (160usize, 640usize);
+    let mut differing_outside = 0;
+    let mut drawn = 0;
+    for i in 0..w * 120 {
+        let (x, y) = (i % w, i / w);
+        let camera = frame.color[(y * 4) * fw + x * 4];
+        if out.composited[i] != camera {
+            if out.indirect.covered(i) {
+                drawn += 1;
+            } else {
+                differing_outside += 1;
+            }
+        }
+    }
+    assert_eq!(differing_outside, 0, "pixels changed where the bunny is absent");
+    assert!(drawn > 50, "the bunny is drawn over the camera image: {drawn} pixels");
+}
+
+/// Tinting the room red tints the bunny's indirect light red: with the green and blue of the
+/// camera image scaled by 0.3 the bunny's red share must rise from near neutral to near the
+/// VALs' own red share (within 0.05: the white bunny reflects the mix of VALs it sees, which
+/// is not the mix of all VALs).
+#[test]
+fn bunny_takes_on_the_rooms_colour() {
+    let gpu = gpu();
+    let scene = small_scene();
+    let frame = recording().frame(0).unwrap();
+    let tinted = RgbdFrame {
+        color: frame.color.iter().map(|c| [c[0], (c[1] as f32 * 0.3) as u8, (c[2] as f32 * 0.3) as u8]).collect(),
+        ..frame.clone()
+    };
+    let mut shares = Vec::new();
+    for f in [&frame, &tinted] {
+        let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
+        let out = mr.render_frame(&gpu, f).unwrap();
+        let bunny: glam::Vec3 = (0..out.indirect.pixels.len()).map(|i| out.indirect.rgb(i)).sum();
+        let vals: glam::Vec3 = relume::reference::rgbd::rgbd_vals(f, &scene.settings.rgbd).iter().map(|v| v.flux).sum();
+        shares.push((red_share(bunny), red_share(vals)));
+    }
+    let (neutral, red) = (shares[0], shares[1]);
+    eprintln!("red share (bunny, VALs): original {neutral:?}, tinted {red:?}");
+    assert!((neutral.0 - neutral.1).abs() < 0.05, "untinted: {neutral:?}");
+    assert!((red.0 - red.1).abs() < 0.05, "tinted: {red:?}");
+    assert!(red.0 > neutral.0 + 0.2, "the tint shows on the bunny: {neutral:?} -> {red:?}");
+}
+
+/// A frame without valid depth gives no VALs and no indirect light, and no error.
+#[test]
+fn frame_without_depth_gives_no_light() {
+    let gpu = gpu();
+    let scene = small_scene();
+    let frame = recording().frame(0).unwrap();
+    let empty = RgbdFrame { depth: vec![0.0; frame.depth.len()], ..frame };
+    let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
+    let out = mr.render_frame(&gpu, &empty).unwrap();
+    assert_eq!(out.val_count, 0);
+    assert!(out.indirect.pixels.iter().all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0));
+}
+
+/// Accumulating keeps VALs from earlier frames: the set never shrinks below one frame's VALs
+/// and its irradiance changes less between frames than without it.
+#[test]
+fn accumulation_keeps_earlier_vals() {
+    let gpu = gpu();
+    let scene = small_scene();
+    let rec = recording();
+    let frames: Vec<RgbdFrame> = [0, 12, 24].iter().map(|&i| rec.frame(i).unwrap()).collect();
+    let acc = relume::mr::AccumulateOptions::default();
+    let mut plain = MrRenderer::new(&gpu, &scene, options()).unwrap();
+    let mut accumulating = MrRenderer::new(&gpu, &scene, MrOptions { accumulate: Some(acc), ..options() }).unwrap();
+    let mut counts = Vec::new();
+    for f in &frames {
+        let a = plain.render_frame(&gpu, f).unwrap();
+        let b = accumulating.render_frame(&gpu, f).unwrap();
+        counts.push((a.val_count, b.val_count));
+    }
+    eprintln!("VALs (plain, accumulated): {counts:?}");
+    assert!(counts.windows(2).all(|w| w[1].1 >= w[0].1), "the accumulated set grows: {counts:?}");
+    assert!(counts[2].1 > counts[2].0, "accumulated {counts:?}");
+}
+
+/// `relume replay` writes one composited and one indirect PNG per frame and a summary.
+#[test]
+fn replay_command_writes_frames_and_summary() {
+    let out = scratch("replay_cli");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(["replay", fixture("recordings/tum_fr1_xyz").to_str().unwrap(), "--scene"])
+        .arg(fixture("scenes/mr_bunny.json"))
+        .args(["--frames", "2", "--width", "80", "--height", "60", "--out"])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    for dir in ["composited", "indirect"] {
+        for name in ["0000.png", "0001.png"] {
+            let image = image::open(out.join(dir).join(name)).unwrap();
+            assert_eq!((image.width(), image.height()), (80, 60));
+        }
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["frames"], 2);
+    assert_eq!(summary["vals_per_frame"].as_array().unwrap().len(), 2);
+    assert_eq!(summary["irradiance_change"].as_array().unwrap().len(), 1);
+    assert!(summary["stage_ms"]["rgbd_vals"].as_array().unwrap().iter().all(|v| v.as_f64().unwrap() >= 0.0));
+}
