@@ -24,54 +24,15 @@ pub fn source() -> String {
     format!("const MIN_FOOTPRINT_COSINE: f32 = {MIN_FOOTPRINT_COSINE:e};\n{WGSL}")
 }
 
-/// WGSL `Intrinsics`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct RawIntrinsics {
-    pub width: u32,
-    pub height: u32,
-    pub fx: f32,
-    pub fy: f32,
-    pub cx: f32,
-    pub cy: f32,
-}
+/// WGSL `Intrinsics`: the domain struct is laid out for the GPU already.
+pub type RawIntrinsics = Intrinsics;
 
-impl From<&Intrinsics> for RawIntrinsics {
-    fn from(i: &Intrinsics) -> Self {
-        Self { width: i.width, height: i.height, fx: i.fx, fy: i.fy, cx: i.cx, cy: i.cy }
-    }
-}
-
-/// WGSL `RgbdSettings`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct RawRgbdSettings {
-    pub grid_step: u32,
-    pub min_depth: f32,
-    pub max_depth: f32,
-    pub radiance_scale: f32,
-    pub bilateral_radius: u32,
-    pub bilateral_depth_sigma: f32,
-    pub min_cosine: f32,
-}
-
-impl From<&RgbdSettings> for RawRgbdSettings {
-    fn from(s: &RgbdSettings) -> Self {
-        Self {
-            grid_step: s.grid_step,
-            min_depth: s.min_depth,
-            max_depth: s.max_depth,
-            radiance_scale: s.radiance_scale,
-            bilateral_radius: s.bilateral_radius,
-            bilateral_depth_sigma: s.bilateral_depth_sigma,
-            min_cosine: s.min_cosine,
-        }
-    }
-}
+/// WGSL `RgbdSettings`: the domain struct is laid out for the GPU already.
+pub type RawRgbdSettings = RgbdSettings;
 
 /// WGSL `RgbdParams`: one frame's constants.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct RawRgbdParams {
     /// Camera-to-world in optical axes, column-major.
     pub camera_to_world: [[f32; 4]; 4],
@@ -86,9 +47,9 @@ impl RawRgbdParams {
     pub fn new(intrinsics: &Intrinsics, settings: &RgbdSettings, camera_to_world: &glam::Affine3A) -> Self {
         Self {
             camera_to_world: Mat4::from(*camera_to_world).to_cols_array_2d(),
-            intrinsics: intrinsics.into(),
-            settings: settings.into(),
-            ..Default::default()
+            intrinsics: *intrinsics,
+            settings: *settings,
+            ..bytemuck::Zeroable::zeroed()
         }
     }
 }

@@ -13,8 +13,9 @@ pub mod accumulate;
 pub mod recording;
 
 /// Pinhole intrinsics of the depth image, registered to colour (pixels). Optical axes: x right,
-/// y down, z forward; pixel centres at integer coordinates.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+/// y down, z forward; pixel centres at integer coordinates. Laid out as WGSL's `Intrinsics`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, bytemuck::Pod, bytemuck::Zeroable)]
 #[serde(deny_unknown_fields)]
 pub struct Intrinsics {
     pub width: u32,
@@ -63,8 +64,9 @@ pub struct RgbdFrame {
 }
 
 /// How a frame becomes VALs (DESIGN.md §2 "RGB-D frames"). Every field is a documented scene /
-/// stream setting with this default.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+/// stream setting with this default. Laid out as WGSL's `RgbdSettings`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, bytemuck::Pod, bytemuck::Zeroable)]
 #[serde(default, deny_unknown_fields)]
 pub struct RgbdSettings {
     /// Downsampling: one VAL per `grid_step x grid_step` block of depth pixels (640x480 at 8 gives
