@@ -151,3 +151,28 @@ fn replay_command_writes_frames_and_summary() {
     assert_eq!(summary["irradiance_change"].as_array().unwrap().len(), 1);
     assert!(summary["stage_ms"]["rgbd_vals"].as_array().unwrap().iter().all(|v| v.as_f64().unwrap() >= 0.0));
 }
+
+/// A scene with its own spot light gets the spot's VALs on top of the frame's: both sources
+/// append to one VAL buffer sized for both.
+#[test]
+fn spot_light_and_frame_light_together() {
+    let gpu = gpu();
+    let dir = fixture("scenes");
+    let json = std::fs::read_to_string(dir.join("mr_bunny.json")).unwrap().replacen(
+        "\"camera\"",
+        r#""light": { "position": [0.84, 0.70, 1.6], "direction": [0, 0, -1], "inner_angle_deg": 10,
+                     "outer_angle_deg": 20, "intensity": [1, 1, 1] },
+        "camera""#,
+        1,
+    );
+    let mut scene = Scene::from_json_str(&json, &dir).unwrap();
+    scene.settings.rgbd.grid_step = 16;
+    scene.settings.rsm_resolution = 16;
+    let frame = recording().frame(0).unwrap();
+    let room_only = MrRenderer::new(&gpu, &small_scene(), options()).unwrap().render_frame(&gpu, &frame).unwrap();
+    let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
+    let both = mr.render_frame(&gpu, &frame).unwrap();
+    assert!(both.timings.stages.iter().any(|(n, _)| n == "rsm_vals"));
+    assert!(both.val_count > room_only.val_count, "{} vs {}", both.val_count, room_only.val_count);
+    assert!(both.val_count <= room_only.val_count + 16 * 16);
+}
