@@ -173,6 +173,24 @@ impl Renderer {
         &self.camera
     }
 
+    /// Render the next frames from `camera` (its `width` and `height` are ignored: each frame
+    /// is rendered at the size passed to [`Renderer::render`]).
+    pub fn set_camera(&mut self, camera: Camera) {
+        self.camera = camera;
+    }
+
+    /// Light the next frames with `light` instead of the scene's spot light. The RSM and its
+    /// VALs are rebuilt every frame, so nothing else changes.
+    pub fn set_spot_light(&mut self, light: &scene::SpotLight) {
+        self.spot = Spot {
+            position: light.position,
+            direction: light.direction,
+            inner_angle: light.inner_angle,
+            outer_angle: light.outer_angle,
+            intensity: light.intensity,
+        };
+    }
+
     /// Render at `width` x `height` with the scene's camera.
     pub fn render(&mut self, gpu: &Gpu, method: Method, width: u32, height: u32) -> Result<Rendered, GpuError> {
         self.prepare(gpu, method, width, height)?;
