@@ -17,11 +17,14 @@
 //! - [`gpu`]: the device and one module per pass, each with its WGSL file in `shaders/`.
 //! - [`renderer`]: a frame, the passes called in order.
 //! - [`image`]: tone mapping, PNG/EXR output, error metrics.
+//! - [`rgbd`]: RGB-D frames and how they become VALs.
+//! - [`service`]: `relume serve`, the HTTP + WebSocket service.
 //!
 //! # Who owns the GPU
 //!
 //! One [`gpu::Gpu`] owns the wgpu device and queue and lives on one thread; passes and the
-//! renderer borrow it. Everything is headless.
+//! renderer borrow it. Everything is headless. In the service that thread is
+//! `service::gpu_worker`'s: handlers send it jobs over a bounded channel.
 
 pub mod gpu;
 pub mod image;
@@ -29,3 +32,4 @@ pub mod reference;
 pub mod renderer;
 pub mod rgbd;
 pub mod scene;
+pub mod service;
