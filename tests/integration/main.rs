@@ -3,8 +3,10 @@
 
 mod accuracy;
 mod cli;
+mod fuzz;
 mod layout;
 mod rsm;
+mod service;
 mod textures;
 mod twins;
 
