@@ -13,6 +13,8 @@ use std::path::Path;
 pub enum ImageError {
     #[error("writing {path}: {source}")]
     Write { path: String, source: ::image::ImageError },
+    #[error("encoding a PNG: {0}")]
+    Encode(::image::ImageError),
 }
 
 /// Linear radiance (W/(m² sr)) per pixel, row-major from the top; alpha is coverage (1 where
@@ -76,6 +78,27 @@ impl LinearImage {
         self.tone_map(exposure)
             .save(path)
             .map_err(|source| ImageError::Write { path: path.display().to_string(), source })
+    }
+
+    /// The PNG file [`LinearImage::write_png`] would write, in memory.
+    pub fn encode_png(&self, exposure: f32) -> Result<Vec<u8>, ImageError> {
+        let mut png = Vec::new();
+        self.tone_map(exposure)
+            .write_to(&mut std::io::Cursor::new(&mut png), ::image::ImageFormat::Png)
+            .map_err(ImageError::Encode)?;
+        Ok(png)
+    }
+
+    /// 8-bit sRGB after `exposure` and clipping, with alpha = coverage (255 where geometry
+    /// was hit): `width * height * 4` bytes, rows from the top.
+    pub fn tone_map_rgba8(&self, exposure: f32) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.pixels.len() * 4);
+        for p in &self.pixels {
+            let c = Vec3::new(p[0], p[1], p[2]) * exposure;
+            let alpha = if p[3] > 0.0 { 255 } else { 0 };
+            out.extend_from_slice(&[encode_srgb(c.x), encode_srgb(c.y), encode_srgb(c.z), alpha]);
+        }
+        out
     }
 
     /// Linear float radiance as OpenEXR (RGBA f32; alpha = coverage).
@@ -154,6 +177,17 @@ mod tests {
         }
         assert_eq!(encode_srgb(f32::NAN), 0);
         assert_eq!(encode_srgb(7.0), 255);
+    }
+
+    #[test]
+    fn encoded_png_decodes_to_the_tone_mapped_image() {
+        let img = image(&[[0.5, 0.25, 1.0, 1.0], [0.0, 0.0, 0.0, 0.0]]);
+        let png = img.encode_png(2.0).expect("encodes");
+        let decoded = ::image::load_from_memory(&png).expect("decodes").into_rgb8();
+        assert_eq!(decoded, img.tone_map(2.0));
+        let rgba = img.tone_map_rgba8(2.0);
+        assert_eq!(&rgba[..4], &[255, encode_srgb(0.5), 255, 255]);
+        assert_eq!(&rgba[4..], &[0, 0, 0, 0]);
     }
 
     #[test]

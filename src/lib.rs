@@ -18,11 +18,14 @@
 //! - [`renderer`]: a frame, the passes called in order.
 //! - [`rgbd`]: RGB-D recordings and frames as light sources; [`mr`]: relighting them (mixed reality).
 //! - [`image`]: tone mapping, PNG/EXR output, error metrics.
+//! - [`rgbd`]: RGB-D frames and how they become VALs.
+//! - [`service`]: `relume serve`, the HTTP + WebSocket service.
 //!
 //! # Who owns the GPU
 //!
 //! One [`gpu::Gpu`] owns the wgpu device and queue and lives on one thread; passes and the
-//! renderer borrow it. Everything is headless.
+//! renderer borrow it. Everything is headless. In the service that thread is
+//! `service::gpu_worker`'s: handlers send it jobs over a bounded channel.
 
 pub mod gpu;
 pub mod image;
@@ -32,3 +35,4 @@ pub mod renderer;
 pub mod replay;
 pub mod rgbd;
 pub mod scene;
+pub mod service;

@@ -102,6 +102,11 @@ enum Command {
         #[arg(long)]
         depth_scale: Option<f32>,
     },
+    /// Serve the HTTP + WebSocket API (see README, "Service"). Every flag also reads the
+    /// environment variable shown; SIGINT/SIGTERM shut down gracefully.
+    Serve(relume::service::Config),
+    /// Print the service's OpenAPI 3.1 document (the contents of proto/openapi.json).
+    Openapi,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -127,11 +132,16 @@ enum Component {
 }
 
 fn main() -> ExitCode {
+    let cli = Cli::parse();
+    // The service logs its requests by default; the batch commands only warnings.
+    let default_filter = if matches!(cli.command, Command::Serve(_)) { "warn,relume=info" } else { "warn" };
     tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()))
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| default_filter.into()),
+        )
         .with_writer(std::io::stderr)
         .init();
-    match run(Cli::parse()) {
+    match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -191,6 +201,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let accumulate =
                 accumulate.then_some(relume::mr::AccumulateOptions { cell_size, max_vals, max_age_frames: max_age });
             replay_command(recording, scene, out, size, frames, accumulate, exposure, intrinsics, depth_scale)
+        }
+        Command::Serve(config) => {
+            let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+            runtime.block_on(relume::service::serve(config))?;
+            Ok(())
+        }
+        Command::Openapi => {
+            print!("{}", relume::service::openapi_json());
+            Ok(())
         }
         Command::Compare { scene, json: _, size, images, reference, val_stride } => {
             anyhow::ensure!(val_stride >= 1, "--val-stride: must be at least 1, got {val_stride}");

@@ -293,6 +293,27 @@ impl Renderer {
         Ok(())
     }
 
+    /// Render the next frames from `camera` (its `width` and `height` are ignored: each frame
+    /// is rendered at the size passed to [`Renderer::render`]).
+    pub fn set_camera(&mut self, camera: Camera) {
+        self.view = View::Scene(camera);
+    }
+
+    /// Light the next frames with `light` instead of the scene's spot light. The RSM and its
+    /// VALs are rebuilt every frame, so nothing else changes. A scene without a spot light has
+    /// no RSM stages: nothing happens (the service refuses such overrides before).
+    pub fn set_spot_light(&mut self, light: &scene::SpotLight) {
+        if let Some(sp) = &mut self.spot {
+            sp.spot = Spot {
+                position: light.position,
+                direction: light.direction,
+                inner_angle: light.inner_angle,
+                outer_angle: light.outer_angle,
+                intensity: light.intensity,
+            };
+        }
+    }
+
     /// Render at `width` x `height` with the scene's camera.
     pub fn render(&mut self, gpu: &Gpu, method: Method, width: u32, height: u32) -> Result<Rendered, GpuError> {
         self.prepare(gpu, method, width, height)?;

@@ -128,10 +128,10 @@ impl<'g> Recorder<'g> {
     /// Submit everything, wait, and return the stage durations.
     pub fn finish(mut self) -> Result<StageTimings, GpuError> {
         let n = self.names.len() as u32;
-        if let Some((set, resolve)) = &self.queries {
-            if n > 0 {
-                self.encoder.resolve_query_set(set, 0..2 * n, resolve, 0);
-            }
+        if let Some((set, resolve)) = &self.queries
+            && n > 0
+        {
+            self.encoder.resolve_query_set(set, 0..2 * n, resolve, 0);
         }
         self.flush()?;
         let (source, ms) = match &self.queries {

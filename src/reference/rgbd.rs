@@ -64,8 +64,7 @@ pub fn grid_step(settings: &RgbdSettings) -> u32 {
 /// Cells of the grid: `ceil(w / s) x ceil(h / s)`.
 pub fn grid_size(intrinsics: &Intrinsics, settings: &RgbdSettings) -> UVec2 {
     let s = grid_step(settings);
-    let size = UVec2::new(intrinsics.width, intrinsics.height);
-    size / s + UVec2::new((size.x % s != 0) as u32, (size.y % s != 0) as u32)
+    UVec2::new(intrinsics.width.div_ceil(s), intrinsics.height.div_ceil(s))
 }
 
 /// The pixels cell `cell` (inside the grid) covers: `(x0, y0, x1, y1)`, ends exclusive and

@@ -66,7 +66,9 @@ pub struct RgbdFrame {
 /// How a frame becomes VALs (DESIGN.md §2 "RGB-D frames"). Every field is a documented scene /
 /// stream setting with this default. Laid out as WGSL's `RgbdSettings`.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, bytemuck::Pod, bytemuck::Zeroable)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Serialize, Deserialize, bytemuck::Pod, bytemuck::Zeroable, utoipa::ToSchema,
+)]
 #[serde(default, deny_unknown_fields)]
 pub struct RgbdSettings {
     /// Downsampling: one VAL per `grid_step x grid_step` block of depth pixels (640x480 at 8 gives

@@ -47,7 +47,7 @@ pub const FOV_Y_RANGE_DEG: (f32, f32) = (1.0, 170.0);
 const ENERGY_TOLERANCE: f32 = 1e-6;
 
 /// A whole scene file.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SceneDescription {
     /// The meshes (at least one).
@@ -68,11 +68,16 @@ pub struct SceneDescription {
 }
 
 /// One mesh entry.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MeshDescription {
-    /// OBJ file, relative to the scene file's directory.
+    /// OBJ file, relative to the scene file's directory. With `obj_text`, only the mesh's name
+    /// (its stem) and the name used in messages.
     pub obj: String,
+    /// The OBJ file's text inline, instead of reading `obj`. It may not load MTL files
+    /// (`mtllib`): give its materials with `material`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obj_text: Option<String>,
     /// Model-to-world transform; identity when absent.
     #[serde(default)]
     pub transform: TransformDescription,
@@ -90,7 +95,7 @@ pub struct MeshDescription {
 }
 
 /// Scale, then rotation, then translation.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TransformDescription {
     /// Translation, m.
@@ -111,7 +116,7 @@ impl Default for TransformDescription {
 }
 
 /// A scale: a single number, or `[x, y, z]`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, utoipa::ToSchema)]
 #[serde(untagged)]
 pub enum ScaleDescription {
     /// The same factor on every axis.
@@ -176,7 +181,7 @@ impl<'de> Deserialize<'de> for ScaleDescription {
 }
 
 /// A material. Each channel in [0, 1], `diffuse + specular <= 1` per channel.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialDescription {
     /// Diffuse albedo `rho_d`, linear RGB; default 0.5 grey.
@@ -254,7 +259,7 @@ impl MaterialDescription {
 }
 
 /// The spot light.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LightDescription {
     /// World-space position, m.
@@ -281,7 +286,8 @@ impl LightDescription {
         }
     }
 
-    fn validate(&self, field: &str) -> Result<(), SceneError> {
+    /// Checks ranges and consistency; `field` is this value's path (`light`, `camera`).
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
         finite3(self.position, &format!("{field}.position"))?;
         let direction_field = format!("{field}.direction");
         finite3(self.direction, &direction_field)?;
@@ -313,7 +319,7 @@ impl LightDescription {
 }
 
 /// The camera.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CameraDescription {
     /// World-space eye position, m.
@@ -348,7 +354,8 @@ impl CameraDescription {
         }
     }
 
-    fn validate(&self, field: &str) -> Result<(), SceneError> {
+    /// Checks ranges and consistency; `field` is this value's path (`light`, `camera`).
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
         finite3(self.position, &format!("{field}.position"))?;
         let target_field = format!("{field}.target");
         finite3(self.target, &target_field)?;
@@ -384,7 +391,7 @@ impl CameraDescription {
 }
 
 /// Render settings; every field has a default.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SettingsDescription {
     /// RSM side, texels, in 8..=2048; default 128.
@@ -413,7 +420,7 @@ pub struct SettingsDescription {
 }
 
 /// Indirect occlusion mode.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Occlusion {
     #[default]
@@ -422,7 +429,7 @@ pub enum Occlusion {
 }
 
 /// Indirect occlusion as a scene file asks for it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum OcclusionSetting {
     /// Disks when the scene can occlude itself, else off.
@@ -433,7 +440,7 @@ pub enum OcclusionSetting {
 }
 
 /// Combination rule of disc occluders.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum OcclusionRule {
     /// `clamp(sum o_i, 0, 1)`: the paper's; double-counts overlapping occluders.
@@ -527,7 +534,9 @@ impl TransformDescription {
         )
     }
 
-    fn validate(&self, field: &str) -> Result<(), SceneError> {
+    /// Checks that every number is finite and every scale factor positive; `field` is this
+    /// transform's path.
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
         finite3(self.translation, &format!("{field}.translation"))?;
         finite3(self.rotation_deg, &format!("{field}.rotation_deg"))?;
         let scale_field = format!("{field}.scale");
@@ -564,7 +573,7 @@ impl SceneDescription {
     /// Parses scene JSON. Syntax errors, unknown or missing fields and wrong types name the
     /// field path and the line and column. Does not [validate](Self::validate) ranges.
     pub fn from_json_str(text: &str) -> Result<SceneDescription, SceneError> {
-        serde_json::from_str(text).map_err(|error| json_error(text, &error))
+        parse_json(text)
     }
 
     /// Checks every value's range and the consistency between values, naming the field path
@@ -585,6 +594,12 @@ impl SceneDescription {
         self.camera.validate("camera")?;
         self.settings.validate("settings")
     }
+}
+
+/// Parses JSON text into any `T`, with the errors of [`SceneDescription::from_json_str`]: a
+/// [`SceneError::Json`] naming the field path, line and column.
+pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, SceneError> {
+    serde_json::from_str(text).map_err(|error| json_error(text, &error))
 }
 
 /// `parent.key`, or `parent["key"]` when the key is not a plain identifier.

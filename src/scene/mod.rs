@@ -34,7 +34,7 @@ use glam::{Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
     CameraDescription, LightDescription, MaterialDescription, MeshDescription, Occlusion, OcclusionRule,
-    OcclusionSetting, ScaleDescription, SceneDescription, SettingsDescription, TransformDescription,
+    OcclusionSetting, ScaleDescription, SceneDescription, SettingsDescription, TransformDescription, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;

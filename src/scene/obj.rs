@@ -68,9 +68,27 @@ pub(crate) fn load(
         line,
         message,
     };
-    let bytes = std::fs::read(&file).map_err(|e| file_error(None, format!("cannot read: {e}")))?;
+    let bytes = match &description.obj_text {
+        Some(text) => std::borrow::Cow::Borrowed(text.as_bytes()),
+        None => {
+            std::borrow::Cow::Owned(std::fs::read(&file).map_err(|e| file_error(None, format!("cannot read: {e}")))?)
+        }
+    };
     let text = String::from_utf8_lossy(&bytes);
     let scan = prescan_obj(&text).map_err(|(line, message)| file_error(Some(line), message))?;
+    if description.obj_text.is_some()
+        && let Some(line) = text.split('\n').position(|l| l.split_whitespace().next() == Some("mtllib"))
+    {
+        // Inline text comes from a client: it may not name files to read.
+        return Err(SceneError::Obj {
+            field: format!("{field}.obj_text"),
+            file: file.clone(),
+            line: Some(line + 1),
+            message: "inline OBJ text may not load MTL files (`mtllib`); give its materials with \
+                      the mesh's `material`"
+                .to_owned(),
+        });
+    }
 
     // tobj asks for each `mtllib`; load it relative to the OBJ and remember where each material
     // is defined (for messages) and the first error (tobj would drop it).
@@ -685,6 +703,7 @@ mod tests {
     fn mesh(obj: &str) -> MeshDescription {
         MeshDescription {
             obj: obj.to_owned(),
+            obj_text: None,
             transform: Default::default(),
             sparse_points: 16,
             material: None,
@@ -729,6 +748,27 @@ f 1 3 4
         assert_eq!(matte.diffuse, Vec3::new(0.8, 0.1, 0.1));
         assert_eq!(matte.specular, Vec3::ZERO);
         assert_eq!(matte.exponent, Material::DEFAULT.exponent);
+    }
+
+    #[test]
+    fn inline_text_loads_without_a_file_and_may_not_load_mtl_files() {
+        let dir = TempDir::new("obj-inline");
+        let inline = MeshDescription {
+            obj_text: Some("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n".to_owned()),
+            ..mesh("uploaded.obj")
+        };
+        let loaded = load(&inline, "meshes[0]", dir.path(), &mut Textures::default()).expect("loads");
+        assert_eq!(loaded.triangles.len(), 1);
+        assert_eq!(loaded.materials, vec![Material::DEFAULT]);
+
+        // The MTL exists next to where the file would be, and is still not read.
+        dir.write("quad.mtl", "newmtl shiny\nKd 0.2 0.2 0.2\n");
+        let inline = MeshDescription { obj_text: Some(QUAD_MTL.to_owned()), ..mesh("quad.obj") };
+        let message =
+            load(&inline, "meshes[0]", dir.path(), &mut Textures::default()).expect_err("mtllib refused").to_string();
+        assert!(message.starts_with("meshes[0].obj_text: "), "{message}");
+        assert!(message.contains("quad.obj:1"), "{message}");
+        assert!(message.contains("mtllib"), "{message}");
     }
 
     #[test]

@@ -19,11 +19,11 @@ fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
     let mut layouter = naga::proc::Layouter::default();
     layouter.update(module.to_ctx()).expect("layout");
     for (handle, ty) in module.types.iter() {
-        if ty.name.as_deref() == Some(name) {
-            if let naga::TypeInner::Struct { members, span } = &ty.inner {
-                let _ = layouter[handle];
-                return (*span, members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).collect());
-            }
+        if ty.name.as_deref() == Some(name)
+            && let naga::TypeInner::Struct { members, span } = &ty.inner
+        {
+            let _ = layouter[handle];
+            return (*span, members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).collect());
         }
     }
     panic!("struct {name} not found in WGSL");

@@ -3,11 +3,13 @@
 
 mod accuracy;
 mod cli;
+mod fuzz;
 mod layout;
 mod recording;
 mod replay;
 mod rgbd;
 mod rsm;
+mod service;
 mod textures;
 mod twins;
 

@@ -1,0 +1,217 @@
+//! The HTTP API's JSON shapes (they are the OpenAPI schemas) and their validation. The scene
+//! description itself is [`crate::scene::SceneDescription`], the scene file format.
+
+use serde::{Deserialize, Serialize};
+
+use crate::image::LinearImage;
+use crate::renderer::{Method, Rendered};
+use crate::scene::{CameraDescription, LightDescription, Scene, SceneError};
+
+/// What `POST /v1/scenes` and `GET /v1/scenes/{id}` answer.
+#[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct SceneInfo {
+    /// The scene's id, for the other routes.
+    #[schema(example = "3f9a0c27d1e84b65")]
+    pub id: String,
+    pub meshes: Vec<MeshInfo>,
+    /// Triangles over all meshes, after subdivision.
+    pub triangles: usize,
+    /// Sparse shading points over all meshes.
+    pub sparse_points: usize,
+    /// Most VALs a frame can have: `settings.rsm_resolution²`.
+    pub max_vals: u32,
+    /// Whether frames run the glossy gather.
+    pub glossy: bool,
+    /// The default camera of renders.
+    pub camera: CameraDescription,
+    /// The spot light that render `light` overrides start from (none for scenes lit by RGB-D
+    /// frames).
+    pub light: Option<LightDescription>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct MeshInfo {
+    /// From the OBJ file's stem.
+    pub name: String,
+    pub vertices: usize,
+    pub triangles: usize,
+    pub sparse_points: usize,
+}
+
+impl SceneInfo {
+    pub fn new(id: &str, scene: &Scene, camera: CameraDescription, light: Option<LightDescription>) -> SceneInfo {
+        SceneInfo {
+            id: id.to_owned(),
+            meshes: scene
+                .meshes
+                .iter()
+                .map(|m| MeshInfo {
+                    name: m.name.clone(),
+                    vertices: m.positions.len(),
+                    triangles: m.triangles.len(),
+                    sparse_points: m.sparse.len(),
+                })
+                .collect(),
+            triangles: scene.triangle_count(),
+            sparse_points: scene.sparse_point_count(),
+            max_vals: scene.settings.rsm_resolution * scene.settings.rsm_resolution,
+            glossy: scene.needs_glossy(),
+            camera,
+            light,
+        }
+    }
+}
+
+/// The body of `POST /v1/scenes/{id}/render`. Every part is optional: `{}` renders the scene's
+/// camera and light with the sparse method to a PNG.
+#[derive(Clone, Debug, Default, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RenderRequest {
+    /// The camera, as in a scene file; default: the scene's. Its `width` and `height` are the
+    /// image's size.
+    #[serde(default)]
+    pub camera: Option<CameraDescription>,
+    /// Changes to the scene's spot light for this render only.
+    #[serde(default)]
+    pub light: Option<LightOverride>,
+    #[serde(default)]
+    pub quality: Quality,
+}
+
+/// Overrides of the scene's spot light; absent fields keep the scene's value. The result is
+/// validated as a scene file's `light` is.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LightOverride {
+    /// World-space position, m.
+    pub position: Option<[f32; 3]>,
+    /// World-space axis direction, nonzero.
+    pub direction: Option<[f32; 3]>,
+    /// Inner half-angle, degrees, in [0, `outer_angle_deg`].
+    pub inner_angle_deg: Option<f32>,
+    /// Outer half-angle, degrees, in (0, 80].
+    pub outer_angle_deg: Option<f32>,
+    /// Radiant intensity on the axis, W/sr, linear RGB, each >= 0.
+    pub intensity: Option<[f32; 3]>,
+}
+
+impl LightOverride {
+    /// `base` with these overrides, validated; errors name fields under `field` (`light`). A
+    /// scene without a spot light has nothing to override: an error.
+    pub fn apply(&self, base: Option<&LightDescription>, field: &str) -> Result<LightDescription, SceneError> {
+        let Some(base) = base else {
+            return Err(SceneError::field(
+                field,
+                "the scene has no spot light to override (it is lit by RGB-D frames)",
+            ));
+        };
+        let light = LightDescription {
+            position: self.position.unwrap_or(base.position),
+            direction: self.direction.unwrap_or(base.direction),
+            inner_angle_deg: self.inner_angle_deg.unwrap_or(base.inner_angle_deg),
+            outer_angle_deg: self.outer_angle_deg.unwrap_or(base.outer_angle_deg),
+            intensity: self.intensity.unwrap_or(base.intensity),
+        };
+        light.validate(field)?;
+        Ok(light)
+    }
+}
+
+/// How a render is computed and returned.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Quality {
+    #[serde(default)]
+    pub method: RenderMethod,
+    #[serde(default)]
+    pub component: Component,
+    /// Exposure multiplier before tone mapping (PNG only), > 0; default the scene's
+    /// `settings.exposure`, else automatic (99th-percentile luminance maps to 1).
+    #[serde(default)]
+    pub exposure: Option<f32>,
+    #[serde(default)]
+    pub format: ImageFormat,
+}
+
+/// How the indirect light is computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum RenderMethod {
+    /// The sparse model-space method.
+    #[default]
+    Sparse,
+    /// Every VAL at every visible pixel (the reference; slow).
+    BruteForce,
+}
+
+impl From<RenderMethod> for Method {
+    fn from(method: RenderMethod) -> Method {
+        match method {
+            RenderMethod::Sparse => Method::Sparse,
+            RenderMethod::BruteForce => Method::BruteForce,
+        }
+    }
+}
+
+/// Which light the image shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Component {
+    /// Direct plus indirect.
+    #[default]
+    Full,
+    Direct,
+    Indirect,
+}
+
+impl Component {
+    /// This component of a frame.
+    pub fn of(self, frame: &Rendered) -> LinearImage {
+        match self {
+            Component::Full => frame.direct.add(&frame.indirect),
+            Component::Direct => frame.direct.clone(),
+            Component::Indirect => frame.indirect.clone(),
+        }
+    }
+}
+
+/// The response body's format.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ImageFormat {
+    /// `image/png`: 8-bit sRGB after exposure and clipping.
+    #[default]
+    Png,
+    /// `application/octet-stream`: linear radiance, W/(m² sr), RGBA f32 little-endian, rows
+    /// from the top, alpha = coverage.
+    F32,
+}
+
+impl Quality {
+    /// Checks the values serde cannot; errors name fields under `field` (`quality`).
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        if let Some(exposure) = self.exposure
+            && !(exposure.is_finite() && exposure > 0.0)
+        {
+            return Err(SceneError::Field {
+                field: format!("{field}.exposure"),
+                message: format!("must be a finite number > 0, got {exposure}"),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What `GET /healthz` answers.
+#[derive(Serialize, Deserialize, utoipa::ToSchema)]
+pub struct Health {
+    /// `ok`, or `shutting_down` (with status 503).
+    #[schema(example = "ok")]
+    pub status: String,
+    /// The GPU adapter renders run on.
+    pub adapter: String,
+    pub scenes: usize,
+    /// Renders waiting for the GPU.
+    pub queue_depth: usize,
+    pub limits: crate::service::Limits,
+}

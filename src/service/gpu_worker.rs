@@ -1,0 +1,325 @@
+//! The one thread that owns the GPU. It holds the [`Gpu`] and one [`Renderer`] per scene, and
+//! takes jobs from a bounded channel; every job answers on its own oneshot channel. Handlers
+//! never touch the device and never block a tokio worker on it.
+//!
+//! Renders (HTTP renders and stream frames) are counted against `max_queue`: one more is
+//! refused at once ([`WorkerError::QueueFull`], HTTP 503). Scene creation and deletion wait
+//! for room instead, in a few channel slots kept for them. A job whose requester has gone
+//! (client disconnected) is skipped. A panic inside a job (wgpu reports validation errors by
+//! panicking) fails that job only.
+
+use std::collections::HashMap;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use glam::Mat4;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::gpu::{Gpu, GpuError};
+use crate::renderer::{Method, Rendered, Renderer};
+use crate::rgbd::{RgbdFrame, RgbdSettings};
+use crate::scene::{Camera, Scene, SpotLight};
+
+use super::api::Component;
+use super::metrics::Metrics;
+use super::wire::StreamImageFormat;
+
+/// Channel slots beyond `max_queue`, for scene creation and deletion.
+const CONTROL_SLOTS: usize = 16;
+
+/// Why a job failed.
+#[derive(Debug, thiserror::Error)]
+pub enum WorkerError {
+    #[error("the render queue is full ({0} renders waiting)")]
+    QueueFull(usize),
+    #[error("no scene with id `{0}`")]
+    SceneNotFound(String),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("not implemented yet: {0}")]
+    NotImplemented(&'static str),
+    #[error("the GPU thread panicked during this job: {0}")]
+    Panicked(String),
+    #[error("the GPU thread has stopped")]
+    Stopped,
+}
+
+/// One HTTP render: the scene's renderer with this camera and light.
+#[derive(Clone, Debug)]
+pub struct RenderJob {
+    pub camera: Camera,
+    /// The spot light, for scenes that have one.
+    pub light: Option<SpotLight>,
+    pub method: Method,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// A finished render and where its time went.
+pub struct RenderOutput {
+    pub frame: Rendered,
+    /// Time in the queue before the GPU thread took the job, ms.
+    pub queue_ms: f64,
+    /// Time the GPU thread spent on the job (all stages and read-back), ms.
+    pub gpu_ms: f64,
+}
+
+/// Everything a stream frame is rendered with: the frame and the stream's settings when it
+/// was submitted.
+#[derive(Clone, Debug)]
+pub struct StreamFrameJob {
+    pub frame_id: u64,
+    pub frame: RgbdFrame,
+    pub camera: Camera,
+    pub light: Option<SpotLight>,
+    /// Model-to-world overrides, by mesh index.
+    pub model_transforms: Vec<(u32, Mat4)>,
+    pub method: Method,
+    pub component: Component,
+    pub exposure: Option<f32>,
+    pub format: StreamImageFormat,
+    pub rgbd: RgbdSettings,
+}
+
+enum Job {
+    AddScene {
+        id: String,
+        scene: Box<Scene>,
+        reply: oneshot::Sender<Result<(), WorkerError>>,
+    },
+    RemoveScene {
+        id: String,
+        reply: oneshot::Sender<bool>,
+    },
+    Render {
+        id: String,
+        job: RenderJob,
+        enqueued: Instant,
+        reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
+    },
+    StreamFrame {
+        id: String,
+        job: Box<StreamFrameJob>,
+        enqueued: Instant,
+        reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
+    },
+    Stop,
+}
+
+/// The handle the handlers hold.
+pub struct GpuWorker {
+    jobs: mpsc::Sender<Job>,
+    /// Renders in the channel (not yet taken by the GPU thread).
+    queued: Arc<AtomicUsize>,
+    capacity: usize,
+    adapter: String,
+    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
+}
+
+impl GpuWorker {
+    /// Starts the GPU thread and waits until it has opened the device. Blocks: call it from
+    /// `spawn_blocking` or outside the runtime.
+    pub fn start(max_queue: usize, metrics: Arc<Metrics>) -> Result<GpuWorker, WorkerError> {
+        let (jobs, receiver) = mpsc::channel(max_queue + CONTROL_SLOTS);
+        let queued = Arc::new(AtomicUsize::new(0));
+        let (ready, is_ready) = std::sync::mpsc::sync_channel(1);
+        let thread_queued = queued.clone();
+        let thread = std::thread::Builder::new()
+            .name("relume-gpu".to_owned())
+            .spawn(move || {
+                let gpu = match Gpu::new() {
+                    Ok(gpu) => gpu,
+                    Err(error) => {
+                        let _ = ready.send(Err(error));
+                        return;
+                    }
+                };
+                let _ = ready.send(Ok(gpu.adapter_name()));
+                run(gpu, receiver, thread_queued, metrics);
+            })
+            .map_err(|e| WorkerError::Panicked(format!("cannot spawn the GPU thread: {e}")))?;
+        let adapter = is_ready.recv().map_err(|_| WorkerError::Stopped)??;
+        tracing::info!(adapter = %adapter, max_queue, "GPU thread ready");
+        Ok(GpuWorker { jobs, queued, capacity: max_queue, adapter, thread: Mutex::new(Some(thread)) })
+    }
+
+    /// The adapter's name and backend.
+    pub fn adapter(&self) -> &str {
+        &self.adapter
+    }
+
+    /// Renders waiting for the GPU thread.
+    pub fn queue_depth(&self) -> usize {
+        self.queued.load(Ordering::SeqCst)
+    }
+
+    pub fn queue_capacity(&self) -> usize {
+        self.capacity
+    }
+
+    /// Builds the scene's renderer (pipelines, buffers) on the GPU thread.
+    pub async fn add_scene(&self, id: &str, scene: Scene) -> Result<(), WorkerError> {
+        let (reply, answer) = oneshot::channel();
+        self.send(Job::AddScene { id: id.to_owned(), scene: Box::new(scene), reply }).await?;
+        answer.await.map_err(|_| WorkerError::Stopped)?
+    }
+
+    /// Drops the scene's renderer; false when there was none. Renders of it still queued
+    /// fail with [`WorkerError::SceneNotFound`].
+    pub async fn remove_scene(&self, id: &str) -> Result<bool, WorkerError> {
+        let (reply, answer) = oneshot::channel();
+        self.send(Job::RemoveScene { id: id.to_owned(), reply }).await?;
+        answer.await.map_err(|_| WorkerError::Stopped)
+    }
+
+    /// Queues a render, or refuses at once when `max_queue` renders are waiting.
+    pub fn try_render(
+        &self,
+        id: &str,
+        job: RenderJob,
+    ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
+        let (reply, answer) = oneshot::channel();
+        self.try_queue(Job::Render { id: id.to_owned(), job, enqueued: Instant::now(), reply })?;
+        Ok(answer)
+    }
+
+    /// Queues a stream frame, or refuses at once when `max_queue` renders are waiting.
+    pub fn try_render_stream_frame(
+        &self,
+        id: &str,
+        job: StreamFrameJob,
+    ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
+        let (reply, answer) = oneshot::channel();
+        self.try_queue(Job::StreamFrame { id: id.to_owned(), job: Box::new(job), enqueued: Instant::now(), reply })?;
+        Ok(answer)
+    }
+
+    /// Lets the GPU thread finish every job already queued, then stops and joins it.
+    pub async fn stop(&self) {
+        let _ = self.jobs.send(Job::Stop).await;
+        let thread = self.thread.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).take();
+        if let Some(thread) = thread
+            && tokio::task::spawn_blocking(move || thread.join()).await.is_err()
+        {
+            tracing::error!("the GPU thread could not be joined");
+        }
+    }
+
+    fn try_queue(&self, job: Job) -> Result<(), WorkerError> {
+        let capacity = self.capacity;
+        self.queued
+            .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |q| (q < capacity).then_some(q + 1))
+            .map_err(WorkerError::QueueFull)?;
+        self.jobs.try_send(job).map_err(|error| {
+            self.queued.fetch_sub(1, Ordering::SeqCst);
+            match error {
+                mpsc::error::TrySendError::Full(_) => WorkerError::QueueFull(self.queue_depth()),
+                mpsc::error::TrySendError::Closed(_) => WorkerError::Stopped,
+            }
+        })
+    }
+
+    async fn send(&self, job: Job) -> Result<(), WorkerError> {
+        self.jobs.send(job).await.map_err(|_| WorkerError::Stopped)
+    }
+}
+
+/// The GPU thread's loop: one job at a time, in order, until [`Job::Stop`] or every sender
+/// is gone.
+fn run(gpu: Gpu, mut jobs: mpsc::Receiver<Job>, queued: Arc<AtomicUsize>, metrics: Arc<Metrics>) {
+    let mut renderers: HashMap<String, Renderer> = HashMap::new();
+    while let Some(job) = jobs.blocking_recv() {
+        match job {
+            Job::AddScene { id, scene, reply } => {
+                let result = guarded(|| Renderer::new(&gpu, &scene).map_err(WorkerError::from)).map(|renderer| {
+                    renderers.insert(id, renderer);
+                });
+                let _ = reply.send(result);
+            }
+            Job::RemoveScene { id, reply } => {
+                let _ = reply.send(renderers.remove(&id).is_some());
+            }
+            Job::Render { id, job, enqueued, reply } => {
+                queued.fetch_sub(1, Ordering::SeqCst);
+                if reply.is_closed() {
+                    tracing::debug!(scene = %id, "render skipped: the client has gone");
+                    continue;
+                }
+                let result = timed(&metrics, enqueued, || match renderers.get_mut(&id) {
+                    None => Err(WorkerError::SceneNotFound(id.clone())),
+                    Some(renderer) => render(&gpu, renderer, &job),
+                });
+                let _ = reply.send(result);
+            }
+            Job::StreamFrame { id, job, enqueued, reply } => {
+                queued.fetch_sub(1, Ordering::SeqCst);
+                if reply.is_closed() {
+                    continue;
+                }
+                let result = timed(&metrics, enqueued, || match renderers.get_mut(&id) {
+                    None => Err(WorkerError::SceneNotFound(id.clone())),
+                    Some(renderer) => render_stream_frame(&gpu, renderer, &job),
+                });
+                let _ = reply.send(result);
+            }
+            Job::Stop => break,
+        }
+    }
+    tracing::info!("GPU thread stopped");
+}
+
+/// Runs `f` (a render) behind [`guarded`], timing it and recording the frame's metrics.
+fn timed(
+    metrics: &Metrics,
+    enqueued: Instant,
+    f: impl FnOnce() -> Result<Rendered, WorkerError>,
+) -> Result<RenderOutput, WorkerError> {
+    let queue_ms = enqueued.elapsed().as_secs_f64() * 1e3;
+    let started = Instant::now();
+    let frame = guarded(f)?;
+    let gpu_ms = started.elapsed().as_secs_f64() * 1e3;
+    metrics.record_frame(gpu_ms / 1e3, &frame.timings);
+    Ok(RenderOutput { frame, queue_ms, gpu_ms })
+}
+
+/// One HTTP render.
+fn render(gpu: &Gpu, renderer: &mut Renderer, job: &RenderJob) -> Result<Rendered, WorkerError> {
+    renderer.set_camera(job.camera);
+    if let Some(light) = &job.light {
+        renderer.set_spot_light(light);
+    }
+    Ok(renderer.render(gpu, job.method, job.width, job.height)?)
+}
+
+/// Renders one RGB-D stream frame. UNFINISHED: the renderer cannot take RGB-D VALs yet.
+///
+/// This is the one function the stream needs filled in. Once the renderer supports RGB-D
+/// frames it should: apply `job.camera`, `job.light` and `job.model_transforms` to
+/// `renderer` (as [`render`] does for the first two), turn `job.frame` into VALs with
+/// `job.rgbd`, and render at `job.camera.width` x `job.camera.height` with `job.method`,
+/// returning the [`Rendered`] frame. The stream session (`service::stream`) already picks the
+/// component, tone maps with `job.exposure`, encodes `job.format` and answers the client with a
+/// `RenderedFrame` message, timings and VAL count included.
+fn render_stream_frame(_gpu: &Gpu, _renderer: &mut Renderer, job: &StreamFrameJob) -> Result<Rendered, WorkerError> {
+    tracing::debug!(frame_id = job.frame_id, "stream frame decoded; RGB-D rendering is not wired yet");
+    Err(WorkerError::NotImplemented("rendering RGB-D stream frames (the renderer takes no RGB-D VALs yet)"))
+}
+
+/// Runs `f`, turning a panic into [`WorkerError::Panicked`] so one bad job cannot take the
+/// GPU thread, and every other client, down.
+fn guarded<T>(f: impl FnOnce() -> Result<T, WorkerError>) -> Result<T, WorkerError> {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(result) => result,
+        Err(payload) => {
+            let message = payload
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| payload.downcast_ref::<&str>().map(|s| (*s).to_owned()))
+                .unwrap_or_else(|| "unknown panic".to_owned());
+            tracing::error!("GPU job panicked: {message}");
+            Err(WorkerError::Panicked(message))
+        }
+    }
+}

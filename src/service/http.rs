@@ -1,0 +1,554 @@
+//! The HTTP API: routes, handlers and the OpenAPI document generated from them (committed as
+//! `proto/openapi.json`; `tests/integration/service.rs` keeps the two equal).
+//!
+//! Every error answer is JSON `{"error": {"code", "message", "field"?, "limit"?}}`
+//! ([`ApiError`]), including unknown routes, wrong methods and bodies over `max_body_bytes`.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::body::Body;
+use axum::extract::rejection::PathRejection;
+use axum::extract::{MatchedPath, Path, Request, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::{Json, Router};
+use http_body_util::BodyExt;
+use utoipa::OpenApi;
+use utoipa_axum::router::OpenApiRouter;
+use utoipa_axum::routes;
+
+use crate::gpu::GpuError;
+use crate::gpu::timing::TimingSource;
+use crate::scene::{Scene, SceneDescription, parse_json};
+
+use super::AppState;
+use super::api::{Health, ImageFormat, RenderRequest, SceneInfo};
+use super::config::limit;
+use super::error::{ApiError, ErrorBody, code};
+use super::gpu_worker::{RenderJob, RenderOutput, WorkerError};
+use super::scenes::{self, SceneEntry};
+use super::stream;
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "relume",
+        description = "One-bounce indirect light from thousands of virtual area lights, rendered on \
+            the GPU. Scenes are created from a scene description (the scene file format of the \
+            README, mesh paths relative to the server's asset directory, or OBJ text inline), \
+            then rendered with a camera, light overrides and quality settings. Errors are JSON \
+            `{\"error\": {\"code\", \"message\", \"field\", \"limit\"}}`.",
+        license(name = "MIT OR Apache-2.0")
+    ),
+    modifiers(&BearerAuth),
+    tags(
+        (name = "scenes", description = "Scenes and their renders"),
+        (name = "service", description = "Health and metrics")
+    )
+)]
+struct ApiDoc;
+
+/// Declares the optional bearer token.
+struct BearerAuth;
+
+impl utoipa::Modify for BearerAuth {
+    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        let components = openapi.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(
+                HttpBuilder::new()
+                    .scheme(HttpAuthScheme::Bearer)
+                    .description(Some("Required on /v1 routes when the server runs with --token / RELUME_TOKEN."))
+                    .build(),
+            ),
+        );
+    }
+}
+
+/// The routes, documented; `/v1` ones behind the token check.
+fn routes(state: Option<Arc<AppState>>) -> OpenApiRouter<Arc<AppState>> {
+    let mut v1 = OpenApiRouter::new()
+        .routes(routes!(create_scene))
+        .routes(routes!(get_scene, delete_scene))
+        .routes(routes!(render_scene))
+        .routes(routes!(stream::open_stream));
+    if let Some(state) = state {
+        v1 = v1.route_layer(middleware::from_fn_with_state(state, require_token));
+    }
+    OpenApiRouter::with_openapi(ApiDoc::openapi()).routes(routes!(healthz)).routes(routes!(metrics)).merge(v1)
+}
+
+/// The OpenAPI 3.1 document of the API.
+pub fn openapi() -> utoipa::openapi::OpenApi {
+    routes(None).into_openapi()
+}
+
+/// [`openapi`] as pretty JSON with a final newline: the contents of `proto/openapi.json`.
+pub fn openapi_json() -> String {
+    let mut json = openapi().to_pretty_json().expect("the OpenAPI document serializes");
+    json.push('\n');
+    json
+}
+
+/// The service's router.
+pub fn router(state: Arc<AppState>) -> Router {
+    let (router, api) = routes(Some(state.clone())).split_for_parts();
+    let api = Arc::new(api);
+    router
+        .route(
+            "/openapi.json",
+            axum::routing::get(move || {
+                let api = api.clone();
+                async move { Json(api.as_ref().clone()) }
+            }),
+        )
+        .fallback(|| async { ApiError::not_found("no such route") })
+        .method_not_allowed_fallback(|| async {
+            ApiError::new(StatusCode::METHOD_NOT_ALLOWED, code::METHOD_NOT_ALLOWED, "method not allowed on this route")
+        })
+        .layer(middleware::from_fn_with_state(state.clone(), observe))
+        .with_state(state)
+}
+
+/// Logs every request and records its latency by matched route.
+async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
+    let started = Instant::now();
+    let method = request.method().clone();
+    let route = request.extensions().get::<MatchedPath>().map_or("unmatched", |m| m.as_str()).to_owned();
+    let response = next.run(request).await;
+    let seconds = started.elapsed().as_secs_f64();
+    let status = response.status().as_u16();
+    state.metrics.record_request(&route, method.as_str(), status, seconds);
+    if route == "/metrics" || route == "/healthz" {
+        tracing::debug!(%method, route, status, ms = seconds * 1e3, "request");
+    } else {
+        tracing::info!(%method, route, status, ms = seconds * 1e3, "request");
+    }
+    response
+}
+
+/// Refuses `/v1` requests without the configured bearer token.
+async fn require_token(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
+    if let Some(token) = &state.config.token {
+        let given = request
+            .headers()
+            .get(header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.strip_prefix("Bearer "));
+        if !given.is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes())) {
+            return ApiError::new(
+                StatusCode::UNAUTHORIZED,
+                code::UNAUTHORIZED,
+                "missing or wrong bearer token (Authorization: Bearer <token>)",
+            )
+            .into_response();
+        }
+    }
+    next.run(request).await
+}
+
+/// Equality whose time does not depend on where the inputs differ.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// The body, refused with 413 past `max_body_bytes` (checked while reading, not trusted from
+/// `Content-Length`).
+async fn read_body(state: &AppState, body: Body) -> Result<bytes::Bytes, ApiError> {
+    let max = state.config.limits.max_body_bytes;
+    let too_large =
+        || ApiError::limit(limit::MAX_BODY_BYTES, None, format!("the request body is over the limit of {max} bytes"));
+    match http_body_util::Limited::new(body, max).collect().await {
+        Ok(collected) => Ok(collected.to_bytes()),
+        Err(error) if error.downcast_ref::<http_body_util::LengthLimitError>().is_some() => Err(too_large()),
+        Err(error) => {
+            Err(ApiError::new(StatusCode::BAD_REQUEST, code::INVALID_JSON, format!("cannot read the body: {error}")))
+        }
+    }
+}
+
+fn utf8(bytes: &[u8]) -> Result<&str, ApiError> {
+    std::str::from_utf8(bytes)
+        .map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, code::INVALID_JSON, format!("the body is not UTF-8: {e}")))
+}
+
+fn scene_id(path: Result<Path<String>, PathRejection>) -> Result<String, ApiError> {
+    path.map(|Path(id)| id).map_err(|_| ApiError::not_found("no scene with that id"))
+}
+
+fn unknown_scene(id: &str) -> ApiError {
+    ApiError::not_found(format!("no scene with id `{id}`"))
+}
+
+/// Health of the service.
+///
+/// 503 while shutting down.
+#[utoipa::path(
+    get,
+    path = "/healthz",
+    tag = "service",
+    responses(
+        (status = 200, description = "Serving", body = Health),
+        (status = 503, description = "Shutting down", body = Health),
+    )
+)]
+async fn healthz(State(state): State<Arc<AppState>>) -> (StatusCode, Json<Health>) {
+    let stopping = state.shutting_down();
+    let health = Health {
+        status: if stopping { "shutting_down" } else { "ok" }.to_owned(),
+        adapter: state.worker.adapter().to_owned(),
+        scenes: state.scenes.len(),
+        queue_depth: state.worker.queue_depth(),
+        limits: state.config.limits,
+    };
+    (if stopping { StatusCode::SERVICE_UNAVAILABLE } else { StatusCode::OK }, Json(health))
+}
+
+/// Prometheus metrics.
+///
+/// Request and frame latency histograms, queue depth, rejected renders, dropped frames, GPU
+/// time per stage.
+#[utoipa::path(
+    get,
+    path = "/metrics",
+    tag = "service",
+    responses((status = 200, description = "Prometheus text format 0.0.4", body = String,
+        content_type = "text/plain; version=0.0.4"))
+)]
+async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    let text = state.metrics.render(&state.gauges());
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], text)
+}
+
+/// Creates a scene from a scene description.
+///
+/// Mesh (`obj`) and texture paths are relative to the server's asset directory and may not leave it; a mesh may instead carry its OBJ text
+/// in `obj_text` (no `mtllib`; materials via `material`). Loading (sparse point placement)
+/// happens before the answer.
+#[utoipa::path(
+    post,
+    path = "/v1/scenes",
+    tag = "scenes",
+    request_body(content = SceneDescription, description = "A scene description (README, \"Scene files\")"),
+    responses(
+        (status = 201, description = "Created", body = SceneInfo,
+            headers(("Location" = String, description = "/v1/scenes/{id}"))),
+        (status = 400, description = "Invalid JSON, field, mesh or path (`field` names it), or over \
+            max_vals, max_frame_side or max_scenes (`limit` names it)", body = ErrorBody),
+        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
+        (status = 413, description = "Over max_body_bytes or max_mesh_bytes", body = ErrorBody),
+        (status = 503, description = "Shutting down", body = ErrorBody),
+    ),
+    security((), ("bearer" = []))
+)]
+async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<Response, ApiError> {
+    if state.shutting_down() {
+        return Err(ApiError::shutting_down());
+    }
+    let bytes = read_body(&state, body).await?;
+    let reservation = state.scenes.reserve()?;
+    let id = reservation.id.clone();
+    let loader = state.clone();
+    let loaded = tokio::task::spawn_blocking(move || -> Result<(SceneDescription, Scene), ApiError> {
+        let description = scenes::admit(utf8(&bytes)?, &loader.assets, &loader.config.limits)?;
+        let scene =
+            Scene::from_description(&description, &loader.assets).map_err(|e| ApiError::scene(&e, &loader.assets))?;
+        Ok((description, scene))
+    })
+    .await
+    .map_err(ApiError::internal)?;
+    let (description, scene) = loaded?;
+    let info = SceneInfo::new(&id, &scene, description.camera.clone(), description.light.clone());
+    let entry = SceneEntry {
+        camera: description.camera,
+        light: description.light,
+        exposure: description.settings.exposure,
+        mesh_count: scene.meshes.len(),
+        info: info.clone(),
+    };
+    state.worker.add_scene(&id, scene).await.map_err(worker_error)?;
+    reservation.commit(entry);
+    tracing::info!(scene = %id, triangles = info.triangles, sparse_points = info.sparse_points, "scene created");
+    let location = HeaderValue::from_str(&format!("/v1/scenes/{id}")).map_err(ApiError::internal)?;
+    Ok((StatusCode::CREATED, [(header::LOCATION, location)], Json(info)).into_response())
+}
+
+/// The scene's summary.
+#[utoipa::path(
+    get,
+    path = "/v1/scenes/{id}",
+    tag = "scenes",
+    params(("id" = String, Path, description = "The scene's id")),
+    responses(
+        (status = 200, description = "The scene", body = SceneInfo),
+        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
+        (status = 404, description = "No such scene", body = ErrorBody),
+    ),
+    security((), ("bearer" = []))
+)]
+async fn get_scene(
+    State(state): State<Arc<AppState>>,
+    id: Result<Path<String>, PathRejection>,
+) -> Result<Json<SceneInfo>, ApiError> {
+    let id = scene_id(id)?;
+    let entry = state.scenes.get(&id).ok_or_else(|| unknown_scene(&id))?;
+    Ok(Json(entry.info.clone()))
+}
+
+/// Deletes the scene and frees its GPU memory.
+///
+/// Renders of it still queued fail with 404; its streams get `ERROR_CODE_SCENE_NOT_FOUND`.
+#[utoipa::path(
+    delete,
+    path = "/v1/scenes/{id}",
+    tag = "scenes",
+    params(("id" = String, Path, description = "The scene's id")),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
+        (status = 404, description = "No such scene", body = ErrorBody),
+    ),
+    security((), ("bearer" = []))
+)]
+async fn delete_scene(
+    State(state): State<Arc<AppState>>,
+    id: Result<Path<String>, PathRejection>,
+) -> Result<StatusCode, ApiError> {
+    let id = scene_id(id)?;
+    state.scenes.remove(&id).ok_or_else(|| unknown_scene(&id))?;
+    state.worker.remove_scene(&id).await.map_err(worker_error)?;
+    tracing::info!(scene = %id, "scene deleted");
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Renders the scene.
+///
+/// The body is optional (absent or `{}`: the scene's camera and light, sparse, PNG). The answer
+/// is the image; its size, VAL count and per-stage times are in headers
+/// (`Server-Timing`: `queue`, each GPU stage, `gpu` (the whole frame on the GPU thread),
+/// `encode`, `total`, in ms).
+#[utoipa::path(
+    post,
+    path = "/v1/scenes/{id}/render",
+    tag = "scenes",
+    params(("id" = String, Path, description = "The scene's id")),
+    request_body(content = Option<RenderRequest>, description = "Camera, light overrides and quality; all optional"),
+    responses(
+        (status = 200, description = "The image: `image/png` (format `png`: 8-bit sRGB after exposure) or \
+            `application/octet-stream` (format `f32`: linear radiance, W/(m² sr), RGBA f32 little-endian, \
+            rows from the top, alpha = coverage)",
+            content(("image/png"), ("application/octet-stream")),
+            headers(
+                ("Server-Timing" = String, description = "Per-stage times, e.g. `queue;dur=0.1, gather;dur=5.2, total;dur=9.8`"),
+                ("X-Relume-Width" = u32, description = "Image width, pixels"),
+                ("X-Relume-Height" = u32, description = "Image height, pixels"),
+                ("X-Relume-Val-Count" = u32, description = "VALs with non-zero flux in this frame"),
+                ("X-Relume-Exposure" = f32, description = "The exposure of a PNG"),
+                ("X-Relume-Timing-Source" = String, description = "`gpu_timestamps` or `wall_clock`"),
+            )),
+        (status = 400, description = "Invalid JSON or field (`field` names it), or over max_frame_side", body = ErrorBody),
+        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
+        (status = 404, description = "No such scene", body = ErrorBody),
+        (status = 413, description = "Over max_body_bytes", body = ErrorBody),
+        (status = 503, description = "The render queue is full (max_queue) or the server is shutting down",
+            body = ErrorBody, headers(("Retry-After" = u32, description = "Seconds, when the queue is full"))),
+    ),
+    security((), ("bearer" = []))
+)]
+async fn render_scene(
+    State(state): State<Arc<AppState>>,
+    id: Result<Path<String>, PathRejection>,
+    body: Body,
+) -> Result<Response, ApiError> {
+    let started = Instant::now();
+    let id = scene_id(id)?;
+    if state.shutting_down() {
+        return Err(ApiError::shutting_down());
+    }
+    let entry = state.scenes.get(&id).ok_or_else(|| unknown_scene(&id))?;
+    let bytes = read_body(&state, body).await?;
+    let text = utf8(&bytes)?;
+    let request: RenderRequest = if text.trim().is_empty() {
+        RenderRequest::default()
+    } else {
+        parse_json(text).map_err(|e| ApiError::scene(&e, &state.assets))?
+    };
+    let camera = request.camera.as_ref().unwrap_or(&entry.camera);
+    if request.camera.is_some() {
+        camera.validate("camera").map_err(|e| ApiError::scene(&e, &state.assets))?;
+    }
+    scenes::check_image_size(camera.width, camera.height, "camera", &state.config.limits)?;
+    let light = match &request.light {
+        Some(light) => {
+            Some(light.apply(entry.light.as_ref(), "light").map_err(|e| ApiError::scene(&e, &state.assets))?)
+        }
+        None => entry.light.clone(),
+    };
+    let quality = request.quality;
+    quality.validate("quality").map_err(|e| ApiError::scene(&e, &state.assets))?;
+    let job = RenderJob {
+        camera: camera.to_camera(),
+        light: light.map(|l| l.to_spot_light()),
+        method: quality.method.into(),
+        width: camera.width,
+        height: camera.height,
+    };
+    let answer = state.worker.try_render(&id, job).map_err(|error| {
+        if matches!(error, WorkerError::QueueFull(_)) {
+            state.metrics.record_rejected_render();
+        }
+        let mut api_error = worker_error(error);
+        if api_error.code == code::QUEUE_FULL {
+            api_error.retry_after = Some(retry_after_seconds(&state));
+        }
+        api_error
+    })?;
+    let output = answer.await.map_err(|_| worker_error(WorkerError::Stopped))?.map_err(worker_error)?;
+    let exposure = quality.exposure.or(entry.exposure);
+    let format = quality.format;
+    let component = quality.component;
+    let encoded = tokio::task::spawn_blocking(move || encode(&output, component, format, exposure))
+        .await
+        .map_err(ApiError::internal)??;
+    Ok(encoded.into_response(started))
+}
+
+/// A rendered image, encoded, with what its headers say.
+struct Encoded {
+    body: Vec<u8>,
+    content_type: &'static str,
+    width: u32,
+    height: u32,
+    val_count: u32,
+    exposure: Option<f32>,
+    source: TimingSource,
+    /// (stage, ms) for `Server-Timing`, `total` excluded.
+    timings: Vec<(String, f64)>,
+}
+
+fn encode(
+    output: &RenderOutput,
+    component: super::api::Component,
+    format: ImageFormat,
+    exposure: Option<f32>,
+) -> Result<Encoded, ApiError> {
+    let started = Instant::now();
+    let image = component.of(&output.frame);
+    let (body, content_type, exposure) = match format {
+        ImageFormat::Png => {
+            let exposure = exposure.unwrap_or_else(|| image.auto_exposure());
+            (image.encode_png(exposure).map_err(ApiError::internal)?, "image/png", Some(exposure))
+        }
+        ImageFormat::F32 => {
+            (bytemuck::cast_slice::<[f32; 4], u8>(&image.pixels).to_vec(), "application/octet-stream", None)
+        }
+    };
+    let mut timings = vec![("queue".to_owned(), output.queue_ms)];
+    timings.extend(output.frame.timings.stages.iter().cloned());
+    timings.push(("gpu".to_owned(), output.gpu_ms));
+    timings.push(("encode".to_owned(), started.elapsed().as_secs_f64() * 1e3));
+    Ok(Encoded {
+        body,
+        content_type,
+        width: image.width,
+        height: image.height,
+        val_count: output.frame.val_count,
+        exposure,
+        source: output.frame.timings.source,
+        timings,
+    })
+}
+
+impl Encoded {
+    fn into_response(self, started: Instant) -> Response {
+        let mut server_timing: Vec<String> =
+            self.timings.iter().map(|(stage, ms)| format!("{stage};dur={ms:.3}")).collect();
+        server_timing.push(format!("total;dur={:.3}", started.elapsed().as_secs_f64() * 1e3));
+        let mut headers = HeaderMap::new();
+        let mut put = |name: &'static str, value: String| {
+            if let Ok(value) = HeaderValue::from_str(&value) {
+                headers.insert(name, value);
+            }
+        };
+        put("server-timing", server_timing.join(", "));
+        put("x-relume-width", self.width.to_string());
+        put("x-relume-height", self.height.to_string());
+        put("x-relume-val-count", self.val_count.to_string());
+        if let Some(exposure) = self.exposure {
+            put("x-relume-exposure", exposure.to_string());
+        }
+        let source = match self.source {
+            TimingSource::GpuTimestamps => "gpu_timestamps",
+            TimingSource::WallClock => "wall_clock",
+        };
+        put("x-relume-timing-source", source.to_owned());
+        headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(self.content_type));
+        (StatusCode::OK, headers, self.body).into_response()
+    }
+}
+
+/// Seconds until the queue has likely drained: the waiting renders times the mean frame time.
+fn retry_after_seconds(state: &AppState) -> u32 {
+    let mean = state.metrics.mean_frame_seconds().unwrap_or(1.0);
+    let waiting = state.worker.queue_depth().max(1) as f64;
+    (waiting * mean).ceil().clamp(1.0, 600.0) as u32
+}
+
+/// The HTTP answer for a failed GPU job.
+fn worker_error(error: WorkerError) -> ApiError {
+    match error {
+        WorkerError::QueueFull(waiting) => ApiError {
+            limit: Some(limit::MAX_QUEUE),
+            ..ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                code::QUEUE_FULL,
+                format!("the render queue is full ({waiting} renders waiting); retry later"),
+            )
+        },
+        WorkerError::SceneNotFound(id) => unknown_scene(&id),
+        WorkerError::Stopped => ApiError::shutting_down(),
+        WorkerError::Gpu(GpuError::TooLarge { what, needed, limit: device }) => ApiError::new(
+            StatusCode::BAD_REQUEST,
+            code::LIMIT_EXCEEDED,
+            format!("{what} needs {needed} bytes of GPU memory, over the device's limit of {device}"),
+        ),
+        error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_) | WorkerError::NotImplemented(_)) => {
+            ApiError::internal(error)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tokens_compare_whole() {
+        assert!(constant_time_eq(b"secret", b"secret"));
+        assert!(!constant_time_eq(b"secret", b"secreT"));
+        assert!(!constant_time_eq(b"secret", b"secret2"));
+        assert!(!constant_time_eq(b"", b"x"));
+    }
+
+    #[test]
+    fn the_document_is_openapi_3_1_with_every_route() {
+        let doc: serde_json::Value = serde_json::from_str(&openapi_json()).expect("JSON");
+        assert_eq!(doc["openapi"], "3.1.0");
+        for route in [
+            "/healthz",
+            "/metrics",
+            "/v1/scenes",
+            "/v1/scenes/{id}",
+            "/v1/scenes/{id}/render",
+            "/v1/scenes/{id}/stream",
+        ] {
+            assert!(doc["paths"][route].is_object(), "{route} missing");
+        }
+        assert!(doc["components"]["schemas"]["SceneDescription"].is_object());
+        assert!(doc["components"]["securitySchemes"]["bearer"].is_object());
+    }
+}

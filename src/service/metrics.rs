@@ -1,0 +1,224 @@
+//! Prometheus metrics in the text exposition format (version 0.0.4), written by hand: a few
+//! counters, gauges and fixed-bucket histograms behind one mutex.
+
+use std::collections::BTreeMap;
+use std::fmt::Write;
+use std::sync::Mutex;
+
+use crate::gpu::timing::StageTimings;
+
+/// Upper bounds of every histogram's buckets, seconds (lavapipe frames take seconds).
+const BUCKETS: [f64; 16] =
+    [0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 300.0];
+
+#[derive(Clone, Debug, Default)]
+struct Histogram {
+    /// Per bucket (not cumulative); the last counts values above every bound.
+    counts: [u64; BUCKETS.len() + 1],
+    sum: f64,
+    count: u64,
+}
+
+impl Histogram {
+    fn observe(&mut self, value: f64) {
+        let bucket = BUCKETS.iter().position(|&le| value <= le).unwrap_or(BUCKETS.len());
+        self.counts[bucket] += 1;
+        self.sum += value;
+        self.count += 1;
+    }
+
+    fn write(&self, out: &mut String, name: &str, labels: &str) {
+        let mut cumulative = 0;
+        let sep = if labels.is_empty() { "" } else { "," };
+        for (le, count) in BUCKETS.iter().zip(&self.counts) {
+            cumulative += count;
+            let _ = writeln!(out, "{name}_bucket{{{labels}{sep}le=\"{le}\"}} {cumulative}");
+        }
+        let _ = writeln!(out, "{name}_bucket{{{labels}{sep}le=\"+Inf\"}} {}", self.count);
+        let braces = if labels.is_empty() { String::new() } else { format!("{{{labels}}}") };
+        let _ = writeln!(out, "{name}_sum{braces} {}", self.sum);
+        let _ = writeln!(out, "{name}_count{braces} {}", self.count);
+    }
+}
+
+#[derive(Default)]
+struct Inner {
+    /// (route, method, status) -> count.
+    requests: BTreeMap<(String, String, u16), u64>,
+    request_seconds: BTreeMap<String, Histogram>,
+    frame_seconds: Histogram,
+    gpu_seconds: BTreeMap<String, f64>,
+    renders_rejected: u64,
+    dropped_frames: u64,
+    stream_messages: BTreeMap<String, u64>,
+    stream_errors: BTreeMap<String, u64>,
+}
+
+/// The service's metrics.
+#[derive(Default)]
+pub struct Metrics {
+    inner: Mutex<Inner>,
+}
+
+/// Values read when the metrics are scraped.
+pub struct Gauges {
+    pub queue_depth: usize,
+    pub queue_capacity: usize,
+    pub scenes: usize,
+    pub streams: usize,
+}
+
+impl Metrics {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        // A panic while holding the lock leaves counters, which stay usable.
+        self.inner.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// One answered HTTP request; `route` is the matched route pattern.
+    pub fn record_request(&self, route: &str, method: &str, status: u16, seconds: f64) {
+        let mut inner = self.lock();
+        *inner.requests.entry((route.to_owned(), method.to_owned(), status)).or_default() += 1;
+        inner.request_seconds.entry(route.to_owned()).or_default().observe(seconds);
+    }
+
+    /// One frame rendered on the GPU thread: its wall time and its stages' times.
+    pub fn record_frame(&self, seconds: f64, timings: &StageTimings) {
+        let mut inner = self.lock();
+        inner.frame_seconds.observe(seconds);
+        for (stage, ms) in &timings.stages {
+            *inner.gpu_seconds.entry(stage.clone()).or_default() += ms / 1e3;
+        }
+    }
+
+    /// A render refused because the queue was full.
+    pub fn record_rejected_render(&self) {
+        self.lock().renders_rejected += 1;
+    }
+
+    /// A stream frame dropped (a newer one replaced it, or the queue was full).
+    pub fn record_dropped_frame(&self) {
+        self.lock().dropped_frames += 1;
+    }
+
+    /// A stream message received, by kind (`rgbd_frame`, `control`, `invalid`).
+    pub fn record_stream_message(&self, kind: &str) {
+        *self.lock().stream_messages.entry(kind.to_owned()).or_default() += 1;
+    }
+
+    /// An `Error` sent on a stream, by code.
+    pub fn record_stream_error(&self, code: &str) {
+        *self.lock().stream_errors.entry(code.to_owned()).or_default() += 1;
+    }
+
+    /// Mean wall time of the frames so far, seconds (None before the first).
+    pub fn mean_frame_seconds(&self) -> Option<f64> {
+        let inner = self.lock();
+        (inner.frame_seconds.count > 0).then(|| inner.frame_seconds.sum / inner.frame_seconds.count as f64)
+    }
+
+    /// The text exposition format.
+    pub fn render(&self, gauges: &Gauges) -> String {
+        let inner = self.lock().clone_for_render();
+        let mut out = String::new();
+        let header = |out: &mut String, name: &str, kind: &str, help: &str| {
+            let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
+        };
+
+        header(&mut out, "relume_http_requests_total", "counter", "HTTP requests answered.");
+        for ((route, method, status), count) in &inner.requests {
+            let _ = writeln!(
+                out,
+                "relume_http_requests_total{{route=\"{}\",method=\"{}\",status=\"{status}\"}} {count}",
+                escape(route),
+                escape(method)
+            );
+        }
+        header(&mut out, "relume_http_request_duration_seconds", "histogram", "HTTP request latency.");
+        for (route, histogram) in &inner.request_seconds {
+            histogram.write(&mut out, "relume_http_request_duration_seconds", &format!("route=\"{}\"", escape(route)));
+        }
+        header(&mut out, "relume_frame_duration_seconds", "histogram", "Wall time of a frame on the GPU thread.");
+        inner.frame_seconds.write(&mut out, "relume_frame_duration_seconds", "");
+        header(&mut out, "relume_gpu_seconds_total", "counter", "Time spent in each GPU stage.");
+        for (stage, seconds) in &inner.gpu_seconds {
+            let _ = writeln!(out, "relume_gpu_seconds_total{{stage=\"{}\"}} {seconds}", escape(stage));
+        }
+        header(&mut out, "relume_render_queue_depth", "gauge", "Renders waiting for the GPU thread.");
+        let _ = writeln!(out, "relume_render_queue_depth {}", gauges.queue_depth);
+        header(&mut out, "relume_render_queue_capacity", "gauge", "Most renders that may wait (max_queue).");
+        let _ = writeln!(out, "relume_render_queue_capacity {}", gauges.queue_capacity);
+        header(&mut out, "relume_renders_rejected_total", "counter", "Renders refused because the queue was full.");
+        let _ = writeln!(out, "relume_renders_rejected_total {}", inner.renders_rejected);
+        header(&mut out, "relume_dropped_frames_total", "counter", "Stream frames dropped before rendering.");
+        let _ = writeln!(out, "relume_dropped_frames_total {}", inner.dropped_frames);
+        header(&mut out, "relume_scenes", "gauge", "Scenes held.");
+        let _ = writeln!(out, "relume_scenes {}", gauges.scenes);
+        header(&mut out, "relume_streams", "gauge", "Open WebSocket streams.");
+        let _ = writeln!(out, "relume_streams {}", gauges.streams);
+        header(&mut out, "relume_stream_messages_total", "counter", "Stream messages received, by kind.");
+        for (kind, count) in &inner.stream_messages {
+            let _ = writeln!(out, "relume_stream_messages_total{{kind=\"{}\"}} {count}", escape(kind));
+        }
+        header(&mut out, "relume_stream_errors_total", "counter", "Error messages sent on streams, by code.");
+        for (code, count) in &inner.stream_errors {
+            let _ = writeln!(out, "relume_stream_errors_total{{code=\"{}\"}} {count}", escape(code));
+        }
+        out
+    }
+}
+
+impl Inner {
+    /// A copy, so the lock is not held while formatting.
+    fn clone_for_render(&self) -> Inner {
+        Inner {
+            requests: self.requests.clone(),
+            request_seconds: self.request_seconds.clone(),
+            frame_seconds: self.frame_seconds.clone(),
+            gpu_seconds: self.gpu_seconds.clone(),
+            renders_rejected: self.renders_rejected,
+            dropped_frames: self.dropped_frames,
+            stream_messages: self.stream_messages.clone(),
+            stream_errors: self.stream_errors.clone(),
+        }
+    }
+}
+
+/// A label value with `\`, `"` and newlines escaped.
+fn escape(value: &str) -> String {
+    value.replace('\\', "\\\\").replace('"', "\\\"").replace('\n', "\\n")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::timing::TimingSource;
+
+    #[test]
+    fn histograms_are_cumulative_and_labels_escaped() {
+        let metrics = Metrics::default();
+        metrics.record_request("/v1/scenes", "POST", 201, 0.003);
+        metrics.record_request("/v1/scenes", "POST", 201, 2.0);
+        metrics.record_request("/a\"b", "GET", 404, 1e6);
+        let timings = StageTimings { source: TimingSource::WallClock, stages: vec![("gather".to_owned(), 250.0)] };
+        metrics.record_frame(0.3, &timings);
+        metrics.record_frame(0.1, &timings);
+        let text = metrics.render(&Gauges { queue_depth: 2, queue_capacity: 8, scenes: 1, streams: 0 });
+        assert!(text.contains("relume_http_requests_total{route=\"/v1/scenes\",method=\"POST\",status=\"201\"} 2"));
+        assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/v1/scenes\",le=\"0.001\"} 0"));
+        assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/v1/scenes\",le=\"0.005\"} 1"));
+        assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/v1/scenes\",le=\"2.5\"} 2"));
+        assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/a\\\"b\",le=\"300\"} 0"));
+        assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/a\\\"b\",le=\"+Inf\"} 1"));
+        assert!(text.contains("relume_frame_duration_seconds_count 2"));
+        assert!(text.contains("relume_frame_duration_seconds_bucket{le=\"0.25\"} 1"));
+        assert!(text.contains("relume_gpu_seconds_total{stage=\"gather\"} 0.5"));
+        assert!(text.contains("relume_render_queue_depth 2"));
+        assert!((metrics.mean_frame_seconds().expect("frames") - 0.2).abs() < 1e-12);
+        // Every sample line belongs to a declared metric family.
+        for line in text.lines().filter(|l| !l.starts_with('#')) {
+            let name = line.split(['{', ' ']).next().expect("name");
+            let family = name.trim_end_matches("_bucket").trim_end_matches("_sum").trim_end_matches("_count");
+            assert!(text.contains(&format!("# TYPE {family} ")) || text.contains(&format!("# TYPE {name} ")), "{line}");
+        }
+    }
+}

@@ -1,0 +1,243 @@
+//! `relume serve`: the renderer as an HTTP + WebSocket service.
+//!
+//! - [`http`]: the routes (`/v1/scenes`, `/v1/scenes/{id}`, `/v1/scenes/{id}/render`,
+//!   `/healthz`, `/metrics`, `/openapi.json`) and the OpenAPI document generated from them.
+//! - [`stream`]: `/v1/scenes/{id}/stream`, the WebSocket stream (protobuf messages of
+//!   `proto/relume.proto`, decoded and encoded by [`wire`]). Rendering RGB-D frames is not
+//!   wired yet.
+//! - [`gpu_worker`]: the one thread that owns the GPU; handlers send it jobs over a bounded
+//!   channel and a full render queue is a 503.
+//! - [`scenes`]: admitting scene descriptions (limits, paths confined to the asset directory)
+//!   and the registry of scenes held.
+//! - [`config`]: flags, environment variables and limits; [`metrics`]: Prometheus text.
+//!
+//! Shutdown (SIGINT, SIGTERM, or the future given to [`Server::run`]): the server stops
+//! accepting connections, answers new work with 503 `shutting_down`, lets in-flight requests
+//! and queued renders finish, closes streams with 1001 (going away) after an `Error` of code
+//! `SHUTTING_DOWN`, then stops the GPU thread. After `shutdown_grace_seconds` whatever is
+//! left is dropped.
+
+pub mod api;
+pub mod config;
+pub mod error;
+pub mod gpu_worker;
+pub mod http;
+pub mod metrics;
+pub mod scenes;
+pub mod stream;
+pub mod wire;
+
+use std::future::{Future, IntoFuture};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use tokio::sync::{Notify, watch};
+
+pub use config::{Config, Limits};
+pub use gpu_worker::{GpuWorker, WorkerError};
+pub use http::{openapi, openapi_json, router};
+pub use metrics::Metrics;
+
+/// Why the service could not start or stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    #[error("asset directory {}: {source}", path.display())]
+    Assets { path: PathBuf, source: std::io::Error },
+    #[error("asset directory {}: not a directory", .0.display())]
+    AssetsNotADirectory(PathBuf),
+    #[error("starting the GPU thread: {0}")]
+    Gpu(#[from] WorkerError),
+    #[error("listening on {addr}: {source}")]
+    Bind { addr: SocketAddr, source: std::io::Error },
+    #[error("serving: {0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// What every handler shares.
+pub struct AppState {
+    pub config: Config,
+    /// The asset directory, canonical.
+    pub assets: PathBuf,
+    pub scenes: scenes::SceneRegistry,
+    pub worker: GpuWorker,
+    pub metrics: Arc<Metrics>,
+    shutdown: watch::Sender<bool>,
+    streams: AtomicUsize,
+    streams_closed: Notify,
+}
+
+impl AppState {
+    /// Whether shutdown has begun (new work is refused).
+    pub fn shutting_down(&self) -> bool {
+        *self.shutdown.borrow()
+    }
+
+    /// Becomes `true` when shutdown begins.
+    pub fn shutdown_receiver(&self) -> watch::Receiver<bool> {
+        self.shutdown.subscribe()
+    }
+
+    fn begin_shutdown(&self) {
+        self.shutdown.send_replace(true);
+    }
+
+    /// Counts an open stream until the guard is dropped.
+    pub fn stream_opened(&self) -> StreamGuard<'_> {
+        self.streams.fetch_add(1, Ordering::SeqCst);
+        StreamGuard(self)
+    }
+
+    async fn all_streams_closed(&self) {
+        loop {
+            let notified = self.streams_closed.notified();
+            if self.streams.load(Ordering::SeqCst) == 0 {
+                return;
+            }
+            notified.await;
+        }
+    }
+
+    /// The metrics' gauges, read now.
+    pub fn gauges(&self) -> metrics::Gauges {
+        metrics::Gauges {
+            queue_depth: self.worker.queue_depth(),
+            queue_capacity: self.worker.queue_capacity(),
+            scenes: self.scenes.len(),
+            streams: self.streams.load(Ordering::SeqCst),
+        }
+    }
+}
+
+/// An open stream, counted while it lives.
+pub struct StreamGuard<'a>(&'a AppState);
+
+impl Drop for StreamGuard<'_> {
+    fn drop(&mut self) {
+        self.0.streams.fetch_sub(1, Ordering::SeqCst);
+        self.0.streams_closed.notify_waiters();
+    }
+}
+
+/// A bound, ready server: the GPU thread is up and the socket listens.
+pub struct Server {
+    listener: tokio::net::TcpListener,
+    state: Arc<AppState>,
+}
+
+impl Server {
+    /// Checks the asset directory, starts the GPU thread and binds `config.addr`.
+    pub async fn bind(config: Config) -> Result<Server, ServeError> {
+        let assets = std::fs::canonicalize(&config.assets)
+            .map_err(|source| ServeError::Assets { path: config.assets.clone(), source })?;
+        if !assets.is_dir() {
+            return Err(ServeError::AssetsNotADirectory(assets));
+        }
+        let metrics = Arc::new(Metrics::default());
+        let (max_queue, worker_metrics) = (config.limits.max_queue, metrics.clone());
+        let worker = tokio::task::spawn_blocking(move || GpuWorker::start(max_queue, worker_metrics))
+            .await
+            .map_err(|e| WorkerError::Panicked(e.to_string()))??;
+        let listener = tokio::net::TcpListener::bind(config.addr)
+            .await
+            .map_err(|source| ServeError::Bind { addr: config.addr, source })?;
+        let state = Arc::new(AppState {
+            scenes: scenes::SceneRegistry::new(config.limits.max_scenes),
+            config,
+            assets,
+            worker,
+            metrics,
+            shutdown: watch::Sender::new(false),
+            streams: AtomicUsize::new(0),
+            streams_closed: Notify::new(),
+        });
+        Ok(Server { listener, state })
+    }
+
+    /// The address actually bound (port 0 resolved).
+    pub fn local_addr(&self) -> SocketAddr {
+        self.listener.local_addr().expect("a bound TCP listener has an address")
+    }
+
+    pub fn state(&self) -> &Arc<AppState> {
+        &self.state
+    }
+
+    /// Serves until `shutdown` completes, then shuts down gracefully (see the module docs).
+    pub async fn run(self, shutdown: impl Future<Output = ()> + Send + 'static) -> Result<(), ServeError> {
+        let Server { listener, state } = self;
+        let grace = Duration::from_secs(state.config.shutdown_grace_seconds);
+        tracing::info!(
+            addr = %listener.local_addr()?,
+            assets = %state.assets.display(),
+            adapter = state.worker.adapter(),
+            token = state.config.token.is_some(),
+            "serving"
+        );
+        let signalled = state.clone();
+        let graceful = async move {
+            shutdown.await;
+            tracing::info!("shutting down: refusing new work, finishing in-flight requests and queued renders");
+            signalled.begin_shutdown();
+        };
+        let mut stopping = state.shutdown_receiver();
+        let deadline = async move {
+            let _ = stopping.wait_for(|&s| s).await;
+            tokio::time::sleep(grace).await;
+        };
+        let serve = axum::serve(listener, router(state.clone())).with_graceful_shutdown(graceful).into_future();
+        let completed = tokio::select! {
+            result = serve => {
+                result?;
+                true
+            }
+            () = deadline => false,
+        };
+        if completed {
+            // Streams were told to close when shutdown began.
+            if tokio::time::timeout(grace, state.all_streams_closed()).await.is_err() {
+                tracing::warn!("streams still open after the grace period; dropping them");
+            }
+        } else {
+            tracing::warn!(?grace, "grace period over: dropping the requests still in flight");
+        }
+        state.worker.stop().await;
+        tracing::info!("stopped");
+        Ok(())
+    }
+}
+
+/// Runs the service until SIGINT or SIGTERM.
+pub async fn serve(config: Config) -> Result<(), ServeError> {
+    Server::bind(config).await?.run(shutdown_signal()).await
+}
+
+/// Completes on SIGINT (Ctrl-C) or, on Unix, SIGTERM.
+pub async fn shutdown_signal() {
+    let interrupt = async {
+        if let Err(error) = tokio::signal::ctrl_c().await {
+            tracing::error!("cannot listen for SIGINT: {error}");
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut signal) => {
+                signal.recv().await;
+            }
+            Err(error) => {
+                tracing::error!("cannot listen for SIGTERM: {error}");
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        () = interrupt => tracing::info!("SIGINT received"),
+        () = terminate => tracing::info!("SIGTERM received"),
+    }
+}

@@ -1,0 +1,293 @@
+//! Scenes held by the service: admitting a description (parse, validate, limits, paths confined
+//! to the asset directory) and the registry of loaded scenes with the `max_scenes` limit.
+
+use std::collections::HashMap;
+use std::hash::BuildHasher;
+use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use axum::http::StatusCode;
+
+use crate::scene::{CameraDescription, LightDescription, SceneDescription};
+
+use super::api::SceneInfo;
+use super::config::{Limits, limit};
+use super::error::{ApiError, code};
+
+/// Parses and validates a scene description sent by a client, and checks what the scene
+/// module does not: the service's limits, and that every file it names is inside `assets`
+/// (canonical). Reads no mesh; touches the file system only to resolve paths.
+pub fn admit(text: &str, assets: &Path, limits: &Limits) -> Result<SceneDescription, ApiError> {
+    let description = SceneDescription::from_json_str(text).map_err(|e| ApiError::scene(&e, assets))?;
+    description.validate().map_err(|e| ApiError::scene(&e, assets))?;
+    let r = description.settings.rsm_resolution;
+    if r as u64 * r as u64 > limits.max_vals as u64 {
+        return Err(ApiError::limit(
+            limit::MAX_VALS,
+            Some("settings.rsm_resolution".to_owned()),
+            format!(
+                "settings.rsm_resolution: {r}² = {} VALs per frame is over the limit of {}",
+                r as u64 * r as u64,
+                limits.max_vals
+            ),
+        ));
+    }
+    check_image_size(description.camera.width, description.camera.height, "camera", limits)?;
+    for (i, mesh) in description.meshes.iter().enumerate() {
+        let field = format!("meshes[{i}]");
+        match &mesh.obj_text {
+            Some(text) => check_mesh_bytes(text.len() as u64, &format!("{field}.obj_text"), limits)?,
+            None => {
+                let obj_field = format!("{field}.obj");
+                let file = confine(assets, &mesh.obj, &obj_field)?;
+                let bytes = std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0);
+                check_mesh_bytes(bytes, &obj_field, limits)?;
+            }
+        }
+        let materials = mesh
+            .material
+            .iter()
+            .map(|m| (format!("{field}.material"), m))
+            .chain(mesh.materials.iter().map(|(name, m)| (format!("{field}.materials[{name:?}]"), m)));
+        for (material_field, material) in materials {
+            if let Some(texture) = &material.diffuse_texture {
+                confine(assets, texture, &format!("{material_field}.diffuse_texture"))?;
+            }
+        }
+    }
+    Ok(description)
+}
+
+/// Width and height within `max_frame_side`; errors name `{field}.width` / `.height`.
+pub fn check_image_size(width: u32, height: u32, field: &str, limits: &Limits) -> Result<(), ApiError> {
+    for (name, value) in [("width", width), ("height", height)] {
+        if value > limits.max_frame_side {
+            let field = format!("{field}.{name}");
+            return Err(ApiError::limit(
+                limit::MAX_FRAME_SIDE,
+                Some(field.clone()),
+                format!("{field}: {value} pixels is over the limit of {}", limits.max_frame_side),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_mesh_bytes(bytes: u64, field: &str, limits: &Limits) -> Result<(), ApiError> {
+    if bytes > limits.max_mesh_bytes as u64 {
+        return Err(ApiError::limit(
+            limit::MAX_MESH_BYTES,
+            Some(field.to_owned()),
+            format!("{field}: the OBJ is {bytes} bytes, over the limit of {}", limits.max_mesh_bytes),
+        ));
+    }
+    Ok(())
+}
+
+/// The file `relative` names inside `root` (canonical), canonical. Refuses absolute paths,
+/// `..` that climbs above `root` and links that lead out of it, before looking at the file
+/// system, so the answer does not reveal whether a file outside exists.
+pub fn confine(root: &Path, relative: &str, field: &str) -> Result<PathBuf, ApiError> {
+    let outside = || ApiError {
+        field: Some(field.to_owned()),
+        ..ApiError::new(
+            StatusCode::BAD_REQUEST,
+            code::PATH_OUTSIDE_ASSETS,
+            format!("{field}: `{relative}` is outside the asset directory; paths are relative to it"),
+        )
+    };
+    let mut depth = 0usize;
+    for component in Path::new(relative).components() {
+        match component {
+            Component::Prefix(_) | Component::RootDir => return Err(outside()),
+            Component::ParentDir => depth = depth.checked_sub(1).ok_or_else(outside)?,
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+        }
+    }
+    let missing = || ApiError {
+        field: Some(field.to_owned()),
+        ..ApiError::new(
+            StatusCode::BAD_REQUEST,
+            code::INVALID_SCENE,
+            format!("{field}: no file `{relative}` in the asset directory"),
+        )
+    };
+    let canonical = std::fs::canonicalize(root.join(relative)).map_err(|_| missing())?;
+    if !canonical.starts_with(root) {
+        return Err(outside());
+    }
+    if !canonical.is_file() {
+        return Err(missing());
+    }
+    Ok(canonical)
+}
+
+/// What the service keeps of a loaded scene (its meshes live on the GPU thread).
+#[derive(Clone, Debug)]
+pub struct SceneEntry {
+    pub info: SceneInfo,
+    /// Renders without a `camera` use this one.
+    pub camera: CameraDescription,
+    /// Render `light` overrides apply to this one (none: the scene has no spot light).
+    pub light: Option<LightDescription>,
+    /// The scene file's `settings.exposure`.
+    pub exposure: Option<f32>,
+    pub mesh_count: usize,
+}
+
+/// The scenes held, and the slots reserved by scenes being loaded.
+pub struct SceneRegistry {
+    inner: Arc<Mutex<Inner>>,
+    max_scenes: usize,
+    next: AtomicU64,
+    ids: std::collections::hash_map::RandomState,
+}
+
+#[derive(Default)]
+struct Inner {
+    scenes: HashMap<String, Arc<SceneEntry>>,
+    reserved: usize,
+}
+
+/// A `max_scenes` slot held while a scene loads; released on drop unless committed.
+pub struct Reservation {
+    inner: Arc<Mutex<Inner>>,
+    /// The id the scene will have.
+    pub id: String,
+    committed: bool,
+}
+
+impl SceneRegistry {
+    pub fn new(max_scenes: usize) -> SceneRegistry {
+        SceneRegistry {
+            inner: Arc::default(),
+            max_scenes,
+            next: AtomicU64::new(0),
+            ids: std::collections::hash_map::RandomState::new(),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        self.inner.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// Holds a slot for a new scene, or refuses when `max_scenes` are held or loading.
+    pub fn reserve(&self) -> Result<Reservation, ApiError> {
+        let mut inner = self.lock();
+        if inner.scenes.len() + inner.reserved >= self.max_scenes {
+            return Err(ApiError::limit(
+                limit::MAX_SCENES,
+                None,
+                format!("{} scenes are held, the limit; delete one first", self.max_scenes),
+            ));
+        }
+        inner.reserved += 1;
+        // Unguessable ids: a per-process random key hashes a counter.
+        let id = format!("{:016x}", self.ids.hash_one(self.next.fetch_add(1, Ordering::Relaxed)));
+        Ok(Reservation { inner: self.inner.clone(), id, committed: false })
+    }
+
+    pub fn get(&self, id: &str) -> Option<Arc<SceneEntry>> {
+        self.lock().scenes.get(id).cloned()
+    }
+
+    pub fn remove(&self, id: &str) -> Option<Arc<SceneEntry>> {
+        self.lock().scenes.remove(id)
+    }
+
+    pub fn len(&self) -> usize {
+        self.lock().scenes.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl Reservation {
+    /// The scene is loaded: it takes the reserved slot.
+    pub fn commit(mut self, entry: SceneEntry) -> Arc<SceneEntry> {
+        let entry = Arc::new(entry);
+        let mut inner = self.inner.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        inner.reserved -= 1;
+        inner.scenes.insert(self.id.clone(), entry.clone());
+        self.committed = true;
+        entry
+    }
+}
+
+impl Drop for Reservation {
+    fn drop(&mut self) {
+        if !self.committed {
+            self.inner.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).reserved -= 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assets() -> PathBuf {
+        std::fs::canonicalize(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures")).expect("fixtures")
+    }
+
+    #[test]
+    fn paths_are_confined_to_the_asset_directory() {
+        let root = assets();
+        let obj = "meshes/cornell_box/CornellBox-Original.obj";
+        assert_eq!(confine(&root, obj, "f").expect("inside"), root.join(obj));
+        assert!(confine(&root, "meshes/../meshes/./cornell_box/CornellBox-Original.obj", "f").is_ok());
+        for outside in ["../Cargo.toml", "/etc/passwd", "meshes/../../Cargo.toml", "../does-not-exist"] {
+            let error = confine(&root, outside, "meshes[0].obj").expect_err(outside);
+            assert_eq!(error.code, code::PATH_OUTSIDE_ASSETS, "{outside}");
+            assert_eq!(error.field.as_deref(), Some("meshes[0].obj"));
+        }
+        let error = confine(&root, "meshes/nope.obj", "f").expect_err("missing");
+        assert_eq!(error.code, code::INVALID_SCENE);
+        let error = confine(&root, "meshes", "f").expect_err("a directory");
+        assert_eq!(error.code, code::INVALID_SCENE);
+    }
+
+    #[test]
+    fn the_registry_counts_loading_scenes_against_the_limit() {
+        let registry = SceneRegistry::new(2);
+        let a = registry.reserve().expect("first");
+        let b = registry.reserve().expect("second");
+        assert_ne!(a.id, b.id);
+        let error = registry.reserve().err().expect("third is over the limit");
+        assert_eq!(error.limit, Some(limit::MAX_SCENES));
+        drop(b);
+        let c = registry.reserve().expect("a failed load frees its slot");
+        assert!(registry.is_empty());
+        let info = SceneInfo {
+            id: a.id.clone(),
+            meshes: Vec::new(),
+            triangles: 0,
+            sparse_points: 0,
+            max_vals: 0,
+            glossy: false,
+            camera: serde_json::from_str(
+                r#"{"position": [0, 0, 1], "target": [0, 0, 0], "fov_y_deg": 40, "width": 1, "height": 1}"#,
+            )
+            .expect("camera"),
+            light: serde_json::from_str(
+                r#"{"position": [0, 1, 0], "direction": [0, -1, 0], "inner_angle_deg": 1,
+                    "outer_angle_deg": 2, "intensity": [1, 1, 1]}"#,
+            )
+            .expect("light"),
+        };
+        let id = a.id.clone();
+        let entry =
+            SceneEntry { camera: info.camera.clone(), light: info.light.clone(), info, exposure: None, mesh_count: 0 };
+        a.commit(entry);
+        assert_eq!(registry.len(), 1);
+        assert!(registry.get(&id).is_some());
+        assert!(registry.reserve().is_err(), "one held and one loading");
+        drop(c);
+        assert!(registry.remove(&id).is_some());
+        assert!(registry.get(&id).is_none());
+    }
+}

@@ -1,0 +1,379 @@
+//! `GET /v1/scenes/{id}/stream`: the WebSocket stream of one scene.
+//!
+//! UNFINISHED: frames are decoded, validated and queued to the GPU thread, but the GPU
+//! thread cannot render RGB-D frames yet ([`super::gpu_worker`]'s `render_stream_frame` answers
+//! `NOT_IMPLEMENTED`), so every valid frame is answered with an `Error` of that code. The rest
+//! is in place: control messages are validated, applied to the stream's settings and
+//! acknowledged; every malformed or invalid message gets an `Error` naming the field or limit
+//! and leaves the connection open; at most one frame per stream is on the GPU and a newer
+//! frame replaces one still waiting (latest frame wins, the replaced one counts as dropped);
+//! a finished frame would be answered with a `RenderedFrame` by [`rendered_frame`].
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade, close_code};
+use axum::extract::{Path, State};
+use axum::response::Response;
+use tokio::sync::oneshot;
+
+use crate::rgbd::RgbdSettings;
+use crate::scene::{CameraDescription, LightDescription, TransformDescription};
+
+use super::AppState;
+use super::error::ApiError;
+use super::gpu_worker::{RenderOutput, StreamFrameJob, WorkerError};
+use super::scenes::SceneEntry;
+use super::wire::{
+    self, ClientMessage, ControlMessage, ErrorCode, FrameImage, FrameMessage, RenderedFrame, ServerMessage,
+    SettingsAck, StreamImageFormat, StreamQuality, WireError,
+};
+
+/// Opens the WebSocket stream of a scene.
+///
+/// 404 before the upgrade when there is no such scene.
+#[utoipa::path(
+    get,
+    path = "/v1/scenes/{id}/stream",
+    tag = "scenes",
+    params(("id" = String, Path, description = "The scene's id")),
+    responses(
+        (status = 101, description = "WebSocket stream: one `relume.v1.Envelope` (proto/relume.proto) per \
+            binary message. UNFINISHED: RGB-D frames are decoded and validated and answered with \
+            ERROR_CODE_NOT_IMPLEMENTED until the renderer takes RGB-D frames; control messages are \
+            acknowledged."),
+        (status = 400, description = "Not a WebSocket upgrade request", body = super::error::ErrorBody),
+        (status = 401, description = "Missing or wrong bearer token", body = super::error::ErrorBody),
+        (status = 404, description = "No such scene", body = super::error::ErrorBody),
+        (status = 503, description = "Shutting down", body = super::error::ErrorBody),
+    ),
+    security((), ("bearer" = []))
+)]
+pub async fn open_stream(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    upgrade: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
+) -> Result<Response, ApiError> {
+    if state.shutting_down() {
+        return Err(ApiError::shutting_down());
+    }
+    let scene = state.scenes.get(&id).ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
+    let upgrade = upgrade.map_err(|rejection| {
+        ApiError::new(rejection.status(), super::error::code::UPGRADE_REQUIRED, rejection.body_text())
+    })?;
+    // Messages up to twice the limit reach the decoder, which answers with an error naming
+    // `max_message_bytes`; larger ones close the connection (1009, message too big).
+    let transport_limit = state.config.limits.max_message_bytes.saturating_mul(2).max(64 << 10);
+    Ok(upgrade.max_message_size(transport_limit).max_frame_size(transport_limit).on_upgrade(move |socket| async move {
+        let _open = state.stream_opened();
+        Session::new(state.clone(), id, &scene).run(socket).await;
+    }))
+}
+
+/// A stream's settings, changed by control messages.
+#[derive(Clone, Debug)]
+struct Settings {
+    camera: CameraDescription,
+    light: Option<LightDescription>,
+    model_transforms: BTreeMap<u32, TransformDescription>,
+    quality: StreamQuality,
+    rgbd: RgbdSettings,
+}
+
+/// A frame on the GPU thread.
+struct InFlight {
+    frame_id: u64,
+    timestamp: f64,
+    decode_ms: f64,
+    quality: StreamQuality,
+    answer: oneshot::Receiver<Result<RenderOutput, WorkerError>>,
+}
+
+struct Session {
+    state: Arc<AppState>,
+    scene_id: String,
+    mesh_count: usize,
+    settings: Settings,
+    in_flight: Option<InFlight>,
+    /// The newest frame not yet submitted (and how long it took to decode, ms).
+    waiting: Option<(FrameMessage, f64)>,
+    dropped_frames: u64,
+}
+
+impl Session {
+    fn new(state: Arc<AppState>, scene_id: String, scene: &SceneEntry) -> Session {
+        Session {
+            state,
+            scene_id,
+            mesh_count: scene.mesh_count,
+            settings: Settings {
+                camera: scene.camera.clone(),
+                light: scene.light.clone(),
+                model_transforms: BTreeMap::new(),
+                quality: StreamQuality { exposure: scene.exposure, ..StreamQuality::default() },
+                rgbd: RgbdSettings::default(),
+            },
+            in_flight: None,
+            waiting: None,
+            dropped_frames: 0,
+        }
+    }
+
+    async fn run(mut self, mut socket: WebSocket) {
+        tracing::info!(scene = %self.scene_id, "stream opened");
+        let mut shutdown = self.state.shutdown_receiver();
+        loop {
+            let answer = async {
+                match self.in_flight.as_mut() {
+                    Some(in_flight) => (&mut in_flight.answer).await,
+                    None => std::future::pending().await,
+                }
+            };
+            let replies = tokio::select! {
+                message = socket.recv() => match message {
+                    Some(Ok(message)) => match self.on_message(message).await {
+                        Some(replies) => replies,
+                        None => break,
+                    },
+                    Some(Err(error)) => {
+                        tracing::debug!(scene = %self.scene_id, "stream transport error: {error}");
+                        break;
+                    }
+                    None => break,
+                },
+                result = answer => {
+                    let in_flight = self.in_flight.take().expect("an answer comes only from a frame in flight");
+                    let mut replies = vec![self.on_rendered(in_flight, result).await];
+                    replies.extend(self.submit_waiting());
+                    replies
+                }
+                () = async { let _ = shutdown.wait_for(|&stopping| stopping).await; } => {
+                    let error = WireError::new(ErrorCode::ShuttingDown, None, "the server is shutting down");
+                    let _ = self.send(&mut socket, ServerMessage::Error(error)).await;
+                    let close = CloseFrame { code: close_code::AWAY, reason: "server shutting down".into() };
+                    let _ = socket.send(Message::Close(Some(close))).await;
+                    break;
+                }
+            };
+            for reply in replies {
+                if self.send(&mut socket, reply).await.is_err() {
+                    return;
+                }
+            }
+        }
+        tracing::info!(scene = %self.scene_id, dropped_frames = self.dropped_frames, "stream closed");
+    }
+
+    async fn send(&self, socket: &mut WebSocket, message: ServerMessage) -> Result<(), axum::Error> {
+        if let ServerMessage::Error(error) = &message {
+            self.state.metrics.record_stream_error(error.code_name());
+        }
+        socket.send(Message::Binary(wire::encode(message).into())).await
+    }
+
+    /// The replies to one client message; `None` to end the session.
+    async fn on_message(&mut self, message: Message) -> Option<Vec<ServerMessage>> {
+        let bytes = match message {
+            Message::Binary(bytes) => bytes,
+            Message::Text(_) => {
+                self.state.metrics.record_stream_message("invalid");
+                let message = "text messages are not part of the protocol: send one binary protobuf Envelope";
+                return Some(vec![ServerMessage::Error(WireError::new(ErrorCode::Malformed, None, message))]);
+            }
+            Message::Close(_) => return None,
+            Message::Ping(_) | Message::Pong(_) => return Some(Vec::new()),
+        };
+        let limits = self.state.config.limits;
+        let started = Instant::now();
+        // Decoding copies and converts whole images (and may inflate a PNG): off the runtime.
+        let decoded = tokio::task::spawn_blocking(move || wire::decode(&bytes, &limits)).await;
+        let decode_ms = started.elapsed().as_secs_f64() * 1e3;
+        let decoded = match decoded {
+            Ok(decoded) => decoded,
+            Err(panic) => {
+                tracing::error!("the stream decoder panicked: {panic}");
+                Err(WireError::new(ErrorCode::Internal, None, "internal error (logged on the server)"))
+            }
+        };
+        let replies = match decoded {
+            Ok(ClientMessage::Frame(frame)) => {
+                self.state.metrics.record_stream_message("rgbd_frame");
+                self.on_frame(frame, decode_ms)
+            }
+            Ok(ClientMessage::Control(control)) => {
+                self.state.metrics.record_stream_message("control");
+                vec![self.on_control(control)]
+            }
+            Err(error) => {
+                self.state.metrics.record_stream_message("invalid");
+                vec![ServerMessage::Error(error)]
+            }
+        };
+        Some(replies)
+    }
+
+    fn on_frame(&mut self, frame: FrameMessage, decode_ms: f64) -> Vec<ServerMessage> {
+        let limits = self.state.config.limits;
+        if let Err(error) = wire::check_frame_vals(&frame.frame.intrinsics, &self.settings.rgbd, &limits) {
+            return vec![ServerMessage::Error(error.with_frame(frame.frame_id))];
+        }
+        if let Some((replaced, _)) = self.waiting.replace((frame, decode_ms)) {
+            tracing::debug!(frame_id = replaced.frame_id, "frame replaced by a newer one before rendering");
+            self.dropped_frames += 1;
+            self.state.metrics.record_dropped_frame();
+        }
+        if self.in_flight.is_none() { self.submit_waiting().into_iter().collect() } else { Vec::new() }
+    }
+
+    /// Sends the waiting frame to the GPU thread; an error reply when it cannot be queued.
+    fn submit_waiting(&mut self) -> Option<ServerMessage> {
+        let (message, decode_ms) = self.waiting.take()?;
+        let s = &self.settings;
+        let camera = s.camera.to_camera();
+        let job = StreamFrameJob {
+            frame_id: message.frame_id,
+            frame: message.frame,
+            camera,
+            light: s.light.as_ref().map(|l| l.to_spot_light()),
+            model_transforms: s.model_transforms.iter().map(|(&mesh, t)| (mesh, t.to_matrix())).collect(),
+            method: s.quality.method,
+            component: s.quality.component,
+            exposure: s.quality.exposure,
+            format: s.quality.format,
+            rgbd: s.rgbd,
+        };
+        let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);
+        match self.state.worker.try_render_stream_frame(&self.scene_id, job) {
+            Ok(answer) => {
+                self.in_flight = Some(InFlight { frame_id, timestamp, decode_ms, quality: s.quality, answer });
+                None
+            }
+            Err(error) => {
+                self.dropped_frames += 1;
+                self.state.metrics.record_dropped_frame();
+                Some(ServerMessage::Error(worker_error(error).with_frame(frame_id)))
+            }
+        }
+    }
+
+    async fn on_rendered(
+        &mut self,
+        in_flight: InFlight,
+        result: Result<Result<RenderOutput, WorkerError>, oneshot::error::RecvError>,
+    ) -> ServerMessage {
+        let frame_id = in_flight.frame_id;
+        let output = match result {
+            Ok(Ok(output)) => output,
+            Ok(Err(error)) => return ServerMessage::Error(worker_error(error).with_frame(frame_id)),
+            Err(_) => return ServerMessage::Error(worker_error(WorkerError::Stopped).with_frame(frame_id)),
+        };
+        let dropped_frames = self.dropped_frames;
+        let encoded = tokio::task::spawn_blocking(move || rendered_frame(&in_flight, output, dropped_frames)).await;
+        match encoded {
+            Ok(Ok(frame)) => ServerMessage::Frame(frame),
+            Ok(Err(error)) => ServerMessage::Error(error.with_frame(frame_id)),
+            Err(panic) => {
+                tracing::error!("encoding a stream frame panicked: {panic}");
+                ServerMessage::Error(WireError::new(ErrorCode::Internal, None, "internal error").with_frame(frame_id))
+            }
+        }
+    }
+
+    /// Validates the whole control message against the scene, then applies all of it.
+    fn on_control(&mut self, control: ControlMessage) -> ServerMessage {
+        let request_id = control.request_id;
+        match self.apply(control) {
+            Ok(applied) => ServerMessage::Ack(SettingsAck { request_id, applied }),
+            Err(error) => ServerMessage::Error(error.with_request(request_id)),
+        }
+    }
+
+    fn apply(&mut self, control: ControlMessage) -> Result<Vec<String>, WireError> {
+        let mut next = self.settings.clone();
+        let mut applied = Vec::new();
+        if let Some(camera) = control.camera {
+            next.camera = camera;
+            applied.push("camera");
+        }
+        if let Some(light) = control.light {
+            next.light = Some(light.apply(self.settings.light.as_ref(), "control.light").map_err(|e| {
+                WireError::new(ErrorCode::InvalidField, e.field_path().map(str::to_owned), e.to_string())
+            })?);
+            applied.push("light");
+        }
+        if !control.model_transforms.is_empty() {
+            for (i, (mesh, transform)) in control.model_transforms.into_iter().enumerate() {
+                if mesh as usize >= self.mesh_count {
+                    return Err(WireError::invalid(
+                        format!("control.model_transforms[{i}].mesh_index"),
+                        format!("the scene has {} meshes, got index {mesh}", self.mesh_count),
+                    ));
+                }
+                next.model_transforms.insert(mesh, transform);
+            }
+            applied.push("model_transforms");
+        }
+        if let Some(quality) = control.quality {
+            next.quality = quality;
+            applied.push("quality");
+        }
+        if let Some(rgbd) = control.rgbd {
+            next.rgbd = rgbd.apply(&self.settings.rgbd, "control.rgbd")?;
+            applied.push("rgbd");
+        }
+        self.settings = next;
+        Ok(applied.into_iter().map(str::to_owned).collect())
+    }
+}
+
+/// The `RenderedFrame` of a finished frame: the quality's component, tone mapped and encoded,
+/// with the decode, queue, GPU stage and encode times.
+fn rendered_frame(in_flight: &InFlight, output: RenderOutput, dropped_frames: u64) -> Result<RenderedFrame, WireError> {
+    let started = Instant::now();
+    let image = in_flight.quality.component.of(&output.frame);
+    let exposure = in_flight.quality.exposure.unwrap_or_else(|| image.auto_exposure());
+    let encoded = match in_flight.quality.format {
+        StreamImageFormat::Png => FrameImage::Png(
+            image.encode_png(exposure).map_err(|e| WireError::new(ErrorCode::Internal, None, e.to_string()))?,
+        ),
+        StreamImageFormat::Rgba8 => FrameImage::Rgba8(image.tone_map_rgba8(exposure)),
+    };
+    let mut timings = vec![("decode".to_owned(), in_flight.decode_ms), ("queue".to_owned(), output.queue_ms)];
+    timings.extend(output.frame.timings.stages.iter().cloned());
+    timings.push(("encode".to_owned(), started.elapsed().as_secs_f64() * 1e3));
+    Ok(RenderedFrame {
+        frame_id: in_flight.frame_id,
+        timestamp: in_flight.timestamp,
+        width: image.width,
+        height: image.height,
+        image: encoded,
+        timings,
+        val_count: output.frame.val_count,
+        dropped_frames,
+    })
+}
+
+/// The stream error for a failed GPU job.
+fn worker_error(error: WorkerError) -> WireError {
+    match error {
+        WorkerError::QueueFull(waiting) => WireError::limit(
+            super::config::limit::MAX_QUEUE,
+            None,
+            format!("frame dropped: the GPU queue is full ({waiting} renders waiting)"),
+        ),
+        WorkerError::SceneNotFound(id) => {
+            WireError::new(ErrorCode::SceneNotFound, None, format!("the scene `{id}` has been deleted"))
+        }
+        WorkerError::NotImplemented(what) => WireError::new(
+            ErrorCode::NotImplemented,
+            None,
+            format!("the frame is valid, but {what} is not implemented yet"),
+        ),
+        WorkerError::Stopped => WireError::new(ErrorCode::ShuttingDown, None, "the GPU thread has stopped"),
+        error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => {
+            tracing::error!("stream frame failed: {error}");
+            WireError::new(ErrorCode::Internal, None, "internal error (logged on the server)")
+        }
+    }
+}

@@ -1,0 +1,725 @@
+//! `relume serve` end to end: a real server on 127.0.0.1 port 0, driven over HTTP and WebSocket,
+//! good inputs and bad ones. Renders are tiny (32x32 of `cornell_bunny_small`, or a two-quad
+//! scene given inline).
+//!
+//! `proto/openapi.json` is compared with the document the handlers generate; after a
+//! deliberate API change, `BLESS=1 cargo test --test integration openapi` rewrites it.
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use bytes::Bytes;
+use futures_util::{SinkExt, StreamExt};
+use http_body_util::{BodyExt, Full};
+use hyper::{HeaderMap, Method, StatusCode};
+use hyper_util::client::legacy::Client;
+use hyper_util::client::legacy::connect::HttpConnector;
+use prost::Message as _;
+use relume::service::wire::proto::{self, envelope::Body};
+use relume::service::wire::{ErrorCode, PROTOCOL_VERSION};
+use relume::service::{Config, ServeError, Server};
+use serde_json::{Value, json};
+use tokio::sync::oneshot;
+use tokio_tungstenite::tungstenite;
+
+use super::fixture;
+
+/// A server on a free loopback port, stopped by [`TestServer::stop`].
+struct TestServer {
+    addr: SocketAddr,
+    stop: Option<oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<Result<(), ServeError>>,
+    client: Client<HttpConnector, Full<Bytes>>,
+    token: Option<String>,
+}
+
+/// An HTTP answer, body read.
+struct Reply {
+    status: StatusCode,
+    headers: HeaderMap,
+    body: Bytes,
+}
+
+impl Reply {
+    fn json(&self) -> Value {
+        serde_json::from_slice(&self.body)
+            .unwrap_or_else(|e| panic!("{}: not JSON ({e}): {}", self.status, String::from_utf8_lossy(&self.body)))
+    }
+
+    fn header(&self, name: &str) -> &str {
+        self.headers.get(name).and_then(|v| v.to_str().ok()).unwrap_or_else(|| panic!("no header {name}"))
+    }
+
+    /// Asserts an error answer with this status and code; returns the `error` object.
+    #[track_caller]
+    fn error(&self, status: u16, code: &str) -> Value {
+        let body = self.json();
+        assert_eq!(self.status.as_u16(), status, "{body}");
+        assert_eq!(self.header("content-type"), "application/json");
+        assert_eq!(body["error"]["code"], code, "{body}");
+        assert!(body["error"]["message"].as_str().is_some_and(|m| !m.is_empty()), "{body}");
+        body["error"].clone()
+    }
+}
+
+impl TestServer {
+    /// Serves `fixtures/` as the asset directory, with the defaults changed by `edit`.
+    async fn start(edit: impl FnOnce(&mut Config)) -> TestServer {
+        let mut config = Config::new(SocketAddr::from(([127, 0, 0, 1], 0)), fixture(""));
+        config.shutdown_grace_seconds = 20;
+        edit(&mut config);
+        let token = config.token.clone();
+        let server = Server::bind(config).await.expect("the server starts");
+        let addr = server.local_addr();
+        assert!(addr.ip().is_loopback());
+        let (stop, stopped) = oneshot::channel::<()>();
+        let task = tokio::spawn(server.run(async {
+            let _ = stopped.await;
+        }));
+        let client = Client::builder(hyper_util::rt::TokioExecutor::new()).build_http();
+        TestServer { addr, stop: Some(stop), task, client, token }
+    }
+
+    async fn request(&self, method: Method, path: &str, body: impl Into<Bytes>) -> Reply {
+        let mut request = hyper::Request::builder().method(method).uri(format!("http://{}{path}", self.addr));
+        if let Some(token) = &self.token {
+            request = request.header("authorization", format!("Bearer {token}"));
+        }
+        self.send(request.body(Full::new(body.into())).expect("request")).await
+    }
+
+    async fn send(&self, request: hyper::Request<Full<Bytes>>) -> Reply {
+        let response = self.client.request(request).await.expect("the server answers");
+        let (parts, body) = response.into_parts();
+        let body = body.collect().await.expect("body").to_bytes();
+        Reply { status: parts.status, headers: parts.headers, body }
+    }
+
+    async fn get(&self, path: &str) -> Reply {
+        self.request(Method::GET, path, Bytes::new()).await
+    }
+
+    async fn post(&self, path: &str, body: &Value) -> Reply {
+        self.request(Method::POST, path, body.to_string()).await
+    }
+
+    /// Creates a scene; returns its id.
+    async fn create(&self, scene: &Value) -> String {
+        let reply = self.post("/v1/scenes", scene).await;
+        assert_eq!(reply.status, StatusCode::CREATED, "{}", reply.json());
+        let id = reply.json()["id"].as_str().expect("id").to_owned();
+        assert_eq!(reply.header("location"), format!("/v1/scenes/{id}"));
+        id
+    }
+
+    async fn stream(&self, id: &str) -> Ws {
+        let url = format!("ws://{}/v1/scenes/{id}/stream", self.addr);
+        let (ws, response) = tokio_tungstenite::connect_async(url).await.expect("the stream opens");
+        assert_eq!(response.status(), StatusCode::SWITCHING_PROTOCOLS);
+        Ws(ws)
+    }
+
+    /// Asks the server to stop and waits until it has.
+    async fn stop(mut self) {
+        let _ = self.stop.take().expect("running").send(());
+        let result = tokio::time::timeout(Duration::from_secs(60), self.task).await;
+        result.expect("the server stops within a minute").expect("the server task").expect("a clean stop");
+    }
+}
+
+struct Ws(tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>);
+
+impl Ws {
+    async fn send(&mut self, message: tungstenite::Message) {
+        self.0.send(message).await.expect("sent");
+    }
+
+    async fn next(&mut self) -> tungstenite::Message {
+        let message = tokio::time::timeout(Duration::from_secs(60), self.0.next()).await.expect("an answer in time");
+        message.expect("the stream is open").expect("a message")
+    }
+
+    /// Sends one binary message and decodes the envelope that answers it.
+    async fn exchange(&mut self, bytes: Vec<u8>) -> Body {
+        self.send(tungstenite::Message::Binary(bytes.into())).await;
+        self.answer().await
+    }
+
+    async fn answer(&mut self) -> Body {
+        match self.next().await {
+            tungstenite::Message::Binary(bytes) => {
+                let envelope = proto::Envelope::decode(bytes.as_ref()).expect("an Envelope");
+                assert_eq!(envelope.version, PROTOCOL_VERSION);
+                envelope.body.expect("a body")
+            }
+            other => panic!("expected a binary message, got {other:?}"),
+        }
+    }
+
+    /// Sends `bytes` and asserts an `Error` with this code; returns it.
+    async fn expect_error(&mut self, bytes: Vec<u8>, code: ErrorCode) -> proto::Error {
+        match self.exchange(bytes).await {
+            Body::Error(error) => {
+                assert_eq!(error.code(), code, "{error:?}");
+                assert!(!error.message.is_empty());
+                error
+            }
+            other => panic!("expected an error {code:?}, got {other:?}"),
+        }
+    }
+}
+
+fn envelope(body: Body) -> Vec<u8> {
+    proto::Envelope { version: PROTOCOL_VERSION, body: Some(body) }.encode_to_vec()
+}
+
+/// `fixtures/scenes/<name>.json` with its mesh paths made relative to `fixtures/` (the
+/// asset directory), at `size` x `size` pixels.
+fn fixture_scene(name: &str, size: u32) -> Value {
+    let text = std::fs::read_to_string(fixture(&format!("scenes/{name}.json"))).expect("fixture");
+    let mut scene: Value = serde_json::from_str(&text.replace("\"../meshes/", "\"meshes/")).expect("JSON");
+    scene["camera"]["width"] = size.into();
+    scene["camera"]["height"] = size.into();
+    scene
+}
+
+/// A floor and a back wall given as OBJ text, lit from above: loads in milliseconds.
+fn inline_scene() -> Value {
+    json!({
+        "meshes": [{
+            "obj": "room.obj",
+            "obj_text": "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv -1 2 -1\nv 1 2 -1\nf 1 4 3 2\nf 1 2 6 5\n",
+            "sparse_points": 64,
+            "material": {"diffuse": [0.8, 0.3, 0.2]}
+        }],
+        "light": {"position": [0, 1.8, 0.5], "direction": [0, -1, -0.3], "inner_angle_deg": 30,
+                  "outer_angle_deg": 45, "intensity": [5, 5, 5]},
+        "camera": {"position": [0, 1, 3], "target": [0, 0.5, 0], "fov_y_deg": 50, "width": 16, "height": 16},
+        "settings": {"rsm_resolution": 16}
+    })
+}
+
+/// A valid RGB-D frame envelope: `w` x `h`, raw RGB8, u16 depth (mm), identity pose.
+fn frame(frame_id: u64, w: u32, h: u32) -> proto::RgbdFrame {
+    let pixels = (w * h) as usize;
+    proto::RgbdFrame {
+        frame_id,
+        timestamp: 12.5,
+        intrinsics: Some(proto::Intrinsics {
+            width: w,
+            height: h,
+            fx: 50.0,
+            fy: 50.0,
+            cx: w as f32 / 2.0,
+            cy: h as f32 / 2.0,
+        }),
+        color: Some(proto::Color { data: Some(proto::color::Data::Rgb8(vec![128; pixels * 3])) }),
+        depth: Some(proto::Depth {
+            data: Some(proto::depth::Data::U16(proto::DepthU16 {
+                data: 1500u16.to_le_bytes().repeat(pixels),
+                units_per_metre: 1000.0,
+            })),
+        }),
+        camera_to_world: Some(pose(0.0, 0.0, 0.0, 1.0)),
+    }
+}
+
+fn pose(x: f32, y: f32, z: f32, w: f32) -> proto::Pose {
+    proto::Pose {
+        transform: Some(proto::pose::Transform::TranslationRotation(proto::TranslationRotation {
+            translation: Some(proto::Vec3 { x: 0.0, y: 1.0, z: 2.0 }),
+            rotation: Some(proto::Quaternion { x, y, z, w }),
+        })),
+    }
+}
+
+fn v3(x: f32, y: f32, z: f32) -> Option<proto::Vec3> {
+    Some(proto::Vec3 { x, y, z })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scenes_are_created_rendered_and_deleted() {
+    let server = TestServer::start(|_| {}).await;
+    let health = server.get("/healthz").await;
+    assert_eq!(health.status, StatusCode::OK);
+    assert_eq!(health.json()["status"], "ok");
+    assert!(health.json()["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+
+    let id = server.create(&fixture_scene("cornell_bunny_small", 32)).await;
+    let info = server.get(&format!("/v1/scenes/{id}")).await;
+    assert_eq!(info.status, StatusCode::OK);
+    let info = info.json();
+    assert_eq!(info["id"], id.as_str());
+    assert_eq!(info["sparse_points"], 768);
+    assert_eq!(info["max_vals"], 32 * 32);
+    assert_eq!(info["meshes"].as_array().map(Vec::len), Some(2));
+
+    // An empty body: the scene's camera (32x32), sparse, PNG.
+    let render = server.request(Method::POST, &format!("/v1/scenes/{id}/render"), Bytes::new()).await;
+    assert_eq!(render.status, StatusCode::OK, "{}", String::from_utf8_lossy(&render.body));
+    assert_eq!(render.header("content-type"), "image/png");
+    let png = image::load_from_memory(&render.body).expect("a PNG").into_rgb8();
+    assert_eq!(png.dimensions(), (32, 32));
+    assert!(png.pixels().any(|p| p.0 != [0, 0, 0]), "the image is lit");
+    assert_eq!((render.header("x-relume-width"), render.header("x-relume-height")), ("32", "32"));
+    assert!(render.header("x-relume-val-count").parse::<u32>().expect("a count") > 0);
+    let timing = render.header("server-timing");
+    for stage in ["queue;dur=", "rsm_raster;dur=", "gather;dur=", "shade;dur=", "gpu;dur=", "encode;dur=", "total;dur="]
+    {
+        assert!(timing.contains(stage), "{stage} missing from {timing}");
+    }
+
+    // Another camera, a light override, brute force, linear floats.
+    let request = json!({
+        "camera": {"position": [0, 1, 3.3], "target": [0, 0.9, 0], "fov_y_deg": 45, "width": 24, "height": 16},
+        "light": {"intensity": [20, 20, 20], "outer_angle_deg": 30},
+        "quality": {"method": "brute-force", "component": "indirect", "format": "f32"}
+    });
+    let render = server.post(&format!("/v1/scenes/{id}/render"), &request).await;
+    assert_eq!(render.status, StatusCode::OK, "{}", String::from_utf8_lossy(&render.body));
+    assert_eq!(render.header("content-type"), "application/octet-stream");
+    assert!(render.header("server-timing").contains("brute_force;dur="));
+    let floats: Vec<f32> =
+        render.body.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes"))).collect();
+    assert_eq!(floats.len(), 24 * 16 * 4);
+    assert!(floats.iter().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(floats.chunks_exact(4).any(|p| p[0] > 0.0 && p[3] == 1.0), "indirect light on covered pixels");
+
+    let metrics = server.get("/metrics").await;
+    assert_eq!(metrics.status, StatusCode::OK);
+    assert!(metrics.header("content-type").starts_with("text/plain; version=0.0.4"));
+    let text = String::from_utf8_lossy(&metrics.body);
+    for needle in [
+        "relume_http_requests_total{route=\"/v1/scenes/{id}/render\",method=\"POST\",status=\"200\"} 2",
+        "relume_frame_duration_seconds_count 2",
+        "relume_gpu_seconds_total{stage=\"gather\"}",
+        "relume_render_queue_depth 0",
+        "relume_scenes 1",
+        "relume_dropped_frames_total 0",
+    ] {
+        assert!(text.contains(needle), "{needle} missing from\n{text}");
+    }
+
+    let deleted = server.request(Method::DELETE, &format!("/v1/scenes/{id}"), Bytes::new()).await;
+    assert_eq!(deleted.status, StatusCode::NO_CONTENT);
+    server.get(&format!("/v1/scenes/{id}")).await.error(404, "not_found");
+    server.post(&format!("/v1/scenes/{id}/render"), &json!({})).await.error(404, "not_found");
+    server.request(Method::DELETE, &format!("/v1/scenes/{id}"), Bytes::new()).await.error(404, "not_found");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_scenes_get_errors_naming_the_field() {
+    let server = TestServer::start(|c| c.limits.max_mesh_bytes = 2 << 20).await;
+    let create = |scene: Value| {
+        let server = &server;
+        async move { server.post("/v1/scenes", &scene).await }
+    };
+
+    let reply = server.request(Method::POST, "/v1/scenes", "{\"meshes\": [").await;
+    assert_eq!(reply.error(400, "invalid_json")["field"], "meshes[0]");
+    let reply = server.request(Method::POST, "/v1/scenes", vec![0xff, 0xfe]).await;
+    reply.error(400, "invalid_json");
+    let mut scene = inline_scene();
+    scene["camera"]["colour"] = json!(1);
+    let error = create(scene).await.error(400, "invalid_json");
+    assert!(error["message"].as_str().unwrap().contains("colour"), "{error}");
+    let mut scene = inline_scene();
+    scene["camera"]["fov_y_deg"] = json!(0);
+    assert_eq!(create(scene).await.error(400, "invalid_field")["field"], "camera.fov_y_deg");
+    let mut scene = inline_scene();
+    scene["meshes"][0]["sparse_points"] = json!(0);
+    assert_eq!(create(scene).await.error(400, "invalid_field")["field"], "meshes[0].sparse_points");
+
+    // Paths that leave the asset directory, whether or not the file exists.
+    for path in ["../Cargo.toml", "/etc/passwd", "meshes/../../src/lib.rs", "../../../../nope.obj"] {
+        let scene = json!({"meshes": [{"obj": path, "sparse_points": 8}],
+                           "light": inline_scene()["light"], "camera": inline_scene()["camera"]});
+        let error = create(scene).await.error(400, "path_outside_assets");
+        assert_eq!(error["field"], "meshes[0].obj");
+        assert!(!error["message"].as_str().unwrap().contains(&fixture("").display().to_string()), "{error}");
+    }
+    let mut scene = inline_scene();
+    scene["meshes"][0]["material"]["diffuse_texture"] = json!("../../etc/hostname");
+    assert_eq!(create(scene).await.error(400, "path_outside_assets")["field"], "meshes[0].material.diffuse_texture");
+    let scene = json!({"meshes": [{"obj": "meshes/missing.obj", "sparse_points": 8}],
+                       "light": inline_scene()["light"], "camera": inline_scene()["camera"]});
+    assert_eq!(create(scene).await.error(400, "invalid_scene")["field"], "meshes[0].obj");
+
+    // Invalid OBJ text: the line is named, the server's directory is not.
+    let mut scene = inline_scene();
+    scene["meshes"][0]["obj_text"] = json!("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
+    let error = create(scene).await.error(400, "invalid_scene");
+    let message = error["message"].as_str().unwrap();
+    assert!(message.contains("room.obj:3"), "{message}");
+    assert!(!message.contains(&fixture("").display().to_string()), "{message}");
+    let mut scene = inline_scene();
+    scene["meshes"][0]["obj_text"] = json!("mtllib ../scenes/x.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    assert_eq!(create(scene).await.error(400, "invalid_scene")["field"], "meshes[0].obj_text");
+    let mut scene = inline_scene();
+    scene["meshes"][0]["obj_text"] = json!("v 0 0 0\nf 1 2 3\n");
+    create(scene).await.error(400, "invalid_scene");
+
+    // Limits: mesh size (413), VALs and frame size (400).
+    let scene = json!({"meshes": [{"obj": "meshes/stanford_bunny/stanford-bunny.obj", "sparse_points": 8}],
+                       "light": inline_scene()["light"], "camera": inline_scene()["camera"]});
+    let error = create(scene).await.error(413, "limit_exceeded");
+    assert_eq!((error["limit"].as_str(), error["field"].as_str()), (Some("max_mesh_bytes"), Some("meshes[0].obj")));
+    let mut scene = inline_scene();
+    scene["settings"]["rsm_resolution"] = json!(512);
+    assert_eq!(create(scene).await.error(400, "limit_exceeded")["limit"], "max_vals");
+    let mut scene = inline_scene();
+    scene["camera"]["width"] = json!(8000);
+    assert_eq!(create(scene).await.error(400, "limit_exceeded")["limit"], "max_frame_side");
+
+    // Nothing was kept, and the server still works.
+    assert_eq!(server.get("/healthz").await.json()["scenes"], 0);
+    server.create(&inline_scene()).await;
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_and_routes_answer_with_json_errors() {
+    let server = TestServer::start(|c| {
+        c.limits.max_body_bytes = 4096;
+        c.limits.max_scenes = 1;
+    })
+    .await;
+    let mut big = inline_scene();
+    big["meshes"][0]["obj_text"] = json!(format!("# {}\n", "x".repeat(5000)));
+    let error = server.post("/v1/scenes", &big).await.error(413, "limit_exceeded");
+    assert_eq!(error["limit"], "max_body_bytes");
+
+    let id = server.create(&inline_scene()).await;
+    assert_eq!(server.post("/v1/scenes", &inline_scene()).await.error(400, "limit_exceeded")["limit"], "max_scenes");
+
+    let render = |body: Value| {
+        let path = format!("/v1/scenes/{id}/render");
+        let server = &server;
+        async move { server.post(&path, &body).await }
+    };
+    let camera = |edit: &dyn Fn(&mut Value)| {
+        let mut c = json!({"position": [0, 1, 3], "target": [0, 0.5, 0], "fov_y_deg": 50, "width": 8, "height": 8});
+        edit(&mut c);
+        json!({ "camera": c })
+    };
+    let e = render(camera(&|c| c["target"] = json!([0, 1, 3]))).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "camera.target");
+    let e = render(camera(&|c| c["width"] = json!(5000))).await.error(400, "limit_exceeded");
+    assert_eq!((e["limit"].as_str(), e["field"].as_str()), (Some("max_frame_side"), Some("camera.width")));
+    let e = render(camera(&|c| c["width"] = json!(-1))).await.error(400, "invalid_json");
+    assert_eq!(e["field"], "camera.width");
+    let e = render(json!({"light": {"inner_angle_deg": 50}})).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "light.inner_angle_deg");
+    let e = render(json!({"light": {"direction": [0, 0, 0]}})).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "light.direction");
+    let e = render(json!({"quality": {"method": "exact"}})).await.error(400, "invalid_json");
+    assert_eq!(e["field"], "quality.method");
+    let e = render(json!({"quality": {"exposure": -1}})).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "quality.exposure");
+    render(json!({"quality": {"typo": 1}})).await.error(400, "invalid_json");
+
+    server.get("/v1/scenes/nope").await.error(404, "not_found");
+    server.get("/v1/nothing").await.error(404, "not_found");
+    server.request(Method::PUT, "/v1/scenes", Bytes::new()).await.error(405, "method_not_allowed");
+    // A plain GET of the stream route is not an upgrade.
+    server.get(&format!("/v1/scenes/{id}/stream")).await.error(400, "upgrade_required");
+
+    let reply = render(json!({"quality": {"exposure": 2, "component": "direct"}})).await;
+    assert_eq!(reply.status, StatusCode::OK);
+    assert_eq!(reply.header("x-relume-exposure"), "2");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_token_guards_the_v1_routes() {
+    let mut server = TestServer::start(|c| c.token = Some("s3cret".to_owned())).await;
+    server.token = None;
+    assert_eq!(server.post("/v1/scenes", &inline_scene()).await.error(401, "unauthorized")["code"], "unauthorized");
+    server.get("/v1/scenes/x").await.error(401, "unauthorized");
+    server.token = Some("wrong".to_owned());
+    let reply = server.get("/v1/scenes/x").await;
+    reply.error(401, "unauthorized");
+    assert_eq!(reply.header("www-authenticate"), "Bearer");
+    assert_eq!(server.get("/healthz").await.status, StatusCode::OK);
+    assert_eq!(server.get("/metrics").await.status, StatusCode::OK);
+    server.token = Some("s3cret".to_owned());
+    let id = server.create(&inline_scene()).await;
+    assert_eq!(server.get(&format!("/v1/scenes/{id}")).await.status, StatusCode::OK);
+    let refused = tokio_tungstenite::connect_async(format!("ws://{}/v1/scenes/{id}/stream", server.addr)).await;
+    match refused {
+        Err(tungstenite::Error::Http(response)) => assert_eq!(response.status(), StatusCode::UNAUTHORIZED),
+        other => panic!("expected 401, got {other:?}"),
+    }
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_full_queue_answers_503_with_retry_after() {
+    let server = TestServer::start(|c| c.limits.max_queue = 1).await;
+    let id = server.create(&fixture_scene("cornell_bunny_small", 48)).await;
+    let body = json!({"quality": {"method": "brute-force"}}).to_string();
+    let path = format!("/v1/scenes/{id}/render");
+    let replies =
+        futures_util::future::join_all((0..6).map(|_| server.request(Method::POST, &path, body.clone()))).await;
+    let mut refused = 0;
+    for reply in &replies {
+        match reply.status.as_u16() {
+            200 => assert_eq!(reply.header("content-type"), "image/png"),
+            503 => {
+                assert_eq!(reply.error(503, "queue_full")["limit"], "max_queue");
+                assert!(reply.header("retry-after").parse::<u32>().expect("seconds") >= 1);
+                refused += 1;
+            }
+            other => panic!("unexpected status {other}"),
+        }
+    }
+    // At most one render waits: the first is queued at once, so at least one succeeds, and
+    // the six arrive well within one frame, so some are refused.
+    assert!((1..=5).contains(&refused), "{refused} refused");
+    let metrics = server.get("/metrics").await;
+    let text = String::from_utf8_lossy(&metrics.body);
+    assert!(text.contains(&format!("relume_renders_rejected_total {refused}")), "{text}");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
+    let server = TestServer::start(|c| {
+        c.limits.max_message_bytes = 512 << 10;
+        c.limits.max_vals = 1000;
+    })
+    .await;
+    let missing = tokio_tungstenite::connect_async(format!("ws://{}/v1/scenes/nope/stream", server.addr)).await;
+    match missing {
+        Err(tungstenite::Error::Http(response)) => assert_eq!(response.status(), StatusCode::NOT_FOUND),
+        other => panic!("expected 404, got {other:?}"),
+    }
+    let id = server.create(&inline_scene()).await;
+    let mut ws = server.stream(&id).await;
+
+    ws.expect_error(vec![0xff, 0x01, 0x02], ErrorCode::Malformed).await;
+    ws.send(tungstenite::Message::Text("{\"hello\": 1}".into())).await;
+    match ws.answer().await {
+        Body::Error(e) => assert_eq!(e.code(), ErrorCode::Malformed),
+        other => panic!("{other:?}"),
+    }
+    let v2 = proto::Envelope { version: 2, body: Some(Body::RgbdFrame(frame(1, 8, 6))) }.encode_to_vec();
+    ws.expect_error(v2, ErrorCode::UnsupportedVersion).await;
+    let e = ws.expect_error(envelope(Body::SettingsAck(Default::default())), ErrorCode::UnexpectedMessage).await;
+    assert_eq!(e.field, "body");
+
+    // Wrong byte lengths, bad poses, bad intrinsics: the field and the frame are named.
+    let mut short = frame(7, 8, 6);
+    short.color = Some(proto::Color { data: Some(proto::color::Data::Rgb8(vec![0; 8 * 6 * 3 - 1])) });
+    let e = ws.expect_error(envelope(Body::RgbdFrame(short)), ErrorCode::InvalidField).await;
+    assert_eq!((e.field.as_str(), e.frame_id), ("rgbd_frame.color.rgb8", Some(7)));
+    let mut short = frame(8, 8, 6);
+    short.depth = Some(proto::Depth { data: Some(proto::depth::Data::F32Metres(vec![0; 8 * 6 * 2])) });
+    let e = ws.expect_error(envelope(Body::RgbdFrame(short)), ErrorCode::InvalidField).await;
+    assert_eq!(e.field, "rgbd_frame.depth.f32_metres");
+    let rotation = "rgbd_frame.camera_to_world.translation_rotation.rotation";
+    for bad in [pose(f32::NAN, 0.0, 0.0, 1.0), pose(0.0, 0.0, 0.0, 2.0)] {
+        let mut f = frame(9, 8, 6);
+        f.camera_to_world = Some(bad);
+        assert_eq!(ws.expect_error(envelope(Body::RgbdFrame(f)), ErrorCode::InvalidField).await.field, rotation);
+    }
+    let mut f = frame(10, 8, 6);
+    f.camera_to_world = Some(proto::Pose {
+        transform: Some(proto::pose::Transform::Matrix(proto::Matrix4 {
+            column_major: vec![2.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+        })),
+    });
+    let e = ws.expect_error(envelope(Body::RgbdFrame(f)), ErrorCode::InvalidField).await;
+    assert_eq!(e.field, "rgbd_frame.camera_to_world.matrix.column_major");
+    let mut f = frame(11, 8, 6);
+    f.intrinsics.as_mut().expect("intrinsics").fx = f32::NAN;
+    assert_eq!(
+        ws.expect_error(envelope(Body::RgbdFrame(f)), ErrorCode::InvalidField).await.field,
+        "rgbd_frame.intrinsics.fx"
+    );
+
+    // Limits: frame side, VALs per frame (320 x 240 at grid 8 is 1200 > 1000), message size.
+    let mut f = frame(12, 8, 6);
+    f.intrinsics.as_mut().expect("intrinsics").width = 5000;
+    let e = ws.expect_error(envelope(Body::RgbdFrame(f)), ErrorCode::LimitExceeded).await;
+    assert_eq!((e.limit.as_str(), e.field.as_str()), ("max_frame_side", "rgbd_frame.intrinsics.width"));
+    let e = ws.expect_error(envelope(Body::RgbdFrame(frame(13, 320, 240))), ErrorCode::LimitExceeded).await;
+    assert_eq!((e.limit.as_str(), e.frame_id), ("max_vals", Some(13)));
+    let e = ws.expect_error(vec![0; 600 << 10], ErrorCode::LimitExceeded).await;
+    assert_eq!(e.limit, "max_message_bytes");
+
+    // Control messages: validated against the scene, acknowledged, all or nothing.
+    let control = |edit: &dyn Fn(&mut proto::Control)| {
+        let mut c = proto::Control { request_id: 21, ..Default::default() };
+        edit(&mut c);
+        envelope(Body::Control(c))
+    };
+    let e = ws
+        .expect_error(
+            control(&|c| c.light = Some(proto::LightOverride { inner_angle_deg: Some(60.0), ..Default::default() })),
+            ErrorCode::InvalidField,
+        )
+        .await;
+    assert_eq!((e.field.as_str(), e.request_id), ("control.light.inner_angle_deg", Some(21)));
+    let e = ws
+        .expect_error(
+            control(&|c| {
+                c.model_transforms = vec![proto::ModelTransform {
+                    mesh_index: 3,
+                    translation: v3(0.0, 0.0, 0.0),
+                    rotation_deg: v3(0.0, 0.0, 0.0),
+                    scale: None,
+                }]
+            }),
+            ErrorCode::InvalidField,
+        )
+        .await;
+    assert_eq!(e.field, "control.model_transforms[0].mesh_index");
+    let ok = control(&|c| {
+        c.camera = Some(proto::Camera {
+            position: v3(0.0, 1.0, 3.0),
+            target: v3(0.0, 0.5, 0.0),
+            up: None,
+            fov_y_deg: 40.0,
+            width: 16,
+            height: 16,
+        });
+        c.quality = Some(proto::Quality { format: proto::ImageFormat::Rgba8 as i32, ..Default::default() });
+        c.rgbd = Some(proto::RgbdSettings { grid_step: Some(16), ..Default::default() });
+    });
+    match ws.exchange(ok).await {
+        Body::SettingsAck(ack) => {
+            assert_eq!(ack.request_id, 21);
+            assert_eq!(ack.applied, ["camera", "quality", "rgbd"]);
+        }
+        other => panic!("{other:?}"),
+    }
+    // With grid_step 16 the 320 x 240 frame is within max_vals; rendering it is not wired yet.
+    let e = ws.expect_error(envelope(Body::RgbdFrame(frame(14, 320, 240))), ErrorCode::NotImplemented).await;
+    assert_eq!(e.frame_id, Some(14));
+
+    // Beyond twice the limit the transport itself closes the connection (1009).
+    // (The server may close before the client has finished sending.)
+    let _ = ws.0.send(tungstenite::Message::Binary(vec![0u8; 2 << 20].into())).await;
+    loop {
+        match tokio::time::timeout(Duration::from_secs(30), ws.0.next()).await.expect("closed in time") {
+            Some(Ok(tungstenite::Message::Close(frame))) => {
+                assert_eq!(frame.map(|f| u16::from(f.code)), Some(1009));
+                break;
+            }
+            Some(Ok(_)) => continue,
+            None | Some(Err(_)) => break,
+        }
+    }
+
+    let metrics = String::from_utf8_lossy(&server.get("/metrics").await.body).into_owned();
+    assert!(metrics.contains("relume_stream_errors_total{code=\"ERROR_CODE_INVALID_FIELD\"}"), "{metrics}");
+    assert!(metrics.contains("relume_stream_messages_total{kind=\"control\"} 3"), "{metrics}");
+    // Other clients were not affected.
+    assert_eq!(server.get(&format!("/v1/scenes/{id}")).await.status, StatusCode::OK);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shutdown_finishes_in_flight_renders_and_closes_streams() {
+    let server = TestServer::start(|_| {}).await;
+    let id = server.create(&fixture_scene("cornell_bunny_small", 32)).await;
+    let mut ws = server.stream(&id).await;
+    let path = format!("/v1/scenes/{id}/render");
+    let body = json!({"quality": {"method": "brute-force"}, "camera": {
+        "position": [0, 1, 3.3], "target": [0, 0.9, 0], "fov_y_deg": 38, "width": 64, "height": 64}})
+    .to_string();
+    let in_flight = {
+        let request = hyper::Request::post(format!("http://{}{path}", server.addr))
+            .body(Full::new(Bytes::from(body)))
+            .expect("request");
+        let client = server.client.clone();
+        tokio::spawn(async move { client.request(request).await })
+    };
+    // Let the render reach the GPU thread.
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let addr = server.addr;
+    let stop = tokio::spawn(server.stop());
+
+    match ws.answer().await {
+        Body::Error(e) => assert_eq!(e.code(), ErrorCode::ShuttingDown),
+        other => panic!("{other:?}"),
+    }
+    match ws.next().await {
+        tungstenite::Message::Close(Some(frame)) => assert_eq!(u16::from(frame.code), 1001),
+        other => panic!("expected a close frame, got {other:?}"),
+    }
+    let response = in_flight.await.expect("task").expect("the in-flight render is answered");
+    assert_eq!(response.status(), StatusCode::OK);
+    let png = response.into_body().collect().await.expect("body").to_bytes();
+    assert_eq!(image::load_from_memory(&png).expect("a PNG").width(), 64);
+    stop.await.expect("stopped cleanly");
+    assert!(tokio::net::TcpStream::connect(addr).await.is_err(), "no longer listening");
+}
+
+#[test]
+fn openapi_document_is_in_sync() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("proto/openapi.json");
+    let generated = relume::service::openapi_json();
+    if std::env::var_os("BLESS").is_some() {
+        std::fs::write(&path, &generated).expect("writing proto/openapi.json");
+        return;
+    }
+    let committed = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(
+        committed == generated,
+        "proto/openapi.json differs from the document the handlers generate; if the API change is \
+         deliberate, run `BLESS=1 cargo test --test integration openapi` (or `relume openapi > \
+         proto/openapi.json`) and commit the result"
+    );
+}
+
+/// The binary: flags and environment variables, a request, and a clean exit on SIGTERM.
+#[cfg(unix)]
+#[test]
+fn the_binary_serves_until_sigterm() {
+    use std::io::{BufRead, BufReader, Read, Write};
+    use std::process::{Command, Stdio};
+
+    let bad = Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(["serve", "--addr", "127.0.0.1:0"])
+        .env("RELUME_ASSETS", fixture("no-such-dir"))
+        .output()
+        .expect("runs");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("no-such-dir"), "{}", String::from_utf8_lossy(&bad.stderr));
+
+    let mut child = Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(["serve", "--addr", "127.0.0.1:0", "--max-queue", "3"])
+        .env("RELUME_ASSETS", fixture(""))
+        .env("NO_COLOR", "1")
+        .env_remove("RUST_LOG")
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starts");
+    let mut stderr = BufReader::new(child.stderr.take().expect("stderr"));
+    let mut log = String::new();
+    let port = loop {
+        let mut line = String::new();
+        assert!(stderr.read_line(&mut line).expect("reads") > 0, "exited early:\n{log}");
+        log.push_str(&line);
+        if line.contains("serving") {
+            let after = &line[line.find("127.0.0.1:").expect("the address is logged") + "127.0.0.1:".len()..];
+            break after.chars().take_while(char::is_ascii_digit).collect::<String>();
+        }
+    };
+    let mut stream = std::net::TcpStream::connect(format!("127.0.0.1:{port}")).expect("connects");
+    stream.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n").expect("writes");
+    let mut answer = String::new();
+    stream.read_to_string(&mut answer).expect("reads");
+    assert!(answer.starts_with("HTTP/1.1 200"), "{answer}");
+    assert!(answer.contains("\"max_queue\":3"), "{answer}");
+
+    let killed = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill runs");
+    assert!(killed.success());
+    let status = child.wait().expect("exits");
+    stderr.read_to_string(&mut log).expect("reads the rest");
+    assert!(status.success(), "{status}\n{log}");
+    assert!(log.contains("SIGTERM received") && log.contains("stopped"), "{log}");
+}
