@@ -119,13 +119,7 @@ impl MrRenderer {
             .collect();
         let composited =
             composite(frame, &rendered.direct.add(&rendered.indirect), &virtual_depth, self.options.exposure);
-        let sparse_irradiance = self
-            .renderer
-            .read_sparse_intermediates(gpu)?
-            .gathered_diffuse
-            .iter()
-            .map(|g| Vec3::from(g.irradiance))
-            .collect();
+        let sparse_irradiance = self.renderer.read_gathered_irradiance(gpu)?;
         Ok(MrFrame {
             composited,
             indirect: rendered.indirect,

@@ -128,12 +128,11 @@ pub struct Renderer {
     val_capacity: u32,
     /// One `u32`: how many VALs were appended (readers clamp it to the capacity).
     pub val_count: wgpu::Buffer,
-    /// VALs uploaded by [`Renderer::set_vals`], kept at the front of `vals` every frame (and
-    /// here, to upload again when `vals` grows).
-    uploaded_vals: Vec<RawVal>,
-    /// The RGB-D VAL pass, once a frame was given; it runs while `rgbd_active`.
-    rgbd: Option<RgbdVals>,
-    rgbd_key: Option<(Intrinsics, RgbdSettings)>,
+    /// How many VALs [`Renderer::set_vals`] put at the front of `vals`, kept every frame.
+    uploaded_vals: u32,
+    /// The RGB-D VAL pass for the intrinsics and settings it was built for, once a frame was
+    /// given; it runs while `rgbd_active`.
+    rgbd: Option<(Intrinsics, RgbdSettings, RgbdVals)>,
     rgbd_active: bool,
     sparse: Option<SparsePasses>,
     brute_force: Option<BruteForce>,
@@ -152,13 +151,7 @@ impl Renderer {
             Some(light) => {
                 let r = scene.settings.rsm_resolution;
                 Some(SpotPasses {
-                    spot: Spot {
-                        position: light.position,
-                        direction: light.direction,
-                        inner_angle: light.inner_angle,
-                        outer_angle: light.outer_angle,
-                        intensity: light.intensity,
-                    },
+                    spot: spot_of(light),
                     resolution: r,
                     rsm: Rsm::new(gpu, &scene_gpu)?,
                     direct: Direct::new(gpu, &scene_gpu)?,
@@ -172,9 +165,8 @@ impl Renderer {
             vals: gpu.storage_buffer_sized::<RawVal>("vals", val_capacity as usize)?,
             val_capacity,
             val_count: gpu.storage_buffer_sized::<u32>("val_count", 1)?,
-            uploaded_vals: Vec::new(),
+            uploaded_vals: 0,
             rgbd: None,
-            rgbd_key: None,
             rgbd_active: false,
             visibility,
             spot,
@@ -238,10 +230,11 @@ impl Renderer {
     /// removes them.
     pub fn set_vals(&mut self, gpu: &Gpu, vals: &[crate::reference::Val]) -> Result<(), GpuError> {
         self.rgbd_active = false;
-        self.uploaded_vals = vals.iter().map(RawVal::from).collect();
+        self.uploaded_vals = vals.len() as u32;
         self.ensure_val_capacity(gpu)?;
-        if !self.uploaded_vals.is_empty() {
-            gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&self.uploaded_vals));
+        let raw: Vec<RawVal> = vals.iter().map(RawVal::from).collect();
+        if !raw.is_empty() {
+            gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&raw));
         }
         Ok(())
     }
@@ -249,15 +242,15 @@ impl Renderer {
     /// Light every following frame with `frame`'s VALs (DESIGN.md §2 "RGB-D frames"), made on
     /// the GPU in the frame's `rgbd_vals` stage, plus the spot light's when the scene has one.
     pub fn set_rgbd_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame, settings: &RgbdSettings) -> Result<(), GpuError> {
-        let key = (frame.intrinsics, *settings);
-        if self.rgbd_key != Some(key) {
-            self.rgbd = Some(RgbdVals::new(gpu, &self.scene, frame.intrinsics, settings)?);
-            self.rgbd_key = Some(key);
+        let built_for_frame = self.rgbd.as_ref().is_some_and(|(k, s, _)| (*k, *s) == (frame.intrinsics, *settings));
+        if !built_for_frame {
+            let pass = RgbdVals::new(gpu, &self.scene, frame.intrinsics, settings)?;
+            self.rgbd = Some((frame.intrinsics, *settings, pass));
         }
-        self.uploaded_vals.clear();
+        self.uploaded_vals = 0;
         self.rgbd_active = true;
         self.ensure_val_capacity(gpu)?;
-        self.rgbd.as_ref().expect("built above").upload(gpu, frame)
+        self.rgbd.as_ref().expect("built above").2.upload(gpu, frame)
     }
 
     /// `frame`'s VALs alone, made on the GPU and read back (for accumulation across frames).
@@ -270,7 +263,7 @@ impl Renderer {
     ) -> Result<Vec<crate::reference::Val>, GpuError> {
         self.set_rgbd_frame(gpu, frame, settings)?;
         self.rgbd_active = false;
-        let pass = self.rgbd.as_ref().expect("built above");
+        let (_, _, pass) = self.rgbd.as_ref().expect("built above");
         gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&0u32));
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
         pass.record(gpu, &mut encoder, &self.vals, &self.val_count, self.val_capacity, None);
@@ -278,17 +271,18 @@ impl Renderer {
         self.read_vals(gpu)
     }
 
-    /// Grow `vals` to hold the uploaded VALs, the RGB-D frame's and the spot light's.
+    /// Grow `vals` to hold the uploaded VALs, the RGB-D frame's and the spot light's. A new
+    /// buffer starts empty: callers write the uploaded VALs after this.
     fn ensure_val_capacity(&mut self, gpu: &Gpu) -> Result<(), GpuError> {
         let rsm = self.spot.as_ref().map_or(0, |s| s.resolution * s.resolution);
-        let rgbd = if self.rgbd_active { self.rgbd.as_ref().map_or(0, RgbdVals::max_vals) } else { 0 };
-        let needed = self.uploaded_vals.len() as u32 + rgbd + rsm;
+        let rgbd = match (&self.rgbd, self.rgbd_active) {
+            (Some((_, _, pass)), true) => pass.max_vals(),
+            _ => 0,
+        };
+        let needed = self.uploaded_vals + rgbd + rsm;
         if needed > self.val_capacity {
             self.val_capacity = needed.next_power_of_two();
             self.vals = gpu.storage_buffer_sized::<RawVal>("vals", self.val_capacity as usize)?;
-            if !self.uploaded_vals.is_empty() {
-                gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&self.uploaded_vals));
-            }
         }
         Ok(())
     }
@@ -304,13 +298,7 @@ impl Renderer {
     /// no RSM stages: nothing happens (the service refuses such overrides before).
     pub fn set_spot_light(&mut self, light: &scene::SpotLight) {
         if let Some(sp) = &mut self.spot {
-            sp.spot = Spot {
-                position: light.position,
-                direction: light.direction,
-                inner_angle: light.inner_angle,
-                outer_angle: light.outer_angle,
-                intensity: light.intensity,
-            };
+            sp.spot = spot_of(light);
         }
     }
 
@@ -322,8 +310,7 @@ impl Renderer {
         gpu.queue.write_buffer(&self.scene.frame, 0, bytemuck::bytes_of(&frame));
 
         // Uploaded VALs stay at the front; the RGB-D frame's and the spot light's are appended.
-        let uploaded = self.uploaded_vals.len() as u32;
-        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&uploaded));
+        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&self.uploaded_vals));
 
         let mut rec = Recorder::new(gpu, "relume.frame", 12);
         let scene = &self.scene;
@@ -334,7 +321,7 @@ impl Renderer {
                 RsmOutputs { vals: &self.vals, val_count: &self.val_count, light_distance: &sp.light_distance };
             rec.stage(stage::RSM_VALS, |e, s| sp.rsm.record(gpu, e, scene, &sp.view, &rsm_out, s))?;
         }
-        if let (true, Some(pass)) = (self.rgbd_active, &self.rgbd) {
+        if let (true, Some((_, _, pass))) = (self.rgbd_active, &self.rgbd) {
             rec.stage(stage::RGBD_VALS, |e, s| pass.record(gpu, e, &self.vals, &self.val_count, self.val_capacity, s))?;
         }
         let target = self.target.as_ref().expect("prepared above");
@@ -517,6 +504,16 @@ impl Renderer {
         Ok(gpu.read_buffer::<RawVal>(&self.vals, n)?.iter().map(Into::into).collect())
     }
 
+    /// Diffuse irradiance (W/m²) the last sparse frame gathered at each sparse point (after
+    /// occlusion); empty before the first sparse frame.
+    pub fn read_gathered_irradiance(&self, gpu: &Gpu) -> Result<Vec<Vec3>, GpuError> {
+        let Some(p) = &self.sparse else {
+            return Ok(Vec::new());
+        };
+        let gathered = gpu.read_buffer::<RawGathered>(&p.gathered.diffuse, self.scene.flat.sparse_points.len())?;
+        Ok(gathered.iter().map(|g| Vec3::from(g.irradiance)).collect())
+    }
+
     /// The last sparse frame's intermediate buffers: (gathered, sparse lights, vertex lights),
     /// each per lobe (glossy empty when the scene has none).
     pub fn read_sparse_intermediates(&self, gpu: &Gpu) -> Result<SparseIntermediates, GpuError> {
@@ -557,6 +554,17 @@ pub struct SparseIntermediates {
     pub sparse_glossy: Vec<RawPointLight>,
     pub vertex_diffuse: Vec<RawPointLight>,
     pub vertex_glossy: Vec<RawPointLight>,
+}
+
+/// The spot light as the RSM and direct passes take it.
+fn spot_of(light: &scene::SpotLight) -> Spot {
+    Spot {
+        position: light.position,
+        direction: light.direction,
+        inner_angle: light.inner_angle,
+        outer_angle: light.outer_angle,
+        intensity: light.intensity,
+    }
 }
 
 /// Optical camera coordinates (x right, y down, z forward) to wgpu clip space for a pinhole
