@@ -269,16 +269,27 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 impl Size {
+    /// The flags' size, else the scene camera's.
     fn resolve(&self, scene: &Scene) -> anyhow::Result<(u32, u32)> {
-        let check = |name: &str, v: u32| {
-            anyhow::ensure!((1..=8192).contains(&v), "--{name}: must be in 1..=8192, got {v}");
-            Ok(v)
-        };
         Ok((
-            check("width", self.width.unwrap_or(scene.camera.width))?,
-            check("height", self.height.unwrap_or(scene.camera.height))?,
+            checked_side("width", self.width.unwrap_or(scene.camera.width))?,
+            checked_side("height", self.height.unwrap_or(scene.camera.height))?,
         ))
     }
+
+    /// The flags' size, both or neither.
+    fn resolve_optional(&self) -> anyhow::Result<Option<(u32, u32)>> {
+        match (self.width, self.height) {
+            (None, None) => Ok(None),
+            (Some(w), Some(h)) => Ok(Some((checked_side("width", w)?, checked_side("height", h)?))),
+            _ => anyhow::bail!("--width and --height: give both or neither"),
+        }
+    }
+}
+
+fn checked_side(name: &str, v: u32) -> anyhow::Result<u32> {
+    anyhow::ensure!((1..=8192).contains(&v), "--{name}: must be in 1..=8192, got {v}");
+    Ok(v)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -309,15 +320,7 @@ fn replay_command(
             .map_err(|(field, m)| anyhow::anyhow!("--intrinsics: {field}: {m}"))?;
         recording_options.intrinsics = Some(k);
     }
-    let check = |name: &str, v: u32| {
-        anyhow::ensure!((1..=8192).contains(&v), "--{name}: must be in 1..=8192, got {v}");
-        Ok(v)
-    };
-    let size = match (size.width, size.height) {
-        (None, None) => None,
-        (Some(w), Some(h)) => Some((check("width", w)?, check("height", h)?)),
-        _ => anyhow::bail!("--width and --height: give both or neither"),
-    };
+    let size = size.resolve_optional()?;
     let options = relume::replay::ReplayOptions {
         recording,
         recording_options,
