@@ -2,13 +2,12 @@
 //! from each frame's camera and composited over its colour image, the real depth hiding the
 //! virtual object where real surfaces are nearer.
 //!
-//! [`MrRenderer`] is the per-frame loop shared by `relume replay` and the service's streams:
-//! frame in, composited image + indirect image + timings out.
+//! [`MrRenderer`] is the per-frame loop of `relume replay` (and, once wired, of the service's
+//! streams): frame in, composited image + indirect image + timings out.
 
 use crate::gpu::timing::StageTimings;
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, encode_srgb};
-use crate::reference::Val;
 use crate::renderer::{Method, Renderer, View};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
@@ -85,15 +84,6 @@ impl MrRenderer {
         })
     }
 
-    pub fn renderer(&self) -> &Renderer {
-        &self.renderer
-    }
-
-    /// Change the RGB-D settings from the next frame on.
-    pub fn set_rgbd_settings(&mut self, settings: RgbdSettings) {
-        self.settings = settings;
-    }
-
     /// Relight `frame`: its VALs (or the accumulated set), the scene's spot light if any, the
     /// virtual object seen from the frame's camera and composited over its colour.
     pub fn render_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<MrFrame, GpuError> {
@@ -128,11 +118,6 @@ impl MrRenderer {
             val_count: rendered.val_count,
             sparse_irradiance,
         })
-    }
-
-    /// The accumulated VALs, when accumulating.
-    pub fn accumulated(&self) -> Option<Vec<Val>> {
-        self.accumulator.as_ref().map(ValAccumulator::vals)
     }
 }
 
