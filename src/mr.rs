@@ -2,8 +2,9 @@
 //! from each frame's camera and composited over its colour image, the real depth hiding the
 //! virtual object where real surfaces are nearer.
 //!
-//! [`MrRenderer`] is the per-frame loop of `relume replay` (and, once wired, of the service's
-//! streams): frame in, composited image + indirect image + timings out.
+//! [`MrRenderer`] is the per-frame loop of `relume replay`: frame in, composited image +
+//! indirect image + timings out. The service's streams use [`virtual_depth`] and [`composite`]
+//! with the scene's shared renderer.
 
 use crate::gpu::timing::StageTimings;
 use crate::gpu::{Gpu, GpuError};
@@ -12,7 +13,7 @@ use crate::renderer::{Method, Renderer, View};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
-use glam::Vec3;
+use glam::{Affine3A, Vec3};
 
 /// How replayed frames are lit and rendered.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -100,13 +101,7 @@ impl MrRenderer {
         self.frames += 1;
         self.renderer.set_view(View::Pinhole { intrinsics: frame.intrinsics, camera_to_world: frame.camera_to_world });
         let rendered = self.renderer.render(gpu, Method::Sparse, w, h)?;
-        let hits = self.renderer.camera_view().expect("rendered above").read(gpu)?;
-        let world_to_camera = frame.camera_to_world.inverse();
-        let flat = &self.renderer.scene.flat;
-        let virtual_depth: Vec<Option<f32>> = hits
-            .iter()
-            .map(|hit| hit.map(|h| world_to_camera.transform_point3(flat.surface_at(h.triangle, h.barycentrics).0).z))
-            .collect();
+        let virtual_depth = virtual_depth(gpu, &self.renderer, frame.camera_to_world)?;
         let composited =
             composite(frame, &rendered.direct.add(&rendered.indirect), &virtual_depth, self.options.exposure);
         let sparse_irradiance = self.renderer.read_gathered_irradiance(gpu)?;
@@ -119,6 +114,21 @@ impl MrRenderer {
             sparse_irradiance,
         })
     }
+}
+
+/// Optical depth (m, along `camera_to_world`'s z) of the virtual content at each pixel of the
+/// last frame `renderer` rendered (from that camera); `None` where no geometry covers it.
+pub fn virtual_depth(gpu: &Gpu, renderer: &Renderer, camera_to_world: Affine3A) -> Result<Vec<Option<f32>>, GpuError> {
+    let Some(view) = renderer.camera_view() else {
+        return Ok(Vec::new());
+    };
+    let world_to_camera = camera_to_world.inverse();
+    let flat = &renderer.scene.flat;
+    Ok(view
+        .read(gpu)?
+        .iter()
+        .map(|hit| hit.map(|h| world_to_camera.transform_point3(flat.surface_at(h.triangle, h.barycentrics).0).z))
+        .collect())
 }
 
 /// The camera image with the virtual object drawn where it is visible: where it covers the

@@ -139,6 +139,8 @@ pub struct Renderer {
     exact: Option<Exact>,
     exact_val_stride: u32,
     target: Option<CameraTarget>,
+    /// Model-to-world of each mesh, as uploaded.
+    placement: Vec<Mat4>,
 }
 
 impl Renderer {
@@ -180,7 +182,36 @@ impl Renderer {
             exact: None,
             exact_val_stride: 1,
             target: None,
+            placement: scene.meshes.iter().map(|m| m.model_to_world).collect(),
         })
+    }
+
+    /// Place mesh `i` of `scene` (the scene this renderer was built from) by
+    /// `model_to_world[i]` from the next frame on: the vertices and the sparse points, which
+    /// live in model space, move with it; nothing is rebuilt but the exact reference's BVH.
+    /// Nothing happens when the placement is unchanged.
+    pub fn place_meshes(&mut self, gpu: &Gpu, scene: &Scene, model_to_world: &[Mat4]) {
+        if model_to_world == self.placement.as_slice() {
+            return;
+        }
+        let mut flat = FlatScene::geometry_placed(scene, model_to_world);
+        assert!(
+            (flat.vertex_count(), flat.sparse_count())
+                == (self.scene.flat.vertex_count(), self.scene.flat.sparse_count()),
+            "place_meshes needs the scene the renderer was built from"
+        );
+        gpu.queue.write_buffer(&self.scene.vertices, 0, bytemuck::cast_slice(&flat.vertices));
+        gpu.queue.write_buffer(&self.scene.sparse_points, 0, bytemuck::cast_slice(&flat.sparse_points));
+        flat.textures = self.scene.flat.textures.take();
+        self.scene.flat = flat;
+        self.placement = model_to_world.to_vec();
+        self.exact = None;
+    }
+
+    /// Stop lighting with an RGB-D frame's or uploaded VALs: the scene's spot light alone.
+    pub fn clear_vals(&mut self) {
+        self.rgbd_active = false;
+        self.uploaded_vals = 0;
     }
 
     /// Use every `stride`-th VAL (flux scaled by `stride`) in the exact reference, whose cost

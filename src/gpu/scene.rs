@@ -5,7 +5,7 @@ use super::raw::{RawFrame, RawMaterial, RawSparsePoint, RawVertex};
 use super::{Gpu, GpuError};
 use crate::reference;
 use crate::scene::{NEIGHBOURS, Scene};
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 
 /// World-space arrays of a whole scene, as the GPU sees them (also the CPU twins' input).
 #[derive(Clone, Debug, Default)]
@@ -52,6 +52,16 @@ impl TextureArray {
 impl FlatScene {
     /// Apply every mesh's model transform and concatenate.
     pub fn from_scene(scene: &Scene) -> Self {
+        let transforms: Vec<Mat4> = scene.meshes.iter().map(|m| m.model_to_world).collect();
+        let mut flat = Self::geometry_placed(scene, &transforms);
+        flat.textures = TextureArray::from_textures(&scene.textures);
+        flat
+    }
+
+    /// The arrays of [`FlatScene::from_scene`] but the textures, with mesh `i` placed by
+    /// `model_to_world[i]`.
+    pub fn geometry_placed(scene: &Scene, model_to_world: &[Mat4]) -> Self {
+        assert_eq!(model_to_world.len(), scene.meshes.len(), "one transform per mesh");
         let mut flat = FlatScene {
             materials: scene
                 .materials
@@ -63,13 +73,13 @@ impl FlatScene {
                     diffuse_texture: m.diffuse_texture.map_or(-1, |t| t as i32),
                 })
                 .collect(),
-            textures: TextureArray::from_textures(&scene.textures),
             ..Default::default()
         };
-        for mesh in &scene.meshes {
+        for (mesh, &transform) in scene.meshes.iter().zip(model_to_world) {
+            let placed = mesh.placed(transform);
             let vertex_base = flat.vertices.len() as u32;
             let sparse_base = flat.sparse_points.len() as u32;
-            let world = mesh.world_positions().into_iter().zip(mesh.world_normals());
+            let world = placed.positions().into_iter().zip(placed.normals());
             for ((p, n), uv) in world.zip(&mesh.texcoords) {
                 flat.vertices.push(RawVertex { position: p.into(), s: uv.x, normal: n.into(), t: 1.0 - uv.y });
             }
@@ -78,8 +88,8 @@ impl FlatScene {
                 flat.triangle_materials.push(*m);
             }
             let sparse = &mesh.sparse;
-            let world = mesh.sparse_world_positions().into_iter().zip(mesh.sparse_world_normals());
-            for (((p, n), radius), triangle) in world.zip(mesh.world_occluder_radii()).zip(&sparse.triangles) {
+            let world = placed.sparse_positions().into_iter().zip(placed.sparse_normals());
+            for (((p, n), radius), triangle) in world.zip(placed.occluder_radii()).zip(&sparse.triangles) {
                 let material = mesh.triangle_materials[*triangle as usize] as usize;
                 flat.sparse_points.push(RawSparsePoint {
                     position: p.into(),

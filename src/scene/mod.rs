@@ -65,6 +65,9 @@ pub struct Scene {
     pub camera: Camera,
     /// Render settings.
     pub settings: Settings,
+    /// The description's `anchor`, already applied to every mesh's [`Mesh::model_to_world`];
+    /// kept to place a mesh given a new transform ([`Scene::mesh_to_world`]).
+    pub anchor: Mat4,
 }
 
 /// Normalised modified Phong material (DESIGN.md §1):
@@ -287,36 +290,75 @@ impl Mesh {
     /// Matrix that takes model-space normals to world space (inverse transpose of the upper
     /// 3x3 of [`Mesh::model_to_world`]); results need renormalising.
     pub fn normal_to_world(&self) -> Mat3 {
-        Mat3::from_mat4(self.model_to_world).inverse().transpose()
+        normal_matrix(self.model_to_world)
     }
 
     /// Vertex positions in world space, m.
     pub fn world_positions(&self) -> Vec<Vec3> {
-        transform_points(self.model_to_world, &self.positions)
+        self.placed(self.model_to_world).positions()
     }
 
     /// Unit vertex normals in world space.
     pub fn world_normals(&self) -> Vec<Vec3> {
-        transform_normals(self.normal_to_world(), &self.normals)
+        self.placed(self.model_to_world).normals()
     }
 
     /// Sparse point positions in world space, m.
     pub fn sparse_world_positions(&self) -> Vec<Vec3> {
-        transform_points(self.model_to_world, &self.sparse.positions)
+        self.placed(self.model_to_world).sparse_positions()
     }
 
     /// Unit sparse point normals in world space.
     pub fn sparse_world_normals(&self) -> Vec<Vec3> {
-        transform_normals(self.normal_to_world(), &self.sparse.normals)
+        self.placed(self.model_to_world).sparse_normals()
+    }
+
+    /// Occluder radii in world space, m (see [`PlacedMesh::occluder_radii`]).
+    pub fn world_occluder_radii(&self) -> Vec<f32> {
+        self.placed(self.model_to_world).occluder_radii()
+    }
+
+    /// This mesh under another model-to-world transform (a moved model: the sparse points,
+    /// in model space, move with it).
+    pub fn placed(&self, model_to_world: Mat4) -> PlacedMesh<'_> {
+        PlacedMesh { mesh: self, model_to_world }
+    }
+}
+
+/// A mesh under a model-to-world transform: its world-space arrays.
+pub struct PlacedMesh<'a> {
+    mesh: &'a Mesh,
+    model_to_world: Mat4,
+}
+
+impl PlacedMesh<'_> {
+    pub fn positions(&self) -> Vec<Vec3> {
+        transform_points(self.model_to_world, &self.mesh.positions)
+    }
+
+    pub fn normals(&self) -> Vec<Vec3> {
+        transform_normals(normal_matrix(self.model_to_world), &self.mesh.normals)
+    }
+
+    pub fn sparse_positions(&self) -> Vec<Vec3> {
+        transform_points(self.model_to_world, &self.mesh.sparse.positions)
+    }
+
+    pub fn sparse_normals(&self) -> Vec<Vec3> {
+        transform_normals(normal_matrix(self.model_to_world), &self.mesh.sparse.normals)
     }
 
     /// Occluder radii in world space, m: the model-space radii times the largest axis scale of
     /// the transform (exact for uniform scale, conservative otherwise).
-    pub fn world_occluder_radii(&self) -> Vec<f32> {
+    pub fn occluder_radii(&self) -> Vec<f32> {
         let linear = Mat3::from_mat4(self.model_to_world);
         let scale = linear.x_axis.length().max(linear.y_axis.length()).max(linear.z_axis.length());
-        self.sparse.occluder_radii.iter().map(|r| r * scale).collect()
+        self.mesh.sparse.occluder_radii.iter().map(|r| r * scale).collect()
     }
+}
+
+fn normal_matrix(model_to_world: Mat4) -> Mat3 {
+    Mat3::from_mat4(model_to_world).inverse().transpose()
 }
 
 fn transform_points(matrix: Mat4, points: &[Vec3]) -> Vec<Vec3> {
@@ -368,7 +410,17 @@ impl Scene {
             light: description.light.as_ref().map(|l| l.to_spot_light()),
             camera: description.camera.to_camera(),
             settings,
+            anchor,
         })
+    }
+
+    /// Model-to-world of mesh `index` given a replacement for its description's `transform`
+    /// (`None`: the loaded one): the anchor still applies, as in the scene file.
+    pub fn mesh_to_world(&self, index: usize, transform: Option<Mat4>) -> Mat4 {
+        match transform {
+            Some(t) => self.anchor * t,
+            None => self.meshes[index].model_to_world,
+        }
     }
 
     /// Whether the glossy gather is needed: glossy is enabled and some triangle's material has

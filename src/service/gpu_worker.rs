@@ -18,7 +18,8 @@ use glam::Mat4;
 use tokio::sync::{mpsc, oneshot};
 
 use crate::gpu::{Gpu, GpuError};
-use crate::renderer::{Method, Rendered, Renderer};
+use crate::mr;
+use crate::renderer::{Method, Rendered, Renderer, View};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::{Camera, Scene, SpotLight};
 
@@ -38,8 +39,6 @@ pub enum WorkerError {
     SceneNotFound(String),
     #[error(transparent)]
     Gpu(#[from] GpuError),
-    #[error("not implemented yet: {0}")]
-    NotImplemented(&'static str),
     #[error("the GPU thread panicked during this job: {0}")]
     Panicked(String),
     #[error("the GPU thread has stopped")]
@@ -57,9 +56,15 @@ pub struct RenderJob {
     pub height: u32,
 }
 
+/// A composited stream frame (sRGB, row-major) and how long compositing took, ms.
+pub type Composite = (Vec<[u8; 3]>, f64);
+
 /// A finished render and where its time went.
 pub struct RenderOutput {
     pub frame: Rendered,
+    /// Stream frames seen from their own camera: the camera image with the virtual content
+    /// composited in (sRGB, row-major, the size of `frame`), and how long that took (ms).
+    pub composited: Option<Composite>,
     /// Time in the queue before the GPU thread took the job, ms.
     pub queue_ms: f64,
     /// Time the GPU thread spent on the job (all stages and read-back), ms.
@@ -72,7 +77,8 @@ pub struct RenderOutput {
 pub struct StreamFrameJob {
     pub frame_id: u64,
     pub frame: RgbdFrame,
-    pub camera: Camera,
+    /// A virtual camera to render from instead of the frame's own (no composite then).
+    pub camera: Option<Camera>,
     pub light: Option<SpotLight>,
     /// Model-to-world overrides, by mesh index.
     pub model_transforms: Vec<(u32, Mat4)>,
@@ -229,12 +235,12 @@ impl GpuWorker {
 /// The GPU thread's loop: one job at a time, in order, until [`Job::Stop`] or every sender
 /// is gone.
 fn run(gpu: Gpu, mut jobs: mpsc::Receiver<Job>, queued: Arc<AtomicUsize>, metrics: Arc<Metrics>) {
-    let mut renderers: HashMap<String, Renderer> = HashMap::new();
+    let mut renderers: HashMap<String, Loaded> = HashMap::new();
     while let Some(job) = jobs.blocking_recv() {
         match job {
             Job::AddScene { id, scene, reply } => {
                 let result = guarded(|| Renderer::new(&gpu, &scene).map_err(WorkerError::from)).map(|renderer| {
-                    renderers.insert(id, renderer);
+                    renderers.insert(id, Loaded { scene: *scene, renderer });
                 });
                 let _ = reply.send(result);
             }
@@ -249,7 +255,7 @@ fn run(gpu: Gpu, mut jobs: mpsc::Receiver<Job>, queued: Arc<AtomicUsize>, metric
                 }
                 let result = timed(&metrics, enqueued, || match renderers.get_mut(&id) {
                     None => Err(WorkerError::SceneNotFound(id.clone())),
-                    Some(renderer) => render(&gpu, renderer, &job),
+                    Some(loaded) => render(&gpu, loaded, &job),
                 });
                 let _ = reply.send(result);
             }
@@ -260,7 +266,7 @@ fn run(gpu: Gpu, mut jobs: mpsc::Receiver<Job>, queued: Arc<AtomicUsize>, metric
                 }
                 let result = timed(&metrics, enqueued, || match renderers.get_mut(&id) {
                     None => Err(WorkerError::SceneNotFound(id.clone())),
-                    Some(renderer) => render_stream_frame(&gpu, renderer, &job),
+                    Some(loaded) => render_stream_frame(&gpu, loaded, &job),
                 });
                 let _ = reply.send(result);
             }
@@ -270,41 +276,76 @@ fn run(gpu: Gpu, mut jobs: mpsc::Receiver<Job>, queued: Arc<AtomicUsize>, metric
     tracing::info!("GPU thread stopped");
 }
 
+/// A scene on the GPU thread: the loaded scene (to place its meshes) and its renderer, shared
+/// by the scene's HTTP renders and streams. Every job sets all the state it renders with.
+struct Loaded {
+    scene: Scene,
+    renderer: Renderer,
+}
+
 /// Runs `f` (a render) behind [`guarded`], timing it and recording the frame's metrics.
 fn timed(
     metrics: &Metrics,
     enqueued: Instant,
-    f: impl FnOnce() -> Result<Rendered, WorkerError>,
+    f: impl FnOnce() -> Result<(Rendered, Option<Composite>), WorkerError>,
 ) -> Result<RenderOutput, WorkerError> {
     let queue_ms = enqueued.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
-    let frame = guarded(f)?;
+    let (frame, composited) = guarded(f)?;
     let gpu_ms = started.elapsed().as_secs_f64() * 1e3;
     metrics.record_frame(gpu_ms / 1e3, &frame.timings);
-    Ok(RenderOutput { frame, queue_ms, gpu_ms })
+    Ok(RenderOutput { frame, composited, queue_ms, gpu_ms })
 }
 
-/// One HTTP render.
-fn render(gpu: &Gpu, renderer: &mut Renderer, job: &RenderJob) -> Result<Rendered, WorkerError> {
+/// One HTTP render: the scene as loaded, lit by its spot light, from `job.camera`.
+fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<(Rendered, Option<Composite>), WorkerError> {
+    let Loaded { scene, renderer } = loaded;
+    let placement: Vec<Mat4> = scene.meshes.iter().map(|m| m.model_to_world).collect();
+    renderer.place_meshes(gpu, scene, &placement);
+    renderer.clear_vals();
     renderer.set_camera(job.camera);
     if let Some(light) = &job.light {
         renderer.set_spot_light(light);
     }
-    Ok(renderer.render(gpu, job.method, job.width, job.height)?)
+    Ok((renderer.render(gpu, job.method, job.width, job.height)?, None))
 }
 
-/// Renders one RGB-D stream frame. UNFINISHED: the renderer cannot take RGB-D VALs yet.
-///
-/// This is the one function the stream needs filled in. Once the renderer supports RGB-D
-/// frames it should: apply `job.camera`, `job.light` and `job.model_transforms` to
-/// `renderer` (as [`render`] does for the first two), turn `job.frame` into VALs with
-/// `job.rgbd`, and render at `job.camera.width` x `job.camera.height` with `job.method`,
-/// returning the [`Rendered`] frame. The stream session (`service::stream`) already picks the
-/// component, tone maps with `job.exposure`, encodes `job.format` and answers the client with a
-/// `RenderedFrame` message, timings and VAL count included.
-fn render_stream_frame(_gpu: &Gpu, _renderer: &mut Renderer, job: &StreamFrameJob) -> Result<Rendered, WorkerError> {
-    tracing::debug!(frame_id = job.frame_id, "stream frame decoded; RGB-D rendering is not wired yet");
-    Err(WorkerError::NotImplemented("rendering RGB-D stream frames (the renderer takes no RGB-D VALs yet)"))
+/// Renders one RGB-D stream frame: the meshes placed by the stream's model transforms, lit
+/// by the frame's VALs (made on the GPU with `job.rgbd`) and the scene's spot light if it has
+/// one, seen from the frame's camera at the frame's size (composited over the frame's colour
+/// when `job.component` is full), or from the stream's virtual camera when it set one.
+fn render_stream_frame(
+    gpu: &Gpu,
+    loaded: &mut Loaded,
+    job: &StreamFrameJob,
+) -> Result<(Rendered, Option<Composite>), WorkerError> {
+    let Loaded { scene, renderer } = loaded;
+    let placement: Vec<Mat4> = (0..scene.meshes.len())
+        .map(|i| {
+            let replaced = job.model_transforms.iter().find(|(mesh, _)| *mesh as usize == i).map(|(_, t)| *t);
+            scene.mesh_to_world(i, replaced)
+        })
+        .collect();
+    renderer.place_meshes(gpu, scene, &placement);
+    if let Some(light) = job.light.as_ref().or(scene.light.as_ref()) {
+        renderer.set_spot_light(light);
+    }
+    renderer.set_rgbd_frame(gpu, &job.frame, &job.rgbd)?;
+    let Some(camera) = job.camera else {
+        let k = job.frame.intrinsics;
+        renderer.set_view(View::Pinhole { intrinsics: k, camera_to_world: job.frame.camera_to_world });
+        let rendered = renderer.render(gpu, job.method, k.width, k.height)?;
+        if job.component != Component::Full {
+            return Ok((rendered, None));
+        }
+        let started = Instant::now();
+        let depth = mr::virtual_depth(gpu, renderer, job.frame.camera_to_world)?;
+        let image =
+            mr::composite(&job.frame, &rendered.direct.add(&rendered.indirect), &depth, job.exposure.unwrap_or(1.0));
+        return Ok((rendered, Some((image, started.elapsed().as_secs_f64() * 1e3))));
+    };
+    renderer.set_camera(camera);
+    Ok((renderer.render(gpu, job.method, camera.width, camera.height)?, None))
 }
 
 /// Runs `f`, turning a panic into [`WorkerError::Panicked`] so one bad job cannot take the

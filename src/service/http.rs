@@ -516,9 +516,7 @@ fn worker_error(error: WorkerError) -> ApiError {
             code::LIMIT_EXCEEDED,
             format!("{what} needs {needed} bytes of GPU memory, over the device's limit of {device}"),
         ),
-        error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_) | WorkerError::NotImplemented(_)) => {
-            ApiError::internal(error)
-        }
+        error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => ApiError::internal(error),
     }
 }
 

@@ -1,13 +1,13 @@
 //! `GET /v1/scenes/{id}/stream`: the WebSocket stream of one scene.
 //!
-//! UNFINISHED: frames are decoded, validated and queued to the GPU thread, but the GPU
-//! thread cannot render RGB-D frames yet ([`super::gpu_worker`]'s `render_stream_frame` answers
-//! `NOT_IMPLEMENTED`), so every valid frame is answered with an `Error` of that code. The rest
-//! is in place: control messages are validated, applied to the stream's settings and
-//! acknowledged; every malformed or invalid message gets an `Error` naming the field or limit
-//! and leaves the connection open; at most one frame per stream is on the GPU and a newer
-//! frame replaces one still waiting (latest frame wins, the replaced one counts as dropped);
-//! a finished frame would be answered with a `RenderedFrame` by [`rendered_frame`].
+//! Frames are decoded and validated off the runtime, then rendered on the GPU thread
+//! ([`super::gpu_worker`]): the frame's pixels become VALs, the scene's virtual content is seen
+//! from the frame's camera and composited over its colour (or seen from a virtual camera the
+//! client set), and the answer is a `RenderedFrame` ([`rendered_frame`]). Control messages are
+//! validated, applied to the stream's settings and acknowledged; every malformed or invalid
+//! message gets an `Error` naming the field or limit and leaves the connection open. At most
+//! one frame per stream is on the GPU, and a newer frame replaces one still waiting (latest
+//! frame wins; the replaced one counts as dropped).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -40,9 +40,8 @@ use super::wire::{
     params(("id" = String, Path, description = "The scene's id")),
     responses(
         (status = 101, description = "WebSocket stream: one `relume.v1.Envelope` (proto/relume.proto) per \
-            binary message. UNFINISHED: RGB-D frames are decoded and validated and answered with \
-            ERROR_CODE_NOT_IMPLEMENTED until the renderer takes RGB-D frames; control messages are \
-            acknowledged."),
+            binary message. Each RGB-D frame is answered with the relit frame (`RenderedFrame`) or an \
+            `Error`; each control message with a `SettingsAck` or an `Error`."),
         (status = 400, description = "Not a WebSocket upgrade request", body = super::error::ErrorBody),
         (status = 401, description = "Missing or wrong bearer token", body = super::error::ErrorBody),
         (status = 404, description = "No such scene", body = super::error::ErrorBody),
@@ -74,7 +73,8 @@ pub async fn open_stream(
 /// A stream's settings, changed by control messages.
 #[derive(Clone, Debug)]
 struct Settings {
-    camera: CameraDescription,
+    /// A virtual camera to render from; `None` (the default): each frame's own camera.
+    camera: Option<CameraDescription>,
     light: Option<LightDescription>,
     model_transforms: BTreeMap<u32, TransformDescription>,
     quality: StreamQuality,
@@ -108,7 +108,7 @@ impl Session {
             scene_id,
             mesh_count: scene.mesh_count,
             settings: Settings {
-                camera: scene.camera.clone(),
+                camera: None,
                 light: scene.light.clone(),
                 model_transforms: BTreeMap::new(),
                 quality: StreamQuality { exposure: scene.exposure, ..StreamQuality::default() },
@@ -230,11 +230,10 @@ impl Session {
     fn submit_waiting(&mut self) -> Option<ServerMessage> {
         let (message, decode_ms) = self.waiting.take()?;
         let s = &self.settings;
-        let camera = s.camera.to_camera();
         let job = StreamFrameJob {
             frame_id: message.frame_id,
             frame: message.frame,
-            camera,
+            camera: s.camera.as_ref().map(CameraDescription::to_camera),
             light: s.light.as_ref().map(|l| l.to_spot_light()),
             model_transforms: s.model_transforms.iter().map(|(&mesh, t)| (mesh, t.to_matrix())).collect(),
             method: s.quality.method,
@@ -293,7 +292,7 @@ impl Session {
         let mut next = self.settings.clone();
         let mut applied = Vec::new();
         if let Some(camera) = control.camera {
-            next.camera = camera;
+            next.camera = Some(camera);
             applied.push("camera");
         }
         if let Some(light) = control.light {
@@ -327,26 +326,43 @@ impl Session {
     }
 }
 
-/// The `RenderedFrame` of a finished frame: the quality's component, tone mapped and encoded,
-/// with the decode, queue, GPU stage and encode times.
+/// The `RenderedFrame` of a finished frame: the composite, or the quality's component tone
+/// mapped, encoded, with the decode, queue, GPU stage, composite and encode times.
 fn rendered_frame(in_flight: &InFlight, output: RenderOutput, dropped_frames: u64) -> Result<RenderedFrame, WireError> {
     let started = Instant::now();
-    let image = in_flight.quality.component.of(&output.frame);
-    let exposure = in_flight.quality.exposure.unwrap_or_else(|| image.auto_exposure());
-    let encoded = match in_flight.quality.format {
-        StreamImageFormat::Png => FrameImage::Png(
-            image.encode_png(exposure).map_err(|e| WireError::new(ErrorCode::Internal, None, e.to_string()))?,
-        ),
-        StreamImageFormat::Rgba8 => FrameImage::Rgba8(image.tone_map_rgba8(exposure)),
+    let (width, height) = (output.frame.indirect.width, output.frame.indirect.height);
+    let internal = |e: &dyn std::fmt::Display| WireError::new(ErrorCode::Internal, None, e.to_string());
+    let encoded = match (&output.composited, in_flight.quality.format) {
+        (Some((rgb, _)), StreamImageFormat::Png) => {
+            let bytes = rgb.iter().flatten().copied().collect();
+            let image = ::image::RgbImage::from_raw(width, height, bytes).ok_or_else(|| internal(&"composite size"))?;
+            let mut png = Vec::new();
+            image.write_to(&mut std::io::Cursor::new(&mut png), ::image::ImageFormat::Png).map_err(|e| internal(&e))?;
+            FrameImage::Png(png)
+        }
+        (Some((rgb, _)), StreamImageFormat::Rgba8) => {
+            FrameImage::Rgba8(rgb.iter().flat_map(|&[r, g, b]| [r, g, b, 255]).collect())
+        }
+        (None, format) => {
+            let image = in_flight.quality.component.of(&output.frame);
+            let exposure = in_flight.quality.exposure.unwrap_or_else(|| image.auto_exposure());
+            match format {
+                StreamImageFormat::Png => FrameImage::Png(image.encode_png(exposure).map_err(|e| internal(&e))?),
+                StreamImageFormat::Rgba8 => FrameImage::Rgba8(image.tone_map_rgba8(exposure)),
+            }
+        }
     };
     let mut timings = vec![("decode".to_owned(), in_flight.decode_ms), ("queue".to_owned(), output.queue_ms)];
     timings.extend(output.frame.timings.stages.iter().cloned());
+    if let Some((_, composite_ms)) = output.composited {
+        timings.push(("composite".to_owned(), composite_ms));
+    }
     timings.push(("encode".to_owned(), started.elapsed().as_secs_f64() * 1e3));
     Ok(RenderedFrame {
         frame_id: in_flight.frame_id,
         timestamp: in_flight.timestamp,
-        width: image.width,
-        height: image.height,
+        width,
+        height,
         image: encoded,
         timings,
         val_count: output.frame.val_count,
@@ -365,11 +381,6 @@ fn worker_error(error: WorkerError) -> WireError {
         WorkerError::SceneNotFound(id) => {
             WireError::new(ErrorCode::SceneNotFound, None, format!("the scene `{id}` has been deleted"))
         }
-        WorkerError::NotImplemented(what) => WireError::new(
-            ErrorCode::NotImplemented,
-            None,
-            format!("the frame is valid, but {what} is not implemented yet"),
-        ),
         WorkerError::Stopped => WireError::new(ErrorCode::ShuttingDown, None, "the GPU thread has stopped"),
         error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => {
             tracing::error!("stream frame failed: {error}");

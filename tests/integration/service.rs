@@ -595,9 +595,15 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
         }
         other => panic!("{other:?}"),
     }
-    // With grid_step 16 the 320 x 240 frame is within max_vals; rendering it is not wired yet.
-    let e = ws.expect_error(envelope(Body::RgbdFrame(frame(14, 320, 240))), ErrorCode::NotImplemented).await;
-    assert_eq!(e.frame_id, Some(14));
+    // With grid_step 16 the 320 x 240 frame is within max_vals; it is rendered from the virtual
+    // camera just set (16 x 16), as raw RGBA8.
+    match ws.exchange(envelope(Body::RgbdFrame(frame(14, 320, 240)))).await {
+        Body::RenderedFrame(f) => {
+            assert_eq!((f.frame_id, f.width, f.height), (14, 16, 16));
+            assert!(matches!(&f.image, Some(proto::rendered_frame::Image::Rgba8(b)) if b.len() == 16 * 16 * 4));
+        }
+        other => panic!("{other:?}"),
+    }
 
     // Beyond twice the limit the transport itself closes the connection (1009).
     // (The server may close before the client has finished sending.)
@@ -618,6 +624,92 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
     assert!(metrics.contains("relume_stream_messages_total{kind=\"control\"} 3"), "{metrics}");
     // Other clients were not affected.
     assert_eq!(server.get(&format!("/v1/scenes/{id}")).await.status, StatusCode::OK);
+    server.stop().await;
+}
+
+/// A frame of `frame(..)`'s grey room seen from (0, 1, 2) looking down -Z (a 180 degree turn
+/// about X: the RGB-D camera looks along its +Z with +Y down), the real wall 5 m away, behind
+/// `inline_scene`'s floor and back wall.
+fn frame_behind_the_scene(frame_id: u64) -> proto::RgbdFrame {
+    let mut f = frame(frame_id, 64, 48);
+    f.camera_to_world = Some(pose(1.0, 0.0, 0.0, 0.0));
+    f.depth = Some(proto::Depth {
+        data: Some(proto::depth::Data::U16(proto::DepthU16 {
+            data: 5000u16.to_le_bytes().repeat(64 * 48),
+            units_per_metre: 1000.0,
+        })),
+    });
+    f
+}
+
+/// Decodes a streamed frame's PNG.
+fn streamed_png(answer: Body, frame_id: u64) -> (proto::RenderedFrame, image::RgbImage) {
+    let Body::RenderedFrame(f) = answer else { panic!("expected a RenderedFrame, got {answer:?}") };
+    assert_eq!(f.frame_id, frame_id);
+    let Some(proto::rendered_frame::Image::Png(png)) = &f.image else { panic!("expected a PNG") };
+    let png = image::load_from_memory(png).expect("a PNG").into_rgb8();
+    assert_eq!(png.dimensions(), (f.width, f.height));
+    (f, png)
+}
+
+/// The stream relights: each frame's pixels light the scene, which is seen from the frame's
+/// camera and composited over its colour; a model transform moves the content; a light
+/// override changes it; and none of it leaks into the scene's HTTP renders.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_relights_frames_and_follows_its_controls() {
+    let server = TestServer::start(|_| {}).await;
+    let id = server.create(&inline_scene()).await;
+    let http_render = || async {
+        let request = json!({"quality": {"component": "indirect", "format": "f32"}});
+        let reply = server.post(&format!("/v1/scenes/{id}/render"), &request).await;
+        assert_eq!(reply.status, StatusCode::OK, "{}", String::from_utf8_lossy(&reply.body));
+        reply.body
+    };
+    let before = http_render().await;
+
+    let mut ws = server.stream(&id).await;
+    let (first, image) = streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(1)))).await, 1);
+    assert_eq!((first.width, first.height), (64, 48), "the frame's own size");
+    assert!(first.val_count > 0);
+    let stages: Vec<&str> = first.timings.iter().map(|t| t.stage.as_str()).collect();
+    for stage in ["decode", "queue", "rgbd_vals", "gather", "shade", "composite", "encode"] {
+        assert!(stages.contains(&stage), "{stage} missing from {stages:?}");
+    }
+    assert!(first.timings.iter().all(|t| t.ms.is_finite() && t.ms >= 0.0));
+    // The real wall (the frame's grey, 128) shows where there is no virtual content: the top
+    // corners; the lit virtual floor and wall cover the middle of the image.
+    assert_eq!(image.get_pixel(0, 0).0, [128, 128, 128]);
+    let virtual_pixels = image.pixels().filter(|p| p.0 != [128, 128, 128]).count();
+    assert!(virtual_pixels > 64 * 48 / 10, "the scene is composited in: {virtual_pixels} pixels");
+
+    // Move the mesh 0.5 m to the right: the composite changes.
+    let control = proto::Control {
+        request_id: 3,
+        model_transforms: vec![proto::ModelTransform {
+            mesh_index: 0,
+            translation: v3(0.5, 0.0, 0.0),
+            rotation_deg: v3(0.0, 0.0, 0.0),
+            scale: None,
+        }],
+        ..Default::default()
+    };
+    assert!(matches!(ws.exchange(envelope(Body::Control(control))).await, Body::SettingsAck(_)));
+    let (_, moved) = streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(2)))).await, 2);
+    assert_ne!(moved, image, "the model transform moves the content");
+    let control = proto::Control {
+        request_id: 4,
+        light: Some(proto::LightOverride { intensity: v3(0.0, 0.0, 0.0), ..Default::default() }),
+        quality: Some(proto::Quality { component: proto::Component::Direct as i32, ..Default::default() }),
+        ..Default::default()
+    };
+    assert!(matches!(ws.exchange(envelope(Body::Control(control))).await, Body::SettingsAck(_)));
+    let (dark, direct) = streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(3)))).await, 3);
+    assert!(!dark.timings.iter().any(|t| t.stage == "composite"), "a component alone is not composited");
+    assert!(direct.pixels().all(|p| p.0 == [0, 0, 0]), "the spot light is off: no direct light");
+
+    // The scene's own renders: same light, same placement, no RGB-D VALs, as before.
+    assert!(http_render().await == before, "the stream's state leaked into an HTTP render");
+    drop(ws);
     server.stop().await;
 }
 
