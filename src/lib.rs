@@ -19,7 +19,7 @@
 //! - [`rgbd`]: RGB-D recordings and frames as light sources; [`mr`]: relighting them (mixed reality).
 //! - [`image`]: tone mapping, PNG/EXR output, error metrics.
 //! - [`rgbd`]: RGB-D frames and how they become VALs.
-//! - [`service`]: `relume serve`, the HTTP + WebSocket service.
+//! - [`service`]: `relume serve`, the HTTP + WebSocket service; [`client`]: a client of it; [`load`]: its load benchmark.
 //!
 //! # Who owns the GPU
 //!
@@ -27,8 +27,10 @@
 //! renderer borrow it. Everything is headless. In the service that thread is
 //! `service::gpu_worker`'s: handlers send it jobs over a bounded channel.
 
+pub mod client;
 pub mod gpu;
 pub mod image;
+pub mod load;
 pub mod mr;
 pub mod reference;
 pub mod renderer;

@@ -101,6 +101,53 @@ enum Command {
         /// Depth units per metre for a recording without intrinsics.json (default 5000, TUM's).
         #[arg(long)]
         depth_scale: Option<f32>,
+        /// Replay through a running `relume serve` (http://host:port) over its WebSocket stream
+        /// instead of rendering here: the scene is uploaded with its meshes inline, every frame is
+        /// sent and its composite written to `composited/`.
+        #[arg(long)]
+        server: Option<String>,
+        /// With --server: the server's bearer token.
+        #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
+        token: Option<String>,
+    },
+    /// Load benchmark of the service: streams replaying a recording plus HTTP render clients,
+    /// for a fixed time; prints throughput, latency percentiles, dropped frames, peak memory.
+    Load {
+        /// A running server (http://host:port); default: one started in this process.
+        #[arg(long)]
+        server: Option<String>,
+        #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
+        token: Option<String>,
+        /// Concurrent streams (each on its own copy of --scene).
+        #[arg(long, default_value_t = 2)]
+        streams: usize,
+        /// Concurrent HTTP render clients (on one copy of --http-scene).
+        #[arg(long = "http", default_value_t = 2)]
+        http_clients: usize,
+        /// How long the clients send, s.
+        #[arg(long, default_value_t = 30.0)]
+        seconds: f64,
+        /// Frames per second each stream sends.
+        #[arg(long, default_value_t = 10.0)]
+        fps: f64,
+        #[arg(long, default_value = "fixtures/recordings/tum_fr1_xyz")]
+        recording: PathBuf,
+        /// The scene the streams relight.
+        #[arg(long, default_value = "fixtures/scenes/mr_bunny.json")]
+        scene: PathBuf,
+        /// The scene the HTTP clients render (at its camera); its meshes are named by path
+        /// inside the server's asset directory.
+        #[arg(long, default_value = "fixtures/scenes/cornell_bunny_small.json")]
+        http_scene: PathBuf,
+        /// The server's asset directory as seen from here (the server started here serves it).
+        #[arg(long, default_value = ".")]
+        assets: PathBuf,
+        /// Frames of the recording loaded and cycled through.
+        #[arg(long, default_value_t = 8)]
+        frames: usize,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
     },
     /// Serve the HTTP + WebSocket API (see README, "Service"). Every flag also reads the
     /// environment variable shown; SIGINT/SIGTERM shut down gracefully.
@@ -197,10 +244,93 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             exposure,
             intrinsics,
             depth_scale,
+            server,
+            token,
         } => {
+            if let Some(server) = server {
+                anyhow::ensure!(
+                    !accumulate && size.width.is_none() && size.height.is_none(),
+                    "--accumulate, --width and --height: not available with --server (the stream renders each frame at its own size, without accumulation)"
+                );
+                let recording_options = recording_options(intrinsics, depth_scale)?;
+                anyhow::ensure!(
+                    exposure.is_finite() && exposure > 0.0,
+                    "--exposure: must be a positive number, got {exposure}"
+                );
+                anyhow::ensure!(frames != Some(0), "--frames: must be at least 1");
+                let options = relume::client::RemoteReplayOptions {
+                    server,
+                    token,
+                    recording,
+                    recording_options,
+                    scene,
+                    out: out.clone(),
+                    frames,
+                    exposure: Some(exposure),
+                    progress: true,
+                };
+                let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+                let summary = runtime.block_on(relume::client::replay_remote(&options))?;
+                let vals = &summary.vals_per_frame;
+                eprintln!(
+                    "replayed {} frames at {}x{} through {}: {} to {} VALs per frame, round trip p50 {:.0} ms, p99 {:.0} ms, {} dropped",
+                    summary.frames,
+                    summary.width,
+                    summary.height,
+                    summary.server,
+                    vals.iter().min().unwrap_or(&0),
+                    vals.iter().max().unwrap_or(&0),
+                    relume::client::quantile(&summary.round_trip_ms, 0.5),
+                    relume::client::quantile(&summary.round_trip_ms, 0.99),
+                    summary.dropped_frames,
+                );
+                eprintln!("{}", relume::replay::stage_table(&summary.stage_ms, ("round trip", &summary.round_trip_ms)));
+                eprintln!("wrote {}", out.display());
+                return Ok(());
+            }
             let accumulate =
                 accumulate.then_some(relume::mr::AccumulateOptions { cell_size, max_vals, max_age_frames: max_age });
             replay_command(recording, scene, out, size, frames, accumulate, exposure, intrinsics, depth_scale)
+        }
+        Command::Load {
+            server,
+            token,
+            streams,
+            http_clients,
+            seconds,
+            fps,
+            recording,
+            scene,
+            http_scene,
+            assets,
+            frames,
+            json,
+        } => {
+            anyhow::ensure!(
+                seconds.is_finite() && seconds > 0.0,
+                "--seconds: must be a positive number, got {seconds}"
+            );
+            let options = relume::load::LoadOptions {
+                server,
+                token,
+                streams,
+                http_clients,
+                duration: std::time::Duration::from_secs_f64(seconds),
+                fps,
+                recording,
+                stream_scene: scene,
+                http_scene,
+                assets,
+                frames,
+            };
+            let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+            let report = runtime.block_on(relume::load::run(&options))?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                println!("{}", relume::load::table(&report));
+            }
+            Ok(())
         }
         Command::Serve(config) => {
             let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
@@ -304,22 +434,11 @@ fn replay_command(
     intrinsics: Option<Vec<f32>>,
     depth_scale: Option<f32>,
 ) -> anyhow::Result<()> {
-    use relume::rgbd::recording::RecordingOptions;
     anyhow::ensure!(exposure.is_finite() && exposure > 0.0, "--exposure: must be a positive number, got {exposure}");
-    if let Some(s) = depth_scale {
-        anyhow::ensure!(s.is_finite() && s > 0.0, "--depth-scale: must be a positive number, got {s}");
-    }
     if frames == Some(0) {
         anyhow::bail!("--frames: must be at least 1");
     }
-    let mut recording_options = RecordingOptions { depth_scale, ..RecordingOptions::default() };
-    if let Some(k) = intrinsics {
-        let tum = relume::rgbd::Intrinsics::TUM;
-        let k = relume::rgbd::Intrinsics { fx: k[0], fy: k[1], cx: k[2], cy: k[3], ..tum };
-        relume::rgbd::recording::check_intrinsics(&k)
-            .map_err(|(field, m)| anyhow::anyhow!("--intrinsics: {field}: {m}"))?;
-        recording_options.intrinsics = Some(k);
-    }
+    let recording_options = recording_options(intrinsics, depth_scale)?;
     let size = size.resolve_optional()?;
     let options = relume::replay::ReplayOptions {
         recording,
@@ -347,9 +466,28 @@ fn replay_command(
         summary.mean_irradiance_change,
         if summary.accumulate { " (accumulating)" } else { "" },
     );
-    eprintln!("{}", relume::replay::stage_table(&summary));
+    eprintln!("{}", relume::replay::stage_table(&summary.stage_ms, ("frame (wall)", &summary.frame_ms)));
     eprintln!("wrote {}", options.out.display());
     Ok(())
+}
+
+/// The recording options of `--intrinsics` and `--depth-scale`, checked.
+fn recording_options(
+    intrinsics: Option<Vec<f32>>,
+    depth_scale: Option<f32>,
+) -> anyhow::Result<relume::rgbd::recording::RecordingOptions> {
+    if let Some(s) = depth_scale {
+        anyhow::ensure!(s.is_finite() && s > 0.0, "--depth-scale: must be a positive number, got {s}");
+    }
+    let mut options = relume::rgbd::recording::RecordingOptions { depth_scale, ..Default::default() };
+    if let Some(k) = intrinsics {
+        let tum = relume::rgbd::Intrinsics::TUM;
+        let k = relume::rgbd::Intrinsics { fx: k[0], fy: k[1], cx: k[2], cy: k[3], ..tum };
+        relume::rgbd::recording::check_intrinsics(&k)
+            .map_err(|(field, m)| anyhow::anyhow!("--intrinsics: {field}: {m}"))?;
+        options.intrinsics = Some(k);
+    }
+    Ok(options)
 }
 
 fn load(path: &Path) -> anyhow::Result<Scene> {

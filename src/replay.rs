@@ -121,7 +121,8 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
     Ok(summary)
 }
 
-fn progress_bar(visible: bool, frames: u64) -> indicatif::ProgressBar {
+/// A progress bar over `frames` frames on standard error, or a hidden one.
+pub fn progress_bar(visible: bool, frames: u64) -> indicatif::ProgressBar {
     if !visible {
         return indicatif::ProgressBar::hidden();
     }
@@ -142,8 +143,9 @@ fn write_indirect(path: &Path, image: &LinearImage, exposure: f32) -> anyhow::Re
     image.write_png(path, exposure).with_context(|| format!("writing {}", path.display()))
 }
 
-/// Mean, median and maximum of each stage's per-frame times, as printed after a replay.
-pub fn stage_table(summary: &ReplaySummary) -> String {
+/// Mean, median and maximum of each stage's per-frame times and of the whole frame's
+/// (`total`: its label and per-frame times), as printed after a replay.
+pub fn stage_table(stage_ms: &BTreeMap<String, Vec<f64>>, total: (&str, &[f64])) -> String {
     let mut lines = vec![format!("{:<14} {:>10} {:>10} {:>10}", "stage", "mean ms", "median ms", "max ms")];
     let mut row = |name: &str, v: &[f64]| {
         let mut sorted = v.to_vec();
@@ -153,9 +155,9 @@ pub fn stage_table(summary: &ReplaySummary) -> String {
         let max = sorted.last().copied().unwrap_or(0.0);
         lines.push(format!("{name:<14} {mean:>10.2} {median:>10.2} {max:>10.2}"));
     };
-    for (stage, v) in &summary.stage_ms {
+    for (stage, v) in stage_ms {
         row(stage, v);
     }
-    row("frame (wall)", &summary.frame_ms);
+    row(total.0, total.1);
     lines.join("\n")
 }

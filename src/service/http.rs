@@ -267,6 +267,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
         camera: description.camera,
         light: description.light,
         exposure: description.settings.exposure,
+        rgbd: description.settings.rgbd,
         mesh_count: scene.meshes.len(),
         info: info.clone(),
     };

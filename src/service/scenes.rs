@@ -134,6 +134,8 @@ pub struct SceneEntry {
     pub light: Option<LightDescription>,
     /// The scene file's `settings.exposure`.
     pub exposure: Option<f32>,
+    /// The scene file's `settings.rgbd`: a stream's RGB-D settings until a control changes them.
+    pub rgbd: crate::rgbd::RgbdSettings,
     pub mesh_count: usize,
 }
 
@@ -280,8 +282,14 @@ mod tests {
             .expect("light"),
         };
         let id = a.id.clone();
-        let entry =
-            SceneEntry { camera: info.camera.clone(), light: info.light.clone(), info, exposure: None, mesh_count: 0 };
+        let entry = SceneEntry {
+            camera: info.camera.clone(),
+            light: info.light.clone(),
+            info,
+            exposure: None,
+            mesh_count: 0,
+            rgbd: Default::default(),
+        };
         a.commit(entry);
         assert_eq!(registry.len(), 1);
         assert!(registry.get(&id).is_some());

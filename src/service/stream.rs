@@ -112,7 +112,7 @@ impl Session {
                 light: scene.light.clone(),
                 model_transforms: BTreeMap::new(),
                 quality: StreamQuality { exposure: scene.exposure, ..StreamQuality::default() },
-                rgbd: RgbdSettings::default(),
+                rgbd: scene.rgbd,
             },
             in_flight: None,
             waiting: None,

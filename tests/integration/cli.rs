@@ -76,3 +76,32 @@ fn bad_inputs_fail_with_a_message_naming_the_field() {
     assert!(stderr(&o).contains("missing.json"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
 }
+
+/// `replay --server` and `load`: bad flags and an unreachable server are named, not panics.
+#[test]
+fn client_commands_name_bad_flags_and_unreachable_servers() {
+    let recording = fixture("recordings/tum_fr1_xyz");
+    let scene = fixture("scenes/mr_bunny.json");
+    let (recording, scene) = (recording.to_str().unwrap(), scene.to_str().unwrap());
+    let out = scratch("cli_client");
+    let out = out.to_str().unwrap();
+    let cases: [(&[&str], &str); 5] = [
+        (&["replay", recording, "--scene", scene, "--out", out, "--server", "https://x:1"], "--server: scheme `https`"),
+        (
+            &["replay", recording, "--scene", scene, "--out", out, "--server", "http://x:1", "--accumulate"],
+            "--accumulate",
+        ),
+        // Port 1 on loopback: nothing listens there.
+        (
+            &["replay", recording, "--scene", scene, "--out", out, "--server", "http://127.0.0.1:1"],
+            "cannot reach the server",
+        ),
+        (&["load", "--seconds", "0"], "--seconds"),
+        (&["load", "--streams", "0", "--http", "0", "--server", "http://127.0.0.1:1"], "at least one client"),
+    ];
+    for (args, needle) in cases {
+        let o = relume(args);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(stderr(&o).contains(needle) && !stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
+    }
+}

@@ -815,3 +815,72 @@ fn the_binary_serves_until_sigterm() {
     assert!(status.success(), "{status}\n{log}");
     assert!(log.contains("SIGTERM received") && log.contains("stopped"), "{log}");
 }
+
+/// `relume replay --server`: the fixture recording through the service gives the same
+/// composites as the offline replay. Two frames at the recording's 640x480, one VAL per 16x16
+/// depth pixels to stay fast.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_recording_replays_through_the_server_as_offline() {
+    use relume::client::{RemoteReplayOptions, replay_remote};
+    use relume::mr::{MrOptions, MrRenderer};
+    use relume::rgbd::recording::{Recording, RecordingOptions};
+
+    let dir = super::scratch("wire_replay");
+    let mut scene: Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture("scenes/mr_bunny.json")).expect("fixture"))
+            .expect("JSON");
+    scene["meshes"][0]["obj"] =
+        fixture("meshes/stanford_bunny/stanford-bunny.obj").to_string_lossy().into_owned().into();
+    scene["settings"]["rgbd"]["grid_step"] = 16.into();
+    let scene_path = dir.join("mr_bunny_coarse.json");
+    std::fs::write(&scene_path, scene.to_string()).expect("scene written");
+
+    let server = TestServer::start(|_| {}).await;
+    let options = RemoteReplayOptions {
+        server: format!("http://{}", server.addr),
+        token: None,
+        recording: fixture("recordings/tum_fr1_xyz"),
+        recording_options: RecordingOptions::default(),
+        scene: scene_path.clone(),
+        out: dir.join("out"),
+        frames: Some(2),
+        exposure: None,
+        progress: false,
+    };
+    let summary = replay_remote(&options).await.expect("the replay runs");
+    assert_eq!((summary.frames, summary.width, summary.height, summary.dropped_frames), (2, 640, 480, 0));
+    assert!(summary.stage_ms.contains_key("composite") && summary.round_trip_ms.len() == 2);
+    let summary_json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/summary.json")).expect("summary")).expect("JSON");
+    assert_eq!(summary_json["vals_per_frame"].as_array().map(Vec::len), Some(2));
+    // The replay's scene was deleted again.
+    let health = server.get("/healthz").await.json();
+    assert_eq!(health["scenes"], 0, "{health}");
+    server.stop().await;
+
+    let (offline, recording) = tokio::task::spawn_blocking(move || {
+        let gpu = super::gpu();
+        let scene = relume::scene::Scene::load(&scene_path).expect("scene");
+        let recording = Recording::open(&fixture("recordings/tum_fr1_xyz"), &RecordingOptions::default()).expect("rec");
+        let options = MrOptions { width: 640, height: 480, exposure: 1.0, accumulate: None };
+        let mut mr = MrRenderer::new(&gpu, &scene, options).expect("renderer");
+        let frames: Vec<_> = (0..2)
+            .map(|i| mr.render_frame(&gpu, &recording.frame(i).expect("frame")).expect("render").composited)
+            .collect();
+        (frames, recording)
+    })
+    .await
+    .expect("the offline replay");
+    for (i, offline) in offline.iter().enumerate() {
+        let wire = image::open(dir.join(format!("out/composited/{i:04}.png"))).expect("a PNG").into_rgb8();
+        assert_eq!(wire.dimensions(), (640, 480));
+        // Same scene, frame, adapter and shaders on both paths: the 8-bit composites must agree
+        // exactly but for rounding, so at most 1 level in any channel.
+        let worst =
+            wire.pixels().zip(offline).map(|(w, o)| (0..3).map(|c| w.0[c].abs_diff(o[c])).max().unwrap_or(0)).max();
+        assert!(worst <= Some(1), "frame {i}: the wire composite differs from the offline one by {worst:?}");
+        let camera = recording.frame(i).expect("frame").color;
+        let virtual_pixels = offline.iter().zip(&camera).filter(|(o, c)| o != c).count();
+        assert!(virtual_pixels > 1000, "frame {i}: the bunny is drawn ({virtual_pixels} pixels)");
+    }
+}
