@@ -197,7 +197,7 @@ async fn drive_stream(
             sending = false;
             drain_until = Some(tokio::time::Instant::now() + Duration::from_secs(60));
         }
-        let owed = tally.sent - tally.rendered - tally.errors - tally.dropped;
+        let owed = tally.sent.saturating_sub(tally.rendered + tally.errors + tally.dropped);
         if !sending && owed == 0 {
             break;
         }
