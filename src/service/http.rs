@@ -268,6 +268,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
         light: description.light,
         exposure: description.settings.exposure,
         mesh_count: scene.meshes.len(),
+        settings: scene.settings,
         info: info.clone(),
     };
     state.worker.add_scene(&id, scene).await.map_err(worker_error)?;

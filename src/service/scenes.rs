@@ -135,6 +135,8 @@ pub struct SceneEntry {
     /// The scene file's `settings.exposure`.
     pub exposure: Option<f32>,
     pub mesh_count: usize,
+    /// The loaded scene's render settings (occlusion resolved): where a stream starts.
+    pub settings: crate::scene::Settings,
 }
 
 /// The scenes held, and the slots reserved by scenes being loaded.
@@ -269,6 +271,7 @@ mod tests {
             sparse_points: 0,
             max_vals: 0,
             glossy: false,
+            occlusion: crate::scene::Occlusion::Off,
             camera: serde_json::from_str(
                 r#"{"position": [0, 0, 1], "target": [0, 0, 0], "fov_y_deg": 40, "width": 1, "height": 1}"#,
             )
@@ -280,8 +283,14 @@ mod tests {
             .expect("light"),
         };
         let id = a.id.clone();
-        let entry =
-            SceneEntry { camera: info.camera.clone(), light: info.light.clone(), info, exposure: None, mesh_count: 0 };
+        let entry = SceneEntry {
+            camera: info.camera.clone(),
+            light: info.light.clone(),
+            info,
+            exposure: None,
+            mesh_count: 0,
+            settings: crate::scene::SettingsDescription::default().to_settings(false),
+        };
         a.commit(entry);
         assert_eq!(registry.len(), 1);
         assert!(registry.get(&id).is_some());

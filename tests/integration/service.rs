@@ -707,6 +707,25 @@ async fn a_stream_relights_frames_and_follows_its_controls() {
     assert!(!dark.timings.iter().any(|t| t.stage == "composite"), "a component alone is not composited");
     assert!(direct.pixels().all(|p| p.0 == [0, 0, 0]), "the spot light is off: no direct light");
 
+    // Occlusion is a stream setting: on, the frame runs the occlusion stage; off, it does not.
+    for (request_id, occlusion, expected) in [(5, proto::Occlusion::Disks, true), (6, proto::Occlusion::Off, false)] {
+        let control = proto::Control {
+            request_id,
+            render: Some(proto::RenderSettings { occlusion: Some(occlusion as i32), glossy: Some(false) }),
+            ..Default::default()
+        };
+        match ws.exchange(envelope(Body::Control(control))).await {
+            Body::SettingsAck(ack) => {
+                assert_eq!((ack.request_id, ack.applied), (request_id, vec!["render".to_owned()]))
+            }
+            other => panic!("expected an ack, got {other:?}"),
+        }
+        let (f, _) =
+            streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(request_id)))).await, request_id);
+        let stages: Vec<&str> = f.timings.iter().map(|t| t.stage.as_str()).collect();
+        assert_eq!(stages.contains(&"occlusion"), expected, "{occlusion:?}: {stages:?}");
+    }
+
     // The scene's own renders: same light, same placement, no RGB-D VALs, as before.
     assert!(http_render().await == before, "the stream's state leaked into an HTTP render");
     drop(ws);
