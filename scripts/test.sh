@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Sets everything up and runs the whole test suite (unit, property and GPU tests on lavapipe),
-# then the formatting and lint checks.
+# Sets everything up, checks formatting and lints, runs the whole test suite (unit, property and
+# GPU tests on lavapipe), then the browser viewer end to end (headless chromium).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
+source scripts/e2e-setup.sh
 cargo fmt --check
 cargo clippy --all-targets --quiet -- -D warnings
 cargo test
+# `cargo test` built the binary the viewer test starts (`relume serve` on port 0).
+RELUME_BIN="${CARGO_TARGET_DIR:-target}/debug/relume" node tests/e2e/viewer.test.mjs

@@ -232,6 +232,18 @@ impl Renderer {
         }
     }
 
+    /// Allow or forbid the glossy gather (it still runs only when a material is glossy); the
+    /// passes are rebuilt on the next frame when this changes whether it runs.
+    pub fn set_glossy(&mut self, allowed: bool) {
+        let glossy = allowed && self.scene.has_glossy_material();
+        if glossy != self.glossy {
+            self.glossy = glossy;
+            self.sparse = None;
+            self.brute_force = None;
+            self.exact = None;
+        }
+    }
+
     /// Whether the glossy stages run for this scene.
     pub fn glossy(&self) -> bool {
         self.glossy

@@ -63,6 +63,53 @@ pub struct RgbdFrame {
     pub camera_to_world: Affine3A,
 }
 
+impl RgbdFrame {
+    /// The frame at `1 / factor` of its size (each side rounded down, at least 1 pixel): colour
+    /// averaged over each `factor x factor` block, depth the median of the block's valid
+    /// measurements (no averaging across an edge between two surfaces), intrinsics
+    /// [`Intrinsics::scaled_to`]. `factor` 0 or 1 keeps the frame.
+    pub fn downsampled(&self, factor: u32) -> RgbdFrame {
+        let k = self.intrinsics;
+        if factor <= 1 {
+            return self.clone();
+        }
+        let (width, height) = ((k.width / factor).max(1), (k.height / factor).max(1));
+        let mut color = Vec::with_capacity((width * height) as usize);
+        let mut depth = Vec::with_capacity((width * height) as usize);
+        let mut valid = Vec::with_capacity((factor * factor) as usize);
+        for y in 0..height {
+            for x in 0..width {
+                let mut sum = [0u32; 3];
+                let mut texels = 0;
+                valid.clear();
+                for sy in y * factor..((y + 1) * factor).min(k.height) {
+                    for sx in x * factor..((x + 1) * factor).min(k.width) {
+                        let i = (sy * k.width + sx) as usize;
+                        for (total, channel) in sum.iter_mut().zip(self.color[i]) {
+                            *total += u32::from(channel);
+                        }
+                        texels += 1;
+                        let d = self.depth[i];
+                        if d.is_finite() && d > 0.0 {
+                            valid.push(d);
+                        }
+                    }
+                }
+                color.push(sum.map(|total| ((total + texels / 2) / texels) as u8));
+                valid.sort_by(f32::total_cmp);
+                depth.push(valid.get(valid.len() / 2).copied().unwrap_or(0.0));
+            }
+        }
+        RgbdFrame {
+            timestamp: self.timestamp,
+            intrinsics: k.scaled_to(width, height),
+            color,
+            depth,
+            camera_to_world: self.camera_to_world,
+        }
+    }
+}
+
 /// How a frame becomes VALs (DESIGN.md §2 "RGB-D frames"). Every field is a documented scene /
 /// stream setting with this default. Laid out as WGSL's `RgbdSettings`.
 #[repr(C)]
@@ -99,5 +146,29 @@ impl Default for RgbdSettings {
             bilateral_depth_sigma: 0.05,
             min_cosine: 0.2,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn downsampling_averages_colour_and_takes_the_median_valid_depth() {
+        // 4x2: two 2x2 blocks. Left: colours 0, 10, 20, 30 and depths 1, 1, 5, missing;
+        // right: all depth missing.
+        let frame = RgbdFrame {
+            timestamp: 2.5,
+            intrinsics: Intrinsics { width: 4, height: 2, fx: 4.0, fy: 4.0, cx: 1.5, cy: 0.5 },
+            color: [0u8, 10, 50, 50, 20, 30, 50, 50].iter().map(|&c| [c, c, 255]).collect(),
+            depth: vec![1.0, 1.0, 0.0, f32::NAN, 5.0, -1.0, 0.0, 0.0],
+            camera_to_world: Affine3A::from_translation(glam::Vec3::X),
+        };
+        let half = frame.downsampled(2);
+        assert_eq!(half.intrinsics, Intrinsics { width: 2, height: 1, fx: 2.0, fy: 2.0, cx: 0.5, cy: 0.0 });
+        assert_eq!(half.color, vec![[15, 15, 255], [50, 50, 255]]);
+        assert_eq!(half.depth, vec![1.0, 0.0]);
+        assert_eq!((half.timestamp, half.camera_to_world), (frame.timestamp, frame.camera_to_world));
+        assert_eq!(frame.downsampled(1).depth.len(), 8);
     }
 }

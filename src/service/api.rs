@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::image::LinearImage;
 use crate::renderer::{Method, Rendered};
-use crate::scene::{CameraDescription, LightDescription, Scene, SceneError};
+use crate::scene::{CameraDescription, LightDescription, Occlusion, Scene, SceneError};
 
 /// What `POST /v1/scenes` and `GET /v1/scenes/{id}` answer.
 #[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]
@@ -22,6 +22,8 @@ pub struct SceneInfo {
     pub max_vals: u32,
     /// Whether frames run the glossy gather.
     pub glossy: bool,
+    /// Indirect occlusion of the scene's frames (the scene file's `auto` resolved).
+    pub occlusion: Occlusion,
     /// The default camera of renders.
     pub camera: CameraDescription,
     /// The spot light that render `light` overrides start from (none for scenes lit by RGB-D
@@ -56,6 +58,7 @@ impl SceneInfo {
             sparse_points: scene.sparse_point_count(),
             max_vals: scene.settings.rsm_resolution * scene.settings.rsm_resolution,
             glossy: scene.needs_glossy(),
+            occlusion: scene.settings.occlusion,
             camera,
             light,
         }

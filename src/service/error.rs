@@ -19,6 +19,8 @@ pub mod code {
     pub const PATH_OUTSIDE_ASSETS: &str = "path_outside_assets";
     /// A configured limit was exceeded; `limit` names the setting.
     pub const LIMIT_EXCEEDED: &str = "limit_exceeded";
+    /// A server-side recording, or one of its frames, cannot be read.
+    pub const INVALID_RECORDING: &str = "invalid_recording";
     pub const NOT_FOUND: &str = "not_found";
     pub const METHOD_NOT_ALLOWED: &str = "method_not_allowed";
     pub const UNAUTHORIZED: &str = "unauthorized";
@@ -52,8 +54,8 @@ pub struct ErrorBody {
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct ErrorDetail {
     /// One of `invalid_json`, `invalid_field`, `invalid_scene`, `path_outside_assets`,
-    /// `limit_exceeded`, `not_found`, `method_not_allowed`, `unauthorized`, `queue_full`,
-    /// `shutting_down`, `upgrade_required`, `internal`.
+    /// `limit_exceeded`, `invalid_recording`, `not_found`, `method_not_allowed`,
+    /// `unauthorized`, `queue_full`, `shutting_down`, `upgrade_required`, `internal`.
     #[schema(example = "invalid_field")]
     pub code: String,
     /// What is wrong, for people.

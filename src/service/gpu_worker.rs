@@ -21,7 +21,7 @@ use crate::gpu::{Gpu, GpuError};
 use crate::mr;
 use crate::renderer::{Method, Rendered, Renderer, View};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
-use crate::scene::{Camera, Scene, SpotLight};
+use crate::scene::{Camera, Occlusion, Scene, SpotLight};
 
 use super::api::Component;
 use super::metrics::Metrics;
@@ -87,6 +87,10 @@ pub struct StreamFrameJob {
     pub exposure: Option<f32>,
     pub format: StreamImageFormat,
     pub rgbd: RgbdSettings,
+    /// Indirect occlusion and whether the glossy gather may run (the scene's settings unless
+    /// the stream changed them).
+    pub occlusion: Occlusion,
+    pub glossy: bool,
 }
 
 enum Job {
@@ -302,6 +306,8 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<(Rendered, 
     let Loaded { scene, renderer } = loaded;
     let placement: Vec<Mat4> = scene.meshes.iter().map(|m| m.model_to_world).collect();
     renderer.place_meshes(gpu, scene, &placement);
+    renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
+    renderer.set_glossy(scene.settings.glossy);
     renderer.clear_vals();
     renderer.set_camera(job.camera);
     if let Some(light) = &job.light {
@@ -312,7 +318,7 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<(Rendered, 
 
 /// Renders one RGB-D stream frame: the meshes placed by the stream's model transforms, lit
 /// by the frame's VALs (made on the GPU with `job.rgbd`) and the scene's spot light if it has
-/// one, seen from the frame's camera at the frame's size (composited over the frame's colour
+/// one, with the stream's occlusion and glossy settings, seen from the frame's camera at the frame's size (composited over the frame's colour
 /// when `job.component` is full), or from the stream's virtual camera when it set one.
 fn render_stream_frame(
     gpu: &Gpu,
@@ -327,6 +333,8 @@ fn render_stream_frame(
         })
         .collect();
     renderer.place_meshes(gpu, scene, &placement);
+    renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);
+    renderer.set_glossy(job.glossy);
     if let Some(light) = job.light.as_ref().or(scene.light.as_ref()) {
         renderer.set_spot_light(light);
     }

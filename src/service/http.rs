@@ -29,7 +29,7 @@ use super::config::limit;
 use super::error::{ApiError, ErrorBody, code};
 use super::gpu_worker::{RenderJob, RenderOutput, WorkerError};
 use super::scenes::{self, SceneEntry};
-use super::stream;
+use super::{recordings, stream, viewer};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -45,6 +45,7 @@ use super::stream;
     modifiers(&BearerAuth),
     tags(
         (name = "scenes", description = "Scenes and their renders"),
+        (name = "recordings", description = "RGB-D recordings held by the server, frame by frame as stream messages"),
         (name = "service", description = "Health and metrics")
     )
 )]
@@ -75,7 +76,9 @@ fn routes(state: Option<Arc<AppState>>) -> OpenApiRouter<Arc<AppState>> {
         .routes(routes!(create_scene))
         .routes(routes!(get_scene, delete_scene))
         .routes(routes!(render_scene))
-        .routes(routes!(stream::open_stream));
+        .routes(routes!(stream::open_stream))
+        .routes(routes!(recordings::list_recordings))
+        .routes(routes!(recordings::recording_frame));
     if let Some(state) = state {
         v1 = v1.route_layer(middleware::from_fn_with_state(state, require_token));
     }
@@ -99,6 +102,7 @@ pub fn router(state: Arc<AppState>) -> Router {
     let (router, api) = routes(Some(state.clone())).split_for_parts();
     let api = Arc::new(api);
     router
+        .merge(viewer::routes())
         .route(
             "/openapi.json",
             axum::routing::get(move || {
@@ -267,8 +271,8 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
         camera: description.camera,
         light: description.light,
         exposure: description.settings.exposure,
-        rgbd: description.settings.rgbd,
         mesh_count: scene.meshes.len(),
+        settings: scene.settings,
         info: info.clone(),
     };
     state.worker.add_scene(&id, scene).await.map_err(worker_error)?;
@@ -544,6 +548,8 @@ mod tests {
             "/v1/scenes/{id}",
             "/v1/scenes/{id}/render",
             "/v1/scenes/{id}/stream",
+            "/v1/recordings",
+            "/v1/recordings/{name}/frames/{index}",
         ] {
             assert!(doc["paths"][route].is_object(), "{route} missing");
         }

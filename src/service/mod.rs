@@ -3,8 +3,11 @@
 //! - [`http`]: the routes (`/v1/scenes`, `/v1/scenes/{id}`, `/v1/scenes/{id}/render`,
 //!   `/healthz`, `/metrics`, `/openapi.json`) and the OpenAPI document generated from them.
 //! - [`stream`]: `/v1/scenes/{id}/stream`, the WebSocket stream (protobuf messages of
-//!   `proto/relume.proto`, decoded and encoded by [`wire`]). Rendering RGB-D frames is not
-//!   wired yet.
+//!   `proto/relume.proto`, decoded and encoded by [`wire`]): RGB-D frames in, relit frames
+//!   out.
+//! - [`recordings`]: `/v1/recordings`, the RGB-D recordings under the asset directory, frame by
+//!   frame as stream messages; [`viewer`]: the browser viewer at `/`, files built into the
+//!   binary.
 //! - [`gpu_worker`]: the one thread that owns the GPU; handlers send it jobs over a bounded
 //!   channel and a full render queue is a 503.
 //! - [`scenes`]: admitting scene descriptions (limits, paths confined to the asset directory)
@@ -23,8 +26,10 @@ pub mod error;
 pub mod gpu_worker;
 pub mod http;
 pub mod metrics;
+pub mod recordings;
 pub mod scenes;
 pub mod stream;
+pub mod viewer;
 pub mod wire;
 
 use std::future::{Future, IntoFuture};
@@ -62,6 +67,7 @@ pub struct AppState {
     /// The asset directory, canonical.
     pub assets: PathBuf,
     pub scenes: scenes::SceneRegistry,
+    pub recordings: recordings::Recordings,
     pub worker: GpuWorker,
     pub metrics: Arc<Metrics>,
     shutdown: watch::Sender<bool>,
@@ -145,6 +151,7 @@ impl Server {
             .map_err(|source| ServeError::Bind { addr: config.addr, source })?;
         let state = Arc::new(AppState {
             scenes: scenes::SceneRegistry::new(config.limits.max_scenes),
+            recordings: recordings::Recordings::new(&assets),
             config,
             assets,
             worker,

@@ -134,9 +134,9 @@ pub struct SceneEntry {
     pub light: Option<LightDescription>,
     /// The scene file's `settings.exposure`.
     pub exposure: Option<f32>,
-    /// The scene file's `settings.rgbd`: a stream's RGB-D settings until a control changes them.
-    pub rgbd: crate::rgbd::RgbdSettings,
     pub mesh_count: usize,
+    /// The loaded scene's render settings (occlusion resolved): where a stream starts.
+    pub settings: crate::scene::Settings,
 }
 
 /// The scenes held, and the slots reserved by scenes being loaded.
@@ -271,6 +271,7 @@ mod tests {
             sparse_points: 0,
             max_vals: 0,
             glossy: false,
+            occlusion: crate::scene::Occlusion::Off,
             camera: serde_json::from_str(
                 r#"{"position": [0, 0, 1], "target": [0, 0, 0], "fov_y_deg": 40, "width": 1, "height": 1}"#,
             )
@@ -288,7 +289,7 @@ mod tests {
             info,
             exposure: None,
             mesh_count: 0,
-            rgbd: Default::default(),
+            settings: crate::scene::SettingsDescription::default().to_settings(false),
         };
         a.commit(entry);
         assert_eq!(registry.len(), 1);

@@ -19,7 +19,7 @@ use axum::response::Response;
 use tokio::sync::oneshot;
 
 use crate::rgbd::RgbdSettings;
-use crate::scene::{CameraDescription, LightDescription, TransformDescription};
+use crate::scene::{CameraDescription, LightDescription, Occlusion, TransformDescription};
 
 use super::AppState;
 use super::error::ApiError;
@@ -79,6 +79,8 @@ struct Settings {
     model_transforms: BTreeMap<u32, TransformDescription>,
     quality: StreamQuality,
     rgbd: RgbdSettings,
+    occlusion: Occlusion,
+    glossy: bool,
 }
 
 /// A frame on the GPU thread.
@@ -94,6 +96,8 @@ struct Session {
     state: Arc<AppState>,
     scene_id: String,
     mesh_count: usize,
+    /// The scene's settings: what `Occlusion::Unspecified` goes back to.
+    scene_settings: crate::scene::Settings,
     settings: Settings,
     in_flight: Option<InFlight>,
     /// The newest frame not yet submitted (and how long it took to decode, ms).
@@ -112,8 +116,11 @@ impl Session {
                 light: scene.light.clone(),
                 model_transforms: BTreeMap::new(),
                 quality: StreamQuality { exposure: scene.exposure, ..StreamQuality::default() },
-                rgbd: scene.rgbd,
+                rgbd: scene.settings.rgbd,
+                occlusion: scene.settings.occlusion,
+                glossy: scene.settings.glossy,
             },
+            scene_settings: scene.settings,
             in_flight: None,
             waiting: None,
             dropped_frames: 0,
@@ -241,6 +248,8 @@ impl Session {
             exposure: s.quality.exposure,
             format: s.quality.format,
             rgbd: s.rgbd,
+            occlusion: s.occlusion,
+            glossy: s.glossy,
         };
         let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);
         match self.state.worker.try_render_stream_frame(&self.scene_id, job) {
@@ -320,6 +329,15 @@ impl Session {
         if let Some(rgbd) = control.rgbd {
             next.rgbd = rgbd.apply(&self.settings.rgbd, "control.rgbd")?;
             applied.push("rgbd");
+        }
+        if let Some(render) = control.render {
+            if let Some(occlusion) = render.occlusion {
+                next.occlusion = occlusion.unwrap_or(self.scene_settings.occlusion);
+            }
+            if let Some(glossy) = render.glossy {
+                next.glossy = glossy;
+            }
+            applied.push("render");
         }
         self.settings = next;
         Ok(applied.into_iter().map(str::to_owned).collect())

@@ -11,7 +11,7 @@ use glam::{Affine3A, Mat3, Mat4, Quat, Vec3};
 use prost::Message;
 
 use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
-use crate::scene::{CameraDescription, ScaleDescription, SceneError, TransformDescription};
+use crate::scene::{CameraDescription, Occlusion, ScaleDescription, SceneError, TransformDescription};
 
 use super::api::{Component, LightOverride};
 use super::config::{Limits, limit};
@@ -57,6 +57,15 @@ pub struct ControlMessage {
     pub model_transforms: Vec<(u32, TransformDescription)>,
     pub quality: Option<StreamQuality>,
     pub rgbd: Option<RgbdSettingsPatch>,
+    pub render: Option<RenderSettingsPatch>,
+}
+
+/// Changes to a stream's render settings; absent fields keep their value.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderSettingsPatch {
+    /// `Some(None)`: back to the scene's setting.
+    pub occlusion: Option<Option<Occlusion>>,
+    pub glossy: Option<bool>,
 }
 
 /// How a stream's frames are rendered and sent back.
@@ -511,7 +520,24 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
         bilateral_depth_sigma: r.bilateral_depth_sigma,
         min_cosine: r.min_cosine,
     });
-    Ok(ControlMessage { request_id: c.request_id, camera, light, model_transforms, quality, rgbd })
+    let render = match c.render {
+        None => None,
+        Some(r) => {
+            let occlusion = match r.occlusion {
+                None => None,
+                Some(value) => Some(match proto::Occlusion::try_from(value) {
+                    Ok(proto::Occlusion::Unspecified) => None,
+                    Ok(proto::Occlusion::Off) => Some(Occlusion::Off),
+                    Ok(proto::Occlusion::Disks) => Some(Occlusion::Disks),
+                    Err(_) => {
+                        return Err(WireError::invalid("control.render.occlusion", format!("unknown value {value}")));
+                    }
+                }),
+            };
+            Some(RenderSettingsPatch { occlusion, glossy: r.glossy })
+        }
+    };
+    Ok(ControlMessage { request_id: c.request_id, camera, light, model_transforms, quality, rgbd, render })
 }
 
 /// A camera, validated as a scene file's `camera` is, and within `max_frame_side`.
@@ -895,6 +921,43 @@ mod tests {
         assert_eq!(decode(&bytes, &limits()).expect_err("v2").code, ErrorCode::UnsupportedVersion);
         let bytes = envelope(Body::SettingsAck(proto::SettingsAck::default()));
         assert_eq!(decode(&bytes, &limits()).expect_err("server body").code, ErrorCode::UnexpectedMessage);
+    }
+
+    /// The bytes the viewer's hand-written encoder (src/service/viewer/proto.js) writes for
+    /// one Control; tests/e2e/viewer.test.mjs checks that the page writes exactly these.
+    const VIEWER_CONTROL: [u8; 23] = [8, 1, 26, 19, 8, 172, 2, 42, 4, 16, 3, 32, 1, 50, 2, 8, 12, 58, 4, 8, 2, 16, 0];
+
+    #[test]
+    fn the_viewers_control_bytes_are_prosts_and_decode() {
+        let control = proto::Control {
+            request_id: 300,
+            quality: Some(proto::Quality { component: 3, format: 1, ..Default::default() }),
+            rgbd: Some(proto::RgbdSettings { grid_step: Some(12), ..Default::default() }),
+            render: Some(proto::RenderSettings { occlusion: Some(2), glossy: Some(false) }),
+            ..Default::default()
+        };
+        assert_eq!(envelope(Body::Control(control.clone())), VIEWER_CONTROL);
+        let ClientMessage::Control(c) = decode(&VIEWER_CONTROL, &limits()).expect("valid") else { panic!("control") };
+        assert_eq!(c.request_id, 300);
+        assert_eq!(c.quality.expect("quality").component, Component::Indirect);
+        assert_eq!(c.rgbd.expect("rgbd").grid_step, Some(12));
+        assert_eq!(
+            c.render,
+            Some(RenderSettingsPatch { occlusion: Some(Some(Occlusion::Disks)), glossy: Some(false) })
+        );
+
+        let unset = proto::Control {
+            render: Some(proto::RenderSettings { occlusion: Some(0), glossy: None }),
+            ..control.clone()
+        };
+        let ClientMessage::Control(c) = decode(&envelope(Body::Control(unset)), &limits()).expect("valid") else {
+            panic!("control")
+        };
+        assert_eq!(c.render, Some(RenderSettingsPatch { occlusion: Some(None), glossy: None }), "0: the scene's");
+        let bad =
+            proto::Control { render: Some(proto::RenderSettings { occlusion: Some(7), glossy: None }), ..control };
+        let e = decode(&envelope(Body::Control(bad)), &limits()).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("control.render.occlusion"));
     }
 
     #[test]

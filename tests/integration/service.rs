@@ -707,9 +707,93 @@ async fn a_stream_relights_frames_and_follows_its_controls() {
     assert!(!dark.timings.iter().any(|t| t.stage == "composite"), "a component alone is not composited");
     assert!(direct.pixels().all(|p| p.0 == [0, 0, 0]), "the spot light is off: no direct light");
 
+    // Occlusion is a stream setting: on, the frame runs the occlusion stage; off, it does not.
+    for (request_id, occlusion, expected) in [(5, proto::Occlusion::Disks, true), (6, proto::Occlusion::Off, false)] {
+        let control = proto::Control {
+            request_id,
+            render: Some(proto::RenderSettings { occlusion: Some(occlusion as i32), glossy: Some(false) }),
+            ..Default::default()
+        };
+        match ws.exchange(envelope(Body::Control(control))).await {
+            Body::SettingsAck(ack) => {
+                assert_eq!((ack.request_id, ack.applied), (request_id, vec!["render".to_owned()]))
+            }
+            other => panic!("expected an ack, got {other:?}"),
+        }
+        let (f, _) =
+            streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(request_id)))).await, request_id);
+        let stages: Vec<&str> = f.timings.iter().map(|t| t.stage.as_str()).collect();
+        assert_eq!(stages.contains(&"occlusion"), expected, "{occlusion:?}: {stages:?}");
+    }
+
     // The scene's own renders: same light, same placement, no RGB-D VALs, as before.
     assert!(http_render().await == before, "the stream's state leaked into an HTTP render");
     drop(ws);
+    server.stop().await;
+}
+
+/// The viewer's files, and the recordings it plays: the fixture recording listed, a frame
+/// answered as the stream message that a stream then renders unchanged, and JSON errors for
+/// bad names, indices and queries.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_viewer_and_the_recordings_are_served() {
+    let server = TestServer::start(|_| {}).await;
+    for (path, content_type) in [
+        ("/", "text/html; charset=utf-8"),
+        ("/viewer.js", "text/javascript; charset=utf-8"),
+        ("/proto.js", "text/javascript; charset=utf-8"),
+        ("/viewer.css", "text/css; charset=utf-8"),
+        ("/default-scene.json", "application/json"),
+    ] {
+        let reply = server.get(path).await;
+        assert_eq!(reply.status, StatusCode::OK, "{path}");
+        assert_eq!(reply.header("content-type"), content_type, "{path}");
+    }
+    let mut scene = server.get("/default-scene.json").await.json();
+    scene["meshes"][0]["sparse_points"] = 64.into();
+    let id = server.create(&scene).await;
+
+    let list = server.get("/v1/recordings").await.json();
+    let recording = &list["recordings"][0];
+    assert_eq!(recording["name"], "tum_fr1_xyz", "{list}");
+    assert_eq!((recording["width"].as_u64(), recording["height"].as_u64()), (Some(640), Some(480)));
+    let frames = recording["frames"].as_u64().expect("a frame count");
+    assert!(frames > 10 && recording["duration_s"].as_f64().is_some_and(|d| d > 0.0), "{list}");
+
+    let path = "/v1/recordings/tum_fr1_xyz/frames";
+    let reply = server.get(&format!("{path}/3?downscale=8")).await;
+    assert_eq!(reply.status, StatusCode::OK, "{}", String::from_utf8_lossy(&reply.body));
+    assert_eq!(reply.header("content-type"), "application/x-protobuf");
+    assert_eq!(reply.header("x-relume-frame-count"), frames.to_string());
+    assert_eq!((reply.header("x-relume-width"), reply.header("x-relume-height")), ("80", "60"));
+    let envelope = proto::Envelope::decode(reply.body.as_ref()).expect("an Envelope");
+    assert_eq!(envelope.version, PROTOCOL_VERSION);
+    let Some(Body::RgbdFrame(frame)) = &envelope.body else { panic!("an RgbdFrame, got {:?}", envelope.body) };
+    assert_eq!(frame.frame_id, 3);
+    let k = frame.intrinsics.expect("intrinsics");
+    assert_eq!((k.width, k.height, k.fx), (80, 60, 525.0 / 8.0));
+    let mut ws = server.stream(&id).await;
+    let (rendered, _) = streamed_png(ws.exchange(reply.body.to_vec()).await, 3);
+    assert_eq!((rendered.width, rendered.height), (80, 60));
+    assert!(rendered.val_count > 0);
+    drop(ws);
+
+    let last = server.get(&format!("{path}/{}", frames - 1)).await;
+    assert_eq!((last.status, last.header("x-relume-width")), (StatusCode::OK, "640"));
+    server.get(&format!("{path}/{frames}")).await.error(404, "not_found");
+    server.get("/v1/recordings/no_such_recording/frames/0").await.error(404, "not_found");
+    for escape in ["..%2Fscenes", ".hidden", "a%5Cb", "%2E%2E"] {
+        let error = server.get(&format!("/v1/recordings/{escape}/frames/0")).await.error(400, "invalid_field");
+        assert_eq!(error["field"], "name", "{escape}");
+    }
+    for (query, field) in [("x/frames/-1", "index"), ("x/frames/one", "index")] {
+        let error = server.get(&format!("/v1/recordings/{query}")).await.error(400, "invalid_field");
+        assert_eq!(error["field"], field, "{query}");
+    }
+    for (query, field) in [("?downscale=0", "downscale"), ("?downscale=17", "downscale"), ("?size=2", "size")] {
+        let error = server.get(&format!("{path}/0{query}")).await.error(400, "invalid_field");
+        assert_eq!(error["field"], field, "{query}");
+    }
     server.stop().await;
 }
 

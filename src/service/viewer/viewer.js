@@ -1,0 +1,391 @@
+// The relume viewer: creates a scene, opens its WebSocket stream and plays a server-side
+// recording on it, one frame after the other (or at the recording's rate, letting the server
+// drop frames), showing each relit frame, its per-stage timings and the settings in effect.
+// Everything goes through the public API: POST /v1/scenes, GET /v1/recordings/..., and the
+// protobuf stream of proto/relume.proto (encoded by ./proto.js).
+//
+// URL parameters (all optional): scene=<URL of a scene file> (default /default-scene.json),
+// recording=<name>, downscale=<1..8>, grid=<VAL grid step>.
+
+import { Component, ImageFormat, Occlusion, decodeEnvelope, encodeControl } from "./proto.js";
+
+const params = new URLSearchParams(location.search);
+const $ = (id) => document.getElementById(id);
+const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+const COMPONENT_NAMES = { [Component.FULL]: "composited", [Component.DIRECT]: "direct only", [Component.INDIRECT]: "indirect only" };
+const FRAME_ANSWER_TIMEOUT_MS = 60_000;
+
+// Everything the page knows; exposed as `window.relumeViewer` for tests and the curious.
+const state = {
+  // What the controls ask for.
+  wanted: {
+    component: Component.FULL,
+    gridStep: Number(params.get("grid") ?? 8),
+    occlusion: true,
+    glossy: true,
+    sparseLog2: 11,
+    downscale: Number(params.get("downscale") ?? 2),
+  },
+  // What the server acknowledged on the current stream (SettingsAck), and requests in flight.
+  applied: {},
+  pending: new Map(),
+  requestId: 0,
+  sceneText: null,
+  scene: null, // SceneInfo of the scene in use
+  recording: null, // RecordingInfo being played
+  socket: null,
+  generation: 0, // bumped on every (re)connection: older playback loops stop
+  playing: true,
+  realtime: false,
+  nextIndex: 0,
+  sent: new Map(), // frame id -> {sentAt, frame}
+  waiter: null, // {frameId, resolve} of the frame the paced loop waits for
+  framesShown: 0,
+  lastFrame: null,
+  droppedFrames: 0,
+  errors: [],
+  connection: "connecting",
+};
+window.relumeViewer = state;
+
+// ----------------------------------------------------------------------------------------
+// Display
+
+function setStatus(kind, text) {
+  state.connection = kind;
+  const status = $("status");
+  status.className = `status ${kind}`;
+  status.dataset.state = kind;
+  status.textContent = text;
+}
+
+function log(kind, text) {
+  if (kind === "error") state.errors.push(text);
+  const item = document.createElement("li");
+  item.className = kind;
+  item.textContent = `${new Date().toLocaleTimeString()} ${text}`;
+  const list = $("log");
+  list.prepend(item);
+  while (list.children.length > 50) list.lastChild.remove();
+}
+
+const STAGE_COLOURS = ["#f0b44c", "#5ca8f0", "#6cc788", "#c77ce0", "#f06a5c", "#4cd3c8", "#e0d05c",
+  "#9aa3b2", "#f08fc0", "#7c8cf0", "#b0e05c", "#f0905c"];
+const stageColours = new Map();
+function stageColour(stage) {
+  if (!stageColours.has(stage)) stageColours.set(stage, STAGE_COLOURS[stageColours.size % STAGE_COLOURS.length]);
+  return stageColours.get(stage);
+}
+
+function showTimings(timings) {
+  const total = timings.reduce((sum, t) => sum + t.ms, 0) || 1;
+  const bar = $("stage-bar");
+  const legend = $("stage-legend");
+  bar.replaceChildren();
+  legend.replaceChildren();
+  for (const { stage, ms } of timings) {
+    const segment = document.createElement("div");
+    segment.style.width = `${(100 * ms) / total}%`;
+    segment.style.background = stageColour(stage);
+    segment.title = `${stage}: ${ms.toFixed(1)} ms`;
+    segment.dataset.stage = stage;
+    bar.append(segment);
+    const entry = document.createElement("span");
+    const swatch = document.createElement("i");
+    swatch.style.background = stageColour(stage);
+    entry.append(swatch, `${stage} ${ms.toFixed(1)} ms`);
+    legend.append(entry);
+  }
+}
+
+function showSettings() {
+  const a = state.applied;
+  const w = state.wanted;
+  const onOff = (v) => (v ? "on" : "off");
+  const rows = [
+    ["view", COMPONENT_NAMES[a.component], COMPONENT_NAMES[w.component]],
+    ["VAL grid step", a.gridStep, w.gridStep],
+    ["occlusion", a.occlusion === undefined ? undefined : onOff(a.occlusion), onOff(w.occlusion)],
+    ["glossy", a.glossy === undefined ? undefined : onOff(a.glossy) + (state.scene?.glossy ? "" : " (no glossy material)"),
+      onOff(w.glossy) + (state.scene?.glossy ? "" : " (no glossy material)")],
+    ["sparse points", state.scene?.sparse_points, undefined],
+    ["frame size", state.lastFrame ? `${state.lastFrame.width}×${state.lastFrame.height}` : undefined, undefined],
+    ["VALs", state.lastFrame?.valCount, undefined],
+    ["recording", state.recording ? `${state.recording.name} (${state.recording.frames} frames)` : undefined, undefined],
+    ["scene", state.scene?.id, undefined],
+  ];
+  const list = $("settings");
+  list.replaceChildren();
+  for (const [name, applied, wanted] of rows) {
+    const dt = document.createElement("dt");
+    dt.textContent = name;
+    const dd = document.createElement("dd");
+    dd.dataset.setting = name;
+    const pending = wanted !== undefined && String(applied) !== String(wanted);
+    dd.textContent = pending ? `${applied ?? "–"} → ${wanted}` : String(applied ?? "–");
+    if (pending) dd.classList.add("pending");
+    list.append(dt, dd);
+  }
+  $("grid-value").textContent = w.gridStep;
+  $("sparse-value").textContent = 2 ** w.sparseLog2;
+  $("occlusion-value").textContent = onOff(w.occlusion);
+  $("glossy-value").textContent = onOff(w.glossy);
+  $("downscale-value").textContent = w.downscale === 1 ? "full" : `1/${w.downscale}`;
+  for (const button of document.querySelectorAll("[data-component]")) {
+    button.classList.toggle("active", Number(button.dataset.component) === w.component);
+  }
+}
+
+let frameUrl = null;
+function showFrame(frame, sent) {
+  const image = frame.png ? new Blob([frame.png], { type: "image/png" }) : null;
+  if (image) {
+    if (frameUrl) URL.revokeObjectURL(frameUrl);
+    frameUrl = URL.createObjectURL(image);
+    $("frame").src = frameUrl;
+    $("frame-placeholder").hidden = true;
+  }
+  state.framesShown += 1;
+  state.lastFrame = frame;
+  state.droppedFrames = frame.droppedFrames;
+  const serverMs = frame.timings.reduce((sum, t) => sum + t.ms, 0);
+  const roundTrip = sent ? performance.now() - sent.sentAt : undefined;
+  const source = sent?.frame;
+  $("frame-info").textContent = `frame ${frame.frameId}` +
+    (source ? ` · t = ${source.timestamp.toFixed(3)} s` : "") +
+    ` · ${frame.width}×${frame.height} · ${frame.valCount} VALs`;
+  $("frame-time").textContent = `frame time ${serverMs.toFixed(0)} ms on the server` +
+    (roundTrip !== undefined ? ` · ${roundTrip.toFixed(0)} ms round trip` : "");
+  const dropped = $("dropped");
+  dropped.dataset.dropped = String(frame.droppedFrames);
+  dropped.textContent = `dropped frames: ${frame.droppedFrames}`;
+  showTimings(frame.timings);
+  showSettings();
+}
+
+// ----------------------------------------------------------------------------------------
+// HTTP
+
+async function fetchOk(url, options) {
+  let response;
+  try {
+    response = await fetch(url, options);
+  } catch (error) {
+    throw new Error(`${url}: the server cannot be reached (${error.message})`);
+  }
+  if (!response.ok) {
+    let detail = response.statusText;
+    try {
+      const body = await response.json();
+      detail = `${body.error.code}: ${body.error.message}`;
+    } catch (_) { /* not a JSON error */ }
+    throw new Error(`${options?.method ?? "GET"} ${url}: ${response.status} ${detail}`);
+  }
+  return response;
+}
+
+// Creates the scene with 2^sparseLog2 sparse points per mesh; deletes the previous one.
+async function createScene() {
+  const scene = JSON.parse(state.sceneText);
+  for (const mesh of scene.meshes) mesh.sparse_points = 2 ** state.wanted.sparseLog2;
+  const response = await fetchOk("/v1/scenes", {
+    method: "POST",
+    headers: { "content-type": "application/json" },
+    body: JSON.stringify(scene),
+  });
+  const previous = state.scene;
+  state.scene = await response.json();
+  if (previous) fetch(`/v1/scenes/${previous.id}`, { method: "DELETE" }).catch(() => {});
+  log("info", `scene ${state.scene.id}: ${state.scene.triangles} triangles, ${state.scene.sparse_points} sparse points`);
+}
+
+async function fetchFrame(index) {
+  const r = state.recording;
+  const url = `/v1/recordings/${encodeURIComponent(r.name)}/frames/${index}?downscale=${state.wanted.downscale}`;
+  return new Uint8Array(await (await fetchOk(url)).arrayBuffer());
+}
+
+// ----------------------------------------------------------------------------------------
+// The stream
+
+function sendControl(parts) {
+  const socket = state.socket;
+  if (!socket || socket.readyState !== WebSocket.OPEN) return;
+  const requestId = ++state.requestId;
+  state.pending.set(requestId, parts);
+  const control = { requestId };
+  if (parts.component !== undefined) control.quality = { component: parts.component, format: ImageFormat.PNG };
+  if (parts.gridStep !== undefined) control.rgbd = { gridStep: parts.gridStep };
+  if (parts.occlusion !== undefined || parts.glossy !== undefined) {
+    control.render = {
+      occlusion: parts.occlusion === undefined ? undefined : parts.occlusion ? Occlusion.DISKS : Occlusion.OFF,
+      glossy: parts.glossy,
+    };
+  }
+  socket.send(encodeControl(control));
+  showSettings();
+}
+
+function sendAllSettings() {
+  const w = state.wanted;
+  sendControl({ component: w.component, gridStep: w.gridStep, occlusion: w.occlusion, glossy: w.glossy });
+}
+
+function onMessage(event, socket) {
+  if (socket !== state.socket) return;
+  let envelope;
+  try {
+    envelope = decodeEnvelope(event.data);
+  } catch (error) {
+    log("error", `undecodable message from the server: ${error.message}`);
+    return;
+  }
+  const { kind, body } = envelope;
+  if (kind === "renderedFrame") {
+    const sent = state.sent.get(body.frameId);
+    state.sent.delete(body.frameId);
+    showFrame(body, sent);
+    answered(body.frameId);
+  } else if (kind === "settingsAck") {
+    const parts = state.pending.get(body.requestId);
+    state.pending.delete(body.requestId);
+    if (parts) Object.assign(state.applied, parts);
+    showSettings();
+  } else if (kind === "error") {
+    const about = body.frameId !== undefined ? ` (frame ${body.frameId})` : body.requestId !== undefined ? ` (settings request ${body.requestId})` : "";
+    log("error", `stream error ${body.code}${about}: ${body.message}${body.field ? ` [${body.field}]` : ""}`);
+    if (body.requestId !== undefined) state.pending.delete(body.requestId);
+    if (body.frameId !== undefined) answered(body.frameId);
+    showSettings();
+  }
+}
+
+function answered(frameId) {
+  if (state.waiter && (frameId === undefined || state.waiter.frameId === frameId)) {
+    state.waiter.resolve();
+    state.waiter = null;
+  }
+}
+
+function openStream(generation) {
+  const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/v1/scenes/${state.scene.id}/stream`;
+  const socket = new WebSocket(url);
+  socket.binaryType = "arraybuffer";
+  state.socket = socket;
+  state.applied = {};
+  state.pending.clear();
+  socket.onopen = () => {
+    setStatus("live", "live");
+    sendAllSettings();
+    play(generation, socket);
+  };
+  socket.onmessage = (event) => onMessage(event, socket);
+  socket.onclose = (event) => {
+    if (socket !== state.socket) return; // replaced on purpose
+    const why = event.reason || (event.code === 1006 ? "connection lost" : `code ${event.code}`);
+    setStatus("closed", `disconnected: ${why} — the server is gone? click to reconnect`);
+    log("error", `stream closed (${event.code}${event.reason ? `, ${event.reason}` : ""})`);
+    answered(undefined);
+  };
+}
+
+// Plays the recording on `socket` until the page moves to another stream.
+async function play(generation, socket) {
+  const live = () => generation === state.generation && socket.readyState === WebSocket.OPEN;
+  while (live()) {
+    if (!state.playing) {
+      await sleep(100);
+      continue;
+    }
+    const index = state.nextIndex;
+    state.nextIndex = (index + 1) % state.recording.frames;
+    const started = performance.now();
+    let bytes;
+    try {
+      bytes = await fetchFrame(index);
+    } catch (error) {
+      log("error", error.message);
+      await sleep(1000);
+      continue;
+    }
+    if (!live()) break;
+    const frame = decodeEnvelope(bytes).body;
+    state.sent.set(frame.frameId, { sentAt: performance.now(), frame });
+    const answer = new Promise((resolve) => { state.waiter = { frameId: frame.frameId, resolve }; });
+    socket.send(bytes);
+    if (state.realtime) {
+      // The recording's rate: the server keeps the newest frame and drops the others.
+      await sleep(Math.max(0, 1000 / 30 - (performance.now() - started)));
+    } else {
+      await Promise.race([answer, sleep(FRAME_ANSWER_TIMEOUT_MS)]);
+    }
+  }
+}
+
+// (Re)creates the scene and opens its stream; the previous stream, if any, is closed.
+async function connect() {
+  const generation = ++state.generation;
+  const previous = state.socket;
+  state.socket = null;
+  if (previous) previous.close(1000, "replaced");
+  setStatus("connecting", "connecting…");
+  try {
+    if (state.sceneText === null) state.sceneText = await (await fetchOk(params.get("scene") ?? "/default-scene.json")).text();
+    if (state.recording === null) {
+      const { recordings } = await (await fetchOk("/v1/recordings")).json();
+      if (recordings.length === 0) {
+        throw new Error("the server holds no recordings: start it with --assets fixtures (recordings/ under the asset directory)");
+      }
+      state.recording = recordings.find((r) => r.name === params.get("recording")) ?? recordings[0];
+    }
+    const first = state.scene === null;
+    await createScene();
+    if (first) state.wanted.occlusion = state.scene.occlusion === "disks";
+    if (generation !== state.generation) return;
+    openStream(generation);
+  } catch (error) {
+    setStatus("error", `${error.message} — click to retry`);
+    log("error", error.message);
+  }
+  showSettings();
+}
+
+// ----------------------------------------------------------------------------------------
+// Controls
+
+function bind() {
+  for (const button of document.querySelectorAll("[data-component]")) {
+    button.addEventListener("click", () => {
+      state.wanted.component = Number(button.dataset.component);
+      sendControl({ component: state.wanted.component });
+    });
+  }
+  $("play").addEventListener("click", () => {
+    state.playing = !state.playing;
+    $("play").textContent = state.playing ? "Pause" : "Play";
+  });
+  $("realtime").addEventListener("change", (event) => { state.realtime = event.target.checked; });
+  $("status").addEventListener("click", () => {
+    if (state.connection === "closed" || state.connection === "error") connect();
+  });
+  const slider = (id, apply) => $(id).addEventListener("change", (event) => apply(Number(event.target.value)));
+  slider("grid", (v) => { state.wanted.gridStep = v; sendControl({ gridStep: v }); });
+  slider("occlusion", (v) => { state.wanted.occlusion = v === 1; sendControl({ occlusion: v === 1 }); });
+  slider("glossy", (v) => { state.wanted.glossy = v === 1; sendControl({ glossy: v === 1 }); });
+  slider("downscale", (v) => { state.wanted.downscale = v; showSettings(); });
+  slider("sparse", (v) => { state.wanted.sparseLog2 = v; connect(); });
+}
+
+function syncSliders() {
+  const w = state.wanted;
+  $("grid").value = w.gridStep;
+  $("sparse").value = w.sparseLog2;
+  $("occlusion").value = w.occlusion ? 1 : 0;
+  $("glossy").value = w.glossy ? 1 : 0;
+  $("downscale").value = w.downscale;
+}
+
+bind();
+syncSliders();
+showSettings();
+connect().then(syncSliders);

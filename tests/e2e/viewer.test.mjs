@@ -1,0 +1,216 @@
+// End-to-end test of the browser viewer: `relume serve` on a free port, Debian's chromium
+// (headless, driven by playwright-core), the page playing the bundled recording. It checks
+// that frames arrive with their stage timings, that the page's hand-written protobuf codec
+// and the server's (prost) agree both ways, that the indirect-only view and the sliders
+// change the next frames and the settings the page reports, that dropped frames, stream
+// errors and a server that goes away are shown; and it takes the README's screenshot.
+//
+// Run by scripts/test.sh after `cargo test` (which builds the binary). Environment:
+// RELUME_BIN (default $CARGO_TARGET_DIR/debug/relume or target/debug/relume), CHROMIUM
+// (default /usr/bin/chromium), BLESS=1 to also write docs/images/viewer.png.
+
+import { spawn } from "node:child_process";
+import { copyFileSync, mkdirSync } from "node:fs";
+import path from "node:path";
+import { createInterface } from "node:readline";
+import { fileURLToPath } from "node:url";
+
+import { chromium } from "playwright-core";
+
+const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../..");
+const binary = process.env.RELUME_BIN ?? path.join(process.env.CARGO_TARGET_DIR ?? path.join(root, "target"), "debug", "relume");
+const screenshot = path.join(root, "out", "e2e", "viewer.png");
+const readmeScreenshot = path.join(root, "docs", "images", "viewer.png");
+const WAIT_MS = 60_000;
+const started = Date.now();
+
+function step(text) {
+  console.log(`[${((Date.now() - started) / 1000).toFixed(1)} s] ${text}`);
+}
+
+function assert(condition, message) {
+  if (!condition) throw new Error(`assertion failed: ${message}`);
+}
+
+// Starts the server; resolves with its address once it logs "serving".
+function startServer() {
+  const server = spawn(binary, ["serve", "--addr", "127.0.0.1:0", "--assets", path.join(root, "fixtures")], {
+    env: { ...process.env, NO_COLOR: "1", RUST_LOG: process.env.RUST_LOG ?? "info" },
+    stdio: ["ignore", "inherit", "pipe"],
+  });
+  const log = [];
+  const address = new Promise((resolve, reject) => {
+    server.on("error", (error) => reject(new Error(`cannot start ${binary}: ${error.message}`)));
+    server.on("exit", (code) => reject(new Error(`the server exited (${code}) before serving:\n${log.join("\n")}`)));
+    createInterface({ input: server.stderr }).on("line", (line) => {
+      log.push(line);
+      if (process.env.E2E_SERVER_LOG) console.error(`server: ${line}`);
+      const match = line.includes("serving") && line.match(/127\.0\.0\.1:(\d+)/);
+      if (match) resolve(`127.0.0.1:${match[1]}`);
+    });
+  });
+  return { server, address, log };
+}
+
+async function main() {
+  const { server, address, log } = startServer();
+  let browser;
+  try {
+    const addr = await address;
+    step(`server on ${addr}`);
+    browser = await chromium.launch({
+      executablePath: process.env.CHROMIUM ?? "/usr/bin/chromium",
+      args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"],
+    });
+    const page = await browser.newPage({ viewport: { width: 1200, height: 800 } });
+    const pageErrors = [];
+    page.on("pageerror", (error) => pageErrors.push(error.message));
+    page.on("console", (message) => { if (message.type() === "error") pageErrors.push(message.text()); });
+    page.setDefaultTimeout(WAIT_MS);
+
+    await page.goto(`http://${addr}/?downscale=2`);
+    const viewer = () => page.evaluate(() => {
+      const s = window.relumeViewer;
+      return { framesShown: s.framesShown, applied: { ...s.applied }, connection: s.connection, errors: [...s.errors],
+        scene: s.scene, lastFrame: s.lastFrame && { frameId: s.lastFrame.frameId, width: s.lastFrame.width,
+          height: s.lastFrame.height, valCount: s.lastFrame.valCount, stages: s.lastFrame.timings.map((t) => t.stage),
+          png: s.lastFrame.png ? Array.from(s.lastFrame.png.subarray(0, 4)) : null } };
+    });
+    const framesAfter = async (n) => {
+      await page.waitForFunction((n) => window.relumeViewer.framesShown >= n, n);
+      return viewer();
+    };
+    const setting = (name) => page.locator(`#settings dd[data-setting="${name}"]`).textContent();
+
+    // Frames arrive, composited, with every stage timed; the status says live.
+    let v = await framesAfter(2);
+    step(`${v.framesShown} frames, ${v.lastFrame.width}x${v.lastFrame.height}, ${v.lastFrame.valCount} VALs`);
+    assert(v.connection === "live", `status live, got ${v.connection}`);
+    assert(v.errors.length === 0, `no errors at start: ${v.errors}`);
+    assert(v.lastFrame.width === 320 && v.lastFrame.height === 240, "downscale=2 of 640x480");
+    assert(v.lastFrame.png?.join() === "137,80,78,71", "a PNG");
+    for (const stage of ["decode", "queue", "rgbd_vals", "gather", "shade", "composite", "encode"]) {
+      assert(v.lastFrame.stages.includes(stage), `stage ${stage} in ${v.lastFrame.stages}`);
+    }
+    assert(await page.locator("#stage-bar > div").count() === v.lastFrame.stages.length, "one bar segment per stage");
+    assert(await page.locator("#frame").getAttribute("src"), "the frame is shown");
+
+    // The codec both ways: the page's Control (encoded in JS) was decoded and acknowledged by
+    // the server, and the server's RgbdFrame (encoded by prost) decodes in the page.
+    assert(v.applied.gridStep === 8 && v.applied.component === 1 && v.applied.occlusion !== undefined
+      && v.applied.glossy === true, `the first control was acknowledged: ${JSON.stringify(v.applied)}`);
+    const decoded = await page.evaluate(async () => {
+      const { decodeEnvelope, encodeControl } = await import("/proto.js");
+      const response = await fetch("/v1/recordings/tum_fr1_xyz/frames/5?downscale=8");
+      const frame = decodeEnvelope(await response.arrayBuffer());
+      const control = Array.from(encodeControl({ requestId: 300, quality: { component: 3, format: 1 },
+        rgbd: { gridStep: 12 }, render: { occlusion: 2, glossy: false } }));
+      return { version: frame.version, kind: frame.kind, body: frame.body, width: response.headers.get("x-relume-width"),
+        control };
+    });
+    assert(decoded.version === 1 && decoded.kind === "rgbdFrame", `an RgbdFrame envelope: ${decoded.kind}`);
+    assert(decoded.body.frameId === 5 && String(decoded.body.intrinsics.width) === decoded.width
+      && decoded.body.intrinsics.height === 60 && Math.abs(decoded.body.intrinsics.fx - 525 / 8) < 1e-3,
+      `the frame's id and intrinsics: ${JSON.stringify(decoded.body)}`);
+    // Bytes protoc / prost write for the same Control (field order, fixed32 float, bool).
+    const expected = [8, 1, 26, 19, 8, 172, 2, 42, 4, 16, 3, 32, 1, 50, 2, 8, 12, 58, 4, 8, 2, 16, 0];
+    assert(decoded.control.join() === expected.join(), `Control bytes ${decoded.control}`);
+
+    // One click to the indirect-only view: acknowledged, and the next frames are not composited.
+    await page.getByRole("button", { name: "Indirect only" }).click();
+    await page.waitForFunction(() => window.relumeViewer.applied.component === 3);
+    v = await viewer();
+    v = await framesAfter(v.framesShown + 2);
+    assert(!v.lastFrame.stages.includes("composite"), `indirect alone is not composited: ${v.lastFrame.stages}`);
+    assert((await setting("view")) === "indirect only", "the settings show the view");
+    step("indirect-only view");
+    await page.getByRole("button", { name: "Composited" }).click();
+    await page.waitForFunction(() => window.relumeViewer.applied.component === 1);
+
+    // The VAL grid slider: acknowledged, reported, and the next frames have fewer VALs.
+    v = await framesAfter((await viewer()).framesShown + 1);
+    const before = { vals: v.lastFrame.valCount, grid: await setting("VAL grid step") };
+    assert(before.grid === "8", `grid step 8 reported, got ${before.grid}`);
+    await page.locator("#grid").fill("16");
+    await page.waitForFunction(() => window.relumeViewer.applied.gridStep === 16);
+    v = await framesAfter((await viewer()).framesShown + 2);
+    const after = { vals: v.lastFrame.valCount, grid: await setting("VAL grid step") };
+    step(`grid 8 -> 16: ${before.vals} -> ${after.vals} VALs`);
+    assert(after.grid === "16", `grid step 16 reported, got ${after.grid}`);
+    assert(after.vals < before.vals / 2, `a coarser grid, fewer VALs: ${before.vals} -> ${after.vals}`);
+
+    // Occlusion and glossy: acknowledged, frames keep coming.
+    await page.locator("#occlusion").fill("0");
+    await page.locator("#glossy").fill("0");
+    await page.waitForFunction(() => window.relumeViewer.applied.occlusion === false
+      && window.relumeViewer.applied.glossy === false);
+    v = await framesAfter((await viewer()).framesShown + 1);
+    assert((await setting("occlusion")) === "off", "occlusion off reported");
+    await page.locator("#occlusion").fill("1");
+    await page.waitForFunction(() => window.relumeViewer.applied.occlusion === true);
+    step("occlusion and glossy");
+
+    // Sparse points: the scene is re-created with the new count and frames resume on it.
+    const oldScene = v.scene;
+    await page.locator("#sparse").fill("10");
+    await page.waitForFunction((id) => window.relumeViewer.scene?.id !== id && window.relumeViewer.connection === "live"
+      && window.relumeViewer.applied.gridStep === 16, oldScene.id);
+    v = await framesAfter((await viewer()).framesShown + 2);
+    assert(v.scene.sparse_points < oldScene.sparse_points, `fewer sparse points: ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
+    assert((await setting("sparse points")) === String(v.scene.sparse_points), "sparse points reported");
+    step(`sparse points ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
+
+    // Real time: frames sent at 30 fps, faster than lavapipe renders them; the server drops
+    // the ones it cannot keep up with and the page shows the count. (A burst of one frame sent
+    // five times makes sure of drops on any machine: the newest waiting frame wins.)
+    await page.locator("#realtime").check();
+    await page.evaluate(async () => {
+      const response = await fetch("/v1/recordings/tum_fr1_xyz/frames/0?downscale=2");
+      const bytes = new Uint8Array(await response.arrayBuffer());
+      for (let i = 0; i < 5; i++) window.relumeViewer.socket.send(bytes);
+    });
+    await page.waitForFunction(() => window.relumeViewer.droppedFrames > 0);
+    v = await framesAfter((await viewer()).framesShown + 1);
+    const dropped = await page.locator("#dropped").textContent();
+    assert(/dropped frames: [1-9]/.test(dropped), `dropped frames shown: ${dropped}`);
+    step(dropped);
+
+    // The README's picture: composited, grid 16, real time.
+    mkdirSync(path.dirname(screenshot), { recursive: true });
+    await page.screenshot({ path: screenshot });
+    if (process.env.BLESS) {
+      mkdirSync(path.dirname(readmeScreenshot), { recursive: true });
+      copyFileSync(screenshot, readmeScreenshot);
+      step(`screenshot written to ${path.relative(root, readmeScreenshot)}`);
+    }
+
+    // A stream error is shown, not swallowed: a message that is not an Envelope.
+    await page.evaluate(() => window.relumeViewer.socket.send(new Uint8Array([0xff, 0xff, 0xff])));
+    await page.waitForFunction(() => window.relumeViewer.errors.some((e) => e.includes("MALFORMED")));
+    assert((await page.locator("#log li.error").first().textContent()).includes("MALFORMED"), "the error is listed");
+    assert(pageErrors.length === 0, `no page errors: ${pageErrors}`);
+
+    // The server goes away: the page says so.
+    server.kill("SIGTERM");
+    await page.waitForFunction(() => window.relumeViewer.connection === "closed");
+    const status = await page.locator("#status").textContent();
+    assert(status.includes("disconnected"), `status after the server stopped: ${status}`);
+    step(`server gone: "${status}"`);
+    step("viewer end-to-end test passed");
+  } catch (error) {
+    console.error(`viewer end-to-end test FAILED: ${error.stack ?? error}`);
+    console.error(`server log (last 40 lines):\n${log.slice(-40).join("\n")}`);
+    process.exitCode = 1;
+  } finally {
+    await browser?.close();
+    if (server.exitCode === null) server.kill("SIGTERM");
+  }
+}
+
+const watchdog = setTimeout(() => {
+  console.error("viewer end-to-end test FAILED: over 3 minutes");
+  process.exit(1);
+}, 180_000);
+await main();
+clearTimeout(watchdog);
