@@ -44,6 +44,8 @@ pub enum GpuError {
     TooLarge { what: String, needed: u64, limit: u64 },
     #[error("RGB-D frame does not fit: {0}")]
     FrameMismatch(String),
+    #[error("GPU work did not finish: {0}")]
+    Incomplete(String),
 }
 
 /// A pair of per-lobe buffers: the diffuse one always, the glossy one only when the scene has a
