@@ -3,7 +3,8 @@
 // its flux scaled by VAL_STRIDE: an unbiased subsample, since the VAL list is in no spatial
 // order. Unlike the brute force it does not tile VALs through workgroup memory (an earlier tiled
 // version lost writes on lavapipe; the culprit was probably the traversal's nested loops, since
-// replaced by the flat loop of `bvh.wgsl`, but the tiled version has not been measured again).
+// replaced by the flat loop of `bvh.wgsl`, or the loop limit below, but the tiled version has
+// not been measured again).
 //
 // Resumable, in rounds: llvmpipe (lavapipe) ends every loop of an invocation once all its loops
 // together have run 65535 iterations (LP_MAX_TGSI_LOOP_ITERATIONS, "shared between every loop

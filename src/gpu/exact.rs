@@ -34,7 +34,10 @@ pub fn source(val_stride: u32, side: u32) -> String {
 
 /// Workgroup side: 8 on GPUs. On CPU adapters 1: llvmpipe runs a workgroup's invocations as
 /// SIMD lanes, and with lanes diverging in the BVH traversal whole 8x8 blocks came out wrong
-/// (bright squares on the bunny at 192x192; single invocations were always right).
+/// (bright squares on the bunny at 192x192). Most likely
+/// the same loop limit as [`EXACT_LOOP_BUDGET`]: llvmpipe counts it per SIMD vector, so lanes
+/// that diverge use up one limit together, which a per-invocation budget cannot account for.
+/// With one invocation per workgroup the budget is that invocation's own.
 fn workgroup_side(gpu: &Gpu) -> u32 {
     if gpu.is_cpu() { 1 } else { 8 }
 }
