@@ -307,18 +307,23 @@ fn occlusion_matches_cpu_twin() {
 #[test]
 fn exact_visibility_matches_cpu_twin() {
     for stride in [1, 4] {
-        exact_matches_cpu_twin_with_stride(stride);
+        exact_matches_cpu_twin("cornell_bunny_small", stride, (20, 16));
     }
 }
 
-fn exact_matches_cpu_twin_with_stride(stride: u32) {
+/// The README's scene, where the blocks showed (545 of 992 pixels differed before the rounds).
+#[test]
+fn exact_visibility_matches_cpu_twin_on_cornell_bunny() {
+    exact_matches_cpu_twin("cornell_bunny", 16, (32, 32));
+}
+
+fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
     use relume::gpu::shader::RAY_OFFSET;
     use relume::reference::bvh::Bvh;
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let scene = load_scene(scene);
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.set_exact_val_stride(stride);
-    let (w, h) = (20, 16);
     let exact = renderer.render(&gpu, Method::Exact, w, h).unwrap();
     if stride == 1 {
         assert!(exact.exact_rounds > 1, "every VAL must need more than one round, took {}", exact.exact_rounds);
