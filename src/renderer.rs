@@ -283,6 +283,13 @@ impl Renderer {
         };
         let needed = self.uploaded_vals + rgbd + rsm;
         if needed > self.val_capacity {
+            if gpu.is_cpu() && needed > Gpu::CPU_MAX_GATHERED_VALS {
+                tracing::warn!(
+                    "up to {needed} VALs: on this CPU adapter the gather and the brute force may use only the first {} \
+                     (llvmpipe's loop limit); lower rsm_resolution or the RGB-D VALs",
+                    Gpu::CPU_MAX_GATHERED_VALS
+                );
+            }
             self.val_capacity = needed.next_power_of_two();
             self.vals = gpu.storage_buffer_sized::<RawVal>("vals", self.val_capacity as usize)?;
         }

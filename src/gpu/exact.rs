@@ -6,7 +6,7 @@ use super::kernel::{Kernel, Slot, groups};
 use super::scene::GpuScene;
 use super::timing::Span;
 use super::visibility::VisibilityTarget;
-use super::{Gpu, GpuError};
+use super::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
 use crate::reference::bvh::Bvh;
 use std::time::Instant;
 
@@ -14,11 +14,11 @@ pub const WGSL: &str = include_str!("../../shaders/exact.wgsl");
 const BVH: &str = include_str!("../../shaders/bvh.wgsl");
 
 /// Loop iterations (VAL loop and BVH traversal together) one invocation runs per round.
-/// llvmpipe silently ends all loops of an invocation after 65,535 iterations in total
-/// (`LP_MAX_TGSI_LOOP_ITERATIONS` in Mesa's gallivm, "shared between every loop in a shader"),
-/// which cut the VAL loop short on pixels with many or long shadow rays; this stays below it
-/// with a margin. GPUs have no such limit but are just as right in rounds.
+/// llvmpipe silently ends all loops of an invocation after [`LLVMPIPE_LOOP_LIMIT`] iterations
+/// in total, which cut the VAL loop short on pixels with many or long shadow rays; this stays
+/// below it with a margin. GPUs have no such limit but are just as right in rounds.
 pub const EXACT_LOOP_BUDGET: u32 = 60_000;
+const _: () = assert!(EXACT_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 
 /// Rounds at most before [`Exact::finish`] gives up (each makes progress on every unfinished
 /// pixel, so only a driver that ignores the budget could need this many).
