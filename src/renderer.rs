@@ -285,7 +285,7 @@ impl Renderer {
         if needed > self.val_capacity {
             if gpu.is_cpu() && needed > Gpu::CPU_MAX_GATHERED_VALS {
                 tracing::warn!(
-                    "up to {needed} VALs: on this CPU adapter the gather and the brute force may use only the first {} \
+                    "up to {needed} VALs: on this CPU adapter the gather and the brute force use only the first ~{} \
                      (llvmpipe's loop limit); lower rsm_resolution or the RGB-D VALs",
                     Gpu::CPU_MAX_GATHERED_VALS
                 );
