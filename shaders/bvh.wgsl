@@ -46,10 +46,19 @@ fn segment_hits_box(origin: vec3<f32>, inv: vec3<f32>, lo: vec3<f32>, hi: vec3<f
     return near <= far;
 }
 
+// A shadow ray's outcome after at most `budget` loop iterations: `complete` is false when the
+// budget ran out first (then `hit` means nothing and the ray must be cast again).
+struct Traversal {
+    hit: bool,
+    complete: bool,
+    steps: u32,
+}
+
 // Stackless: nodes are depth-first, a leaf is followed by `index + 1` and an inner node's
 // `first` is its miss link (see `reference::bvh::BvhNode`). One flat loop over nodes and leaf
-// triangles, with no early exit from nested loops.
-fn occluded(origin: vec3<f32>, target_position: vec3<f32>) -> bool {
+// triangles, with no early exit from nested loops, of at most `budget` iterations (see
+// `EXACT_LOOP_BUDGET` in `exact.wgsl`).
+fn occluded(origin: vec3<f32>, target_position: vec3<f32>, budget: u32) -> Traversal {
     let d = target_position - origin;
     let inv = 1.0 / d;
     let n = arrayLength(&bvh_nodes);
@@ -57,7 +66,9 @@ fn occluded(origin: vec3<f32>, target_position: vec3<f32>) -> bool {
     var k = 0u;
     var end = 0u;
     var hit = false;
-    while !hit && (k < end || index < n) {
+    var steps = 0u;
+    while !hit && (k < end || index < n) && steps < budget {
+        steps += 1u;
         if k < end {
             let t = 3u * bvh_triangles[k];
             let a = vertices[indices[t]].position;
@@ -77,5 +88,5 @@ fn occluded(origin: vec3<f32>, target_position: vec3<f32>) -> bool {
             index = select(max(node.first, index + 1u), index + 1u, enter || node.count > 0u);
         }
     }
-    return hit;
+    return Traversal(hit, hit || !(k < end || index < n), steps);
 }

@@ -522,6 +522,7 @@ fn add_exact_comparison(
     report["exact_ms"] = exact.timings.total_of(&[stage::EXACT]).into();
     report["exact_val_stride"] = val_stride.into();
     report["exact_vals_used"] = (exact.val_count / val_stride).into();
+    report["exact_rounds"] = exact.exact_rounds.into();
     if let Some(dir) = images {
         exact.indirect.write_png(&dir.join("indirect_exact.png"), exposure)?;
     }

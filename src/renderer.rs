@@ -63,6 +63,8 @@ pub struct Rendered {
     pub timings: StageTimings,
     /// VALs with non-zero flux this frame.
     pub val_count: u32,
+    /// Method::Exact: the rounds it took (see `gpu::exact`); 0 for the other methods.
+    pub exact_rounds: u32,
 }
 
 struct SparsePasses {
@@ -324,6 +326,13 @@ impl Renderer {
         };
         let needed = self.uploaded_vals + rgbd + rsm;
         if needed > self.val_capacity {
+            if gpu.is_cpu() && needed > Gpu::CPU_MAX_GATHERED_VALS {
+                tracing::warn!(
+                    "up to {needed} VALs: on this CPU adapter the gather and the brute force use only the first ~{} \
+                     (llvmpipe's loop limit); lower rsm_resolution or the RGB-D VALs",
+                    Gpu::CPU_MAX_GATHERED_VALS
+                );
+            }
             self.val_capacity = needed.next_power_of_two();
             self.vals = gpu.storage_buffer_sized::<RawVal>("vals", self.val_capacity as usize)?;
         }
@@ -406,7 +415,16 @@ impl Renderer {
                 sp.direct.record(gpu, e, scene, &target.view, &sp.light_distance, &target.direct, s)
             })?;
         }
-        let timings = rec.finish()?;
+        let mut timings = rec.finish()?;
+        let mut exact_rounds = 0;
+        if let (Method::Exact, Some(x)) = (method, &self.exact) {
+            let rounds = x.finish(gpu, scene, &target.view, &self.vals, &self.val_count, &target.indirect)?;
+            // Rounds after the first are timed by wall clock, whatever timed the first.
+            if let Some((_, ms)) = timings.stages.iter_mut().find(|(name, _)| name == stage::EXACT) {
+                *ms += rounds.extra_ms;
+            }
+            exact_rounds = rounds.count;
+        }
 
         let pixels = (width * height) as usize;
         let indirect = gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?;
@@ -421,6 +439,7 @@ impl Renderer {
             indirect: LinearImage { width, height, pixels: indirect },
             timings,
             val_count,
+            exact_rounds,
         })
     }
 
@@ -456,6 +475,9 @@ impl Renderer {
                 self.exact = Some(Exact::new(gpu, scene, self.glossy, self.exact_val_stride)?);
             }
             _ => {}
+        }
+        if let (Method::Exact, Some(x)) = (method, &mut self.exact) {
+            x.fit(gpu, (width * height) as usize)?;
         }
         let size_matches = self.target.as_ref().is_some_and(|t| t.view.width == width && t.view.height == height);
         if !size_matches {

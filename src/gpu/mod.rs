@@ -44,7 +44,15 @@ pub enum GpuError {
     TooLarge { what: String, needed: u64, limit: u64 },
     #[error("RGB-D frame does not fit: {0}")]
     FrameMismatch(String),
+    #[error("GPU work did not finish: {0}")]
+    Incomplete(String),
 }
+
+/// Loop iterations after which llvmpipe (lavapipe) ends every loop of a shader invocation,
+/// silently: `LP_MAX_TGSI_LOOP_ITERATIONS` in Mesa's gallivm, "shared between every loop in a
+/// shader" and counted per SIMD vector of invocations. Passes whose loops can run longer must
+/// split their work (`gpu::exact` runs in rounds).
+pub const LLVMPIPE_LOOP_LIMIT: u32 = 65_535;
 
 /// A pair of per-lobe buffers: the diffuse one always, the glossy one only when the scene has a
 /// glossy material.
@@ -112,6 +120,12 @@ impl Gpu {
             .await?;
         Ok(Self { device, queue, adapter_info: info, timestamps })
     }
+
+    /// VALs beyond which the gather and the brute force on a CPU adapter run past
+    /// [`LLVMPIPE_LOOP_LIMIT`] (one loop iteration per VAL and two per tile) and silently drop
+    /// the rest: with 125,676 VALs the brute force used exactly the first 63,551.
+    /// [`Gpu::is_cpu`] says whether it applies.
+    pub const CPU_MAX_GATHERED_VALS: u32 = LLVMPIPE_LOOP_LIMIT / (shader::TILE_SIZE + 2) * shader::TILE_SIZE;
 
     /// Whether the adapter runs on the CPU (lavapipe / llvmpipe).
     pub fn is_cpu(&self) -> bool {

@@ -411,7 +411,8 @@ pub struct SettingsDescription {
     /// that is neither a convex object nor a convex room ([`crate::scene::Scene`]).
     #[serde(default)]
     pub occlusion: OcclusionSetting,
-    /// How disc occluders combine: `"sum"` (the paper, default) or `"product"`.
+    /// How disc occluders combine: `"product"` (default: measured closer to exact) or `"sum"`
+    /// (the paper's).
     #[serde(default)]
     pub occlusion_rule: OcclusionRule,
     /// How RGB-D frames become VALs (replay and streams); every field has a default.
@@ -444,9 +445,9 @@ pub enum OcclusionSetting {
 #[serde(rename_all = "snake_case")]
 pub enum OcclusionRule {
     /// `clamp(sum o_i, 0, 1)`: the paper's; double-counts overlapping occluders.
-    #[default]
     Sum,
-    /// `1 - prod(1 - o_i)`.
+    /// `1 - prod(1 - o_i)`: closer to exact visibility on both measured fixtures (README).
+    #[default]
     Product,
 }
 
@@ -470,7 +471,7 @@ impl Default for SettingsDescription {
             seed: default_seed(),
             exposure: None,
             occlusion: OcclusionSetting::Auto,
-            occlusion_rule: OcclusionRule::Sum,
+            occlusion_rule: OcclusionRule::Product,
             rgbd: RgbdSettings::default(),
         }
     }
@@ -936,7 +937,7 @@ mod tests {
                 seed: 7,
                 exposure: Some(2.5),
                 occlusion: Occlusion::Off,
-                occlusion_rule: OcclusionRule::Sum,
+                occlusion_rule: OcclusionRule::Product,
                 rgbd: RgbdSettings::default(),
             }
         );
