@@ -90,6 +90,12 @@ enum Command {
         /// Skip the plots (results.json and results.csv only).
         #[arg(long)]
         no_plots: bool,
+        /// Skip the FMA-bound kernel and the gather variants.
+        #[arg(long)]
+        no_fma: bool,
+        /// Skip the temporal-stability frames.
+        #[arg(long)]
+        no_temporal: bool,
         /// Output directory (created).
         #[arg(long)]
         out: PathBuf,
@@ -232,7 +238,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 accumulate.then_some(relume::mr::AccumulateOptions { cell_size, max_vals, max_age_frames: max_age });
             replay_command(recording, scene, out, size, frames, accumulate, exposure, intrinsics, depth_scale)
         }
-        Command::Bench { scene, sweep, grid, quick, reference, val_stride, no_plots, out } => {
+        Command::Bench { scene, sweep, grid, quick, reference, val_stride, no_plots, no_fma, no_temporal, out } => {
             anyhow::ensure!(val_stride.is_none() || reference.is_some(), "--val-stride: only with --reference exact");
             let options = relume::bench::BenchOptions {
                 scene,
@@ -241,6 +247,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 quick,
                 exact_val_stride: reference.map(|_| val_stride.unwrap_or(1)),
                 out,
+                fma: !no_fma,
+                temporal: !no_temporal,
                 plots: !no_plots,
             };
             let gpu = Gpu::new()?;

@@ -10,7 +10,9 @@
 //! By default each axis is varied alone around a base configuration (the scene's settings);
 //! `grid` takes the Cartesian product instead.
 
+pub mod fma;
 pub mod plot;
+pub mod temporal;
 
 use crate::compare::{self, IndirectError};
 use crate::gpu::timing::TimingSource;
@@ -221,6 +223,10 @@ pub struct BenchOptions {
     /// Also compare against exact visibility over every `n`-th VAL.
     pub exact_val_stride: Option<u32>,
     pub out: PathBuf,
+    /// Also measure the FMA-bound kernel against the gather ([`fma::measure`]).
+    pub fma: bool,
+    /// Also measure temporal stability ([`temporal::measure`]).
+    pub temporal: bool,
     pub plots: bool,
 }
 
@@ -307,6 +313,10 @@ pub struct BenchResults {
     pub quick: bool,
     pub exact_val_stride: Option<u32>,
     pub configs: Vec<ConfigResult>,
+    /// The gather's throughput against an FMA-bound kernel, on the base configuration.
+    pub fma: Option<fma::FmaReport>,
+    /// Temporal stability on the base configuration.
+    pub temporal: Option<temporal::TemporalReport>,
 }
 
 pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and texture relume holds after the timed sparse \
@@ -413,8 +423,25 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
             }
         }
     }
+    // The extra measurements use the base configuration (the first).
+    let mut base_scene = scenes.get(&configs[0].sparse_points_per_mesh).cloned().unwrap_or(scene);
+    base_scene.settings.rsm_resolution = configs[0].rsm_resolution;
+    base_scene.settings.glossy = configs[0].glossy;
+    base_scene.settings.occlusion = configs[0].occlusion;
+    let fma = if options.fma {
+        progress("FMA-bound kernel and gather variants");
+        Some(fma::measure(gpu, &base_scene, options.quick)?)
+    } else {
+        None
+    };
+    let temporal = if options.temporal {
+        progress("temporal stability");
+        Some(temporal::measure(gpu, &base_scene, options.quick)?)
+    } else {
+        None
+    };
     let results = BenchResults {
-        scene: scene.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
+        scene: base_scene.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
         adapter: gpu.adapter_name(),
         timing: timing.unwrap_or(if gpu.timestamps { TimingSource::GpuTimestamps } else { TimingSource::WallClock }),
         gpu_memory_note: GPU_MEMORY_NOTE,
@@ -422,6 +449,8 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         quick: options.quick,
         exact_val_stride: options.exact_val_stride,
         configs: results,
+        fma,
+        temporal,
     };
     write_results(&options.out, &results)?;
     if options.plots {

@@ -52,6 +52,28 @@ fn quick_bench_writes_a_finite_table_and_plots() {
     }
     assert!(configs.iter().any(|c| c["occlusion"] == "disks"));
 
+    let fma = &json["fma"];
+    for key in ["fma_per_s", "fma_ms"] {
+        assert!(finite_non_negative(fma, key) > 0.0, "{key}: {fma}");
+    }
+    let variants = fma["gather_variants"].as_array().expect("gather variants");
+    assert!(!variants.is_empty());
+    for v in variants {
+        for key in ["gather_ms", "interactions_per_s", "ratio_to_fma"] {
+            finite_non_negative(v, key);
+        }
+    }
+    let motions = json["temporal"]["motions"].as_array().expect("temporal motions");
+    let names: Vec<&str> = motions.iter().map(|m| m["motion"].as_str().unwrap()).collect();
+    assert_eq!(names, ["camera_orbit", "moving_light", "moving_model"]);
+    for m in motions {
+        for key in
+            ["sparse_image_change", "brute_force_image_change", "error_image_change", "sparse_point_irradiance_change"]
+        {
+            finite_non_negative(m, key);
+        }
+    }
+
     let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 1 + configs.len());
