@@ -90,6 +90,11 @@ enum Command {
         /// Skip the plots (results.json and results.csv only).
         #[arg(long)]
         no_plots: bool,
+        /// The paper's Table 1 configurations (200k/730k triangles, 4k/16k sparse points,
+        /// 16k/64k/512k VALs, diffuse/+glossy/+occlusion, 1920x1080) on scenes built from this
+        /// one (its other meshes replicated in the room); no references. Hours on lavapipe.
+        #[arg(long, conflicts_with_all = ["sweep", "grid", "reference"])]
+        table1: bool,
         /// Skip the FMA-bound kernel and the gather variants.
         #[arg(long)]
         no_fma: bool,
@@ -238,7 +243,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 accumulate.then_some(relume::mr::AccumulateOptions { cell_size, max_vals, max_age_frames: max_age });
             replay_command(recording, scene, out, size, frames, accumulate, exposure, intrinsics, depth_scale)
         }
-        Command::Bench { scene, sweep, grid, quick, reference, val_stride, no_plots, no_fma, no_temporal, out } => {
+        Command::Bench {
+            scene,
+            sweep,
+            grid,
+            quick,
+            reference,
+            val_stride,
+            table1,
+            no_plots,
+            no_fma,
+            no_temporal,
+            out,
+        } => {
             anyhow::ensure!(val_stride.is_none() || reference.is_some(), "--val-stride: only with --reference exact");
             let options = relume::bench::BenchOptions {
                 scene,
@@ -246,6 +263,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 grid,
                 quick,
                 exact_val_stride: reference.map(|_| val_stride.unwrap_or(1)),
+                references: !table1,
+                table1,
                 out,
                 fma: !no_fma,
                 temporal: !no_temporal,

@@ -12,6 +12,7 @@
 
 pub mod fma;
 pub mod plot;
+pub mod table1;
 pub mod temporal;
 
 use crate::compare::{self, IndirectError};
@@ -222,6 +223,11 @@ pub struct BenchOptions {
     pub quick: bool,
     /// Also compare against exact visibility over every `n`-th VAL.
     pub exact_val_stride: Option<u32>,
+    /// Render the brute-force reference and report the error against it.
+    pub references: bool,
+    /// The paper's Table 1 configurations on scenes built from this one ([`table1`]); the
+    /// sweep axes do not apply.
+    pub table1: bool,
     pub out: PathBuf,
     /// Also measure the FMA-bound kernel against the gather ([`fma::measure`]).
     pub fma: bool,
@@ -265,6 +271,8 @@ impl BenchOptions {
 /// Everything measured for one configuration.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ConfigResult {
+    /// `scene` (the scene file), or the built scene (`--table1`: `table1_200k`, `table1_730k`).
+    pub variant: String,
     #[serde(flatten)]
     pub config: Config,
     /// Whether the glossy stages ran (glossy allowed and a glossy material present).
@@ -283,9 +291,10 @@ pub struct ConfigResult {
     pub sparse_indirect_ms: f64,
     /// Every stage of the frame, RSM, visibility and direct light included.
     pub frame_ms: f64,
-    pub brute_force_ms: f64,
+    /// `None` without references (`--table1`).
+    pub brute_force_ms: Option<f64>,
     /// `brute_force_ms / sparse_indirect_ms`.
-    pub speedup: f64,
+    pub speedup: Option<f64>,
     /// VAL-receiver interactions of the gather per second (VALs x sparse points / gather time).
     pub gather_interactions_per_s: f64,
     /// Device memory in buffers and textures after the sparse frame ([`Gpu::memory_in_use`]).
@@ -294,7 +303,7 @@ pub struct ConfigResult {
     /// The sparse indirect image against the brute force (as `compare`'s `indirect_rel_rmse`
     /// and `indirect_flip_mean`). With occlusion on this includes the occlusion's darkening,
     /// which the brute force (no visibility) lacks: compare against exact for occlusion.
-    pub vs_brute_force: IndirectError,
+    pub vs_brute_force: Option<IndirectError>,
     /// Against exact visibility, with `--reference exact`.
     pub vs_exact: Option<IndirectError>,
     pub exact_ms: Option<f64>,
@@ -346,88 +355,27 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
     }
     std::fs::create_dir_all(&options.out)
         .map_err(|e| flag_error("--out", format!("creating {}: {e}", options.out.display())))?;
-    let configs = options.configs(&description, &scene);
-
-    // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
-    let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
-    for c in &configs {
-        let key = (c.sparse_points_per_mesh, c.rsm_resolution, c.glossy);
-        match groups.iter_mut().find(|(k, _)| *k == key) {
-            Some((_, g)) => g.push(*c),
-            None => groups.push((key, vec![*c])),
-        }
-    }
-    let mut scenes: HashMap<Option<u32>, Scene> = HashMap::new();
-    let mut results = Vec::with_capacity(configs.len());
+    let jobs = if options.table1 {
+        table1::jobs(&description, &scene, options.quick)
+    } else {
+        vec![Job { variant: "scene".to_owned(), configs: options.configs(&description, &scene), description }]
+    };
+    let mut results = Vec::new();
     let mut timing = None;
-    for ((sparse, rsm, glossy), group) in groups {
-        let mut scene = match scenes.get(&sparse) {
-            Some(s) => s.clone(),
-            None => {
-                let mut d = description.clone();
-                if let Some(n) = sparse {
-                    d.meshes.iter_mut().for_each(|m| m.sparse_points = n);
-                }
-                let s = Scene::from_description(&d, &base_dir).map_err(scene_error)?;
-                scenes.insert(sparse, s.clone());
-                s
-            }
-        };
-        scene.settings.rsm_resolution = rsm;
-        scene.settings.glossy = glossy;
-        let mut renderer = Renderer::new(gpu, &scene)?;
-        let mut sizes: Vec<(u32, u32)> = group.iter().map(|c| (c.width, c.height)).collect();
-        sizes.dedup();
-        for (w, h) in sizes {
-            let mut sparse_frames = Vec::new();
-            for c in group.iter().filter(|c| (c.width, c.height) == (w, h)) {
-                progress(&describe(c));
-                renderer.set_occlusion(c.occlusion, scene.settings.occlusion_rule);
-                let frame = compare::sparse_frame(gpu, &mut renderer, w, h)?;
-                sparse_frames.push((*c, frame, gpu.memory_in_use()));
-            }
-            let brute = compare::brute_force_frame(gpu, &mut renderer, w, h)?;
-            let exact = match options.exact_val_stride {
-                Some(stride) => Some(compare::exact_frame(gpu, &mut renderer, w, h, stride)?),
-                None => None,
-            };
-            renderer.release_reference_passes();
-            for (config, frame, memory) in sparse_frames {
-                timing.get_or_insert(frame.timings.source);
-                let sparse_indirect_ms = frame.timings.total_of(stage::SPARSE_INDIRECT);
-                let brute_force_ms = brute.timings.total_of(stage::BRUTE_FORCE_INDIRECT);
-                let gather_ms = frame.timings.total_of(&[stage::GATHER]);
-                let interactions = frame.val_count as f64 * scene.sparse_point_count() as f64;
-                results.push(ConfigResult {
-                    config,
-                    glossy_active: renderer.glossy(),
-                    sparse_points: scene.sparse_point_count(),
-                    triangles: scene.triangle_count(),
-                    vertices: scene.vertex_count(),
-                    vals: frame.val_count,
-                    pixels: w as u64 * h as u64,
-                    covered_pixels: brute.indirect.coverage(),
-                    timing: frame.timings.source,
-                    frame_ms: frame.timings.stages.iter().map(|(_, ms)| ms).sum(),
-                    stages_ms: frame.timings.stages.clone(),
-                    sparse_indirect_ms,
-                    brute_force_ms,
-                    speedup: brute_force_ms / sparse_indirect_ms,
-                    gather_interactions_per_s: interactions / (gather_ms * 1e-3),
-                    gpu_memory: memory,
-                    gpu_memory_bytes: memory.total_bytes(),
-                    vs_brute_force: compare::indirect_error(&frame.indirect, &brute.indirect),
-                    vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, &x.indirect)),
-                    exact_ms: exact.as_ref().map(|x| x.timings.total_of(&[stage::EXACT])),
-                });
-            }
-        }
+    let mut base_scene = None;
+    for job in &jobs {
+        let base = run_job(gpu, options, job, &base_dir, &mut results, progress).map_err(|e| match e {
+            BenchError::Scene { source, .. } => BenchError::Scene { path: path.clone(), source },
+            e => e,
+        })?;
+        base_scene.get_or_insert(base);
     }
+    for r in &results {
+        timing.get_or_insert(r.timing);
+    }
+    // The extra measurements use the first job's base configuration (its first).
+    let base_scene = base_scene.unwrap_or(scene);
     // The extra measurements use the base configuration (the first).
-    let mut base_scene = scenes.get(&configs[0].sparse_points_per_mesh).cloned().unwrap_or(scene);
-    base_scene.settings.rsm_resolution = configs[0].rsm_resolution;
-    base_scene.settings.glossy = configs[0].glossy;
-    base_scene.settings.occlusion = configs[0].occlusion;
     let fma = if options.fma {
         progress("FMA-bound kernel and gather variants");
         Some(fma::measure(gpu, &base_scene, options.quick)?)
@@ -445,7 +393,13 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         adapter: gpu.adapter_name(),
         timing: timing.unwrap_or(if gpu.timestamps { TimingSource::GpuTimestamps } else { TimingSource::WallClock }),
         gpu_memory_note: GPU_MEMORY_NOTE,
-        mode: if options.grid { "grid" } else { "one_axis_at_a_time" },
+        mode: if options.table1 {
+            "table1"
+        } else if options.grid {
+            "grid"
+        } else {
+            "one_axis_at_a_time"
+        },
         quick: options.quick,
         exact_val_stride: options.exact_val_stride,
         configs: results,
@@ -458,6 +412,108 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
             .map_err(|message| BenchError::Write { path: options.out.clone(), message })?;
     }
     Ok(results)
+}
+
+/// Scenes and configurations to run: the scene file with the sweep's configurations, or the
+/// scenes [`table1`] builds.
+pub struct Job {
+    /// `scene`, or which built scene (e.g. `table1_200k`).
+    pub variant: String,
+    pub description: SceneDescription,
+    pub configs: Vec<Config>,
+}
+
+/// Run `job`'s configurations, appending to `results`; returns the scene of its first
+/// configuration (the base of the extra measurements).
+fn run_job(
+    gpu: &Gpu,
+    options: &BenchOptions,
+    job: &Job,
+    base_dir: &Path,
+    results: &mut Vec<ConfigResult>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Scene, BenchError> {
+    let scene_error = |source| BenchError::Scene { path: PathBuf::new(), source };
+    // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
+    let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
+    for c in &job.configs {
+        let key = (c.sparse_points_per_mesh, c.rsm_resolution, c.glossy);
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, g)) => g.push(*c),
+            None => groups.push((key, vec![*c])),
+        }
+    }
+    let mut scenes: HashMap<Option<u32>, Scene> = HashMap::new();
+    let mut base_scene = None;
+    for ((sparse, rsm, glossy), group) in groups {
+        let mut scene = match scenes.get(&sparse) {
+            Some(s) => s.clone(),
+            None => {
+                let mut d = job.description.clone();
+                if let Some(n) = sparse {
+                    d.meshes.iter_mut().for_each(|m| m.sparse_points = n);
+                }
+                let s = Scene::from_description(&d, base_dir).map_err(scene_error)?;
+                scenes.insert(sparse, s.clone());
+                s
+            }
+        };
+        scene.settings.rsm_resolution = rsm;
+        scene.settings.glossy = glossy;
+        scene.settings.occlusion = group[0].occlusion;
+        base_scene.get_or_insert_with(|| scene.clone());
+        let mut renderer = Renderer::new(gpu, &scene)?;
+        let mut sizes: Vec<(u32, u32)> = group.iter().map(|c| (c.width, c.height)).collect();
+        sizes.dedup();
+        for (w, h) in sizes {
+            let mut sparse_frames = Vec::new();
+            for c in group.iter().filter(|c| (c.width, c.height) == (w, h)) {
+                progress(&format!("{}: {}", job.variant, describe(c)));
+                renderer.set_occlusion(c.occlusion, scene.settings.occlusion_rule);
+                let frame = compare::sparse_frame(gpu, &mut renderer, w, h)?;
+                sparse_frames.push((*c, frame, gpu.memory_in_use()));
+            }
+            let brute = match options.references {
+                true => Some(compare::brute_force_frame(gpu, &mut renderer, w, h)?),
+                false => None,
+            };
+            let exact = match options.exact_val_stride {
+                Some(stride) => Some(compare::exact_frame(gpu, &mut renderer, w, h, stride)?),
+                None => None,
+            };
+            renderer.release_reference_passes();
+            for (config, frame, memory) in sparse_frames {
+                let sparse_indirect_ms = frame.timings.total_of(stage::SPARSE_INDIRECT);
+                let brute_force_ms = brute.as_ref().map(|b| b.timings.total_of(stage::BRUTE_FORCE_INDIRECT));
+                let gather_ms = frame.timings.total_of(&[stage::GATHER]);
+                let interactions = frame.val_count as f64 * scene.sparse_point_count() as f64;
+                results.push(ConfigResult {
+                    variant: job.variant.clone(),
+                    config,
+                    glossy_active: renderer.glossy(),
+                    sparse_points: scene.sparse_point_count(),
+                    triangles: scene.triangle_count(),
+                    vertices: scene.vertex_count(),
+                    vals: frame.val_count,
+                    pixels: w as u64 * h as u64,
+                    covered_pixels: frame.indirect.coverage(),
+                    timing: frame.timings.source,
+                    frame_ms: frame.timings.stages.iter().map(|(_, ms)| ms).sum(),
+                    stages_ms: frame.timings.stages.clone(),
+                    sparse_indirect_ms,
+                    brute_force_ms,
+                    speedup: brute_force_ms.map(|b| b / sparse_indirect_ms),
+                    gather_interactions_per_s: interactions / (gather_ms * 1e-3),
+                    gpu_memory: memory,
+                    gpu_memory_bytes: memory.total_bytes(),
+                    vs_brute_force: brute.as_ref().map(|b| compare::indirect_error(&frame.indirect, &b.indirect)),
+                    vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, &x.indirect)),
+                    exact_ms: exact.as_ref().map(|x| x.timings.total_of(&[stage::EXACT])),
+                });
+            }
+        }
+    }
+    Ok(base_scene.expect("a job has configurations"))
 }
 
 /// A configuration in words, for progress lines and plot labels.
@@ -498,6 +554,7 @@ pub fn csv(results: &BenchResults) -> String {
         }
     }
     let mut header: Vec<String> = [
+        "variant",
         "sparse_points_per_mesh",
         "sparse_points",
         "rsm_resolution",
@@ -532,6 +589,7 @@ pub fn csv(results: &BenchResults) -> String {
     for r in &results.configs {
         let c = &r.config;
         let mut row = vec![
+            r.variant.clone(),
             c.sparse_points_per_mesh.map_or(String::new(), |n| n.to_string()),
             r.sparse_points.to_string(),
             c.rsm_resolution.to_string(),
@@ -547,12 +605,12 @@ pub fn csv(results: &BenchResults) -> String {
             r.timing.as_str().to_owned(),
             r.sparse_indirect_ms.to_string(),
             r.frame_ms.to_string(),
-            r.brute_force_ms.to_string(),
-            r.speedup.to_string(),
+            opt(r.brute_force_ms),
+            opt(r.speedup),
             r.gather_interactions_per_s.to_string(),
             r.gpu_memory_bytes.to_string(),
-            r.vs_brute_force.rel_rmse.to_string(),
-            r.vs_brute_force.flip_mean.to_string(),
+            opt(r.vs_brute_force.map(|e| e.rel_rmse)),
+            opt(r.vs_brute_force.map(|e| e.flip_mean)),
             opt(r.vs_exact.map(|e| e.rel_rmse)),
             opt(r.vs_exact.map(|e| e.flip_mean)),
             opt(r.exact_ms),

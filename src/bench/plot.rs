@@ -98,9 +98,10 @@ fn log_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
 fn draw_error_vs_time<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &BenchResults) -> Drawn {
     root.fill(&WHITE).map_err(err)?;
     let exact = results.configs.iter().all(|r| r.vs_exact.is_some()) && !results.configs.is_empty();
-    let error =
-        |r: &ConfigResult| if exact { r.vs_exact.map_or(0.0, |e| e.rel_rmse) } else { r.vs_brute_force.rel_rmse };
-    let points: Vec<(f64, f64)> = results.configs.iter().map(|r| (r.sparse_indirect_ms, error(r))).collect();
+    let error = |r: &ConfigResult| if exact { r.vs_exact } else { r.vs_brute_force }.map(|e| e.rel_rmse);
+    let with_error: Vec<&ConfigResult> = results.configs.iter().filter(|r| error(r).is_some()).collect();
+    let points: Vec<(f64, f64)> =
+        with_error.iter().map(|r| (r.sparse_indirect_ms, error(r).unwrap_or_default())).collect();
     let front = pareto_front(&points);
     let y_max = points.iter().map(|p| p.1).filter(|y| y.is_finite()).fold(0.0f64, f64::max).max(1e-3) * 1.15;
     let reference = if exact { "exact visibility" } else { "brute force" };
@@ -132,9 +133,9 @@ fn draw_error_vs_time<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results
     chart.draw_series(front_points.iter().map(|&p| Circle::new(p, 5, RED.filled()))).map_err(err)?;
     chart
         .draw_series(
-            front.iter().map(|&i| {
-                Text::new(short_label(&results.configs[i]), points[i], (FAMILY, 12).into_font().color(&BLACK))
-            }),
+            front
+                .iter()
+                .map(|&i| Text::new(short_label(with_error[i]), points[i], (FAMILY, 12).into_font().color(&BLACK))),
         )
         .map_err(err)?;
     chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.8)).draw().map_err(err)?;
@@ -230,7 +231,10 @@ const SCALINGS: [Scaling; 3] = [
         x: |r| r.vals as f64,
         rest: |r| {
             let c = &r.config;
-            format!("{:?} {:?} {} {}x{}", c.sparse_points_per_mesh, c.occlusion, c.glossy, c.width, c.height)
+            format!(
+                "{} {:?} {:?} {} {}x{}",
+                r.variant, c.sparse_points_per_mesh, c.occlusion, c.glossy, c.width, c.height
+            )
         },
     },
     Scaling {
@@ -238,7 +242,7 @@ const SCALINGS: [Scaling; 3] = [
         x: |r| r.sparse_points as f64,
         rest: |r| {
             let c = &r.config;
-            format!("{} {:?} {} {}x{}", c.rsm_resolution, c.occlusion, c.glossy, c.width, c.height)
+            format!("{} {} {:?} {} {}x{}", r.variant, c.rsm_resolution, c.occlusion, c.glossy, c.width, c.height)
         },
     },
     Scaling {
@@ -246,7 +250,7 @@ const SCALINGS: [Scaling; 3] = [
         x: |r| r.pixels as f64,
         rest: |r| {
             let c = &r.config;
-            format!("{:?} {} {:?} {}", c.sparse_points_per_mesh, c.rsm_resolution, c.occlusion, c.glossy)
+            format!("{} {:?} {} {:?} {}", r.variant, c.sparse_points_per_mesh, c.rsm_resolution, c.occlusion, c.glossy)
         },
     },
 ];
@@ -272,7 +276,7 @@ fn draw_scaling<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &Ben
         });
         let used: Vec<&ConfigResult> = groups.iter().flat_map(|(_, g)| g.iter().copied()).collect();
         let x_range = log_range(used.iter().map(|r| (scaling.x)(r)));
-        let y_range = log_range(used.iter().flat_map(|r| [r.sparse_indirect_ms, r.brute_force_ms]));
+        let y_range = log_range(used.iter().flat_map(|r| [Some(r.sparse_indirect_ms), r.brute_force_ms]).flatten());
         let x_mid = (x_range.start * x_range.end).sqrt();
         let y_mid = (y_range.start * y_range.end).sqrt();
         let mut chart = ChartBuilder::on(panel)
@@ -298,7 +302,8 @@ fn draw_scaling<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &Ben
         for (g, (_, group)) in groups.iter_mut().enumerate() {
             group.sort_by(|a, b| (scaling.x)(a).total_cmp(&(scaling.x)(b)));
             let sparse: Vec<(f64, f64)> = group.iter().map(|r| ((scaling.x)(r), r.sparse_indirect_ms)).collect();
-            let brute: Vec<(f64, f64)> = group.iter().map(|r| ((scaling.x)(r), r.brute_force_ms)).collect();
+            let brute: Vec<(f64, f64)> =
+                group.iter().filter_map(|r| Some(((scaling.x)(r), r.brute_force_ms?))).collect();
             let s = chart.draw_series(LineSeries::new(sparse.clone(), BLUE.stroke_width(2))).map_err(err)?;
             if g == 0 {
                 s.label("sparse indirect")

@@ -118,3 +118,23 @@ fn bench_flags_are_checked_and_named() {
         assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
     }
 }
+
+#[test]
+fn table1_preset_builds_its_scenes_and_runs_quick() {
+    let dir = scratch("bench_table1");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let args = ["bench", scene.to_str().unwrap(), "--table1", "--quick", "--no-fma", "--no-temporal"];
+    let o = relume(&[&args[..], &["--no-plots", "--out", dir.to_str().unwrap()]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let configs = json["configs"].as_array().expect("configs");
+    assert_eq!(configs.len(), 3, "diffuse, + glossy, + occlusion");
+    for c in configs {
+        assert_eq!(c["variant"], "table1_200k");
+        assert!(c["triangles"].as_u64().is_some_and(|t| t > 200_000), "three bunnies and the room: {c}");
+        assert!(c["brute_force_ms"].is_null() && c["vs_brute_force"].is_null(), "no references: {c}");
+        finite_non_negative(c, "frame_ms");
+    }
+    assert_eq!(configs[1]["glossy_active"], true);
+}
