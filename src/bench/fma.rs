@@ -45,9 +45,10 @@ pub struct GatherVariant {
 }
 
 const NOTE: &str = "ratio_to_fma = gather VAL-receiver interactions/s / scalar FMA/s of an FMA-bound kernel, \
-     both timed in this run; one diffuse interaction is some 30 arithmetic operations (the disc form factor, a \
-     normalisation, a square root, a division and the sums), so a ratio near 1/30 would mean the gather runs at \
-     the arithmetic limit";
+     both timed in this run: 1 / ratio_to_fma is how many FMA issue slots of the adapter one interaction takes. \
+     An interaction (disc form factor, normalisations, a square root, divisions, the sums; the Phong lobe when \
+     glossy) is a few tens of operations (not counted exactly), so 1 / ratio far above that means the gather \
+     runs far from the arithmetic limit";
 
 /// Measure the FMA kernel and the gather of `scene` (its own settings; `quick`: a smaller run).
 pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, BenchError> {

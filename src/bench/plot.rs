@@ -45,13 +45,17 @@ macro_rules! png_and_svg {
     }};
 }
 
-/// The files [`write_all`] writes, without extension.
+/// The files [`write_all`] always writes, without extension (and `error_vs_time_exact` with an
+/// exact reference).
 pub const PLOTS: &[&str] = &["error_vs_time", "stage_breakdown", "scaling"];
 
 /// Every plot, PNG and SVG, into `dir`.
 pub fn write_all(dir: &Path, results: &BenchResults) -> Drawn {
     register_font()?;
     png_and_svg!(dir, PLOTS[0], (900, 600), draw_error_vs_time, results);
+    if results.configs.iter().any(|r| r.vs_exact.is_some()) {
+        png_and_svg!(dir, "error_vs_time_exact", (900, 600), draw_error_vs_time_exact, results);
+    }
     let width = (300 + 60 * results.configs.len() as u32).clamp(900, 2400);
     png_and_svg!(dir, PLOTS[1], (width, 600), draw_stage_breakdown, results);
     png_and_svg!(dir, PLOTS[2], (1500, 500), draw_scaling, results);
@@ -96,15 +100,31 @@ fn log_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
 }
 
 fn draw_error_vs_time<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &BenchResults) -> Drawn {
+    draw_error_vs_time_against(root, results, false)
+}
+
+fn draw_error_vs_time_exact<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &BenchResults) -> Drawn {
+    draw_error_vs_time_against(root, results, true)
+}
+
+/// Error against brute force, or with `exact` against exact visibility, over time.
+fn draw_error_vs_time_against<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    results: &BenchResults,
+    exact: bool,
+) -> Drawn {
     root.fill(&WHITE).map_err(err)?;
-    let exact = results.configs.iter().all(|r| r.vs_exact.is_some()) && !results.configs.is_empty();
     let error = |r: &ConfigResult| if exact { r.vs_exact } else { r.vs_brute_force }.map(|e| e.rel_rmse);
     let with_error: Vec<&ConfigResult> = results.configs.iter().filter(|r| error(r).is_some()).collect();
     let points: Vec<(f64, f64)> =
         with_error.iter().map(|r| (r.sparse_indirect_ms, error(r).unwrap_or_default())).collect();
     let front = pareto_front(&points);
     let y_max = points.iter().map(|p| p.1).filter(|y| y.is_finite()).fold(0.0f64, f64::max).max(1e-3) * 1.15;
-    let reference = if exact { "exact visibility" } else { "brute force" };
+    let reference = match (exact, results.exact_val_stride) {
+        (true, Some(n)) if n > 1 => format!("exact visibility (every {n}th VAL)"),
+        (true, _) => "exact visibility".to_owned(),
+        (false, _) => "brute force".to_owned(),
+    };
     let mut chart = ChartBuilder::on(root)
         .caption(format!("Indirect error against {reference} vs time ({})", results.adapter), (FAMILY, 18))
         .margin(15)
@@ -114,6 +134,8 @@ fn draw_error_vs_time<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results
         .map_err(err)?;
     chart
         .configure_mesh()
+        .x_labels(8)
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .x_desc(format!("sparse indirect stages, ms ({}, log)", results.timing.as_str()))
         .y_desc("relative RMSE of the indirect image")
         .label_style((FAMILY, 13))
@@ -288,6 +310,10 @@ fn draw_scaling<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &Ben
             .map_err(err)?;
         chart
             .configure_mesh()
+            .x_labels(6)
+            .y_labels(6)
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.0}"))
             .x_desc(scaling.title)
             .y_desc(format!("ms ({})", results.timing.as_str()))
             .label_style((FAMILY, 12))
