@@ -95,6 +95,10 @@ enum Command {
         /// one (its other meshes replicated in the room); no references. Hours on lavapipe.
         #[arg(long, conflicts_with_all = ["sweep", "grid", "reference"])]
         table1: bool,
+        /// Skip the brute-force reference (and the error against it): for configurations too
+        /// large to brute-force.
+        #[arg(long, conflicts_with = "reference")]
+        no_references: bool,
         /// Skip the FMA-bound kernel and the gather variants.
         #[arg(long)]
         no_fma: bool,
@@ -251,6 +255,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             reference,
             val_stride,
             table1,
+            no_references,
             no_plots,
             no_fma,
             no_temporal,
@@ -263,7 +268,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 grid,
                 quick,
                 exact_val_stride: reference.map(|_| val_stride.unwrap_or(1)),
-                references: !table1,
+                references: !table1 && !no_references,
                 table1,
                 out,
                 fma: !no_fma,

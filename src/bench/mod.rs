@@ -356,7 +356,14 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
     std::fs::create_dir_all(&options.out)
         .map_err(|e| flag_error("--out", format!("creating {}: {e}", options.out.display())))?;
     let jobs = if options.table1 {
-        table1::jobs(&description, &scene, options.quick)
+        let jobs = table1::jobs(&description, &scene, options.quick);
+        // The built scenes, for runs of single configurations (`bench <file> --no-references`).
+        for job in &jobs {
+            let file = options.out.join(format!("{}.json", job.variant));
+            let d = table1::with_absolute_paths(&job.description, &base_dir);
+            write_file(&file, serde_json::to_string_pretty(&d).expect("scenes serialise").as_bytes())?;
+        }
+        jobs
     } else {
         vec![Job { variant: "scene".to_owned(), configs: options.configs(&description, &scene), description }]
     };

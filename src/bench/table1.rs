@@ -12,6 +12,7 @@
 
 use super::{Config, Job};
 use crate::scene::{Occlusion, ScaleDescription, Scene, SceneDescription};
+use std::path::Path;
 
 /// (name, triangles) of the paper's two scenes.
 pub const TRIANGLE_TARGETS: [(&str, usize); 2] = [("200k", 200_000), ("730k", 730_000)];
@@ -64,6 +65,27 @@ pub fn jobs(description: &SceneDescription, scene: &Scene, quick: bool) -> Vec<J
             Job { variant: format!("table1_{name}"), description: d, configs }
         })
         .collect()
+}
+
+/// `description` with its file paths (OBJ, textures) made absolute from `base_dir`, to be
+/// written anywhere.
+pub fn with_absolute_paths(description: &SceneDescription, base_dir: &Path) -> SceneDescription {
+    let absolute = |p: &str| {
+        let base = std::path::absolute(base_dir).unwrap_or_else(|_| base_dir.to_path_buf());
+        base.join(p).to_string_lossy().into_owned()
+    };
+    let mut d = description.clone();
+    for m in &mut d.meshes {
+        if m.obj_text.is_none() {
+            m.obj = absolute(&m.obj);
+        }
+        for material in m.material.iter_mut().chain(m.materials.values_mut()) {
+            if let Some(t) = &mut material.diffuse_texture {
+                *t = absolute(t);
+            }
+        }
+    }
+    d
 }
 
 /// `description` with every mesh after the first replicated `copies` times in a square grid

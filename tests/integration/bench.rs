@@ -137,4 +137,6 @@ fn table1_preset_builds_its_scenes_and_runs_quick() {
         finite_non_negative(c, "frame_ms");
     }
     assert_eq!(configs[1]["glossy_active"], true);
+    let built = relume::scene::Scene::load(&dir.join("table1_200k.json")).expect("the built scene loads");
+    assert_eq!(built.meshes.len(), 4, "the room and three bunnies");
 }
