@@ -306,6 +306,8 @@ pub struct ConfigResult {
     pub vs_brute_force: Option<IndirectError>,
     /// Against exact visibility, with `--reference exact`.
     pub vs_exact: Option<IndirectError>,
+    /// `--table1`: the paper's frames per second for this configuration (AMD Radeon 7870).
+    pub paper_fps: Option<u32>,
     pub exact_ms: Option<f64>,
 }
 
@@ -516,6 +518,7 @@ fn run_job(
                     vs_brute_force: brute.as_ref().map(|b| compare::indirect_error(&frame.indirect, &b.indirect)),
                     vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, &x.indirect)),
                     exact_ms: exact.as_ref().map(|x| x.timings.total_of(&[stage::EXACT])),
+                    paper_fps: table1::paper_fps(&job.variant, &config, scene.sparse_point_count()),
                 });
             }
         }
@@ -586,6 +589,7 @@ pub fn csv(results: &BenchResults) -> String {
         "rel_rmse_vs_exact",
         "flip_mean_vs_exact",
         "exact_ms",
+        "paper_fps",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -621,6 +625,7 @@ pub fn csv(results: &BenchResults) -> String {
             opt(r.vs_exact.map(|e| e.rel_rmse)),
             opt(r.vs_exact.map(|e| e.flip_mean)),
             opt(r.exact_ms),
+            r.paper_fps.map_or(String::new(), |f| f.to_string()),
         ];
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");

@@ -32,6 +32,19 @@ pub const PAPER_FPS: [[[[u32; 3]; 3]; 2]; 2] = [
     [[[73, 51, 39], [40, 27, 23], [15, 9, 9]], [[53, 36, 23], [22, 14, 12], [7, 4, 4]]],
 ];
 
+/// The paper's FPS for a configuration of job `variant` with `sparse_points` in all, when it
+/// is one of Table 1's.
+pub fn paper_fps(variant: &str, config: &Config, sparse_points: usize) -> Option<u32> {
+    let scene = TRIANGLE_TARGETS.iter().position(|(name, _)| variant == format!("table1_{name}"))?;
+    // 4,096 or 16,384 shared by the meshes, rounded down per mesh.
+    let sparse =
+        SPARSE_TOTALS.iter().position(|&t| sparse_points <= t as usize && sparse_points * 10 >= t as usize * 9)?;
+    let rsm = RSM_RESOLUTIONS.iter().position(|&r| r == config.rsm_resolution)?;
+    let mode =
+        MODES.iter().position(|&(_, glossy, occlusion)| (glossy, occlusion) == (config.glossy, config.occlusion))?;
+    ((config.width, config.height) == RESOLUTION).then_some(PAPER_FPS[scene][sparse][rsm][mode])
+}
+
 /// The scenes and configurations. `quick`: the 200k scene only, R = 8, 64 sparse points,
 /// 32x32 (checks the machinery in seconds).
 pub fn jobs(description: &SceneDescription, scene: &Scene, quick: bool) -> Vec<Job> {
@@ -139,5 +152,24 @@ mod tests {
         }
         assert_eq!(r.meshes[1].transform.scale, ScaleDescription::Uniform(1.5));
         assert_eq!(replicate(&d, 1), d);
+    }
+
+    #[test]
+    fn paper_fps_finds_table_1_cells() {
+        let config = Config {
+            sparse_points_per_mesh: Some(341),
+            rsm_resolution: 256,
+            occlusion: Occlusion::Disks,
+            glossy: true,
+            width: 1920,
+            height: 1080,
+        };
+        assert_eq!(paper_fps("table1_730k", &config, 4092), Some(23));
+        assert_eq!(
+            paper_fps("table1_200k", &Config { glossy: false, occlusion: Occlusion::Off, ..config }, 16_384),
+            Some(24)
+        );
+        assert_eq!(paper_fps("scene", &config, 4092), None);
+        assert_eq!(paper_fps("table1_730k", &Config { width: 32, ..config }, 4092), None);
     }
 }
