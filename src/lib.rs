@@ -17,7 +17,8 @@
 //! - [`gpu`]: the device and one module per pass, each with its WGSL file in `shaders/`.
 //! - [`renderer`]: a frame, the passes called in order.
 //! - [`rgbd`]: RGB-D recordings and frames as light sources; [`mr`]: relighting them (mixed reality).
-//! - [`image`]: tone mapping, PNG/EXR output, error metrics.
+//! - [`image`]: tone mapping, PNG/EXR output, error metrics; [`compare`]: the error and timing
+//!   figures of `relume compare`, which [`bench`] (`relume bench`, sweeps and plots) shares.
 //! - [`rgbd`]: RGB-D frames and how they become VALs.
 //! - [`service`]: `relume serve`, the HTTP + WebSocket service; [`client`]: a client of it; [`load`]: its load benchmark.
 //!
@@ -27,7 +28,9 @@
 //! renderer borrow it. Everything is headless. In the service that thread is
 //! `service::gpu_worker`'s: handlers send it jobs over a bounded channel.
 
+pub mod bench;
 pub mod client;
+pub mod compare;
 pub mod gpu;
 pub mod image;
 pub mod load;

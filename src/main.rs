@@ -2,9 +2,9 @@
 
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
+use relume::compare;
 use relume::gpu::Gpu;
-use relume::gpu::timing::TimingSource;
-use relume::image::{LinearImage, flip_mean, relative_rmse};
+use relume::image::LinearImage;
 use relume::renderer::{Method, Renderer, stage};
 use relume::scene::Scene;
 use std::path::{Path, PathBuf};
@@ -63,6 +63,51 @@ enum Command {
         /// Exact reference: use every N-th VAL (flux x N); reported in the output.
         #[arg(long, default_value_t = 1)]
         val_stride: u32,
+    },
+    /// Sweep quality settings: per configuration the time of every stage, the device memory
+    /// held and the indirect error against brute force (and exact); writes results.json,
+    /// results.csv and plots into --out (see README, "Benchmark").
+    Bench {
+        scene: PathBuf,
+        /// An axis and its values, AXIS=V1,V2,...; axes: sparse_points (per mesh),
+        /// rsm_resolution (VALs <= R²), occlusion (off,disks), glossy (on,off), resolution
+        /// (WxH or N). Repeat for more axes.
+        #[arg(long = "sweep", value_name = "AXIS=V1,V2,...")]
+        sweep: Vec<String>,
+        /// Every combination of the swept values instead of one axis at a time around the
+        /// scene's settings.
+        #[arg(long)]
+        grid: bool,
+        /// A tiny sweep at 32x32 that runs in seconds (the CI smoke test).
+        #[arg(long)]
+        quick: bool,
+        /// Also compare every configuration against exact visibility.
+        #[arg(long, value_enum)]
+        reference: Option<Reference>,
+        /// With --reference exact: use every N-th VAL (flux x N).
+        #[arg(long)]
+        val_stride: Option<u32>,
+        /// Skip the plots (results.json and results.csv only).
+        #[arg(long)]
+        no_plots: bool,
+        /// The paper's Table 1 configurations (200k/730k triangles, 4k/16k sparse points,
+        /// 16k/64k/512k VALs, diffuse/+glossy/+occlusion, 1920x1080) on scenes built from this
+        /// one (its other meshes replicated in the room); no references. Hours on lavapipe.
+        #[arg(long, conflicts_with_all = ["sweep", "grid", "reference"])]
+        table1: bool,
+        /// Skip the brute-force reference (and the error against it): for configurations too
+        /// large to brute-force.
+        #[arg(long, conflicts_with = "reference")]
+        no_references: bool,
+        /// Skip the FMA-bound kernel and the gather variants.
+        #[arg(long)]
+        no_fma: bool,
+        /// Skip the temporal-stability frames.
+        #[arg(long)]
+        no_temporal: bool,
+        /// Output directory (created).
+        #[arg(long)]
+        out: PathBuf,
     },
     /// Relight every frame of an RGB-D recording (TUM layout) with a scene's virtual content:
     /// writes composited and indirect-only frames and a timing and stability summary.
@@ -332,6 +377,48 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        Command::Bench {
+            scene,
+            sweep,
+            grid,
+            quick,
+            reference,
+            val_stride,
+            table1,
+            no_references,
+            no_plots,
+            no_fma,
+            no_temporal,
+            out,
+        } => {
+            anyhow::ensure!(val_stride.is_none() || reference.is_some(), "--val-stride: only with --reference exact");
+            let options = relume::bench::BenchOptions {
+                scene,
+                sweep: relume::bench::Sweep::parse(&sweep)?,
+                grid,
+                quick,
+                exact_val_stride: reference.map(|_| val_stride.unwrap_or(1)),
+                references: !table1 && !no_references,
+                table1,
+                out,
+                fma: !no_fma,
+                temporal: !no_temporal,
+                plots: !no_plots,
+            };
+            let gpu = Gpu::new()?;
+            let start = Instant::now();
+            let results = relume::bench::run(&gpu, &options, &mut |what| {
+                eprintln!("[{:7.1} s] {what}", start.elapsed().as_secs_f64());
+            })?;
+            eprintln!(
+                "{} configurations on {} ({} timing); wrote {}",
+                results.configs.len(),
+                results.adapter,
+                results.timing.as_str(),
+                options.out.join("results.json").display()
+            );
+            Ok(())
+        }
         Command::Serve(config) => {
             let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
             runtime.block_on(relume::service::serve(config))?;
@@ -352,12 +439,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             // The brute force has no visibility, so it is compared with sparse without occlusion;
             // `--reference exact` measures occlusion.
             renderer.set_occlusion(relume::scene::Occlusion::Off, scene.settings.occlusion_rule);
-            // A warm-up frame settles first-use allocations; brute force is too slow to repeat
-            // and its single frame is dominated by its own arithmetic.
-            renderer.render(&gpu, Method::Sparse, w, h)?;
-            let sparse = renderer.render(&gpu, Method::Sparse, w, h)?;
-            let brute = renderer.render(&gpu, Method::BruteForce, w, h)?;
-            let exposure = brute.indirect.auto_exposure();
+            let sparse = compare::sparse_frame(&gpu, &mut renderer, w, h)?;
+            let brute = compare::brute_force_frame(&gpu, &mut renderer, w, h)?;
+            let error = compare::indirect_error(&sparse.indirect, &brute.indirect);
+            let exposure = error.exposure;
             let sparse_ms = sparse.timings.total_of(stage::SPARSE_INDIRECT);
             let brute_force_ms = brute.timings.total_of(stage::BRUTE_FORCE_INDIRECT);
             if let Some(dir) = &images {
@@ -366,7 +451,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let mut report = serde_json::json!({
                 "scene": scene_name(&scene),
                 "adapter": gpu.adapter_name(),
-                "timing": match sparse.timings.source { TimingSource::GpuTimestamps => "gpu_timestamps", TimingSource::WallClock => "wall_clock" },
+                "timing": sparse.timings.source,
                 "width": w,
                 "height": h,
                 "pixels": w as u64 * h as u64,
@@ -382,8 +467,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "sparse_ms": sparse_ms,
                 "brute_force_ms": brute_force_ms,
                 "speedup": brute_force_ms / sparse_ms,
-                "indirect_rel_rmse": relative_rmse(&sparse.indirect, &brute.indirect),
-                "indirect_flip_mean": flip_mean(&sparse.indirect, &brute.indirect, exposure),
+                "indirect_rel_rmse": error.rel_rmse,
+                "indirect_flip_mean": error.flip_mean,
                 "exposure": exposure,
                 "setup_ms": setup_ms,
                 "sparse_stages_ms": sparse.timings.stages,
@@ -516,8 +601,7 @@ fn add_exact_comparison(
     images: Option<&Path>,
 ) -> anyhow::Result<()> {
     use relume::scene::{Occlusion, OcclusionRule};
-    renderer.set_exact_val_stride(val_stride);
-    let exact = renderer.render(gpu, Method::Exact, w, h)?;
+    let exact = compare::exact_frame(gpu, renderer, w, h, val_stride)?;
     let exposure = exact.indirect.auto_exposure();
     report["exact_ms"] = exact.timings.total_of(&[stage::EXACT]).into();
     report["exact_val_stride"] = val_stride.into();
@@ -536,9 +620,9 @@ fn add_exact_comparison(
         if let Some(dir) = images {
             sparse.indirect.write_png(&dir.join(format!("indirect_sparse_occlusion_{key}.png")), exposure)?;
         }
-        report[format!("indirect_rel_rmse_vs_exact_{key}")] = relative_rmse(&sparse.indirect, &exact.indirect).into();
-        report[format!("indirect_flip_mean_vs_exact_{key}")] =
-            flip_mean(&sparse.indirect, &exact.indirect, exposure).into();
+        let error = compare::indirect_error(&sparse.indirect, &exact.indirect);
+        report[format!("indirect_rel_rmse_vs_exact_{key}")] = error.rel_rmse.into();
+        report[format!("indirect_flip_mean_vs_exact_{key}")] = error.flip_mean.into();
         if key == "sum" {
             report["occlusion_ms"] = sparse.timings.total_of(&[stage::OCCLUSION]).into();
             report["gather_ms"] = sparse.timings.total_of(&[stage::GATHER]).into();

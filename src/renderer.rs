@@ -246,6 +246,13 @@ impl Renderer {
         }
     }
 
+    /// Drop the brute-force and exact passes (the exact one holds the BVH's buffers); they are
+    /// rebuilt when next asked for.
+    pub fn release_reference_passes(&mut self) {
+        self.brute_force = None;
+        self.exact = None;
+    }
+
     /// Whether the glossy stages run for this scene.
     pub fn glossy(&self) -> bool {
         self.glossy

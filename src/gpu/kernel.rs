@@ -34,7 +34,11 @@ impl Slot {
 
 /// Compile a pass's WGSL (with the shared prelude for `scene`) inside an error scope.
 pub fn module(gpu: &Gpu, scene: &GpuScene, label: &str, pass_wgsl: &str) -> Result<wgpu::ShaderModule, GpuError> {
-    let source = shader::source(pass_wgsl, scene.textured());
+    module_from_source(gpu, label, shader::source(pass_wgsl, scene.textured()))
+}
+
+/// Compile complete WGSL `source` inside an error scope.
+pub fn module_from_source(gpu: &Gpu, label: &str, source: String) -> Result<wgpu::ShaderModule, GpuError> {
     gpu.build_checked(label, || {
         gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),

@@ -71,6 +71,19 @@ impl Lobes {
     }
 }
 
+/// Device memory in buffers and textures at one moment ([`Gpu::memory_in_use`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct MemoryInUse {
+    pub buffer_bytes: u64,
+    pub texture_bytes: u64,
+}
+
+impl MemoryInUse {
+    pub fn total_bytes(&self) -> u64 {
+        self.buffer_bytes + self.texture_bytes
+    }
+}
+
 /// The device, its queue and what the adapter can do. Owned by one thread; passes borrow it.
 pub struct Gpu {
     pub device: wgpu::Device,
@@ -130,6 +143,15 @@ impl Gpu {
     /// Whether the adapter runs on the CPU (lavapipe / llvmpipe).
     pub fn is_cpu(&self) -> bool {
         self.adapter_info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// Device memory live right now in buffers and textures, as wgpu's internal counters
+    /// count it (the sizes of the driver allocations backing every buffer and texture this
+    /// process holds on the device, alignment included; not pipelines or driver overhead).
+    pub fn memory_in_use(&self) -> MemoryInUse {
+        let hal = self.device.get_internal_counters().hal;
+        let bytes = |c: isize| c.max(0) as u64;
+        MemoryInUse { buffer_bytes: bytes(hal.buffer_memory.read()), texture_bytes: bytes(hal.texture_memory.read()) }
     }
 
     /// `"<name> (<backend>)"`, e.g. `"llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)"`.

@@ -23,10 +23,10 @@ const SCENE: &str = include_str!("../../shaders/scene.wgsl");
 const SCENE_TEXTURES: &str = include_str!("../../shaders/scene_textures.wgsl");
 const SCENE_UNTEXTURED: &str = include_str!("../../shaders/scene_untextured.wgsl");
 
-fn header() -> String {
+fn header(tile_size: u32) -> String {
     format!(
         "const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\
-         const TILE_SIZE: u32 = {TILE_SIZE}u;\n\
+         const TILE_SIZE: u32 = {tile_size}u;\n\
          const NEIGHBOURS: u32 = {NEIGHBOURS}u;\n\
          const NO_NEIGHBOUR: u32 = {NO_NEIGHBOUR}u;\n\
          const NO_SURFACE_DISTANCE: f32 = {NO_SURFACE_DISTANCE:e};\n\
@@ -50,8 +50,13 @@ fn header() -> String {
 /// The full WGSL source of a pass whose own file is `pass`; `textured` scenes bind the texture
 /// array, others have no texture binding at all.
 pub fn source(pass: &str, textured: bool) -> String {
+    source_with_tile_size(pass, textured, TILE_SIZE)
+}
+
+/// [`source`] with another `TILE_SIZE` (the bench's gather variants).
+pub fn source_with_tile_size(pass: &str, textured: bool, tile_size: u32) -> String {
     let textures = if textured { SCENE_TEXTURES } else { SCENE_UNTEXTURED };
-    format!("{}\n{COMMON}\n{textures}\n{SCENE}\n{pass}", header())
+    format!("{}\n{COMMON}\n{textures}\n{SCENE}\n{pass}", header(tile_size))
 }
 
 /// Every pass's full source, by file name (for the layout and compilation tests).

@@ -12,6 +12,16 @@ pub enum TimingSource {
     WallClock,
 }
 
+impl TimingSource {
+    /// The name reports use (as serialised).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TimingSource::GpuTimestamps => "gpu_timestamps",
+            TimingSource::WallClock => "wall_clock",
+        }
+    }
+}
+
 /// Durations of named stages (ms), in recording order.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct StageTimings {

@@ -33,8 +33,9 @@ use std::path::{Path, PathBuf};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
-    CameraDescription, LightDescription, MaterialDescription, MeshDescription, Occlusion, OcclusionRule,
-    OcclusionSetting, ScaleDescription, SceneDescription, SettingsDescription, TransformDescription, parse_json,
+    CameraDescription, LightDescription, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion,
+    OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SettingsDescription,
+    TransformDescription, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;

@@ -1,0 +1,708 @@
+//! `relume bench`: a sweep over quality settings measuring, per configuration, what each stage
+//! costs, the device memory the renderer holds and how far the indirect image is from the
+//! references. Error figures come from [`crate::compare`], the code path of `relume compare`.
+//!
+//! Axes: sparse points per mesh, RSM resolution (the VAL count is at most its square),
+//! occlusion (off / disks), glossy (on / off) and output resolution. The interpolation's
+//! neighbour count is not an axis: it is fixed at 8 ([`crate::scene::NEIGHBOURS`], compiled
+//! into the scene data and the shaders).
+//!
+//! By default each axis is varied alone around a base configuration (the scene's settings);
+//! `grid` takes the Cartesian product instead.
+
+pub mod fma;
+pub mod plot;
+pub mod table1;
+pub mod temporal;
+
+use crate::compare::{self, IndirectError};
+use crate::gpu::timing::TimingSource;
+use crate::gpu::{Gpu, GpuError, MemoryInUse};
+use crate::renderer::{Renderer, stage};
+use crate::scene::{MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Errors of a bench run: bad flags name the flag and the value.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error("{flag}: {message}")]
+    Flag { flag: String, message: String },
+    #[error("reading scene {path}: {source}")]
+    Read { path: PathBuf, source: std::io::Error },
+    #[error("scene {path}: {source}")]
+    Scene { path: PathBuf, source: SceneError },
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("writing {path}: {message}")]
+    Write { path: PathBuf, message: String },
+}
+
+fn flag_error(flag: &str, message: impl Into<String>) -> BenchError {
+    BenchError::Flag { flag: flag.to_owned(), message: message.into() }
+}
+
+/// Most pixels on one side of a bench image (as `render`'s `--width`).
+const MAX_SIDE: u32 = 8192;
+
+/// One configuration of the sweep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Config {
+    /// Sparse points on every mesh; `None`: each mesh's own count from the scene file.
+    pub sparse_points_per_mesh: Option<u32>,
+    /// RSM side R: at most R² VALs (only lit texels become VALs).
+    pub rsm_resolution: u32,
+    pub occlusion: Occlusion,
+    /// Whether the glossy gather may run (it runs only when the scene has a glossy material).
+    pub glossy: bool,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// The values given for each axis (`None`: the axis is not swept).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Sweep {
+    pub sparse_points: Option<Vec<u32>>,
+    pub rsm_resolution: Option<Vec<u32>>,
+    pub occlusion: Option<Vec<Occlusion>>,
+    pub glossy: Option<Vec<bool>>,
+    pub resolution: Option<Vec<(u32, u32)>>,
+}
+
+/// The axis names `--sweep` accepts.
+pub const AXES: &[&str] = &["sparse_points", "rsm_resolution", "occlusion", "glossy", "resolution"];
+
+impl Sweep {
+    /// Parse `--sweep axis=v1,v2,...` arguments; each axis at most once.
+    pub fn parse(args: &[String]) -> Result<Self, BenchError> {
+        let mut sweep = Sweep::default();
+        for arg in args {
+            let Some((axis, values)) = arg.split_once('=') else {
+                return Err(flag_error("--sweep", format!("expected AXIS=V1,V2,..., got `{arg}`")));
+            };
+            let axis = axis.trim();
+            let flag = format!("--sweep {axis}");
+            let values: Vec<&str> = values.split(',').map(str::trim).collect();
+            if values.iter().any(|v| v.is_empty()) {
+                return Err(flag_error(&flag, format!("empty value in `{arg}`")));
+            }
+            let duplicate = |given: bool| {
+                if given { Err(flag_error(&flag, "given more than once")) } else { Ok(()) }
+            };
+            match axis {
+                "sparse_points" => {
+                    duplicate(sweep.sparse_points.is_some())?;
+                    sweep.sparse_points = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_SPARSE_POINTS))?);
+                }
+                "rsm_resolution" => {
+                    duplicate(sweep.rsm_resolution.is_some())?;
+                    let (lo, hi) = RSM_RESOLUTION_RANGE;
+                    sweep.rsm_resolution = Some(parse_each(&flag, &values, |v| int_in(v, lo, hi))?);
+                }
+                "occlusion" => {
+                    duplicate(sweep.occlusion.is_some())?;
+                    sweep.occlusion = Some(parse_each(&flag, &values, |v| match v {
+                        "off" => Ok(Occlusion::Off),
+                        "disks" => Ok(Occlusion::Disks),
+                        _ => Err("expected `off` or `disks`".to_owned()),
+                    })?);
+                }
+                "glossy" => {
+                    duplicate(sweep.glossy.is_some())?;
+                    sweep.glossy = Some(parse_each(&flag, &values, |v| match v {
+                        "on" | "true" => Ok(true),
+                        "off" | "false" => Ok(false),
+                        _ => Err("expected `on` or `off`".to_owned()),
+                    })?);
+                }
+                "resolution" => {
+                    duplicate(sweep.resolution.is_some())?;
+                    sweep.resolution = Some(parse_each(&flag, &values, parse_resolution)?);
+                }
+                "neighbours" | "neighbors" => {
+                    return Err(flag_error(
+                        &flag,
+                        "not an axis yet: the interpolation uses a fixed 8 neighbours (scene::NEIGHBOURS, \
+                         compiled into the scene data and the shaders)",
+                    ));
+                }
+                _ => {
+                    return Err(flag_error(&flag, format!("unknown axis; the axes are {}", AXES.join(", "))));
+                }
+            }
+        }
+        Ok(sweep)
+    }
+
+    /// The configurations: each swept axis varied alone around `base` (duplicates dropped), or
+    /// with `grid` every combination.
+    pub fn configs(&self, base: &Config, grid: bool) -> Vec<Config> {
+        let mut out: Vec<Config> = Vec::new();
+        let mut push = |c: Config| {
+            if !out.contains(&c) {
+                out.push(c);
+            }
+        };
+        if grid {
+            for sparse in self
+                .sparse_points
+                .clone()
+                .map_or(vec![base.sparse_points_per_mesh], |v| v.into_iter().map(Some).collect())
+            {
+                for &rsm in &one(&self.rsm_resolution, base.rsm_resolution) {
+                    for &glossy in &one(&self.glossy, base.glossy) {
+                        for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
+                            for &occlusion in &one(&self.occlusion, base.occlusion) {
+                                push(Config {
+                                    sparse_points_per_mesh: sparse,
+                                    rsm_resolution: rsm,
+                                    occlusion,
+                                    glossy,
+                                    width,
+                                    height,
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+            return out;
+        }
+        push(*base);
+        for &v in self.sparse_points.iter().flatten() {
+            push(Config { sparse_points_per_mesh: Some(v), ..*base });
+        }
+        for &v in self.rsm_resolution.iter().flatten() {
+            push(Config { rsm_resolution: v, ..*base });
+        }
+        for &v in self.occlusion.iter().flatten() {
+            push(Config { occlusion: v, ..*base });
+        }
+        for &v in self.glossy.iter().flatten() {
+            push(Config { glossy: v, ..*base });
+        }
+        for &(width, height) in self.resolution.iter().flatten() {
+            push(Config { width, height, ..*base });
+        }
+        out
+    }
+}
+
+/// The values of an axis, or the base value alone when it is not swept.
+fn one<T: Clone>(values: &Option<Vec<T>>, base: T) -> Vec<T> {
+    values.clone().unwrap_or_else(|| vec![base])
+}
+
+fn parse_each<T>(flag: &str, values: &[&str], f: impl Fn(&str) -> Result<T, String>) -> Result<Vec<T>, BenchError> {
+    values.iter().map(|v| f(v).map_err(|m| flag_error(flag, format!("`{v}`: {m}")))).collect()
+}
+
+fn int_in(v: &str, lo: u32, hi: u32) -> Result<u32, String> {
+    let n: u32 = v.parse().map_err(|_| format!("not a whole number in {lo}..={hi}"))?;
+    if (lo..=hi).contains(&n) { Ok(n) } else { Err(format!("must be in {lo}..={hi}")) }
+}
+
+/// `WxH` or `N` (square).
+fn parse_resolution(v: &str) -> Result<(u32, u32), String> {
+    match v.split_once(['x', 'X']) {
+        Some((w, h)) => Ok((int_in(w, 1, MAX_SIDE)?, int_in(h, 1, MAX_SIDE)?)),
+        None => {
+            let n = int_in(v, 1, MAX_SIDE)?;
+            Ok((n, n))
+        }
+    }
+}
+
+/// What `relume bench` was asked to do.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub scene: PathBuf,
+    pub sweep: Sweep,
+    pub grid: bool,
+    /// A tiny sweep at a tiny resolution that runs in seconds (CI's smoke test).
+    pub quick: bool,
+    /// Also compare against exact visibility over every `n`-th VAL.
+    pub exact_val_stride: Option<u32>,
+    /// Render the brute-force reference and report the error against it.
+    pub references: bool,
+    /// The paper's Table 1 configurations on scenes built from this one ([`table1`]); the
+    /// sweep axes do not apply.
+    pub table1: bool,
+    pub out: PathBuf,
+    /// Also measure the FMA-bound kernel against the gather ([`fma::measure`]).
+    pub fma: bool,
+    /// Also measure temporal stability ([`temporal::measure`]).
+    pub temporal: bool,
+    pub plots: bool,
+}
+
+/// The quick sweep's base resolution and the axes it sweeps when none are given.
+const QUICK_SIDE: u32 = 32;
+const QUICK_SPARSE: [u32; 2] = [32, 128];
+const QUICK_RSM: [u32; 2] = [8, 16];
+
+impl BenchOptions {
+    /// The base configuration (the scene's settings; with `quick`, 32 sparse points per mesh,
+    /// R = 8 and 32x32 unless the sweep gives a resolution) and the configurations.
+    pub fn configs(&self, description: &SceneDescription, scene: &Scene) -> Vec<Config> {
+        let mut base = Config {
+            sparse_points_per_mesh: None,
+            rsm_resolution: scene.settings.rsm_resolution,
+            occlusion: scene.settings.occlusion,
+            glossy: scene.settings.glossy,
+            width: description.camera.width,
+            height: description.camera.height,
+        };
+        let mut sweep = self.sweep.clone();
+        if self.quick {
+            base.sparse_points_per_mesh = Some(QUICK_SPARSE[0]);
+            base.rsm_resolution = QUICK_RSM[0];
+            (base.width, base.height) = (QUICK_SIDE, QUICK_SIDE);
+            if sweep == Sweep::default() {
+                sweep.sparse_points = Some(QUICK_SPARSE.to_vec());
+                sweep.rsm_resolution = Some(QUICK_RSM.to_vec());
+                sweep.occlusion = Some(vec![Occlusion::Off, Occlusion::Disks]);
+            }
+        }
+        sweep.configs(&base, self.grid)
+    }
+}
+
+/// Everything measured for one configuration.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ConfigResult {
+    /// `scene` (the scene file), or the built scene (`--table1`: `table1_200k`, `table1_730k`).
+    pub variant: String,
+    #[serde(flatten)]
+    pub config: Config,
+    /// Whether the glossy stages ran (glossy allowed and a glossy material present).
+    pub glossy_active: bool,
+    pub sparse_points: usize,
+    pub triangles: usize,
+    pub vertices: usize,
+    /// VALs with non-zero flux in the frame.
+    pub vals: u32,
+    pub pixels: u64,
+    pub covered_pixels: usize,
+    pub timing: TimingSource,
+    /// Every stage of the sparse frame (after a warm-up frame), ms.
+    pub stages_ms: Vec<(String, f64)>,
+    /// `gather + occlusion + renormalise + interpolate + shade` (as `compare`'s `sparse_ms`).
+    pub sparse_indirect_ms: f64,
+    /// Every stage of the frame, RSM, visibility and direct light included.
+    pub frame_ms: f64,
+    /// `None` without references (`--table1`).
+    pub brute_force_ms: Option<f64>,
+    /// `brute_force_ms / sparse_indirect_ms`.
+    pub speedup: Option<f64>,
+    /// VAL-receiver interactions of the gather per second (VALs x sparse points / gather time).
+    pub gather_interactions_per_s: f64,
+    /// Device memory in buffers and textures after the sparse frame ([`Gpu::memory_in_use`]).
+    pub gpu_memory: MemoryInUse,
+    pub gpu_memory_bytes: u64,
+    /// The sparse indirect image against the brute force (as `compare`'s `indirect_rel_rmse`
+    /// and `indirect_flip_mean`). With occlusion on this includes the occlusion's darkening,
+    /// which the brute force (no visibility) lacks: compare against exact for occlusion.
+    pub vs_brute_force: Option<IndirectError>,
+    /// Against exact visibility, with `--reference exact`.
+    pub vs_exact: Option<IndirectError>,
+    /// `--table1`: the paper's frames per second for this configuration (AMD Radeon 7870).
+    pub paper_fps: Option<u32>,
+    pub exact_ms: Option<f64>,
+}
+
+/// A bench run's results (`results.json`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BenchResults {
+    pub scene: String,
+    pub adapter: String,
+    /// Where stage times come from: `gpu_timestamps` or `wall_clock` (each stage submitted and
+    /// waited for alone; lavapipe's timestamps are not trusted).
+    pub timing: TimingSource,
+    pub gpu_memory_note: &'static str,
+    pub mode: &'static str,
+    pub quick: bool,
+    pub exact_val_stride: Option<u32>,
+    pub configs: Vec<ConfigResult>,
+    /// The gather's throughput against an FMA-bound kernel, on the base configuration.
+    pub fma: Option<fma::FmaReport>,
+    /// Temporal stability on the base configuration.
+    pub temporal: Option<temporal::TemporalReport>,
+}
+
+pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and texture relume holds after the timed sparse \
+     frame (wgpu's internal counters: the sizes of the driver allocations, alignment included; pipelines and driver \
+     overhead not counted); the reference passes' buffers are released before";
+
+/// What a renderer is built for: sparse points per mesh, RSM resolution, glossy.
+type RendererKey = (Option<u32>, u32, bool);
+
+/// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
+/// `options.out`. `progress` is told each configuration as it starts.
+pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<BenchResults, BenchError> {
+    if let Some(0) = options.exact_val_stride {
+        return Err(flag_error("--val-stride", "must be at least 1, got 0"));
+    }
+    let path = &options.scene;
+    let text = std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.clone(), source })?;
+    let scene_error = |source| BenchError::Scene { path: path.clone(), source };
+    let description = SceneDescription::from_json_str(&text).map_err(scene_error)?;
+    let base_dir = path.parent().unwrap_or_else(|| Path::new(".")).to_path_buf();
+    let scene = Scene::from_description(&description, &base_dir).map_err(scene_error)?;
+    if scene.light.is_none() {
+        return Err(flag_error(
+            &path.display().to_string(),
+            "light: required by `bench` (its VALs come from the spot light's RSM)",
+        ));
+    }
+    std::fs::create_dir_all(&options.out)
+        .map_err(|e| flag_error("--out", format!("creating {}: {e}", options.out.display())))?;
+    let jobs = if options.table1 {
+        let jobs = table1::jobs(&description, &scene, options.quick);
+        // The built scenes, for runs of single configurations (`bench <file> --no-references`).
+        for job in &jobs {
+            let file = options.out.join(format!("{}.json", job.variant));
+            let d = table1::with_absolute_paths(&job.description, &base_dir);
+            write_file(&file, serde_json::to_string_pretty(&d).expect("scenes serialise").as_bytes())?;
+        }
+        jobs
+    } else {
+        vec![Job { variant: "scene".to_owned(), configs: options.configs(&description, &scene), description }]
+    };
+    let mut results = Vec::new();
+    let mut timing = None;
+    let mut base_scene = None;
+    for job in &jobs {
+        let base = run_job(gpu, options, job, &base_dir, &mut results, progress).map_err(|e| match e {
+            BenchError::Scene { source, .. } => BenchError::Scene { path: path.clone(), source },
+            e => e,
+        })?;
+        base_scene.get_or_insert(base);
+    }
+    for r in &results {
+        timing.get_or_insert(r.timing);
+    }
+    // The extra measurements use the first job's base configuration (its first).
+    let base_scene = base_scene.unwrap_or(scene);
+    // The extra measurements use the base configuration (the first).
+    let fma = if options.fma {
+        progress("FMA-bound kernel and gather variants");
+        Some(fma::measure(gpu, &base_scene, options.quick)?)
+    } else {
+        None
+    };
+    let temporal = if options.temporal {
+        progress("temporal stability");
+        Some(temporal::measure(gpu, &base_scene, options.quick)?)
+    } else {
+        None
+    };
+    let results = BenchResults {
+        scene: base_scene.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
+        adapter: gpu.adapter_name(),
+        timing: timing.unwrap_or(if gpu.timestamps { TimingSource::GpuTimestamps } else { TimingSource::WallClock }),
+        gpu_memory_note: GPU_MEMORY_NOTE,
+        mode: if options.table1 {
+            "table1"
+        } else if options.grid {
+            "grid"
+        } else {
+            "one_axis_at_a_time"
+        },
+        quick: options.quick,
+        exact_val_stride: options.exact_val_stride,
+        configs: results,
+        fma,
+        temporal,
+    };
+    write_results(&options.out, &results)?;
+    if options.plots {
+        plot::write_all(&options.out, &results)
+            .map_err(|message| BenchError::Write { path: options.out.clone(), message })?;
+    }
+    Ok(results)
+}
+
+/// Scenes and configurations to run: the scene file with the sweep's configurations, or the
+/// scenes [`table1`] builds.
+pub struct Job {
+    /// `scene`, or which built scene (e.g. `table1_200k`).
+    pub variant: String,
+    pub description: SceneDescription,
+    pub configs: Vec<Config>,
+}
+
+/// Run `job`'s configurations, appending to `results`; returns the scene of its first
+/// configuration (the base of the extra measurements).
+fn run_job(
+    gpu: &Gpu,
+    options: &BenchOptions,
+    job: &Job,
+    base_dir: &Path,
+    results: &mut Vec<ConfigResult>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Scene, BenchError> {
+    let scene_error = |source| BenchError::Scene { path: PathBuf::new(), source };
+    // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
+    let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
+    for c in &job.configs {
+        let key = (c.sparse_points_per_mesh, c.rsm_resolution, c.glossy);
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, g)) => g.push(*c),
+            None => groups.push((key, vec![*c])),
+        }
+    }
+    let mut scenes: HashMap<Option<u32>, Scene> = HashMap::new();
+    let mut base_scene = None;
+    for ((sparse, rsm, glossy), group) in groups {
+        let mut scene = match scenes.get(&sparse) {
+            Some(s) => s.clone(),
+            None => {
+                let mut d = job.description.clone();
+                if let Some(n) = sparse {
+                    d.meshes.iter_mut().for_each(|m| m.sparse_points = n);
+                }
+                let s = Scene::from_description(&d, base_dir).map_err(scene_error)?;
+                scenes.insert(sparse, s.clone());
+                s
+            }
+        };
+        scene.settings.rsm_resolution = rsm;
+        scene.settings.glossy = glossy;
+        scene.settings.occlusion = group[0].occlusion;
+        base_scene.get_or_insert_with(|| scene.clone());
+        let mut renderer = Renderer::new(gpu, &scene)?;
+        let mut sizes: Vec<(u32, u32)> = group.iter().map(|c| (c.width, c.height)).collect();
+        sizes.dedup();
+        for (w, h) in sizes {
+            let mut sparse_frames = Vec::new();
+            for c in group.iter().filter(|c| (c.width, c.height) == (w, h)) {
+                progress(&format!("{}: {}", job.variant, describe(c)));
+                renderer.set_occlusion(c.occlusion, scene.settings.occlusion_rule);
+                let frame = compare::sparse_frame(gpu, &mut renderer, w, h)?;
+                sparse_frames.push((*c, frame, gpu.memory_in_use()));
+            }
+            let brute = match options.references {
+                true => Some(compare::brute_force_frame(gpu, &mut renderer, w, h)?),
+                false => None,
+            };
+            let exact = match options.exact_val_stride {
+                Some(stride) => Some(compare::exact_frame(gpu, &mut renderer, w, h, stride)?),
+                None => None,
+            };
+            renderer.release_reference_passes();
+            for (config, frame, memory) in sparse_frames {
+                let sparse_indirect_ms = frame.timings.total_of(stage::SPARSE_INDIRECT);
+                let brute_force_ms = brute.as_ref().map(|b| b.timings.total_of(stage::BRUTE_FORCE_INDIRECT));
+                let gather_ms = frame.timings.total_of(&[stage::GATHER]);
+                let interactions = frame.val_count as f64 * scene.sparse_point_count() as f64;
+                results.push(ConfigResult {
+                    variant: job.variant.clone(),
+                    config,
+                    glossy_active: renderer.glossy(),
+                    sparse_points: scene.sparse_point_count(),
+                    triangles: scene.triangle_count(),
+                    vertices: scene.vertex_count(),
+                    vals: frame.val_count,
+                    pixels: w as u64 * h as u64,
+                    covered_pixels: frame.indirect.coverage(),
+                    timing: frame.timings.source,
+                    frame_ms: frame.timings.stages.iter().map(|(_, ms)| ms).sum(),
+                    stages_ms: frame.timings.stages.clone(),
+                    sparse_indirect_ms,
+                    brute_force_ms,
+                    speedup: brute_force_ms.map(|b| b / sparse_indirect_ms),
+                    gather_interactions_per_s: interactions / (gather_ms * 1e-3),
+                    gpu_memory: memory,
+                    gpu_memory_bytes: memory.total_bytes(),
+                    vs_brute_force: brute.as_ref().map(|b| compare::indirect_error(&frame.indirect, &b.indirect)),
+                    vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, &x.indirect)),
+                    exact_ms: exact.as_ref().map(|x| x.timings.total_of(&[stage::EXACT])),
+                    paper_fps: table1::paper_fps(&job.variant, &config, scene.sparse_point_count()),
+                });
+            }
+        }
+    }
+    Ok(base_scene.expect("a job has configurations"))
+}
+
+/// A configuration in words, for progress lines and plot labels.
+pub fn describe(c: &Config) -> String {
+    let sparse = c.sparse_points_per_mesh.map_or("scene".to_owned(), |n| n.to_string());
+    format!(
+        "sparse/mesh {sparse}, R {}, occlusion {}, glossy {}, {}x{}",
+        c.rsm_resolution,
+        match c.occlusion {
+            Occlusion::Off => "off",
+            Occlusion::Disks => "disks",
+        },
+        if c.glossy { "on" } else { "off" },
+        c.width,
+        c.height
+    )
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), BenchError> {
+    std::fs::write(path, bytes).map_err(|e| BenchError::Write { path: path.to_path_buf(), message: e.to_string() })
+}
+
+/// `results.json` and `results.csv` (one row per configuration, a column per stage).
+pub fn write_results(dir: &Path, results: &BenchResults) -> Result<(), BenchError> {
+    let json = serde_json::to_string_pretty(results).expect("results serialise");
+    write_file(&dir.join("results.json"), json.as_bytes())?;
+    write_file(&dir.join("results.csv"), csv(results).as_bytes())
+}
+
+/// The CSV table: fixed columns, then `<stage>_ms` for every stage any configuration ran.
+pub fn csv(results: &BenchResults) -> String {
+    let mut stages: Vec<&str> = Vec::new();
+    for r in &results.configs {
+        for (name, _) in &r.stages_ms {
+            if !stages.contains(&name.as_str()) {
+                stages.push(name);
+            }
+        }
+    }
+    let mut header: Vec<String> = [
+        "variant",
+        "sparse_points_per_mesh",
+        "sparse_points",
+        "rsm_resolution",
+        "vals",
+        "occlusion",
+        "glossy",
+        "glossy_active",
+        "width",
+        "height",
+        "pixels",
+        "covered_pixels",
+        "triangles",
+        "timing",
+        "sparse_indirect_ms",
+        "frame_ms",
+        "brute_force_ms",
+        "speedup",
+        "gather_interactions_per_s",
+        "gpu_memory_bytes",
+        "rel_rmse_vs_brute_force",
+        "flip_mean_vs_brute_force",
+        "rel_rmse_vs_exact",
+        "flip_mean_vs_exact",
+        "exact_ms",
+        "paper_fps",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    header.extend(stages.iter().map(|s| format!("{s}_ms")));
+    let mut out = header.join(",") + "\n";
+    let opt = |v: Option<f64>| v.map_or(String::new(), |x| x.to_string());
+    for r in &results.configs {
+        let c = &r.config;
+        let mut row = vec![
+            r.variant.clone(),
+            c.sparse_points_per_mesh.map_or(String::new(), |n| n.to_string()),
+            r.sparse_points.to_string(),
+            c.rsm_resolution.to_string(),
+            r.vals.to_string(),
+            format!("{:?}", c.occlusion).to_lowercase(),
+            c.glossy.to_string(),
+            r.glossy_active.to_string(),
+            c.width.to_string(),
+            c.height.to_string(),
+            r.pixels.to_string(),
+            r.covered_pixels.to_string(),
+            r.triangles.to_string(),
+            r.timing.as_str().to_owned(),
+            r.sparse_indirect_ms.to_string(),
+            r.frame_ms.to_string(),
+            opt(r.brute_force_ms),
+            opt(r.speedup),
+            r.gather_interactions_per_s.to_string(),
+            r.gpu_memory_bytes.to_string(),
+            opt(r.vs_brute_force.map(|e| e.rel_rmse)),
+            opt(r.vs_brute_force.map(|e| e.flip_mean)),
+            opt(r.vs_exact.map(|e| e.rel_rmse)),
+            opt(r.vs_exact.map(|e| e.flip_mean)),
+            opt(r.exact_ms),
+            r.paper_fps.map_or(String::new(), |f| f.to_string()),
+        ];
+        row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
+        out += &(row.join(",") + "\n");
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(a: &[&str]) -> Vec<String> {
+        a.iter().map(|s| s.to_string()).collect()
+    }
+
+    const BASE: Config = Config {
+        sparse_points_per_mesh: None,
+        rsm_resolution: 64,
+        occlusion: Occlusion::Off,
+        glossy: true,
+        width: 100,
+        height: 50,
+    };
+
+    #[test]
+    fn sweep_parses_every_axis() {
+        let s = Sweep::parse(&args(&[
+            "sparse_points=256,1024",
+            "rsm_resolution=32",
+            "occlusion=off,disks",
+            "glossy=on,off",
+            "resolution=64,320x240",
+        ]))
+        .unwrap();
+        assert_eq!(s.sparse_points, Some(vec![256, 1024]));
+        assert_eq!(s.rsm_resolution, Some(vec![32]));
+        assert_eq!(s.occlusion, Some(vec![Occlusion::Off, Occlusion::Disks]));
+        assert_eq!(s.glossy, Some(vec![true, false]));
+        assert_eq!(s.resolution, Some(vec![(64, 64), (320, 240)]));
+    }
+
+    #[test]
+    fn sweep_errors_name_the_axis_and_value() {
+        for (arg, wanted) in [
+            ("sparse_points=0", "--sweep sparse_points: `0`: must be in 1..=65536"),
+            ("sparse_points=12k", "--sweep sparse_points: `12k`: not a whole number"),
+            ("rsm_resolution=4", "--sweep rsm_resolution: `4`: must be in 8..=2048"),
+            ("occlusion=on", "--sweep occlusion: `on`: expected `off` or `disks`"),
+            ("glossy=maybe", "--sweep glossy: `maybe`"),
+            ("resolution=0x10", "--sweep resolution: `0x10`: must be in 1..=8192"),
+            ("resolution=64,", "--sweep resolution: empty value"),
+            ("speed=1", "--sweep speed: unknown axis"),
+            ("neighbours=4,8", "--sweep neighbours: not an axis yet"),
+            ("sparse_points", "--sweep: expected AXIS=V1,V2"),
+        ] {
+            let e = Sweep::parse(&args(&[arg])).unwrap_err().to_string();
+            assert!(e.starts_with(wanted), "{arg}: {e}");
+        }
+        let e = Sweep::parse(&args(&["glossy=on", "glossy=off"])).unwrap_err().to_string();
+        assert_eq!(e, "--sweep glossy: given more than once");
+    }
+
+    #[test]
+    fn one_axis_at_a_time_varies_each_axis_around_the_base() {
+        let s = Sweep::parse(&args(&["sparse_points=16,32", "occlusion=off,disks"])).unwrap();
+        let c = s.configs(&BASE, false);
+        assert_eq!(c.len(), 4, "base, two sparse counts, disks (off is the base): {c:?}");
+        assert_eq!(c[0], BASE);
+        assert_eq!(c[1].sparse_points_per_mesh, Some(16));
+        assert_eq!(c[3], Config { occlusion: Occlusion::Disks, ..BASE });
+    }
+
+    #[test]
+    fn grid_takes_every_combination() {
+        let s = Sweep::parse(&args(&["sparse_points=16,32", "rsm_resolution=8,16,32", "glossy=on,off"])).unwrap();
+        let c = s.configs(&BASE, true);
+        assert_eq!(c.len(), 12);
+        assert!(c.iter().all(|c| c.width == 100 && c.occlusion == Occlusion::Off));
+    }
+}

@@ -1,0 +1,142 @@
+//! `relume bench --quick`: the smoke test CI runs. Checks the outputs' shape and that every
+//! figure is finite; the numbers themselves are not asserted.
+
+use super::{fixture, scratch};
+use std::process::{Command, Output};
+
+fn relume(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_relume")).args(args).output().expect("running relume")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn finite_non_negative(v: &serde_json::Value, key: &str) -> f64 {
+    let x = v[key].as_f64().unwrap_or_else(|| panic!("{key} missing or not a number: {v}"));
+    assert!(x.is_finite() && x >= 0.0, "{key} = {x}");
+    x
+}
+
+#[test]
+fn quick_bench_writes_a_finite_table_and_plots() {
+    let dir = scratch("bench_quick");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let o = relume(&["bench", scene.to_str().unwrap(), "--quick", "--out", dir.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    assert!(json["timing"].as_str().is_some_and(|t| t == "gpu_timestamps" || t == "wall_clock"), "{json}");
+    assert!(json["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+    let configs = json["configs"].as_array().expect("configs");
+    // Base, 128 sparse points per mesh, R = 16, disks.
+    assert_eq!(configs.len(), 4, "{json}");
+    for c in configs {
+        for key in ["sparse_indirect_ms", "frame_ms", "brute_force_ms", "speedup", "gather_interactions_per_s"] {
+            finite_non_negative(c, key);
+        }
+        for key in ["rel_rmse", "flip_mean"] {
+            finite_non_negative(&c["vs_brute_force"], key);
+        }
+        assert!(c["gpu_memory_bytes"].as_u64().is_some_and(|b| b > 0), "{c}");
+        assert!(c["vals"].as_u64().is_some_and(|n| n > 0), "{c}");
+        assert_eq!(c["pixels"].as_u64(), Some(32 * 32));
+        let stages = c["stages_ms"].as_array().expect("stages");
+        for name in ["rsm_raster", "rsm_vals", "visibility", "gather", "renormalise", "interpolate", "shade", "direct"]
+        {
+            let stage = stages.iter().find(|s| s[0] == name).unwrap_or_else(|| panic!("stage {name}: {c}"));
+            assert!(stage[1].as_f64().is_some_and(|ms| ms.is_finite() && ms >= 0.0), "{stage}");
+        }
+        assert!(c["vs_exact"].is_null());
+    }
+    assert!(configs.iter().any(|c| c["occlusion"] == "disks"));
+
+    let fma = &json["fma"];
+    for key in ["fma_per_s", "fma_ms"] {
+        assert!(finite_non_negative(fma, key) > 0.0, "{key}: {fma}");
+    }
+    let variants = fma["gather_variants"].as_array().expect("gather variants");
+    assert!(!variants.is_empty());
+    for v in variants {
+        for key in ["gather_ms", "interactions_per_s", "ratio_to_fma"] {
+            finite_non_negative(v, key);
+        }
+    }
+    let motions = json["temporal"]["motions"].as_array().expect("temporal motions");
+    let names: Vec<&str> = motions.iter().map(|m| m["motion"].as_str().unwrap()).collect();
+    assert_eq!(names, ["camera_orbit", "moving_light", "moving_model"]);
+    for m in motions {
+        for key in
+            ["sparse_image_change", "brute_force_image_change", "error_image_change", "sparse_point_irradiance_change"]
+        {
+            finite_non_negative(m, key);
+        }
+    }
+
+    let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 1 + configs.len());
+    let header: Vec<&str> = lines[0].split(',').collect();
+    for row in &lines[1..] {
+        let cells: Vec<&str> = row.split(',').collect();
+        assert_eq!(cells.len(), header.len(), "{row}");
+        for (name, cell) in header.iter().zip(&cells) {
+            let numeric = name.ends_with("_ms") || name.starts_with("rel_rmse") || name.starts_with("flip_mean");
+            if numeric && !cell.is_empty() {
+                let x: f64 = cell.parse().unwrap_or_else(|_| panic!("{name} = {cell}"));
+                assert!(x.is_finite(), "{name} = {cell}");
+            }
+        }
+    }
+    for name in relume::bench::plot::PLOTS {
+        let png = image::open(dir.join(format!("{name}.png"))).unwrap_or_else(|e| panic!("{name}.png: {e}"));
+        assert!(png.width() > 100 && png.height() > 100, "{name}.png");
+        let svg = std::fs::read_to_string(dir.join(format!("{name}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("</svg>"), "{name}.svg");
+    }
+}
+
+#[test]
+fn bench_flags_are_checked_and_named() {
+    let dir = scratch("bench_errors");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let scene = scene.to_str().unwrap();
+    let out = dir.to_str().unwrap();
+    for (args, wanted) in [
+        (vec!["--sweep", "sparse_points=0"], "--sweep sparse_points"),
+        (vec!["--sweep", "neighbours=4,8"], "--sweep neighbours"),
+        (vec!["--sweep", "fps=60"], "unknown axis"),
+        (vec!["--val-stride", "4"], "--val-stride"),
+        (vec!["--reference", "exact", "--val-stride", "0"], "--val-stride"),
+    ] {
+        let mut all = vec!["bench", scene, "--quick", "--out", out];
+        all.extend(&args);
+        let o = relume(&all);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(stderr(&o).contains(wanted), "{args:?}: {}", stderr(&o));
+        assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+    }
+}
+
+#[test]
+fn table1_preset_builds_its_scenes_and_runs_quick() {
+    let dir = scratch("bench_table1");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let args = ["bench", scene.to_str().unwrap(), "--table1", "--quick", "--no-fma", "--no-temporal"];
+    let o = relume(&[&args[..], &["--no-plots", "--out", dir.to_str().unwrap()]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let configs = json["configs"].as_array().expect("configs");
+    assert_eq!(configs.len(), 3, "diffuse, + glossy, + occlusion");
+    for c in configs {
+        assert_eq!(c["variant"], "table1_200k");
+        assert!(c["triangles"].as_u64().is_some_and(|t| t > 200_000), "three bunnies and the room: {c}");
+        assert!(c["brute_force_ms"].is_null() && c["vs_brute_force"].is_null(), "no references: {c}");
+        finite_non_negative(c, "frame_ms");
+    }
+    assert_eq!(configs[1]["glossy_active"], true);
+    let built = relume::scene::Scene::load(&dir.join("table1_200k.json")).expect("the built scene loads");
+    assert_eq!(built.meshes.len(), 4, "the room and three bunnies");
+}
