@@ -27,6 +27,21 @@ fn register_font() -> Drawn {
         .clone()
 }
 
+/// The boxed legend of the labelled series, at `position`.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Drawn {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.85))
+        .label_font((FAMILY, 12))
+        .draw()
+        .map_err(err)
+}
+
 fn err(e: impl std::fmt::Display) -> String {
     e.to_string()
 }
@@ -228,15 +243,7 @@ fn draw_stage_breakdown<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, resul
             .label(name)
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .border_style(BLACK)
-        .background_style(WHITE.mix(0.85))
-        .label_font((FAMILY, 12))
-        .draw()
-        .map_err(err)?;
-    Ok(())
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight)
 }
 
 /// One scaling panel: configurations that differ only in the quantity on x, as lines.
@@ -342,14 +349,7 @@ fn draw_scaling<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &Ben
             }
             chart.draw_series(brute.iter().map(|&p| Circle::new(p, 3, RED.filled()))).map_err(err)?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.85))
-            .label_font((FAMILY, 12))
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     }
     Ok(())
 }
