@@ -1,6 +1,12 @@
 // Brute-force reference (DESIGN.md §5): every VAL applied to every visible pixel through §3,
 // no sparse points, no interpolation. VALs stream through workgroup memory as in the gather.
 // Rust twin: `reference::shade_brute_force`.
+//
+// One dispatch takes the VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN): all of them on GPUs; on CPU
+// adapters (llvmpipe's loop limit) ranges, each after the first adding to what the earlier
+// ones wrote (gpu::kernel::ValRangeKernels).
+override VAL_BEGIN: u32 = 0u;
+override VAL_SPAN: u32 = 0xffffffffu;
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
@@ -23,12 +29,13 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
     var l = vec3<f32>(0.0);
     let count = min(val_count, arrayLength(&vals));
-    for (var base = 0u; base < count; base += TILE_SIZE) {
-        if base + local < count {
+    let end = min(count, VAL_BEGIN + min(VAL_SPAN, count));
+    for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
+        if base + local < end {
             tile[local] = vals[base + local];
         }
         workgroupBarrier();
-        let n = min(TILE_SIZE, count - base);
+        let n = min(TILE_SIZE, end - base);
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
@@ -41,7 +48,12 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
         workgroupBarrier();
     }
     if inside {
-        indirect[id.y * frame.width + id.x] = select(vec4<f32>(0.0), vec4<f32>(l, 1.0), hit.covered);
+        let i = id.y * frame.width + id.x;
+        var before = vec4<f32>(0.0);
+        if VAL_BEGIN > 0u {
+            before = indirect[i];
+        }
+        indirect[i] = select(vec4<f32>(0.0), vec4<f32>(before.rgb + l, 1.0), hit.covered);
     }
 }
 

@@ -46,7 +46,9 @@ struct SparsePoint {
 // occlusion pass's light sphere).
 struct Gathered {
     irradiance: vec3<f32>,
-    _pad0: f32,
+    // The sum of the weights behind `position` (and `second_moment`): what a later VAL range
+    // needs to merge its sums in (gpu::gather on CPU adapters).
+    weight: f32,
     position: vec3<f32>,
     _pad1: f32,
     second_moment: vec3<f32>,

@@ -2,6 +2,14 @@
 // point, with the luminance-weighted mean VAL position; the glossy entry point also sums the
 // Phong-lobe-weighted irradiance toward the eye and its mean position. VALs stream through
 // workgroup memory in tiles of TILE_SIZE. Rust twin: `reference::gather_point`.
+//
+// One dispatch takes the VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN). On GPUs that is all of them
+// at once; CPU adapters end a shader's loops after a fixed iteration count (llvmpipe's
+// LLVMPIPE_LOOP_LIMIT), so there the VALs are split into ranges, one dispatch each, and every
+// range after the first merges its sums into what the earlier ones wrote (`Gathered.weight`
+// carries the weight sum the means need).
+override VAL_BEGIN: u32 = 0u;
+override VAL_SPAN: u32 = 0xffffffffu;
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> vals: array<Val>;
@@ -29,12 +37,13 @@ fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
     }
     let w_o = view_direction(p.position, p.normal, frame.eye);
     let count = min(val_count, arrayLength(&vals));
-    for (var base = 0u; base < count; base += TILE_SIZE) {
-        if base + local < count {
+    let end = min(count, VAL_BEGIN + min(VAL_SPAN, count));
+    for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
+        if base + local < end {
             tile[local] = vals[base + local];
         }
         workgroupBarrier();
-        let n = min(TILE_SIZE, count - base);
+        let n = min(TILE_SIZE, end - base);
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(p.position, p.normal, val.position, val.normal, val.area);
@@ -59,16 +68,41 @@ fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
     return s;
 }
 
-fn diffuse_result(s: Sums) -> Gathered {
-    let w = max(s.wd, GATHER_EPSILON);
-    return Gathered(s.e, 0.0, s.ld / w, 0.0, s.ld2 / w, 0.0);
+// Irradiance `e` with the weight sum `w` of the weighted position sums `l` and `l2`, added to
+// `before` (the earlier VAL ranges' result; zero for the first range).
+fn merged(before: Gathered, e: vec3<f32>, w: f32, l: vec3<f32>, l2: vec3<f32>) -> Gathered {
+    let total = before.weight + w;
+    let norm = max(total, GATHER_EPSILON);
+    return Gathered(
+        before.irradiance + e,
+        total,
+        (before.position * before.weight + l) / norm,
+        0.0,
+        (before.second_moment * before.weight + l2) / norm,
+        0.0,
+    );
+}
+
+// What the earlier VAL ranges gathered at point `i` (nothing for the first range).
+fn earlier_diffuse(i: u32) -> Gathered {
+    if VAL_BEGIN == 0u {
+        return Gathered(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    }
+    return gathered_diffuse[i];
+}
+
+fn earlier_glossy(i: u32) -> Gathered {
+    if VAL_BEGIN == 0u {
+        return Gathered(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    }
+    return gathered_glossy[i];
 }
 
 @compute @workgroup_size(TILE_SIZE)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let s = gather_tiles(id.x, local, false);
     if id.x < frame.sparse_count {
-        gathered_diffuse[id.x] = diffuse_result(s);
+        gathered_diffuse[id.x] = merged(earlier_diffuse(id.x), s.e, s.wd, s.ld, s.ld2);
     }
 }
 
@@ -76,7 +110,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
 fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let s = gather_tiles(id.x, local, true);
     if id.x < frame.sparse_count {
-        gathered_diffuse[id.x] = diffuse_result(s);
-        gathered_glossy[id.x] = Gathered(s.g, 0.0, s.ls / max(s.ws, GATHER_EPSILON), 0.0, vec3<f32>(0.0), 0.0);
+        gathered_diffuse[id.x] = merged(earlier_diffuse(id.x), s.e, s.wd, s.ld, s.ld2);
+        gathered_glossy[id.x] = merged(earlier_glossy(id.x), s.g, s.ws, s.ls, vec3<f32>(0.0));
     }
 }

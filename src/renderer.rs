@@ -333,13 +333,6 @@ impl Renderer {
         };
         let needed = self.uploaded_vals + rgbd + rsm;
         if needed > self.val_capacity {
-            if gpu.is_cpu() && needed > Gpu::CPU_MAX_GATHERED_VALS {
-                tracing::warn!(
-                    "up to {needed} VALs: on this CPU adapter the gather and the brute force use only the first ~{} \
-                     (llvmpipe's loop limit); lower rsm_resolution or the RGB-D VALs",
-                    Gpu::CPU_MAX_GATHERED_VALS
-                );
-            }
             self.val_capacity = needed.next_power_of_two();
             self.vals = gpu.storage_buffer_sized::<RawVal>("vals", self.val_capacity as usize)?;
         }
@@ -495,7 +488,18 @@ impl Renderer {
                 direct: gpu.storage_buffer_sized::<[f32; 4]>("frame.direct", pixels)?,
             });
         }
+        if let Some(p) = self.sparse.as_mut() {
+            p.gather.fit(gpu, &self.scene, self.val_capacity)?;
+        }
+        if let Some(b) = self.brute_force.as_mut() {
+            b.fit(gpu, &self.scene, self.val_capacity)?;
+        }
         Ok(())
+    }
+
+    /// How many VALs the VAL buffer holds at most (what the frame's passes must cover).
+    pub fn val_capacity(&self) -> u32 {
+        self.val_capacity
     }
 
     /// (camera world-to-clip, light world-to-clip when there is a spot light), with near and far

@@ -1,7 +1,12 @@
 //! Gather at sparse points (`shaders/gather.wgsl`, DESIGN.md §4 step 1). Rust twin:
 //! `reference::gather_point`.
+//!
+//! On a CPU adapter one invocation may not loop over more than about
+//! [`Gpu::CPU_MAX_GATHERED_VALS`] VALs (llvmpipe ends a shader's loops after [`super::LLVMPIPE_LOOP_LIMIT`] iterations,
+//! silently), so there the VALs are gathered in ranges, one dispatch each, every range merging
+//! into the sums of the ones before ([`ValRangeKernels`]). GPUs take every VAL in one dispatch.
 
-use super::kernel::{self, Kernel, Slot, groups};
+use super::kernel::{self, Slot, ValRangeKernels, groups};
 use super::scene::GpuScene;
 use super::shader::TILE_SIZE;
 use super::timing::Span;
@@ -10,7 +15,7 @@ use super::{Gpu, GpuError, Lobes};
 pub const WGSL: &str = include_str!("../../shaders/gather.wgsl");
 
 pub struct Gather {
-    kernel: Kernel,
+    kernels: ValRangeKernels,
     /// VALs per workgroup-memory tile, also the workgroup size.
     tile_size: u32,
 }
@@ -31,8 +36,18 @@ impl Gather {
             slots.push(Slot::StorageReadWrite);
         }
         let entry = if glossy { "main_glossy" } else { "main" };
-        let kernel = Kernel::new(gpu, &scene.layout, &module, "gather", entry, &slots)?;
-        Ok(Self { kernel, tile_size })
+        let kernels = ValRangeKernels::new(gpu, scene, module, "gather", entry, slots, tile_size)?;
+        Ok(Self { kernels, tile_size })
+    }
+
+    /// Cover frames of up to `max_vals` VALs (see [`ValRangeKernels::fit`]).
+    pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
+        self.kernels.fit(gpu, scene, max_vals)
+    }
+
+    /// Dispatches per frame: one per VAL range.
+    pub fn ranges(&self) -> usize {
+        self.kernels.ranges()
     }
 
     /// Gather `vals` (`val_count` of them) at every sparse point into `gathered`.
@@ -53,14 +68,7 @@ impl Gather {
             gathered.diffuse.as_entire_binding(),
         ];
         resources.extend(gathered.glossy.as_ref().map(|b| b.as_entire_binding()));
-        let group = self.kernel.bind(gpu, &resources);
         let n = scene.flat.sparse_count();
-        self.kernel.dispatch(
-            encoder,
-            &group,
-            &scene.bind_group,
-            [groups(n, self.tile_size), 1, 1],
-            span.as_ref().map(Span::compute),
-        );
+        self.kernels.dispatch(gpu, encoder, scene, &resources, [groups(n, self.tile_size), 1, 1], span);
     }
 }

@@ -2,7 +2,8 @@
 //! always the scene (`shaders/scene.wgsl`). Passes are small structs of these.
 
 use super::scene::GpuScene;
-use super::{Gpu, GpuError, shader};
+use super::timing::Span;
+use super::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT, shader};
 
 /// The kind of resource at one group(0) binding, in binding order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -64,6 +65,19 @@ impl Kernel {
         entry: &str,
         slots: &[Slot],
     ) -> Result<Self, GpuError> {
+        Self::with_constants(gpu, scene_layout, module, label, entry, slots, &[])
+    }
+
+    /// [`Kernel::new`] with values for the module's `override` constants.
+    pub fn with_constants(
+        gpu: &Gpu,
+        scene_layout: &wgpu::BindGroupLayout,
+        module: &wgpu::ShaderModule,
+        label: &str,
+        entry: &str,
+        slots: &[Slot],
+        constants: &[(&str, f64)],
+    ) -> Result<Self, GpuError> {
         let entries: Vec<wgpu::BindGroupLayoutEntry> = slots
             .iter()
             .enumerate()
@@ -89,7 +103,7 @@ impl Kernel {
                 layout: Some(&pipeline_layout),
                 module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
                 cache: None,
             });
             (layout, pipeline)
@@ -152,4 +166,86 @@ impl Kernel {
 /// Workgroups needed to cover `n` items in groups of `size`.
 pub fn groups(n: u32, size: u32) -> u32 {
     n.div_ceil(size)
+}
+
+/// The pipelines of a pass whose invocations loop over every VAL (the gather, the brute
+/// force), one per VAL range. GPUs take every VAL in one dispatch. A CPU adapter ends a
+/// shader's loops after [`LLVMPIPE_LOOP_LIMIT`] iterations, silently, so there the VALs are
+/// split into ranges that stay under it, one dispatch each, every range after the first
+/// adding to what the earlier ones wrote. The shader takes its range from the `override`
+/// constants `VAL_BEGIN` and `VAL_SPAN`.
+pub struct ValRangeKernels {
+    kernels: Vec<Kernel>,
+    module: wgpu::ShaderModule,
+    label: &'static str,
+    entry: &'static str,
+    slots: Vec<Slot>,
+    /// VALs per range: `u32::MAX` on GPUs.
+    range: u32,
+}
+
+impl ValRangeKernels {
+    /// `tile_size`: VALs per workgroup-memory tile (one loop iteration per VAL and two per
+    /// tile count toward the limit; a tile is kept spare).
+    pub fn new(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        module: wgpu::ShaderModule,
+        label: &'static str,
+        entry: &'static str,
+        slots: Vec<Slot>,
+        tile_size: u32,
+    ) -> Result<Self, GpuError> {
+        let range = if gpu.is_cpu() { (LLVMPIPE_LOOP_LIMIT / (tile_size + 2) - 1) * tile_size } else { u32::MAX };
+        let mut kernels = Self { kernels: Vec::new(), module, label, entry, slots, range };
+        kernels.fit(gpu, scene, 1)?;
+        Ok(kernels)
+    }
+
+    /// Make sure frames of up to `max_vals` VALs are covered whole: builds the pipelines of
+    /// the ranges this needs that are not built yet (CPU adapters only).
+    pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
+        let ranges = max_vals.div_ceil(self.range).max(1);
+        for r in self.kernels.len() as u32..ranges {
+            let constants: &[(&str, f64)] = if self.range == u32::MAX {
+                &[]
+            } else {
+                &[("VAL_BEGIN", f64::from(r * self.range)), ("VAL_SPAN", f64::from(self.range))]
+            };
+            let kernel = Kernel::with_constants(
+                gpu,
+                &scene.layout,
+                &self.module,
+                self.label,
+                self.entry,
+                &self.slots,
+                constants,
+            )?;
+            self.kernels.push(kernel);
+        }
+        Ok(())
+    }
+
+    /// Dispatches per frame: one per VAL range.
+    pub fn ranges(&self) -> usize {
+        self.kernels.len()
+    }
+
+    /// Record every range's dispatch, in order; `span` times them together.
+    pub fn dispatch(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &GpuScene,
+        resources: &[wgpu::BindingResource<'_>],
+        workgroups: [u32; 3],
+        span: Option<Span<'_>>,
+    ) {
+        let parts = self.kernels.len();
+        for (part, kernel) in self.kernels.iter().enumerate() {
+            let group = kernel.bind(gpu, resources);
+            let timestamps = span.as_ref().map(|s| s.compute_part(part, parts));
+            kernel.dispatch(encoder, &group, &scene.bind_group, workgroups, timestamps);
+        }
+    }
 }

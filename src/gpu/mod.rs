@@ -134,10 +134,11 @@ impl Gpu {
         Ok(Self { device, queue, adapter_info: info, timestamps })
     }
 
-    /// VALs beyond which the gather and the brute force on a CPU adapter run past
-    /// [`LLVMPIPE_LOOP_LIMIT`] (one loop iteration per VAL and two per tile) and silently drop
-    /// the rest: with 125,676 VALs the brute force used exactly the first 63,551.
-    /// [`Gpu::is_cpu`] says whether it applies.
+    /// VALs beyond which one invocation of the gather or the brute force on a CPU adapter would
+    /// run past [`LLVMPIPE_LOOP_LIMIT`] (one loop iteration per VAL and two per tile) and
+    /// silently drop the rest (with 125,676 VALs in one dispatch the brute force used exactly
+    /// the first 63,551); both therefore split their VALs into ranges there
+    /// ([`kernel::ValRangeKernels`]). [`Gpu::is_cpu`] says whether it applies.
     pub const CPU_MAX_GATHERED_VALS: u32 = LLVMPIPE_LOOP_LIMIT / (shader::TILE_SIZE + 2) * shader::TILE_SIZE;
 
     /// Whether the adapter runs on the CPU (lavapipe / llvmpipe).

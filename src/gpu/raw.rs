@@ -73,7 +73,8 @@ pub struct RawSparsePoint {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RawGathered {
     pub irradiance: [f32; 3],
-    pub _pad0: f32,
+    /// Sum of the weights behind `position`, kept so VAL ranges gathered apart can merge.
+    pub weight: f32,
     pub position: [f32; 3],
     pub _pad1: f32,
     /// Weighted mean of the squared VAL positions, per axis (m²).

@@ -44,10 +44,16 @@ pub struct Span<'a> {
 
 impl<'a> Span<'a> {
     pub fn compute(&self) -> wgpu::ComputePassTimestampWrites<'a> {
+        self.compute_part(0, 1)
+    }
+
+    /// Pass `part` of `parts` compute passes that make one stage: the first writes the
+    /// beginning timestamp, the last the end.
+    pub fn compute_part(&self, part: usize, parts: usize) -> wgpu::ComputePassTimestampWrites<'a> {
         wgpu::ComputePassTimestampWrites {
             query_set: self.query_set,
-            beginning_of_pass_write_index: Some(2 * self.index),
-            end_of_pass_write_index: Some(2 * self.index + 1),
+            beginning_of_pass_write_index: (part == 0).then_some(2 * self.index),
+            end_of_pass_write_index: (part + 1 == parts).then_some(2 * self.index + 1),
         }
     }
 

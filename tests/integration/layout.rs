@@ -45,7 +45,7 @@ fn rust_structs_match_wgsl() {
     check!(m, "Vertex", RawVertex, [position, s, normal, t]);
     check!(m, "Material", RawMaterial, [diffuse, exponent, specular, diffuse_texture]);
     check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
-    check!(m, "Gathered", RawGathered, [irradiance, _pad0, position, _pad1, second_moment, _pad2]);
+    check!(m, "Gathered", RawGathered, [irradiance, weight, position, _pad1, second_moment, _pad2]);
     check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, _pad1]);
     check!(
         m,

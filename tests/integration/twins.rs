@@ -159,12 +159,62 @@ fn sparse_pipeline_matches_cpu_twins() {
     assert!(lit > 20, "the spot must light some visible pixels directly, lit {lit}");
 }
 
+/// Past llvmpipe's loop limit the gather runs in VAL ranges, one dispatch each, merged: with
+/// more VALs than one invocation may loop over (an RSM of 300², ~70k VALs), every sparse point
+/// must still receive all of them. Before the ranges, the GPU silently summed the first ~63k.
+#[test]
+fn gather_takes_every_val_past_the_cpu_loop_limit() {
+    let gpu = gpu();
+    let mut scene = load_scene("cornell_bunny_small");
+    scene.settings.rsm_resolution = 300;
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
+    let vals: Vec<Val> = renderer.read_vals(&gpu).unwrap();
+    assert!(
+        vals.len() as u32 > relume::gpu::Gpu::CPU_MAX_GATHERED_VALS,
+        "the RSM must exceed one invocation's loop budget: {} VALs",
+        vals.len()
+    );
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let eye = renderer.view().eye();
+    let cpu: Vec<reference::Gathered> = renderer
+        .scene
+        .flat
+        .sparse_points
+        .iter()
+        .map(|p| reference::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, &vals))
+        .collect();
+    let scale_e = max_of(cpu.iter().map(|g| g.irradiance));
+    let scale_g = max_of(cpu.iter().map(|g| g.glossy_irradiance));
+    for (i, c) in cpu.iter().enumerate() {
+        let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
+        assert_close(gd.irradiance.into(), c.irradiance, REL, scale_e, 1e-9, &format!("E at sparse point {i}"));
+        assert_close(gg.irradiance.into(), c.glossy_irradiance, REL, scale_g, 1e-9, &format!("G at sparse point {i}"));
+        if c.irradiance.max_element() > 1e-3 * scale_e {
+            assert_close(gd.position.into(), c.diffuse_position, 1e-3, 1.0, 1e-4, &format!("l'_d at {i}"));
+        }
+    }
+}
+
 #[test]
 fn brute_force_matches_cpu_twin() {
+    brute_force_matches_twin(None, (32, 24));
+}
+
+/// As [`gather_takes_every_val_past_the_cpu_loop_limit`], for the brute force: ~70k VALs, more
+/// than one invocation may loop over on a CPU adapter, all of them at every pixel.
+#[test]
+fn brute_force_takes_every_val_past_the_cpu_loop_limit() {
+    brute_force_matches_twin(Some(300), (10, 8));
+}
+
+fn brute_force_matches_twin(rsm_resolution: Option<u32>, (w, h): (u32, u32)) {
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let mut scene = load_scene("cornell_bunny_small");
+    if let Some(r) = rsm_resolution {
+        scene.settings.rsm_resolution = r;
+    }
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-    let (w, h) = (32, 24);
     let frame = renderer.render(&gpu, Method::BruteForce, w, h).unwrap();
     let vals = renderer.read_vals(&gpu).unwrap();
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
@@ -173,6 +223,9 @@ fn brute_force_matches_cpu_twin() {
     let expected = super::per_hit(flat, &hits, |p, n, surface| {
         reference::shade_brute_force(p, n, surface, eye, &vals, renderer.glossy())
     });
+    if rsm_resolution.is_some() {
+        assert!(vals.len() as u32 > relume::gpu::Gpu::CPU_MAX_GATHERED_VALS, "{} VALs", vals.len());
+    }
     let scale = max_of(expected.iter().flatten().copied());
     assert!(scale > 0.0);
     for (i, e) in expected.iter().enumerate() {
