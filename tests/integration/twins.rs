@@ -37,22 +37,7 @@ fn sparse_pipeline_matches_cpu_twins() {
     let eye = renderer.view().eye();
 
     // Step 1: gather.
-    let cpu: Vec<reference::Gathered> = flat
-        .sparse_points
-        .iter()
-        .map(|p| reference::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, &vals))
-        .collect();
-    let scale_e = max_of(cpu.iter().map(|g| g.irradiance));
-    let scale_g = max_of(cpu.iter().map(|g| g.glossy_irradiance));
-    assert!(scale_e > 0.0 && scale_g > 0.0);
-    for (i, c) in cpu.iter().enumerate() {
-        let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
-        assert_close(gd.irradiance.into(), c.irradiance, REL, scale_e, 1e-9, &format!("E at sparse point {i}"));
-        assert_close(gg.irradiance.into(), c.glossy_irradiance, REL, scale_g, 1e-9, &format!("G at sparse point {i}"));
-        if c.irradiance.max_element() > 1e-3 * scale_e {
-            assert_close(gd.position.into(), c.diffuse_position, 1e-3, 1.0, 1e-4, &format!("l'_d at {i}"));
-        }
-    }
+    assert_gather_matches_twin(flat, &mid, eye, &vals);
 
     // Step 2: renormalisation, from the GPU's own gathered values.
     let mut cpu_sparse = (Vec::new(), Vec::new());
@@ -176,16 +161,25 @@ fn gather_takes_every_val_past_the_cpu_loop_limit() {
         vals.len()
     );
     let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
-    let eye = renderer.view().eye();
-    let cpu: Vec<reference::Gathered> = renderer
-        .scene
-        .flat
+    assert_gather_matches_twin(&renderer.scene.flat, &mid, renderer.view().eye(), &vals);
+}
+
+/// The GPU's gathered light (diffuse and glossy irradiance, mean diffuse VAL position) at every
+/// sparse point against `reference::gather_point` over `vals`.
+fn assert_gather_matches_twin(
+    flat: &relume::gpu::scene::FlatScene,
+    mid: &relume::renderer::SparseIntermediates,
+    eye: Vec3,
+    vals: &[Val],
+) {
+    let cpu: Vec<reference::Gathered> = flat
         .sparse_points
         .iter()
-        .map(|p| reference::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, &vals))
+        .map(|p| reference::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, vals))
         .collect();
     let scale_e = max_of(cpu.iter().map(|g| g.irradiance));
     let scale_g = max_of(cpu.iter().map(|g| g.glossy_irradiance));
+    assert!(scale_e > 0.0 && scale_g > 0.0);
     for (i, c) in cpu.iter().enumerate() {
         let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
         assert_close(gd.irradiance.into(), c.irradiance, REL, scale_e, 1e-9, &format!("E at sparse point {i}"));
