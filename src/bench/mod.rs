@@ -2,10 +2,9 @@
 //! costs, the device memory the renderer holds and how far the indirect image is from the
 //! references. Error figures come from [`crate::compare`], the code path of `relume compare`.
 //!
-//! Axes: sparse points per mesh, RSM resolution (the VAL count is at most its square),
-//! occlusion (off / disks), glossy (on / off) and output resolution. The interpolation's
-//! neighbour count is not an axis: it is fixed at 8 ([`crate::scene::NEIGHBOURS`], compiled
-//! into the scene data and the shaders).
+//! Axes: sparse points per mesh, interpolation neighbours per vertex, RSM resolution (the VAL
+//! count is at most its square), occlusion (off / disks), glossy (on / off) and output
+//! resolution.
 //!
 //! By default each axis is varied alone around a base configuration (the scene's settings);
 //! `grid` takes the Cartesian product instead.
@@ -50,6 +49,9 @@ const MAX_SIDE: u32 = 8192;
 pub struct Config {
     /// Sparse points on every mesh; `None`: each mesh's own count from the scene file.
     pub sparse_points_per_mesh: Option<u32>,
+    /// Sparse points each vertex interpolates from; `None`: the scene's
+    /// `settings.interpolation_neighbours`.
+    pub neighbours: Option<u32>,
     /// RSM side R: at most R² VALs (only lit texels become VALs).
     pub rsm_resolution: u32,
     pub occlusion: Occlusion,
@@ -63,6 +65,7 @@ pub struct Config {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Sweep {
     pub sparse_points: Option<Vec<u32>>,
+    pub neighbours: Option<Vec<u32>>,
     pub rsm_resolution: Option<Vec<u32>>,
     pub occlusion: Option<Vec<Occlusion>>,
     pub glossy: Option<Vec<bool>>,
@@ -70,7 +73,7 @@ pub struct Sweep {
 }
 
 /// The axis names `--sweep` accepts.
-pub const AXES: &[&str] = &["sparse_points", "rsm_resolution", "occlusion", "glossy", "resolution"];
+pub const AXES: &[&str] = &["sparse_points", "neighbours", "rsm_resolution", "occlusion", "glossy", "resolution"];
 
 impl Sweep {
     /// Parse `--sweep axis=v1,v2,...` arguments; each axis at most once.
@@ -120,11 +123,9 @@ impl Sweep {
                     sweep.resolution = Some(parse_each(&flag, &values, parse_resolution)?);
                 }
                 "neighbours" | "neighbors" => {
-                    return Err(flag_error(
-                        &flag,
-                        "not an axis yet: the interpolation uses a fixed 8 neighbours (scene::NEIGHBOURS, \
-                         compiled into the scene data and the shaders)",
-                    ));
+                    duplicate(sweep.neighbours.is_some())?;
+                    let max = crate::scene::MAX_NEIGHBOURS;
+                    sweep.neighbours = Some(parse_each(&flag, &values, |v| int_in(v, 1, max))?);
                 }
                 _ => {
                     return Err(flag_error(&flag, format!("unknown axis; the axes are {}", AXES.join(", "))));
@@ -144,23 +145,28 @@ impl Sweep {
             }
         };
         if grid {
+            let neighbours_values =
+                self.neighbours.clone().map_or(vec![base.neighbours], |v| v.into_iter().map(Some).collect());
             for sparse in self
                 .sparse_points
                 .clone()
                 .map_or(vec![base.sparse_points_per_mesh], |v| v.into_iter().map(Some).collect())
             {
-                for &rsm in &one(&self.rsm_resolution, base.rsm_resolution) {
-                    for &glossy in &one(&self.glossy, base.glossy) {
-                        for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
-                            for &occlusion in &one(&self.occlusion, base.occlusion) {
-                                push(Config {
-                                    sparse_points_per_mesh: sparse,
-                                    rsm_resolution: rsm,
-                                    occlusion,
-                                    glossy,
-                                    width,
-                                    height,
-                                });
+                for &neighbours in &neighbours_values {
+                    for &rsm in &one(&self.rsm_resolution, base.rsm_resolution) {
+                        for &glossy in &one(&self.glossy, base.glossy) {
+                            for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
+                                for &occlusion in &one(&self.occlusion, base.occlusion) {
+                                    push(Config {
+                                        sparse_points_per_mesh: sparse,
+                                        neighbours,
+                                        rsm_resolution: rsm,
+                                        occlusion,
+                                        glossy,
+                                        width,
+                                        height,
+                                    });
+                                }
                             }
                         }
                     }
@@ -171,6 +177,9 @@ impl Sweep {
         push(*base);
         for &v in self.sparse_points.iter().flatten() {
             push(Config { sparse_points_per_mesh: Some(v), ..*base });
+        }
+        for &v in self.neighbours.iter().flatten() {
+            push(Config { neighbours: Some(v), ..*base });
         }
         for &v in self.rsm_resolution.iter().flatten() {
             push(Config { rsm_resolution: v, ..*base });
@@ -247,6 +256,7 @@ impl BenchOptions {
     pub fn configs(&self, description: &SceneDescription, scene: &Scene) -> Vec<Config> {
         let mut base = Config {
             sparse_points_per_mesh: None,
+            neighbours: None,
             rsm_resolution: scene.settings.rsm_resolution,
             occlusion: scene.settings.occlusion,
             glossy: scene.settings.glossy,
@@ -277,6 +287,8 @@ pub struct ConfigResult {
     pub config: Config,
     /// Whether the glossy stages ran (glossy allowed and a glossy material present).
     pub glossy_active: bool,
+    /// Sparse points each vertex interpolated from (the configuration's, or the scene's).
+    pub interpolation_neighbours: u32,
     pub sparse_points: usize,
     pub triangles: usize,
     pub vertices: usize,
@@ -335,7 +347,7 @@ pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and textur
      overhead not counted); the reference passes' buffers are released before";
 
 /// What a renderer is built for: sparse points per mesh, RSM resolution, glossy.
-type RendererKey = (Option<u32>, u32, bool);
+type RendererKey = (Option<u32>, Option<u32>, u32, bool);
 
 /// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
 /// `options.out`. `progress` is told each configuration as it starts.
@@ -446,24 +458,27 @@ fn run_job(
     // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
     let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
     for c in &job.configs {
-        let key = (c.sparse_points_per_mesh, c.rsm_resolution, c.glossy);
+        let key = (c.sparse_points_per_mesh, c.neighbours, c.rsm_resolution, c.glossy);
         match groups.iter_mut().find(|(k, _)| *k == key) {
             Some((_, g)) => g.push(*c),
             None => groups.push((key, vec![*c])),
         }
     }
-    let mut scenes: HashMap<Option<u32>, Scene> = HashMap::new();
+    let mut scenes: HashMap<(Option<u32>, Option<u32>), Scene> = HashMap::new();
     let mut base_scene = None;
-    for ((sparse, rsm, glossy), group) in groups {
-        let mut scene = match scenes.get(&sparse) {
+    for ((sparse, neighbours, rsm, glossy), group) in groups {
+        let mut scene = match scenes.get(&(sparse, neighbours)) {
             Some(s) => s.clone(),
             None => {
                 let mut d = job.description.clone();
                 if let Some(n) = sparse {
                     d.meshes.iter_mut().for_each(|m| m.sparse_points = n);
                 }
+                if let Some(k) = neighbours {
+                    d.settings.interpolation_neighbours = k;
+                }
                 let s = Scene::from_description(&d, base_dir).map_err(scene_error)?;
-                scenes.insert(sparse, s.clone());
+                scenes.insert((sparse, neighbours), s.clone());
                 s
             }
         };
@@ -500,6 +515,7 @@ fn run_job(
                     variant: job.variant.clone(),
                     config,
                     glossy_active: renderer.glossy(),
+                    interpolation_neighbours: scene.settings.interpolation_neighbours,
                     sparse_points: scene.sparse_point_count(),
                     triangles: scene.triangle_count(),
                     vertices: scene.vertex_count(),
@@ -529,8 +545,9 @@ fn run_job(
 /// A configuration in words, for progress lines and plot labels.
 pub fn describe(c: &Config) -> String {
     let sparse = c.sparse_points_per_mesh.map_or("scene".to_owned(), |n| n.to_string());
+    let neighbours = c.neighbours.map_or(String::new(), |k| format!(", {k} neighbours"));
     format!(
-        "sparse/mesh {sparse}, R {}, occlusion {}, glossy {}, {}x{}",
+        "sparse/mesh {sparse}{neighbours}, R {}, occlusion {}, glossy {}, {}x{}",
         c.rsm_resolution,
         match c.occlusion {
             Occlusion::Off => "off",
@@ -566,6 +583,7 @@ pub fn csv(results: &BenchResults) -> String {
     let mut header: Vec<String> = [
         "variant",
         "sparse_points_per_mesh",
+        "neighbours",
         "sparse_points",
         "rsm_resolution",
         "vals",
@@ -602,6 +620,7 @@ pub fn csv(results: &BenchResults) -> String {
         let mut row = vec![
             r.variant.clone(),
             c.sparse_points_per_mesh.map_or(String::new(), |n| n.to_string()),
+            r.interpolation_neighbours.to_string(),
             r.sparse_points.to_string(),
             c.rsm_resolution.to_string(),
             r.vals.to_string(),
@@ -643,6 +662,7 @@ mod tests {
 
     const BASE: Config = Config {
         sparse_points_per_mesh: None,
+        neighbours: None,
         rsm_resolution: 64,
         occlusion: Occlusion::Off,
         glossy: true,
@@ -678,7 +698,7 @@ mod tests {
             ("resolution=0x10", "--sweep resolution: `0x10`: must be in 1..=8192"),
             ("resolution=64,", "--sweep resolution: empty value"),
             ("speed=1", "--sweep speed: unknown axis"),
-            ("neighbours=4,8", "--sweep neighbours: not an axis yet"),
+            ("neighbours=4,17", "--sweep neighbours: `17`: must be in 1..=16"),
             ("sparse_points", "--sweep: expected AXIS=V1,V2"),
         ] {
             let e = Sweep::parse(&args(&[arg])).unwrap_err().to_string();
@@ -696,6 +716,11 @@ mod tests {
         assert_eq!(c[0], BASE);
         assert_eq!(c[1].sparse_points_per_mesh, Some(16));
         assert_eq!(c[3], Config { occlusion: Occlusion::Disks, ..BASE });
+        let s = Sweep::parse(&args(&["neighbours=4,8,16"])).unwrap();
+        let c = s.configs(&BASE, false);
+        let k: Vec<Option<u32>> = c.iter().map(|c| c.neighbours).collect();
+        assert_eq!(k, [None, Some(4), Some(8), Some(16)]);
+        assert_eq!(s.configs(&BASE, true).len(), 3, "the grid replaces the base's count");
     }
 
     #[test]

@@ -66,6 +66,7 @@ pub fn jobs(description: &SceneDescription, scene: &Scene, quick: bool) -> Vec<J
                     for &(_, glossy, occlusion) in &MODES {
                         configs.push(Config {
                             sparse_points_per_mesh: Some((total / meshes).max(1)),
+                            neighbours: None,
                             rsm_resolution,
                             occlusion,
                             glossy,
@@ -158,6 +159,7 @@ mod tests {
     fn paper_fps_finds_table_1_cells() {
         let config = Config {
             sparse_points_per_mesh: Some(341),
+            neighbours: None,
             rsm_resolution: 256,
             occlusion: Occlusion::Disks,
             glossy: true,

@@ -9,6 +9,11 @@ use super::{Gpu, GpuError, Lobes};
 
 pub const WGSL: &str = include_str!("../../shaders/interpolate.wgsl");
 
+/// The pass's WGSL for `neighbours` sparse points per vertex.
+pub fn source(neighbours: u32) -> String {
+    format!("const NEIGHBOURS: u32 = {neighbours}u;\n{WGSL}")
+}
+
 pub struct Interpolate {
     kernel: Kernel,
 }
@@ -19,7 +24,7 @@ impl Interpolate {
             gpu,
             scene,
             "interpolate",
-            WGSL,
+            &source(scene.flat.neighbours),
             &[Slot::Storage, Slot::Storage, Slot::Storage, Slot::StorageReadWrite],
             &[Slot::Storage, Slot::StorageReadWrite],
             glossy,

@@ -4,7 +4,7 @@
 use super::raw::{RawFrame, RawMaterial, RawSparsePoint, RawVertex};
 use super::{Gpu, GpuError};
 use crate::reference;
-use crate::scene::{NEIGHBOURS, Scene};
+use crate::scene::Scene;
 use glam::{Mat4, Vec3};
 
 /// World-space arrays of a whole scene, as the GPU sees them (also the CPU twins' input).
@@ -16,8 +16,10 @@ pub struct FlatScene {
     pub triangle_materials: Vec<u32>,
     pub materials: Vec<RawMaterial>,
     pub sparse_points: Vec<RawSparsePoint>,
-    /// Per vertex, into `sparse_points`; `shader::NO_NEIGHBOUR` pads.
-    pub vertex_neighbours: Vec<[u32; NEIGHBOURS]>,
+    /// Sparse points per vertex in `vertex_neighbours` (the scene's `interpolation_neighbours`).
+    pub neighbours: u32,
+    /// `neighbours` sparse point indices per vertex, nearest first, `u32::MAX` padded.
+    pub vertex_neighbours: Vec<u32>,
     /// Every diffuse texture, resized to one size; `None` when the scene has none.
     pub textures: Option<TextureArray>,
 }
@@ -73,6 +75,7 @@ impl FlatScene {
                     diffuse_texture: m.diffuse_texture.map_or(-1, |t| t as i32),
                 })
                 .collect(),
+            neighbours: scene.settings.interpolation_neighbours,
             ..Default::default()
         };
         for (mesh, &transform) in scene.meshes.iter().zip(model_to_world) {
@@ -98,9 +101,8 @@ impl FlatScene {
                     exponent: scene.materials[material].exponent,
                 });
             }
-            for ids in &sparse.vertex_neighbours {
-                flat.vertex_neighbours.push(ids.map(|i| if i == u32::MAX { i } else { i + sparse_base }));
-            }
+            flat.vertex_neighbours
+                .extend(sparse.vertex_neighbours.iter().map(|&i| if i == u32::MAX { i } else { i + sparse_base }));
         }
         flat
     }

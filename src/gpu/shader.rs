@@ -8,7 +8,6 @@ pub const WORKGROUP_SIZE: u32 = 64;
 /// VALs per workgroup-memory tile in the gather and the brute force (also their workgroup size).
 pub const TILE_SIZE: u32 = 64;
 /// Sparse neighbours interpolated per vertex.
-pub const NEIGHBOURS: u32 = crate::scene::NEIGHBOURS as u32;
 /// Padding value of a vertex's neighbour list.
 pub const NO_NEIGHBOUR: u32 = u32::MAX;
 /// Light distance written where an RSM texel sees nothing (m).
@@ -27,7 +26,6 @@ fn header(tile_size: u32) -> String {
     format!(
         "const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\
          const TILE_SIZE: u32 = {tile_size}u;\n\
-         const NEIGHBOURS: u32 = {NEIGHBOURS}u;\n\
          const NO_NEIGHBOUR: u32 = {NO_NEIGHBOUR}u;\n\
          const NO_SURFACE_DISTANCE: f32 = {NO_SURFACE_DISTANCE:e};\n\
          const SHADOW_BIAS_TEXELS: f32 = {SHADOW_BIAS_TEXELS:e};\n\
@@ -67,7 +65,7 @@ pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
         ("rsm.wgsl", rsm::WGSL),
         ("gather.wgsl", gather::WGSL),
         ("renormalise.wgsl", renormalise::WGSL),
-        ("interpolate.wgsl", interpolate::WGSL),
+        ("interpolate.wgsl", &interpolate::source(crate::scene::DEFAULT_NEIGHBOURS)),
         ("shade.wgsl", shade::WGSL),
         ("brute_force.wgsl", brute_force::WGSL),
         ("exact.wgsl", &exact::source(4, 8)),

@@ -406,6 +406,9 @@ pub struct SettingsDescription {
     /// Exposure multiplier (> 0) before tone mapping; default `null` (automatic).
     #[serde(default)]
     pub exposure: Option<f32>,
+    /// Sparse points each vertex interpolates from (paper eqs. 12-13), 1..=16; default 8.
+    #[serde(default = "default_neighbours")]
+    pub interpolation_neighbours: u32,
     /// Indirect occlusion: `"auto"` (default), `"off"` or `"disks"` (DESIGN.md §4 step 3).
     /// `"auto"` is `"disks"` when the scene can occlude itself: more than one mesh, or a mesh
     /// that is neither a convex object nor a convex room ([`crate::scene::Scene`]).
@@ -451,6 +454,10 @@ pub enum OcclusionRule {
     Product,
 }
 
+fn default_neighbours() -> u32 {
+    super::DEFAULT_NEIGHBOURS
+}
+
 fn default_rsm_resolution() -> u32 {
     128
 }
@@ -470,6 +477,7 @@ impl Default for SettingsDescription {
             glossy: default_glossy(),
             seed: default_seed(),
             exposure: None,
+            interpolation_neighbours: default_neighbours(),
             occlusion: OcclusionSetting::Auto,
             occlusion_rule: OcclusionRule::Product,
             rgbd: RgbdSettings::default(),
@@ -486,6 +494,7 @@ impl SettingsDescription {
             glossy: self.glossy,
             seed: self.seed,
             exposure: self.exposure,
+            interpolation_neighbours: self.interpolation_neighbours,
             occlusion: match self.occlusion {
                 OcclusionSetting::Off => Occlusion::Off,
                 OcclusionSetting::Disks => Occlusion::Disks,
@@ -500,6 +509,7 @@ impl SettingsDescription {
     fn validate(&self, field: &str) -> Result<(), SceneError> {
         let (lo, hi) = RSM_RESOLUTION_RANGE;
         int_in(self.rsm_resolution, lo, hi, &format!("{field}.rsm_resolution"))?;
+        int_in(self.interpolation_neighbours, 1, super::MAX_NEIGHBOURS, &format!("{field}.interpolation_neighbours"))?;
         if let Some(exposure) = self.exposure {
             positive(exposure, &format!("{field}.exposure"))?;
         }
@@ -936,6 +946,7 @@ mod tests {
                 glossy: false,
                 seed: 7,
                 exposure: Some(2.5),
+                interpolation_neighbours: 8,
                 occlusion: Occlusion::Off,
                 occlusion_rule: OcclusionRule::Product,
                 rgbd: RgbdSettings::default(),
@@ -947,6 +958,8 @@ mod tests {
         assert_eq!(message, "settings.rgbd.grid_step: must be in 1..=64, got 0");
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
+        let message = error_of(&with_settings(r#"{"interpolation_neighbours": 17}"#));
+        assert_eq!(message, "settings.interpolation_neighbours: must be in 1..=16, got 17");
         let message = error_of(&with_settings(r#"{"exposure": 0}"#));
         assert_eq!(message, "settings.exposure: must be > 0, got 0");
         let message = error_of(&with_settings(r#"{"exposure": null, "gamma": 2.2}"#));

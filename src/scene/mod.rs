@@ -40,8 +40,12 @@ pub use description::{
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
 
-/// Number of sparse points each vertex interpolates from (paper eqs. 12-13).
-pub const NEIGHBOURS: usize = 8;
+/// Sparse points each vertex interpolates from (paper eqs. 12-13) unless the scene's
+/// `settings.interpolation_neighbours` says otherwise.
+pub const DEFAULT_NEIGHBOURS: u32 = 8;
+
+/// Most sparse points a vertex may interpolate from.
+pub const MAX_NEIGHBOURS: u32 = 16;
 
 /// Most triangles one mesh may have after subdivision; more is an error rather than a
 /// machine brought to its knees by a too-large `sparse_points`.
@@ -192,6 +196,8 @@ pub struct Settings {
     pub seed: u64,
     /// Exposure multiplier applied before tone mapping; `None` picks one automatically.
     pub exposure: Option<f32>,
+    /// Sparse points each vertex interpolates from, 1..=[`MAX_NEIGHBOURS`].
+    pub interpolation_neighbours: u32,
     /// Indirect occlusion by disc occluders (DESIGN.md §4 step 3).
     pub occlusion: Occlusion,
     pub occlusion_rule: OcclusionRule,
@@ -239,9 +245,11 @@ pub struct SparsePoints {
     /// Model-space occluder-disc radius of each point: the largest distance to a mesh vertex
     /// whose nearest sparse point it is; 0 when no vertex is nearest to it.
     pub occluder_radii: Vec<f32>,
-    /// One entry per mesh vertex: indices of its [`NEIGHBOURS`] nearest sparse points, nearest
+    /// Sparse points per vertex in [`SparsePoints::vertex_neighbours`].
+    pub neighbours: usize,
+    /// `neighbours` entries per mesh vertex: indices of its nearest sparse points, nearest
     /// first, padded with `u32::MAX` when the mesh has fewer points.
-    pub vertex_neighbours: Vec<[u32; NEIGHBOURS]>,
+    pub vertex_neighbours: Vec<u32>,
 }
 
 impl Mesh {
@@ -396,7 +404,7 @@ impl Scene {
         let mut meshes = Vec::with_capacity(description.meshes.len());
         let anchor = description.anchor.as_ref().map_or(Mat4::IDENTITY, |a| a.to_matrix());
         for (index, mesh_description) in description.meshes.iter().enumerate() {
-            let mut mesh = load_mesh(mesh_description, index, base_dir, settings.seed, &mut materials, &mut textures)?;
+            let mut mesh = load_mesh(mesh_description, index, base_dir, &settings, &mut materials, &mut textures)?;
             mesh.model_to_world = anchor * mesh.model_to_world;
             meshes.push(mesh);
         }
@@ -455,7 +463,7 @@ fn load_mesh(
     description: &MeshDescription,
     index: usize,
     base_dir: &Path,
-    seed: u64,
+    settings: &Settings,
     materials: &mut Vec<Material>,
     textures: &mut texture::Textures,
 ) -> Result<Mesh, SceneError> {
@@ -507,12 +515,9 @@ fn load_mesh(
 
     let subdivided_at = started.elapsed();
     let stream = index as u64;
-    let sparse = sparse::build(&geometry, sparse_count, seed, stream).map_err(|message| SceneError::Obj {
-        field: field.clone(),
-        file: file.clone(),
-        line: None,
-        message,
-    })?;
+    let neighbours = settings.interpolation_neighbours as usize;
+    let sparse = sparse::build(&geometry, sparse_count, neighbours, settings.seed, stream)
+        .map_err(|message| SceneError::Obj { field: field.clone(), file: file.clone(), line: None, message })?;
 
     let name = file.file_stem().map_or_else(|| format!("mesh{index}"), |s| s.to_string_lossy().into_owned());
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
@@ -660,7 +665,7 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         assert_eq!(scene.sparse_point_count(), 64);
         assert_eq!(mesh.normals.len(), mesh.positions.len());
         assert_eq!(mesh.triangle_materials.len(), mesh.triangles.len());
-        assert_eq!(mesh.sparse.vertex_neighbours.len(), mesh.positions.len());
+        assert_eq!(mesh.sparse.vertex_neighbours.len(), mesh.positions.len() * DEFAULT_NEIGHBOURS as usize);
         assert_eq!(scene.materials.len(), 1);
         assert_eq!(scene.materials[0].exponent, 30.0);
         assert!(scene.needs_glossy());

@@ -14,7 +14,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{Geometry, NEIGHBOURS, SparsePoints};
+use super::{Geometry, SparsePoints};
 
 /// Candidates drawn per sparse point kept (Yuksel suggests 5).
 pub(crate) const OVERSAMPLING: usize = 5;
@@ -43,14 +43,20 @@ fn tree_frame() -> Quat {
     Quat::from_euler(EulerRot::XYZ, 0.31, 0.77, 1.13)
 }
 
-/// Places `count` sparse points on the surface and links every vertex to its nearest points.
-/// `seed` and `stream` (the mesh index) make the placement reproducible.
-pub(crate) fn build(geometry: &Geometry, count: usize, seed: u64, stream: u64) -> Result<SparsePoints, String> {
+/// Places `count` sparse points on the surface and links every vertex to its `neighbours`
+/// nearest points. `seed` and `stream` (the mesh index) make the placement reproducible.
+pub(crate) fn build(
+    geometry: &Geometry,
+    count: usize,
+    neighbours: usize,
+    seed: u64,
+    stream: u64,
+) -> Result<SparsePoints, String> {
     let started = std::time::Instant::now();
     let samples = place(geometry, count, seed, stream)?;
     let placed_at = started.elapsed();
     let (positions, normals): (Vec<Vec3>, Vec<Vec3>) = samples.iter().map(|&(t, b)| evaluate(geometry, t, b)).unzip();
-    let (vertex_neighbours, occluder_radii) = link_vertices(&geometry.positions, &positions)?;
+    let (vertex_neighbours, occluder_radii) = link_vertices(&geometry.positions, &positions, neighbours)?;
     tracing::debug!(
         placement_ms = placed_at.as_secs_f64() * 1e3,
         neighbours_ms = (started.elapsed() - placed_at).as_secs_f64() * 1e3,
@@ -62,6 +68,7 @@ pub(crate) fn build(geometry: &Geometry, count: usize, seed: u64, stream: u64) -
         positions,
         normals,
         occluder_radii,
+        neighbours,
         vertex_neighbours,
     })
 }
@@ -254,32 +261,33 @@ impl IndexedMaxHeap {
     }
 }
 
-/// For every vertex its [`NEIGHBOURS`] nearest sparse points (nearest first, `u32::MAX`
-/// padded), and for every point the largest distance to a vertex whose nearest point it is.
-fn link_vertices(vertices: &[Vec3], points: &[Vec3]) -> Result<(Vec<[u32; NEIGHBOURS]>, Vec<f32>), String> {
+/// For every vertex its `n` nearest sparse points (nearest first, `u32::MAX` padded; `n`
+/// entries per vertex), and for every point the largest distance to a vertex whose nearest
+/// point it is.
+fn link_vertices(vertices: &[Vec3], points: &[Vec3], n: usize) -> Result<(Vec<u32>, Vec<f32>), String> {
     let mut radii = vec![0.0f32; points.len()];
-    let Some(k) = NonZeroUsize::new(NEIGHBOURS.min(points.len())) else {
-        return Ok((vec![[u32::MAX; NEIGHBOURS]; vertices.len()], radii));
+    let Some(k) = NonZeroUsize::new(n.min(points.len())) else {
+        return Ok((vec![u32::MAX; n * vertices.len()], radii));
     };
     let tree: ImmutableKdTree<f32, 3> =
         ImmutableKdTree::new_from_slice(&tree_coordinates(points)).map_err(|e| format!("k-d tree: {e}"))?;
     let frame = tree_frame();
-    let mut neighbours = Vec::with_capacity(vertices.len());
-    let mut nearest: Vec<(f32, u32)> = Vec::with_capacity(NEIGHBOURS);
+    let mut neighbours = Vec::with_capacity(n * vertices.len());
+    let mut nearest: Vec<(f32, u32)> = Vec::with_capacity(n);
     for vertex in vertices {
         let found = tree.query(&(frame * *vertex).to_array()).nearest_n::<SquaredEuclidean<f32>>(k).execute();
         // Re-rank by the distance in model space, which the radii and the shaders use.
         nearest.clear();
         nearest.extend(found.iter().map(|r| (vertex.distance(points[r.item as usize]), r.item)));
         nearest.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let mut row = [u32::MAX; NEIGHBOURS];
+        let mut row = vec![u32::MAX; n];
         for (slot, &(_, point)) in row.iter_mut().zip(&nearest) {
             *slot = point;
         }
         if let Some(&(distance, point)) = nearest.first() {
             radii[point as usize] = radii[point as usize].max(distance);
         }
-        neighbours.push(row);
+        neighbours.extend(row);
     }
     Ok((neighbours, radii))
 }
@@ -312,14 +320,14 @@ mod tests {
     #[test]
     fn placement_is_deterministic_per_seed_and_stream() {
         let g = square(1.0);
-        let a = build(&g, 100, 7, 0).expect("builds");
-        let b = build(&g, 100, 7, 0).expect("builds");
+        let a = build(&g, 100, 8, 7, 0).expect("builds");
+        let b = build(&g, 100, 8, 7, 0).expect("builds");
         assert_eq!(a.triangles, b.triangles);
         assert_eq!(a.barycentrics, b.barycentrics);
         assert_eq!(a.vertex_neighbours, b.vertex_neighbours);
-        let other_seed = build(&g, 100, 8, 0).expect("builds");
+        let other_seed = build(&g, 100, 8, 8, 0).expect("builds");
         assert_ne!(a.barycentrics, other_seed.barycentrics);
-        let other_stream = build(&g, 100, 7, 1).expect("builds");
+        let other_stream = build(&g, 100, 8, 7, 1).expect("builds");
         assert_ne!(a.barycentrics, other_stream.barycentrics);
     }
 
@@ -327,7 +335,7 @@ mod tests {
     fn points_lie_on_the_surface() {
         let mut g = square(2.0);
         g.positions[2].z = 1.0; // Bend one corner so the triangles differ.
-        let sparse = build(&g, 300, 1, 0).expect("builds");
+        let sparse = build(&g, 300, 8, 1, 0).expect("builds");
         assert_eq!(sparse.len(), 300);
         for i in 0..sparse.len() {
             let t = sparse.triangles[i];
@@ -349,7 +357,7 @@ mod tests {
         quad(&mut g, Vec2::new(2.0, 0.0), Vec2::new(5.0, 1.0));
         let count = 1024;
         for seed in 0..4 {
-            let sparse = build(&g, count, seed, 0).expect("builds");
+            let sparse = build(&g, count, 8, seed, 0).expect("builds");
             let small = sparse.triangles.iter().filter(|&&t| t < 2).count();
             let fraction = small as f64 / count as f64;
             // Tolerance: 0.02 of all points (8 % of the small quad's 256). The small quad's
@@ -362,7 +370,7 @@ mod tests {
     fn placement_is_well_spread() {
         // Blue noise keeps points apart: the closest pair is far from the ~0 of white noise.
         let count = 400;
-        let sparse = build(&square(1.0), count, 3, 0).expect("builds");
+        let sparse = build(&square(1.0), count, 8, 3, 0).expect("builds");
         let spacing = (1.0 / count as f32).sqrt();
         let mut closest = f32::INFINITY;
         for (i, p) in sparse.positions.iter().enumerate() {
@@ -380,7 +388,7 @@ mod tests {
         quad(&mut g, Vec2::ZERO, Vec2::ONE);
         g.triangles[2].swap(1, 2);
         g.triangles[3].swap(1, 2);
-        let sparse = build(&g, 200, 5, 0).expect("builds");
+        let sparse = build(&g, 200, 8, 5, 0).expect("builds");
         let front = sparse.triangles.iter().filter(|&&t| t < 2).count();
         assert!((front as i32 - 100).abs() <= 10, "{front} of 200 on the front");
     }
@@ -393,9 +401,9 @@ mod tests {
             g.positions.push(Vec3::new(0.05 * i as f32, 0.5, 0.0));
             g.normals.push(Vec3::Z);
         }
-        let sparse = build(&g, 3, 2, 0).expect("builds");
-        assert_eq!(sparse.vertex_neighbours.len(), g.positions.len());
-        for (v, row) in sparse.vertex_neighbours.iter().enumerate() {
+        let sparse = build(&g, 3, 8, 2, 0).expect("builds");
+        assert_eq!(sparse.vertex_neighbours.len(), 8 * g.positions.len());
+        for (v, row) in sparse.vertex_neighbours.chunks_exact(8).enumerate() {
             assert!(row[..3].iter().all(|&i| i < 3), "{row:?}");
             assert!(row[3..].iter().all(|&i| i == u32::MAX), "{row:?}");
             let mut sorted = row[..3].to_vec();
@@ -406,8 +414,16 @@ mod tests {
             assert!(d.windows(2).all(|w| w[0] <= w[1]), "vertex {v}: {d:?}");
         }
 
-        let sparse = build(&g, 64, 2, 0).expect("builds");
-        for (v, row) in sparse.vertex_neighbours.iter().enumerate() {
+        for k in [4, 8, 16] {
+            let sparse = build(&g, 64, k, 2, 0).expect("builds");
+            assert_eq!(sparse.vertex_neighbours.len(), k * g.positions.len());
+            check_nearest_first(&g, &sparse, k);
+        }
+    }
+
+    /// Every vertex's `k` neighbours are points, by increasing distance, the nearest first.
+    fn check_nearest_first(g: &Geometry, sparse: &SparsePoints, k: usize) {
+        for (v, row) in sparse.vertex_neighbours.chunks_exact(k).enumerate() {
             assert!(row.iter().all(|&i| i < 64), "{row:?}");
             let d: Vec<f32> = row.iter().map(|&i| g.positions[v].distance(sparse.positions[i as usize])).collect();
             assert!(d.windows(2).all(|w| w[0] <= w[1]), "vertex {v}: {d:?}");
@@ -421,9 +437,9 @@ mod tests {
     fn occluder_radii_cover_their_vertices() {
         let mut g = square(1.0);
         super::super::subdivide::subdivide(&mut g, 0.1, 1 << 20).expect("within the cap");
-        let sparse = build(&g, 50, 4, 0).expect("builds");
+        let sparse = build(&g, 50, 8, 4, 0).expect("builds");
         let mut assigned = vec![0usize; sparse.len()];
-        for (v, row) in sparse.vertex_neighbours.iter().enumerate() {
+        for (v, row) in sparse.vertex_neighbours.chunks_exact(8).enumerate() {
             let nearest = row[0] as usize;
             assigned[nearest] += 1;
             let d = g.positions[v].distance(sparse.positions[nearest]);
@@ -476,6 +492,6 @@ mod tests {
             triangles: vec![[0, 1, 2]],
             triangle_materials: vec![0],
         };
-        assert!(build(&g, 10, 1, 0).is_err());
+        assert!(build(&g, 10, 8, 1, 0).is_err());
     }
 }

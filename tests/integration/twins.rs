@@ -68,29 +68,7 @@ fn sparse_pipeline_matches_cpu_twins() {
     }
 
     // Step 4: interpolation, from the GPU's own sparse lights.
-    let sparse_d: Vec<PointLight> = mid.sparse_diffuse.iter().map(light).collect();
-    let sparse_s: Vec<PointLight> = mid.sparse_glossy.iter().map(light).collect();
-    let scale = max_of(sparse_d.iter().map(|l| l.intensity));
-    for (v, ids) in flat.vertex_neighbours.iter().enumerate() {
-        let vertex = flat.vertices[v];
-        let ids: Vec<usize> = ids.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
-        let sp = |i: usize| flat.sparse_points[i];
-        let distances: Vec<f32> =
-            ids.iter().map(|&i| Vec3::from(vertex.position).distance(sp(i).position.into())).collect();
-        let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
-        let w = reference::interpolation_weights(vertex.normal.into(), &distances, &normals);
-        let d = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>());
-        let s = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>());
-        assert_close(
-            light(&mid.vertex_diffuse[v]).intensity,
-            d.intensity,
-            REL,
-            scale,
-            1e-9,
-            &format!("vertex {v} I_d"),
-        );
-        assert_close(light(&mid.vertex_glossy[v]).position, s.position, 1e-3, 1.0, 1e-4, &format!("vertex {v} l_s"));
-    }
+    assert_interpolation_matches_twin(flat, &mid);
 
     // Step 5: per-pixel shading, from the GPU's visibility buffer and vertex lights.
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
@@ -415,4 +393,57 @@ fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
         .map(|i| (exact.indirect.rgb(i).element_sum(), brute.indirect.rgb(i).element_sum()))
         .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     assert!(sum_exact < 0.95 * sum_brute, "exact {sum_exact} vs unoccluded {sum_brute}");
+}
+
+/// The GPU's per-vertex lights against `reference::interpolate_lights` over each vertex's
+/// `flat.neighbours` sparse points, from the GPU's own sparse lights.
+fn assert_interpolation_matches_twin(
+    flat: &relume::gpu::scene::FlatScene,
+    mid: &relume::renderer::SparseIntermediates,
+) {
+    let sparse_d: Vec<PointLight> = mid.sparse_diffuse.iter().map(light).collect();
+    let sparse_s: Vec<PointLight> = mid.sparse_glossy.iter().map(light).collect();
+    let scale = max_of(sparse_d.iter().map(|l| l.intensity));
+    for (v, ids) in flat.vertex_neighbours.chunks_exact(flat.neighbours as usize).enumerate() {
+        let vertex = flat.vertices[v];
+        let ids: Vec<usize> = ids.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
+        let sp = |i: usize| flat.sparse_points[i];
+        let distances: Vec<f32> =
+            ids.iter().map(|&i| Vec3::from(vertex.position).distance(sp(i).position.into())).collect();
+        let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
+        let w = reference::interpolation_weights(vertex.normal.into(), &distances, &normals);
+        let d = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>());
+        let s = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>());
+        assert_close(
+            light(&mid.vertex_diffuse[v]).intensity,
+            d.intensity,
+            REL,
+            scale,
+            1e-9,
+            &format!("vertex {v} I_d"),
+        );
+        assert_close(light(&mid.vertex_glossy[v]).position, s.position, 1e-3, 1.0, 1e-4, &format!("vertex {v} l_s"));
+    }
+}
+
+/// The interpolation with 4 and 16 neighbours per vertex (`settings.interpolation_neighbours`)
+/// against its twin, and the image changes with the count.
+#[test]
+fn interpolation_takes_the_scene_neighbour_count() {
+    let gpu = gpu();
+    let dir = super::fixture("scenes");
+    let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let mut images = Vec::new();
+    for k in [4, 16] {
+        let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+        json["settings"]["interpolation_neighbours"] = k.into();
+        let scene = relume::scene::Scene::from_json_str(&json.to_string(), &dir).unwrap();
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let frame = renderer.render(&gpu, Method::Sparse, 24, 20).unwrap();
+        let flat = &renderer.scene.flat;
+        assert_eq!((flat.neighbours, flat.vertex_neighbours.len()), (k, k as usize * flat.vertices.len()));
+        assert_interpolation_matches_twin(flat, &renderer.read_sparse_intermediates(&gpu).unwrap());
+        images.push(frame.indirect.pixels);
+    }
+    assert_ne!(images[0], images[1], "4 and 16 neighbours interpolate differently");
 }
