@@ -189,10 +189,12 @@ pub fn describe_error(error: &proto::Error) -> String {
     text
 }
 
-/// The scene file at `path` as a `POST /v1/scenes` body: every mesh's OBJ is read here and sent
-/// inline (`obj_text`), so the server needs none of the client's files. Textures and MTL files
-/// cannot travel this way; a scene that needs them must live in the server's asset directory.
-pub fn upload_description(path: &Path) -> anyhow::Result<Value> {
+/// The scene file at `path` as JSON, with `edit(scene file's directory, index, mesh)` applied
+/// to each of its meshes.
+fn edit_meshes(
+    path: &Path,
+    mut edit: impl FnMut(&Path, usize, &mut Value) -> anyhow::Result<()>,
+) -> anyhow::Result<Value> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading scene {}", path.display()))?;
     let mut description: Value =
         serde_json::from_str(&text).with_context(|| format!("{}: not a JSON scene", path.display()))?;
@@ -200,8 +202,18 @@ pub fn upload_description(path: &Path) -> anyhow::Result<Value> {
     let meshes =
         description["meshes"].as_array_mut().with_context(|| format!("{}: meshes: required", path.display()))?;
     for (i, mesh) in meshes.iter_mut().enumerate() {
+        edit(dir, i, mesh)?;
+    }
+    Ok(description)
+}
+
+/// The scene file at `path` as a `POST /v1/scenes` body: every mesh's OBJ is read here and sent
+/// inline (`obj_text`), so the server needs none of the client's files. Textures and MTL files
+/// cannot travel this way; a scene that needs them must live in the server's asset directory.
+pub fn upload_description(path: &Path) -> anyhow::Result<Value> {
+    edit_meshes(path, |dir, i, mesh| {
         if mesh.get("obj_text").is_some() {
-            continue;
+            return Ok(());
         }
         let obj = mesh["obj"].as_str().with_context(|| format!("{}: meshes[{i}].obj: required", path.display()))?;
         let obj_path = dir.join(obj);
@@ -210,8 +222,8 @@ pub fn upload_description(path: &Path) -> anyhow::Result<Value> {
         let name = obj_path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         mesh["obj"] = name.into();
         mesh["obj_text"] = obj_text.into();
-    }
-    Ok(description)
+        Ok(())
+    })
 }
 
 /// The scene file at `path` as a `POST /v1/scenes` body for a server whose asset directory is
@@ -219,29 +231,23 @@ pub fn upload_description(path: &Path) -> anyhow::Result<Value> {
 /// directory, are made relative to `assets`. For scenes whose meshes need MTL files or
 /// textures, which [`upload_description`] cannot send.
 pub fn asset_description(path: &Path, assets: &Path) -> anyhow::Result<Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading scene {}", path.display()))?;
-    let mut description: Value =
-        serde_json::from_str(&text).with_context(|| format!("{}: not a JSON scene", path.display()))?;
-    let dir = path.parent().unwrap_or(Path::new("."));
     let assets = assets.canonicalize().with_context(|| format!("asset directory {}", assets.display()))?;
-    let relative = |field: &str, file: &str| -> anyhow::Result<Value> {
-        let full = dir.join(file).canonicalize().with_context(|| format!("{field}: {file}"))?;
-        let inside = full.strip_prefix(&assets).with_context(|| {
-            format!("{field}: {} is outside the server's asset directory {}", full.display(), assets.display())
-        })?;
-        Ok(inside.to_string_lossy().into_owned().into())
-    };
-    let meshes =
-        description["meshes"].as_array_mut().with_context(|| format!("{}: meshes: required", path.display()))?;
-    for (i, mesh) in meshes.iter_mut().enumerate() {
+    edit_meshes(path, |dir, i, mesh| {
+        let relative = |field: &str, file: &str| -> anyhow::Result<Value> {
+            let full = dir.join(file).canonicalize().with_context(|| format!("{field}: {file}"))?;
+            let inside = full.strip_prefix(&assets).with_context(|| {
+                format!("{field}: {} is outside the server's asset directory {}", full.display(), assets.display())
+            })?;
+            Ok(inside.to_string_lossy().into_owned().into())
+        };
         if let Some(obj) = mesh["obj"].as_str().filter(|_| mesh.get("obj_text").is_none()) {
             mesh["obj"] = relative(&format!("meshes[{i}].obj"), obj)?;
         }
         if let Some(texture) = mesh["material"]["diffuse_texture"].as_str() {
             mesh["material"]["diffuse_texture"] = relative(&format!("meshes[{i}].material.diffuse_texture"), texture)?;
         }
-    }
-    Ok(description)
+        Ok(())
+    })
 }
 
 /// What to replay against which server.

@@ -292,50 +292,33 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             server,
             token,
         } => {
+            anyhow::ensure!(
+                exposure.is_finite() && exposure > 0.0,
+                "--exposure: must be a positive number, got {exposure}"
+            );
+            anyhow::ensure!(frames != Some(0), "--frames: must be at least 1");
+            let recording_options = recording_options(intrinsics, depth_scale)?;
             if let Some(server) = server {
                 anyhow::ensure!(
                     !accumulate && size.width.is_none() && size.height.is_none(),
                     "--accumulate, --width and --height: not available with --server (the stream renders each frame at its own size, without accumulation)"
                 );
-                let recording_options = recording_options(intrinsics, depth_scale)?;
-                anyhow::ensure!(
-                    exposure.is_finite() && exposure > 0.0,
-                    "--exposure: must be a positive number, got {exposure}"
-                );
-                anyhow::ensure!(frames != Some(0), "--frames: must be at least 1");
                 let options = relume::client::RemoteReplayOptions {
                     server,
                     token,
                     recording,
                     recording_options,
                     scene,
-                    out: out.clone(),
+                    out,
                     frames,
                     exposure: Some(exposure),
                     progress: true,
                 };
-                let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-                let summary = runtime.block_on(relume::client::replay_remote(&options))?;
-                let vals = &summary.vals_per_frame;
-                eprintln!(
-                    "replayed {} frames at {}x{} through {}: {} to {} VALs per frame, round trip p50 {:.0} ms, p99 {:.0} ms, {} dropped",
-                    summary.frames,
-                    summary.width,
-                    summary.height,
-                    summary.server,
-                    vals.iter().min().unwrap_or(&0),
-                    vals.iter().max().unwrap_or(&0),
-                    relume::client::quantile(&summary.round_trip_ms, 0.5),
-                    relume::client::quantile(&summary.round_trip_ms, 0.99),
-                    summary.dropped_frames,
-                );
-                eprintln!("{}", relume::replay::stage_table(&summary.stage_ms, ("round trip", &summary.round_trip_ms)));
-                eprintln!("wrote {}", out.display());
-                return Ok(());
+                return remote_replay_command(&options);
             }
             let accumulate =
                 accumulate.then_some(relume::mr::AccumulateOptions { cell_size, max_vals, max_age_frames: max_age });
-            replay_command(recording, scene, out, size, frames, accumulate, exposure, intrinsics, depth_scale)
+            replay_command(recording, scene, out, size, frames, accumulate, exposure, recording_options)
         }
         Command::Load {
             server,
@@ -507,6 +490,28 @@ fn checked_side(name: &str, v: u32) -> anyhow::Result<u32> {
     Ok(v)
 }
 
+/// `replay --server`: the replay through a running server, and its summary.
+fn remote_replay_command(options: &relume::client::RemoteReplayOptions) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let summary = runtime.block_on(relume::client::replay_remote(options))?;
+    let vals = &summary.vals_per_frame;
+    eprintln!(
+        "replayed {} frames at {}x{} through {}: {} to {} VALs per frame, round trip p50 {:.0} ms, p99 {:.0} ms, {} dropped",
+        summary.frames,
+        summary.width,
+        summary.height,
+        summary.server,
+        vals.iter().min().unwrap_or(&0),
+        vals.iter().max().unwrap_or(&0),
+        relume::client::quantile(&summary.round_trip_ms, 0.5),
+        relume::client::quantile(&summary.round_trip_ms, 0.99),
+        summary.dropped_frames,
+    );
+    eprintln!("{}", relume::replay::stage_table(&summary.stage_ms, ("round trip", &summary.round_trip_ms)));
+    eprintln!("wrote {}", options.out.display());
+    Ok(())
+}
+
 #[allow(clippy::too_many_arguments)]
 fn replay_command(
     recording: PathBuf,
@@ -516,14 +521,8 @@ fn replay_command(
     frames: Option<usize>,
     accumulate: Option<relume::mr::AccumulateOptions>,
     exposure: f32,
-    intrinsics: Option<Vec<f32>>,
-    depth_scale: Option<f32>,
+    recording_options: relume::rgbd::recording::RecordingOptions,
 ) -> anyhow::Result<()> {
-    anyhow::ensure!(exposure.is_finite() && exposure > 0.0, "--exposure: must be a positive number, got {exposure}");
-    if frames == Some(0) {
-        anyhow::bail!("--frames: must be at least 1");
-    }
-    let recording_options = recording_options(intrinsics, depth_scale)?;
     let size = size.resolve_optional()?;
     let options = relume::replay::ReplayOptions {
         recording,
