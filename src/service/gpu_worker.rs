@@ -304,8 +304,7 @@ fn timed(
 /// One HTTP render: the scene as loaded, lit by its spot light, from `job.camera`.
 fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<(Rendered, Option<Composite>), WorkerError> {
     let Loaded { scene, renderer } = loaded;
-    let placement: Vec<Mat4> = scene.meshes.iter().map(|m| m.model_to_world).collect();
-    renderer.place_meshes(gpu, scene, &placement);
+    renderer.place_meshes(gpu, scene, &placement(scene, &[]));
     renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
     renderer.set_glossy(scene.settings.glossy);
     renderer.clear_vals();
@@ -316,23 +315,29 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<(Rendered, 
     Ok((renderer.render(gpu, job.method, job.width, job.height)?, None))
 }
 
+/// Model-to-world of every mesh of `scene`: as loaded, but where `transforms` (by mesh
+/// index) replaces a mesh's own transform (the scene's anchor still applies).
+fn placement(scene: &Scene, transforms: &[(u32, Mat4)]) -> Vec<Mat4> {
+    (0..scene.meshes.len())
+        .map(|i| {
+            let replaced = transforms.iter().find(|(mesh, _)| *mesh as usize == i).map(|(_, t)| *t);
+            scene.mesh_to_world(i, replaced)
+        })
+        .collect()
+}
+
 /// Renders one RGB-D stream frame: the meshes placed by the stream's model transforms, lit
 /// by the frame's VALs (made on the GPU with `job.rgbd`) and the scene's spot light if it has
-/// one, with the stream's occlusion and glossy settings, seen from the frame's camera at the frame's size (composited over the frame's colour
-/// when `job.component` is full), or from the stream's virtual camera when it set one.
+/// one, with the stream's occlusion and glossy settings, seen from the frame's camera at the
+/// frame's size (composited over the frame's colour when `job.component` is full), or from
+/// the stream's virtual camera when it set one.
 fn render_stream_frame(
     gpu: &Gpu,
     loaded: &mut Loaded,
     job: &StreamFrameJob,
 ) -> Result<(Rendered, Option<Composite>), WorkerError> {
     let Loaded { scene, renderer } = loaded;
-    let placement: Vec<Mat4> = (0..scene.meshes.len())
-        .map(|i| {
-            let replaced = job.model_transforms.iter().find(|(mesh, _)| *mesh as usize == i).map(|(_, t)| *t);
-            scene.mesh_to_world(i, replaced)
-        })
-        .collect();
-    renderer.place_meshes(gpu, scene, &placement);
+    renderer.place_meshes(gpu, scene, &placement(scene, &job.model_transforms));
     renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);
     renderer.set_glossy(job.glossy);
     if let Some(light) = job.light.as_ref().or(scene.light.as_ref()) {
