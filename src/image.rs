@@ -15,6 +15,8 @@ pub enum ImageError {
     Write { path: String, source: ::image::ImageError },
     #[error("encoding a PNG: {0}")]
     Encode(::image::ImageError),
+    #[error("{pixels} pixels for a {width}x{height} image")]
+    Size { pixels: usize, width: u32, height: u32 },
 }
 
 /// Linear radiance (W/(m² sr)) per pixel, row-major from the top; alpha is coverage (1 where
@@ -82,11 +84,7 @@ impl LinearImage {
 
     /// The PNG file [`LinearImage::write_png`] would write, in memory.
     pub fn encode_png(&self, exposure: f32) -> Result<Vec<u8>, ImageError> {
-        let mut png = Vec::new();
-        self.tone_map(exposure)
-            .write_to(&mut std::io::Cursor::new(&mut png), ::image::ImageFormat::Png)
-            .map_err(ImageError::Encode)?;
-        Ok(png)
+        png_bytes(&self.tone_map(exposure))
     }
 
     /// 8-bit sRGB after `exposure` and clipping, with alpha = coverage (255 where geometry
@@ -160,6 +158,26 @@ pub fn flip_mean(test: &LinearImage, reference: &LinearImage, exposure: f32) -> 
         }
     }
     if n > 0 { sum / n as f64 } else { 0.0 }
+}
+
+/// An 8-bit sRGB image (row-major from the top, `width * height` pixels) encoded as PNG.
+pub fn encode_rgb8_png(width: u32, height: u32, pixels: &[[u8; 3]]) -> Result<Vec<u8>, ImageError> {
+    png_bytes(&rgb8_image(width, height, pixels)?)
+}
+
+/// `pixels` (row-major from the top) as an image; an error unless there are `width * height`.
+pub fn rgb8_image(width: u32, height: u32, pixels: &[[u8; 3]]) -> Result<::image::RgbImage, ImageError> {
+    ::image::RgbImage::from_raw(width, height, pixels.as_flattened().to_vec()).ok_or(ImageError::Size {
+        pixels: pixels.len(),
+        width,
+        height,
+    })
+}
+
+fn png_bytes(image: &::image::RgbImage) -> Result<Vec<u8>, ImageError> {
+    let mut png = Vec::new();
+    image.write_to(&mut std::io::Cursor::new(&mut png), ::image::ImageFormat::Png).map_err(ImageError::Encode)?;
+    Ok(png)
 }
 
 #[cfg(test)]

@@ -134,8 +134,7 @@ pub fn progress_bar(visible: bool, frames: u64) -> indicatif::ProgressBar {
 }
 
 fn write_rgb(path: &Path, width: u32, height: u32, pixels: &[[u8; 3]]) -> anyhow::Result<()> {
-    let image = ::image::RgbImage::from_raw(width, height, pixels.iter().flatten().copied().collect())
-        .context("composited image of the wrong size")?;
+    let image = crate::image::rgb8_image(width, height, pixels).context("composited image")?;
     image.save(path).with_context(|| format!("writing {}", path.display()))
 }
 

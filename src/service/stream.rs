@@ -352,11 +352,7 @@ fn rendered_frame(in_flight: &InFlight, output: RenderOutput, dropped_frames: u6
     let internal = |e: &dyn std::fmt::Display| WireError::new(ErrorCode::Internal, None, e.to_string());
     let encoded = match (&output.composited, in_flight.quality.format) {
         (Some((rgb, _)), StreamImageFormat::Png) => {
-            let bytes = rgb.iter().flatten().copied().collect();
-            let image = ::image::RgbImage::from_raw(width, height, bytes).ok_or_else(|| internal(&"composite size"))?;
-            let mut png = Vec::new();
-            image.write_to(&mut std::io::Cursor::new(&mut png), ::image::ImageFormat::Png).map_err(|e| internal(&e))?;
-            FrameImage::Png(png)
+            FrameImage::Png(crate::image::encode_rgb8_png(width, height, rgb).map_err(|e| internal(&e))?)
         }
         (Some((rgb, _)), StreamImageFormat::Rgba8) => {
             FrameImage::Rgba8(rgb.iter().flat_map(|&[r, g, b]| [r, g, b, 255]).collect())
