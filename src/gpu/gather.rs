@@ -2,9 +2,10 @@
 //! `reference::gather_point`.
 //!
 //! On a CPU adapter one invocation may not loop over more than about
-//! [`Gpu::CPU_MAX_GATHERED_VALS`] VALs (llvmpipe ends a shader's loops after [`super::LLVMPIPE_LOOP_LIMIT`] iterations,
-//! silently), so there the VALs are gathered in ranges, one dispatch each, every range merging
-//! into the sums of the ones before ([`ValRangeKernels`]). GPUs take every VAL in one dispatch.
+//! [`Gpu::CPU_MAX_GATHERED_VALS`] VALs (llvmpipe ends a shader's loops after
+//! [`super::LLVMPIPE_LOOP_LIMIT`] iterations, silently), so there the VALs are gathered in
+//! ranges, one dispatch each, every range merging into the sums of the ones before
+//! ([`ValRangeKernels`]). GPUs take every VAL in one dispatch.
 
 use super::kernel::{self, Slot, ValRangeKernels, groups};
 use super::scene::GpuScene;
@@ -43,11 +44,6 @@ impl Gather {
     /// Cover frames of up to `max_vals` VALs (see [`ValRangeKernels::fit`]).
     pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
         self.kernels.fit(gpu, scene, max_vals)
-    }
-
-    /// Dispatches per frame: one per VAL range.
-    pub fn ranges(&self) -> usize {
-        self.kernels.ranges()
     }
 
     /// Gather `vals` (`val_count` of them) at every sparse point into `gathered`.

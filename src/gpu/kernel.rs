@@ -226,11 +226,6 @@ impl ValRangeKernels {
         Ok(())
     }
 
-    /// Dispatches per frame: one per VAL range.
-    pub fn ranges(&self) -> usize {
-        self.kernels.len()
-    }
-
     /// Record every range's dispatch, in order; `span` times them together.
     pub fn dispatch(
         &self,

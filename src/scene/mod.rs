@@ -296,12 +296,6 @@ impl SparsePoints {
 }
 
 impl Mesh {
-    /// Matrix that takes model-space normals to world space (inverse transpose of the upper
-    /// 3x3 of [`Mesh::model_to_world`]); results need renormalising.
-    pub fn normal_to_world(&self) -> Mat3 {
-        normal_matrix(self.model_to_world)
-    }
-
     /// Vertex positions in world space, m.
     pub fn world_positions(&self) -> Vec<Vec3> {
         self.placed(self.model_to_world).positions()
@@ -366,6 +360,8 @@ impl PlacedMesh<'_> {
     }
 }
 
+/// Matrix that takes model-space normals to world space (inverse transpose of the upper 3x3
+/// of `model_to_world`); results need renormalising.
 fn normal_matrix(model_to_world: Mat4) -> Mat3 {
     Mat3::from_mat4(model_to_world).inverse().transpose()
 }
