@@ -336,7 +336,7 @@ async fn stream_recording(
         round_trip_ms: Vec::new(),
         dropped_frames: 0,
     };
-    let bar = crate::replay::progress_bar(options.progress, frames as u64);
+    let bar = crate::mr::replay::progress_bar(options.progress, frames as u64);
     for i in 0..frames {
         let frame = recording.frame(i)?;
         let sent = Instant::now();

@@ -4,7 +4,7 @@
 //! [0, 1], encode as sRGB. Auto exposure maps the 99th-percentile luminance of covered pixels
 //! to 1.
 
-use crate::reference::luminance;
+use crate::twin::luminance;
 use glam::Vec3;
 use std::path::Path;
 

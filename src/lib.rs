@@ -13,14 +13,20 @@
 //! # Layout
 //!
 //! - [`scene`]: scene files (JSON), OBJ/MTL loading, subdivision, sparse points and neighbours.
-//! - [`reference`]: the CPU twin of every GPU computation: the readable statement of the maths.
-//! - [`gpu`]: the device and one module per pass, each with its WGSL file in `shaders/`.
-//! - [`renderer`]: a frame, the passes called in order.
-//! - [`rgbd`]: RGB-D recordings and frames as light sources; [`mr`]: relighting them (mixed reality).
-//! - [`image`]: tone mapping, PNG/EXR output, error metrics; [`compare`]: the error and timing
-//!   figures of `relume compare`, which [`bench`] (`relume bench`, sweeps and plots) shares.
-//! - [`rgbd`]: RGB-D frames and how they become VALs.
-//! - [`service`]: `relume serve`, the HTTP + WebSocket service; [`client`]: a client of it; [`load`]: its load benchmark.
+//! - [`gpu`]: the device and the techniques, one folder each with its WGSL beside its Rust:
+//!   `lights/` (spot light RSM VALs and direct light, RGB-D VALs), `raster/` (visibility
+//!   buffers), `sparse/` (gather, renormalise, interpolate, shade), `visibility/` (the sparse
+//!   method's visibility modes), `references/` (brute force, exact visibility).
+//! - [`renderer`]: a frame, the ordered list of the techniques it needs.
+//! - [`twin`]: the CPU twin of every GPU computation: the readable statement of the maths
+//!   (a visibility mode keeps its twin in its own folder, e.g. `gpu::visibility::disks::twin`).
+//! - [`rgbd`]: RGB-D recordings and frames as light sources; [`mr`]: relighting them (mixed
+//!   reality), `mr::replay` replaying a recording.
+//! - [`image`]: tone mapping, PNG/EXR output, error metrics.
+//! - [`bench`]: `relume bench` (sweeps and plots) and `bench::compare`, the figures of
+//!   `relume compare`, one code path.
+//! - [`service`]: `relume serve`, the HTTP + WebSocket service; [`client`]: a client of it;
+//!   [`load`]: its load benchmark.
 //!
 //! # Who owns the GPU
 //!
@@ -30,14 +36,12 @@
 
 pub mod bench;
 pub mod client;
-pub mod compare;
 pub mod gpu;
 pub mod image;
 pub mod load;
 pub mod mr;
-pub mod reference;
 pub mod renderer;
-pub mod replay;
 pub mod rgbd;
 pub mod scene;
 pub mod service;
+pub mod twin;

@@ -1,26 +1,31 @@
-//! A frame: the passes of `gpu/` called in order (DESIGN.md §4), each in a debug group and a
-//! timing span. No frame graph; stages and buffers exist only when the scene and the method
-//! need them.
+//! A frame: the ordered list of the techniques the scene and the request need
+//! (`gpu::technique`), each pass in a debug group and a timing span. A list, not a frame graph;
+//! stages and buffers exist only when the scene, the method and the components asked for need
+//! them.
+//!
+//! ```text
+//! spot light:  SpotVals (rsm_raster, rsm_vals)  ─┐
+//! RGB-D frame: RgbdVals (rgbd_vals)             ─┴─ VALs
+//! camera:      CameraView (visibility)
+//! indirect:    SparseMethod (gather, [visibility mode], renormalise, interpolate, shade)
+//!              | BruteForce (brute_force) | Exact (exact)
+//! direct:      DirectLight (direct)
+//! ```
 
-use crate::gpu::brute_force::BruteForce;
-use crate::gpu::direct::Direct;
-use crate::gpu::exact::Exact;
-use crate::gpu::gather::Gather;
-use crate::gpu::interpolate::Interpolate;
-use crate::gpu::occlusion::Occlusion;
+use crate::gpu::lights::rgbd::RgbdVals;
+use crate::gpu::lights::spot::{DirectLight, SpotVals};
+use crate::gpu::raster::{CameraView, Visibility, VisibilityTarget};
 use crate::gpu::raw::{RawFrame, RawGathered, RawPointLight, RawVal};
-use crate::gpu::renormalise::Renormalise;
-use crate::gpu::rgbd::RgbdVals;
-use crate::gpu::rsm::{Rsm, RsmOutputs};
+use crate::gpu::references::brute_force::BruteForce;
+use crate::gpu::references::exact::Exact;
 use crate::gpu::scene::{FlatScene, GpuScene};
-use crate::gpu::shade::Shade;
+use crate::gpu::sparse::{SparseMethod, SparseSettings};
+use crate::gpu::technique::{CameraTarget, Frame, Technique, Vals};
 use crate::gpu::timing::{Recorder, StageTimings};
-use crate::gpu::visibility::{Visibility, VisibilityTarget};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::image::LinearImage;
-use crate::reference::rsm::Spot;
 use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
-use crate::scene::{self, Camera, Scene};
+use crate::scene::{self, Camera, Scene, SpotLight};
 use glam::{Affine3A, Mat4, Vec3, Vec4};
 
 /// How the indirect light is computed.
@@ -36,24 +41,71 @@ pub enum Method {
     Exact,
 }
 
-/// Stage names, as reported in timings.
+/// Which light the image shows.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, utoipa::ToSchema, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Component {
+    /// Direct plus indirect.
+    #[default]
+    Full,
+    Direct,
+    Indirect,
+}
+
+impl Component {
+    /// This component of a frame.
+    pub fn of(self, frame: &Rendered) -> LinearImage {
+        match self {
+            Component::Full => frame.direct.add(&frame.indirect),
+            Component::Direct => frame.direct.clone(),
+            Component::Indirect => frame.indirect.clone(),
+        }
+    }
+
+    /// What a frame must compute to show it.
+    pub fn needs(self) -> Components {
+        match self {
+            Component::Full => Components::ALL,
+            Component::Direct => Components::DIRECT,
+            Component::Indirect => Components::INDIRECT,
+        }
+    }
+}
+
+/// Which components a frame computes. A component left out runs none of its techniques (a
+/// direct-only frame has no gather); its image comes back black with the coverage in alpha.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Components {
+    pub direct: bool,
+    pub indirect: bool,
+}
+
+impl Components {
+    pub const ALL: Self = Self { direct: true, indirect: true };
+    pub const DIRECT: Self = Self { direct: true, indirect: false };
+    pub const INDIRECT: Self = Self { direct: false, indirect: true };
+}
+
+/// Stage names, as reported in timings: each is the name its technique records.
 pub mod stage {
-    pub const RSM_RASTER: &str = "rsm_raster";
-    pub const RSM_VALS: &str = "rsm_vals";
-    pub const RGBD_VALS: &str = "rgbd_vals";
-    pub const VISIBILITY: &str = "visibility";
-    pub const GATHER: &str = "gather";
-    pub const OCCLUSION: &str = "occlusion";
-    pub const RENORMALISE: &str = "renormalise";
-    pub const INTERPOLATE: &str = "interpolate";
-    pub const SHADE: &str = "shade";
-    pub const BRUTE_FORCE: &str = "brute_force";
-    pub const EXACT: &str = "exact";
-    pub const DIRECT: &str = "direct";
-    /// The stages that compute indirect light with the sparse method.
-    pub const SPARSE_INDIRECT: &[&str] = &[GATHER, OCCLUSION, RENORMALISE, INTERPOLATE, SHADE];
-    /// The stages that compute indirect light by brute force.
-    pub const BRUTE_FORCE_INDIRECT: &[&str] = &[BRUTE_FORCE];
+    use crate::gpu::lights::{rgbd::RgbdVals, spot};
+    use crate::gpu::raster::CameraView;
+    use crate::gpu::{references, sparse, visibility};
+
+    pub const RSM_RASTER: &str = spot::RSM_RASTER;
+    pub const RSM_VALS: &str = spot::RSM_VALS;
+    pub const RGBD_VALS: &str = RgbdVals::STAGE;
+    pub const VISIBILITY: &str = CameraView::STAGE;
+    pub const GATHER: &str = sparse::gather::PASS.label;
+    pub const OCCLUSION: &str = visibility::disks::PASS.label;
+    pub const RENORMALISE: &str = sparse::renormalise::PASS.label;
+    pub const INTERPOLATE: &str = sparse::interpolate::PASS.label;
+    pub const SHADE: &str = sparse::shade::PASS.label;
+    pub const BRUTE_FORCE: &str = references::brute_force::PASS.label;
+    pub const EXACT: &str = references::exact::PASS.label;
+    pub const DIRECT: &str = spot::DIRECT;
 }
 
 /// One rendered frame: linear radiance (W/(m² sr)), alpha = 1 where geometry covers the pixel.
@@ -61,40 +113,20 @@ pub struct Rendered {
     pub direct: LinearImage,
     pub indirect: LinearImage,
     pub timings: StageTimings,
+    /// The stages of the technique that computed the indirect light (empty when it was not
+    /// asked for).
+    pub indirect_stages: Vec<&'static str>,
     /// VALs with non-zero flux this frame.
     pub val_count: u32,
-    /// Method::Exact: the rounds it took (see `gpu::exact`); 0 for the other methods.
+    /// Method::Exact: the rounds it took (see `gpu::references::exact`); 0 for the other methods.
     pub exact_rounds: u32,
 }
 
-struct SparsePasses {
-    gather: Gather,
-    /// Only when the scene asks for occlusion.
-    occlusion: Option<Occlusion>,
-    renormalise: Renormalise,
-    interpolate: Interpolate,
-    shade: Shade,
-    gathered: Lobes,
-    sparse_lights: Lobes,
-    vertex_lights: Lobes,
-}
-
-struct CameraTarget {
-    view: VisibilityTarget,
-    indirect: wgpu::Buffer,
-    direct: wgpu::Buffer,
-}
-
-/// The spot light's stages and buffers: only for scenes with a spot light.
-struct SpotPasses {
-    spot: Spot,
-    resolution: u32,
-    rsm: Rsm,
-    direct: Direct,
-    /// The light's visibility buffer (the RSM).
-    view: VisibilityTarget,
-    /// Distance from the light to the surface each RSM texel sees: the direct pass's shadow map.
-    light_distance: wgpu::Buffer,
+impl Rendered {
+    /// Time of the stages that computed the indirect light (ms).
+    pub fn indirect_ms(&self) -> f64 {
+        self.timings.total_of(&self.indirect_stages)
+    }
 }
 
 /// Where the camera image is rendered from.
@@ -117,74 +149,106 @@ impl View {
     }
 }
 
+/// A technique with the settings it was built for: asked for with other settings, it is built
+/// anew.
+struct Built<K, T> {
+    key: K,
+    technique: T,
+}
+
+/// `slot`'s technique if it was built for `key`, else `build()` in its place.
+fn built_for<K: PartialEq, T>(
+    slot: &mut Option<Built<K, T>>,
+    key: K,
+    build: impl FnOnce() -> Result<T, GpuError>,
+) -> Result<&mut T, GpuError> {
+    if slot.as_ref().is_none_or(|b| b.key != key) {
+        *slot = None;
+        *slot = Some(Built { key, technique: build()? });
+    }
+    Ok(&mut slot.as_mut().expect("set above").technique)
+}
+
+/// The indirect techniques, each kept (with its buffers) until it is asked for with other
+/// settings or [`Renderer::release_reference_passes`] drops it.
+#[derive(Default)]
+struct Indirect {
+    sparse: Option<Built<SparseSettings, SparseMethod>>,
+    /// Keyed by `glossy`.
+    brute_force: Option<Built<bool, BruteForce>>,
+    /// Keyed by (`glossy`, VAL stride, placement generation: the BVH is the placed geometry's).
+    exact: Option<Built<(bool, u32, u64), Exact>>,
+}
+
+/// The spot light's two techniques: only for scenes with a spot light.
+struct Spot {
+    vals: SpotVals,
+    direct: DirectLight,
+}
+
 pub struct Renderer {
     pub scene: GpuScene,
+    /// Shared by the camera and the spot light's views.
+    raster: Visibility,
+    camera: CameraView,
     glossy: bool,
     view: View,
     occlusion: scene::Occlusion,
     occlusion_rule: scene::OcclusionRule,
-    visibility: Visibility,
-    spot: Option<SpotPasses>,
-    /// `array<Val>`: the spot light's VALs (R² at most) after the uploaded ones.
-    pub vals: wgpu::Buffer,
-    val_capacity: u32,
-    /// One `u32`: how many VALs were appended (readers clamp it to the capacity).
-    pub val_count: wgpu::Buffer,
+    exact_val_stride: u32,
+    spot: Option<Spot>,
+    /// The spot light's VALs (R² at most) after the uploaded ones.
+    pub vals: Vals,
     /// How many VALs [`Renderer::set_vals`] put at the front of `vals`, kept every frame.
     uploaded_vals: u32,
     /// The RGB-D VAL pass for the intrinsics and settings it was built for, once a frame was
     /// given; it runs while `rgbd_active`.
-    rgbd: Option<(Intrinsics, RgbdSettings, RgbdVals)>,
+    rgbd: Option<Built<(Intrinsics, RgbdSettings), RgbdVals>>,
     rgbd_active: bool,
-    sparse: Option<SparsePasses>,
-    brute_force: Option<BruteForce>,
-    exact: Option<Exact>,
-    exact_val_stride: u32,
+    indirect: Indirect,
+    /// The camera's images at the size of the last frame.
     target: Option<CameraTarget>,
-    /// Model-to-world of each mesh, as uploaded.
+    /// Model-to-world of each mesh, as uploaded, and how many times it changed.
     placement: Vec<Mat4>,
+    placement_generation: u64,
 }
 
 impl Renderer {
     pub fn new(gpu: &Gpu, scene: &Scene) -> Result<Self, GpuError> {
         let scene_gpu = GpuScene::new(gpu, FlatScene::from_scene(scene))?;
         let glossy = scene.settings.glossy && scene_gpu.has_glossy_material();
-        let visibility = Visibility::new(gpu, &scene_gpu)?;
+        let raster = Visibility::new(gpu, &scene_gpu)?;
         let spot = match &scene.light {
             None => None,
             Some(light) => {
-                let r = scene.settings.rsm_resolution;
-                Some(SpotPasses {
-                    spot: spot_of(light),
-                    resolution: r,
-                    rsm: Rsm::new(gpu, &scene_gpu)?,
-                    direct: Direct::new(gpu, &scene_gpu)?,
-                    view: visibility.target(gpu, "rsm", r, r),
-                    light_distance: gpu.storage_buffer_sized::<f32>("rsm.light_distance", (r * r) as usize)?,
-                })
+                let vals = SpotVals::new(gpu, &scene_gpu, &raster, *light, scene.settings.rsm_resolution)?;
+                let direct = DirectLight::new(gpu, &scene_gpu, &vals)?;
+                Some(Spot { vals, direct })
             }
         };
-        let val_capacity = spot.as_ref().map_or(1, |s| s.resolution * s.resolution);
+        let capacity = spot.as_ref().map_or(1, |s| s.vals.resolution * s.vals.resolution);
         Ok(Self {
-            vals: gpu.storage_buffer_sized::<RawVal>("vals", val_capacity as usize)?,
-            val_capacity,
-            val_count: gpu.storage_buffer_sized::<u32>("val_count", 1)?,
+            vals: Vals {
+                buffer: gpu.storage_buffer_sized::<RawVal>("vals", capacity as usize)?,
+                count: gpu.storage_buffer_sized::<u32>("val_count", 1)?,
+                capacity,
+            },
             uploaded_vals: 0,
             rgbd: None,
             rgbd_active: false,
-            visibility,
+            camera: CameraView::new(&raster),
+            raster,
             spot,
             glossy,
             view: View::Scene(scene.camera),
             occlusion: scene.settings.occlusion,
             occlusion_rule: scene.settings.occlusion_rule,
-            scene: scene_gpu,
-            sparse: None,
-            brute_force: None,
-            exact: None,
             exact_val_stride: 1,
+            scene: scene_gpu,
+            indirect: Indirect::default(),
             target: None,
             placement: scene.meshes.iter().map(|m| m.model_to_world).collect(),
+            placement_generation: 0,
         })
     }
 
@@ -207,7 +271,7 @@ impl Renderer {
         flat.textures = self.scene.flat.textures.take();
         self.scene.flat = flat;
         self.placement = model_to_world.to_vec();
-        self.exact = None;
+        self.placement_generation += 1;
     }
 
     /// Stop lighting with an RGB-D frame's or uploaded VALs: the scene's spot light alone.
@@ -219,38 +283,25 @@ impl Renderer {
     /// Use every `stride`-th VAL (flux scaled by `stride`) in the exact reference, whose cost
     /// is pixels x VALs x BVH traversal. 1 (the default) uses them all.
     pub fn set_exact_val_stride(&mut self, stride: u32) {
-        if stride.max(1) != self.exact_val_stride {
-            self.exact_val_stride = stride.max(1);
-            self.exact = None;
-        }
+        self.exact_val_stride = stride.max(1);
     }
 
-    /// Change the occlusion mode; the sparse passes are rebuilt on the next sparse frame.
+    /// Change the occlusion mode from the next sparse frame on.
     pub fn set_occlusion(&mut self, occlusion: scene::Occlusion, rule: scene::OcclusionRule) {
-        if (occlusion, rule) != (self.occlusion, self.occlusion_rule) {
-            self.occlusion = occlusion;
-            self.occlusion_rule = rule;
-            self.sparse = None;
-        }
+        (self.occlusion, self.occlusion_rule) = (occlusion, rule);
     }
 
-    /// Allow or forbid the glossy gather (it still runs only when a material is glossy); the
-    /// passes are rebuilt on the next frame when this changes whether it runs.
+    /// Allow or forbid the glossy lobe (it still runs only when a material is glossy) from the
+    /// next frame on.
     pub fn set_glossy(&mut self, allowed: bool) {
-        let glossy = allowed && self.scene.has_glossy_material();
-        if glossy != self.glossy {
-            self.glossy = glossy;
-            self.sparse = None;
-            self.brute_force = None;
-            self.exact = None;
-        }
+        self.glossy = allowed && self.scene.has_glossy_material();
     }
 
-    /// Drop the brute-force and exact passes (the exact one holds the BVH's buffers); they are
-    /// rebuilt when next asked for.
+    /// Drop the brute-force and exact techniques (the exact one holds the BVH's buffers); they
+    /// are built again when next asked for.
     pub fn release_reference_passes(&mut self) {
-        self.brute_force = None;
-        self.exact = None;
+        self.indirect.brute_force = None;
+        self.indirect.exact = None;
     }
 
     /// Whether the glossy stages run for this scene.
@@ -259,13 +310,13 @@ impl Renderer {
     }
 
     /// The spot light, when the scene has one.
-    pub fn spot(&self) -> Option<Spot> {
-        self.spot.as_ref().map(|s| s.spot)
+    pub fn spot(&self) -> Option<SpotLight> {
+        self.spot.as_ref().map(|s| s.vals.light)
     }
 
     /// The spot light's visibility buffer (its RSM), when the scene has a spot light.
     pub fn rsm_view(&self) -> Option<&VisibilityTarget> {
-        self.spot.as_ref().map(|s| &s.view)
+        self.spot.as_ref().map(|s| &s.vals.view)
     }
 
     pub fn view(&self) -> &View {
@@ -280,13 +331,13 @@ impl Renderer {
     /// Light every following frame with `vals` (e.g. RGB-D VALs accumulated over frames), plus
     /// the spot light's when the scene has one, instead of an RGB-D frame's. An empty slice
     /// removes them.
-    pub fn set_vals(&mut self, gpu: &Gpu, vals: &[crate::reference::Val]) -> Result<(), GpuError> {
+    pub fn set_vals(&mut self, gpu: &Gpu, vals: &[crate::twin::Val]) -> Result<(), GpuError> {
         self.rgbd_active = false;
         self.uploaded_vals = vals.len() as u32;
         self.ensure_val_capacity(gpu)?;
         let raw: Vec<RawVal> = vals.iter().map(RawVal::from).collect();
         if !raw.is_empty() {
-            gpu.queue.write_buffer(&self.vals, 0, bytemuck::cast_slice(&raw));
+            gpu.queue.write_buffer(&self.vals.buffer, 0, bytemuck::cast_slice(&raw));
         }
         Ok(())
     }
@@ -294,15 +345,14 @@ impl Renderer {
     /// Light every following frame with `frame`'s VALs (DESIGN.md §2 "RGB-D frames"), made on
     /// the GPU in the frame's `rgbd_vals` stage, plus the spot light's when the scene has one.
     pub fn set_rgbd_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame, settings: &RgbdSettings) -> Result<(), GpuError> {
-        let built_for_frame = self.rgbd.as_ref().is_some_and(|(k, s, _)| (*k, *s) == (frame.intrinsics, *settings));
-        if !built_for_frame {
-            let pass = RgbdVals::new(gpu, &self.scene, frame.intrinsics, settings)?;
-            self.rgbd = Some((frame.intrinsics, *settings, pass));
-        }
+        let scene = &self.scene;
+        built_for(&mut self.rgbd, (frame.intrinsics, *settings), || {
+            RgbdVals::new(gpu, scene, frame.intrinsics, settings)
+        })?;
         self.uploaded_vals = 0;
         self.rgbd_active = true;
         self.ensure_val_capacity(gpu)?;
-        self.rgbd.as_ref().expect("built above").2.upload(gpu, frame)
+        self.rgbd.as_ref().expect("built above").technique.upload(gpu, frame)
     }
 
     /// `frame`'s VALs alone, made on the GPU and read back (for accumulation across frames).
@@ -312,29 +362,30 @@ impl Renderer {
         gpu: &Gpu,
         frame: &RgbdFrame,
         settings: &RgbdSettings,
-    ) -> Result<Vec<crate::reference::Val>, GpuError> {
+    ) -> Result<Vec<crate::twin::Val>, GpuError> {
         self.set_rgbd_frame(gpu, frame, settings)?;
         self.rgbd_active = false;
-        let (_, _, pass) = self.rgbd.as_ref().expect("built above");
-        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&0u32));
+        let pass = &self.rgbd.as_ref().expect("built above").technique;
+        let vals = &self.vals;
+        gpu.queue.write_buffer(&vals.count, 0, bytemuck::bytes_of(&0u32));
         let mut encoder = gpu.device.create_command_encoder(&Default::default());
-        pass.record(gpu, &mut encoder, &self.vals, &self.val_count, self.val_capacity, None);
+        pass.append(gpu, &mut encoder, &self.scene, vals, None);
         gpu.submit_and_wait(encoder)?;
         self.read_vals(gpu)
     }
 
-    /// Grow `vals` to hold the uploaded VALs, the RGB-D frame's and the spot light's. A new
-    /// buffer starts empty: callers write the uploaded VALs after this.
+    /// Grow the VAL buffer to hold the uploaded VALs, the RGB-D frame's and the spot light's. A
+    /// new buffer starts empty: callers write the uploaded VALs after this.
     fn ensure_val_capacity(&mut self, gpu: &Gpu) -> Result<(), GpuError> {
-        let rsm = self.spot.as_ref().map_or(0, |s| s.resolution * s.resolution);
+        let rsm = self.spot.as_ref().map_or(0, |s| s.vals.resolution * s.vals.resolution);
         let rgbd = match (&self.rgbd, self.rgbd_active) {
-            (Some((_, _, pass)), true) => pass.max_vals(),
+            (Some(b), true) => b.technique.max_vals(),
             _ => 0,
         };
         let needed = self.uploaded_vals + rgbd + rsm;
-        if needed > self.val_capacity {
-            self.val_capacity = needed.next_power_of_two();
-            self.vals = gpu.storage_buffer_sized::<RawVal>("vals", self.val_capacity as usize)?;
+        if needed > self.vals.capacity {
+            self.vals.capacity = needed.next_power_of_two();
+            self.vals.buffer = gpu.storage_buffer_sized::<RawVal>("vals", self.vals.capacity as usize)?;
         }
         Ok(())
     }
@@ -348,170 +399,162 @@ impl Renderer {
     /// Light the next frames with `light` instead of the scene's spot light. The RSM and its
     /// VALs are rebuilt every frame, so nothing else changes. A scene without a spot light has
     /// no RSM stages: nothing happens (the service refuses such overrides before).
-    pub fn set_spot_light(&mut self, light: &scene::SpotLight) {
+    pub fn set_spot_light(&mut self, light: &SpotLight) {
         if let Some(sp) = &mut self.spot {
-            sp.spot = spot_of(light);
+            sp.vals.light = *light;
         }
     }
 
-    /// Render at `width` x `height` with the scene's camera.
+    /// Render both components at `width` x `height`.
     pub fn render(&mut self, gpu: &Gpu, method: Method, width: u32, height: u32) -> Result<Rendered, GpuError> {
-        self.prepare(gpu, method, width, height)?;
-        let (camera_to_clip, light_to_clip) = self.view_transforms(width, height);
-        let frame = self.frame_uniforms(camera_to_clip, light_to_clip.unwrap_or(Mat4::IDENTITY), width, height);
-        gpu.queue.write_buffer(&self.scene.frame, 0, bytemuck::bytes_of(&frame));
+        self.render_components(gpu, method, width, height, Components::ALL)
+    }
 
+    /// Render `components` at `width` x `height`: prepare the frame's techniques, record them
+    /// in order, submit, and read back the images they wrote.
+    pub fn render_components(
+        &mut self,
+        gpu: &Gpu,
+        method: Method,
+        width: u32,
+        height: u32,
+        components: Components,
+    ) -> Result<Rendered, GpuError> {
+        self.prepare(gpu, method, components, width, height)?;
+        let camera_to_clip = self.camera_to_clip(width, height);
+        let uniforms = self.frame_uniforms(camera_to_clip, width, height);
+        gpu.queue.write_buffer(&self.scene.frame, 0, bytemuck::bytes_of(&uniforms));
         // Uploaded VALs stay at the front; the RGB-D frame's and the spot light's are appended.
-        gpu.queue.write_buffer(&self.val_count, 0, bytemuck::bytes_of(&self.uploaded_vals));
+        gpu.queue.write_buffer(&self.vals.count, 0, bytemuck::bytes_of(&self.uploaded_vals));
 
-        let mut rec = Recorder::new(gpu, "relume.frame", 12);
-        let scene = &self.scene;
-        if let Some(sp) = &self.spot {
-            let light_to_clip = light_to_clip.expect("a spot light has a view");
-            rec.stage(stage::RSM_RASTER, |e, s| self.visibility.record(gpu, e, scene, &sp.view, light_to_clip, s))?;
-            let rsm_out =
-                RsmOutputs { vals: &self.vals, val_count: &self.val_count, light_distance: &sp.light_distance };
-            rec.stage(stage::RSM_VALS, |e, s| sp.rsm.record(gpu, e, scene, &sp.view, &rsm_out, s))?;
-        }
-        if let (true, Some((_, _, pass))) = (self.rgbd_active, &self.rgbd) {
-            rec.stage(stage::RGBD_VALS, |e, s| pass.record(gpu, e, &self.vals, &self.val_count, self.val_capacity, s))?;
-        }
-        let target = self.target.as_ref().expect("prepared above");
-        rec.stage(stage::VISIBILITY, |e, s| self.visibility.record(gpu, e, scene, &target.view, camera_to_clip, s))?;
-        match method {
-            Method::Sparse => {
-                let p = self.sparse.as_ref().expect("prepared above");
-                rec.stage(stage::GATHER, |e, s| {
-                    p.gather.record(gpu, e, scene, &self.vals, &self.val_count, &p.gathered, s)
-                })?;
-                if let Some(o) = &p.occlusion {
-                    rec.stage(stage::OCCLUSION, |e, s| o.record(gpu, e, scene, &p.gathered, s))?;
-                }
-                rec.stage(stage::RENORMALISE, |e, s| {
-                    p.renormalise.record(gpu, e, scene, &p.gathered, &p.sparse_lights, s)
-                })?;
-                rec.stage(stage::INTERPOLATE, |e, s| {
-                    p.interpolate.record(gpu, e, scene, &p.sparse_lights, &p.vertex_lights, s)
-                })?;
-                rec.stage(stage::SHADE, |e, s| {
-                    p.shade.record(gpu, e, scene, &target.view, &p.vertex_lights, &target.indirect, s)
-                })?;
-            }
-            Method::BruteForce => {
-                let b = self.brute_force.as_ref().expect("prepared above");
-                rec.stage(stage::BRUTE_FORCE, |e, s| {
-                    b.record(gpu, e, scene, &target.view, &self.vals, &self.val_count, &target.indirect, s)
-                })?;
-            }
-            Method::Exact => {
-                let x = self.exact.as_ref().expect("prepared above");
-                rec.stage(stage::EXACT, |e, s| {
-                    x.record(gpu, e, scene, &target.view, &self.vals, &self.val_count, &target.indirect, s)
-                })?;
-            }
-        }
-        if let Some(sp) = &self.spot {
-            rec.stage(stage::DIRECT, |e, s| {
-                sp.direct.record(gpu, e, scene, &target.view, &sp.light_distance, &target.direct, s)
-            })?;
+        let target = self.target.as_ref().expect("prepare sizes the camera target");
+        let frame = Frame { scene: &self.scene, vals: &self.vals, camera: target, camera_to_clip };
+        let (techniques, indirect) = self.techniques(method, components);
+        let stage_count = techniques.iter().map(|t| t.stages().len()).sum();
+        let mut rec = Recorder::new(gpu, "relume.frame", stage_count);
+        for t in &techniques {
+            t.record(gpu, &frame, &mut rec)?;
         }
         let mut timings = rec.finish()?;
         let mut exact_rounds = 0;
-        if let (Method::Exact, Some(x)) = (method, &self.exact) {
-            let rounds = x.finish(gpu, scene, &target.view, &self.vals, &self.val_count, &target.indirect)?;
-            // Rounds after the first are timed by wall clock, whatever timed the first.
-            if let Some((_, ms)) = timings.stages.iter_mut().find(|(name, _)| name == stage::EXACT) {
-                *ms += rounds.extra_ms;
-            }
-            exact_rounds = rounds.count;
+        for t in &techniques {
+            exact_rounds = exact_rounds.max(t.finish(gpu, &frame, &mut timings)?);
         }
+        let indirect_stages = indirect.map_or_else(Vec::new, |t| t.stages());
 
         let pixels = (width * height) as usize;
-        let indirect = gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?;
-        let direct = match self.spot {
-            Some(_) => gpu.read_buffer::<[f32; 4]>(&target.direct, pixels)?,
-            // No light of its own: the direct image is black where the geometry is.
-            None => indirect.iter().map(|p| [0.0, 0.0, 0.0, p[3]]).collect(),
+        let coverage_only = |image: &[[f32; 4]]| image.iter().map(|p| [0.0, 0.0, 0.0, p[3]]).collect::<Vec<_>>();
+        let (indirect, direct) = match (components.indirect, components.direct && self.spot.is_some()) {
+            (true, true) => {
+                (gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?, gpu.read_buffer(&target.direct, pixels)?)
+            }
+            (true, false) => {
+                let indirect = gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?;
+                let direct = coverage_only(&indirect);
+                (indirect, direct)
+            }
+            (false, true) => {
+                let direct = gpu.read_buffer::<[f32; 4]>(&target.direct, pixels)?;
+                (coverage_only(&direct), direct)
+            }
+            (false, false) => {
+                // Neither wrote the camera's images: coverage from its visibility buffer.
+                let coverage: Vec<[f32; 4]> = target
+                    .view
+                    .read(gpu)?
+                    .iter()
+                    .map(|h| [0.0, 0.0, 0.0, if h.is_some() { 1.0 } else { 0.0 }])
+                    .collect();
+                (coverage.clone(), coverage)
+            }
         };
         let val_count = self.live_val_count(gpu)?;
         Ok(Rendered {
             direct: LinearImage { width, height, pixels: direct },
             indirect: LinearImage { width, height, pixels: indirect },
             timings,
+            indirect_stages,
             val_count,
             exact_rounds,
         })
     }
 
-    /// Build the pipelines and buffers `method` needs at this size, once.
-    fn prepare(&mut self, gpu: &Gpu, method: Method, width: u32, height: u32) -> Result<(), GpuError> {
-        let scene = &self.scene;
-        match method {
-            Method::Sparse if self.sparse.is_none() => {
-                let glossy = self.glossy;
-                let n = scene.flat.sparse_points.len();
-                let v = scene.flat.vertices.len();
-                self.sparse = Some(SparsePasses {
-                    gather: Gather::new(gpu, scene, glossy)?,
-                    occlusion: match self.occlusion {
-                        scene::Occlusion::Off => None,
-                        scene::Occlusion::Disks => {
-                            let product = self.occlusion_rule == scene::OcclusionRule::Product;
-                            Some(Occlusion::new(gpu, scene, glossy, product)?)
-                        }
-                    },
-                    renormalise: Renormalise::new(gpu, scene, glossy)?,
-                    interpolate: Interpolate::new(gpu, scene, glossy)?,
-                    shade: Shade::new(gpu, scene, glossy)?,
-                    gathered: Lobes::new::<RawGathered>(gpu, "gather.gathered", n, glossy)?,
-                    sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy)?,
-                    vertex_lights: Lobes::new::<RawPointLight>(gpu, "interpolate.vertex_lights", v, glossy)?,
-                });
-            }
-            Method::BruteForce if self.brute_force.is_none() => {
-                self.brute_force = Some(BruteForce::new(gpu, scene, self.glossy)?);
-            }
-            Method::Exact if self.exact.is_none() => {
-                self.exact = Some(Exact::new(gpu, scene, self.glossy, self.exact_val_stride)?);
-            }
-            _ => {}
+    /// The frame's techniques in order, and which of them computes the indirect light. Call
+    /// after [`Renderer::prepare`] for the same method and components.
+    fn techniques(&self, method: Method, components: Components) -> (Vec<&dyn Technique>, Option<&dyn Technique>) {
+        let indirect: Option<&dyn Technique> = match (components.indirect, method) {
+            (false, _) => None,
+            (true, Method::Sparse) => self.indirect.sparse.as_ref().map(|b| &b.technique as &dyn Technique),
+            (true, Method::BruteForce) => self.indirect.brute_force.as_ref().map(|b| &b.technique as &dyn Technique),
+            (true, Method::Exact) => self.indirect.exact.as_ref().map(|b| &b.technique as &dyn Technique),
+        };
+        let mut list: Vec<&dyn Technique> = Vec::new();
+        // The spot light's RSM also makes the direct light's shadow map.
+        list.extend(self.spot.as_ref().map(|s| &s.vals as &dyn Technique));
+        if components.indirect && self.rgbd_active {
+            list.extend(self.rgbd.as_ref().map(|b| &b.technique as &dyn Technique));
         }
-        if let (Method::Exact, Some(x)) = (method, &mut self.exact) {
-            x.fit(gpu, (width * height) as usize)?;
+        list.push(&self.camera);
+        list.extend(indirect);
+        if components.direct {
+            list.extend(self.spot.as_ref().map(|s| &s.direct as &dyn Technique));
+        }
+        (list, indirect)
+    }
+
+    /// Build the techniques the frame needs that are not built for the current settings, and
+    /// fit them and the camera's images to this frame.
+    fn prepare(
+        &mut self,
+        gpu: &Gpu,
+        method: Method,
+        components: Components,
+        width: u32,
+        height: u32,
+    ) -> Result<(), GpuError> {
+        let (scene, glossy, capacity) = (&self.scene, self.glossy, self.vals.capacity);
+        let pixels = (width * height) as usize;
+        if components.indirect {
+            match method {
+                Method::Sparse => {
+                    let settings =
+                        SparseSettings { glossy, occlusion: self.occlusion, occlusion_rule: self.occlusion_rule };
+                    built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
+                        .fit(gpu, scene, capacity)?;
+                }
+                Method::BruteForce => {
+                    built_for(&mut self.indirect.brute_force, glossy, || BruteForce::new(gpu, scene, glossy))?
+                        .fit(gpu, scene, capacity)?;
+                }
+                Method::Exact => {
+                    let (stride, generation) = (self.exact_val_stride, self.placement_generation);
+                    built_for(&mut self.indirect.exact, (glossy, stride, generation), || {
+                        Exact::new(gpu, scene, glossy, stride)
+                    })?
+                    .fit(gpu, pixels)?;
+                }
+            }
         }
         let size_matches = self.target.as_ref().is_some_and(|t| t.view.width == width && t.view.height == height);
         if !size_matches {
-            let pixels = (width * height) as usize;
             self.target = Some(CameraTarget {
-                view: self.visibility.target(gpu, "camera", width, height),
+                view: self.raster.target(gpu, "camera", width, height),
                 indirect: gpu.storage_buffer_sized::<[f32; 4]>("frame.indirect", pixels)?,
                 direct: gpu.storage_buffer_sized::<[f32; 4]>("frame.direct", pixels)?,
             });
-        }
-        if let Some(p) = self.sparse.as_mut() {
-            p.gather.fit(gpu, &self.scene, self.val_capacity)?;
-        }
-        if let Some(b) = self.brute_force.as_mut() {
-            b.fit(gpu, &self.scene, self.val_capacity)?;
         }
         Ok(())
     }
 
     /// How many VALs the VAL buffer holds at most (what the frame's passes must cover).
     pub fn val_capacity(&self) -> u32 {
-        self.val_capacity
+        self.vals.capacity
     }
 
-    /// (camera world-to-clip, light world-to-clip when there is a spot light), with near and far
-    /// planes fitted to the scene.
-    pub fn view_transforms(&self, width: u32, height: u32) -> (Mat4, Option<Mat4>) {
-        let (centre, radius) = self.scene.flat.bounding_sphere();
-        let fit = |eye: Vec3| {
-            let far = (eye.distance(centre) + radius).max(1e-3) * 1.01;
-            (far * 1e-4, far)
-        };
-        let (near, far) = fit(self.view.eye());
-        let camera = match &self.view {
+    /// World to the camera's clip space at `width` x `height`, near and far fitted to the scene.
+    pub fn camera_to_clip(&self, width: u32, height: u32) -> Mat4 {
+        let (near, far) = self.scene.flat.depth_range(self.view.eye());
+        match &self.view {
             View::Scene(c) => {
                 glam::camera::rh::proj::directx::perspective(c.fov_y, width as f32 / height as f32, near, far)
                     * glam::camera::rh::view::look_at_mat4(c.position, c.target, c.up)
@@ -519,24 +562,21 @@ impl Renderer {
             View::Pinhole { intrinsics, camera_to_world } => {
                 pinhole_to_clip(&intrinsics.scaled_to(width, height), near, far) * Mat4::from(camera_to_world.inverse())
             }
-        };
-        let light = self.spot.as_ref().map(|sp| {
-            let s = &sp.spot;
-            let up = if s.direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
-            let (near, far) = fit(s.position);
-            glam::camera::rh::proj::directx::perspective(2.0 * s.outer_angle, 1.0, near, far)
-                * glam::camera::rh::view::look_at_mat4(s.position, s.position + s.direction, up)
-        });
-        (camera, light)
+        }
     }
 
-    fn frame_uniforms(&self, camera: Mat4, light: Mat4, width: u32, height: u32) -> RawFrame {
+    /// World to the spot light's clip space, when the scene has a spot light.
+    pub fn light_to_clip(&self) -> Option<Mat4> {
+        self.spot.as_ref().map(|s| s.vals.light_to_clip(&self.scene))
+    }
+
+    fn frame_uniforms(&self, camera: Mat4, width: u32, height: u32) -> RawFrame {
         let flat = &self.scene.flat;
         // Without a spot light its fields are unused: zero intensity, a valid cone.
-        let (spot, resolution) = match &self.spot {
-            Some(sp) => (sp.spot, sp.resolution),
+        let (spot, resolution, light) = match &self.spot {
+            Some(sp) => (sp.vals.light, sp.vals.resolution, sp.vals.light_to_clip(&self.scene)),
             None => (
-                Spot {
+                SpotLight {
                     position: Vec3::ZERO,
                     direction: Vec3::NEG_Y,
                     inner_angle: 0.0,
@@ -544,6 +584,7 @@ impl Renderer {
                     intensity: Vec3::ZERO,
                 },
                 0,
+                Mat4::IDENTITY,
             ),
         };
         RawFrame {
@@ -571,19 +612,24 @@ impl Renderer {
 
     /// How many VALs lit the last frame (appends past the capacity are dropped).
     fn live_val_count(&self, gpu: &Gpu) -> Result<u32, GpuError> {
-        Ok(gpu.read_buffer::<u32>(&self.val_count, 1)?[0].min(self.val_capacity))
+        Ok(gpu.read_buffer::<u32>(&self.vals.count, 1)?[0].min(self.vals.capacity))
     }
 
     /// The live VALs of the last frame (for the CPU twins and diagnostics).
-    pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::reference::Val>, GpuError> {
+    pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::twin::Val>, GpuError> {
         let n = self.live_val_count(gpu)? as usize;
-        Ok(gpu.read_buffer::<RawVal>(&self.vals, n)?.iter().map(Into::into).collect())
+        Ok(gpu.read_buffer::<RawVal>(&self.vals.buffer, n)?.iter().map(Into::into).collect())
+    }
+
+    /// The sparse technique, once a sparse frame was rendered.
+    fn sparse(&self) -> Option<&SparseMethod> {
+        self.indirect.sparse.as_ref().map(|b| &b.technique)
     }
 
     /// Diffuse irradiance (W/m²) the last sparse frame gathered at each sparse point (after
     /// occlusion); empty before the first sparse frame.
     pub fn read_gathered_irradiance(&self, gpu: &Gpu) -> Result<Vec<Vec3>, GpuError> {
-        let Some(p) = &self.sparse else {
+        let Some(p) = self.sparse() else {
             return Ok(Vec::new());
         };
         let gathered = gpu.read_buffer::<RawGathered>(&p.gathered.diffuse, self.scene.flat.sparse_points.len())?;
@@ -593,7 +639,7 @@ impl Renderer {
     /// The last sparse frame's intermediate buffers: (gathered, sparse lights, vertex lights),
     /// each per lobe (glossy empty when the scene has none).
     pub fn read_sparse_intermediates(&self, gpu: &Gpu) -> Result<SparseIntermediates, GpuError> {
-        let Some(p) = &self.sparse else {
+        let Some(p) = self.sparse() else {
             return Ok(SparseIntermediates::default());
         };
         let n = self.scene.flat.sparse_points.len();
@@ -630,17 +676,6 @@ pub struct SparseIntermediates {
     pub sparse_glossy: Vec<RawPointLight>,
     pub vertex_diffuse: Vec<RawPointLight>,
     pub vertex_glossy: Vec<RawPointLight>,
-}
-
-/// The spot light as the RSM and direct passes take it.
-fn spot_of(light: &scene::SpotLight) -> Spot {
-    Spot {
-        position: light.position,
-        direction: light.direction,
-        inner_angle: light.inner_angle,
-        outer_angle: light.outer_angle,
-        intensity: light.intensity,
-    }
 }
 
 /// Optical camera coordinates (x right, y down, z forward) to wgpu clip space for a pinhole

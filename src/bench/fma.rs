@@ -3,16 +3,16 @@
 //! gather at several tile (= workgroup) sizes.
 
 use super::BenchError;
-use crate::compare;
-use crate::gpu::gather::Gather;
-use crate::gpu::kernel::module_from_source;
+use crate::bench::compare;
+use crate::gpu::pass::module_from_source;
 use crate::gpu::raw::RawGathered;
+use crate::gpu::sparse::gather::Gather;
 use crate::gpu::timing::{Recorder, TimingSource};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::renderer::Renderer;
 use crate::scene::Scene;
 
-const WGSL: &str = include_str!("../../shaders/fma.wgsl");
+const WGSL: &str = include_str!("fma.wgsl");
 /// Independent vec4 chains per invocation (unrolled in the shader).
 const CHAINS: u64 = 8;
 const WORKGROUP_SIZE: u32 = 64;
@@ -73,9 +73,7 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
         // One warm-up dispatch, then the timed ones.
         for i in 0..=repeats {
             let mut rec = Recorder::new(gpu, "bench.gather", 1);
-            rec.stage("gather", |e, s| {
-                pass.record(gpu, e, &renderer.scene, &renderer.vals, &renderer.val_count, &gathered, s)
-            })?;
+            rec.stage("gather", |e, s| pass.record(gpu, e, &renderer.scene, &renderer.vals, &gathered, s))?;
             let ms = rec.finish()?.stages[0].1;
             if i > 0 {
                 best = best.min(ms);

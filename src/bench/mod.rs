@@ -1,6 +1,6 @@
 //! `relume bench`: a sweep over quality settings measuring, per configuration, what each stage
 //! costs, the device memory the renderer holds and how far the indirect image is from the
-//! references. Error figures come from [`crate::compare`], the code path of `relume compare`.
+//! references. Error figures come from [`crate::bench::compare`], the code path of `relume compare`.
 //!
 //! Axes: sparse points per mesh, interpolation neighbours per vertex, RSM resolution (the VAL
 //! count is at most its square), occlusion (off / disks), glossy (on / off) and output
@@ -9,15 +9,16 @@
 //! By default each axis is varied alone around a base configuration (the scene's settings);
 //! `grid` takes the Cartesian product instead.
 
+pub mod compare;
 pub mod fma;
 pub mod plot;
 pub mod table1;
 pub mod temporal;
 
-use crate::compare::{self, IndirectError};
+use self::compare::IndirectError;
 use crate::gpu::timing::TimingSource;
 use crate::gpu::{Gpu, GpuError, MemoryInUse};
-use crate::renderer::{Renderer, stage};
+use crate::renderer::{Rendered, Renderer, stage};
 use crate::scene::{MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -507,8 +508,8 @@ fn run_job(
             };
             renderer.release_reference_passes();
             for (config, frame, memory) in sparse_frames {
-                let sparse_indirect_ms = frame.timings.total_of(stage::SPARSE_INDIRECT);
-                let brute_force_ms = brute.as_ref().map(|b| b.timings.total_of(stage::BRUTE_FORCE_INDIRECT));
+                let sparse_indirect_ms = frame.indirect_ms();
+                let brute_force_ms = brute.as_ref().map(Rendered::indirect_ms);
                 let gather_ms = frame.timings.total_of(&[stage::GATHER]);
                 let interactions = frame.val_count as f64 * scene.sparse_point_count() as f64;
                 results.push(ConfigResult {
@@ -533,7 +534,7 @@ fn run_job(
                     gpu_memory_bytes: memory.total_bytes(),
                     vs_brute_force: brute.as_ref().map(|b| compare::indirect_error(&frame.indirect, &b.indirect)),
                     vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, &x.indirect)),
-                    exact_ms: exact.as_ref().map(|x| x.timings.total_of(&[stage::EXACT])),
+                    exact_ms: exact.as_ref().map(Rendered::indirect_ms),
                     paper_fps: table1::paper_fps(&job.variant, &config, scene.sparse_point_count()),
                 });
             }

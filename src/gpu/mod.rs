@@ -1,29 +1,44 @@
-//! The GPU side: one headless device, the scene's buffers, and one module per pass.
+//! The GPU side: one headless device, the scene's buffers, and the techniques, one folder each
+//! (`lights/`, `raster/`, `sparse/`, `visibility/`, `references/`), each pass's WGSL beside its
+//! Rust module. A technique ([`technique::Technique`]) prepares its resources and records its
+//! passes; [`crate::renderer`] runs the list of techniques a frame needs.
 //!
-//! Every pass owns its pipeline(s), bind-group layout and WGSL file, is built with
-//! `new(&Gpu, &GpuScene) -> Result<Self, GpuError>` and recorded with
-//! `record(&self, &mut CommandEncoder, ...)`. Passes that have a glossy variant expose two entry
-//! points, `main` and `main_glossy`; the glossy buffers are bound only by the latter and exist
-//! only when the scene has a glossy material.
+//! Every pass declares its bindings, entry points and workgroup size once in a
+//! [`pass::PassDesc`] (checked against its WGSL by naga in `tests/integration/layout.rs`), owns
+//! its pipeline(s) and records each dispatch with one call that names its resources
+//! ([`pass::Kernel::run`]). Passes that have a glossy variant have two entry points, `main` and
+//! `main_glossy`; the glossy buffers are bound only by the latter and exist only when the scene
+//! has a glossy material. Shared WGSL (structs, the DESIGN.md formulas, the scene bindings) is
+//! in `shader/`.
 
-pub mod brute_force;
-pub mod direct;
-pub mod exact;
-pub mod gather;
-pub mod interpolate;
-pub mod kernel;
-pub mod occlusion;
+pub mod lights;
+pub mod pass;
+pub mod raster;
 pub mod raw;
-pub mod renormalise;
-pub mod rgbd;
-pub mod rsm;
+pub mod references;
 pub mod scene;
-pub mod shade;
 pub mod shader;
+pub mod sparse;
+pub mod technique;
 pub mod timing;
 pub mod visibility;
 
 use bytemuck::Pod;
+
+/// Every compute pass's declaration, in frame order: what the naga layout test checks against
+/// the WGSL (`tests/integration/layout.rs`) and the shaders the compilation test builds.
+pub const PASSES: &[&pass::PassDesc] = &[
+    &lights::rsm::PASS,
+    &lights::rgbd::PASS,
+    &sparse::gather::PASS,
+    &visibility::disks::PASS,
+    &sparse::renormalise::PASS,
+    &sparse::interpolate::PASS,
+    &sparse::shade::PASS,
+    &references::brute_force::PASS,
+    &references::exact::PASS,
+    &lights::direct::PASS,
+];
 
 /// Errors from the device and from pipeline creation.
 #[derive(Debug, thiserror::Error)]
@@ -51,7 +66,7 @@ pub enum GpuError {
 /// Loop iterations after which llvmpipe (lavapipe) ends every loop of a shader invocation,
 /// silently: `LP_MAX_TGSI_LOOP_ITERATIONS` in Mesa's gallivm, "shared between every loop in a
 /// shader" and counted per SIMD vector of invocations. Passes whose loops can run longer must
-/// split their work (`gpu::exact` runs in rounds).
+/// split their work (`gpu::references::exact` runs in rounds).
 pub const LLVMPIPE_LOOP_LIMIT: u32 = 65_535;
 
 /// A pair of per-lobe buffers: the diffuse one always, the glossy one only when the scene has a
@@ -138,7 +153,7 @@ impl Gpu {
     /// run past [`LLVMPIPE_LOOP_LIMIT`] (one loop iteration per VAL and two per tile) and
     /// silently drop the rest (with 125,676 VALs in one dispatch the brute force used exactly
     /// the first 63,551); both therefore split their VALs into ranges there
-    /// ([`kernel::ValRangeKernels`]). [`Gpu::is_cpu`] says whether it applies.
+    /// ([`pass::Kernels::val_ranges`]). [`Gpu::is_cpu`] says whether it applies.
     pub const CPU_MAX_GATHERED_VALS: u32 = LLVMPIPE_LOOP_LIMIT / (shader::TILE_SIZE + 2) * shader::TILE_SIZE;
 
     /// Whether the adapter runs on the CPU (lavapipe / llvmpipe).

@@ -1,7 +1,7 @@
-//! `#[repr(C)]` twins of the structs in `shaders/common.wgsl`. A test parses the WGSL with naga
+//! `#[repr(C)]` twins of the structs in `shader/common.wgsl`. A test parses the WGSL with naga
 //! and checks every size and field offset against these.
 
-use crate::reference;
+use crate::twin;
 use bytemuck::{Pod, Zeroable};
 
 /// WGSL `Val`.
@@ -16,8 +16,8 @@ pub struct RawVal {
     pub _pad1: f32,
 }
 
-impl From<&reference::Val> for RawVal {
-    fn from(v: &reference::Val) -> Self {
+impl From<&twin::Val> for RawVal {
+    fn from(v: &twin::Val) -> Self {
         Self {
             position: v.position.into(),
             area: v.area,
@@ -29,7 +29,7 @@ impl From<&reference::Val> for RawVal {
     }
 }
 
-impl From<&RawVal> for reference::Val {
+impl From<&RawVal> for twin::Val {
     fn from(v: &RawVal) -> Self {
         Self { position: v.position.into(), normal: v.normal.into(), area: v.area, flux: v.flux.into() }
     }
@@ -92,14 +92,14 @@ pub struct RawPointLight {
     pub _pad1: f32,
 }
 
-impl From<&RawPointLight> for reference::PointLight {
+impl From<&RawPointLight> for twin::PointLight {
     fn from(p: &RawPointLight) -> Self {
         Self { position: p.position.into(), intensity: p.intensity.into() }
     }
 }
 
-impl From<&reference::PointLight> for RawPointLight {
-    fn from(p: &reference::PointLight) -> Self {
+impl From<&twin::PointLight> for RawPointLight {
+    fn from(p: &twin::PointLight) -> Self {
         Self { position: p.position.into(), _pad0: 0.0, intensity: p.intensity.into(), _pad1: 0.0 }
     }
 }

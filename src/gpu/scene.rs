@@ -3,8 +3,8 @@
 
 use super::raw::{RawFrame, RawMaterial, RawSparsePoint, RawVertex};
 use super::{Gpu, GpuError};
-use crate::reference;
 use crate::scene::Scene;
+use crate::twin;
 use glam::{Mat4, Vec3};
 
 /// World-space arrays of a whole scene, as the GPU sees them (also the CPU twins' input).
@@ -120,23 +120,24 @@ impl FlatScene {
     }
 
     /// Interpolated surface of `triangle` at barycentrics `b`: (position, unit normal, material).
-    /// Twin of `surface_at` in `shaders/scene.wgsl`.
-    pub fn surface_at(&self, triangle: u32, b: glam::Vec2) -> (Vec3, Vec3, crate::reference::Surface) {
+    /// Twin of `surface_at` in `shader/scene.wgsl`.
+    pub fn surface_at(&self, triangle: u32, b: glam::Vec2) -> (Vec3, Vec3, crate::twin::Material) {
         let t = 3 * triangle as usize;
         let v = [0, 1, 2].map(|k| self.vertices[self.indices[t + k] as usize]);
         let p = v.map(|v| Vec3::from(v.position));
-        let n = reference::barycentric(b, v[0].normal.into(), v[1].normal.into(), v[2].normal.into());
+        let n = twin::barycentric(b, v[0].normal.into(), v[1].normal.into(), v[2].normal.into());
         let normal =
             if n.length_squared() > 1e-20 { n.normalize() } else { (p[1] - p[0]).cross(p[2] - p[0]).normalize() };
         let m = self.materials[self.triangle_materials[triangle as usize] as usize];
         let mut diffuse = Vec3::from(m.diffuse);
         if let (Ok(layer), Some(textures)) = (usize::try_from(m.diffuse_texture), &self.textures) {
             let st = |v: RawVertex| Vec3::new(v.s, v.t, 0.0);
-            let st = reference::barycentric(b, st(v[0]), st(v[1]), st(v[2])).truncate();
-            diffuse *= reference::sample_bilinear(&textures.layers[layer], textures.width, textures.height, st);
+            let st = twin::barycentric(b, st(v[0]), st(v[1]), st(v[2])).truncate();
+            diffuse *= twin::sample_bilinear(&textures.layers[layer], textures.width, textures.height, st);
         }
-        let surface = reference::Surface { diffuse, specular: m.specular.into(), exponent: m.exponent };
-        (reference::barycentric(b, p[0], p[1], p[2]), normal, surface)
+        let surface =
+            twin::Material { diffuse, specular: m.specular.into(), exponent: m.exponent, diffuse_texture: None };
+        (twin::barycentric(b, p[0], p[1], p[2]), normal, surface)
     }
 
     /// Centre and radius of a sphere bounding every vertex (m).
@@ -149,12 +150,20 @@ impl FlatScene {
         let centre = (lo + hi) * 0.5;
         (centre, (hi - lo).length() * 0.5)
     }
+
+    /// Near and far planes (m) that hold the whole scene for a viewpoint at `eye`: far just past
+    /// the bounding sphere, near 1e-4 of it.
+    pub fn depth_range(&self, eye: Vec3) -> (f32, f32) {
+        let (centre, radius) = self.bounding_sphere();
+        let far = (eye.distance(centre) + radius).max(1e-3) * 1.01;
+        (far * 1e-4, far)
+    }
 }
 
 /// The uploaded scene.
 pub struct GpuScene {
     pub flat: FlatScene,
-    /// Layout of group(1) (`shaders/scene.wgsl`).
+    /// Layout of group(1) (`shader/scene.wgsl`).
     pub layout: wgpu::BindGroupLayout,
     pub bind_group: wgpu::BindGroup,
     /// The `Frame` uniform, rewritten every frame.
@@ -228,7 +237,7 @@ impl GpuScene {
         Ok(Self { flat, layout, bind_group, frame, vertices, indices, sparse_points, vertex_neighbours })
     }
 
-    /// Whether the scene binds diffuse textures (`shaders/scene_textures.wgsl`).
+    /// Whether the scene binds diffuse textures (`shader/scene_textures.wgsl`).
     pub fn textured(&self) -> bool {
         self.flat.textures.is_some()
     }

@@ -30,6 +30,13 @@ pub struct StageTimings {
 }
 
 impl StageTimings {
+    /// Add `ms` to stage `name` (work of the stage done after the frame was submitted).
+    pub fn add(&mut self, name: &str, ms: f64) {
+        if let Some((_, total)) = self.stages.iter_mut().find(|(n, _)| n == name) {
+            *total += ms;
+        }
+    }
+
     /// Sum of the stages whose names are in `names` (ms).
     pub fn total_of(&self, names: &[&str]) -> f64 {
         self.stages.iter().filter(|(n, _)| names.contains(&n.as_str())).map(|(_, ms)| ms).sum()
@@ -77,8 +84,9 @@ pub struct Recorder<'g> {
 }
 
 impl<'g> Recorder<'g> {
-    /// A recorder for at most `capacity` stages.
-    pub fn new(gpu: &'g Gpu, label: &str, capacity: u32) -> Self {
+    /// A recorder for at most `stages` stages (the frame's techniques say how many).
+    pub fn new(gpu: &'g Gpu, label: &str, stages: usize) -> Self {
+        let capacity = stages.max(1) as u32;
         let queries = gpu.timestamps.then(|| {
             let set = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some(&format!("{label}.timestamps")),

@@ -13,7 +13,7 @@ use std::mem::size_of;
 
 use glam::Vec3;
 
-use crate::reference::Val;
+use crate::twin::Val;
 
 /// Integer grid coordinates of a cell; ordered x, then y, then z.
 type CellKey = (i32, i32, i32);

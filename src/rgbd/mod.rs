@@ -4,7 +4,7 @@
 //!
 //! - [`recording`]: TUM RGB-D recordings on disk (association, pose interpolation, intrinsics).
 //! - [`accumulate`]: a persistent world-space VAL set across frames (paper §5, restriction 3).
-//! - `reference::rgbd`: the CPU twin of the VAL generation; `gpu::rgbd`: the GPU pass.
+//! - `twin::rgbd`: the CPU twin of the VAL generation; `gpu::lights::rgbd`: the GPU pass.
 
 use glam::Affine3A;
 use serde::{Deserialize, Serialize};

@@ -3,8 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::image::LinearImage;
-use crate::renderer::{Method, Rendered};
+use crate::renderer::Method;
 use crate::scene::{CameraDescription, LightDescription, Occlusion, Scene, SceneError};
 
 /// What `POST /v1/scenes` and `GET /v1/scenes/{id}` answer.
@@ -156,27 +155,7 @@ impl From<RenderMethod> for Method {
     }
 }
 
-/// Which light the image shows.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum Component {
-    /// Direct plus indirect.
-    #[default]
-    Full,
-    Direct,
-    Indirect,
-}
-
-impl Component {
-    /// This component of a frame.
-    pub fn of(self, frame: &Rendered) -> LinearImage {
-        match self {
-            Component::Full => frame.direct.add(&frame.indirect),
-            Component::Direct => frame.direct.clone(),
-            Component::Indirect => frame.indirect.clone(),
-        }
-    }
-}
+pub use crate::renderer::Component;
 
 /// The response body's format.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]

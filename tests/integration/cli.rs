@@ -42,7 +42,7 @@ fn render_writes_png_and_exr_of_the_requested_size() {
 #[test]
 fn compare_prints_the_documented_fields() {
     let scene = fixture("scenes/cornell_bunny_small.json");
-    let o = relume(&["compare", scene.to_str().unwrap(), "--json", "--width", "32", "--height", "32"]);
+    let o = relume(&["compare", scene.to_str().unwrap(), "--width", "32", "--height", "32"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     for key in ["sparse_ms", "brute_force_ms", "indirect_rel_rmse", "indirect_flip_mean"] {

@@ -1,12 +1,13 @@
 //! The hand-mirrored `#[repr(C)]` structs match the WGSL structs, field by field (naga parses
-//! the shaders; no drift like kajiya's HLSL/Rust copies), and every shader validates.
+//! the shaders; no drift like kajiya's HLSL/Rust copies), every pass's declared bindings and
+//! workgroup size are what its WGSL uses, and every shader validates.
 
 use relume::gpu::raw::*;
 use relume::gpu::shader;
 use std::mem::{offset_of, size_of};
 
 fn module() -> naga::Module {
-    module_of("gather.wgsl")
+    module_of("gather")
 }
 
 fn module_of(name: &str) -> naga::Module {
@@ -72,8 +73,8 @@ fn rust_structs_match_wgsl() {
 
 #[test]
 fn rgbd_structs_match_wgsl() {
-    use relume::gpu::rgbd::{RawIntrinsics, RawRgbdParams, RawRgbdSettings};
-    let m = module_of("rgbd.wgsl");
+    use relume::gpu::lights::rgbd::{RawIntrinsics, RawRgbdParams, RawRgbdSettings};
+    let m = module_of("rgbd");
     check!(m, "Intrinsics", RawIntrinsics, [width, height, fx, fy, cx, cy]);
     check!(
         m,
@@ -92,5 +93,68 @@ fn every_shader_validates() {
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
             .validate(&module)
             .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+    }
+}
+
+/// The kind of a group(0) global as the pass declarations name it.
+fn slot_of(module: &naga::Module, global: &naga::GlobalVariable) -> relume::gpu::pass::Slot {
+    use relume::gpu::pass::Slot;
+    match (global.space, &module.types[global.ty].inner) {
+        (naga::AddressSpace::Storage { access }, _) if access.contains(naga::StorageAccess::STORE) => {
+            Slot::StorageReadWrite
+        }
+        (naga::AddressSpace::Storage { .. }, _) => Slot::Storage,
+        (
+            naga::AddressSpace::Handle,
+            naga::TypeInner::Image { class: naga::ImageClass::Sampled { kind: naga::ScalarKind::Uint, .. }, .. },
+        ) => Slot::TextureUint,
+        (space, ty) => panic!("{:?}: no slot for {space:?} {ty:?}", global.name),
+    }
+}
+
+/// Every entry point of every pass uses exactly the group(0) bindings its `PassDesc` declares
+/// for it (names, kinds and binding indices, in order), and runs the declared workgroup size:
+/// the Rust side binds by these names, so a renamed, moved or retyped WGSL binding fails here.
+#[test]
+fn pass_declarations_match_wgsl() {
+    for pass in relume::gpu::PASSES {
+        for textured in [false, true] {
+            let source = (pass.default_source)(textured);
+            let module = naga::front::wgsl::parse_str(&source)
+                .unwrap_or_else(|e| panic!("{}: {}", pass.label, e.emit_to_string(&source)));
+            let info =
+                naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all())
+                    .validate(&module)
+                    .unwrap_or_else(|e| panic!("{}: {e:?}", pass.label));
+            assert_eq!(
+                module.entry_points.len(),
+                pass.entries.len(),
+                "{}: entry points declared vs in the WGSL",
+                pass.label
+            );
+            for entry in pass.entries {
+                let (index, point) = module
+                    .entry_points
+                    .iter()
+                    .enumerate()
+                    .find(|(_, e)| e.name == entry.name)
+                    .unwrap_or_else(|| panic!("{}: no entry point {}", pass.label, entry.name));
+                let uses = info.get_entry_point(index);
+                let mut used: Vec<(u32, String, relume::gpu::pass::Slot)> = module
+                    .global_variables
+                    .iter()
+                    .filter(|(handle, _)| !uses[*handle].is_empty())
+                    .filter_map(|(_, g)| {
+                        let b = g.binding.as_ref().filter(|b| b.group == 0)?;
+                        Some((b.binding, g.name.clone().unwrap_or_default(), slot_of(&module, g)))
+                    })
+                    .collect();
+                used.sort_by_key(|u| u.0);
+                let declared: Vec<(u32, String, relume::gpu::pass::Slot)> =
+                    entry.uses(pass).into_iter().map(|(i, b)| (i, b.name.to_owned(), b.slot)).collect();
+                assert_eq!(used, declared, "{}.{}: group(0) bindings", pass.label, entry.name);
+                assert_eq!(point.workgroup_size, pass.workgroup, "{}.{}: workgroup size", pass.label, entry.name);
+            }
+        }
     }
 }

@@ -4,6 +4,7 @@
 mod accuracy;
 mod bench;
 mod cli;
+mod frame;
 mod fuzz;
 mod layout;
 mod recording;
@@ -49,8 +50,8 @@ pub fn assert_close(a: glam::Vec3, b: glam::Vec3, rel: f32, scale: f32, abs: f32
 /// CPU twin values at every visibility texel that hit geometry: `f(position, normal, surface)`.
 pub fn per_hit(
     flat: &relume::gpu::scene::FlatScene,
-    hits: &[Option<relume::gpu::visibility::Hit>],
-    f: impl Fn(glam::Vec3, glam::Vec3, &relume::reference::Surface) -> glam::Vec3,
+    hits: &[Option<relume::gpu::raster::Hit>],
+    f: impl Fn(glam::Vec3, glam::Vec3, &relume::twin::Material) -> glam::Vec3,
 ) -> Vec<Option<glam::Vec3>> {
     hits.iter()
         .map(|hit| {

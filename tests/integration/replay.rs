@@ -81,7 +81,7 @@ fn bunny_takes_on_the_rooms_colour() {
         let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
         let out = mr.render_frame(&gpu, f).unwrap();
         let bunny: glam::Vec3 = (0..out.indirect.pixels.len()).map(|i| out.indirect.rgb(i)).sum();
-        let vals: glam::Vec3 = relume::reference::rgbd::rgbd_vals(f, &scene.settings.rgbd).iter().map(|v| v.flux).sum();
+        let vals: glam::Vec3 = relume::twin::rgbd::rgbd_vals(f, &scene.settings.rgbd).iter().map(|v| v.flux).sum();
         shares.push((red_share(bunny), red_share(vals)));
     }
     let (neutral, red) = (shares[0], shares[1]);

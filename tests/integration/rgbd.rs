@@ -1,4 +1,4 @@
-//! The RGB-D VAL pass (`gpu::rgbd`) against its CPU twin (`reference::rgbd`, DESIGN.md §2
+//! The RGB-D VAL pass (`gpu::lights::rgbd`) against its CPU twin (`twin::rgbd`, DESIGN.md §2
 //! "RGB-D frames") on a small synthetic frame, and its append contract: after what is already
 //! in the VAL buffer, never past the capacity.
 //!
@@ -17,12 +17,13 @@
 use super::{gpu, load_scene};
 use glam::{Affine3A, Quat, UVec2, Vec3};
 use relume::gpu::Gpu;
+use relume::gpu::lights::rgbd::RgbdVals;
 use relume::gpu::raw::RawVal;
-use relume::gpu::rgbd::RgbdVals;
 use relume::gpu::scene::{FlatScene, GpuScene};
-use relume::reference::Val;
-use relume::reference::rgbd::{cell_block, cell_centre, rgbd_vals_by_cell};
+use relume::gpu::technique::Vals;
 use relume::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
+use relume::twin::Val;
+use relume::twin::rgbd::{cell_block, cell_centre, rgbd_vals_by_cell};
 use std::collections::HashMap;
 
 const SMALL: Intrinsics = Intrinsics { width: 64, height: 48, fx: 60.0, fy: 60.0, cx: 31.5, cy: 23.5 };
@@ -96,9 +97,10 @@ fn run(
     let count = gpu.storage_buffer("test.val_count", &[initial.len() as u32], wgpu::BufferUsages::COPY_SRC).unwrap();
     pass.upload(gpu, frame).unwrap();
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.rgbd") });
-    pass.record(gpu, &mut encoder, &vals, &count, capacity, None);
+    let vals = Vals { buffer: vals, count, capacity };
+    pass.append(gpu, &mut encoder, &f.scene, &vals, None);
     gpu.submit_and_wait(encoder).unwrap();
-    (gpu.read_buffer::<u32>(&count, 1).unwrap()[0], gpu.read_buffer::<RawVal>(&vals, buffer_len).unwrap())
+    (gpu.read_buffer::<u32>(&vals.count, 1).unwrap()[0], gpu.read_buffer::<RawVal>(&vals.buffer, buffer_len).unwrap())
 }
 
 const SENTINEL: RawVal =

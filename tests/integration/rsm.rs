@@ -2,9 +2,10 @@
 
 use super::{gpu, scratch};
 use glam::Vec3;
-use relume::reference::rsm::{Spot, spot_cone_flux};
 use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
+use relume::scene::SpotLight;
+use relume::twin::rsm::spot_cone_flux;
 
 /// A spot aimed straight down at a large plane: every ray of the cone hits the plane, so the
 /// VALs' total flux is `rho_d * I * 2 pi * integral falloff sin` (§2). Tolerance 0.5 %: the RSM
@@ -26,7 +27,7 @@ fn rsm_flux_equals_analytic_cone_flux_on_a_plane() {
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
     let total: Vec3 = renderer.read_vals(&gpu).unwrap().iter().map(|v| v.flux).sum();
-    let spot = Spot {
+    let spot = SpotLight {
         position: Vec3::new(0.0, 2.0, 0.0),
         direction: -Vec3::Y,
         inner_angle: 20f32.to_radians(),

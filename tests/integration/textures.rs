@@ -1,13 +1,13 @@
 //! Diffuse textures (`map_Kd`): the GPU's sampled albedo against the CPU twin's bilinear sample.
 
 use super::{assert_close, gpu, scratch};
-use relume::reference;
 use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
+use relume::twin;
 
 /// A textured floor under a spot light. The direct pass applies the sampled albedo, so the
-/// direct image against `reference::rsm::direct_radiance` with `FlatScene::surface_at` (which
-/// samples with `reference::sample_bilinear`) checks texture coordinates, the v flip, sRGB
+/// direct image against `twin::rsm::direct_radiance` with `FlatScene::surface_at` (which
+/// samples with `twin::sample_bilinear`) checks texture coordinates, the v flip, sRGB
 /// decoding and filtering. Tolerance 1 % of the image maximum: GPUs (lavapipe included) filter
 /// with 8-bit sub-texel weights, an error of up to 1/256 of the contrast between texels, and
 /// the spot's falloff differs by ~1e-4 as in the other twins.
@@ -41,8 +41,7 @@ fn textured_albedo_matches_cpu_twin() {
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let flat = &renderer.scene.flat;
     let (eye, spot) = (renderer.view().eye(), renderer.spot().unwrap());
-    let expected =
-        super::per_hit(flat, &hits, |p, n, surface| reference::rsm::direct_radiance(p, n, surface, eye, &spot));
+    let expected = super::per_hit(flat, &hits, |p, n, surface| twin::rsm::direct_radiance(p, n, surface, eye, &spot));
     let scale = expected.iter().flatten().map(|v| v.max_element()).fold(0.0, f32::max);
     let (mut reddish, mut bluish) = (0, 0);
     for (i, e) in expected.iter().enumerate() {

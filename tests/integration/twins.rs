@@ -1,4 +1,4 @@
-//! Every GPU pass against its CPU twin in `relume::reference`, on the same inputs: each pass's
+//! Every GPU pass against its CPU twin in `relume::twin`, on the same inputs: each pass's
 //! input is read back from the GPU, fed to the twin, and the outputs compared.
 //!
 //! Tolerances: lavapipe evaluates `inverseSqrt`, `exp2`/`log2` and `acos` with a few ulp of
@@ -9,8 +9,8 @@
 use super::{assert_close, gpu, load_scene};
 use glam::Vec3;
 use relume::gpu::raw::RawPointLight;
-use relume::reference::{self, PointLight, Val};
 use relume::renderer::{Method, Renderer};
+use relume::twin::{self, PointLight, Val};
 
 const REL: f32 = 1e-3;
 
@@ -44,15 +44,8 @@ fn sparse_pipeline_matches_cpu_twins() {
     for (i, p) in flat.sparse_points.iter().enumerate() {
         let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
         let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
-        cpu_sparse.0.push(reference::renormalise_diffuse(x, n, gd.irradiance.into(), gd.position.into()));
-        cpu_sparse.1.push(reference::renormalise_glossy(
-            x,
-            n,
-            p.exponent,
-            eye,
-            gg.irradiance.into(),
-            gg.position.into(),
-        ));
+        cpu_sparse.0.push(twin::renormalise_diffuse(x, n, gd.irradiance.into(), gd.position.into()));
+        cpu_sparse.1.push(twin::renormalise_glossy(x, n, p.exponent, eye, gg.irradiance.into(), gg.position.into()));
     }
     for (cpu, gpu_lights, what) in
         [(&cpu_sparse.0, &mid.sparse_diffuse, "I_d"), (&cpu_sparse.1, &mid.sparse_glossy, "I_s")]
@@ -81,20 +74,20 @@ fn sparse_pipeline_matches_cpu_twins() {
             let t = 3 * h.triangle as usize;
             let corners = [0, 1, 2].map(|k| flat.indices[t + k] as usize);
             let lerp = |l: &[PointLight]| PointLight {
-                position: reference::barycentric(
+                position: twin::barycentric(
                     h.barycentrics,
                     l[corners[0]].position,
                     l[corners[1]].position,
                     l[corners[2]].position,
                 ),
-                intensity: reference::barycentric(
+                intensity: twin::barycentric(
                     h.barycentrics,
                     l[corners[0]].intensity,
                     l[corners[1]].intensity,
                     l[corners[2]].intensity,
                 ),
             };
-            reference::shade_sparse(p, n, &surface, eye, &lerp(&vd), Some(&lerp(&vs)))
+            twin::shade_sparse(p, n, &surface, eye, &lerp(&vd), Some(&lerp(&vs)))
         }));
     }
     let scale = max_of(expected.iter().flatten().copied());
@@ -108,8 +101,7 @@ fn sparse_pipeline_matches_cpu_twins() {
 
     // Direct light: wherever the shadow test passes, the GPU equals the twin.
     let spot = renderer.spot().unwrap();
-    let direct =
-        super::per_hit(flat, &hits, |p, n, surface| reference::rsm::direct_radiance(p, n, surface, eye, &spot));
+    let direct = super::per_hit(flat, &hits, |p, n, surface| twin::rsm::direct_radiance(p, n, surface, eye, &spot));
     let scale = max_of(direct.iter().flatten().copied());
     let mut lit = 0;
     for (i, want) in direct.iter().enumerate() {
@@ -143,17 +135,17 @@ fn gather_takes_every_val_past_the_cpu_loop_limit() {
 }
 
 /// The GPU's gathered light (diffuse and glossy irradiance, mean diffuse VAL position) at every
-/// sparse point against `reference::gather_point` over `vals`.
+/// sparse point against `twin::gather_point` over `vals`.
 fn assert_gather_matches_twin(
     flat: &relume::gpu::scene::FlatScene,
     mid: &relume::renderer::SparseIntermediates,
     eye: Vec3,
     vals: &[Val],
 ) {
-    let cpu: Vec<reference::Gathered> = flat
+    let cpu: Vec<twin::Gathered> = flat
         .sparse_points
         .iter()
-        .map(|p| reference::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, vals))
+        .map(|p| twin::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, vals))
         .collect();
     let scale_e = max_of(cpu.iter().map(|g| g.irradiance));
     let scale_g = max_of(cpu.iter().map(|g| g.glossy_irradiance));
@@ -193,7 +185,7 @@ fn brute_force_matches_twin(rsm_resolution: Option<u32>, (w, h): (u32, u32)) {
     let flat = &renderer.scene.flat;
     let eye = renderer.view().eye();
     let expected = super::per_hit(flat, &hits, |p, n, surface| {
-        reference::shade_brute_force(p, n, surface, eye, &vals, renderer.glossy())
+        twin::shade_brute_force(p, n, surface, eye, &vals, renderer.glossy())
     });
     if rsm_resolution.is_some() {
         assert!(vals.len() as u32 > relume::gpu::Gpu::CPU_MAX_GATHERED_VALS, "{} VALs", vals.len());
@@ -223,8 +215,8 @@ fn rsm_vals_match_cpu_twin() {
     for (t, hit) in hits.iter().enumerate() {
         if let Some(h) = hit {
             let (y, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
-            let ndc = reference::rsm::rsm_texel_ndc(t as u32 % r, t as u32 / r, r);
-            let v = reference::rsm::rsm_texel_val(ndc, r, &spot, y, n, surface.diffuse);
+            let ndc = twin::rsm::rsm_texel_ndc(t as u32 % r, t as u32 / r, r);
+            let v = twin::rsm::rsm_texel_val(ndc, r, &spot, y, n, surface.diffuse);
             if v.flux.max_element() > 0.0 {
                 cpu_vals.push(v);
             }
@@ -274,12 +266,12 @@ fn extreme_materials_render_finite_and_non_negative() {
     }
 }
 
-/// The occlusion pass against `reference::occlusion` for both combination rules: the GPU's
+/// The occlusion pass against `gpu::visibility::disks::twin` for both combination rules: the GPU's
 /// gathered irradiance after occlusion equals the CPU gather times the CPU visibility of the
 /// GPU's own light sphere (same 1e-3 tolerance as the other twins).
 #[test]
 fn occlusion_matches_cpu_twin() {
-    use reference::occlusion::{Combine, Disc, light_sphere, visibility};
+    use relume::gpu::visibility::disks::twin::{Combine, Disc, light_sphere, visibility};
     let dir = super::fixture("scenes");
     let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
     for (rule, combine) in [("sum", Combine::Sum), ("product", Combine::Product)] {
@@ -304,7 +296,7 @@ fn occlusion_matches_cpu_twin() {
         let mut occluded = 0;
         for (i, p) in flat.sparse_points.iter().enumerate() {
             let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
-            let g = reference::gather_point(x, n, p.exponent, eye, &vals);
+            let g = twin::gather_point(x, n, p.exponent, eye, &vals);
             let gd = &mid.gathered_diffuse[i];
             let sphere = light_sphere(gd.position.into(), gd.second_moment.into());
             let others: Vec<Disc> = discs.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, d)| *d).collect();
@@ -344,7 +336,7 @@ fn exact_visibility_matches_cpu_twin_on_cornell_bunny() {
 
 fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
     use relume::gpu::shader::RAY_OFFSET;
-    use relume::reference::bvh::Bvh;
+    use relume::twin::bvh::Bvh;
     let gpu = gpu();
     let scene = load_scene(scene);
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
@@ -373,7 +365,7 @@ fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
             .filter(|v| !bvh.occluded(&positions, &triangles, p + n * RAY_OFFSET, v.position + v.normal * RAY_OFFSET))
             .copied()
             .collect();
-        reference::shade_brute_force(p, n, surface, eye, &visible, renderer.glossy())
+        twin::shade_brute_force(p, n, surface, eye, &visible, renderer.glossy())
     });
     let scale = max_of(expected.iter().flatten().copied());
     let mut differing = 0;
@@ -395,7 +387,7 @@ fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
     assert!(sum_exact < 0.95 * sum_brute, "exact {sum_exact} vs unoccluded {sum_brute}");
 }
 
-/// The GPU's per-vertex lights against `reference::interpolate_lights` over each vertex's
+/// The GPU's per-vertex lights against `twin::interpolate_lights` over each vertex's
 /// `flat.neighbours` sparse points, from the GPU's own sparse lights.
 fn assert_interpolation_matches_twin(
     flat: &relume::gpu::scene::FlatScene,
@@ -411,9 +403,9 @@ fn assert_interpolation_matches_twin(
         let distances: Vec<f32> =
             ids.iter().map(|&i| Vec3::from(vertex.position).distance(sp(i).position.into())).collect();
         let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
-        let w = reference::interpolation_weights(vertex.normal.into(), &distances, &normals);
-        let d = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>());
-        let s = reference::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>());
+        let w = twin::interpolation_weights(vertex.normal.into(), &distances, &normals);
+        let d = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>());
+        let s = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>());
         assert_close(
             light(&mid.vertex_diffuse[v]).intensity,
             d.intensity,

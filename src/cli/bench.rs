@@ -1,0 +1,81 @@
+//! `relume bench`: the sweep of quality settings, the paper's Table 1, the FMA and temporal
+//! measurements.
+
+use super::Reference;
+use relume::gpu::Gpu;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(clap::Args)]
+pub struct Args {
+    scene: PathBuf,
+    /// An axis and its values, AXIS=V1,V2,...; axes: sparse_points (per mesh),
+    /// rsm_resolution (VALs <= R²), occlusion (off,disks), glossy (on,off), resolution
+    /// (WxH or N). Repeat for more axes.
+    #[arg(long = "sweep", value_name = "AXIS=V1,V2,...")]
+    sweep: Vec<String>,
+    /// Every combination of the swept values instead of one axis at a time around the
+    /// scene's settings.
+    #[arg(long)]
+    grid: bool,
+    /// A tiny sweep at 32x32 that runs in seconds (the CI smoke test).
+    #[arg(long)]
+    quick: bool,
+    /// Also compare every configuration against exact visibility.
+    #[arg(long, value_enum)]
+    reference: Option<Reference>,
+    /// With --reference exact: use every N-th VAL (flux x N).
+    #[arg(long)]
+    val_stride: Option<u32>,
+    /// Skip the plots (results.json and results.csv only).
+    #[arg(long)]
+    no_plots: bool,
+    /// The paper's Table 1 configurations (200k/730k triangles, 4k/16k sparse points,
+    /// 16k/64k/512k VALs, diffuse/+glossy/+occlusion, 1920x1080) on scenes built from this
+    /// one (its other meshes replicated in the room); no references. Hours on lavapipe.
+    #[arg(long, conflicts_with_all = ["sweep", "grid", "reference"])]
+    table1: bool,
+    /// Skip the brute-force reference (and the error against it): for configurations too
+    /// large to brute-force.
+    #[arg(long, conflicts_with = "reference")]
+    no_references: bool,
+    /// Skip the FMA-bound kernel and the gather variants.
+    #[arg(long)]
+    no_fma: bool,
+    /// Skip the temporal-stability frames.
+    #[arg(long)]
+    no_temporal: bool,
+    /// Output directory (created).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    anyhow::ensure!(args.val_stride.is_none() || args.reference.is_some(), "--val-stride: only with --reference exact");
+    let options = relume::bench::BenchOptions {
+        scene: args.scene,
+        sweep: relume::bench::Sweep::parse(&args.sweep)?,
+        grid: args.grid,
+        quick: args.quick,
+        exact_val_stride: args.reference.map(|Reference::Exact| args.val_stride.unwrap_or(1)),
+        references: !args.table1 && !args.no_references,
+        table1: args.table1,
+        out: args.out,
+        fma: !args.no_fma,
+        temporal: !args.no_temporal,
+        plots: !args.no_plots,
+    };
+    let gpu = Gpu::new()?;
+    let start = Instant::now();
+    let results = relume::bench::run(&gpu, &options, &mut |what| {
+        eprintln!("[{:7.1} s] {what}", start.elapsed().as_secs_f64());
+    })?;
+    eprintln!(
+        "{} configurations on {} ({} timing); wrote {}",
+        results.configs.len(),
+        results.adapter,
+        results.timing.as_str(),
+        options.out.join("results.json").display()
+    );
+    Ok(())
+}

@@ -1,0 +1,119 @@
+//! The `relume` command line: one module per command, each an `Args` struct and a `run`.
+
+pub mod bench;
+pub mod compare;
+pub mod load;
+pub mod render;
+pub mod replay;
+pub mod serve;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand, ValueEnum};
+use relume::scene::Scene;
+use std::path::Path;
+
+#[derive(Parser)]
+#[command(name = "relume", version, about = "One-bounce global illumination from thousands of virtual area lights")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Render a scene file to a tone-mapped PNG (and optionally linear EXR).
+    Render(render::Args),
+    /// Render with the sparse method and the brute-force reference and print the error and
+    /// cost as one JSON object.
+    Compare(compare::Args),
+    /// Sweep quality settings: per configuration the time of every stage, the device memory
+    /// held and the indirect error against brute force (and exact); writes results.json,
+    /// results.csv and plots into --out (see README, "Benchmark").
+    Bench(bench::Args),
+    /// Relight every frame of an RGB-D recording (TUM layout) with a scene's virtual content:
+    /// writes composited and indirect-only frames and a timing and stability summary.
+    Replay(replay::Args),
+    /// Load benchmark of the service: streams replaying a recording plus HTTP render clients,
+    /// for a fixed time; prints throughput, latency percentiles, dropped frames, peak memory.
+    Load(load::Args),
+    /// Serve the HTTP + WebSocket API (see README, "Service"). Every flag also reads the
+    /// environment variable shown; SIGINT/SIGTERM shut down gracefully.
+    Serve(relume::service::Config),
+    /// Print the service's OpenAPI 3.1 document (the contents of proto/openapi.json).
+    Openapi,
+}
+
+impl Command {
+    pub fn run(self) -> anyhow::Result<()> {
+        match self {
+            Command::Render(args) => render::run(args),
+            Command::Compare(args) => compare::run(args),
+            Command::Bench(args) => bench::run(args),
+            Command::Replay(args) => replay::run(args),
+            Command::Load(args) => load::run(args),
+            Command::Serve(config) => serve::run(config),
+            Command::Openapi => serve::openapi(),
+        }
+    }
+}
+
+/// A reference to measure against, beside the brute force.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Reference {
+    Exact,
+}
+
+#[derive(clap::Args)]
+pub struct Size {
+    /// Override the camera's width in pixels (1..=8192).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Override the camera's height in pixels (1..=8192).
+    #[arg(long)]
+    pub height: Option<u32>,
+}
+
+impl Size {
+    /// The flags' size, else the scene camera's.
+    pub fn resolve(&self, scene: &Scene) -> anyhow::Result<(u32, u32)> {
+        Ok((
+            checked_side("width", self.width.unwrap_or(scene.camera.width))?,
+            checked_side("height", self.height.unwrap_or(scene.camera.height))?,
+        ))
+    }
+
+    /// The flags' size, both or neither.
+    pub fn resolve_optional(&self) -> anyhow::Result<Option<(u32, u32)>> {
+        match (self.width, self.height) {
+            (None, None) => Ok(None),
+            (Some(w), Some(h)) => Ok(Some((checked_side("width", w)?, checked_side("height", h)?))),
+            _ => anyhow::bail!("--width and --height: give both or neither"),
+        }
+    }
+}
+
+fn checked_side(name: &str, v: u32) -> anyhow::Result<u32> {
+    anyhow::ensure!((1..=8192).contains(&v), "--{name}: must be in 1..=8192, got {v}");
+    Ok(v)
+}
+
+/// `--val-stride`, checked.
+pub fn checked_val_stride(val_stride: u32) -> anyhow::Result<u32> {
+    anyhow::ensure!(val_stride >= 1, "--val-stride: must be at least 1, got {val_stride}");
+    Ok(val_stride)
+}
+
+pub fn load(path: &Path) -> anyhow::Result<Scene> {
+    Scene::load(path).with_context(|| format!("loading scene {}", path.display()))
+}
+
+/// A scene for `render` and `compare`, which are lit by the scene's own spot light.
+pub fn load_lit(path: &Path) -> anyhow::Result<Scene> {
+    let scene = load(path)?;
+    anyhow::ensure!(
+        scene.light.is_some(),
+        "{}: light: required by this command (a scene without one is lit by RGB-D frames: use `replay`)",
+        path.display()
+    );
+    Ok(scene)
+}

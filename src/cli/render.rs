@@ -1,0 +1,90 @@
+//! `relume render`: a scene to PNG (and EXR), one component or all three.
+
+use super::{Size, checked_val_stride, load_lit};
+use relume::gpu::Gpu;
+use relume::image::LinearImage;
+use relume::renderer::{Component, Components, Method, Renderer};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Scene description (JSON).
+    scene: PathBuf,
+    /// Output PNG (8-bit sRGB after exposure and clipping).
+    #[arg(long, default_value = "out.png")]
+    out: PathBuf,
+    /// Also write linear float radiance (OpenEXR, RGBA f32, alpha = coverage).
+    #[arg(long)]
+    hdr: Option<PathBuf>,
+    /// Which light to write. A component left out is not computed (`direct` runs no gather).
+    #[arg(long, value_enum, default_value_t = Component::Full)]
+    component: Component,
+    /// Write every component from one frame into this directory instead: `direct`,
+    /// `indirect` and `full`, each as `.png` and `.exr`, all at the full image's exposure.
+    #[arg(long, conflicts_with_all = ["out", "hdr", "component"])]
+    out_dir: Option<PathBuf>,
+    /// How the indirect light is computed.
+    #[arg(long, value_enum, default_value_t = Method::Sparse)]
+    method: Method,
+    #[command(flatten)]
+    size: Size,
+    /// Exposure multiplier before tone mapping (default: the scene's, else automatic).
+    #[arg(long)]
+    exposure: Option<f32>,
+    /// With --method exact: use every N-th VAL (flux x N), for large scenes.
+    #[arg(long, default_value_t = 1)]
+    val_stride: u32,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let val_stride = checked_val_stride(args.val_stride)?;
+    if let Some(e) = args.exposure {
+        anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure: must be a positive number, got {e}");
+    }
+    let scene = load_lit(&args.scene)?;
+    let (w, h) = args.size.resolve(&scene)?;
+    let gpu = Gpu::new()?;
+    let mut renderer = Renderer::new(&gpu, &scene)?;
+    renderer.set_exact_val_stride(val_stride);
+    let needs = if args.out_dir.is_some() { Components::ALL } else { args.component.needs() };
+    let frame = renderer.render_components(&gpu, args.method, w, h, needs)?;
+    let exposure_of =
+        |image: &LinearImage| args.exposure.or(scene.settings.exposure).unwrap_or_else(|| image.auto_exposure());
+    let (written, exposure) = match &args.out_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("--out-dir: creating {}: {e}", dir.display()))?;
+            let full = Component::Full.of(&frame);
+            let exposure = exposure_of(&full);
+            for (name, image) in
+                [("direct", frame.direct.clone()), ("indirect", frame.indirect.clone()), ("full", full)]
+            {
+                write(&image, &dir.join(format!("{name}.png")), Some(&dir.join(format!("{name}.exr"))), exposure)?;
+            }
+            (dir.clone(), exposure)
+        }
+        None => {
+            let image = args.component.of(&frame);
+            let exposure = exposure_of(&image);
+            write(&image, &args.out, args.hdr.as_deref(), exposure)?;
+            (args.out.clone(), exposure)
+        }
+    };
+    let stages: Vec<String> = frame.timings.stages.iter().map(|(n, ms)| format!("{n} {ms:.2}")).collect();
+    eprintln!(
+        "wrote {} ({w}x{h}, {} VALs, {} sparse points, exposure {exposure:.4}); {:?} ms: {}",
+        written.display(),
+        frame.val_count,
+        scene.sparse_point_count(),
+        frame.timings.source,
+        stages.join(", ")
+    );
+    Ok(())
+}
+
+fn write(image: &LinearImage, png: &Path, exr: Option<&Path>, exposure: f32) -> anyhow::Result<()> {
+    image.write_png(png, exposure)?;
+    if let Some(exr) = exr {
+        image.write_exr(exr)?;
+    }
+    Ok(())
+}

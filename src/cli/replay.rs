@@ -1,0 +1,157 @@
+//! `relume replay`: relight an RGB-D recording, here or through a running server.
+
+use super::Size;
+use anyhow::Context;
+use relume::gpu::Gpu;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Recording directory (rgb.txt, depth.txt, optional groundtruth.txt and intrinsics.json).
+    recording: PathBuf,
+    /// Scene with the virtual content and its anchor in the recording's world frame.
+    #[arg(long)]
+    scene: PathBuf,
+    /// Output directory.
+    #[arg(long, default_value = "out/replay")]
+    out: PathBuf,
+    #[command(flatten)]
+    size: Size,
+    /// Replay only the first N frames.
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Accumulate VALs across frames into a world-space set (steadier light).
+    #[arg(long)]
+    accumulate: bool,
+    /// With --accumulate: grid cell of the set (m).
+    #[arg(long, default_value_t = 0.05)]
+    cell_size: f32,
+    /// With --accumulate: VALs kept at most (memory bound; the oldest go first).
+    #[arg(long, default_value_t = 65_536)]
+    max_vals: usize,
+    /// With --accumulate: VALs older than this many frames are dropped.
+    #[arg(long, default_value_t = 300)]
+    max_age: u32,
+    /// Exposure of the virtual object in the composite (1 keeps the radiance_scale calibration).
+    #[arg(long, default_value_t = 1.0)]
+    exposure: f32,
+    /// Intrinsics for a recording without intrinsics.json: fx,fy,cx,cy (default: TUM's).
+    #[arg(long, value_delimiter = ',', num_args = 4)]
+    intrinsics: Option<Vec<f32>>,
+    /// Depth units per metre for a recording without intrinsics.json (default 5000, TUM's).
+    #[arg(long)]
+    depth_scale: Option<f32>,
+    /// Replay through a running `relume serve` (http://host:port) over its WebSocket stream
+    /// instead of rendering here: the scene is uploaded with its meshes inline, every frame is
+    /// sent and its composite written to `composited/`.
+    #[arg(long)]
+    server: Option<String>,
+    /// With --server: the server's bearer token.
+    #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let exposure = args.exposure;
+    anyhow::ensure!(exposure.is_finite() && exposure > 0.0, "--exposure: must be a positive number, got {exposure}");
+    anyhow::ensure!(args.frames != Some(0), "--frames: must be at least 1");
+    let recording_options = recording_options(args.intrinsics, args.depth_scale)?;
+    if let Some(server) = args.server {
+        anyhow::ensure!(
+            !args.accumulate && args.size.width.is_none() && args.size.height.is_none(),
+            "--accumulate, --width and --height: not available with --server (the stream renders each frame at its own size, without accumulation)"
+        );
+        let options = relume::client::RemoteReplayOptions {
+            server,
+            token: args.token,
+            recording: args.recording,
+            recording_options,
+            scene: args.scene,
+            out: args.out,
+            frames: args.frames,
+            exposure: Some(exposure),
+            progress: true,
+        };
+        return remote_replay_command(&options);
+    }
+    let accumulate = args.accumulate.then_some(relume::mr::AccumulateOptions {
+        cell_size: args.cell_size,
+        max_vals: args.max_vals,
+        max_age_frames: args.max_age,
+    });
+    let options = relume::mr::replay::ReplayOptions {
+        recording: args.recording,
+        recording_options,
+        scene: args.scene,
+        out: args.out,
+        size: args.size.resolve_optional()?,
+        frames: args.frames,
+        accumulate,
+        exposure,
+        progress: true,
+    };
+    replay_command(&options)
+}
+
+/// `replay --server`: the replay through a running server, and its summary.
+fn remote_replay_command(options: &relume::client::RemoteReplayOptions) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+    let summary = runtime.block_on(relume::client::replay_remote(options))?;
+    let vals = &summary.vals_per_frame;
+    eprintln!(
+        "replayed {} frames at {}x{} through {}: {} to {} VALs per frame, round trip p50 {:.0} ms, p99 {:.0} ms, {} dropped",
+        summary.frames,
+        summary.width,
+        summary.height,
+        summary.server,
+        vals.iter().min().unwrap_or(&0),
+        vals.iter().max().unwrap_or(&0),
+        relume::client::quantile(&summary.round_trip_ms, 0.5),
+        relume::client::quantile(&summary.round_trip_ms, 0.99),
+        summary.dropped_frames,
+    );
+    eprintln!("{}", relume::mr::replay::stage_table(&summary.stage_ms, ("round trip", &summary.round_trip_ms)));
+    eprintln!("wrote {}", options.out.display());
+    Ok(())
+}
+
+/// The replay here, and its summary.
+fn replay_command(options: &relume::mr::replay::ReplayOptions) -> anyhow::Result<()> {
+    let gpu = Gpu::new()?;
+    let summary = relume::mr::replay::replay(&gpu, options)?;
+    let vals = &summary.vals_per_frame;
+    eprintln!(
+        "replayed {} frames at {}x{} on {} ({}): {} to {} VALs per frame, mean relative change of the object's irradiance {:.4}{}",
+        summary.frames,
+        summary.width,
+        summary.height,
+        summary.adapter,
+        summary.timing,
+        vals.iter().min().unwrap_or(&0),
+        vals.iter().max().unwrap_or(&0),
+        summary.mean_irradiance_change,
+        if summary.accumulate { " (accumulating)" } else { "" },
+    );
+    eprintln!("{}", relume::mr::replay::stage_table(&summary.stage_ms, ("frame (wall)", &summary.frame_ms)));
+    eprintln!("wrote {}", options.out.display());
+    Ok(())
+}
+
+/// The recording options of `--intrinsics` and `--depth-scale`, checked.
+fn recording_options(
+    intrinsics: Option<Vec<f32>>,
+    depth_scale: Option<f32>,
+) -> anyhow::Result<relume::rgbd::recording::RecordingOptions> {
+    if let Some(s) = depth_scale {
+        anyhow::ensure!(s.is_finite() && s > 0.0, "--depth-scale: must be a positive number, got {s}");
+    }
+    let mut options = relume::rgbd::recording::RecordingOptions { depth_scale, ..Default::default() };
+    if let Some(k) = intrinsics {
+        let tum = relume::rgbd::Intrinsics::TUM;
+        let k = relume::rgbd::Intrinsics { fx: k[0], fy: k[1], cx: k[2], cy: k[3], ..tum };
+        relume::rgbd::recording::check_intrinsics(&k)
+            .map_err(|(field, m)| anyhow::anyhow!("--intrinsics: {field}: {m}"))?;
+        options.intrinsics = Some(k);
+    }
+    Ok(options)
+}

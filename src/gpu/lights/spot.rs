@@ -1,0 +1,113 @@
+//! The spot light (DESIGN.md §2 "RSM of a spot light", §4 step 6): two techniques. [`SpotVals`]
+//! rasterises the scene from the light (its RSM) and turns each lit texel into a VAL and a
+//! light-distance shadow map; [`DirectLight`] shades the camera's pixels with the light through
+//! that shadow map.
+
+use super::{direct, rsm};
+use crate::gpu::pass::{Kernels, buffer, view};
+use crate::gpu::raster::{Visibility, VisibilityTarget};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::technique::{Frame, Technique};
+use crate::gpu::timing::Recorder;
+use crate::gpu::{Gpu, GpuError};
+use crate::scene::SpotLight;
+use glam::{Mat4, Vec3};
+
+/// Stage names.
+pub const RSM_RASTER: &str = "rsm_raster";
+pub const RSM_VALS: &str = "rsm_vals";
+pub const DIRECT: &str = "direct";
+
+/// The light's RSM and the VALs it makes.
+pub struct SpotVals {
+    pub light: SpotLight,
+    /// RSM texels per side.
+    pub resolution: u32,
+    raster: Visibility,
+    rsm: Kernels,
+    /// The light's visibility buffer (the RSM).
+    pub view: VisibilityTarget,
+    /// Distance from the light to the surface each RSM texel sees: [`DirectLight`]'s shadow map.
+    pub light_distance: wgpu::Buffer,
+}
+
+impl SpotVals {
+    pub fn new(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        raster: &Visibility,
+        light: SpotLight,
+        resolution: u32,
+    ) -> Result<Self, GpuError> {
+        let r = resolution;
+        Ok(Self {
+            light,
+            resolution,
+            raster: raster.clone(),
+            rsm: Kernels::lobes(gpu, scene, &rsm::PASS, rsm::WGSL, false)?,
+            view: raster.target(gpu, "rsm", r, r),
+            light_distance: gpu.storage_buffer_sized::<f32>("rsm.light_distance", (r * r) as usize)?,
+        })
+    }
+
+    /// World to the light's clip space: a square perspective over the outer cone, near and far
+    /// fitted to the scene.
+    pub fn light_to_clip(&self, scene: &GpuScene) -> Mat4 {
+        let s = &self.light;
+        let up = if s.direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
+        let (near, far) = scene.flat.depth_range(s.position);
+        glam::camera::rh::proj::directx::perspective(2.0 * s.outer_angle, 1.0, near, far)
+            * glam::camera::rh::view::look_at_mat4(s.position, s.position + s.direction, up)
+    }
+}
+
+impl Technique for SpotVals {
+    fn stages(&self) -> Vec<&'static str> {
+        vec![RSM_RASTER, RSM_VALS]
+    }
+
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
+        let scene = frame.scene;
+        let light_to_clip = self.light_to_clip(scene);
+        rec.stage(RSM_RASTER, |e, s| self.raster.record(gpu, e, scene, &self.view, light_to_clip, s))?;
+        let resources = [
+            view("visibility", &self.view.view),
+            buffer("vals", &frame.vals.buffer),
+            buffer("val_count", &frame.vals.count),
+            buffer("light_distance", &self.light_distance),
+        ];
+        let texels = [self.resolution, self.resolution, 1];
+        rec.stage(RSM_VALS, |e, s| self.rsm.run(gpu, e, scene, &resources, texels, s))
+    }
+}
+
+/// The spot light's direct light at the camera's pixels.
+pub struct DirectLight {
+    pass: Kernels,
+    /// [`SpotVals::light_distance`].
+    light_distance: wgpu::Buffer,
+}
+
+impl DirectLight {
+    pub fn new(gpu: &Gpu, scene: &GpuScene, vals: &SpotVals) -> Result<Self, GpuError> {
+        let pass = Kernels::lobes(gpu, scene, &direct::PASS, direct::WGSL, false)?;
+        Ok(Self { pass, light_distance: vals.light_distance.clone() })
+    }
+}
+
+impl Technique for DirectLight {
+    fn stages(&self) -> Vec<&'static str> {
+        vec![DIRECT]
+    }
+
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
+        let camera = frame.camera;
+        let resources = [
+            view("visibility", &camera.view.view),
+            buffer("direct", &camera.direct),
+            buffer("light_distance", &self.light_distance),
+        ];
+        let pixels = [camera.view.width, camera.view.height, 1];
+        rec.stage(DIRECT, |e, s| self.pass.run(gpu, e, frame.scene, &resources, pixels, s))
+    }
+}

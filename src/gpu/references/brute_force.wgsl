@@ -1,0 +1,56 @@
+// Brute-force reference (DESIGN.md §5): every VAL applied to every visible pixel through §3,
+// no sparse points, no interpolation. VALs stream through workgroup memory as in the gather, in
+// tiles and per-dispatch ranges (`shader/val_tiles.wgsl`, prepended), each range after the first
+// adding to the radiance the earlier ones wrote. Rust twin: `twin::shade_brute_force`.
+
+@group(0) @binding(0) var visibility: texture_2d<u32>;
+@group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> vals: array<Val>;
+@group(0) @binding(3) var<storage, read> val_count: u32;
+
+fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
+    let inside = id.x < frame.width && id.y < frame.height;
+    var hit = Hit(false, 0u, vec2<f32>(0.0));
+    if inside {
+        hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
+    }
+    var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1));
+    if hit.covered {
+        s = surface_at(hit.triangle, hit.barycentrics);
+    }
+    let w_o = view_direction(s.position, s.normal, frame.eye);
+    let spec = s.material.specular * phong_normalisation(s.material.exponent);
+    var l = vec3<f32>(0.0);
+    let end = val_range_end();
+    for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
+        let n = load_tile(base, local, end);
+        for (var j = 0u; j < n; j++) {
+            let val = tile[j];
+            let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
+            let e = val.flux * (geo.weight * geo.cos_receiver);
+            l += s.material.diffuse / PI * e;
+            if glossy {
+                l += spec * phong_lobe(dot(mirror(geo.direction, s.normal), w_o), s.material.exponent) * e;
+            }
+        }
+        workgroupBarrier();
+    }
+    if inside {
+        let i = id.y * frame.width + id.x;
+        var before = vec4<f32>(0.0);
+        if VAL_BEGIN > 0u {
+            before = indirect[i];
+        }
+        indirect[i] = select(vec4<f32>(0.0), vec4<f32>(before.rgb + l, 1.0), hit.covered);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    brute_force(id.xy, local, false);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    brute_force(id.xy, local, true);
+}

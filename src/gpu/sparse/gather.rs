@@ -1,0 +1,85 @@
+//! Gather at sparse points (`gather.wgsl`, DESIGN.md §4 step 1). Rust twin:
+//! `twin::gather_point`.
+//!
+//! On a CPU adapter one invocation may not loop over more than about
+//! [`Gpu::CPU_MAX_GATHERED_VALS`] VALs (llvmpipe ends a shader's loops after
+//! [`crate::gpu::LLVMPIPE_LOOP_LIMIT`] iterations, silently), so there the VALs are gathered in
+//! ranges, one dispatch each, every range merging into the sums of the ones before
+//! ([`Kernels::val_ranges`]). GPUs take every VAL in one dispatch.
+
+use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, with_lobes};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::{TILE_SIZE, VAL_TILES};
+use crate::gpu::technique::Vals;
+use crate::gpu::timing::Span;
+use crate::gpu::{Gpu, GpuError, Lobes};
+
+pub const WGSL: &str = include_str!("gather.wgsl");
+
+/// The pass's own WGSL: the VAL tiles, then `gather.wgsl`.
+pub fn body() -> String {
+    format!("{VAL_TILES}\n{WGSL}")
+}
+
+/// One invocation per sparse point, `TILE_SIZE` per workgroup (the tile is the workgroup's).
+pub const PASS: PassDesc = PassDesc {
+    label: "gather",
+    bindings: &[
+        read("sparse_points"),
+        read("vals"),
+        read("val_count"),
+        read_write("gathered_diffuse"),
+        read_write("gathered_glossy"),
+    ],
+    entries: &[Entry::first("main", 4), Entry::first("main_glossy", 5)],
+    workgroup: [TILE_SIZE, 1, 1],
+    default_source: |textured| PASS.source(&body(), textured),
+};
+
+pub struct Gather {
+    kernels: Kernels,
+}
+
+impl Gather {
+    /// `glossy` builds the entry point that also gathers the Phong lobe.
+    pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool) -> Result<Self, GpuError> {
+        Self::with_tile_size(gpu, scene, glossy, TILE_SIZE)
+    }
+
+    /// The pass with `tile_size` VALs per tile and threads per workgroup instead of
+    /// [`TILE_SIZE`] (the bench compares them; the device must allow the workgroup size).
+    pub fn with_tile_size(gpu: &Gpu, scene: &GpuScene, glossy: bool, tile_size: u32) -> Result<Self, GpuError> {
+        let workgroup = [tile_size, 1, 1];
+        let source = PASS.source_with(&body(), scene.textured(), workgroup, tile_size);
+        let entry = PASS.lobe_entry(glossy);
+        let kernels = Kernels::val_ranges(gpu, scene, &PASS, source, entry, workgroup, tile_size)?;
+        Ok(Self { kernels })
+    }
+
+    /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]).
+    pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
+        self.kernels.fit(gpu, scene, max_vals)
+    }
+
+    /// Gather `vals` at every sparse point into `gathered`.
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        e: &mut wgpu::CommandEncoder,
+        scene: &GpuScene,
+        vals: &Vals,
+        gathered: &Lobes,
+        span: Option<Span<'_>>,
+    ) {
+        let resources = with_lobes(
+            vec![
+                buffer("sparse_points", &scene.sparse_points),
+                buffer("vals", &vals.buffer),
+                buffer("val_count", &vals.count),
+            ],
+            &[(gathered, "gathered_diffuse", "gathered_glossy")],
+        );
+        let n = scene.flat.sparse_count();
+        self.kernels.run(gpu, e, scene, &resources, [n, 1, 1], span);
+    }
+}

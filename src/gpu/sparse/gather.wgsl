@@ -1,0 +1,108 @@
+// Gather at sparse points (DESIGN.md §4 step 1): every VAL's irradiance summed at every sparse
+// point, with the luminance-weighted mean VAL position; the glossy entry point also sums the
+// Phong-lobe-weighted irradiance toward the eye and its mean position. VALs stream through
+// workgroup memory in tiles of TILE_SIZE (`shader/val_tiles.wgsl`, prepended). Rust twin:
+// `twin::gather_point`.
+//
+// One dispatch takes the VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN). On GPUs that is all of them
+// at once; CPU adapters end a shader's loops after a fixed iteration count (llvmpipe's
+// LLVMPIPE_LOOP_LIMIT), so there the VALs are split into ranges, one dispatch each, and every
+// range after the first merges its sums into what the earlier ones wrote (`Gathered.weight`
+// carries the weight sum the means need).
+
+@group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
+@group(0) @binding(1) var<storage, read> vals: array<Val>;
+@group(0) @binding(2) var<storage, read> val_count: u32;
+@group(0) @binding(3) var<storage, read_write> gathered_diffuse: array<Gathered>;
+@group(0) @binding(4) var<storage, read_write> gathered_glossy: array<Gathered>;
+
+struct Sums {
+    e: vec3<f32>,
+    g: vec3<f32>,
+    ld: vec3<f32>,
+    ld2: vec3<f32>,
+    ls: vec3<f32>,
+    wd: f32,
+    ws: f32,
+}
+
+fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
+    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+    var p = SparsePoint(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0);
+    if index < frame.sparse_count {
+        p = sparse_points[index];
+    }
+    let w_o = view_direction(p.position, p.normal, frame.eye);
+    let end = val_range_end();
+    for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
+        let n = load_tile(base, local, end);
+        for (var j = 0u; j < n; j++) {
+            let val = tile[j];
+            let geo = val_geometry(p.position, p.normal, val.position, val.normal, val.area);
+            let f = geo.weight * geo.cos_receiver;
+            let e_j = val.flux * f;
+            let y = luminance(val.flux) * f;
+            s.e += e_j;
+            let gd = y + GATHER_EPSILON;
+            s.ld += gd * val.position;
+            s.ld2 += gd * val.position * val.position;
+            s.wd += gd;
+            if glossy {
+                let lobe = phong_lobe(dot(mirror(geo.direction, p.normal), w_o), p.exponent);
+                s.g += e_j * lobe;
+                let gs = y * lobe + GATHER_EPSILON;
+                s.ls += gs * val.position;
+                s.ws += gs;
+            }
+        }
+        workgroupBarrier();
+    }
+    return s;
+}
+
+// Irradiance `e` with the weight sum `w` of the weighted position sums `l` and `l2`, added to
+// `before` (the earlier VAL ranges' result; zero for the first range).
+fn merged(before: Gathered, e: vec3<f32>, w: f32, l: vec3<f32>, l2: vec3<f32>) -> Gathered {
+    let total = before.weight + w;
+    let norm = max(total, GATHER_EPSILON);
+    return Gathered(
+        before.irradiance + e,
+        total,
+        (before.position * before.weight + l) / norm,
+        0.0,
+        (before.second_moment * before.weight + l2) / norm,
+        0.0,
+    );
+}
+
+// What the earlier VAL ranges gathered at point `i` (nothing for the first range).
+fn earlier_diffuse(i: u32) -> Gathered {
+    if VAL_BEGIN == 0u {
+        return Gathered(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    }
+    return gathered_diffuse[i];
+}
+
+fn earlier_glossy(i: u32) -> Gathered {
+    if VAL_BEGIN == 0u {
+        return Gathered(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    }
+    return gathered_glossy[i];
+}
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let s = gather_tiles(id.x, local, false);
+    if id.x < frame.sparse_count {
+        gathered_diffuse[id.x] = merged(earlier_diffuse(id.x), s.e, s.wd, s.ld, s.ld2);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let s = gather_tiles(id.x, local, true);
+    if id.x < frame.sparse_count {
+        gathered_diffuse[id.x] = merged(earlier_diffuse(id.x), s.e, s.wd, s.ld, s.ld2);
+        gathered_glossy[id.x] = merged(earlier_glossy(id.x), s.g, s.ws, s.ls, vec3<f32>(0.0));
+    }
+}

@@ -1,0 +1,114 @@
+// Per-vertex interpolation (DESIGN.md §4 step 4, paper eqs. 12-13): each vertex averages the
+// point lights of its NEIGHBOURS nearest sparse points with weights
+// (1 - d / d_max) * clamp(dot(n_v, n_x), 0, 1). Rust twins: `twin::interpolation_weights`,
+// `twin::interpolate_lights`.
+
+@group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
+@group(0) @binding(1) var<storage, read> vertex_neighbours: array<array<u32, NEIGHBOURS>>;
+@group(0) @binding(2) var<storage, read> sparse_diffuse: array<PointLight>;
+@group(0) @binding(3) var<storage, read_write> vertex_diffuse: array<PointLight>;
+@group(0) @binding(4) var<storage, read> sparse_glossy: array<PointLight>;
+@group(0) @binding(5) var<storage, read_write> vertex_glossy: array<PointLight>;
+
+fn interpolation_weights(n_v: vec3<f32>, distances: array<f32, NEIGHBOURS>, normals: array<vec3<f32>, NEIGHBOURS>, count: u32) -> array<f32, NEIGHBOURS> {
+    var d_max = 0.0;
+    for (var j = 0u; j < count; j++) {
+        d_max = max(d_max, distances[j]);
+    }
+    var w: array<f32, NEIGHBOURS>;
+    var total = 0.0;
+    for (var j = 0u; j < count; j++) {
+        var spatial = 1.0;
+        if d_max > 0.0 {
+            spatial = 1.0 - distances[j] / d_max;
+        }
+        w[j] = max(spatial, 0.0) * clamp(dot(n_v, normals[j]), 0.0, 1.0);
+        total += w[j];
+    }
+    if total <= 0.0 && count > 0u {
+        var fallback = 0u;
+        for (var j = count; j > 0u; j--) {
+            if dot(n_v, normals[j - 1u]) > 0.0 {
+                fallback = j - 1u;
+            }
+        }
+        w[fallback] = 1.0;
+    }
+    return w;
+}
+
+struct Neighbourhood {
+    ids: array<u32, NEIGHBOURS>,
+    weights: array<f32, NEIGHBOURS>,
+    count: u32,
+    total: f32,
+}
+
+fn neighbourhood(v: u32) -> Neighbourhood {
+    let vertex = vertices[v];
+    let ids = vertex_neighbours[v];
+    var distances: array<f32, NEIGHBOURS>;
+    var normals: array<vec3<f32>, NEIGHBOURS>;
+    var count = 0u;
+    for (var j = 0u; j < NEIGHBOURS; j++) {
+        if ids[j] == NO_NEIGHBOUR {
+            break;
+        }
+        let p = sparse_points[ids[j]];
+        distances[j] = distance(vertex.position, p.position);
+        normals[j] = p.normal;
+        count += 1u;
+    }
+    let w = interpolation_weights(vertex.normal, distances, normals, count);
+    var total = 0.0;
+    for (var j = 0u; j < count; j++) {
+        total += w[j];
+    }
+    return Neighbourhood(ids, w, count, total);
+}
+
+fn interpolate_diffuse(nb: Neighbourhood) -> PointLight {
+    var out = PointLight(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    if nb.total <= 0.0 {
+        return out;
+    }
+    for (var j = 0u; j < nb.count; j++) {
+        let l = sparse_diffuse[nb.ids[j]];
+        let f = nb.weights[j] / nb.total;
+        out.position += l.position * f;
+        out.intensity += l.intensity * f;
+    }
+    return out;
+}
+
+fn interpolate_glossy(nb: Neighbourhood) -> PointLight {
+    var out = PointLight(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    if nb.total <= 0.0 {
+        return out;
+    }
+    for (var j = 0u; j < nb.count; j++) {
+        let l = sparse_glossy[nb.ids[j]];
+        let f = nb.weights[j] / nb.total;
+        out.position += l.position * f;
+        out.intensity += l.intensity * f;
+    }
+    return out;
+}
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.vertex_count {
+        return;
+    }
+    vertex_diffuse[id.x] = interpolate_diffuse(neighbourhood(id.x));
+}
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.vertex_count {
+        return;
+    }
+    let nb = neighbourhood(id.x);
+    vertex_diffuse[id.x] = interpolate_diffuse(nb);
+    vertex_glossy[id.x] = interpolate_glossy(nb);
+}

@@ -1,0 +1,114 @@
+//! The sparse model-space method (DESIGN.md §4), one technique: gather at the sparse points,
+//! the visibility mode (`gpu::visibility`), renormalise, interpolate per vertex, shade per
+//! pixel.
+
+pub mod gather;
+pub mod interpolate;
+pub mod renormalise;
+pub mod shade;
+
+use crate::gpu::pass::{Kernels, buffer, view, with_lobes};
+use crate::gpu::raw::{RawGathered, RawPointLight};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::technique::{Frame, Technique};
+use crate::gpu::timing::Recorder;
+use crate::gpu::visibility::{self, SparseVisibility};
+use crate::gpu::{Gpu, GpuError, Lobes};
+use crate::scene::{Occlusion, OcclusionRule};
+use gather::Gather;
+
+/// What the sparse technique is built for: a change rebuilds it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SparseSettings {
+    pub glossy: bool,
+    pub occlusion: Occlusion,
+    pub occlusion_rule: OcclusionRule,
+}
+
+/// The sparse method's passes and the buffers between them.
+pub struct SparseMethod {
+    gather: Gather,
+    /// `None` when visibility is off.
+    visibility: Option<Box<dyn SparseVisibility>>,
+    renormalise: Kernels,
+    interpolate: Kernels,
+    shade: Kernels,
+    /// Per sparse point: the gathered sums (after visibility).
+    pub gathered: Lobes,
+    /// Per sparse point: the renormalised point lights.
+    pub sparse_lights: Lobes,
+    /// Per vertex: the interpolated point lights.
+    pub vertex_lights: Lobes,
+}
+
+impl SparseMethod {
+    pub fn new(gpu: &Gpu, scene: &GpuScene, settings: SparseSettings) -> Result<Self, GpuError> {
+        let glossy = settings.glossy;
+        let n = scene.flat.sparse_points.len();
+        let v = scene.flat.vertices.len();
+        Ok(Self {
+            gather: Gather::new(gpu, scene, glossy)?,
+            visibility: visibility::for_settings(gpu, scene, settings.occlusion, settings.occlusion_rule, glossy)?,
+            renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy)?,
+            interpolate: Kernels::lobes(
+                gpu,
+                scene,
+                &interpolate::PASS,
+                &interpolate::body(scene.flat.neighbours),
+                glossy,
+            )?,
+            shade: Kernels::lobes(gpu, scene, &shade::PASS, shade::WGSL, glossy)?,
+            gathered: Lobes::new::<RawGathered>(gpu, "gather.gathered", n, glossy)?,
+            sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy)?,
+            vertex_lights: Lobes::new::<RawPointLight>(gpu, "interpolate.vertex_lights", v, glossy)?,
+        })
+    }
+
+    /// Cover frames of up to `max_vals` VALs.
+    pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
+        self.gather.fit(gpu, scene, max_vals)
+    }
+}
+
+impl Technique for SparseMethod {
+    fn stages(&self) -> Vec<&'static str> {
+        let mut stages = vec![gather::PASS.label];
+        stages.extend(self.visibility.as_ref().map(|v| v.stage()));
+        stages.extend([renormalise::PASS.label, interpolate::PASS.label, shade::PASS.label]);
+        stages
+    }
+
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
+        let (scene, vals) = (frame.scene, frame.vals);
+        rec.stage(gather::PASS.label, |e, s| self.gather.record(gpu, e, scene, vals, &self.gathered, s))?;
+        if let Some(v) = &self.visibility {
+            rec.stage(v.stage(), |e, s| v.record(gpu, e, scene, &self.gathered, s))?;
+        }
+        let (points, vertices) = (scene.flat.sparse_count(), scene.flat.vertex_count());
+        let resources = with_lobes(
+            vec![buffer("sparse_points", &scene.sparse_points)],
+            &[
+                (&self.gathered, "gathered_diffuse", "gathered_glossy"),
+                (&self.sparse_lights, "sparse_diffuse", "sparse_glossy"),
+            ],
+        );
+        rec.stage(renormalise::PASS.label, |e, s| self.renormalise.run(gpu, e, scene, &resources, [points, 1, 1], s))?;
+        let resources = with_lobes(
+            vec![buffer("sparse_points", &scene.sparse_points), buffer("vertex_neighbours", &scene.vertex_neighbours)],
+            &[
+                (&self.sparse_lights, "sparse_diffuse", "sparse_glossy"),
+                (&self.vertex_lights, "vertex_diffuse", "vertex_glossy"),
+            ],
+        );
+        rec.stage(interpolate::PASS.label, |e, s| {
+            self.interpolate.run(gpu, e, scene, &resources, [vertices, 1, 1], s)
+        })?;
+        let camera = frame.camera;
+        let resources = with_lobes(
+            vec![view("visibility", &camera.view.view), buffer("indirect", &camera.indirect)],
+            &[(&self.vertex_lights, "vertex_diffuse", "vertex_glossy")],
+        );
+        let pixels = [camera.view.width, camera.view.height, 1];
+        rec.stage(shade::PASS.label, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))
+    }
+}

@@ -1,0 +1,31 @@
+// Renormalisation (DESIGN.md §4 step 2, paper eq. 11): per sparse point, a diffuse (and glossy)
+// point light that reproduces exactly what was gathered there. Rust twins:
+// `twin::renormalise_diffuse`, `twin::renormalise_glossy`.
+
+@group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
+@group(0) @binding(1) var<storage, read> gathered_diffuse: array<Gathered>;
+@group(0) @binding(2) var<storage, read_write> sparse_diffuse: array<PointLight>;
+@group(0) @binding(3) var<storage, read> gathered_glossy: array<Gathered>;
+@group(0) @binding(4) var<storage, read_write> sparse_glossy: array<PointLight>;
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.sparse_count {
+        return;
+    }
+    let p = sparse_points[id.x];
+    let g = gathered_diffuse[id.x];
+    sparse_diffuse[id.x] = renormalise_diffuse(p.position, p.normal, g.irradiance, g.position);
+}
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.sparse_count {
+        return;
+    }
+    let p = sparse_points[id.x];
+    let g = gathered_diffuse[id.x];
+    sparse_diffuse[id.x] = renormalise_diffuse(p.position, p.normal, g.irradiance, g.position);
+    let s = gathered_glossy[id.x];
+    sparse_glossy[id.x] = renormalise_glossy(p.position, p.normal, p.exponent, frame.eye, s.irradiance, s.position);
+}

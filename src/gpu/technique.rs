@@ -1,0 +1,58 @@
+//! A technique prepares its resources for a scene and records its own passes; a frame is the
+//! ordered list of the techniques the scene and the request need ([`crate::renderer`] builds
+//! it), each pass a stage of the frame's [`Recorder`]: a debug group and a timing span.
+//!
+//! The techniques (one folder each): the spot light's VALs and its direct light and the
+//! RGB-D VALs (`lights/`), the camera's visibility buffer (`raster/`), the sparse method with
+//! its visibility mode (`sparse/`, `visibility/`), and the references (`references/`).
+
+use super::raster::VisibilityTarget;
+use super::scene::GpuScene;
+use super::timing::{Recorder, StageTimings};
+use super::{Gpu, GpuError};
+use glam::Mat4;
+
+/// The VAL list every light technique appends to and every indirect technique reads.
+pub struct Vals {
+    /// `array<Val>`.
+    pub buffer: wgpu::Buffer,
+    /// One `u32`: how many VALs the frame's light techniques appended (readers clamp it to
+    /// `capacity`).
+    pub count: wgpu::Buffer,
+    /// Elements `buffer` holds.
+    pub capacity: u32,
+}
+
+/// The camera's images of one size: its visibility buffer and the two outputs.
+pub struct CameraTarget {
+    pub view: VisibilityTarget,
+    /// `array<vec4<f32>>`, one per pixel: indirect radiance, alpha = coverage.
+    pub indirect: wgpu::Buffer,
+    /// `array<vec4<f32>>`, one per pixel: direct radiance, alpha = coverage.
+    pub direct: wgpu::Buffer,
+}
+
+/// What every technique of one frame sees.
+pub struct Frame<'a> {
+    pub scene: &'a GpuScene,
+    pub vals: &'a Vals,
+    pub camera: &'a CameraTarget,
+    /// World to the camera's clip space.
+    pub camera_to_clip: Mat4,
+}
+
+/// One technique of a frame.
+pub trait Technique {
+    /// The stages it records, in order: their names in the frame's timings.
+    fn stages(&self) -> Vec<&'static str>;
+
+    /// Record its passes, each in a stage of `rec` named as [`Technique::stages`] says.
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError>;
+
+    /// Work that must follow the frame's submission (the exact reference's further rounds),
+    /// its time added to `timings`; returns how many dispatches of the stage it took (0 when
+    /// it has none).
+    fn finish(&self, _gpu: &Gpu, _frame: &Frame<'_>, _timings: &mut StageTimings) -> Result<u32, GpuError> {
+        Ok(0)
+    }
+}

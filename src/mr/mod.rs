@@ -1,0 +1,217 @@
+//! Mixed reality (DESIGN.md §6): virtual content lit by a real room's RGB-D frames, rendered
+//! from each frame's camera and composited over its colour image, the real depth hiding the
+//! virtual object where real surfaces are nearer.
+//!
+//! [`MrRenderer`] is the per-frame loop of `relume replay`: frame in, composited image +
+//! indirect image + timings out. The service's streams use [`virtual_depth`] and [`composite`]
+//! with the scene's shared renderer.
+
+pub mod replay;
+
+use crate::gpu::timing::StageTimings;
+use crate::gpu::{Gpu, GpuError};
+use crate::image::{LinearImage, encode_srgb};
+use crate::renderer::{Method, Renderer, View};
+use crate::rgbd::accumulate::ValAccumulator;
+use crate::rgbd::{RgbdFrame, RgbdSettings};
+use crate::scene::Scene;
+use glam::{Affine3A, Vec3};
+
+/// How replayed frames are lit and rendered.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MrOptions {
+    /// Output size; the frame's intrinsics are scaled to it.
+    pub width: u32,
+    pub height: u32,
+    /// Exposure of the virtual object's radiance before sRGB encoding. The default 1 keeps the
+    /// calibration of `radiance_scale`: a white room pixel of radiance L lights a white virtual
+    /// surface to at most L.
+    pub exposure: f32,
+    /// Accumulate VALs across frames into a world-space set (None: each frame's VALs only).
+    pub accumulate: Option<AccumulateOptions>,
+}
+
+/// The persistent VAL set of [`ValAccumulator`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AccumulateOptions {
+    /// Grid cell (m): one VAL per cell, the newest.
+    pub cell_size: f32,
+    /// Memory bound: VALs kept at most (the oldest go first).
+    pub max_vals: usize,
+    /// VALs older than this many frames are dropped.
+    pub max_age_frames: u32,
+}
+
+impl Default for AccumulateOptions {
+    fn default() -> Self {
+        Self { cell_size: 0.05, max_vals: 65_536, max_age_frames: 300 }
+    }
+}
+
+/// One relit frame.
+pub struct MrFrame {
+    /// The camera image with the virtual object composited in (sRGB, row-major).
+    pub composited: Vec<[u8; 3]>,
+    /// Indirect light on the virtual object alone (linear radiance; alpha = coverage).
+    pub indirect: LinearImage,
+    /// Direct light of the scene's own spot light, if it has one.
+    pub direct: LinearImage,
+    pub timings: StageTimings,
+    /// VALs that lit the frame (the frame's, or the accumulated set, plus the spot's).
+    pub val_count: u32,
+    /// Diffuse irradiance (W/m²) at each sparse point of the virtual object: view-independent,
+    /// so its change between frames measures how steady the light is.
+    pub sparse_irradiance: Vec<Vec3>,
+}
+
+pub struct MrRenderer {
+    renderer: Renderer,
+    settings: RgbdSettings,
+    options: MrOptions,
+    accumulator: Option<ValAccumulator>,
+    frames: u64,
+}
+
+impl MrRenderer {
+    pub fn new(gpu: &Gpu, scene: &Scene, options: MrOptions) -> anyhow::Result<Self> {
+        let accumulator = match options.accumulate {
+            Some(a) => Some(ValAccumulator::new(a.cell_size, a.max_vals, a.max_age_frames)?),
+            None => None,
+        };
+        Ok(Self {
+            renderer: Renderer::new(gpu, scene)?,
+            settings: scene.settings.rgbd,
+            options,
+            accumulator,
+            frames: 0,
+        })
+    }
+
+    /// Relight `frame`: its VALs (or the accumulated set), the scene's spot light if any, the
+    /// virtual object seen from the frame's camera and composited over its colour.
+    pub fn render_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<MrFrame, GpuError> {
+        let (w, h) = (self.options.width, self.options.height);
+        let settings = self.settings;
+        match &mut self.accumulator {
+            None => self.renderer.set_rgbd_frame(gpu, frame, &settings)?,
+            Some(acc) => {
+                let vals = self.renderer.rgbd_frame_vals(gpu, frame, &settings)?;
+                acc.insert(self.frames, &vals);
+                self.renderer.set_vals(gpu, &acc.vals())?;
+            }
+        }
+        self.frames += 1;
+        self.renderer.set_view(View::Pinhole { intrinsics: frame.intrinsics, camera_to_world: frame.camera_to_world });
+        let rendered = self.renderer.render(gpu, Method::Sparse, w, h)?;
+        let virtual_depth = virtual_depth(gpu, &self.renderer, frame.camera_to_world)?;
+        let composited =
+            composite(frame, &rendered.direct.add(&rendered.indirect), &virtual_depth, self.options.exposure);
+        let sparse_irradiance = self.renderer.read_gathered_irradiance(gpu)?;
+        Ok(MrFrame {
+            composited,
+            indirect: rendered.indirect,
+            direct: rendered.direct,
+            timings: rendered.timings,
+            val_count: rendered.val_count,
+            sparse_irradiance,
+        })
+    }
+}
+
+/// Optical depth (m, along `camera_to_world`'s z) of the virtual content at each pixel of the
+/// last frame `renderer` rendered (from that camera); `None` where no geometry covers it.
+pub fn virtual_depth(gpu: &Gpu, renderer: &Renderer, camera_to_world: Affine3A) -> Result<Vec<Option<f32>>, GpuError> {
+    let Some(view) = renderer.camera_view() else {
+        return Ok(Vec::new());
+    };
+    let world_to_camera = camera_to_world.inverse();
+    let flat = &renderer.scene.flat;
+    Ok(view
+        .read(gpu)?
+        .iter()
+        .map(|hit| hit.map(|h| world_to_camera.transform_point3(flat.surface_at(h.triangle, h.barycentrics).0).z))
+        .collect())
+}
+
+/// The camera image with the virtual object drawn where it is visible: where it covers the
+/// pixel and is nearer than the real surface (or the real depth is missing). `virtual_rgb` is
+/// linear radiance at the output size, `virtual_depth` its optical depth per pixel (m), and
+/// the colour and depth of `frame` are sampled at the nearest pixel when the sizes differ.
+pub fn composite(
+    frame: &RgbdFrame,
+    virtual_rgb: &LinearImage,
+    virtual_depth: &[Option<f32>],
+    exposure: f32,
+) -> Vec<[u8; 3]> {
+    let (w, h) = (virtual_rgb.width as usize, virtual_rgb.height as usize);
+    let (fw, fh) = (frame.intrinsics.width as usize, frame.intrinsics.height as usize);
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            let source = (y * fh / h) * fw + x * fw / w;
+            let real_depth = frame.depth[source];
+            let real_valid = real_depth.is_finite() && real_depth > 0.0;
+            match virtual_depth[i] {
+                Some(z) if !real_valid || z < real_depth => {
+                    let c = virtual_rgb.rgb(i) * exposure;
+                    [encode_srgb(c.x), encode_srgb(c.y), encode_srgb(c.z)]
+                }
+                _ => frame.color[source],
+            }
+        })
+        .collect()
+}
+
+/// Mean relative change between two frames' per-point irradiance:
+/// `sum |E_t - E_{t-1}| / sum |E_{t-1}|` over points and channels (0 = identical).
+pub fn relative_change(previous: &[Vec3], current: &[Vec3]) -> f64 {
+    let (mut diff, mut total) = (0.0f64, 0.0f64);
+    for (p, c) in previous.iter().zip(current) {
+        diff += f64::from((*c - *p).abs().element_sum());
+        total += f64::from(p.abs().element_sum());
+    }
+    if total > 0.0 { diff / total } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rgbd::Intrinsics;
+
+    fn frame(w: u32, h: u32, depth: f32) -> RgbdFrame {
+        RgbdFrame {
+            timestamp: 0.0,
+            intrinsics: Intrinsics { width: w, height: h, fx: 10.0, fy: 10.0, cx: 1.5, cy: 1.5 },
+            color: (0..w * h).map(|i| [i as u8, 7, 9]).collect(),
+            depth: vec![depth; (w * h) as usize],
+            camera_to_world: glam::Affine3A::IDENTITY,
+        }
+    }
+
+    /// The camera image passes through where the virtual object is absent or behind the real
+    /// surface; the object shows where it is nearer or the real depth is missing.
+    #[test]
+    fn composite_respects_real_depth() {
+        let mut f = frame(4, 4, 2.0);
+        f.depth[5] = 0.0;
+        let image = LinearImage { width: 4, height: 4, pixels: vec![[1.0, 0.0, 0.0, 1.0]; 16] };
+        let mut depth = vec![None; 16];
+        depth[1] = Some(1.0); // in front
+        depth[2] = Some(3.0); // behind
+        depth[5] = Some(9.0); // no real depth
+        let out = composite(&f, &image, &depth, 1.0);
+        for (i, (got, camera)) in out.iter().zip(&f.color).enumerate() {
+            let expected = if i == 1 || i == 5 { [255, 0, 0] } else { *camera };
+            assert_eq!(*got, expected, "pixel {i}");
+        }
+    }
+
+    #[test]
+    fn relative_change_of_identical_and_doubled() {
+        let a = vec![Vec3::ONE, Vec3::splat(2.0)];
+        assert_eq!(relative_change(&a, &a), 0.0);
+        let b: Vec<Vec3> = a.iter().map(|v| *v * 2.0).collect();
+        assert!((relative_change(&a, &b) - 1.0).abs() < 1e-12);
+        assert_eq!(relative_change(&[], &[]), 0.0);
+    }
+}

@@ -1,0 +1,333 @@
+//! CPU twins of every quantity the GPU passes compute (DESIGN.md §2-§4).
+//!
+//! Each function here has a WGSL function of the same name and argument order in
+//! `shaders/common.wgsl` (or in the pass's own shader). Tests run both on the same inputs and
+//! compare them; the CPU versions are also the readable statement of the maths.
+//!
+//! Units: positions in metres, flux in W, intensity in W/sr, irradiance in W/m², radiance in
+//! W/(m² sr); all colours are linear RGB.
+
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+pub mod bvh;
+pub mod rgbd;
+pub mod rsm;
+
+/// Squared distance under which a VAL and a receiver are treated as coincident: the direction
+/// between them is undefined, so the pair contributes nothing (m²).
+pub const COINCIDENT_DISTANCE_SQ: f32 = 1e-24;
+/// Added to every averaging weight so an averaged light position stays defined when a receiver
+/// gets no light at all (DESIGN.md §4 step 1).
+pub const GATHER_EPSILON: f32 = 1e-30;
+/// Smallest distance (m) at which a renormalised point light is applied; closer lights are
+/// pushed out to it so the inverse-square law cannot divide by zero.
+pub const MIN_LIGHT_DISTANCE: f32 = 1e-4;
+/// Smallest cosine between a receiver normal and its renormalised light direction. A grazing
+/// averaged light is rotated toward the normal up to this cosine (DESIGN.md §4 step 2).
+pub const MIN_RENORMALISE_COSINE: f32 = 0.02;
+/// Smallest `cos * lobe^k` a renormalised glossy light may divide by; below it the intensity is
+/// capped, which bounds the energy error to views within a few degrees of grazing.
+pub const MIN_GLOSSY_RESPONSE: f32 = 0.02;
+
+/// Luminance of a linear RGB triple (Rec. 709 weights).
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// Mirror `w` about `n`: `2 dot(n, w) n - w` (both unit; DESIGN.md's `reflect`, which is the
+/// negation of WGSL's built-in `reflect`).
+pub fn mirror(w: Vec3, n: Vec3) -> Vec3 {
+    2.0 * n.dot(w) * n - w
+}
+
+/// `max(0, c)^k`, defined for every `k >= 0` (0^0 = 1) without NaN from `log2(0)`.
+pub fn phong_lobe(cos_r: f32, k: f32) -> f32 {
+    if k <= 0.0 {
+        1.0
+    } else if cos_r <= 0.0 {
+        0.0
+    } else {
+        (k * cos_r.log2()).exp2()
+    }
+}
+
+/// Normalised modified-Phong specular factor `(k + 2) / (2 pi)` (1/sr).
+pub fn phong_normalisation(k: f32) -> f32 {
+    (k + 2.0) / (2.0 * PI)
+}
+
+/// Geometric part of one VAL seen from a receiver (DESIGN.md §3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValGeometry {
+    /// Unit direction from the receiver to the VAL.
+    pub direction: Vec3,
+    /// `cos_x`: receiver cosine, clamped at 0.
+    pub cos_receiver: f32,
+    /// `w_j = cos_j / (pi d^2 + a_j)` (1/m²).
+    pub weight: f32,
+}
+
+/// The point-to-disc form-factor weight of VAL (`val_position`, `val_normal`, `val_area`) at
+/// receiver (`x`, `n_x`). Coincident pairs and VALs facing away give zero weight.
+pub fn val_geometry(x: Vec3, n_x: Vec3, val_position: Vec3, val_normal: Vec3, val_area: f32) -> ValGeometry {
+    let v = val_position - x;
+    let d2 = v.length_squared();
+    if d2 <= COINCIDENT_DISTANCE_SQ {
+        return ValGeometry { direction: n_x, cos_receiver: 0.0, weight: 0.0 };
+    }
+    let w = v / d2.sqrt();
+    let cos_receiver = n_x.dot(w).max(0.0);
+    let cos_val = (-val_normal.dot(w)).max(0.0);
+    ValGeometry { direction: w, cos_receiver, weight: cos_val / (PI * d2 + val_area.max(0.0)) }
+}
+
+/// Irradiance (W/m²) at `x` from one Lambertian disc VAL of flux `flux` (W).
+pub fn val_irradiance(x: Vec3, n_x: Vec3, val: &Val) -> Vec3 {
+    let g = val_geometry(x, n_x, val.position, val.normal, val.area);
+    val.flux * (g.weight * g.cos_receiver)
+}
+
+/// One virtual area light: a Lambertian disc.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Val {
+    pub position: Vec3,
+    /// Unit normal; the disc emits into the half-space it faces.
+    pub normal: Vec3,
+    /// Disc area (m²).
+    pub area: f32,
+    /// Emitted flux (W, RGB).
+    pub flux: Vec3,
+}
+
+/// The twins take a receiver's material as [`crate::scene::Material`] with its diffuse texture
+/// already sampled into `diffuse` (`diffuse_texture` is not read), as WGSL's `Material.material`.
+pub use crate::scene::Material;
+
+/// What the gather accumulates at one sparse point (DESIGN.md §4 step 1).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct Gathered {
+    /// `E_x`: irradiance (W/m²).
+    pub irradiance: Vec3,
+    /// `l'_d`: luminance-and-geometry weighted mean VAL position (m).
+    pub diffuse_position: Vec3,
+    /// The same weighted mean of the squared VAL positions, per axis (m²).
+    pub diffuse_second_moment: Vec3,
+    /// `G_x`: irradiance weighted by the Phong lobe toward the eye (W/m²).
+    pub glossy_irradiance: Vec3,
+    /// `l'_s`: lobe-weighted mean VAL position (m).
+    pub glossy_position: Vec3,
+}
+
+/// Gather every VAL at sparse point (`x`, `n_x`) with Phong exponent `k`, seen from `eye`.
+pub fn gather_point(x: Vec3, n_x: Vec3, k: f32, eye: Vec3, vals: &[Val]) -> Gathered {
+    let w_o = view_direction(x, n_x, eye);
+    let (mut e, mut g) = (Vec3::ZERO, Vec3::ZERO);
+    let (mut ld, mut ld2, mut ls) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+    let (mut wd, mut ws) = (0.0f32, 0.0f32);
+    for val in vals {
+        let geo = val_geometry(x, n_x, val.position, val.normal, val.area);
+        let e_j = val.flux * (geo.weight * geo.cos_receiver);
+        let lobe = phong_lobe(mirror(geo.direction, n_x).dot(w_o), k);
+        let y = luminance(val.flux) * geo.weight * geo.cos_receiver;
+        e += e_j;
+        g += e_j * lobe;
+        let gd = y + GATHER_EPSILON;
+        let gs = y * lobe + GATHER_EPSILON;
+        ld += gd * val.position;
+        ld2 += gd * val.position * val.position;
+        ls += gs * val.position;
+        wd += gd;
+        ws += gs;
+    }
+    Gathered {
+        irradiance: e,
+        diffuse_position: ld / wd,
+        diffuse_second_moment: ld2 / wd,
+        glossy_irradiance: g,
+        glossy_position: ls / ws,
+    }
+}
+
+/// Unit direction from `x` toward the eye; the normal when the eye sits on `x`.
+pub fn view_direction(x: Vec3, n_x: Vec3, eye: Vec3) -> Vec3 {
+    let v = eye - x;
+    let d2 = v.length_squared();
+    if d2 <= COINCIDENT_DISTANCE_SQ { n_x } else { v / d2.sqrt() }
+}
+
+/// A point light with intensity (W/sr, RGB): a renormalised averaged VPL.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct PointLight {
+    pub position: Vec3,
+    pub intensity: Vec3,
+}
+
+/// Direction from `x` toward `target`, rotated toward `n` so that its cosine with `n` is at
+/// least [`MIN_RENORMALISE_COSINE`]; returns (unit direction, distance clamped to
+/// [`MIN_LIGHT_DISTANCE`]).
+pub fn renormalise_direction(x: Vec3, n: Vec3, target: Vec3) -> (Vec3, f32) {
+    let v = target - x;
+    let d = v.length();
+    let w = if d * d > COINCIDENT_DISTANCE_SQ { v / d } else { n };
+    let c = n.dot(w);
+    if c >= MIN_RENORMALISE_COSINE {
+        return (w, d.max(MIN_LIGHT_DISTANCE));
+    }
+    let tangent = w - c * n;
+    let t2 = tangent.length_squared();
+    let t = if t2 > 1e-12 { tangent / t2.sqrt() } else { any_perpendicular(n) };
+    let s = (1.0 - MIN_RENORMALISE_COSINE * MIN_RENORMALISE_COSINE).sqrt();
+    (t * s + n * MIN_RENORMALISE_COSINE, d.max(MIN_LIGHT_DISTANCE))
+}
+
+/// A unit vector perpendicular to unit `n`.
+pub fn any_perpendicular(n: Vec3) -> Vec3 {
+    let a = if n.x.abs() < 0.9 { Vec3::X } else { Vec3::Y };
+    n.cross(a).normalize()
+}
+
+/// Diffuse renormalisation (DESIGN.md §4 step 2, paper eq. 11): a point light that, applied at
+/// `x`, reproduces the gathered irradiance `e` exactly. Finite and non-negative for every input.
+pub fn renormalise_diffuse(x: Vec3, n: Vec3, e: Vec3, averaged_position: Vec3) -> PointLight {
+    let (w, d) = renormalise_direction(x, n, averaged_position);
+    let cos = n.dot(w);
+    PointLight { position: x + w * d, intensity: (e * (d * d / cos)).max(Vec3::ZERO) }
+}
+
+/// Glossy renormalisation: a point light that, applied at `x` with the Phong lobe toward
+/// `eye`, reproduces the gathered `g` (up to the [`MIN_GLOSSY_RESPONSE`] cap).
+pub fn renormalise_glossy(x: Vec3, n: Vec3, k: f32, eye: Vec3, g: Vec3, averaged_position: Vec3) -> PointLight {
+    let w_o = view_direction(x, n, eye);
+    let (mut w, d) = renormalise_direction(x, n, averaged_position);
+    let mut response = n.dot(w) * phong_lobe(mirror(w, n).dot(w_o), k);
+    if response < MIN_GLOSSY_RESPONSE && n.dot(w_o) > 0.0 {
+        // The averaged position misses the lobe: put the light in the mirror direction of the
+        // view instead, where the lobe is 1.
+        let (r, _) = renormalise_direction(x, n, x + mirror(w_o, n));
+        let r_response = n.dot(r) * phong_lobe(mirror(r, n).dot(w_o), k);
+        if r_response > response {
+            w = r;
+            response = r_response;
+        }
+    }
+    let intensity = if n.dot(w_o) > 0.0 { g * (d * d / response.max(MIN_GLOSSY_RESPONSE)) } else { Vec3::ZERO };
+    PointLight { position: x + w * d, intensity: intensity.max(Vec3::ZERO) }
+}
+
+/// Interpolation weights of a vertex's sparse neighbours (DESIGN.md §4 step 4, paper eq. 12):
+/// `(1 - d_j / d_max) * clamp(dot(n_v, n_j), 0, 1)`. When every weight is zero the nearest
+/// neighbour facing the vertex's side (else the nearest) gets weight 1. `distances` must be
+/// sorted nearest first (as the k-d tree returns them); the result always sums to > 0 when
+/// `distances` is non-empty.
+pub fn interpolation_weights(n_v: Vec3, distances: &[f32], normals: &[Vec3]) -> Vec<f32> {
+    let d_max = distances.iter().copied().fold(0.0f32, f32::max);
+    let mut w: Vec<f32> = distances
+        .iter()
+        .zip(normals)
+        .map(|(&d, n)| {
+            let spatial = if d_max > 0.0 { 1.0 - d / d_max } else { 1.0 };
+            spatial.max(0.0) * n_v.dot(*n).clamp(0.0, 1.0)
+        })
+        .collect();
+    if w.iter().sum::<f32>() <= 0.0 && !w.is_empty() {
+        let fallback = normals.iter().position(|n| n_v.dot(*n) > 0.0).unwrap_or(0);
+        w[fallback] = 1.0;
+    }
+    w
+}
+
+/// Weighted mean of point lights (positions and intensities), weights from
+/// [`interpolation_weights`].
+pub fn interpolate_lights(weights: &[f32], lights: &[PointLight]) -> PointLight {
+    let total: f32 = weights.iter().sum();
+    if total <= 0.0 {
+        return PointLight::default();
+    }
+    let mut out = PointLight::default();
+    for (w, l) in weights.iter().zip(lights) {
+        out.position += l.position * (w / total);
+        out.intensity += l.intensity * (w / total);
+    }
+    out
+}
+
+/// Radiance (W/(m² sr)) toward `eye` from a point light at a receiver (`p`, `n`) through the
+/// Phong BRDF. `glossy` selects the specular term, else the diffuse one.
+pub fn point_light_radiance(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, light: &PointLight, glossy: bool) -> Vec3 {
+    let v = light.position - p;
+    let d2 = v.length_squared().max(MIN_LIGHT_DISTANCE * MIN_LIGHT_DISTANCE);
+    let w = v / d2.sqrt();
+    let cos = n.dot(w).max(0.0);
+    let e = light.intensity * (cos / d2);
+    if glossy {
+        let w_o = view_direction(p, n, eye);
+        surface.specular
+            * phong_normalisation(surface.exponent)
+            * phong_lobe(mirror(w, n).dot(w_o), surface.exponent)
+            * e
+    } else {
+        surface.diffuse / PI * e
+    }
+}
+
+/// Per-pixel sparse shading (DESIGN.md §4 step 5): the diffuse and glossy point lights applied
+/// with the pixel's own position, normal, material and view direction.
+pub fn shade_sparse(
+    p: Vec3,
+    n: Vec3,
+    surface: &Material,
+    eye: Vec3,
+    diffuse: &PointLight,
+    glossy: Option<&PointLight>,
+) -> Vec3 {
+    let mut l = point_light_radiance(p, n, surface, eye, diffuse, false);
+    if let Some(g) = glossy {
+        l += point_light_radiance(p, n, surface, eye, g, true);
+    }
+    l
+}
+
+/// Brute-force indirect radiance at a pixel: every VAL through §3, no interpolation.
+pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: &[Val], glossy: bool) -> Vec3 {
+    let w_o = view_direction(p, n, eye);
+    let spec = surface.specular * phong_normalisation(surface.exponent);
+    let mut l = Vec3::ZERO;
+    for val in vals {
+        let geo = val_geometry(p, n, val.position, val.normal, val.area);
+        let e = val.flux * (geo.weight * geo.cos_receiver);
+        l += surface.diffuse / PI * e;
+        if glossy {
+            l += spec * phong_lobe(mirror(geo.direction, n).dot(w_o), surface.exponent) * e;
+        }
+    }
+    l
+}
+
+/// Bilinear sample of an sRGB-encoded RGBA8 image (`width` x `height`, rows from the top) at
+/// texture coordinates `st` (s right, t down, texel centres at (i + 0.5) / size), with repeat
+/// addressing; texels are decoded to linear before filtering, as GPUs do for sRGB formats.
+pub fn sample_bilinear(rgba8: &[u8], width: u32, height: u32, st: Vec2) -> Vec3 {
+    let (w, h) = (width as i64, height as i64);
+    let x = st.x * width as f32 - 0.5;
+    let y = st.y * height as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let texel = |i: i64, j: i64| {
+        let k = 4 * (j.rem_euclid(h) * w + i.rem_euclid(w)) as usize;
+        let d = crate::image::decode_srgb;
+        Vec3::new(d(rgba8[k]), d(rgba8[k + 1]), d(rgba8[k + 2]))
+    };
+    let (i, j) = (x0 as i64, y0 as i64);
+    let top = texel(i, j).lerp(texel(i + 1, j), fx);
+    let bottom = texel(i, j + 1).lerp(texel(i + 1, j + 1), fx);
+    top.lerp(bottom, fy)
+}
+
+/// Barycentric interpolation `(1 - b.x - b.y) a + b.x b + b.y c`.
+pub fn barycentric(b: Vec2, a: Vec3, bb: Vec3, c: Vec3) -> Vec3 {
+    a * (1.0 - b.x - b.y) + bb * b.x + c * b.y
+}
+
+#[cfg(test)]
+mod tests;
