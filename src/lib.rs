@@ -20,7 +20,8 @@
 //! - [`image`]: tone mapping, PNG/EXR output, error metrics; [`compare`]: the error and timing
 //!   figures of `relume compare`, which [`bench`] (`relume bench`, sweeps and plots) shares.
 //! - [`rgbd`]: RGB-D frames and how they become VALs.
-//! - [`service`]: `relume serve`, the HTTP + WebSocket service; [`client`]: a client of it; [`load`]: its load benchmark.
+//! - [`service`]: `relume serve`, the HTTP + WebSocket service, a client of it
+//!   (`service::client`) and its load benchmark (`service::load`).
 //!
 //! # Who owns the GPU
 //!
@@ -29,11 +30,9 @@
 //! `service::gpu_worker`'s: handlers send it jobs over a bounded channel.
 
 pub mod bench;
-pub mod client;
 pub mod compare;
 pub mod gpu;
 pub mod image;
-pub mod load;
 pub mod mr;
 pub mod reference;
 pub mod renderer;

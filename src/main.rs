@@ -303,7 +303,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     !accumulate && size.width.is_none() && size.height.is_none(),
                     "--accumulate, --width and --height: not available with --server (the stream renders each frame at its own size, without accumulation)"
                 );
-                let options = relume::client::RemoteReplayOptions {
+                let options = relume::service::client::RemoteReplayOptions {
                     server,
                     token,
                     recording,
@@ -338,7 +338,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 seconds.is_finite() && seconds > 0.0,
                 "--seconds: must be a positive number, got {seconds}"
             );
-            let options = relume::load::LoadOptions {
+            let options = relume::service::load::LoadOptions {
                 server,
                 token,
                 streams,
@@ -352,11 +352,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 frames,
             };
             let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-            let report = runtime.block_on(relume::load::run(&options))?;
+            let report = runtime.block_on(relume::service::load::run(&options))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
-                println!("{}", relume::load::table(&report));
+                println!("{}", relume::service::load::table(&report));
             }
             Ok(())
         }
@@ -491,9 +491,9 @@ fn checked_side(name: &str, v: u32) -> anyhow::Result<u32> {
 }
 
 /// `replay --server`: the replay through a running server, and its summary.
-fn remote_replay_command(options: &relume::client::RemoteReplayOptions) -> anyhow::Result<()> {
+fn remote_replay_command(options: &relume::service::client::RemoteReplayOptions) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    let summary = runtime.block_on(relume::client::replay_remote(options))?;
+    let summary = runtime.block_on(relume::service::client::replay_remote(options))?;
     let vals = &summary.vals_per_frame;
     eprintln!(
         "replayed {} frames at {}x{} through {}: {} to {} VALs per frame, round trip p50 {:.0} ms, p99 {:.0} ms, {} dropped",
@@ -503,8 +503,8 @@ fn remote_replay_command(options: &relume::client::RemoteReplayOptions) -> anyho
         summary.server,
         vals.iter().min().unwrap_or(&0),
         vals.iter().max().unwrap_or(&0),
-        relume::client::quantile(&summary.round_trip_ms, 0.5),
-        relume::client::quantile(&summary.round_trip_ms, 0.99),
+        relume::service::client::quantile(&summary.round_trip_ms, 0.5),
+        relume::service::client::quantile(&summary.round_trip_ms, 0.99),
         summary.dropped_frames,
     );
     eprintln!("{}", relume::replay::stage_table(&summary.stage_ms, ("round trip", &summary.round_trip_ms)));

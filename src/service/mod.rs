@@ -13,6 +13,8 @@
 //! - [`scenes`]: admitting scene descriptions (limits, paths confined to the asset directory)
 //!   and the registry of scenes held.
 //! - [`config`]: flags, environment variables and limits; [`metrics`]: Prometheus text.
+//! - [`client`]: a client of the service (`relume replay --server`); [`load`]: its load
+//!   benchmark (`relume load`).
 //!
 //! Shutdown (SIGINT, SIGTERM, or the future given to [`Server::run`]): the server stops
 //! accepting connections, answers new work with 503 `shutting_down`, lets in-flight requests
@@ -21,10 +23,12 @@
 //! left is dropped.
 
 pub mod api;
+pub mod client;
 pub mod config;
 pub mod error;
 pub mod gpu_worker;
 pub mod http;
+pub mod load;
 pub mod metrics;
 pub mod recordings;
 pub mod scenes;

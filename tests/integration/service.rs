@@ -916,7 +916,7 @@ fn the_binary_serves_until_sigterm() {
 /// depth pixels to stay fast.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_recording_replays_through_the_server_as_offline() {
-    use relume::client::{RemoteReplayOptions, replay_remote};
+    use relume::service::client::{RemoteReplayOptions, replay_remote};
     use relume::mr::{MrOptions, MrRenderer};
     use relume::rgbd::recording::{Recording, RecordingOptions};
 

@@ -1,6 +1,6 @@
 //! A client of `relume serve`: uploads a scene, streams RGB-D frames over the WebSocket
 //! protocol (`proto/relume.proto`) and collects the relit frames. `relume replay --server`
-//! ([`replay_remote`]) and `relume load` (`crate::load`) are built on it.
+//! ([`replay_remote`]) and `relume load` (`crate::service::load`) are built on it.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

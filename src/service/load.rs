@@ -15,7 +15,7 @@ use hyper::{Method, StatusCode};
 use serde::Serialize;
 use serde_json::json;
 
-use crate::client::{Connection, asset_description, describe_error, quantile, upload_description};
+use crate::service::client::{Connection, asset_description, describe_error, quantile, upload_description};
 use crate::rgbd::RgbdFrame;
 use crate::rgbd::recording::{Recording, RecordingOptions};
 use crate::service::wire::proto::envelope::Body;
