@@ -193,6 +193,11 @@ enum Command {
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
+        /// Soak test instead: one normal stream and HTTP client alone, then beside a hostile
+        /// mix (floods, slow and idle sockets, bad stream messages, scene churn), each phase
+        /// --seconds long, on loopback (README, "Soak test").
+        #[arg(long)]
+        chaos: bool,
     },
     /// Serve the HTTP + WebSocket API (see README, "Service"). Every flag also reads the
     /// environment variable shown; SIGINT/SIGTERM shut down gracefully.
@@ -333,6 +338,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             assets,
             frames,
             json,
+            chaos,
         } => {
             anyhow::ensure!(
                 seconds.is_finite() && seconds > 0.0,
@@ -350,8 +356,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 http_scene,
                 assets,
                 frames,
+                chaos,
             };
             let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
+            if chaos {
+                let report = runtime.block_on(relume::service::load::soak(&options))?;
+                match json {
+                    true => println!("{}", serde_json::to_string_pretty(&report)?),
+                    false => println!("{}", relume::service::load::soak_table(&report)),
+                }
+                return Ok(());
+            }
             let report = runtime.block_on(relume::service::load::run(&options))?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&report)?);

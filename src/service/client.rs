@@ -53,6 +53,20 @@ impl Connection {
         Ok(Connection { authority, token, http })
     }
 
+    /// The same server, with HTTP connections made from `source` (another loopback address is
+    /// another client to the server's fair queue).
+    pub fn from_source(&self, source: std::net::IpAddr) -> Connection {
+        let mut connector = HttpConnector::new();
+        connector.set_local_address(Some(source));
+        let http = Client::builder(hyper_util::rt::TokioExecutor::new()).build(connector);
+        Connection { authority: self.authority.clone(), token: self.token.clone(), http }
+    }
+
+    /// `host:port` of the server.
+    pub fn authority(&self) -> &str {
+        &self.authority
+    }
+
     /// One HTTP request; the answer's status and body.
     pub async fn request(&self, method: Method, path: &str, body: Bytes) -> anyhow::Result<(StatusCode, Bytes)> {
         let mut request = hyper::Request::builder()

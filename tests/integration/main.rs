@@ -5,6 +5,7 @@ mod accuracy;
 mod bench;
 mod cli;
 mod fuzz;
+mod hardening;
 mod layout;
 mod recording;
 mod replay;
