@@ -25,8 +25,8 @@
 //! - [`image`]: tone mapping, PNG/EXR output, error metrics.
 //! - [`bench`]: `relume bench` (sweeps and plots) and `bench::compare`, the figures of
 //!   `relume compare`, one code path.
-//! - [`service`]: `relume serve`, the HTTP + WebSocket service; [`client`]: a client of it;
-//!   [`load`]: its load benchmark.
+//! - [`service`]: `relume serve`, the HTTP + WebSocket service, a client of it
+//!   (`service::client`) and its load benchmark and soak test (`service::load`).
 //!
 //! # Who owns the GPU
 //!
@@ -35,10 +35,8 @@
 //! `service::gpu_worker`'s: handlers send it jobs over a bounded channel.
 
 pub mod bench;
-pub mod client;
 pub mod gpu;
 pub mod image;
-pub mod load;
 pub mod mr;
 pub mod renderer;
 pub mod rgbd;

@@ -40,12 +40,17 @@ pub struct Args {
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
+    /// Soak test instead: one normal stream and HTTP client alone, then beside a hostile
+    /// mix (floods, slow and idle sockets, bad stream messages, scene churn), each phase
+    /// --seconds long, on loopback (README, "Soak test").
+    #[arg(long)]
+    chaos: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let seconds = args.seconds;
     anyhow::ensure!(seconds.is_finite() && seconds > 0.0, "--seconds: must be a positive number, got {seconds}");
-    let options = relume::load::LoadOptions {
+    let options = relume::service::load::LoadOptions {
         server: args.server,
         token: args.token,
         streams: args.streams,
@@ -57,13 +62,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         http_scene: args.http_scene,
         assets: args.assets,
         frames: args.frames,
+        chaos: args.chaos,
     };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    let report = runtime.block_on(relume::load::run(&options))?;
+    if args.chaos {
+        let report = runtime.block_on(relume::service::load::soak(&options))?;
+        match args.json {
+            true => println!("{}", serde_json::to_string_pretty(&report)?),
+            false => println!("{}", relume::service::load::soak_table(&report)),
+        }
+        return Ok(());
+    }
+    let report = runtime.block_on(relume::service::load::run(&options))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        println!("{}", relume::load::table(&report));
+        println!("{}", relume::service::load::table(&report));
     }
     Ok(())
 }

@@ -61,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             !args.accumulate && args.size.width.is_none() && args.size.height.is_none(),
             "--accumulate, --width and --height: not available with --server (the stream renders each frame at its own size, without accumulation)"
         );
-        let options = relume::client::RemoteReplayOptions {
+        let options = relume::service::client::RemoteReplayOptions {
             server,
             token: args.token,
             recording: args.recording,
@@ -94,9 +94,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// `replay --server`: the replay through a running server, and its summary.
-fn remote_replay_command(options: &relume::client::RemoteReplayOptions) -> anyhow::Result<()> {
+fn remote_replay_command(options: &relume::service::client::RemoteReplayOptions) -> anyhow::Result<()> {
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
-    let summary = runtime.block_on(relume::client::replay_remote(options))?;
+    let summary = runtime.block_on(relume::service::client::replay_remote(options))?;
     let vals = &summary.vals_per_frame;
     eprintln!(
         "replayed {} frames at {}x{} through {}: {} to {} VALs per frame, round trip p50 {:.0} ms, p99 {:.0} ms, {} dropped",
@@ -106,8 +106,8 @@ fn remote_replay_command(options: &relume::client::RemoteReplayOptions) -> anyho
         summary.server,
         vals.iter().min().unwrap_or(&0),
         vals.iter().max().unwrap_or(&0),
-        relume::client::quantile(&summary.round_trip_ms, 0.5),
-        relume::client::quantile(&summary.round_trip_ms, 0.99),
+        relume::service::client::quantile(&summary.round_trip_ms, 0.5),
+        relume::service::client::quantile(&summary.round_trip_ms, 0.99),
         summary.dropped_frames,
     );
     eprintln!("{}", relume::mr::replay::stage_table(&summary.stage_ms, ("round trip", &summary.round_trip_ms)));

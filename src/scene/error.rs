@@ -49,6 +49,17 @@ pub enum SceneError {
         /// What is wrong.
         message: String,
     },
+    /// The scene would have more triangles than the loader was allowed (after subdivision,
+    /// all meshes together).
+    #[error("{field}: {message}")]
+    TooManyTriangles {
+        /// The mesh, `meshes[i].obj` (its OBJ alone is over) or `meshes[i].sparse_points`
+        /// (subdividing it would be).
+        field: String,
+        /// The most triangles allowed.
+        limit: usize,
+        message: String,
+    },
 }
 
 impl SceneError {
@@ -61,9 +72,10 @@ impl SceneError {
     pub fn field_path(&self) -> Option<&str> {
         match self {
             SceneError::Read { .. } => None,
-            SceneError::Json { field, .. } | SceneError::Field { field, .. } | SceneError::Obj { field, .. } => {
-                Some(field)
-            }
+            SceneError::Json { field, .. }
+            | SceneError::Field { field, .. }
+            | SceneError::Obj { field, .. }
+            | SceneError::TooManyTriangles { field, .. } => Some(field),
         }
     }
 }

@@ -393,14 +393,30 @@ impl Scene {
     /// Validates a parsed description and loads every mesh it names; OBJ paths are relative to
     /// `base_dir`.
     pub fn from_description(description: &SceneDescription, base_dir: &Path) -> Result<Scene, SceneError> {
+        Self::from_description_within(description, base_dir, usize::MAX)
+    }
+
+    /// [`Scene::from_description`] with at most `max_triangles` triangles after subdivision,
+    /// all meshes together (and [`MAX_TRIANGLES_PER_MESH`] per mesh): each OBJ's triangles are
+    /// checked as soon as it is parsed, and subdivision stops as soon as it would go over
+    /// ([`SceneError::TooManyTriangles`]).
+    pub fn from_description_within(
+        description: &SceneDescription,
+        base_dir: &Path,
+        max_triangles: usize,
+    ) -> Result<Scene, SceneError> {
         description.validate()?;
         let mut settings = description.settings.to_settings(false);
         let mut materials = Vec::new();
         let mut textures = texture::Textures::default();
         let mut meshes = Vec::with_capacity(description.meshes.len());
         let anchor = description.anchor.as_ref().map_or(Mat4::IDENTITY, |a| a.to_matrix());
+        let mut triangles = 0usize;
         for (index, mesh_description) in description.meshes.iter().enumerate() {
-            let mut mesh = load_mesh(mesh_description, index, base_dir, &settings, &mut materials, &mut textures)?;
+            let budget = TriangleBudget { left: max_triangles.saturating_sub(triangles), total: max_triangles };
+            let mut mesh =
+                load_mesh(mesh_description, index, base_dir, &settings, &budget, &mut materials, &mut textures)?;
+            triangles += mesh.triangles.len();
             mesh.model_to_world = anchor * mesh.model_to_world;
             meshes.push(mesh);
         }
@@ -453,6 +469,24 @@ impl Scene {
     }
 }
 
+/// Triangles a mesh may have after subdivision: what the scene's meshes before it left of the
+/// scene's `total`.
+struct TriangleBudget {
+    left: usize,
+    total: usize,
+}
+
+impl TriangleBudget {
+    fn exceeded(&self, field: String, what: &str) -> SceneError {
+        let message = if self.left < self.total {
+            format!("{what} over the {} triangles left of the scene's limit of {}", self.left, self.total)
+        } else {
+            format!("{what} over the scene's limit of {} triangles", self.total)
+        };
+        SceneError::TooManyTriangles { field, limit: self.total, message }
+    }
+}
+
 /// Loads mesh `index` of the description: OBJ, normals, subdivision, sparse points. Its
 /// materials are appended to `materials`, their textures to `textures`.
 fn load_mesh(
@@ -460,12 +494,17 @@ fn load_mesh(
     index: usize,
     base_dir: &Path,
     settings: &Settings,
+    budget: &TriangleBudget,
     materials: &mut Vec<Material>,
     textures: &mut texture::Textures,
 ) -> Result<Mesh, SceneError> {
     let started = std::time::Instant::now();
     let field = format!("meshes[{index}]");
     let loaded = obj::load(description, &field, base_dir, textures)?;
+    if loaded.triangles.len() > budget.left {
+        let what = format!("the OBJ has {} triangles,", loaded.triangles.len());
+        return Err(budget.exceeded(format!("{field}.obj"), &what));
+    }
     let file = loaded.file.clone();
     let loaded_at = started.elapsed();
     let material_offset = u32::try_from(materials.len()).map_err(|_| SceneError::Field {
@@ -499,14 +538,19 @@ fn load_mesh(
     let spacing = (area / sparse_count as f64).sqrt() as f32;
     let original_triangles = geometry.triangles.len();
     let normals_at = started.elapsed();
-    subdivide::subdivide(&mut geometry, spacing, MAX_TRIANGLES_PER_MESH).map_err(|limit| SceneError::Obj {
-        field: format!("{field}.sparse_points"),
-        file: file.clone(),
-        line: None,
-        message: format!(
-            "subdividing to the sparse point spacing {spacing} would exceed {limit} \
-                 triangles; use fewer sparse points"
-        ),
+    let cap = budget.left.min(MAX_TRIANGLES_PER_MESH);
+    subdivide::subdivide(&mut geometry, spacing, cap).map_err(|limit| {
+        let what = format!("subdividing to the sparse point spacing {spacing} would go");
+        if limit < MAX_TRIANGLES_PER_MESH {
+            budget.exceeded(format!("{field}.sparse_points"), &what)
+        } else {
+            SceneError::Obj {
+                field: format!("{field}.sparse_points"),
+                file: file.clone(),
+                line: None,
+                message: format!("{what} over {limit} triangles per mesh; use fewer sparse points"),
+            }
+        }
     })?;
 
     let subdivided_at = started.elapsed();

@@ -87,7 +87,7 @@ pub(crate) fn crease_normals(
 
     // Every (edge, triangle) incidence, sorted so that the triangles of an edge are adjacent.
     // Corners are numbered 3 * triangle + k.
-    let mut incidences: Vec<((u32, u32), u32, u32)> = Vec::with_capacity(3 * triangles.len());
+    let mut incidences: Vec<Incidence> = Vec::with_capacity(3 * triangles.len());
     for (t, triangle) in points.iter().enumerate() {
         for k in 0..3 {
             let (u, w) = (triangle[k], triangle[(k + 1) % 3]);
@@ -100,16 +100,12 @@ pub(crate) fn crease_normals(
 
     let mut clusters = UnionFind::new(3 * triangles.len());
     for run in incidences.chunk_by(|a, b| a.0 == b.0) {
-        for (i, &(_, lo_i, hi_i)) in run.iter().enumerate() {
-            for &(_, lo_j, hi_j) in &run[i + 1..] {
-                let (Some(a), Some(b)) = (units[lo_i as usize / 3], units[lo_j as usize / 3]) else {
-                    continue;
-                };
-                if a.dot(b) >= cos_crease {
-                    clusters.union(lo_i, lo_j);
-                    clusters.union(hi_i, hi_j);
-                }
-            }
+        if run.len() <= PAIRWISE_MAX {
+            join_pairwise(run, &units, cos_crease, &mut clusters);
+        } else {
+            let ((u, w), _, _) = run[0];
+            let edge = positions[w as usize] - positions[u as usize];
+            join_by_angle(run, edge, &units, cos_crease.clamp(-1.0, 1.0).acos(), &mut clusters);
         }
     }
 
@@ -165,6 +161,63 @@ pub(crate) fn crease_normals(
         texcoords: new_texcoords,
         triangles: new_triangles,
         triangle_materials: Vec::new(),
+    }
+}
+
+/// Triangles around one edge compared pairwise at most; more (a non-manifold edge: a fan of
+/// sheets, or one triangle repeated) are sorted by angle around the edge instead, so that
+/// loading stays O(n log n) in triangles whatever the connectivity.
+const PAIRWISE_MAX: usize = 8;
+
+/// One (edge, triangle) incidence: the edge's points (lower first), and the triangle's corners
+/// at the lower and at the higher point.
+type Incidence = ((u32, u32), u32, u32);
+
+/// Joins the corners of every two triangles of `run` (one edge's incidences) whose faces bend
+/// by at most the crease angle across the edge: each pair of unit normals compared.
+fn join_pairwise(run: &[Incidence], units: &[Option<Vec3>], cos_crease: f32, clusters: &mut UnionFind) {
+    for (i, &(_, lo_i, hi_i)) in run.iter().enumerate() {
+        for &(_, lo_j, hi_j) in &run[i + 1..] {
+            let (Some(a), Some(b)) = (units[lo_i as usize / 3], units[lo_j as usize / 3]) else {
+                continue;
+            };
+            if a.dot(b) >= cos_crease {
+                clusters.union(lo_i, lo_j);
+                clusters.union(hi_i, hi_j);
+            }
+        }
+    }
+}
+
+/// What [`join_pairwise`] joins, in O(k log k) for k triangles: the unit normals of triangles
+/// around an edge are perpendicular to it (`edge`, from the lower point to the higher), so each
+/// is an angle on a circle and two bend by at most `crease` (radians) exactly when their angles
+/// are at most `crease` apart. The pairs that close connect the same groups as the neighbours
+/// in angle order that are, the last and the first included (around the circle).
+fn join_by_angle(run: &[Incidence], edge: Vec3, units: &[Option<Vec3>], crease: f32, clusters: &mut UnionFind) {
+    let Some(axis) = edge.try_normalize() else {
+        return;
+    };
+    let x = axis.any_orthonormal_vector();
+    let y = axis.cross(x);
+    let mut around: Vec<(f32, Incidence)> = run
+        .iter()
+        .filter_map(|&incidence| units[incidence.1 as usize / 3].map(|n| (n.dot(y).atan2(n.dot(x)), incidence)))
+        .collect();
+    around.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let mut join = |(_, lo_a, hi_a): Incidence, (_, lo_b, hi_b): Incidence| {
+        clusters.union(lo_a, lo_b);
+        clusters.union(hi_a, hi_b);
+    };
+    for pair in around.windows(2) {
+        if pair[1].0 - pair[0].0 <= crease {
+            join(pair[0].1, pair[1].1);
+        }
+    }
+    if let [first, .., last] = around.as_slice()
+        && first.0 + std::f32::consts::TAU - last.0 <= crease
+    {
+        join(first.1, last.1);
     }
 }
 
@@ -331,5 +384,70 @@ mod tests {
         let sharp = crease_normals(&positions, &texcoords, &triangles, 20f32.to_radians());
         assert_eq!(sharp.positions.len(), 6);
         assert_eq!(sharp.normals[sharp.triangles[0][0] as usize], Vec3::Z);
+    }
+
+    /// The corner pairs `join` puts in one cluster, over `corners` corners.
+    fn partition(corners: usize, join: impl FnOnce(&mut UnionFind)) -> Vec<u32> {
+        let mut clusters = UnionFind::new(corners);
+        join(&mut clusters);
+        (0..corners as u32).map(|c| clusters.find(c)).collect()
+    }
+
+    proptest::proptest! {
+        /// A high-valence edge (a fan of sheets around the edge 0-1, some repeated, some
+        /// flipped, some degenerate): joining by angle gives exactly the clusters of the
+        /// pairwise comparison, except where two faces bend by within 1e-4 radians of the
+        /// crease angle (where float rounding may decide either way, in both methods).
+        #[test]
+        fn joining_by_angle_equals_joining_pairwise(
+            sheets in proptest::collection::vec((0.0f32..std::f32::consts::TAU, 0.1f32..3.0, 0u8..8), 9..60),
+            crease_deg in 1.0f32..179.0,
+            axis in (-1.0f32..1.0, -1.0f32..1.0, 0.2f32..1.0),
+        ) {
+            let axis = Vec3::new(axis.0, axis.1, axis.2).normalize();
+            let (x, y) = axis.any_orthonormal_pair();
+            let mut positions = vec![Vec3::ZERO, axis * 2.0];
+            let mut triangles = Vec::new();
+            for &(angle, radius, kind) in &sheets {
+                let apex = axis + (x * angle.cos() + y * angle.sin()) * radius;
+                positions.push(if kind == 0 { axis * 0.5 } else { apex });
+                let v = (positions.len() - 1) as u32;
+                triangles.push(if kind == 1 { [1, 0, v] } else { [0, 1, v] });
+                if kind == 2 {
+                    triangles.push([0, 1, v]);
+                }
+            }
+            let units: Vec<Option<Vec3>> = face_normals(&positions, &triangles).iter().map(|f| f.try_normalize()).collect();
+            let crease = crease_deg.to_radians();
+            let near_crease = units.iter().flatten().enumerate().any(|(i, a)| {
+                units.iter().flatten().skip(i + 1).any(|b| (a.dot(*b).clamp(-1.0, 1.0).acos() - crease).abs() < 1e-4)
+            });
+            proptest::prop_assume!(!near_crease);
+            let run: Vec<Incidence> = triangles
+                .iter()
+                .enumerate()
+                .map(|(t, triangle)| {
+                    let k = (0..3)
+                        .find(|&k| triangle[k] + triangle[(k + 1) % 3] == 1)
+                        .expect("the edge 0-1");
+                    let (lo, hi) = if triangle[k] == 0 { (k, (k + 1) % 3) } else { ((k + 1) % 3, k) };
+                    ((0, 1), (3 * t + lo) as u32, (3 * t + hi) as u32)
+                })
+                .collect();
+            let corners = 3 * triangles.len();
+            let pairwise = partition(corners, |c| join_pairwise(&run, &units, crease.cos(), c));
+            let by_angle = partition(corners, |c| join_by_angle(&run, axis * 2.0, &units, crease, c));
+            proptest::prop_assert_eq!(pairwise, by_angle);
+        }
+    }
+
+    #[test]
+    fn one_triangle_repeated_is_one_smooth_sheet() {
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::Y];
+        let triangles = vec![[0, 1, 2]; 5000];
+        let geometry = crease_normals(&positions, &zeros(&positions), &triangles, CREASE_ANGLE_DEG.to_radians());
+        assert_eq!(geometry.positions.len(), 3, "every copy shares the three vertices");
+        assert!(geometry.normals.iter().all(|&n| n == Vec3::Z));
+        assert_eq!(geometry.triangles, triangles);
     }
 }

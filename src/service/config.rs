@@ -25,13 +25,22 @@ pub struct Config {
     pub shutdown_grace_seconds: u64,
     #[command(flatten)]
     pub limits: Limits,
+    #[command(flatten)]
+    pub timeouts: Timeouts,
 }
 
 impl Config {
     /// The defaults, listening on `addr` and reading meshes from `assets` (for tests and
     /// embedding; the command line fills the same struct).
     pub fn new(addr: SocketAddr, assets: impl Into<PathBuf>) -> Config {
-        Config { addr, assets: assets.into(), token: None, shutdown_grace_seconds: 30, limits: Limits::default() }
+        Config {
+            addr,
+            assets: assets.into(),
+            token: None,
+            shutdown_grace_seconds: 30,
+            limits: Limits::default(),
+            timeouts: Timeouts::default(),
+        }
     }
 }
 
@@ -57,9 +66,32 @@ pub struct Limits {
     /// Largest OBJ, bytes (a file in the asset directory or inline `obj_text`).
     #[arg(long, env = "RELUME_MAX_MESH_BYTES", default_value_t = Limits::default().max_mesh_bytes)]
     pub max_mesh_bytes: usize,
-    /// Most renders waiting for the GPU; one more gets 503 with `Retry-After`.
+    /// Most renders waiting for the GPU, all clients together; one more gets 503 with
+    /// `Retry-After`.
     #[arg(long, env = "RELUME_MAX_QUEUE", default_value_t = Limits::default().max_queue)]
     pub max_queue: usize,
+    /// Most renders one client (one IP address) may have waiting for the GPU; one more gets
+    /// 503 with `Retry-After`. Clients are served round robin.
+    #[arg(long, env = "RELUME_MAX_CLIENT_QUEUE", default_value_t = Limits::default().max_client_queue)]
+    pub max_client_queue: usize,
+    /// Most triangles of a scene after subdivision, all meshes together (checked on the OBJ's
+    /// triangles before any work, and while subdividing).
+    #[arg(long, env = "RELUME_MAX_TRIANGLES", default_value_t = Limits::default().max_triangles)]
+    pub max_triangles: usize,
+    /// Most sparse points of a scene, all meshes' `sparse_points` together.
+    #[arg(long, env = "RELUME_MAX_SPARSE_POINTS", default_value_t = Limits::default().max_sparse_points)]
+    pub max_sparse_points: u32,
+    /// Most pixels (width x height) of a rendered image, a stream's camera or an RGB-D frame.
+    #[arg(long, env = "RELUME_MAX_PIXELS", default_value_t = Limits::default().max_pixels)]
+    pub max_pixels: u64,
+    /// Most WebSocket streams open at once; one more gets 503 before the upgrade. Each buffers
+    /// at most `2 * max_message_bytes` of an incoming message.
+    #[arg(long, env = "RELUME_MAX_STREAMS", default_value_t = Limits::default().max_streams)]
+    pub max_streams: usize,
+    /// Most HTTP connections open at once (WebSocket streams not included once upgraded); one
+    /// more is answered 503 and closed.
+    #[arg(long, env = "RELUME_MAX_CONNECTIONS", default_value_t = Limits::default().max_connections)]
+    pub max_connections: usize,
 }
 
 impl Default for Limits {
@@ -71,7 +103,13 @@ impl Default for Limits {
             max_vals: 65_536,
             max_scenes: 16,
             max_mesh_bytes: 32 << 20,
-            max_queue: 8,
+            max_queue: 16,
+            max_client_queue: 2,
+            max_triangles: 2_000_000,
+            max_sparse_points: 65_536,
+            max_pixels: 4 << 20,
+            max_streams: 8,
+            max_connections: 128,
         }
     }
 }
@@ -86,4 +124,83 @@ pub mod limit {
     pub const MAX_SCENES: &str = "max_scenes";
     pub const MAX_MESH_BYTES: &str = "max_mesh_bytes";
     pub const MAX_QUEUE: &str = "max_queue";
+    pub const MAX_CLIENT_QUEUE: &str = "max_client_queue";
+    pub const MAX_TRIANGLES: &str = "max_triangles";
+    pub const MAX_SPARSE_POINTS: &str = "max_sparse_points";
+    pub const MAX_PIXELS: &str = "max_pixels";
+    pub const MAX_STREAMS: &str = "max_streams";
+    pub const MAX_CONNECTIONS: &str = "max_connections";
+}
+
+/// A limit exceeded by a request or stream message, before any work was done for it; the
+/// HTTP and stream errors are made from it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{message}")]
+pub struct LimitExceeded {
+    /// The setting, one of [`limit`].
+    pub limit: &'static str,
+    /// The offending field, e.g. `camera.width`.
+    pub field: Option<String>,
+    /// For people; starts with the field's path when there is one.
+    pub message: String,
+}
+
+impl LimitExceeded {
+    fn new(limit: &'static str, field: String, message: impl std::fmt::Display) -> LimitExceeded {
+        LimitExceeded { limit, message: format!("{field}: {message}"), field: Some(field) }
+    }
+}
+
+impl Limits {
+    /// An image `width` x `height` within `max_frame_side` and `max_pixels`; errors name
+    /// `{field}.width` / `.height`, or `field` for the pixel count.
+    pub fn check_image(&self, width: u32, height: u32, field: &str) -> Result<(), LimitExceeded> {
+        for (name, value) in [("width", width), ("height", height)] {
+            if value > self.max_frame_side {
+                let message = format!("{value} pixels is over the limit of {}", self.max_frame_side);
+                return Err(LimitExceeded::new(limit::MAX_FRAME_SIDE, format!("{field}.{name}"), message));
+            }
+        }
+        let pixels = width as u64 * height as u64;
+        if pixels > self.max_pixels {
+            let message = format!("{width} x {height} = {pixels} pixels is over the limit of {}", self.max_pixels);
+            return Err(LimitExceeded::new(limit::MAX_PIXELS, field.to_owned(), message));
+        }
+        Ok(())
+    }
+}
+
+/// How long the service waits for a client before it closes the connection.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::Args)]
+pub struct Timeouts {
+    /// Seconds a connection may take to send a request's headers, counted from when it opened
+    /// or its previous answer was sent: slow headers, silent sockets and idle keep-alive
+    /// connections are closed after it.
+    #[arg(long, env = "RELUME_HEADER_TIMEOUT_SECONDS", default_value_t = Timeouts::default().header_timeout_seconds,
+        value_parser = clap::value_parser!(u64).range(1..))]
+    pub header_timeout_seconds: u64,
+    /// Seconds a request body may take to arrive; slower is answered 408.
+    #[arg(long, env = "RELUME_BODY_TIMEOUT_SECONDS", default_value_t = Timeouts::default().body_timeout_seconds,
+        value_parser = clap::value_parser!(u64).range(1..))]
+    pub body_timeout_seconds: u64,
+    /// Seconds between the pings the server sends on an open stream.
+    #[arg(long, env = "RELUME_STREAM_PING_SECONDS", default_value_t = Timeouts::default().stream_ping_seconds,
+        value_parser = clap::value_parser!(u64).range(1..))]
+    pub stream_ping_seconds: u64,
+    /// Seconds a stream may go without any message from the client (pongs included), and a
+    /// message to the client may take to be sent, before the stream is closed (1001).
+    #[arg(long, env = "RELUME_STREAM_IDLE_SECONDS", default_value_t = Timeouts::default().stream_idle_seconds,
+        value_parser = clap::value_parser!(u64).range(1..))]
+    pub stream_idle_seconds: u64,
+}
+
+impl Default for Timeouts {
+    fn default() -> Self {
+        Timeouts {
+            header_timeout_seconds: 10,
+            body_timeout_seconds: 30,
+            stream_ping_seconds: 15,
+            stream_idle_seconds: 60,
+        }
+    }
 }

@@ -5,39 +5,72 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 
+use crate::gpu::GpuError;
 use crate::scene::SceneError;
 
-/// Machine-readable error codes of the HTTP API.
-pub mod code {
+use super::config::{LimitExceeded, limit};
+use super::gpu_worker::WorkerError;
+
+/// Machine-readable error codes of the HTTP API: the `code` of every error body.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Code {
     /// The body is not JSON, or has an unknown or missing field or a value of the wrong type.
-    pub const INVALID_JSON: &str = "invalid_json";
+    InvalidJson,
     /// A value is out of range or inconsistent with another; `field` names it.
-    pub const INVALID_FIELD: &str = "invalid_field";
+    InvalidField,
     /// A mesh, material or texture cannot be loaded (missing file, invalid OBJ).
-    pub const INVALID_SCENE: &str = "invalid_scene";
+    InvalidScene,
     /// A mesh or texture path resolves outside the asset directory.
-    pub const PATH_OUTSIDE_ASSETS: &str = "path_outside_assets";
+    PathOutsideAssets,
     /// A configured limit was exceeded; `limit` names the setting.
-    pub const LIMIT_EXCEEDED: &str = "limit_exceeded";
+    LimitExceeded,
     /// A server-side recording, or one of its frames, cannot be read.
-    pub const INVALID_RECORDING: &str = "invalid_recording";
-    pub const NOT_FOUND: &str = "not_found";
-    pub const METHOD_NOT_ALLOWED: &str = "method_not_allowed";
-    pub const UNAUTHORIZED: &str = "unauthorized";
+    InvalidRecording,
+    NotFound,
+    MethodNotAllowed,
+    Unauthorized,
     /// The render queue is full; retry after `Retry-After` seconds.
-    pub const QUEUE_FULL: &str = "queue_full";
+    QueueFull,
+    /// The request body did not arrive within `body_timeout_seconds`.
+    RequestTimeout,
+    /// The GPU device was lost during the render; a new one is up: retry.
+    DeviceLost,
     /// The server is shutting down and takes no new work.
-    pub const SHUTTING_DOWN: &str = "shutting_down";
+    ShuttingDown,
     /// The request is not a WebSocket upgrade where one is required.
-    pub const UPGRADE_REQUIRED: &str = "upgrade_required";
-    pub const INTERNAL: &str = "internal";
+    UpgradeRequired,
+    Internal,
+}
+
+impl Code {
+    /// The code as it appears in error bodies, e.g. `invalid_json`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Code::InvalidJson => "invalid_json",
+            Code::InvalidField => "invalid_field",
+            Code::InvalidScene => "invalid_scene",
+            Code::PathOutsideAssets => "path_outside_assets",
+            Code::LimitExceeded => "limit_exceeded",
+            Code::InvalidRecording => "invalid_recording",
+            Code::NotFound => "not_found",
+            Code::MethodNotAllowed => "method_not_allowed",
+            Code::Unauthorized => "unauthorized",
+            Code::QueueFull => "queue_full",
+            Code::RequestTimeout => "request_timeout",
+            Code::DeviceLost => "device_lost",
+            Code::ShuttingDown => "shutting_down",
+            Code::UpgradeRequired => "upgrade_required",
+            Code::Internal => "internal",
+        }
+    }
 }
 
 /// An HTTP error answer.
 #[derive(Debug)]
 pub struct ApiError {
     pub status: StatusCode,
-    pub code: &'static str,
+    pub code: Code,
     pub message: String,
     pub field: Option<String>,
     pub limit: Option<&'static str>,
@@ -53,11 +86,7 @@ pub struct ErrorBody {
 
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct ErrorDetail {
-    /// One of `invalid_json`, `invalid_field`, `invalid_scene`, `path_outside_assets`,
-    /// `limit_exceeded`, `invalid_recording`, `not_found`, `method_not_allowed`,
-    /// `unauthorized`, `queue_full`, `shutting_down`, `upgrade_required`, `internal`.
-    #[schema(example = "invalid_field")]
-    pub code: String,
+    pub code: Code,
     /// What is wrong, for people.
     #[schema(example = "camera.fov_y_deg: must be in (1, 170), got 0")]
     pub message: String,
@@ -70,7 +99,7 @@ pub struct ErrorDetail {
 }
 
 impl ApiError {
-    pub fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> ApiError {
+    pub fn new(status: StatusCode, code: Code, message: impl Into<String>) -> ApiError {
         ApiError { status, code, message: message.into(), field: None, limit: None, retry_after: None }
     }
 
@@ -79,37 +108,41 @@ impl ApiError {
         let field = field.into();
         ApiError {
             field: Some(field.clone()),
-            ..ApiError::new(StatusCode::BAD_REQUEST, code::INVALID_FIELD, format!("{field}: {message}"))
+            ..ApiError::new(StatusCode::BAD_REQUEST, Code::InvalidField, format!("{field}: {message}"))
         }
     }
 
     /// `limit_exceeded`: 413 for limits in bytes, 400 otherwise.
     pub fn limit(limit: &'static str, field: Option<String>, message: impl Into<String>) -> ApiError {
         let status = if limit.ends_with("_bytes") { StatusCode::PAYLOAD_TOO_LARGE } else { StatusCode::BAD_REQUEST };
-        ApiError { field, limit: Some(limit), ..ApiError::new(status, code::LIMIT_EXCEEDED, message) }
+        ApiError { field, limit: Some(limit), ..ApiError::new(status, Code::LimitExceeded, message) }
     }
 
     pub fn not_found(message: impl Into<String>) -> ApiError {
-        ApiError::new(StatusCode::NOT_FOUND, code::NOT_FOUND, message)
+        ApiError::new(StatusCode::NOT_FOUND, Code::NotFound, message)
     }
 
     pub fn shutting_down() -> ApiError {
-        ApiError::new(StatusCode::SERVICE_UNAVAILABLE, code::SHUTTING_DOWN, "the server is shutting down")
+        ApiError::new(StatusCode::SERVICE_UNAVAILABLE, Code::ShuttingDown, "the server is shutting down")
     }
 
     /// 500 with a generic message; `detail` goes to the log only.
     pub fn internal(detail: impl std::fmt::Display) -> ApiError {
         tracing::error!("internal error: {detail}");
-        ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, code::INTERNAL, "internal error (logged on the server)")
+        ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, Code::Internal, "internal error (logged on the server)")
     }
 
     /// A scene error, as the client should see it: `asset_root` (the server's directory) is
     /// removed from file paths in the message.
     pub fn scene(error: &SceneError, asset_root: &std::path::Path) -> ApiError {
+        if let SceneError::TooManyTriangles { field, .. } = error {
+            return ApiError::limit(limit::MAX_TRIANGLES, Some(field.clone()), error.to_string());
+        }
         let code = match error {
-            SceneError::Json { .. } => code::INVALID_JSON,
-            SceneError::Field { .. } => code::INVALID_FIELD,
-            SceneError::Obj { .. } | SceneError::Read { .. } => code::INVALID_SCENE,
+            SceneError::Json { .. } => Code::InvalidJson,
+            SceneError::Field { .. } => Code::InvalidField,
+            SceneError::Obj { .. } | SceneError::Read { .. } => Code::InvalidScene,
+            SceneError::TooManyTriangles { .. } => Code::LimitExceeded,
         };
         let mut message = error.to_string();
         let root = asset_root.display().to_string();
@@ -123,9 +156,54 @@ impl ApiError {
     }
 }
 
+impl From<LimitExceeded> for ApiError {
+    /// 413 for limits in bytes, 503 for the server's capacity (`max_streams`,
+    /// `max_connections`), 400 otherwise.
+    fn from(e: LimitExceeded) -> ApiError {
+        let status = if [limit::MAX_STREAMS, limit::MAX_CONNECTIONS].contains(&e.limit) {
+            StatusCode::SERVICE_UNAVAILABLE
+        } else if e.limit.ends_with("_bytes") {
+            StatusCode::PAYLOAD_TOO_LARGE
+        } else {
+            StatusCode::BAD_REQUEST
+        };
+        ApiError { field: e.field, limit: Some(e.limit), ..ApiError::new(status, Code::LimitExceeded, e.message) }
+    }
+}
+
+impl From<WorkerError> for ApiError {
+    /// The HTTP answer for a failed GPU job; a full queue carries `Retry-After`, the measured
+    /// queue wait (at least 1 s).
+    fn from(error: WorkerError) -> ApiError {
+        match error {
+            WorkerError::QueueFull { waiting, limit, retry_after } => ApiError {
+                limit: Some(limit),
+                retry_after: Some(retry_after.map_or(1, |wait| wait.as_secs_f64().ceil().clamp(1.0, 600.0) as u32)),
+                ..ApiError::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    Code::QueueFull,
+                    format!("the render queue is full ({waiting} renders waiting, the limit {limit}); retry later"),
+                )
+            },
+            WorkerError::SceneNotFound(id) => ApiError::not_found(format!("no scene with id `{id}`")),
+            WorkerError::Stopped => ApiError::shutting_down(),
+            error @ WorkerError::DeviceLost => ApiError {
+                retry_after: Some(1),
+                ..ApiError::new(StatusCode::SERVICE_UNAVAILABLE, Code::DeviceLost, format!("{error}; retry"))
+            },
+            WorkerError::Gpu(GpuError::TooLarge { what, needed, limit: device }) => ApiError::new(
+                StatusCode::BAD_REQUEST,
+                Code::LimitExceeded,
+                format!("{what} needs {needed} bytes of GPU memory, over the device's limit of {device}"),
+            ),
+            error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => ApiError::internal(error),
+        }
+    }
+}
+
 impl std::fmt::Display for ApiError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} {}: {}", self.status.as_u16(), self.code, self.message)
+        write!(f, "{} {}: {}", self.status.as_u16(), self.code.as_str(), self.message)
     }
 }
 
@@ -133,7 +211,7 @@ impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let body = ErrorBody {
             error: ErrorDetail {
-                code: self.code.to_owned(),
+                code: self.code,
                 message: self.message,
                 field: self.field,
                 limit: self.limit.map(str::to_owned),

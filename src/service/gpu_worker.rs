@@ -1,21 +1,25 @@
-//! The one thread that owns the GPU. It holds the [`Gpu`] and one [`Renderer`] per scene, and
-//! takes jobs from a bounded channel; every job answers on its own oneshot channel. Handlers
-//! never touch the device and never block a tokio worker on it.
+//! The one thread that owns the GPU. It holds a [`Backend`] (in the service the [`Gpu`] and
+//! one [`Renderer`] per scene: [`GpuBackend`]) and takes jobs from the [`FairQueue`]; every job
+//! answers on its own oneshot channel. Handlers never touch the device and never block a
+//! tokio worker on it.
 //!
-//! Renders (HTTP renders and stream frames) are counted against `max_queue`: one more is
-//! refused at once ([`WorkerError::QueueFull`], HTTP 503). Scene creation and deletion wait
-//! for room instead, in a few channel slots kept for them. A job whose requester has gone
+//! Renders (HTTP renders and stream frames) wait per client and are counted against
+//! `max_client_queue` and `max_queue`: one more is refused at once ([`WorkerError::QueueFull`],
+//! HTTP 503). Scene creation and deletion go ahead of renders. A job whose requester has gone
 //! (client disconnected) is skipped. A panic inside a job (wgpu reports validation errors by
 //! panicking) fails that job only.
+//!
+//! The backend is a trait so that the service's scheduling, limits and error paths can be
+//! driven without a GPU (the tests' fake backend sleeps and answers black images).
 
 use std::collections::HashMap;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::Mat4;
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::oneshot;
 
 use crate::gpu::{Gpu, GpuError};
 use crate::mr;
@@ -24,17 +28,22 @@ use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::{Camera, Occlusion, Scene, SpotLight};
 
 use super::api::Component;
+use super::config::{Limits, limit};
 use super::metrics::Metrics;
+use super::schedule::{ClientId, FairQueue, Refused};
 use super::wire::StreamImageFormat;
-
-/// Channel slots beyond `max_queue`, for scene creation and deletion.
-const CONTROL_SLOTS: usize = 16;
 
 /// Why a job failed.
 #[derive(Debug, thiserror::Error)]
 pub enum WorkerError {
-    #[error("the render queue is full ({0} renders waiting)")]
-    QueueFull(usize),
+    #[error("the render queue is full ({waiting} renders waiting, the limit {limit})")]
+    QueueFull {
+        waiting: usize,
+        /// `max_queue` (all clients) or `max_client_queue` (this client).
+        limit: &'static str,
+        /// The measured queue wait, when there is one.
+        retry_after: Option<Duration>,
+    },
     #[error("no scene with id `{0}`")]
     SceneNotFound(String),
     #[error(transparent)]
@@ -43,7 +52,47 @@ pub enum WorkerError {
     Panicked(String),
     #[error("the GPU thread has stopped")]
     Stopped,
+    #[error("the GPU device was lost during this job; a new one has been opened and the scenes re-uploaded")]
+    DeviceLost,
 }
+
+impl From<Refused> for WorkerError {
+    fn from(refused: Refused) -> WorkerError {
+        match refused {
+            Refused::Full { waiting, retry_after } => {
+                WorkerError::QueueFull { waiting, limit: limit::MAX_QUEUE, retry_after }
+            }
+            Refused::ClientFull { waiting, retry_after } => {
+                WorkerError::QueueFull { waiting, limit: limit::MAX_CLIENT_QUEUE, retry_after }
+            }
+            Refused::Closed => WorkerError::Stopped,
+        }
+    }
+}
+
+/// What the GPU thread runs jobs on: one device and the scenes loaded on it.
+pub trait Backend {
+    /// The adapter's name and backend, for `/healthz`.
+    fn adapter(&self) -> String;
+    /// Prepares the scene's resources (pipelines, buffers).
+    fn add_scene(&mut self, id: &str, scene: Scene) -> Result<(), WorkerError>;
+    /// Drops the scene's resources; false when there were none.
+    fn remove_scene(&mut self, id: &str) -> bool;
+    /// One HTTP render ([`WorkerError::SceneNotFound`] for an unknown scene).
+    fn render(&mut self, id: &str, job: &RenderJob) -> Result<Frame, WorkerError>;
+    /// One stream frame.
+    fn render_stream_frame(&mut self, id: &str, job: &StreamFrameJob) -> Result<Frame, WorkerError>;
+    /// Called before every job and after every failed one: when the device has been lost,
+    /// opens a new one, rebuilds every scene's resources from the scene and answers true.
+    fn recover(&mut self) -> bool {
+        false
+    }
+    /// Test hook: lose the device during the next render (the next job on a fake backend).
+    fn lose_device(&mut self) {}
+}
+
+/// A rendered frame and, for stream frames seen from their own camera, the composite.
+pub type Frame = (Rendered, Option<Composite>);
 
 /// One HTTP render: the scene's renderer with this camera and light.
 #[derive(Clone, Debug)]
@@ -55,7 +104,6 @@ pub struct RenderJob {
     pub width: u32,
     pub height: u32,
 }
-
 /// A composited stream frame (sRGB, row-major) and how long compositing took, ms.
 pub type Composite = (Vec<[u8; 3]>, f64);
 
@@ -94,65 +142,53 @@ pub struct StreamFrameJob {
 }
 
 enum Job {
-    AddScene {
-        id: String,
-        scene: Box<Scene>,
-        reply: oneshot::Sender<Result<(), WorkerError>>,
-    },
-    RemoveScene {
-        id: String,
-        reply: oneshot::Sender<bool>,
-    },
-    Render {
-        id: String,
-        job: RenderJob,
-        enqueued: Instant,
-        reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
-    },
-    StreamFrame {
-        id: String,
-        job: Box<StreamFrameJob>,
-        enqueued: Instant,
-        reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
-    },
-    Stop,
+    AddScene { id: String, scene: Box<Scene>, reply: oneshot::Sender<Result<(), WorkerError>> },
+    RemoveScene { id: String, reply: oneshot::Sender<bool> },
+    Render { id: String, job: RenderJob, reply: oneshot::Sender<Result<RenderOutput, WorkerError>> },
+    StreamFrame { id: String, job: Box<StreamFrameJob>, reply: oneshot::Sender<Result<RenderOutput, WorkerError>> },
+    LoseDevice,
 }
 
 /// The handle the handlers hold.
 pub struct GpuWorker {
-    jobs: mpsc::Sender<Job>,
-    /// Renders in the channel (not yet taken by the GPU thread).
-    queued: Arc<AtomicUsize>,
-    capacity: usize,
+    queue: Arc<FairQueue<Job>>,
     adapter: String,
     thread: Mutex<Option<std::thread::JoinHandle<()>>>,
 }
 
 impl GpuWorker {
-    /// Starts the GPU thread and waits until it has opened the device. Blocks: call it from
-    /// `spawn_blocking` or outside the runtime.
-    pub fn start(max_queue: usize, metrics: Arc<Metrics>) -> Result<GpuWorker, WorkerError> {
-        let (jobs, receiver) = mpsc::channel(max_queue + CONTROL_SLOTS);
-        let queued = Arc::new(AtomicUsize::new(0));
+    /// Starts the GPU thread on the [`GpuBackend`] and waits until it has opened the device.
+    /// Blocks: call it from `spawn_blocking` or outside the runtime.
+    pub fn start(limits: &Limits, metrics: Arc<Metrics>) -> Result<GpuWorker, WorkerError> {
+        GpuWorker::start_with(|| Ok(GpuBackend::new(Gpu::new()?)), limits, metrics)
+    }
+
+    /// Starts the GPU thread on the backend `open` makes there. Blocks until it is made.
+    pub fn start_with<B: Backend>(
+        open: impl FnOnce() -> Result<B, WorkerError> + Send + 'static,
+        limits: &Limits,
+        metrics: Arc<Metrics>,
+    ) -> Result<GpuWorker, WorkerError> {
+        let queue = Arc::new(FairQueue::new(limits.max_queue, limits.max_client_queue));
         let (ready, is_ready) = std::sync::mpsc::sync_channel(1);
-        let thread_queued = queued.clone();
+        let thread_queue = queue.clone();
         let thread = std::thread::Builder::new()
             .name("relume-gpu".to_owned())
             .spawn(move || {
-                let gpu = match Gpu::new() {
-                    Ok(gpu) => gpu,
+                let backend = match open() {
+                    Ok(backend) => backend,
                     Err(error) => {
                         let _ = ready.send(Err(error));
                         return;
                     }
                 };
-                let _ = ready.send(Ok(gpu.adapter_name()));
-                run(gpu, receiver, thread_queued, metrics);
+                let _ = ready.send(Ok(backend.adapter()));
+                run(backend, &thread_queue, &metrics);
             })
             .map_err(|e| WorkerError::Panicked(format!("cannot spawn the GPU thread: {e}")))?;
         let adapter = is_ready.recv().map_err(|_| WorkerError::Stopped)??;
-        tracing::info!(adapter = %adapter, max_queue, "GPU thread ready");
-        Ok(GpuWorker { jobs, queued, capacity: max_queue, adapter, thread: Mutex::new(Some(thread)) })
+        tracing::info!(adapter = %adapter, limits.max_queue, limits.max_client_queue, "GPU thread ready");
+        Ok(GpuWorker { queue, adapter, thread: Mutex::new(Some(thread)) })
     }
 
     /// The adapter's name and backend.
@@ -162,17 +198,17 @@ impl GpuWorker {
 
     /// Renders waiting for the GPU thread.
     pub fn queue_depth(&self) -> usize {
-        self.queued.load(Ordering::SeqCst)
+        self.queue.waiting()
     }
 
     pub fn queue_capacity(&self) -> usize {
-        self.capacity
+        self.queue.capacity()
     }
 
     /// Builds the scene's renderer (pipelines, buffers) on the GPU thread.
     pub async fn add_scene(&self, id: &str, scene: Scene) -> Result<(), WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.send(Job::AddScene { id: id.to_owned(), scene: Box::new(scene), reply }).await?;
+        self.queue.push_control(Job::AddScene { id: id.to_owned(), scene: Box::new(scene), reply })?;
         answer.await.map_err(|_| WorkerError::Stopped)?
     }
 
@@ -180,35 +216,44 @@ impl GpuWorker {
     /// fail with [`WorkerError::SceneNotFound`].
     pub async fn remove_scene(&self, id: &str) -> Result<bool, WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.send(Job::RemoveScene { id: id.to_owned(), reply }).await?;
+        self.queue.push_control(Job::RemoveScene { id: id.to_owned(), reply })?;
         answer.await.map_err(|_| WorkerError::Stopped)
     }
 
-    /// Queues a render, or refuses at once when `max_queue` renders are waiting.
+    /// Queues a render of `client`, or refuses at once when its queue or the whole queue is
+    /// full.
     pub fn try_render(
         &self,
+        client: ClientId,
         id: &str,
         job: RenderJob,
     ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.try_queue(Job::Render { id: id.to_owned(), job, enqueued: Instant::now(), reply })?;
+        self.queue.push(client, Job::Render { id: id.to_owned(), job, reply })?;
         Ok(answer)
     }
 
-    /// Queues a stream frame, or refuses at once when `max_queue` renders are waiting.
+    /// Queues a stream frame of `client`, as [`GpuWorker::try_render`] does.
     pub fn try_render_stream_frame(
         &self,
+        client: ClientId,
         id: &str,
         job: StreamFrameJob,
     ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.try_queue(Job::StreamFrame { id: id.to_owned(), job: Box::new(job), enqueued: Instant::now(), reply })?;
+        self.queue.push(client, Job::StreamFrame { id: id.to_owned(), job: Box::new(job), reply })?;
         Ok(answer)
+    }
+
+    /// Test hook ([`Backend::lose_device`]): the device is lost during the next render, as a
+    /// driver reset would lose it.
+    pub fn lose_device(&self) -> Result<(), WorkerError> {
+        Ok(self.queue.push_control(Job::LoseDevice)?)
     }
 
     /// Lets the GPU thread finish every job already queued, then stops and joins it.
     pub async fn stop(&self) {
-        let _ = self.jobs.send(Job::Stop).await;
+        self.queue.close();
         let thread = self.thread.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).take();
         if let Some(thread) = thread
             && tokio::task::spawn_blocking(move || thread.join()).await.is_err()
@@ -216,68 +261,153 @@ impl GpuWorker {
             tracing::error!("the GPU thread could not be joined");
         }
     }
-
-    fn try_queue(&self, job: Job) -> Result<(), WorkerError> {
-        let capacity = self.capacity;
-        self.queued
-            .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |q| (q < capacity).then_some(q + 1))
-            .map_err(WorkerError::QueueFull)?;
-        self.jobs.try_send(job).map_err(|error| {
-            self.queued.fetch_sub(1, Ordering::SeqCst);
-            match error {
-                mpsc::error::TrySendError::Full(_) => WorkerError::QueueFull(self.queue_depth()),
-                mpsc::error::TrySendError::Closed(_) => WorkerError::Stopped,
-            }
-        })
-    }
-
-    async fn send(&self, job: Job) -> Result<(), WorkerError> {
-        self.jobs.send(job).await.map_err(|_| WorkerError::Stopped)
-    }
 }
 
-/// The GPU thread's loop: one job at a time, in order, until [`Job::Stop`] or every sender
-/// is gone.
-fn run(gpu: Gpu, mut jobs: mpsc::Receiver<Job>, queued: Arc<AtomicUsize>, metrics: Arc<Metrics>) {
-    let mut renderers: HashMap<String, Loaded> = HashMap::new();
-    while let Some(job) = jobs.blocking_recv() {
-        match job {
+/// The GPU thread's loop: one job at a time, in the queue's order, until it is closed and
+/// empty. A job that fails because the device was lost answers [`WorkerError::DeviceLost`].
+fn run(mut backend: impl Backend, queue: &FairQueue<Job>, metrics: &Metrics) {
+    while let Some(taken) = queue.pop() {
+        backend.recover();
+        let queue_ms = taken.waited.unwrap_or_default().as_secs_f64() * 1e3;
+        match taken.job {
             Job::AddScene { id, scene, reply } => {
-                let result = guarded(|| Renderer::new(&gpu, &scene).map_err(WorkerError::from)).map(|renderer| {
-                    renderers.insert(id, Loaded { scene: *scene, renderer });
-                });
-                let _ = reply.send(result);
+                let result = guarded(|| backend.add_scene(&id, *scene));
+                let _ = reply.send(lost_or(&mut backend, result));
             }
             Job::RemoveScene { id, reply } => {
-                let _ = reply.send(renderers.remove(&id).is_some());
+                let _ = reply.send(backend.remove_scene(&id));
             }
-            Job::Render { id, job, enqueued, reply } => {
-                queued.fetch_sub(1, Ordering::SeqCst);
+            Job::Render { id, job, reply } => {
                 if reply.is_closed() {
                     tracing::debug!(scene = %id, "render skipped: the client has gone");
                     continue;
                 }
-                let result = timed(&metrics, enqueued, || match renderers.get_mut(&id) {
-                    None => Err(WorkerError::SceneNotFound(id.clone())),
-                    Some(loaded) => render(&gpu, loaded, &job),
-                });
-                let _ = reply.send(result);
+                let result = timed(metrics, queue_ms, || backend.render(&id, &job));
+                let _ = reply.send(lost_or(&mut backend, result));
             }
-            Job::StreamFrame { id, job, enqueued, reply } => {
-                queued.fetch_sub(1, Ordering::SeqCst);
+            Job::StreamFrame { id, job, reply } => {
                 if reply.is_closed() {
                     continue;
                 }
-                let result = timed(&metrics, enqueued, || match renderers.get_mut(&id) {
-                    None => Err(WorkerError::SceneNotFound(id.clone())),
-                    Some(loaded) => render_stream_frame(&gpu, loaded, &job),
-                });
-                let _ = reply.send(result);
+                let result = timed(metrics, queue_ms, || backend.render_stream_frame(&id, &job));
+                let _ = reply.send(lost_or(&mut backend, result));
             }
-            Job::Stop => break,
+            Job::LoseDevice => backend.lose_device(),
         }
     }
     tracing::info!("GPU thread stopped");
+}
+
+/// `result`, or [`WorkerError::DeviceLost`] when it failed because the device was lost (the
+/// backend has recovered by the time this returns).
+fn lost_or<T>(backend: &mut impl Backend, result: Result<T, WorkerError>) -> Result<T, WorkerError> {
+    match result {
+        Err(error) if backend.recover() => {
+            tracing::warn!("a job failed with the device lost: {error}");
+            Err(WorkerError::DeviceLost)
+        }
+        result => result,
+    }
+}
+
+/// The backend of the service: the device and one renderer per scene. Each scene is kept as
+/// loaded, so that a lost device is replaced and every renderer rebuilt without the clients.
+pub struct GpuBackend {
+    gpu: Gpu,
+    scenes: HashMap<String, Loaded>,
+    /// Set by the device's lost callback.
+    lost: Arc<AtomicBool>,
+    /// [`Backend::lose_device`] was called: destroy the device during the next render.
+    lose_during_next_render: bool,
+}
+
+impl GpuBackend {
+    pub fn new(gpu: Gpu) -> GpuBackend {
+        let lost = watch_for_loss(&gpu);
+        GpuBackend { gpu, scenes: HashMap::new(), lost, lose_during_next_render: false }
+    }
+
+    /// Runs the test hook when armed: the device is destroyed under the render.
+    fn maybe_lose_device(&mut self) {
+        if std::mem::take(&mut self.lose_during_next_render) {
+            tracing::warn!("test hook: destroying the GPU device");
+            self.gpu.device.destroy();
+        }
+    }
+}
+
+/// A flag the device's lost callback sets.
+fn watch_for_loss(gpu: &Gpu) -> Arc<AtomicBool> {
+    let lost = Arc::new(AtomicBool::new(false));
+    let flag = lost.clone();
+    gpu.device.set_device_lost_callback(move |reason, message| {
+        tracing::error!(?reason, message, "the GPU device was lost");
+        flag.store(true, Ordering::SeqCst);
+    });
+    lost
+}
+
+impl Backend for GpuBackend {
+    fn adapter(&self) -> String {
+        self.gpu.adapter_name()
+    }
+
+    fn add_scene(&mut self, id: &str, scene: Scene) -> Result<(), WorkerError> {
+        let renderer = Renderer::new(&self.gpu, &scene)?;
+        self.scenes.insert(id.to_owned(), Loaded { scene, renderer });
+        Ok(())
+    }
+
+    fn remove_scene(&mut self, id: &str) -> bool {
+        self.scenes.remove(id).is_some()
+    }
+
+    fn render(&mut self, id: &str, job: &RenderJob) -> Result<Frame, WorkerError> {
+        self.maybe_lose_device();
+        let gpu = &self.gpu;
+        let loaded = self.scenes.get_mut(id).ok_or_else(|| WorkerError::SceneNotFound(id.to_owned()))?;
+        render(gpu, loaded, job)
+    }
+
+    fn render_stream_frame(&mut self, id: &str, job: &StreamFrameJob) -> Result<Frame, WorkerError> {
+        self.maybe_lose_device();
+        let gpu = &self.gpu;
+        let loaded = self.scenes.get_mut(id).ok_or_else(|| WorkerError::SceneNotFound(id.to_owned()))?;
+        render_stream_frame(gpu, loaded, job)
+    }
+
+    fn recover(&mut self) -> bool {
+        if !self.lost.load(Ordering::SeqCst) {
+            return false;
+        }
+        let gpu = match Gpu::new() {
+            Ok(gpu) => gpu,
+            Err(error) => {
+                // Still lost: the next job tries again.
+                tracing::error!("cannot open a new GPU device: {error}");
+                return true;
+            }
+        };
+        self.lost = watch_for_loss(&gpu);
+        self.gpu = gpu;
+        let gpu = &self.gpu;
+        self.scenes.retain(|id, loaded| match guarded(|| Ok(Renderer::new(gpu, &loaded.scene)?)) {
+            Ok(renderer) => {
+                loaded.renderer = renderer;
+                true
+            }
+            Err(error) => {
+                tracing::error!(scene = %id, "scene dropped: it cannot be re-uploaded to the new device: {error}");
+                false
+            }
+        });
+        tracing::warn!(adapter = %gpu.adapter_name(), scenes = self.scenes.len(), "GPU device recreated");
+        true
+    }
+
+    fn lose_device(&mut self) {
+        self.lose_during_next_render = true;
+    }
 }
 
 /// A scene on the GPU thread: the loaded scene (to place its meshes) and its renderer, shared
@@ -290,10 +420,9 @@ struct Loaded {
 /// Runs `f` (a render) behind [`guarded`], timing it and recording the frame's metrics.
 fn timed(
     metrics: &Metrics,
-    enqueued: Instant,
-    f: impl FnOnce() -> Result<(Rendered, Option<Composite>), WorkerError>,
+    queue_ms: f64,
+    f: impl FnOnce() -> Result<Frame, WorkerError>,
 ) -> Result<RenderOutput, WorkerError> {
-    let queue_ms = enqueued.elapsed().as_secs_f64() * 1e3;
     let started = Instant::now();
     let (frame, composited) = guarded(f)?;
     let gpu_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -302,7 +431,7 @@ fn timed(
 }
 
 /// One HTTP render: the scene as loaded, lit by its spot light, from `job.camera`.
-fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<(Rendered, Option<Composite>), WorkerError> {
+fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, WorkerError> {
     let Loaded { scene, renderer } = loaded;
     renderer.place_meshes(gpu, scene, &placement(scene, &[]));
     renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
@@ -331,11 +460,7 @@ fn placement(scene: &Scene, transforms: &[(u32, Mat4)]) -> Vec<Mat4> {
 /// one, with the stream's occlusion and glossy settings, seen from the frame's camera at the
 /// frame's size (composited over the frame's colour when `job.component` is full), or from
 /// the stream's virtual camera when it set one.
-fn render_stream_frame(
-    gpu: &Gpu,
-    loaded: &mut Loaded,
-    job: &StreamFrameJob,
-) -> Result<(Rendered, Option<Composite>), WorkerError> {
+fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> Result<Frame, WorkerError> {
     let Loaded { scene, renderer } = loaded;
     renderer.place_meshes(gpu, scene, &placement(scene, &job.model_transforms));
     renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);

@@ -19,16 +19,16 @@ use utoipa::OpenApi;
 use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
-use crate::gpu::GpuError;
 use crate::gpu::timing::TimingSource;
 use crate::scene::{Scene, SceneDescription, parse_json};
 
 use super::AppState;
 use super::api::{Health, ImageFormat, RenderRequest, SceneInfo};
 use super::config::limit;
-use super::error::{ApiError, ErrorBody, code};
+use super::error::{ApiError, Code, ErrorBody};
 use super::gpu_worker::{RenderJob, RenderOutput, WorkerError};
 use super::scenes::{self, SceneEntry};
+use super::schedule::ClientId;
 use super::{recordings, stream, viewer};
 
 #[derive(OpenApi)]
@@ -112,7 +112,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         )
         .fallback(|| async { ApiError::not_found("no such route") })
         .method_not_allowed_fallback(|| async {
-            ApiError::new(StatusCode::METHOD_NOT_ALLOWED, code::METHOD_NOT_ALLOWED, "method not allowed on this route")
+            ApiError::new(StatusCode::METHOD_NOT_ALLOWED, Code::MethodNotAllowed, "method not allowed on this route")
         })
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .with_state(state)
@@ -121,18 +121,36 @@ pub fn router(state: Arc<AppState>) -> Router {
 /// Logs every request and records its latency by matched route.
 async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
     let started = Instant::now();
-    let method = request.method().clone();
+    let method = method_label(request.method());
     let route = request.extensions().get::<MatchedPath>().map_or("unmatched", |m| m.as_str()).to_owned();
     let response = next.run(request).await;
     let seconds = started.elapsed().as_secs_f64();
     let status = response.status().as_u16();
-    state.metrics.record_request(&route, method.as_str(), status, seconds);
+    state.metrics.record_request(&route, method, status, seconds);
     if route == "/metrics" || route == "/healthz" {
         tracing::debug!(%method, route, status, ms = seconds * 1e3, "request");
     } else {
         tracing::info!(%method, route, status, ms = seconds * 1e3, "request");
     }
     response
+}
+
+/// The request's method as a metrics label and in the log: one of the standard methods, or
+/// `other`, so that invented methods cannot grow `/metrics`. Routes are labelled by their
+/// pattern (`MatchedPath`) or `unmatched`, a closed set too.
+fn method_label(method: &axum::http::Method) -> &'static str {
+    match method.as_str() {
+        "GET" => "GET",
+        "HEAD" => "HEAD",
+        "POST" => "POST",
+        "PUT" => "PUT",
+        "DELETE" => "DELETE",
+        "OPTIONS" => "OPTIONS",
+        "PATCH" => "PATCH",
+        "CONNECT" => "CONNECT",
+        "TRACE" => "TRACE",
+        _ => "other",
+    }
 }
 
 /// Refuses `/v1` requests without the configured bearer token.
@@ -146,7 +164,7 @@ async fn require_token(State(state): State<Arc<AppState>>, request: Request, nex
         if !given.is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes())) {
             return ApiError::new(
                 StatusCode::UNAUTHORIZED,
-                code::UNAUTHORIZED,
+                Code::Unauthorized,
                 "missing or wrong bearer token (Authorization: Bearer <token>)",
             )
             .into_response();
@@ -161,23 +179,36 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 }
 
 /// The body, refused with 413 past `max_body_bytes` (checked while reading, not trusted from
-/// `Content-Length`).
+/// `Content-Length`) and with 408 when it takes longer than `body_timeout_seconds`.
 async fn read_body(state: &AppState, body: Body) -> Result<bytes::Bytes, ApiError> {
     let max = state.config.limits.max_body_bytes;
     let too_large =
         || ApiError::limit(limit::MAX_BODY_BYTES, None, format!("the request body is over the limit of {max} bytes"));
-    match http_body_util::Limited::new(body, max).collect().await {
+    let seconds = state.config.timeouts.body_timeout_seconds;
+    let collected = tokio::time::timeout(
+        std::time::Duration::from_secs(seconds),
+        http_body_util::Limited::new(body, max).collect(),
+    )
+    .await
+    .map_err(|_| {
+        ApiError::new(
+            StatusCode::REQUEST_TIMEOUT,
+            Code::RequestTimeout,
+            format!("the request body did not arrive within {seconds} s (body_timeout_seconds)"),
+        )
+    })?;
+    match collected {
         Ok(collected) => Ok(collected.to_bytes()),
         Err(error) if error.downcast_ref::<http_body_util::LengthLimitError>().is_some() => Err(too_large()),
         Err(error) => {
-            Err(ApiError::new(StatusCode::BAD_REQUEST, code::INVALID_JSON, format!("cannot read the body: {error}")))
+            Err(ApiError::new(StatusCode::BAD_REQUEST, Code::InvalidJson, format!("cannot read the body: {error}")))
         }
     }
 }
 
 fn utf8(bytes: &[u8]) -> Result<&str, ApiError> {
     std::str::from_utf8(bytes)
-        .map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, code::INVALID_JSON, format!("the body is not UTF-8: {e}")))
+        .map_err(|e| ApiError::new(StatusCode::BAD_REQUEST, Code::InvalidJson, format!("the body is not UTF-8: {e}")))
 }
 
 fn scene_id(path: Result<Path<String>, PathRejection>) -> Result<String, ApiError> {
@@ -242,7 +273,8 @@ async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         (status = 201, description = "Created", body = SceneInfo,
             headers(("Location" = String, description = "/v1/scenes/{id}"))),
         (status = 400, description = "Invalid JSON, field, mesh or path (`field` names it), or over \
-            max_vals, max_frame_side or max_scenes (`limit` names it)", body = ErrorBody),
+            max_vals, max_frame_side, max_pixels, max_sparse_points, max_triangles or max_scenes \
+            (`limit` names it)", body = ErrorBody),
         (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
         (status = 413, description = "Over max_body_bytes or max_mesh_bytes", body = ErrorBody),
         (status = 503, description = "Shutting down", body = ErrorBody),
@@ -259,8 +291,8 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
     let loader = state.clone();
     let loaded = tokio::task::spawn_blocking(move || -> Result<(SceneDescription, Scene), ApiError> {
         let description = scenes::admit(utf8(&bytes)?, &loader.assets, &loader.config.limits)?;
-        let scene =
-            Scene::from_description(&description, &loader.assets).map_err(|e| ApiError::scene(&e, &loader.assets))?;
+        let scene = Scene::from_description_within(&description, &loader.assets, loader.config.limits.max_triangles)
+            .map_err(|e| ApiError::scene(&e, &loader.assets))?;
         Ok((description, scene))
     })
     .await
@@ -275,7 +307,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
         settings: scene.settings,
         info: info.clone(),
     };
-    state.worker.add_scene(&id, scene).await.map_err(worker_error)?;
+    state.worker.add_scene(&id, scene).await?;
     reservation.commit(entry);
     tracing::info!(scene = %id, triangles = info.triangles, sparse_points = info.sparse_points, "scene created");
     let location = HeaderValue::from_str(&format!("/v1/scenes/{id}")).map_err(ApiError::internal)?;
@@ -325,7 +357,7 @@ async fn delete_scene(
 ) -> Result<StatusCode, ApiError> {
     let id = scene_id(id)?;
     state.scenes.remove(&id).ok_or_else(|| unknown_scene(&id))?;
-    state.worker.remove_scene(&id).await.map_err(worker_error)?;
+    state.worker.remove_scene(&id).await?;
     tracing::info!(scene = %id, "scene deleted");
     Ok(StatusCode::NO_CONTENT)
 }
@@ -355,17 +387,22 @@ async fn delete_scene(
                 ("X-Relume-Exposure" = f32, description = "The exposure of a PNG"),
                 ("X-Relume-Timing-Source" = String, description = "`gpu_timestamps` or `wall_clock`"),
             )),
-        (status = 400, description = "Invalid JSON or field (`field` names it), or over max_frame_side", body = ErrorBody),
+        (status = 400, description = "Invalid JSON or field (`field` names it), or over max_frame_side or \
+            max_pixels", body = ErrorBody),
         (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
         (status = 404, description = "No such scene", body = ErrorBody),
         (status = 413, description = "Over max_body_bytes", body = ErrorBody),
-        (status = 503, description = "The render queue is full (max_queue) or the server is shutting down",
-            body = ErrorBody, headers(("Retry-After" = u32, description = "Seconds, when the queue is full"))),
+        (status = 408, description = "The body did not arrive within body_timeout_seconds", body = ErrorBody),
+        (status = 503, description = "The client's queue (max_client_queue) or the whole render queue \
+            (max_queue) is full, or the server is shutting down",
+            body = ErrorBody, headers(("Retry-After" = u32,
+                description = "Seconds, when the queue is full: the measured queue wait"))),
     ),
     security((), ("bearer" = []))
 )]
 async fn render_scene(
     State(state): State<Arc<AppState>>,
+    client: ClientId,
     id: Result<Path<String>, PathRejection>,
     body: Body,
 ) -> Result<Response, ApiError> {
@@ -386,7 +423,7 @@ async fn render_scene(
     if request.camera.is_some() {
         camera.validate("camera").map_err(|e| ApiError::scene(&e, &state.assets))?;
     }
-    scenes::check_image_size(camera.width, camera.height, "camera", &state.config.limits)?;
+    state.config.limits.check_image(camera.width, camera.height, "camera")?;
     let light = match &request.light {
         Some(light) => {
             Some(light.apply(entry.light.as_ref(), "light").map_err(|e| ApiError::scene(&e, &state.assets))?)
@@ -402,17 +439,12 @@ async fn render_scene(
         width: camera.width,
         height: camera.height,
     };
-    let answer = state.worker.try_render(&id, job).map_err(|error| {
-        if matches!(error, WorkerError::QueueFull(_)) {
+    let answer = state.worker.try_render(client, &id, job).inspect_err(|error| {
+        if matches!(error, WorkerError::QueueFull { .. }) {
             state.metrics.record_rejected_render();
         }
-        let mut api_error = worker_error(error);
-        if api_error.code == code::QUEUE_FULL {
-            api_error.retry_after = Some(retry_after_seconds(&state));
-        }
-        api_error
     })?;
-    let output = answer.await.map_err(|_| worker_error(WorkerError::Stopped))?.map_err(worker_error)?;
+    let output = answer.await.map_err(|_| WorkerError::Stopped)??;
     let exposure = quality.exposure.or(entry.exposure);
     let format = quality.format;
     let component = quality.component;
@@ -493,35 +525,6 @@ impl Encoded {
         put("x-relume-timing-source", source.to_owned());
         headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(self.content_type));
         (StatusCode::OK, headers, self.body).into_response()
-    }
-}
-
-/// Seconds until the queue has likely drained: the waiting renders times the mean frame time.
-fn retry_after_seconds(state: &AppState) -> u32 {
-    let mean = state.metrics.mean_frame_seconds().unwrap_or(1.0);
-    let waiting = state.worker.queue_depth().max(1) as f64;
-    (waiting * mean).ceil().clamp(1.0, 600.0) as u32
-}
-
-/// The HTTP answer for a failed GPU job.
-fn worker_error(error: WorkerError) -> ApiError {
-    match error {
-        WorkerError::QueueFull(waiting) => ApiError {
-            limit: Some(limit::MAX_QUEUE),
-            ..ApiError::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                code::QUEUE_FULL,
-                format!("the render queue is full ({waiting} renders waiting); retry later"),
-            )
-        },
-        WorkerError::SceneNotFound(id) => unknown_scene(&id),
-        WorkerError::Stopped => ApiError::shutting_down(),
-        WorkerError::Gpu(GpuError::TooLarge { what, needed, limit: device }) => ApiError::new(
-            StatusCode::BAD_REQUEST,
-            code::LIMIT_EXCEEDED,
-            format!("{what} needs {needed} bytes of GPU memory, over the device's limit of {device}"),
-        ),
-        error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => ApiError::internal(error),
     }
 }
 

@@ -49,6 +49,7 @@ struct Inner {
     frame_seconds: Histogram,
     gpu_seconds: BTreeMap<String, f64>,
     renders_rejected: u64,
+    connections_refused: u64,
     dropped_frames: u64,
     stream_messages: BTreeMap<String, u64>,
     stream_errors: BTreeMap<String, u64>,
@@ -66,6 +67,8 @@ pub struct Gauges {
     pub queue_capacity: usize,
     pub scenes: usize,
     pub streams: usize,
+    /// HTTP connections open (upgraded streams not included).
+    pub connections: usize,
 }
 
 impl Metrics {
@@ -93,6 +96,11 @@ impl Metrics {
     /// A render refused because the queue was full.
     pub fn record_rejected_render(&self) {
         self.lock().renders_rejected += 1;
+    }
+
+    /// A connection refused because `max_connections` were open.
+    pub fn record_refused_connection(&self) {
+        self.lock().connections_refused += 1;
     }
 
     /// A stream frame dropped (a newer one replaced it, or the queue was full).
@@ -155,6 +163,10 @@ impl Metrics {
         let _ = writeln!(out, "relume_scenes {}", gauges.scenes);
         header(&mut out, "relume_streams", "gauge", "Open WebSocket streams.");
         let _ = writeln!(out, "relume_streams {}", gauges.streams);
+        header(&mut out, "relume_connections", "gauge", "HTTP connections open (upgraded streams not included).");
+        let _ = writeln!(out, "relume_connections {}", gauges.connections);
+        header(&mut out, "relume_connections_refused_total", "counter", "Connections refused at max_connections.");
+        let _ = writeln!(out, "relume_connections_refused_total {}", inner.connections_refused);
         header(&mut out, "relume_stream_messages_total", "counter", "Stream messages received, by kind.");
         for (kind, count) in &inner.stream_messages {
             let _ = writeln!(out, "relume_stream_messages_total{{kind=\"{}\"}} {count}", escape(kind));
@@ -176,6 +188,7 @@ impl Inner {
             frame_seconds: self.frame_seconds.clone(),
             gpu_seconds: self.gpu_seconds.clone(),
             renders_rejected: self.renders_rejected,
+            connections_refused: self.connections_refused,
             dropped_frames: self.dropped_frames,
             stream_messages: self.stream_messages.clone(),
             stream_errors: self.stream_errors.clone(),
@@ -202,7 +215,7 @@ mod tests {
         let timings = StageTimings { source: TimingSource::WallClock, stages: vec![("gather".to_owned(), 250.0)] };
         metrics.record_frame(0.3, &timings);
         metrics.record_frame(0.1, &timings);
-        let text = metrics.render(&Gauges { queue_depth: 2, queue_capacity: 8, scenes: 1, streams: 0 });
+        let text = metrics.render(&Gauges { queue_depth: 2, queue_capacity: 8, scenes: 1, streams: 0, connections: 1 });
         assert!(text.contains("relume_http_requests_total{route=\"/v1/scenes\",method=\"POST\",status=\"201\"} 2"));
         assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/v1/scenes\",le=\"0.001\"} 0"));
         assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/v1/scenes\",le=\"0.005\"} 1"));

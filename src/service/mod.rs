@@ -8,11 +8,14 @@
 //! - [`recordings`]: `/v1/recordings`, the RGB-D recordings under the asset directory, frame by
 //!   frame as stream messages; [`viewer`]: the browser viewer at `/`, files built into the
 //!   binary.
-//! - [`gpu_worker`]: the one thread that owns the GPU; handlers send it jobs over a bounded
-//!   channel and a full render queue is a 503.
+//! - [`gpu_worker`]: the one thread that owns the GPU; handlers send it jobs through the
+//!   [`schedule`] queue, fair between clients, and a full queue is a 503.
+//! - [`listen`]: the connection loop: header and body timeouts, the connection cap.
 //! - [`scenes`]: admitting scene descriptions (limits, paths confined to the asset directory)
 //!   and the registry of scenes held.
 //! - [`config`]: flags, environment variables and limits; [`metrics`]: Prometheus text.
+//! - [`client`]: a client of the service (`relume replay --server`); [`load`]: its load
+//!   benchmark (`relume load`).
 //!
 //! Shutdown (SIGINT, SIGTERM, or the future given to [`Server::run`]): the server stops
 //! accepting connections, answers new work with 503 `shutting_down`, lets in-flight requests
@@ -21,18 +24,22 @@
 //! left is dropped.
 
 pub mod api;
+pub mod client;
 pub mod config;
 pub mod error;
 pub mod gpu_worker;
 pub mod http;
+pub mod listen;
+pub mod load;
 pub mod metrics;
 pub mod recordings;
 pub mod scenes;
+pub mod schedule;
 pub mod stream;
 pub mod viewer;
 pub mod wire;
 
-use std::future::{Future, IntoFuture};
+use std::future::Future;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -41,8 +48,8 @@ use std::time::Duration;
 
 use tokio::sync::{Notify, watch};
 
-pub use config::{Config, Limits};
-pub use gpu_worker::{GpuWorker, WorkerError};
+pub use config::{Config, LimitExceeded, Limits, Timeouts};
+pub use gpu_worker::{Backend, GpuWorker, WorkerError};
 pub use http::{openapi, openapi_json, router};
 pub use metrics::Metrics;
 
@@ -73,6 +80,7 @@ pub struct AppState {
     shutdown: watch::Sender<bool>,
     streams: AtomicUsize,
     streams_closed: Notify,
+    connections: listen::Connections,
 }
 
 impl AppState {
@@ -90,10 +98,18 @@ impl AppState {
         self.shutdown.send_replace(true);
     }
 
-    /// Counts an open stream until the guard is dropped.
-    pub fn stream_opened(&self) -> StreamGuard<'_> {
-        self.streams.fetch_add(1, Ordering::SeqCst);
-        StreamGuard(self)
+    /// Holds a stream's slot until the guard is dropped, or refuses when `max_streams` are
+    /// open.
+    pub fn open_stream(self: &Arc<Self>) -> Result<StreamGuard, LimitExceeded> {
+        let max = self.config.limits.max_streams;
+        self.streams
+            .fetch_update(Ordering::SeqCst, Ordering::SeqCst, |open| (open < max).then_some(open + 1))
+            .map_err(|open| LimitExceeded {
+                limit: config::limit::MAX_STREAMS,
+                field: None,
+                message: format!("{open} streams are open, the limit; retry later"),
+            })?;
+        Ok(StreamGuard(self.clone()))
     }
 
     async fn all_streams_closed(&self) {
@@ -113,14 +129,15 @@ impl AppState {
             queue_capacity: self.worker.queue_capacity(),
             scenes: self.scenes.len(),
             streams: self.streams.load(Ordering::SeqCst),
+            connections: self.connections.open(),
         }
     }
 }
 
 /// An open stream, counted while it lives.
-pub struct StreamGuard<'a>(&'a AppState);
+pub struct StreamGuard(Arc<AppState>);
 
-impl Drop for StreamGuard<'_> {
+impl Drop for StreamGuard {
     fn drop(&mut self) {
         self.0.streams.fetch_sub(1, Ordering::SeqCst);
         self.0.streams_closed.notify_waiters();
@@ -136,19 +153,30 @@ pub struct Server {
 impl Server {
     /// Checks the asset directory, starts the GPU thread and binds `config.addr`.
     pub async fn bind(config: Config) -> Result<Server, ServeError> {
+        let limits = config.limits;
+        Server::bind_with(config, move |metrics| GpuWorker::start(&limits, metrics)).await
+    }
+
+    /// [`Server::bind`] with the worker `start` makes (on a blocking thread), e.g. one on
+    /// another [`Backend`].
+    pub async fn bind_with(
+        config: Config,
+        start: impl FnOnce(Arc<Metrics>) -> Result<GpuWorker, WorkerError> + Send + 'static,
+    ) -> Result<Server, ServeError> {
         let assets = std::fs::canonicalize(&config.assets)
             .map_err(|source| ServeError::Assets { path: config.assets.clone(), source })?;
         if !assets.is_dir() {
             return Err(ServeError::AssetsNotADirectory(assets));
         }
         let metrics = Arc::new(Metrics::default());
-        let (max_queue, worker_metrics) = (config.limits.max_queue, metrics.clone());
-        let worker = tokio::task::spawn_blocking(move || GpuWorker::start(max_queue, worker_metrics))
+        let worker_metrics = metrics.clone();
+        let worker = tokio::task::spawn_blocking(move || start(worker_metrics))
             .await
             .map_err(|e| WorkerError::Panicked(e.to_string()))??;
         let listener = tokio::net::TcpListener::bind(config.addr)
             .await
             .map_err(|source| ServeError::Bind { addr: config.addr, source })?;
+        let max_connections = config.limits.max_connections;
         let state = Arc::new(AppState {
             scenes: scenes::SceneRegistry::new(config.limits.max_scenes),
             recordings: recordings::Recordings::new(&assets),
@@ -159,6 +187,7 @@ impl Server {
             shutdown: watch::Sender::new(false),
             streams: AtomicUsize::new(0),
             streams_closed: Notify::new(),
+            connections: listen::Connections::new(max_connections),
         });
         Ok(Server { listener, state })
     }
@@ -194,7 +223,7 @@ impl Server {
             let _ = stopping.wait_for(|&s| s).await;
             tokio::time::sleep(grace).await;
         };
-        let serve = axum::serve(listener, router(state.clone())).with_graceful_shutdown(graceful).into_future();
+        let serve = listen::serve(listener, router(state.clone()), state.clone(), graceful);
         let completed = tokio::select! {
             result = serve => {
                 result?;

@@ -19,7 +19,7 @@ use serde::Serialize;
 use crate::rgbd::recording::{Recording, RecordingOptions};
 
 use super::AppState;
-use super::error::{ApiError, code};
+use super::error::{ApiError, Code};
 use super::wire;
 
 /// The folder of the asset directory that holds recordings.
@@ -103,7 +103,7 @@ impl Recordings {
         let recording = Recording::open(&dir, &RecordingOptions::default()).map_err(|error| {
             ApiError::new(
                 StatusCode::UNPROCESSABLE_ENTITY,
-                code::INVALID_RECORDING,
+                Code::InvalidRecording,
                 format!("recording `{name}`: {error}"),
             )
         })?;
@@ -228,7 +228,7 @@ pub async fn recording_frame(
         let frame = recording.frame(index).map_err(|error| {
             ApiError::new(
                 StatusCode::UNPROCESSABLE_ENTITY,
-                code::INVALID_RECORDING,
+                Code::InvalidRecording,
                 format!("recording `{name}`: {error}"),
             )
         })?;

@@ -13,7 +13,7 @@ use crate::scene::{CameraDescription, LightDescription, SceneDescription};
 
 use super::api::SceneInfo;
 use super::config::{Limits, limit};
-use super::error::{ApiError, code};
+use super::error::{ApiError, Code};
 
 /// Parses and validates a scene description sent by a client, and checks what the scene
 /// module does not: the service's limits, and that every file it names is inside `assets`
@@ -33,7 +33,18 @@ pub fn admit(text: &str, assets: &Path, limits: &Limits) -> Result<SceneDescript
             ),
         ));
     }
-    check_image_size(description.camera.width, description.camera.height, "camera", limits)?;
+    limits.check_image(description.camera.width, description.camera.height, "camera")?;
+    let sparse_points: u64 = description.meshes.iter().map(|m| m.sparse_points as u64).sum();
+    if sparse_points > limits.max_sparse_points as u64 {
+        return Err(ApiError::limit(
+            limit::MAX_SPARSE_POINTS,
+            Some("meshes".to_owned()),
+            format!(
+                "meshes: {sparse_points} sparse points over all meshes is over the limit of {}",
+                limits.max_sparse_points
+            ),
+        ));
+    }
     for (i, mesh) in description.meshes.iter().enumerate() {
         let field = format!("meshes[{i}]");
         match &mesh.obj_text {
@@ -59,21 +70,6 @@ pub fn admit(text: &str, assets: &Path, limits: &Limits) -> Result<SceneDescript
     Ok(description)
 }
 
-/// Width and height within `max_frame_side`; errors name `{field}.width` / `.height`.
-pub fn check_image_size(width: u32, height: u32, field: &str, limits: &Limits) -> Result<(), ApiError> {
-    for (name, value) in [("width", width), ("height", height)] {
-        if value > limits.max_frame_side {
-            let field = format!("{field}.{name}");
-            return Err(ApiError::limit(
-                limit::MAX_FRAME_SIDE,
-                Some(field.clone()),
-                format!("{field}: {value} pixels is over the limit of {}", limits.max_frame_side),
-            ));
-        }
-    }
-    Ok(())
-}
-
 fn check_mesh_bytes(bytes: u64, field: &str, limits: &Limits) -> Result<(), ApiError> {
     if bytes > limits.max_mesh_bytes as u64 {
         return Err(ApiError::limit(
@@ -93,7 +89,7 @@ pub fn confine(root: &Path, relative: &str, field: &str) -> Result<PathBuf, ApiE
         field: Some(field.to_owned()),
         ..ApiError::new(
             StatusCode::BAD_REQUEST,
-            code::PATH_OUTSIDE_ASSETS,
+            Code::PathOutsideAssets,
             format!("{field}: `{relative}` is outside the asset directory; paths are relative to it"),
         )
     };
@@ -110,7 +106,7 @@ pub fn confine(root: &Path, relative: &str, field: &str) -> Result<PathBuf, ApiE
         field: Some(field.to_owned()),
         ..ApiError::new(
             StatusCode::BAD_REQUEST,
-            code::INVALID_SCENE,
+            Code::InvalidScene,
             format!("{field}: no file `{relative}` in the asset directory"),
         )
     };
@@ -244,13 +240,13 @@ mod tests {
         assert!(confine(&root, "meshes/../meshes/./cornell_box/CornellBox-Original.obj", "f").is_ok());
         for outside in ["../Cargo.toml", "/etc/passwd", "meshes/../../Cargo.toml", "../does-not-exist"] {
             let error = confine(&root, outside, "meshes[0].obj").expect_err(outside);
-            assert_eq!(error.code, code::PATH_OUTSIDE_ASSETS, "{outside}");
+            assert_eq!(error.code, Code::PathOutsideAssets, "{outside}");
             assert_eq!(error.field.as_deref(), Some("meshes[0].obj"));
         }
         let error = confine(&root, "meshes/nope.obj", "f").expect_err("missing");
-        assert_eq!(error.code, code::INVALID_SCENE);
+        assert_eq!(error.code, Code::InvalidScene);
         let error = confine(&root, "meshes", "f").expect_err("a directory");
-        assert_eq!(error.code, code::INVALID_SCENE);
+        assert_eq!(error.code, Code::InvalidScene);
     }
 
     #[test]

@@ -11,12 +11,13 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade, close_code};
 use axum::extract::{Path, State};
 use axum::response::Response;
 use tokio::sync::oneshot;
+use tokio_tungstenite::tungstenite;
 
 use crate::rgbd::RgbdSettings;
 use crate::scene::{CameraDescription, LightDescription, Occlusion, TransformDescription};
@@ -25,6 +26,7 @@ use super::AppState;
 use super::error::ApiError;
 use super::gpu_worker::{RenderOutput, StreamFrameJob, WorkerError};
 use super::scenes::SceneEntry;
+use super::schedule::ClientId;
 use super::wire::{
     self, ClientMessage, ControlMessage, ErrorCode, FrameImage, FrameMessage, RenderedFrame, ServerMessage,
     SettingsAck, StreamImageFormat, StreamQuality, WireError,
@@ -45,12 +47,14 @@ use super::wire::{
         (status = 400, description = "Not a WebSocket upgrade request", body = super::error::ErrorBody),
         (status = 401, description = "Missing or wrong bearer token", body = super::error::ErrorBody),
         (status = 404, description = "No such scene", body = super::error::ErrorBody),
-        (status = 503, description = "Shutting down", body = super::error::ErrorBody),
+        (status = 503, description = "Shutting down, or max_streams streams are open (`limit` names it)",
+            body = super::error::ErrorBody),
     ),
     security((), ("bearer" = []))
 )]
 pub async fn open_stream(
     State(state): State<Arc<AppState>>,
+    client: ClientId,
     Path(id): Path<String>,
     upgrade: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
@@ -59,15 +63,24 @@ pub async fn open_stream(
     }
     let scene = state.scenes.get(&id).ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
     let upgrade = upgrade.map_err(|rejection| {
-        ApiError::new(rejection.status(), super::error::code::UPGRADE_REQUIRED, rejection.body_text())
+        ApiError::new(rejection.status(), super::error::Code::UpgradeRequired, rejection.body_text())
     })?;
+    // Held from here, so that an upgrade that never completes frees its slot too.
+    let open = state.open_stream()?;
     // Messages up to twice the limit reach the decoder, which answers with an error naming
-    // `max_message_bytes`; larger ones close the connection (1009, message too big).
-    let transport_limit = state.config.limits.max_message_bytes.saturating_mul(2).max(64 << 10);
+    // `max_message_bytes`; larger ones close the connection (1009, message too big). This is
+    // also the most a stream buffers of an incoming message.
+    let transport_limit = transport_limit(&state.config.limits);
     Ok(upgrade.max_message_size(transport_limit).max_frame_size(transport_limit).on_upgrade(move |socket| async move {
-        let _open = state.stream_opened();
-        Session::new(state.clone(), id, &scene).run(socket).await;
+        let _open = open;
+        Session::new(state.clone(), client, id, &scene).run(socket).await;
     }))
+}
+
+/// The most bytes of one incoming message a stream buffers: `2 * max_message_bytes` (at least
+/// 64 KiB).
+pub fn transport_limit(limits: &super::Limits) -> usize {
+    limits.max_message_bytes.saturating_mul(2).max(64 << 10)
 }
 
 /// A stream's settings, changed by control messages.
@@ -94,6 +107,8 @@ struct InFlight {
 
 struct Session {
     state: Arc<AppState>,
+    /// Whose queue the stream's frames wait in.
+    client: ClientId,
     scene_id: String,
     mesh_count: usize,
     /// The scene's settings: what `Occlusion::Unspecified` goes back to.
@@ -106,9 +121,10 @@ struct Session {
 }
 
 impl Session {
-    fn new(state: Arc<AppState>, scene_id: String, scene: &SceneEntry) -> Session {
+    fn new(state: Arc<AppState>, client: ClientId, scene_id: String, scene: &SceneEntry) -> Session {
         Session {
             state,
+            client,
             scene_id,
             mesh_count: scene.mesh_count,
             settings: Settings {
@@ -130,6 +146,11 @@ impl Session {
     async fn run(mut self, mut socket: WebSocket) {
         tracing::info!(scene = %self.scene_id, "stream opened");
         let mut shutdown = self.state.shutdown_receiver();
+        let timeouts = self.state.config.timeouts;
+        let idle = Duration::from_secs(timeouts.stream_idle_seconds);
+        let ping_every = Duration::from_secs(timeouts.stream_ping_seconds.max(1));
+        let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + ping_every, ping_every);
+        let mut heard = tokio::time::Instant::now();
         loop {
             let answer = async {
                 match self.in_flight.as_mut() {
@@ -139,12 +160,23 @@ impl Session {
             };
             let replies = tokio::select! {
                 message = socket.recv() => match message {
-                    Some(Ok(message)) => match self.on_message(message).await {
-                        Some(replies) => replies,
-                        None => break,
-                    },
+                    Some(Ok(message)) => {
+                        heard = tokio::time::Instant::now();
+                        match self.on_message(message).await {
+                            Some(replies) => replies,
+                            None => break,
+                        }
+                    }
                     Some(Err(error)) => {
                         tracing::debug!(scene = %self.scene_id, "stream transport error: {error}");
+                        if too_big(error) {
+                            self.state.metrics.record_stream_message("too_big");
+                            let reason = format!(
+                                "message over {} bytes (twice max_message_bytes)",
+                                transport_limit(&self.state.config.limits)
+                            );
+                            close(&mut socket, close_code::SIZE, reason, idle).await;
+                        }
                         break;
                     }
                     None => break,
@@ -155,16 +187,28 @@ impl Session {
                     replies.extend(self.submit_waiting());
                     replies
                 }
+                _ = ping.tick() => {
+                    match tokio::time::timeout(idle, socket.send(Message::Ping(Default::default()))).await {
+                        Ok(Ok(())) => continue,
+                        _ => break,
+                    }
+                }
+                () = tokio::time::sleep_until(heard + idle) => {
+                    tracing::info!(scene = %self.scene_id, "stream idle: closing it");
+                    let reason = format!("no message for {} s (stream_idle_seconds)", idle.as_secs());
+                    close(&mut socket, close_code::AWAY, reason, idle).await;
+                    break;
+                }
                 () = async { let _ = shutdown.wait_for(|&stopping| stopping).await; } => {
                     let error = WireError::new(ErrorCode::ShuttingDown, None, "the server is shutting down");
-                    let _ = self.send(&mut socket, ServerMessage::Error(error)).await;
-                    let close = CloseFrame { code: close_code::AWAY, reason: "server shutting down".into() };
-                    let _ = socket.send(Message::Close(Some(close))).await;
+                    let _ = tokio::time::timeout(idle, self.send(&mut socket, ServerMessage::Error(error))).await;
+                    close(&mut socket, close_code::AWAY, "server shutting down".to_owned(), idle).await;
                     break;
                 }
             };
             for reply in replies {
-                if self.send(&mut socket, reply).await.is_err() {
+                // A client that does not read cannot hold the stream (and its buffers) forever.
+                if !matches!(tokio::time::timeout(idle, self.send(&mut socket, reply)).await, Ok(Ok(()))) {
                     return;
                 }
             }
@@ -252,7 +296,7 @@ impl Session {
             glossy: s.glossy,
         };
         let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);
-        match self.state.worker.try_render_stream_frame(&self.scene_id, job) {
+        match self.state.worker.try_render_stream_frame(self.client, &self.scene_id, job) {
             Ok(answer) => {
                 self.in_flight = Some(InFlight { frame_id, timestamp, decode_ms, quality: s.quality, answer });
                 None
@@ -260,7 +304,7 @@ impl Session {
             Err(error) => {
                 self.dropped_frames += 1;
                 self.state.metrics.record_dropped_frame();
-                Some(ServerMessage::Error(worker_error(error).with_frame(frame_id)))
+                Some(ServerMessage::Error(WireError::from(error).with_frame(frame_id)))
             }
         }
     }
@@ -273,8 +317,8 @@ impl Session {
         let frame_id = in_flight.frame_id;
         let output = match result {
             Ok(Ok(output)) => output,
-            Ok(Err(error)) => return ServerMessage::Error(worker_error(error).with_frame(frame_id)),
-            Err(_) => return ServerMessage::Error(worker_error(WorkerError::Stopped).with_frame(frame_id)),
+            Ok(Err(error)) => return ServerMessage::Error(WireError::from(error).with_frame(frame_id)),
+            Err(_) => return ServerMessage::Error(WireError::from(WorkerError::Stopped).with_frame(frame_id)),
         };
         let dropped_frames = self.dropped_frames;
         let encoded = tokio::task::spawn_blocking(move || rendered_frame(&in_flight, output, dropped_frames)).await;
@@ -384,21 +428,40 @@ fn rendered_frame(in_flight: &InFlight, output: RenderOutput, dropped_frames: u6
     })
 }
 
-/// The stream error for a failed GPU job.
-fn worker_error(error: WorkerError) -> WireError {
-    match error {
-        WorkerError::QueueFull(waiting) => WireError::limit(
-            super::config::limit::MAX_QUEUE,
-            None,
-            format!("frame dropped: the GPU queue is full ({waiting} renders waiting)"),
-        ),
-        WorkerError::SceneNotFound(id) => {
-            WireError::new(ErrorCode::SceneNotFound, None, format!("the scene `{id}` has been deleted"))
-        }
-        WorkerError::Stopped => WireError::new(ErrorCode::ShuttingDown, None, "the GPU thread has stopped"),
-        error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => {
-            tracing::error!("stream frame failed: {error}");
-            WireError::new(ErrorCode::Internal, None, "internal error (logged on the server)")
+/// Sends a Close frame (within `timeout`); the connection is dropped after it.
+async fn close(socket: &mut WebSocket, code: u16, reason: String, timeout: Duration) {
+    let close = CloseFrame { code, reason: reason.into() };
+    let _ = tokio::time::timeout(timeout, socket.send(Message::Close(Some(close)))).await;
+}
+
+/// Whether a transport error is a message or frame over the transport limit.
+fn too_big(error: axum::Error) -> bool {
+    error
+        .into_inner()
+        .downcast_ref::<tungstenite::Error>()
+        .is_some_and(|e| matches!(e, tungstenite::Error::Capacity(_)))
+}
+
+impl From<WorkerError> for WireError {
+    /// The stream error for a failed GPU job.
+    fn from(error: WorkerError) -> WireError {
+        match error {
+            WorkerError::QueueFull { waiting, limit, .. } => WireError::limit(
+                limit,
+                None,
+                format!("frame dropped: the GPU queue is full ({waiting} renders waiting)"),
+            ),
+            WorkerError::SceneNotFound(id) => {
+                WireError::new(ErrorCode::SceneNotFound, None, format!("the scene `{id}` has been deleted"))
+            }
+            WorkerError::Stopped => WireError::new(ErrorCode::ShuttingDown, None, "the GPU thread has stopped"),
+            error @ WorkerError::DeviceLost => {
+                WireError::new(ErrorCode::Internal, None, format!("frame dropped: {error}; send the next"))
+            }
+            error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => {
+                tracing::error!("stream frame failed: {error}");
+                WireError::new(ErrorCode::Internal, None, "internal error (logged on the server)")
+            }
         }
     }
 }

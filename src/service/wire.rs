@@ -14,7 +14,7 @@ use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
 use crate::scene::{CameraDescription, Occlusion, ScaleDescription, SceneError, TransformDescription};
 
 use super::api::{Component, LightOverride};
-use super::config::{Limits, limit};
+use super::config::{LimitExceeded, Limits, limit};
 use crate::renderer::Method;
 
 /// The code prost generates from `proto/relume.proto`.
@@ -197,6 +197,13 @@ pub struct WireError {
     pub request_id: Option<u64>,
 }
 
+impl From<LimitExceeded> for WireError {
+    fn from(e: LimitExceeded) -> WireError {
+        let message = format!("{} ({})", e.message, e.limit);
+        WireError { limit: Some(e.limit), ..WireError::new(ErrorCode::LimitExceeded, e.field, message) }
+    }
+}
+
 impl WireError {
     pub fn new(code: ErrorCode, field: Option<String>, message: impl Into<String>) -> WireError {
         WireError { code, message: message.into(), field, limit: None, frame_id: None, request_id: None }
@@ -303,14 +310,8 @@ fn decode_intrinsics(i: proto::Intrinsics, limits: &Limits) -> Result<Intrinsics
         if value == 0 {
             return Err(WireError::invalid(format!("{field}.{name}"), "must be at least 1, got 0"));
         }
-        if value > limits.max_frame_side {
-            return Err(WireError::limit(
-                limit::MAX_FRAME_SIDE,
-                Some(format!("{field}.{name}")),
-                format!("{value} pixels is over the limit of {}", limits.max_frame_side),
-            ));
-        }
     }
+    limits.check_image(i.width, i.height, field)?;
     for (name, value) in [("fx", i.fx), ("fy", i.fy)] {
         if !(value.is_finite() && value > 0.0) {
             return Err(WireError::invalid(format!("{field}.{name}"), format!("must be finite and > 0, got {value}")));
@@ -540,7 +541,8 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
     Ok(ControlMessage { request_id: c.request_id, camera, light, model_transforms, quality, rgbd, render })
 }
 
-/// A camera, validated as a scene file's `camera` is, and within `max_frame_side`.
+/// A camera, validated as a scene file's `camera` is, and within `max_frame_side` and
+/// `max_pixels`.
 fn decode_camera(c: proto::Camera, limits: &Limits) -> Result<CameraDescription, WireError> {
     let field = "control.camera";
     let camera = CameraDescription {
@@ -551,23 +553,9 @@ fn decode_camera(c: proto::Camera, limits: &Limits) -> Result<CameraDescription,
         width: c.width,
         height: c.height,
     };
-    check_image_size(camera.width, camera.height, field, limits)?;
+    limits.check_image(camera.width, camera.height, field)?;
     camera.validate(field).map_err(WireError::from_scene)?;
     Ok(camera)
-}
-
-/// Width and height within `max_frame_side`; errors name `{field}.width` / `.height`.
-pub fn check_image_size(width: u32, height: u32, field: &str, limits: &Limits) -> Result<(), WireError> {
-    for (name, value) in [("width", width), ("height", height)] {
-        if value > limits.max_frame_side {
-            return Err(WireError::limit(
-                limit::MAX_FRAME_SIDE,
-                Some(format!("{field}.{name}")),
-                format!("{value} pixels is over the limit of {}", limits.max_frame_side),
-            ));
-        }
-    }
-    Ok(())
 }
 
 fn decode_quality(q: proto::Quality) -> Result<StreamQuality, WireError> {

@@ -6,6 +6,7 @@ mod bench;
 mod cli;
 mod frame;
 mod fuzz;
+mod hardening;
 mod layout;
 mod recording;
 mod replay;

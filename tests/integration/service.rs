@@ -5,6 +5,7 @@
 //! `proto/openapi.json` is compared with the document the handlers generate; after a
 //! deliberate API change, `BLESS=1 cargo test --test integration openapi` rewrites it.
 
+use std::future::Future;
 use std::net::SocketAddr;
 use std::time::Duration;
 
@@ -25,34 +26,36 @@ use tokio_tungstenite::tungstenite;
 use super::fixture;
 
 /// A server on a free loopback port, stopped by [`TestServer::stop`].
-struct TestServer {
-    addr: SocketAddr,
+pub(super) struct TestServer {
+    pub(super) addr: SocketAddr,
     stop: Option<oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<Result<(), ServeError>>,
     client: Client<HttpConnector, Full<Bytes>>,
-    token: Option<String>,
+    pub(super) token: Option<String>,
+    /// The server's state, for test hooks.
+    pub(super) state: std::sync::Arc<relume::service::AppState>,
 }
 
 /// An HTTP answer, body read.
-struct Reply {
-    status: StatusCode,
-    headers: HeaderMap,
-    body: Bytes,
+pub(super) struct Reply {
+    pub(super) status: StatusCode,
+    pub(super) headers: HeaderMap,
+    pub(super) body: Bytes,
 }
 
 impl Reply {
-    fn json(&self) -> Value {
+    pub(super) fn json(&self) -> Value {
         serde_json::from_slice(&self.body)
             .unwrap_or_else(|e| panic!("{}: not JSON ({e}): {}", self.status, String::from_utf8_lossy(&self.body)))
     }
 
-    fn header(&self, name: &str) -> &str {
+    pub(super) fn header(&self, name: &str) -> &str {
         self.headers.get(name).and_then(|v| v.to_str().ok()).unwrap_or_else(|| panic!("no header {name}"))
     }
 
     /// Asserts an error answer with this status and code; returns the `error` object.
     #[track_caller]
-    fn error(&self, status: u16, code: &str) -> Value {
+    pub(super) fn error(&self, status: u16, code: &str) -> Value {
         let body = self.json();
         assert_eq!(self.status.as_u16(), status, "{body}");
         assert_eq!(self.header("content-type"), "application/json");
@@ -65,22 +68,31 @@ impl Reply {
 impl TestServer {
     /// Serves `fixtures/` as the asset directory, with the defaults changed by `edit`.
     async fn start(edit: impl FnOnce(&mut Config)) -> TestServer {
+        TestServer::start_with(edit, |config| Box::pin(Server::bind(config))).await
+    }
+
+    /// [`TestServer::start`] with the server `bind` makes of the config.
+    pub(super) async fn start_with(
+        edit: impl FnOnce(&mut Config),
+        bind: impl FnOnce(Config) -> std::pin::Pin<Box<dyn Future<Output = Result<Server, ServeError>> + Send>>,
+    ) -> TestServer {
         let mut config = Config::new(SocketAddr::from(([127, 0, 0, 1], 0)), fixture(""));
         config.shutdown_grace_seconds = 20;
         edit(&mut config);
         let token = config.token.clone();
-        let server = Server::bind(config).await.expect("the server starts");
+        let server = bind(config).await.expect("the server starts");
         let addr = server.local_addr();
+        let state = server.state().clone();
         assert!(addr.ip().is_loopback());
         let (stop, stopped) = oneshot::channel::<()>();
         let task = tokio::spawn(server.run(async {
             let _ = stopped.await;
         }));
         let client = Client::builder(hyper_util::rt::TokioExecutor::new()).build_http();
-        TestServer { addr, stop: Some(stop), task, client, token }
+        TestServer { addr, stop: Some(stop), task, client, token, state }
     }
 
-    async fn request(&self, method: Method, path: &str, body: impl Into<Bytes>) -> Reply {
+    pub(super) async fn request(&self, method: Method, path: &str, body: impl Into<Bytes>) -> Reply {
         let mut request = hyper::Request::builder().method(method).uri(format!("http://{}{path}", self.addr));
         if let Some(token) = &self.token {
             request = request.header("authorization", format!("Bearer {token}"));
@@ -88,23 +100,23 @@ impl TestServer {
         self.send(request.body(Full::new(body.into())).expect("request")).await
     }
 
-    async fn send(&self, request: hyper::Request<Full<Bytes>>) -> Reply {
+    pub(super) async fn send(&self, request: hyper::Request<Full<Bytes>>) -> Reply {
         let response = self.client.request(request).await.expect("the server answers");
         let (parts, body) = response.into_parts();
         let body = body.collect().await.expect("body").to_bytes();
         Reply { status: parts.status, headers: parts.headers, body }
     }
 
-    async fn get(&self, path: &str) -> Reply {
+    pub(super) async fn get(&self, path: &str) -> Reply {
         self.request(Method::GET, path, Bytes::new()).await
     }
 
-    async fn post(&self, path: &str, body: &Value) -> Reply {
+    pub(super) async fn post(&self, path: &str, body: &Value) -> Reply {
         self.request(Method::POST, path, body.to_string()).await
     }
 
     /// Creates a scene; returns its id.
-    async fn create(&self, scene: &Value) -> String {
+    pub(super) async fn create(&self, scene: &Value) -> String {
         let reply = self.post("/v1/scenes", scene).await;
         assert_eq!(reply.status, StatusCode::CREATED, "{}", reply.json());
         let id = reply.json()["id"].as_str().expect("id").to_owned();
@@ -120,7 +132,7 @@ impl TestServer {
     }
 
     /// Asks the server to stop and waits until it has.
-    async fn stop(mut self) {
+    pub(super) async fn stop(mut self) {
         let _ = self.stop.take().expect("running").send(());
         let result = tokio::time::timeout(Duration::from_secs(60), self.task).await;
         result.expect("the server stops within a minute").expect("the server task").expect("a clean stop");
@@ -184,7 +196,7 @@ fn fixture_scene(name: &str, size: u32) -> Value {
 }
 
 /// A floor and a back wall given as OBJ text, lit from above: loads in milliseconds.
-fn inline_scene() -> Value {
+pub(super) fn inline_scene() -> Value {
     json!({
         "meshes": [{
             "obj": "room.obj",
@@ -456,7 +468,11 @@ async fn a_token_guards_the_v1_routes() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_full_queue_answers_503_with_retry_after() {
-    let server = TestServer::start(|c| c.limits.max_queue = 1).await;
+    let server = TestServer::start(|c| {
+        c.limits.max_queue = 1;
+        c.limits.max_client_queue = 8;
+    })
+    .await;
     let id = server.create(&fixture_scene("cornell_bunny_small", 48)).await;
     let body = json!({"quality": {"method": "brute-force"}}).to_string();
     let path = format!("/v1/scenes/{id}/render");
@@ -916,9 +932,9 @@ fn the_binary_serves_until_sigterm() {
 /// depth pixels to stay fast.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_recording_replays_through_the_server_as_offline() {
-    use relume::client::{RemoteReplayOptions, replay_remote};
     use relume::mr::{MrOptions, MrRenderer};
     use relume::rgbd::recording::{Recording, RecordingOptions};
+    use relume::service::client::{RemoteReplayOptions, replay_remote};
 
     let dir = super::scratch("wire_replay");
     let mut scene: Value =

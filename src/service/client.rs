@@ -1,6 +1,6 @@
 //! A client of `relume serve`: uploads a scene, streams RGB-D frames over the WebSocket
 //! protocol (`proto/relume.proto`) and collects the relit frames. `relume replay --server`
-//! ([`replay_remote`]) and `relume load` (`crate::load`) are built on it.
+//! ([`replay_remote`]) and `relume load` (`crate::service::load`) are built on it.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -51,6 +51,20 @@ impl Connection {
         }
         let http = Client::builder(hyper_util::rt::TokioExecutor::new()).build_http();
         Ok(Connection { authority, token, http })
+    }
+
+    /// The same server, with HTTP connections made from `source` (another loopback address is
+    /// another client to the server's fair queue).
+    pub fn from_source(&self, source: std::net::IpAddr) -> Connection {
+        let mut connector = HttpConnector::new();
+        connector.set_local_address(Some(source));
+        let http = Client::builder(hyper_util::rt::TokioExecutor::new()).build(connector);
+        Connection { authority: self.authority.clone(), token: self.token.clone(), http }
+    }
+
+    /// `host:port` of the server.
+    pub fn authority(&self) -> &str {
+        &self.authority
     }
 
     /// One HTTP request; the answer's status and body.
