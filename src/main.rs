@@ -63,6 +63,17 @@ enum Command {
         /// Exact reference: use every N-th VAL (flux x N); reported in the output.
         #[arg(long, default_value_t = 1)]
         val_stride: u32,
+        /// Exact reference: where it runs (auto: the CPU on CPU adapters or with
+        /// --reference-samples / --spp > 1, the GPU otherwise).
+        #[arg(long, value_enum, default_value_t = compare::ReferenceDevice::Auto, requires = "reference")]
+        reference_device: compare::ReferenceDevice,
+        /// Exact reference (CPU): N importance-sampled VALs per receiver instead of every VAL;
+        /// reports the reference's noise and noise-corrected errors.
+        #[arg(long, conflicts_with = "val_stride", requires = "reference")]
+        reference_samples: Option<u32>,
+        /// Exact reference (CPU): jittered samples per pixel (box filter); 1 = the pixel centre.
+        #[arg(long, default_value_t = 1, requires = "reference")]
+        spp: u32,
     },
     /// Sweep quality settings: per configuration the time of every stage, the device memory
     /// held and the indirect error against brute force (and exact); writes results.json,
@@ -411,8 +422,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             print!("{}", relume::service::openapi_json());
             Ok(())
         }
-        Command::Compare { scene, json: _, size, images, reference, val_stride } => {
-            anyhow::ensure!(val_stride >= 1, "--val-stride: must be at least 1, got {val_stride}");
+        Command::Compare {
+            scene,
+            json: _,
+            size,
+            images,
+            reference,
+            val_stride,
+            reference_device,
+            reference_samples,
+            spp,
+        } => {
+            let exact_options =
+                compare::ExactOptions { device: reference_device, val_stride, samples: reference_samples, spp };
+            exact_options.check().map_err(anyhow::Error::msg)?;
             let scene = load_lit(&scene)?;
             let (w, h) = size.resolve(&scene)?;
             let gpu = Gpu::new()?;
@@ -458,7 +481,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 "brute_force_stages_ms": brute.timings.stages,
             });
             if reference.is_some() {
-                add_exact_comparison(&mut report, &gpu, &mut renderer, &scene, (w, h), val_stride, images.as_deref())?;
+                add_exact_comparison(
+                    &mut report,
+                    &gpu,
+                    &mut renderer,
+                    &scene,
+                    (w, h),
+                    &exact_options,
+                    images.as_deref(),
+                )?;
             }
             println!("{}", serde_json::to_string_pretty(&report)?);
             Ok(())
@@ -596,16 +627,24 @@ fn add_exact_comparison(
     renderer: &mut Renderer,
     scene: &Scene,
     (w, h): (u32, u32),
-    val_stride: u32,
+    options: &compare::ExactOptions,
     images: Option<&Path>,
 ) -> anyhow::Result<()> {
     use relume::scene::{Occlusion, OcclusionRule};
-    let exact = compare::exact_frame(gpu, renderer, w, h, val_stride)?;
+    let exact = compare::exact_reference(gpu, renderer, w, h, options)?;
     let exposure = exact.indirect.auto_exposure();
-    report["exact_ms"] = exact.timings.total_of(&[stage::EXACT]).into();
-    report["exact_val_stride"] = val_stride.into();
-    report["exact_vals_used"] = (exact.val_count / val_stride).into();
-    report["exact_rounds"] = exact.exact_rounds.into();
+    report["exact_ms"] = exact.ms.into();
+    report["exact_device"] = serde_json::to_value(exact.device)?;
+    report["exact_estimator"] = options.estimator().into();
+    report["exact_val_stride"] = options.val_stride.into();
+    report["exact_samples"] = options.samples.into();
+    report["exact_spp"] = options.spp.into();
+    report["exact_vals_used"] = options.samples.unwrap_or(exact.val_count / options.val_stride).into();
+    report["exact_rounds"] = exact.rounds.into();
+    report["exact_shadow_rays"] = exact.shadow_rays.into();
+    report["exact_rays_per_s"] = exact.shadow_rays.map(|n| n as f64 / (exact.ms * 1e-3)).into();
+    let variance = exact.variance.as_deref();
+    report["exact_rel_stderr"] = variance.map(|v| relume::image::relative_stderr(&exact.indirect, v)).into();
     if let Some(dir) = images {
         exact.indirect.write_png(&dir.join("indirect_exact.png"), exposure)?;
     }
@@ -621,6 +660,8 @@ fn add_exact_comparison(
         }
         let error = compare::indirect_error(&sparse.indirect, &exact.indirect);
         report[format!("indirect_rel_rmse_vs_exact_{key}")] = error.rel_rmse.into();
+        report[format!("indirect_rel_rmse_vs_exact_{key}_corrected")] =
+            variance.map(|v| relume::image::noise_corrected_relative_rmse(&sparse.indirect, &exact.indirect, v)).into();
         report[format!("indirect_flip_mean_vs_exact_{key}")] = error.flip_mean.into();
         if key == "sum" {
             report["occlusion_ms"] = sparse.timings.total_of(&[stage::OCCLUSION]).into();
