@@ -5,7 +5,7 @@
 use super::BenchError;
 use crate::gpu::timing::TimingSource;
 use crate::gpu::{Gpu, GpuError};
-use crate::image::{LinearImage, flip_mean, relative_rmse};
+use crate::image::{LinearImage, flip_mean, noise_corrected_relative_rmse, relative_rmse, relative_stderr};
 use crate::renderer::{Method, Rendered, Renderer, stage};
 use crate::scene::{Occlusion, OcclusionRule, Scene};
 use std::path::Path;
@@ -58,6 +58,170 @@ pub fn exact_frame(
     renderer.render(gpu, Method::Exact, width, height)
 }
 
+/// Where `compare --reference exact` computes its reference.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReferenceDevice {
+    /// The CPU on CPU adapters (lavapipe) or when an option only the CPU reference has is given
+    /// (`--reference-samples`, `--spp` > 1); the GPU pass otherwise.
+    Auto,
+    /// `twin::exact_cpu` over rayon's threads.
+    Cpu,
+    /// The GPU pass (`gpu::references::exact`).
+    Gpu,
+}
+
+/// How the exact-visibility reference is computed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExactOptions {
+    pub device: ReferenceDevice,
+    /// Every n-th VAL, flux x n (1: all).
+    pub val_stride: u32,
+    /// Importance-sampled VALs per receiver instead of a sum (CPU only).
+    pub samples: Option<u32>,
+    /// Jittered samples per pixel (CPU only beyond 1).
+    pub spp: u32,
+}
+
+/// Seed of the CPU reference's random numbers (VAL draws, sub-pixel positions): fixed, so a
+/// figure can be reproduced.
+pub const REFERENCE_SEED: u64 = 0x5eed;
+
+impl ExactOptions {
+    /// Check the options: `Err` names the flag (`--reference-samples: ...`).
+    pub fn check(&self) -> Result<(), String> {
+        use crate::twin::exact_cpu::{MAX_SPP, MAX_VAL_SAMPLES};
+        if self.val_stride < 1 {
+            return Err(format!("--val-stride: must be at least 1, got {}", self.val_stride));
+        }
+        if !(1..=MAX_SPP).contains(&self.spp) {
+            return Err(format!("--spp: must be in 1..={MAX_SPP}, got {}", self.spp));
+        }
+        if let Some(n) = self.samples {
+            if !(2..=MAX_VAL_SAMPLES).contains(&n) {
+                return Err(format!("--reference-samples: must be in 2..={MAX_VAL_SAMPLES}, got {n}"));
+            }
+            if self.val_stride != 1 {
+                return Err("--reference-samples: replaces --val-stride; give one of them".into());
+            }
+        }
+        if self.device == ReferenceDevice::Gpu && (self.samples.is_some() || self.spp > 1) {
+            return Err("--reference-device: gpu computes every VAL (or a stride) at the pixel centre; \
+                        --reference-samples and --spp need cpu"
+                .into());
+        }
+        Ok(())
+    }
+
+    /// The device `Auto` stands for on `gpu`.
+    pub fn device_on(&self, gpu: &Gpu) -> ReferenceDevice {
+        match self.device {
+            ReferenceDevice::Auto if gpu.is_cpu() || self.samples.is_some() || self.spp > 1 => ReferenceDevice::Cpu,
+            ReferenceDevice::Auto => ReferenceDevice::Gpu,
+            d => d,
+        }
+    }
+
+    /// How the reference treats the VALs (as reported: "all", "stride" or "importance").
+    pub fn estimator(&self) -> &'static str {
+        match (self.samples, self.val_stride) {
+            (Some(_), _) => "importance",
+            (None, 1) => "all",
+            _ => "stride",
+        }
+    }
+}
+
+/// An exact-visibility reference image with its noise and cost.
+pub struct ExactReference {
+    pub indirect: LinearImage,
+    /// Per pixel and channel the variance of the reference's estimate; `None` for a stride.
+    pub variance: Option<Vec<glam::Vec3>>,
+    pub device: ReferenceDevice,
+    /// Wall time of the reference itself (ms): the GPU pass's stage time, or the CPU's BVH build
+    /// and tracing (not the GPU frame that made the VALs and the visibility buffer).
+    pub ms: f64,
+    /// CPU: shadow rays cast.
+    pub shadow_rays: Option<u64>,
+    /// GPU: the pass's rounds.
+    pub rounds: u32,
+    /// VALs in the frame.
+    pub val_count: u32,
+}
+
+/// The exact-visibility reference of `renderer`'s scene at `width` x `height` per `options`
+/// (checked with [`ExactOptions::check`]). The CPU path takes the VALs and the camera's
+/// visibility buffer from a sparse frame rendered first: with one sample per pixel its receivers
+/// are that buffer's pixels (exactly those the GPU methods shade); with more it traces primary
+/// rays at jittered positions through the same BVH as its shadow rays.
+pub fn exact_reference(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    width: u32,
+    height: u32,
+    options: &ExactOptions,
+) -> Result<ExactReference, GpuError> {
+    use crate::twin::bvh::Bvh;
+    use crate::twin::exact_cpu::{self as cpu, CameraRays, PixelSampling, Receiver, Receivers, ValSampling};
+    let device = options.device_on(gpu);
+    if device == ReferenceDevice::Gpu {
+        let frame = exact_frame(gpu, renderer, width, height, options.val_stride)?;
+        let exact = options.val_stride == 1;
+        return Ok(ExactReference {
+            variance: exact.then(|| vec![glam::Vec3::ZERO; frame.indirect.pixels.len()]),
+            ms: frame.indirect_ms(),
+            indirect: frame.indirect,
+            device,
+            shadow_rays: None,
+            rounds: frame.exact_rounds,
+            val_count: frame.val_count,
+        });
+    }
+    let frame = renderer.render(gpu, Method::Sparse, width, height)?;
+    let vals = renderer.read_vals(gpu)?;
+    let hits = match renderer.camera_view() {
+        Some(view) if options.spp == 1 => view.read(gpu)?,
+        _ => Vec::new(),
+    };
+    let start = std::time::Instant::now();
+    let flat = &renderer.scene.flat;
+    let eye = renderer.view().eye();
+    let positions: Vec<glam::Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
+    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let bvh = Bvh::build(&positions, &triangles);
+    let surface = |t: u32, b: glam::Vec2| {
+        let (p, n, s) = flat.surface_at(t, b);
+        Receiver::new(p, n, s, eye)
+    };
+    let camera = CameraRays::new(renderer.camera_to_clip(width, height), width, height);
+    let resolved: Vec<Option<Receiver>> = hits.iter().map(|h| h.map(|h| surface(h.triangle, h.barycentrics))).collect();
+    let receivers = if options.spp == 1 {
+        Receivers::Hits(&resolved)
+    } else {
+        Receivers::Traced {
+            camera: &camera,
+            sampling: PixelSampling { spp: options.spp, seed: REFERENCE_SEED },
+            surface: &surface,
+        }
+    };
+    let sampling = match (options.samples, options.val_stride) {
+        (Some(samples), _) => ValSampling::Importance { samples, seed: REFERENCE_SEED },
+        (None, 1) => ValSampling::All,
+        (None, s) => ValSampling::Stride(s),
+    };
+    let scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy() };
+    let out = cpu::render(&scene, &receivers, width, height, sampling);
+    Ok(ExactReference {
+        indirect: out.image,
+        variance: out.variance,
+        device,
+        ms: start.elapsed().as_secs_f64() * 1e3,
+        shadow_rays: Some(out.shadow_rays),
+        rounds: 0,
+        val_count: frame.val_count,
+    })
+}
+
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and
 /// with `--reference exact` every occlusion mode against exact visibility.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -95,18 +259,32 @@ pub struct CompareReport {
     pub exact: Option<ExactComparison>,
 }
 
-/// Sparse with occlusion off, "sum" and "product" against the exact-visibility reference.
+/// Sparse with occlusion off, "sum" and "product" against the exact-visibility reference, each
+/// raw error beside the one corrected for the reference's own noise (`None` for a stride, whose
+/// noise is not estimated).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ExactComparison {
     pub exact_ms: f64,
+    pub exact_device: ReferenceDevice,
+    /// "all", "stride" or "importance".
+    pub exact_estimator: &'static str,
     pub exact_val_stride: u32,
+    pub exact_samples: Option<u32>,
+    pub exact_spp: u32,
     pub exact_vals_used: u32,
     pub exact_rounds: u32,
+    pub exact_shadow_rays: Option<u64>,
+    pub exact_rays_per_s: Option<f64>,
+    /// `sqrt(sum s² / sum |g|²)`: the reference's own relative noise.
+    pub exact_rel_stderr: Option<f64>,
     pub indirect_rel_rmse_vs_exact_off: f64,
+    pub indirect_rel_rmse_vs_exact_off_corrected: Option<f64>,
     pub indirect_flip_mean_vs_exact_off: f64,
     pub indirect_rel_rmse_vs_exact_sum: f64,
+    pub indirect_rel_rmse_vs_exact_sum_corrected: Option<f64>,
     pub indirect_flip_mean_vs_exact_sum: f64,
     pub indirect_rel_rmse_vs_exact_product: f64,
+    pub indirect_rel_rmse_vs_exact_product_corrected: Option<f64>,
     pub indirect_flip_mean_vs_exact_product: f64,
     /// The disks' stage with the "sum" rule (ms).
     pub occlusion_ms: f64,
@@ -114,21 +292,21 @@ pub struct ExactComparison {
     pub gather_ms: f64,
 }
 
-/// Measure `scene` at `width` x `height` as `relume compare` does; with `exact_val_stride`,
-/// also against exact visibility over every n-th VAL. `images`: a directory for the indirect
-/// images and their difference.
+/// Measure `scene` at `width` x `height` as `relume compare` does; with `exact`, also against
+/// exact visibility computed as it says. `images`: a directory for the indirect images and
+/// their difference.
 pub fn compare(
     gpu: &Gpu,
     scene: &Scene,
     (w, h): (u32, u32),
-    exact_val_stride: Option<u32>,
+    exact: Option<&ExactOptions>,
     images: Option<&Path>,
 ) -> Result<CompareReport, BenchError> {
     let start = Instant::now();
     let mut renderer = Renderer::new(gpu, scene)?;
     let setup_ms = start.elapsed().as_secs_f64() * 1e3;
     // The brute force has no visibility, so it is compared with sparse without occlusion;
-    // `exact_val_stride` measures occlusion.
+    // `exact` measures occlusion.
     renderer.set_occlusion(Occlusion::Off, scene.settings.occlusion_rule);
     let sparse = sparse_frame(gpu, &mut renderer, w, h)?;
     let brute = brute_force_frame(gpu, &mut renderer, w, h)?;
@@ -137,8 +315,8 @@ pub fn compare(
         write_comparison(dir, &sparse.indirect, &brute.indirect, error.exposure)?;
     }
     let (sparse_ms, brute_force_ms) = (sparse.indirect_ms(), brute.indirect_ms());
-    let exact = match exact_val_stride {
-        Some(stride) => Some(exact_comparison(gpu, &mut renderer, (w, h), stride, images)?),
+    let exact = match exact {
+        Some(options) => Some(exact_comparison(gpu, &mut renderer, (w, h), options, images)?),
         None => None,
     };
     Ok(CompareReport {
@@ -175,10 +353,11 @@ fn exact_comparison(
     gpu: &Gpu,
     renderer: &mut Renderer,
     (w, h): (u32, u32),
-    val_stride: u32,
+    options: &ExactOptions,
     images: Option<&Path>,
 ) -> Result<ExactComparison, BenchError> {
-    let exact = exact_frame(gpu, renderer, w, h, val_stride)?;
+    let exact = exact_reference(gpu, renderer, w, h, options)?;
+    let variance = exact.variance.as_deref();
     let exposure = exact.indirect.auto_exposure();
     if let Some(dir) = images {
         write_png(&exact.indirect, &dir.join("indirect_exact.png"), exposure)?;
@@ -195,23 +374,34 @@ fn exact_comparison(
         if let Some(dir) = images {
             write_png(&sparse.indirect, &dir.join(format!("indirect_sparse_occlusion_{key}.png")), exposure)?;
         }
-        errors.push(indirect_error(&sparse.indirect, &exact.indirect));
+        let corrected = variance.map(|v| noise_corrected_relative_rmse(&sparse.indirect, &exact.indirect, v));
+        errors.push((indirect_error(&sparse.indirect, &exact.indirect), corrected));
         if key == "sum" {
             occlusion_ms = sparse.timings.total_of(&[stage::OCCLUSION]);
             gather_ms = sparse.timings.total_of(&[stage::GATHER]);
         }
     }
-    let [off, sum, product] = errors[..] else { unreachable!("three modes measured") };
+    let [(off, off_c), (sum, sum_c), (product, product_c)] = errors[..] else { unreachable!("three modes measured") };
     Ok(ExactComparison {
-        exact_ms: exact.indirect_ms(),
-        exact_val_stride: val_stride,
-        exact_vals_used: exact.val_count / val_stride,
-        exact_rounds: exact.exact_rounds,
+        exact_ms: exact.ms,
+        exact_device: exact.device,
+        exact_estimator: options.estimator(),
+        exact_val_stride: options.val_stride,
+        exact_samples: options.samples,
+        exact_spp: options.spp,
+        exact_vals_used: options.samples.unwrap_or(exact.val_count / options.val_stride),
+        exact_rounds: exact.rounds,
+        exact_shadow_rays: exact.shadow_rays,
+        exact_rays_per_s: exact.shadow_rays.map(|n| n as f64 / (exact.ms * 1e-3)),
+        exact_rel_stderr: variance.map(|v| relative_stderr(&exact.indirect, v)),
         indirect_rel_rmse_vs_exact_off: off.rel_rmse,
+        indirect_rel_rmse_vs_exact_off_corrected: off_c,
         indirect_flip_mean_vs_exact_off: off.flip_mean,
         indirect_rel_rmse_vs_exact_sum: sum.rel_rmse,
+        indirect_rel_rmse_vs_exact_sum_corrected: sum_c,
         indirect_flip_mean_vs_exact_sum: sum.flip_mean,
         indirect_rel_rmse_vs_exact_product: product.rel_rmse,
+        indirect_rel_rmse_vs_exact_product_corrected: product_c,
         indirect_flip_mean_vs_exact_product: product.flip_mean,
         occlusion_ms,
         gather_ms,

@@ -1,16 +1,19 @@
-//! A bounding volume hierarchy over the scene's triangles for exact visibility (DESIGN.md §5),
-//! built here on the CPU and traversed on the GPU by `shaders/bvh.wgsl`; `occluded` below is
-//! the traversal's twin, `ray_triangle` the intersection's.
+//! The bounding volume hierarchy over the scene's triangles for exact visibility (DESIGN.md §5).
+//! One tree serves both references: it is built by the `obvhs` crate (PLOC with parallel
+//! reinsertion and SAH-driven leaf collapsing, its `medium_build` preset, no spatial splits),
+//! traversed on the CPU by obvhs itself ([`Bvh::segment_blocked`], [`Bvh::closest_hit`]: the CPU
+//! exact reference, `twin::exact_cpu`) and flattened into the stackless depth-first layout
+//! that `shaders/bvh.wgsl` traverses on the GPU. [`Bvh::occluded`] is that traversal's twin,
+//! [`ray_triangle`] the intersection's; every traversal here uses the same [`ray_triangle`], so
+//! CPU and GPU decide each shadow ray with the same arithmetic.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3, Vec3A};
+use obvhs::bvh2::Bvh2;
+use obvhs::ray::Ray;
 
-/// Triangles per leaf at most.
-pub const LEAF_SIZE: usize = 4;
 /// `|det|` below this fraction of `|e1| |e2| |d|` (the sine of the angle between the ray and the
 /// triangle's plane, times the sine of the triangle's smallest angle) counts as parallel.
 pub const RAY_PARALLEL_EPSILON: f32 = 1e-5;
-/// Depth of the tree at most (a bound on the build's recursion).
-pub const MAX_DEPTH: usize = 32;
 
 /// One node, as the GPU reads it (`BvhNode` in `shaders/bvh.wgsl`). Nodes are in depth-first
 /// order, so an inner node's first child is `index + 1`. A leaf (`count > 0`) holds
@@ -26,61 +29,53 @@ pub struct BvhNode {
     pub count: u32,
 }
 
-/// The hierarchy: nodes in depth-first order and the triangle order its leaves index.
-#[derive(Clone, Debug, Default)]
+/// The hierarchy: obvhs's tree for the CPU, and its flattened form for the GPU.
+#[derive(Clone, Default)]
 pub struct Bvh {
+    /// The GPU layout: nodes in depth-first order with miss links.
     pub nodes: Vec<BvhNode>,
     /// Triangle indices (into the scene's triangle list) in leaf order.
     pub order: Vec<u32>,
+    /// obvhs's binary tree (its leaves index `corners` and `tree.primitive_indices`).
+    tree: Bvh2,
+    /// Corners of each triangle in the tree's primitive order (`tree.primitive_indices[k]` is
+    /// the scene's triangle of `corners[k]`), so a leaf's triangles are contiguous in memory.
+    corners: Vec<[Vec3; 3]>,
+}
+
+/// A ray's closest intersection: the scene's triangle, the distance along the ray's direction
+/// and the barycentrics `(u, v)` of `FlatScene::surface_at` (weights of the second and third
+/// corner).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TriangleHit {
+    pub triangle: u32,
+    pub t: f32,
+    pub barycentrics: Vec2,
 }
 
 impl Bvh {
-    /// Median split on the longest axis of the centroids' bounds.
+    /// Build over `triangles` (corner indices into `positions`) with obvhs.
     pub fn build(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
-        let centroids: Vec<Vec3> =
-            triangles.iter().map(|t| t.iter().map(|&i| positions[i as usize]).sum::<Vec3>() / 3.0).collect();
-        let mut bvh = Bvh { nodes: Vec::new(), order: (0..triangles.len() as u32).collect() };
-        if !triangles.is_empty() {
-            bvh.split(positions, triangles, &centroids, 0, triangles.len(), 0);
+        if triangles.is_empty() {
+            return Self::default();
         }
-        bvh
+        let tris: Vec<obvhs::triangle::Triangle> = triangles
+            .iter()
+            .map(|t| {
+                let [v0, v1, v2] = t.map(|i| Vec3A::from(positions[i as usize]));
+                obvhs::triangle::Triangle { v0, v1, v2 }
+            })
+            .collect();
+        let params = obvhs::BvhBuildParams::medium_build();
+        let tree = obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
+        let corners =
+            tree.primitive_indices.iter().map(|&i| triangles[i as usize].map(|v| positions[v as usize])).collect();
+        let (nodes, order) = flatten(&tree);
+        Self { nodes, order, tree, corners }
     }
 
-    fn split(&mut self, p: &[Vec3], tris: &[[u32; 3]], c: &[Vec3], lo: usize, hi: usize, depth: usize) {
-        let (mut min, mut max) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-        let (mut cmin, mut cmax) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-        for &t in &self.order[lo..hi] {
-            for &v in &tris[t as usize] {
-                min = min.min(p[v as usize]);
-                max = max.max(p[v as usize]);
-            }
-            cmin = cmin.min(c[t as usize]);
-            cmax = cmax.max(c[t as usize]);
-        }
-        let index = self.nodes.len();
-        self.nodes.push(BvhNode { min: min.into(), first: lo as u32, max: max.into(), count: (hi - lo) as u32 });
-        let extent = cmax - cmin;
-        if hi - lo <= LEAF_SIZE || depth + 1 >= MAX_DEPTH || extent.max_element() <= 0.0 {
-            return;
-        }
-        let axis = if extent.x >= extent.y && extent.x >= extent.z {
-            0
-        } else if extent.y >= extent.z {
-            1
-        } else {
-            2
-        };
-        let mid = (lo + hi) / 2;
-        self.order[lo..hi]
-            .select_nth_unstable_by(mid - lo, |a, b| c[*a as usize][axis].total_cmp(&c[*b as usize][axis]));
-        self.split(p, tris, c, lo, mid, depth + 1);
-        self.split(p, tris, c, mid, hi, depth + 1);
-        self.nodes[index].first = self.nodes.len() as u32;
-        self.nodes[index].count = 0;
-    }
-
-    /// Whether any triangle blocks the open segment from `origin` to `target` (twin of
-    /// `occluded` in `shaders/bvh.wgsl`).
+    /// Whether any triangle blocks the open segment from `origin` to `target`, through the
+    /// flattened GPU layout (twin of `occluded` in `shaders/bvh.wgsl`).
     pub fn occluded(&self, positions: &[Vec3], triangles: &[[u32; 3]], origin: Vec3, target: Vec3) -> bool {
         if self.nodes.is_empty() {
             return false;
@@ -103,6 +98,78 @@ impl Bvh {
         }
         false
     }
+
+    /// The same question as [`Bvh::occluded`], answered by obvhs's any-hit traversal of its own
+    /// tree (the CPU exact reference's shadow ray).
+    pub fn segment_blocked(&self, origin: Vec3, target: Vec3) -> bool {
+        if self.corners.is_empty() {
+            return false;
+        }
+        let d = target - origin;
+        let ray = Ray::new(origin.into(), d.into(), 0.0, 1.0);
+        !self.tree.ray_traverse_miss(ray, |_, k| {
+            let [a, b, c] = self.corners[k];
+            match ray_triangle(origin, d, a, b, c) {
+                Some(t) if t > 0.0 && t < 1.0 => t,
+                _ => f32::INFINITY,
+            }
+        })
+    }
+
+    /// The nearest triangle the ray `origin + t direction`, t > 0, meets (obvhs's closest-hit
+    /// traversal with [`ray_triangle_hit`]).
+    pub fn closest_hit(&self, origin: Vec3, direction: Vec3) -> Option<TriangleHit> {
+        if self.corners.is_empty() {
+            return None;
+        }
+        let ray = Ray::new(origin.into(), direction.into(), 0.0, f32::INFINITY);
+        let mut hit = obvhs::ray::RayHit::none();
+        let mut best: Option<(f32, Vec2)> = None;
+        self.tree.ray_traverse(ray, &mut hit, |_, k| {
+            let [a, b, c] = self.corners[k];
+            match ray_triangle_hit(origin, direction, a, b, c) {
+                Some((t, uv)) if t > 0.0 && best.is_none_or(|(bt, _)| t < bt) => {
+                    best = Some((t, uv));
+                    t
+                }
+                _ => f32::INFINITY,
+            }
+        });
+        let (t, barycentrics) = best?;
+        Some(TriangleHit { triangle: self.tree.primitive_indices[hit.primitive_id as usize], t, barycentrics })
+    }
+}
+
+/// obvhs's tree in depth-first order with miss links ([`BvhNode`]), and the leaves' triangles.
+fn flatten(tree: &Bvh2) -> (Vec<BvhNode>, Vec<u32>) {
+    enum Step {
+        Visit(usize),
+        /// Set the miss link of the flattened node at this index: its subtree is done.
+        Close(usize),
+    }
+    let mut nodes = Vec::with_capacity(tree.nodes.len());
+    let mut order = Vec::with_capacity(tree.primitive_indices.len());
+    let mut stack = vec![Step::Visit(0)];
+    while let Some(step) = stack.pop() {
+        match step {
+            Step::Visit(i) => {
+                let n = &tree.nodes[i];
+                let at = nodes.len();
+                nodes.push(BvhNode { min: n.aabb.min.into(), first: 0, max: n.aabb.max.into(), count: 0 });
+                if n.is_leaf() {
+                    let first = n.first_index as usize;
+                    nodes[at].first = order.len() as u32;
+                    nodes[at].count = n.prim_count;
+                    order.extend_from_slice(&tree.primitive_indices[first..first + n.prim_count as usize]);
+                } else {
+                    let left = n.first_index as usize;
+                    stack.extend([Step::Close(at), Step::Visit(left + 1), Step::Visit(left)]);
+                }
+            }
+            Step::Close(at) => nodes[at].first = nodes.len() as u32,
+        }
+    }
+    (nodes, order)
 }
 
 /// Slab test of the segment `origin + s * d`, s in [0, 1] (`inv` = 1 / d), against a box.
@@ -117,6 +184,11 @@ pub fn segment_hits_box(origin: Vec3, inv: Vec3, min: Vec3, max: Vec3) -> bool {
 /// Möller–Trumbore: parameter `t` along `d` where the ray `origin + t d` meets triangle
 /// (`a`, `b`, `c`), two-sided; `None` when it misses or runs parallel.
 pub fn ray_triangle(origin: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<f32> {
+    ray_triangle_hit(origin, d, a, b, c).map(|(t, _)| t)
+}
+
+/// [`ray_triangle`] with the barycentrics `(u, v)` of the hit (weights of `b` and `c`).
+pub fn ray_triangle_hit(origin: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<(f32, Vec2)> {
     let e1 = b - a;
     let e2 = c - a;
     let p = d.cross(e2);
@@ -137,7 +209,7 @@ pub fn ray_triangle(origin: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<
     if v < 0.0 || u + v > 1.0 {
         return None;
     }
-    Some(e2.dot(q) * inv_det)
+    Some((e2.dot(q) * inv_det, Vec2::new(u, v)))
 }
 
 #[cfg(test)]
@@ -145,11 +217,12 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// The BVH traversal agrees with testing every triangle, on random segments through a soup
-    /// of random triangles (exact agreement: both use the same intersection routine, so only a
-    /// traversal bug can make them differ).
+    /// Both traversals (the GPU layout's twin and obvhs's own any-hit) agree with testing every
+    /// triangle, on random segments through a soup of random triangles, and the closest hit with
+    /// the nearest of all triangles (exact agreement: every path uses the same intersection
+    /// routine, so only a traversal or flattening bug can make them differ).
     #[test]
-    fn traversal_agrees_with_brute_force_loop() {
+    fn traversals_agree_with_brute_force_loop() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
         let mut positions = Vec::new();
@@ -162,19 +235,46 @@ mod tests {
             triangles.push([3 * i, 3 * i + 1, 3 * i + 2]);
         }
         let bvh = Bvh::build(&positions, &triangles);
-        assert!(bvh.nodes.len() > 500);
+        assert!(bvh.nodes.len() > 200, "a tree, not a list: {} nodes", bvh.nodes.len());
+        let mut seen = bvh.order.clone();
+        seen.sort_unstable();
+        assert_eq!(seen, (0..2000).collect::<Vec<u32>>(), "every triangle in exactly one leaf");
         let (mut hits, mut misses) = (0, 0);
         for _ in 0..3000 {
             let o = Vec3::new(r(-6.0, 6.0), r(-6.0, 6.0), r(-6.0, 6.0));
             let t = Vec3::new(r(-6.0, 6.0), r(-6.0, 6.0), r(-6.0, 6.0));
+            let corners = |tri: &[u32; 3]| tri.map(|i| positions[i as usize]);
             let brute = triangles.iter().any(|tri| {
-                let [a, b, c] = tri.map(|i| positions[i as usize]);
+                let [a, b, c] = corners(tri);
                 ray_triangle(o, t - o, a, b, c).is_some_and(|s| s > 0.0 && s < 1.0)
             });
-            assert_eq!(bvh.occluded(&positions, &triangles, o, t), brute, "segment {o} -> {t}");
+            assert_eq!(bvh.occluded(&positions, &triangles, o, t), brute, "GPU layout: segment {o} -> {t}");
+            assert_eq!(bvh.segment_blocked(o, t), brute, "obvhs any-hit: segment {o} -> {t}");
+            let nearest = triangles
+                .iter()
+                .enumerate()
+                .filter_map(|(k, tri)| {
+                    let [a, b, c] = corners(tri);
+                    ray_triangle(o, t - o, a, b, c).filter(|s| *s > 0.0).map(|s| (k as u32, s))
+                })
+                .min_by(|x, y| x.1.total_cmp(&y.1));
+            let closest = bvh.closest_hit(o, t - o);
+            assert_eq!(closest.map(|h| (h.triangle, h.t)), nearest, "closest hit along {o} -> {t}");
             if brute { hits += 1 } else { misses += 1 }
         }
         assert!(hits > 300 && misses > 300, "both outcomes exercised: {hits} hits, {misses} misses");
+    }
+
+    #[test]
+    fn empty_and_single_triangle_scenes() {
+        let empty = Bvh::build(&[], &[]);
+        assert!(!empty.segment_blocked(Vec3::ZERO, Vec3::ONE) && empty.closest_hit(Vec3::ZERO, Vec3::X).is_none());
+        let one = Bvh::build(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        assert_eq!(one.nodes.len(), 1);
+        let (o, t) = (Vec3::new(0.2, 0.3, 1.0), Vec3::new(0.2, 0.3, -1.0));
+        assert!(one.occluded(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]], o, t) && one.segment_blocked(o, t));
+        let hit = one.closest_hit(o, Vec3::NEG_Z).unwrap();
+        assert!((hit.t - 1.0).abs() < 1e-6 && (hit.barycentrics - Vec2::new(0.2, 0.3)).length() < 1e-6, "{hit:?}");
     }
 
     #[test]

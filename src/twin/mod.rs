@@ -11,6 +11,7 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
 pub mod bvh;
+pub mod exact_cpu;
 pub mod rgbd;
 pub mod rsm;
 
@@ -291,15 +292,19 @@ pub fn shade_sparse(
 /// Brute-force indirect radiance at a pixel: every VAL through §3, no interpolation.
 pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: &[Val], glossy: bool) -> Vec3 {
     let w_o = view_direction(p, n, eye);
-    let spec = surface.specular * phong_normalisation(surface.exponent);
-    let mut l = Vec3::ZERO;
-    for val in vals {
-        let geo = val_geometry(p, n, val.position, val.normal, val.area);
-        let e = val.flux * (geo.weight * geo.cos_receiver);
-        l += surface.diffuse / PI * e;
-        if glossy {
-            l += spec * phong_lobe(mirror(geo.direction, n).dot(w_o), surface.exponent) * e;
-        }
+    vals.iter().map(|val| val_radiance(p, n, surface, w_o, val, glossy)).sum()
+}
+
+/// Radiance (W/(m² sr)) toward `w_o` (unit, toward the eye) that one unoccluded VAL reflects
+/// at receiver (`p`, `n`): DESIGN.md §3's diffuse term plus, when `glossy`, the Phong term. The
+/// term every brute-force and exact-visibility pixel sums over its (visible) VALs.
+pub fn val_radiance(p: Vec3, n: Vec3, surface: &Material, w_o: Vec3, val: &Val, glossy: bool) -> Vec3 {
+    let geo = val_geometry(p, n, val.position, val.normal, val.area);
+    let e = val.flux * (geo.weight * geo.cos_receiver);
+    let mut l = surface.diffuse / PI * e;
+    if glossy {
+        let spec = surface.specular * phong_normalisation(surface.exponent);
+        l += spec * phong_lobe(mirror(geo.direction, n).dot(w_o), surface.exponent) * e;
     }
     l
 }

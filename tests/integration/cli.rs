@@ -77,6 +77,61 @@ fn bad_inputs_fail_with_a_message_naming_the_field() {
     assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
 }
 
+/// `compare --reference exact` on the CPU with sampled VALs and jittered pixels reports its
+/// estimator, its noise and a noise-corrected error (never above the raw one) beside each raw
+/// error.
+#[test]
+fn compare_reports_the_cpu_reference_and_its_noise() {
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let o = relume(&[
+        "compare",
+        scene.to_str().unwrap(),
+        "--width",
+        "12",
+        "--height",
+        "10",
+        "--reference",
+        "exact",
+        "--reference-device",
+        "cpu",
+        "--reference-samples",
+        "8",
+        "--spp",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!((v["exact_device"].as_str(), v["exact_estimator"].as_str()), (Some("cpu"), Some("importance")));
+    assert_eq!((v["exact_samples"].as_u64(), v["exact_spp"].as_u64()), (Some(8), Some(2)));
+    let stderr_rel = v["exact_rel_stderr"].as_f64().unwrap();
+    assert!(stderr_rel > 0.0 && stderr_rel.is_finite(), "a sampled reference has noise: {stderr_rel}");
+    assert!(v["exact_shadow_rays"].as_u64().unwrap() > 0 && v["exact_rays_per_s"].as_f64().unwrap() > 0.0);
+    for key in ["off", "sum", "product"] {
+        let raw = v[format!("indirect_rel_rmse_vs_exact_{key}")].as_f64().unwrap();
+        let corrected = v[format!("indirect_rel_rmse_vs_exact_{key}_corrected")].as_f64().unwrap();
+        assert!(corrected >= 0.0 && corrected <= raw, "{key}: corrected {corrected} vs raw {raw}");
+    }
+}
+
+/// The exact reference's options: bad values and combinations are named, not panics.
+#[test]
+fn exact_reference_flags_are_checked() {
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let scene = scene.to_str().unwrap();
+    for (args, flag) in [
+        (&["--reference", "exact", "--reference-samples", "1"][..], "--reference-samples"),
+        (&["--reference", "exact", "--spp", "0"][..], "--spp"),
+        (&["--reference", "exact", "--spp", "100000"][..], "--spp"),
+        (&["--reference", "exact", "--reference-device", "gpu", "--spp", "4"][..], "--reference-device"),
+        (&["--reference", "exact", "--reference-samples", "8", "--val-stride", "4"][..], "--reference-samples"),
+        (&["--reference-samples", "8"][..], "--reference"),
+    ] {
+        let o = relume(&[&["compare", scene, "--width", "8", "--height", "8"][..], args].concat());
+        assert!(!o.status.success(), "{args:?} must fail");
+        assert!(stderr(&o).contains(flag) && !stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
+    }
+}
+
 /// `replay --server` and `load`: bad flags and an unreachable server are named, not panics.
 #[test]
 fn client_commands_name_bad_flags_and_unreachable_servers() {

@@ -334,6 +334,88 @@ fn exact_visibility_matches_cpu_twin_on_cornell_bunny() {
     exact_matches_cpu_twin("cornell_bunny", 16, (32, 32));
 }
 
+/// The CPU exact reference (`twin::exact_cpu`: rayon, obvhs's traversal) against the GPU
+/// exact pass (obvhs's tree flattened for `bvh.wgsl`), every VAL, pixel by pixel on the same
+/// visibility buffer. Tolerance: the twins' 1e-3 of the largest pixel (the two sum the same
+/// terms in different orders, lavapipe with a few ulp per operation), and up to 1 % of pixels may
+/// differ beyond it, for a shadow ray through a shared triangle edge that the two float pipelines
+/// decide differently (as in [`exact_visibility_matches_cpu_twin`]).
+#[test]
+fn cpu_exact_reference_matches_gpu_exact() {
+    use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &load_scene("cornell_bunny_small")).unwrap();
+    let (w, h) = (20, 16);
+    let options = |device| ExactOptions { device, val_stride: 1, samples: None, spp: 1 };
+    let on_gpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Gpu)).unwrap();
+    let on_cpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Cpu)).unwrap();
+    assert_eq!((on_gpu.device, on_cpu.device), (ReferenceDevice::Gpu, ReferenceDevice::Cpu));
+    let scale = max_of((0..on_cpu.indirect.pixels.len()).map(|i| on_cpu.indirect.rgb(i)));
+    assert!(scale > 0.0);
+    let mut differing = 0;
+    for i in 0..on_cpu.indirect.pixels.len() {
+        assert_eq!(on_cpu.indirect.covered(i), on_gpu.indirect.covered(i), "coverage of pixel {i}");
+        let (c, g) = (on_cpu.indirect.rgb(i), on_gpu.indirect.rgb(i));
+        let bad = (c - g).abs().max_element() > REL * scale + 1e-9;
+        if bad && differing < 5 {
+            eprintln!("pixel {i}: GPU {g} CPU {c}");
+        }
+        differing += usize::from(bad);
+    }
+    let covered = on_cpu.indirect.coverage();
+    assert!(differing * 100 <= covered, "{differing} of {covered} pixels differ");
+    let rays = on_cpu.shadow_rays.unwrap();
+    assert!(rays > 0 && rays <= covered as u64 * on_cpu.val_count as u64, "{rays} shadow rays");
+    for r in [&on_cpu, &on_gpu] {
+        assert!(r.variance.as_ref().unwrap().iter().all(|v| *v == Vec3::ZERO), "every VAL: no noise");
+    }
+}
+
+/// Primary rays through pixel centres in the obvhs BVH (the CPU reference's receivers with
+/// `--spp`) see what the rasteriser's visibility buffer sees: on at least 97 % of pixels both
+/// miss, or both hit the same surface point to 0.1 pixel on screen and 0.2 % of the distance in
+/// depth (which triangle may differ: the subdivided walls put many shared edges in a pixel, and
+/// the rasteriser snaps vertices to its sub-pixel grid, which moved points by ~1/40 pixel here).
+/// The rest are silhouette pixels, where a centre on an edge goes either way.
+#[test]
+fn traced_pixel_centres_match_the_visibility_buffer() {
+    use relume::twin::bvh::Bvh;
+    use relume::twin::exact_cpu::CameraRays;
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &load_scene("cornell_bunny_small")).unwrap();
+    let (w, h) = (48, 40);
+    renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let flat = &renderer.scene.flat;
+    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
+    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let bvh = Bvh::build(&positions, &triangles);
+    let world_to_clip = renderer.camera_to_clip(w, h);
+    let camera = CameraRays::new(world_to_clip, w, h);
+    let on_screen = |p: Vec3| {
+        let ndc = world_to_clip.project_point3(p);
+        glam::Vec2::new((ndc.x + 1.0) * 0.5 * w as f32, (1.0 - ndc.y) * 0.5 * h as f32)
+    };
+    let mut same = 0;
+    for (i, hit) in hits.iter().enumerate() {
+        let (x, y) = ((i as u32 % w) as f32 + 0.5, (i as u32 / w) as f32 + 0.5);
+        let (origin, direction) = camera.ray(x, y);
+        let traced = bvh.closest_hit(origin, direction);
+        match (hit, traced) {
+            (Some(g), Some(c)) => {
+                let (pg, _, _) = flat.surface_at(g.triangle, g.barycentrics);
+                let (pc, _, _) = flat.surface_at(c.triangle, c.barycentrics);
+                let offset = (on_screen(pg) - on_screen(pc)).length();
+                let depth = (pg.distance(origin) - pc.distance(origin)).abs();
+                same += usize::from(offset < 0.1 && depth < 2e-3 * c.t);
+            }
+            (None, None) => same += 1,
+            _ => {}
+        }
+    }
+    assert!(same * 100 >= hits.len() * 97, "{same} of {} pixels agree", hits.len());
+}
+
 fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
     use relume::gpu::shader::RAY_OFFSET;
     use relume::twin::bvh::Bvh;
