@@ -109,11 +109,16 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Relight every frame of an RGB-D recording (TUM layout) with a scene's virtual content:
-    /// writes composited and indirect-only frames and a timing and stability summary.
+    /// Relight every frame of an RGB-D recording (a TUM or Open3D/Redwood folder, or an MCAP
+    /// file) with a scene's virtual content: writes composited and indirect-only frames and a
+    /// timing and stability summary.
     Replay {
-        /// Recording directory (rgb.txt, depth.txt, optional groundtruth.txt and intrinsics.json).
+        /// Recording: a TUM folder (rgb.txt, depth.txt, optional groundtruth.txt and
+        /// intrinsics.json), an Open3D/Redwood folder (color/, depth/, optional trajectory.log and
+        /// camera JSON) or a ROS 2 MCAP file (.mcap).
         recording: PathBuf,
+        #[command(flatten)]
+        mcap: relume::rgbd::rosbag::McapTopics,
         /// Scene with the virtual content and its anchor in the recording's world frame.
         #[arg(long)]
         scene: PathBuf,
@@ -291,13 +296,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             depth_scale,
             server,
             token,
+            mcap,
         } => {
             anyhow::ensure!(
                 exposure.is_finite() && exposure > 0.0,
                 "--exposure: must be a positive number, got {exposure}"
             );
             anyhow::ensure!(frames != Some(0), "--frames: must be at least 1");
-            let recording_options = recording_options(intrinsics, depth_scale)?;
+            let recording_options =
+                relume::rgbd::recording::RecordingOptions { mcap, ..recording_options(intrinsics, depth_scale)? };
             if let Some(server) = server {
                 anyhow::ensure!(
                     !accumulate && size.width.is_none() && size.height.is_none(),
