@@ -24,8 +24,9 @@
 //! depth image with the colour image of nearest stamp within the tolerance, each pose
 //! interpolated at the depth stamp.
 //!
-//! The file is read whole into memory, at most [`MAX_MCAP_BYTES`]; the image payloads of the
-//! kept frames stay in memory and are converted when a frame is asked for. Errors name the
+//! The file (at most [`MAX_MCAP_BYTES`]) is streamed twice (channels, then messages), each
+//! record at most [`MAX_MCAP_RECORD_BYTES`]; the image payloads stay in memory, at most
+//! [`MAX_MCAP_IMAGE_BYTES`], and are converted when a frame is asked for. Errors name the
 //! file, the record (topic, type, index on the topic) and the field.
 
 use std::borrow::Cow;
@@ -45,8 +46,13 @@ use super::recording::{
 
 /// ROS's depth scale for `16UC1` depth (REP 118: millimetres): units per metre.
 pub const ROS_DEPTH_SCALE: f32 = 1000.0;
-/// Largest MCAP file read (bytes): the file is read whole into memory.
+/// Largest MCAP file read, bytes.
 pub const MAX_MCAP_BYTES: u64 = 1 << 30;
+/// Largest record (after decompression) of an MCAP file, bytes: bounds what a corrupt length
+/// field can make the reader allocate (a 4K RGB image is 25 MB).
+pub const MAX_MCAP_RECORD_BYTES: usize = 256 << 20;
+/// Most image bytes kept in memory for the frames of one MCAP recording.
+pub const MAX_MCAP_IMAGE_BYTES: usize = 2 << 30;
 
 pub const IMAGE: &str = "sensor_msgs/msg/Image";
 pub const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
@@ -290,12 +296,16 @@ pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, Record
             format!("is {size} bytes, more than the {MAX_MCAP_BYTES} read (split it, e.g. `mcap filter`)"),
         ));
     }
-    let bytes = std::fs::read(file).map_err(|e| io_error(&name, e))?;
     let stream_error = |e: mcap::McapError| record_error("file", format!("not a valid MCAP file: {e}"));
+    let messages = || -> Result<_, RecordingError> {
+        let reader = std::io::BufReader::new(std::fs::File::open(file).map_err(|e| io_error(&name, e))?);
+        let options = mcap::sans_io::LinearReaderOptions::default().with_record_length_limit(MAX_MCAP_RECORD_BYTES);
+        Ok(mcap::io::MessageReader::new_with_options(reader, options))
+    };
 
     // Pass 1: the channels.
     let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
-    for message in mcap::MessageStream::new(&bytes).map_err(stream_error)? {
+    for message in messages()? {
         let message = message.map_err(stream_error)?;
         channels.entry(message.channel.id).or_insert_with(|| ChannelInfo {
             topic: message.channel.topic.clone(),
@@ -318,7 +328,8 @@ pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, Record
     let mut poses = Vec::new();
     let mut transforms = Transforms::default();
     let mut counts: HashMap<u16, usize> = HashMap::new();
-    for message in mcap::MessageStream::new(&bytes).map_err(stream_error)? {
+    let mut image_bytes = 0usize;
+    for message in messages()? {
         let message = message.map_err(stream_error)?;
         let channel = &message.channel;
         let index = counts.entry(channel.id).or_default();
@@ -346,6 +357,12 @@ pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, Record
                 let image: msg::Image = msg::decode(data).map_err(fail)?;
                 let is_depth = channel.topic == topics.depth;
                 let payload = image_payload(&record, image, is_depth, depth_scale).map_err(fail)?;
+                image_bytes = image_bytes.saturating_add(payload.1.data.len());
+                if image_bytes > MAX_MCAP_IMAGE_BYTES {
+                    return Err(fail(format!(
+                        "the images so far hold more than the {MAX_MCAP_IMAGE_BYTES} bytes kept in memory (split the file, e.g. `mcap filter`)"
+                    )));
+                }
                 if is_depth { depth.push(payload) } else { colour.push(payload) }
             }
             CAMERA_INFO if camera_info.is_none() => {
@@ -368,7 +385,6 @@ pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, Record
             _ => return Err(fail(format!("topic has schema `{schema}`, not one relume reads here"))),
         }
     }
-    drop(bytes);
 
     let intrinsics = match &camera_info {
         Some((record, info)) => intrinsics_of(info)

@@ -329,7 +329,7 @@ fn mcap_errors_name_the_record_and_field() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig::with_cases(256))]
 
     /// Arbitrary bytes, and single-byte edits of a valid bag, are an error or a recording
     /// whose frames decode: never a panic.
