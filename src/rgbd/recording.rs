@@ -294,16 +294,7 @@ impl Recording {
         if recording.is_empty() {
             return Err(RecordingError::NoFrames { stats });
         }
-        if stats.without_colour + stats.without_pose > 0 {
-            tracing::warn!(
-                "{}: skipped {} of {} depth frames ({} without a colour frame, {} without a pose within {tolerance} s)",
-                dir.display(),
-                stats.without_colour + stats.without_pose,
-                stats.depth_frames,
-                stats.without_colour,
-                stats.without_pose
-            );
-        }
+        warn_skipped(dir, &stats, tolerance);
         tracing::debug!("{}: {} frames, {stats:?}", dir.display(), recording.len());
         Ok(recording)
     }
@@ -388,6 +379,20 @@ impl Recording {
 
     pub fn layout(&self) -> Layout {
         self.layout
+    }
+}
+
+/// Logs the depth frames that association left out, if any.
+pub(super) fn warn_skipped(path: &Path, stats: &AssociationStats, tolerance: f64) {
+    if stats.without_colour + stats.without_pose > 0 {
+        tracing::warn!(
+            "{}: skipped {} of {} depth frames ({} without a colour frame, {} without a pose within {tolerance} s)",
+            path.display(),
+            stats.without_colour + stats.without_pose,
+            stats.depth_frames,
+            stats.without_colour,
+            stats.without_pose
+        );
     }
 }
 

@@ -397,15 +397,7 @@ pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, Record
         }
     };
     for (_, image) in colour.iter().chain(&depth) {
-        if (image.width, image.height) != (intrinsics.width, intrinsics.height) {
-            return Err(RecordingError::ImageSize {
-                file: PathBuf::from(format!("{}: {}", name.display(), image.record)),
-                width: image.width,
-                height: image.height,
-                expected_width: intrinsics.width,
-                expected_height: intrinsics.height,
-            });
-        }
+        check_size(&name, image, &intrinsics)?;
     }
     let stamps = |images: &[(f64, ImagePayload)], what: &str| -> Result<Vec<f64>, RecordingError> {
         let times: Vec<f64> = images.iter().map(|(t, _)| *t).collect();
@@ -459,16 +451,7 @@ pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, Record
     if timestamps.is_empty() {
         return Err(RecordingError::NoFrames { stats });
     }
-    if stats.without_colour + stats.without_pose > 0 {
-        tracing::warn!(
-            "{}: skipped {} of {} depth images ({} without a colour image, {} without a pose within {tolerance} s)",
-            file.display(),
-            stats.without_colour + stats.without_pose,
-            stats.depth_frames,
-            stats.without_colour,
-            stats.without_pose
-        );
-    }
+    super::recording::warn_skipped(file, &stats, tolerance);
     Ok(Recording::from_parts(Parts {
         dir: file.to_path_buf(),
         intrinsics,
@@ -737,17 +720,23 @@ pub(super) fn decode_frame(
     intrinsics: &Intrinsics,
 ) -> Result<(Vec<[u8; 3]>, Vec<f32>), RecordingError> {
     for image in [&images.colour, &images.depth] {
-        if (image.width, image.height) != (intrinsics.width, intrinsics.height) {
-            return Err(RecordingError::ImageSize {
-                file: PathBuf::from(format!("{}: {}", file.display(), image.record)),
-                width: image.width,
-                height: image.height,
-                expected_width: intrinsics.width,
-                expected_height: intrinsics.height,
-            });
-        }
+        check_size(file, image, intrinsics)?;
     }
     Ok((colour_pixels(&images.colour), depth_metres(&images.depth)))
+}
+
+/// The image's size against the intrinsics; the error names the file and the record.
+fn check_size(file: &Path, image: &ImagePayload, intrinsics: &Intrinsics) -> Result<(), RecordingError> {
+    if (image.width, image.height) == (intrinsics.width, intrinsics.height) {
+        return Ok(());
+    }
+    Err(RecordingError::ImageSize {
+        file: PathBuf::from(format!("{}: {}", file.display(), image.record)),
+        width: image.width,
+        height: image.height,
+        expected_width: intrinsics.width,
+        expected_height: intrinsics.height,
+    })
 }
 
 /// The rows of an image, `step` apart, each `width * bpp` bytes (the layout was checked).
