@@ -30,8 +30,9 @@ pub enum Command {
     /// held and the indirect error against brute force (and exact); writes results.json,
     /// results.csv and plots into --out (see README, "Benchmark").
     Bench(bench::Args),
-    /// Relight every frame of an RGB-D recording (TUM layout) with a scene's virtual content:
-    /// writes composited and indirect-only frames and a timing and stability summary.
+    /// Relight every frame of an RGB-D recording (a TUM or Open3D/Redwood folder, or an MCAP
+    /// file) with a scene's virtual content: writes composited and indirect-only frames and a
+    /// timing and stability summary.
     Replay(replay::Args),
     /// Load benchmark of the service: streams replaying a recording plus HTTP render clients,
     /// for a fixed time; prints throughput, latency percentiles, dropped frames, peak memory.

@@ -7,8 +7,12 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Recording directory (rgb.txt, depth.txt, optional groundtruth.txt and intrinsics.json).
+    /// Recording: a TUM folder (rgb.txt, depth.txt, optional groundtruth.txt and
+    /// intrinsics.json), an Open3D/Redwood folder (color/, depth/, optional trajectory.log and
+    /// camera JSON) or a ROS 2 MCAP file (.mcap).
     recording: PathBuf,
+    #[command(flatten)]
+    mcap: relume::rgbd::rosbag::McapTopics,
     /// Scene with the virtual content and its anchor in the recording's world frame.
     #[arg(long)]
     scene: PathBuf,
@@ -55,7 +59,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let exposure = args.exposure;
     anyhow::ensure!(exposure.is_finite() && exposure > 0.0, "--exposure: must be a positive number, got {exposure}");
     anyhow::ensure!(args.frames != Some(0), "--frames: must be at least 1");
-    let recording_options = recording_options(args.intrinsics, args.depth_scale)?;
+    let recording_options = relume::rgbd::recording::RecordingOptions {
+        mcap: args.mcap,
+        ..recording_options(args.intrinsics, args.depth_scale)?
+    };
     if let Some(server) = args.server {
         anyhow::ensure!(
             !args.accumulate && args.size.width.is_none() && args.size.height.is_none(),

@@ -2,7 +2,8 @@
 //! a real room's camera frame (after downsampling) becomes a VAL, so virtual content placed in
 //! the room receives the room's colours as indirect light.
 //!
-//! - [`recording`]: TUM RGB-D recordings on disk (association, pose interpolation, intrinsics).
+//! - [`recording`]: RGB-D recordings on disk (association, pose interpolation, intrinsics), in
+//!   the TUM layout or, through [`redwood`] and [`rosbag`], Open3D/Redwood's and MCAP files.
 //! - [`accumulate`]: a persistent world-space VAL set across frames (paper §5, restriction 3).
 //! - `twin::rgbd`: the CPU twin of the VAL generation; `gpu::lights::rgbd`: the GPU pass.
 
@@ -11,6 +12,8 @@ use serde::{Deserialize, Serialize};
 
 pub mod accumulate;
 pub mod recording;
+pub mod redwood;
+pub mod rosbag;
 
 /// Pinhole intrinsics of the depth image, registered to colour (pixels). Optical axes: x right,
 /// y down, z forward; pixel centres at integer coordinates. Laid out as WGSL's `Intrinsics`.

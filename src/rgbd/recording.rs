@@ -1,6 +1,11 @@
-//! TUM RGB-D recordings on disk (ECOSYSTEM.md "RGB-D conventions users bring").
+//! RGB-D recordings on disk (ECOSYSTEM.md "RGB-D conventions users bring"), in three layouts
+//! that [`Recording::open`] tells apart by their files:
 //!
-//! A recording is a directory holding
+//! - a TUM RGB-D directory (`rgb.txt`, `depth.txt`; below);
+//! - an Open3D / Redwood directory (`color/` or `image/` and `depth/`; see [`super::redwood`]);
+//! - an MCAP file (ROS 2 / Foxglove bag, `.mcap`; see [`super::rosbag`]).
+//!
+//! A TUM recording is a directory holding
 //!
 //! - `rgb.txt` and `depth.txt`: `timestamp filename` lines (seconds; file names relative to the
 //!   directory), `#` starts a comment line;
@@ -10,7 +15,7 @@
 //! - optionally `intrinsics.json`: `{"width", "height", "fx", "fy", "cx", "cy", "depth_scale"}`
 //!   (`depth_scale` optional), the pinhole intrinsics of the registered depth image.
 //!
-//! [`Recording::open`] reads the text files, pairs each depth frame with the colour frame of
+//! [`Recording::open`] reads the text files of a TUM directory, pairs each depth frame with the colour frame of
 //! nearest timestamp and interpolates its pose; [`Recording::frame`] loads the PNGs of one frame
 //! (colour: 8-bit RGB or RGBA; depth: 16-bit grayscale, `depth_scale` units per metre, 0 = none).
 //!
@@ -43,19 +48,28 @@ const DEPTH_FILE: &str = "depth.txt";
 const GROUNDTRUTH_FILE: &str = "groundtruth.txt";
 
 /// What the caller (CLI flags) adds to a recording.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RecordingOptions {
-    /// Intrinsics for a recording without `intrinsics.json` ([`Intrinsics::TUM`] when `None`).
+    /// Intrinsics for a recording without an intrinsics file or camera info ([`Intrinsics::TUM`]
+    /// when `None`).
     pub intrinsics: Option<Intrinsics>,
-    /// Depth units per metre when `intrinsics.json` gives none ([`TUM_DEPTH_SCALE`] when `None`).
+    /// Depth units per metre when `intrinsics.json` gives none (when `None`: [`TUM_DEPTH_SCALE`]
+    /// for TUM, 1000 for Open3D/Redwood and MCAP `16UC1`).
     pub depth_scale: Option<f32>,
     /// Largest timestamp difference (s) for pairing depth with colour and with ground truth.
     pub tolerance_s: f64,
+    /// The topics of an MCAP recording (defaults when `None`).
+    pub mcap: super::rosbag::McapTopics,
 }
 
 impl Default for RecordingOptions {
     fn default() -> Self {
-        Self { intrinsics: None, depth_scale: None, tolerance_s: DEFAULT_TOLERANCE_S }
+        Self {
+            intrinsics: None,
+            depth_scale: None,
+            tolerance_s: DEFAULT_TOLERANCE_S,
+            mcap: super::rosbag::McapTopics::default(),
+        }
     }
 }
 
@@ -115,6 +129,13 @@ pub enum RecordingError {
     NoFrames { stats: AssociationStats },
     #[error("frame {index} out of range: the recording has {len} frames")]
     FrameIndex { index: usize, len: usize },
+    /// The path is neither a TUM nor an Open3D/Redwood directory nor an MCAP file.
+    #[error("{}: not a recording: {message}", path.display())]
+    NotARecording { path: PathBuf, message: String },
+    /// A record of an MCAP file is malformed or misses a field (`record` names the record:
+    /// topic, message type and index on its channel).
+    #[error("{}: {record}: {message}", file.display())]
+    Record { file: PathBuf, record: String, message: String },
 }
 
 /// A recording's frame list, poses and intrinsics; frames' images are read on demand.
@@ -128,19 +149,81 @@ pub struct Recording {
     timestamps: Vec<f64>,
     /// Camera-to-world (optical axes) at each timestamp.
     poses: Vec<Affine3A>,
-    files: Vec<FramePair>,
+    frames: Frames,
     stats: AssociationStats,
+    layout: Layout,
+}
+
+/// The on-disk layout a recording was read from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Layout {
+    /// TUM RGB-D: `rgb.txt`, `depth.txt`, `groundtruth.txt`.
+    Tum,
+    /// Open3D / Redwood: `color/`, `depth/`, `trajectory.log`, camera JSON.
+    Redwood,
+    /// An MCAP file of ROS 2 messages.
+    Mcap,
+}
+
+/// Where each frame's images are.
+#[derive(Clone, Debug)]
+pub(super) enum Frames {
+    /// Image files relative to the recording directory, one pair per frame.
+    Files(Vec<FramePair>),
+    /// Images decoded from an MCAP file, one per frame.
+    Mcap(Vec<super::rosbag::FrameImages>),
 }
 
 /// The two images of one frame, relative to the recording directory.
 #[derive(Clone, Debug)]
-struct FramePair {
-    depth: PathBuf,
-    colour: PathBuf,
+pub(super) struct FramePair {
+    pub depth: PathBuf,
+    pub colour: PathBuf,
+}
+
+/// A recording as a layout's reader assembles it.
+pub(super) struct Parts {
+    pub dir: PathBuf,
+    pub intrinsics: Intrinsics,
+    pub depth_scale: f32,
+    pub has_groundtruth: bool,
+    pub timestamps: Vec<f64>,
+    pub poses: Vec<Affine3A>,
+    pub frames: Frames,
+    pub stats: AssociationStats,
+    pub layout: Layout,
 }
 
 impl Recording {
-    /// Reads the recording in `dir`.
+    /// Reads the recording at `path`, whatever its layout: an MCAP file (`.mcap`,
+    /// [`super::rosbag::open`]), a TUM directory (it holds `rgb.txt` or `depth.txt`:
+    /// [`Recording::open_tum`]) or an Open3D/Redwood directory (it holds `depth/` and
+    /// `color/` or `image/`: [`super::redwood::open`]).
+    pub fn open(path: &Path, options: &RecordingOptions) -> Result<Recording, RecordingError> {
+        let not_a_recording = |message: String| RecordingError::NotARecording { path: path.to_path_buf(), message };
+        if path.is_file() {
+            return if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("mcap")) {
+                super::rosbag::open(path, options)
+            } else {
+                Err(not_a_recording("a file, and not an MCAP file (`.mcap`)".to_owned()))
+            };
+        }
+        if !path.is_dir() {
+            return Err(not_a_recording("no such file or directory".to_owned()));
+        }
+        if path.join(RGB_FILE).exists() || path.join(DEPTH_FILE).exists() {
+            return Self::open_tum(path, options);
+        }
+        if super::redwood::detect(path) {
+            return super::redwood::open(path, options);
+        }
+        Err(not_a_recording(format!(
+            "a directory with neither {RGB_FILE}/{DEPTH_FILE} (TUM) nor depth/ beside color/ or image/ (Open3D/Redwood)"
+        )))
+    }
+
+    /// Reads the TUM recording in `dir`.
     ///
     /// - Intrinsics: `intrinsics.json` if present, else `options.intrinsics`, else
     ///   [`Intrinsics::TUM`]; the depth scale likewise from the file's `depth_scale`,
@@ -154,12 +237,9 @@ impl Recording {
     ///   trajectory, the end sample is used. Without `groundtruth.txt` every pose is the identity.
     ///
     /// Timestamps must increase strictly within each file. Fails when no frame is left.
-    pub fn open(dir: &Path, options: &RecordingOptions) -> Result<Recording, RecordingError> {
+    pub fn open_tum(dir: &Path, options: &RecordingOptions) -> Result<Recording, RecordingError> {
         let (intrinsics, depth_scale) = resolve_intrinsics(dir, options)?;
-        let tolerance = options.tolerance_s;
-        if !(tolerance.is_finite() && tolerance >= 0.0) {
-            return Err(value_error("recording options", "tolerance_s", format!("must be >= 0, got {tolerance}")));
-        }
+        let tolerance = check_tolerance(options)?;
         let colour = parse_frame_list(RGB_FILE, &read_text(dir, RGB_FILE)?)?;
         let depth = parse_frame_list(DEPTH_FILE, &read_text(dir, DEPTH_FILE)?)?;
         let groundtruth = match read_text(dir, GROUNDTRUTH_FILE) {
@@ -179,9 +259,11 @@ impl Recording {
             has_groundtruth: groundtruth.is_some(),
             timestamps: Vec::new(),
             poses: Vec::new(),
-            files: Vec::new(),
+            frames: Frames::Files(Vec::new()),
             stats: AssociationStats { depth_frames: depth.len(), colour_frames: colour.len(), ..Default::default() },
+            layout: Layout::Tum,
         };
+        let mut files = Vec::new();
         let mut used_colour = HashSet::new();
         for entry in &depth {
             let t = entry.timestamp;
@@ -204,23 +286,15 @@ impl Recording {
             }
             recording.timestamps.push(t);
             recording.poses.push(pose);
-            recording.files.push(FramePair { depth: entry.file.clone(), colour: colour[c].file.clone() });
+            files.push(FramePair { depth: entry.file.clone(), colour: colour[c].file.clone() });
         }
+        recording.frames = Frames::Files(files);
 
         let stats = recording.stats;
         if recording.is_empty() {
             return Err(RecordingError::NoFrames { stats });
         }
-        if stats.without_colour + stats.without_pose > 0 {
-            tracing::warn!(
-                "{}: skipped {} of {} depth frames ({} without a colour frame, {} without a pose within {tolerance} s)",
-                dir.display(),
-                stats.without_colour + stats.without_pose,
-                stats.depth_frames,
-                stats.without_colour,
-                stats.without_pose
-            );
-        }
+        warn_skipped(dir, &stats, tolerance);
         tracing::debug!("{}: {} frames, {stats:?}", dir.display(), recording.len());
         Ok(recording)
     }
@@ -234,11 +308,27 @@ impl Recording {
         self.timestamps.is_empty()
     }
 
-    /// Frame `index`: both PNGs read and checked against the intrinsics, depth in metres.
+    /// Assembles a recording that a layout's reader has read.
+    pub(super) fn from_parts(parts: Parts) -> Recording {
+        let Parts { dir, intrinsics, depth_scale, has_groundtruth, timestamps, poses, frames, stats, layout } = parts;
+        Recording { dir, intrinsics, depth_scale, has_groundtruth, timestamps, poses, frames, stats, layout }
+    }
+
+    /// Frame `index`: both images read (or decoded) and checked against the intrinsics, depth
+    /// in metres.
     pub fn frame(&self, index: usize) -> Result<RgbdFrame, RecordingError> {
-        let files = self.files.get(index).ok_or(RecordingError::FrameIndex { index, len: self.len() })?;
-        let color = load_colour(&self.dir, &files.colour, &self.intrinsics)?;
-        let depth = load_depth(&self.dir, &files.depth, &self.intrinsics, self.depth_scale)?;
+        if index >= self.len() {
+            return Err(RecordingError::FrameIndex { index, len: self.len() });
+        }
+        let (color, depth) = match &self.frames {
+            Frames::Files(files) => {
+                let files = &files[index];
+                let color = load_colour(&self.dir, &files.colour, &self.intrinsics)?;
+                let depth = load_depth(&self.dir, &files.depth, &self.intrinsics, self.depth_scale)?;
+                (color, depth)
+            }
+            Frames::Mcap(images) => super::rosbag::decode_frame(&self.dir, &images[index], &self.intrinsics)?,
+        };
         Ok(RgbdFrame {
             timestamp: self.timestamps[index],
             intrinsics: self.intrinsics,
@@ -272,7 +362,8 @@ impl Recording {
         self.depth_scale
     }
 
-    /// Whether poses come from `groundtruth.txt` (else all are the identity).
+    /// Whether poses come from the recording (`groundtruth.txt`, `trajectory.log`, the MCAP's
+    /// transforms); else all are the identity.
     pub fn has_groundtruth(&self) -> bool {
         self.has_groundtruth
     }
@@ -281,8 +372,37 @@ impl Recording {
         &self.stats
     }
 
+    /// The directory (or, for MCAP, the file) the recording was read from.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+}
+
+/// Logs the depth frames that association left out, if any.
+pub(super) fn warn_skipped(path: &Path, stats: &AssociationStats, tolerance: f64) {
+    if stats.without_colour + stats.without_pose > 0 {
+        tracing::warn!(
+            "{}: skipped {} of {} depth frames ({} without a colour frame, {} without a pose within {tolerance} s)",
+            path.display(),
+            stats.without_colour + stats.without_pose,
+            stats.depth_frames,
+            stats.without_colour,
+            stats.without_pose
+        );
+    }
+}
+
+/// `options.tolerance_s`, checked.
+pub(super) fn check_tolerance(options: &RecordingOptions) -> Result<f64, RecordingError> {
+    let tolerance = options.tolerance_s;
+    if tolerance.is_finite() && tolerance >= 0.0 {
+        Ok(tolerance)
+    } else {
+        Err(value_error("recording options", "tolerance_s", format!("must be >= 0, got {tolerance}")))
     }
 }
 
@@ -375,19 +495,19 @@ pub fn check_intrinsics(intrinsics: &Intrinsics) -> Result<(), (&'static str, St
     Ok(())
 }
 
-fn check_depth_scale(scale: f32) -> Result<(), String> {
+pub(super) fn check_depth_scale(scale: f32) -> Result<(), String> {
     if scale.is_finite() && scale > 0.0 { Ok(()) } else { Err(format!("must be positive and finite, got {scale}")) }
 }
 
-fn value_error(origin: &'static str, field: &'static str, message: String) -> RecordingError {
+pub(super) fn value_error(origin: &'static str, field: &'static str, message: String) -> RecordingError {
     RecordingError::Value { origin, field, message }
 }
 
-fn read_text(dir: &Path, name: &str) -> Result<String, RecordingError> {
+pub(super) fn read_text(dir: &Path, name: &str) -> Result<String, RecordingError> {
     std::fs::read_to_string(dir.join(name)).map_err(|source| io_error(Path::new(name), source))
 }
 
-fn io_error(file: &Path, source: std::io::Error) -> RecordingError {
+pub(super) fn io_error(file: &Path, source: std::io::Error) -> RecordingError {
     let file = file.to_path_buf();
     if source.kind() == ErrorKind::NotFound {
         RecordingError::Missing { file }
@@ -398,19 +518,19 @@ fn io_error(file: &Path, source: std::io::Error) -> RecordingError {
 
 /// The data lines of a TUM text file with their 1-based numbers: blank lines and `#` comment
 /// lines left out, whitespace-separated fields.
-fn data_lines(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
+pub(super) fn data_lines(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
     text.lines().enumerate().filter_map(|(i, line)| {
         let line = line.trim();
         (!line.is_empty() && !line.starts_with('#')).then(|| (i + 1, line.split_whitespace().collect()))
     })
 }
 
-fn line_error(file: &str, line: usize, message: impl Into<String>) -> RecordingError {
+pub(super) fn line_error(file: &str, line: usize, message: impl Into<String>) -> RecordingError {
     RecordingError::Line { file: PathBuf::from(file), line, message: message.into() }
 }
 
 /// A finite number, or an error naming what it is.
-fn parse_number(file: &str, line: usize, what: &str, field: &str) -> Result<f64, RecordingError> {
+pub(super) fn parse_number(file: &str, line: usize, what: &str, field: &str) -> Result<f64, RecordingError> {
     let value: f64 = field.parse().map_err(|_| line_error(file, line, format!("{what} `{field}` is not a number")))?;
     if value.is_finite() { Ok(value) } else { Err(line_error(file, line, format!("{what} is {value}"))) }
 }
@@ -460,13 +580,32 @@ fn parse_frame_list(file: &str, text: &str) -> Result<Vec<FrameEntry>, Recording
         .collect()
 }
 
-/// One line of `groundtruth.txt`: camera-to-world at `timestamp`.
+/// One line of `groundtruth.txt` (or one transform of an MCAP file): camera-to-world at
+/// `timestamp`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct PoseSample {
-    timestamp: f64,
-    translation: Vec3,
+pub(super) struct PoseSample {
+    pub timestamp: f64,
+    pub translation: Vec3,
     /// Unit.
-    rotation: Quat,
+    pub rotation: Quat,
+}
+
+impl PoseSample {
+    /// A sample from a translation and a quaternion `[x, y, z, w]` as recorded (f64), the
+    /// quaternion normalised; an error when its norm is off 1 by more than
+    /// [`QUATERNION_NORM_TOLERANCE`].
+    pub fn new(timestamp: f64, translation: [f64; 3], quaternion: [f64; 4]) -> Result<PoseSample, String> {
+        let norm = quaternion.iter().map(|c| c * c).sum::<f64>().sqrt();
+        if norm.is_nan() || (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+            return Err(format!("quaternion (x y z w) has norm {norm}, not 1 (within {QUATERNION_NORM_TOLERANCE})"));
+        }
+        let q = quaternion.map(|c| (c / norm) as f32);
+        Ok(PoseSample {
+            timestamp,
+            translation: Vec3::from_array(translation.map(|c| c as f32)),
+            rotation: Quat::from_array(q).normalize(),
+        })
+    }
 }
 
 fn parse_groundtruth(text: &str) -> Result<Vec<PoseSample>, RecordingError> {
@@ -483,26 +622,14 @@ fn parse_groundtruth(text: &str) -> Result<Vec<PoseSample>, RecordingError> {
                 *value = parse_number(FILE, line, name, field)?;
             }
             increasing.check(line, v[0])?;
-            let norm = (v[4] * v[4] + v[5] * v[5] + v[6] * v[6] + v[7] * v[7]).sqrt();
-            if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
-                return Err(line_error(
-                    FILE,
-                    line,
-                    format!("quaternion (qx qy qz qw) has norm {norm}, not 1 (within {QUATERNION_NORM_TOLERANCE})"),
-                ));
-            }
-            let q = [v[4], v[5], v[6], v[7]].map(|c| (c / norm) as f32);
-            Ok(PoseSample {
-                timestamp: v[0],
-                translation: Vec3::new(v[1] as f32, v[2] as f32, v[3] as f32),
-                rotation: Quat::from_array(q).normalize(),
-            })
+            PoseSample::new(v[0], [v[1], v[2], v[3]], [v[4], v[5], v[6], v[7]])
+                .map_err(|message| line_error(FILE, line, message.replace("(x y z w)", "(qx qy qz qw)")))
         })
         .collect()
 }
 
 /// Index of the value of increasing `sorted` nearest to `t` (the earlier one on a tie).
-fn nearest(sorted: &[f64], t: f64) -> Option<usize> {
+pub(super) fn nearest(sorted: &[f64], t: f64) -> Option<usize> {
     let after = sorted.partition_point(|&x| x < t);
     match (after.checked_sub(1), (after < sorted.len()).then_some(after)) {
         (Some(before), Some(after)) => Some(if t - sorted[before] <= sorted[after] - t { before } else { after }),
@@ -512,7 +639,7 @@ fn nearest(sorted: &[f64], t: f64) -> Option<usize> {
 
 /// Camera-to-world at `t` from increasing `samples`: interpolated between the bracketing pair,
 /// the end sample just outside the trajectory; `None` when no sample lies within `tolerance`.
-fn interpolate_pose(samples: &[PoseSample], t: f64, tolerance: f64) -> Option<Affine3A> {
+pub(super) fn interpolate_pose(samples: &[PoseSample], t: f64, tolerance: f64) -> Option<Affine3A> {
     let after = samples.partition_point(|s| s.timestamp <= t);
     let (a, b) = match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
         (Some(a), Some(b)) => (a, *b),
@@ -527,19 +654,30 @@ fn interpolate_pose(samples: &[PoseSample], t: f64, tolerance: f64) -> Option<Af
     Some(Affine3A::from_rotation_translation(rotation, a.translation.lerp(b.translation, s)))
 }
 
-/// Opens a PNG of the recording, checks its size against `intrinsics` before decoding it.
-fn decode_png(
+/// The format of a recording's image file by its extension: JPEG for `.jpg`/`.jpeg`, else PNG.
+fn image_format(file: &Path) -> ImageFormat {
+    match file.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("jpg" | "jpeg") => ImageFormat::Jpeg,
+        _ => ImageFormat::Png,
+    }
+}
+
+/// Opens an image of the recording (`format`), checks its size against `intrinsics` before
+/// decoding it.
+fn decode_image(
     dir: &Path,
     file: &Path,
+    format: ImageFormat,
     intrinsics: &Intrinsics,
     accept: impl Fn(ColorType) -> bool,
     wanted: &str,
 ) -> Result<DynamicImage, RecordingError> {
     let image_error = |message: String| RecordingError::Image { file: file.to_path_buf(), message };
+    let name = format.extensions_str().first().map_or("image".to_owned(), |e| e.to_ascii_uppercase());
     let reader = File::open(dir.join(file)).map_err(|source| io_error(file, source))?;
-    let decoder = ImageReader::with_format(BufReader::new(reader), ImageFormat::Png)
+    let decoder = ImageReader::with_format(BufReader::new(reader), format)
         .into_decoder()
-        .map_err(|e| image_error(format!("cannot decode PNG: {e}")))?;
+        .map_err(|e| image_error(format!("cannot decode {name}: {e}")))?;
     let (width, height) = decoder.dimensions();
     if (width, height) != (intrinsics.width, intrinsics.height) {
         return Err(RecordingError::ImageSize {
@@ -552,15 +690,15 @@ fn decode_png(
     }
     let color_type = decoder.color_type();
     if !accept(color_type) {
-        return Err(image_error(format!("expected {wanted}, got {color_type:?}")));
+        return Err(image_error(format!("expected {wanted} {name}, got {color_type:?}")));
     }
-    DynamicImage::from_decoder(decoder).map_err(|e| image_error(format!("cannot decode PNG: {e}")))
+    DynamicImage::from_decoder(decoder).map_err(|e| image_error(format!("cannot decode {name}: {e}")))
 }
 
-/// 8-bit RGB or RGBA PNG to row-major RGB (alpha dropped).
+/// 8-bit RGB or RGBA PNG, or 8-bit RGB JPEG, to row-major RGB (alpha dropped).
 fn load_colour(dir: &Path, file: &Path, intrinsics: &Intrinsics) -> Result<Vec<[u8; 3]>, RecordingError> {
     let accept = |c| matches!(c, ColorType::Rgb8 | ColorType::Rgba8);
-    let image = decode_png(dir, file, intrinsics, accept, "an 8-bit RGB or RGBA PNG")?;
+    let image = decode_image(dir, file, image_format(file), intrinsics, accept, "an 8-bit RGB or RGBA")?;
     let rgb = match image {
         DynamicImage::ImageRgb8(rgb) => rgb,
         other => other.into_rgb8(),
@@ -571,7 +709,7 @@ fn load_colour(dir: &Path, file: &Path, intrinsics: &Intrinsics) -> Result<Vec<[
 /// 16-bit grayscale PNG to row-major depth in metres (`value / depth_scale`; 0 stays 0).
 fn load_depth(dir: &Path, file: &Path, intrinsics: &Intrinsics, depth_scale: f32) -> Result<Vec<f32>, RecordingError> {
     let accept = |c| c == ColorType::L16;
-    let image = decode_png(dir, file, intrinsics, accept, "a 16-bit grayscale PNG")?;
+    let image = decode_image(dir, file, ImageFormat::Png, intrinsics, accept, "a 16-bit grayscale")?;
     let DynamicImage::ImageLuma16(depth) = image else {
         return Err(RecordingError::Image { file: file.to_path_buf(), message: "decoded as non-16-bit".to_owned() });
     };
