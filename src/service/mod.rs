@@ -84,6 +84,40 @@ pub struct AppState {
 }
 
 impl AppState {
+    /// Checks the asset directory and starts the GPU thread with the worker `start` makes (on
+    /// a blocking thread): everything the router needs, without a socket, so that the router
+    /// can also be driven as a tower service ([`router`] + `tower::ServiceExt::oneshot`; each
+    /// request then needs a `ConnectInfo<SocketAddr>` extension, which [`listen`] inserts for
+    /// real connections).
+    pub async fn start(
+        config: Config,
+        start: impl FnOnce(Arc<Metrics>) -> Result<GpuWorker, WorkerError> + Send + 'static,
+    ) -> Result<Arc<AppState>, ServeError> {
+        let assets = std::fs::canonicalize(&config.assets)
+            .map_err(|source| ServeError::Assets { path: config.assets.clone(), source })?;
+        if !assets.is_dir() {
+            return Err(ServeError::AssetsNotADirectory(assets));
+        }
+        let metrics = Arc::new(Metrics::default());
+        let worker_metrics = metrics.clone();
+        let worker = tokio::task::spawn_blocking(move || start(worker_metrics))
+            .await
+            .map_err(|e| WorkerError::Panicked(e.to_string()))??;
+        let max_connections = config.limits.max_connections;
+        Ok(Arc::new(AppState {
+            scenes: scenes::SceneRegistry::new(config.limits.max_scenes),
+            recordings: recordings::Recordings::new(&assets),
+            config,
+            assets,
+            worker,
+            metrics,
+            shutdown: watch::Sender::new(false),
+            streams: AtomicUsize::new(0),
+            streams_closed: Notify::new(),
+            connections: listen::Connections::new(max_connections),
+        }))
+    }
+
     /// Whether shutdown has begun (new work is refused).
     pub fn shutting_down(&self) -> bool {
         *self.shutdown.borrow()
@@ -163,32 +197,10 @@ impl Server {
         config: Config,
         start: impl FnOnce(Arc<Metrics>) -> Result<GpuWorker, WorkerError> + Send + 'static,
     ) -> Result<Server, ServeError> {
-        let assets = std::fs::canonicalize(&config.assets)
-            .map_err(|source| ServeError::Assets { path: config.assets.clone(), source })?;
-        if !assets.is_dir() {
-            return Err(ServeError::AssetsNotADirectory(assets));
-        }
-        let metrics = Arc::new(Metrics::default());
-        let worker_metrics = metrics.clone();
-        let worker = tokio::task::spawn_blocking(move || start(worker_metrics))
-            .await
-            .map_err(|e| WorkerError::Panicked(e.to_string()))??;
-        let listener = tokio::net::TcpListener::bind(config.addr)
-            .await
-            .map_err(|source| ServeError::Bind { addr: config.addr, source })?;
-        let max_connections = config.limits.max_connections;
-        let state = Arc::new(AppState {
-            scenes: scenes::SceneRegistry::new(config.limits.max_scenes),
-            recordings: recordings::Recordings::new(&assets),
-            config,
-            assets,
-            worker,
-            metrics,
-            shutdown: watch::Sender::new(false),
-            streams: AtomicUsize::new(0),
-            streams_closed: Notify::new(),
-            connections: listen::Connections::new(max_connections),
-        });
+        let addr = config.addr;
+        let state = AppState::start(config, start).await?;
+        let listener =
+            tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
         Ok(Server { listener, state })
     }
 

@@ -27,63 +27,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 use tokio_tungstenite::tungstenite;
 
+use super::fake_backend::FakeBackend;
 use super::service::{Reply, TestServer, inline_scene};
-
-/// A GPU thread without a GPU: every render takes `render_time` and is grey.
-struct FakeBackend {
-    render_time: Duration,
-    scenes: HashSet<String>,
-}
-
-impl FakeBackend {
-    fn frame(&self, id: &str, width: u32, height: u32) -> Result<Frame, WorkerError> {
-        if !self.scenes.contains(id) {
-            return Err(WorkerError::SceneNotFound(id.to_owned()));
-        }
-        std::thread::sleep(self.render_time);
-        let image = LinearImage { width, height, pixels: vec![[0.2, 0.2, 0.2, 1.0]; (width * height) as usize] };
-        let timings = StageTimings {
-            source: TimingSource::WallClock,
-            stages: vec![("fake".to_owned(), self.render_time.as_secs_f64() * 1e3)],
-        };
-        Ok((
-            Rendered {
-                direct: image.clone(),
-                indirect: image,
-                timings,
-                indirect_stages: Vec::new(),
-                val_count: 0,
-                exact_rounds: 0,
-            },
-            None,
-        ))
-    }
-}
-
-impl Backend for FakeBackend {
-    fn adapter(&self) -> String {
-        "fake backend (no GPU)".to_owned()
-    }
-
-    fn add_scene(&mut self, id: &str, _: Scene) -> Result<(), WorkerError> {
-        self.scenes.insert(id.to_owned());
-        Ok(())
-    }
-
-    fn remove_scene(&mut self, id: &str) -> bool {
-        self.scenes.remove(id)
-    }
-
-    fn render(&mut self, id: &str, job: &RenderJob) -> Result<Frame, WorkerError> {
-        self.frame(id, job.width, job.height)
-    }
-
-    fn render_stream_frame(&mut self, id: &str, job: &StreamFrameJob) -> Result<Frame, WorkerError> {
-        let k = job.frame.intrinsics;
-        let (width, height) = job.camera.map_or((k.width, k.height), |c| (c.width, c.height));
-        self.frame(id, width, height)
-    }
-}
 
 /// A server on the fake backend, renders taking `render_ms`.
 async fn fake_server(render_ms: u64, edit: impl FnOnce(&mut Config)) -> TestServer {
@@ -92,7 +37,7 @@ async fn fake_server(render_ms: u64, edit: impl FnOnce(&mut Config)) -> TestServ
             let limits = config.limits;
             let render_time = Duration::from_millis(render_ms);
             Server::bind_with(config, move |metrics| {
-                GpuWorker::start_with(move || Ok(FakeBackend { render_time, scenes: HashSet::new() }), &limits, metrics)
+                GpuWorker::start_with(move || Ok(FakeBackend::new(render_time)), &limits, metrics)
             })
             .await
         })

@@ -4,6 +4,7 @@
 mod accuracy;
 mod bench;
 mod cli;
+mod fake_backend;
 mod frame;
 mod fuzz;
 mod hardening;
@@ -13,6 +14,7 @@ mod recording;
 mod redwood;
 mod replay;
 mod rgbd;
+mod router;
 mod rsm;
 mod service;
 mod textures;

@@ -1,0 +1,177 @@
+//! The router's limits, token and 4xx paths, driven as a tower service
+//! (`tower::ServiceExt::oneshot`, as axum's `examples/testing` does) on the fake GPU thread:
+//! no adapter, no socket. What needs a real connection (timeouts, upgrades, the connection cap,
+//! WebSocket frames) is tested over loopback in `service.rs` and `hardening.rs`.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::body::Body;
+use axum::extract::ConnectInfo;
+use bytes::Bytes;
+use http_body_util::BodyExt;
+use hyper::{Method, StatusCode};
+use relume::service::{AppState, Config, GpuWorker, router};
+use serde_json::{Value, json};
+use tower::ServiceExt;
+
+use super::fake_backend::FakeBackend;
+use super::fixture;
+use super::service::{Reply, inline_scene};
+
+/// The router on a fake GPU thread (renders take no time), `fixtures/` as the asset
+/// directory, the defaults changed by `edit`.
+struct App {
+    router: Router,
+    state: Arc<AppState>,
+    token: Option<String>,
+}
+
+impl App {
+    async fn start(edit: impl FnOnce(&mut Config)) -> App {
+        let mut config = Config::new(SocketAddr::from(([127, 0, 0, 1], 0)), fixture(""));
+        edit(&mut config);
+        let token = config.token.clone();
+        let limits = config.limits;
+        let state = AppState::start(config, move |metrics| {
+            GpuWorker::start_with(|| Ok(FakeBackend::new(Duration::ZERO)), &limits, metrics)
+        })
+        .await
+        .expect("the state starts");
+        App { router: router(state.clone()), state, token }
+    }
+
+    /// One request through the router, as the connection loop hands it over: with the peer's
+    /// address (the fair queue's client) in its extensions.
+    async fn send(&self, request: hyper::Request<Body>) -> Reply {
+        let mut request = request;
+        request.extensions_mut().insert(ConnectInfo(SocketAddr::from(([127, 0, 0, 1], 40000))));
+        let response = self.router.clone().oneshot(request).await.expect("the router is infallible");
+        let (parts, body) = response.into_parts();
+        let body = body.collect().await.expect("body").to_bytes();
+        Reply { status: parts.status, headers: parts.headers, body }
+    }
+
+    async fn request(&self, method: Method, path: &str, body: impl Into<Bytes>) -> Reply {
+        let mut request = hyper::Request::builder().method(method).uri(path);
+        if let Some(token) = &self.token {
+            request = request.header("authorization", format!("Bearer {token}"));
+        }
+        self.send(request.body(Body::from(body.into())).expect("request")).await
+    }
+
+    async fn get(&self, path: &str) -> Reply {
+        self.request(Method::GET, path, Bytes::new()).await
+    }
+
+    async fn post(&self, path: &str, body: &Value) -> Reply {
+        self.request(Method::POST, path, body.to_string()).await
+    }
+
+    async fn create(&self, scene: &Value) -> String {
+        let reply = self.post("/v1/scenes", scene).await;
+        assert_eq!(reply.status, StatusCode::CREATED, "{}", reply.json());
+        reply.json()["id"].as_str().expect("id").to_owned()
+    }
+
+    async fn stop(self) {
+        self.state.worker.stop().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn limits_and_routes_answer_with_json_errors() {
+    let app = App::start(|c| {
+        c.limits.max_body_bytes = 4096;
+        c.limits.max_scenes = 1;
+    })
+    .await;
+    let mut big = inline_scene();
+    big["meshes"][0]["obj_text"] = json!(format!("# {}\n", "x".repeat(5000)));
+    let error = app.post("/v1/scenes", &big).await.error(413, "limit_exceeded");
+    assert_eq!(error["limit"], "max_body_bytes");
+
+    let id = app.create(&inline_scene()).await;
+    assert_eq!(app.post("/v1/scenes", &inline_scene()).await.error(400, "limit_exceeded")["limit"], "max_scenes");
+
+    let render = |body: Value| {
+        let path = format!("/v1/scenes/{id}/render");
+        let app = &app;
+        async move { app.post(&path, &body).await }
+    };
+    let camera = |edit: &dyn Fn(&mut Value)| {
+        let mut c = json!({"position": [0, 1, 3], "target": [0, 0.5, 0], "fov_y_deg": 50, "width": 8, "height": 8});
+        edit(&mut c);
+        json!({ "camera": c })
+    };
+    let e = render(camera(&|c| c["target"] = json!([0, 1, 3]))).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "camera.target");
+    let e = render(camera(&|c| c["width"] = json!(5000))).await.error(400, "limit_exceeded");
+    assert_eq!((e["limit"].as_str(), e["field"].as_str()), (Some("max_frame_side"), Some("camera.width")));
+    let e = render(camera(&|c| c["width"] = json!(-1))).await.error(400, "invalid_json");
+    assert_eq!(e["field"], "camera.width");
+    let e = render(json!({"light": {"inner_angle_deg": 50}})).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "light.inner_angle_deg");
+    let e = render(json!({"light": {"direction": [0, 0, 0]}})).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "light.direction");
+    let e = render(json!({"quality": {"method": "exact"}})).await.error(400, "invalid_json");
+    assert_eq!(e["field"], "quality.method");
+    let e = render(json!({"quality": {"exposure": -1}})).await.error(400, "invalid_field");
+    assert_eq!(e["field"], "quality.exposure");
+    render(json!({"quality": {"typo": 1}})).await.error(400, "invalid_json");
+
+    app.get("/v1/scenes/nope").await.error(404, "not_found");
+    app.get("/v1/nothing").await.error(404, "not_found");
+    app.request(Method::PUT, "/v1/scenes", Bytes::new()).await.error(405, "method_not_allowed");
+    // A plain GET of the stream route is not an upgrade.
+    app.get(&format!("/v1/scenes/{id}/stream")).await.error(400, "upgrade_required");
+
+    let reply = render(json!({"quality": {"exposure": 2, "component": "direct"}})).await;
+    assert_eq!(reply.status, StatusCode::OK);
+    assert_eq!(reply.header("x-relume-exposure"), "2");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_token_guards_the_v1_routes() {
+    let mut app = App::start(|c| c.token = Some("s3cret".to_owned())).await;
+    app.token = None;
+    app.post("/v1/scenes", &inline_scene()).await.error(401, "unauthorized");
+    app.get("/v1/scenes/x").await.error(401, "unauthorized");
+    app.token = Some("wrong".to_owned());
+    let reply = app.get("/v1/scenes/x").await;
+    reply.error(401, "unauthorized");
+    assert_eq!(reply.header("www-authenticate"), "Bearer");
+    assert_eq!(app.get("/healthz").await.status, StatusCode::OK);
+    assert_eq!(app.get("/metrics").await.status, StatusCode::OK);
+    app.token = Some("s3cret".to_owned());
+    let id = app.create(&inline_scene()).await;
+    assert_eq!(app.get(&format!("/v1/scenes/{id}")).await.status, StatusCode::OK);
+    // A WebSocket handshake without the token is refused before the upgrade.
+    app.token = None;
+    let handshake = hyper::Request::get(format!("/v1/scenes/{id}/stream"))
+        .header("upgrade", "websocket")
+        .header("connection", "Upgrade")
+        .header("sec-websocket-key", "dGhlIHNhbXBsZSBub25jZQ==")
+        .header("sec-websocket-version", "13")
+        .body(Body::empty())
+        .expect("request");
+    app.send(handshake).await.error(401, "unauthorized");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn metrics_labels_stay_a_closed_set() {
+    let app = App::start(|_| {}).await;
+    for i in 0..20 {
+        let method = Method::from_bytes(format!("INVENTED{i}").as_bytes()).expect("a method token");
+        app.request(method, &format!("/no/such/route/{i}"), Bytes::new()).await;
+    }
+    let metrics = String::from_utf8(app.get("/metrics").await.body.to_vec()).expect("text");
+    assert!(!metrics.contains("INVENTED"), "an invented method became a label");
+    assert!(!metrics.contains("/no/such/route"), "an unmatched path became a label");
+    assert!(metrics.contains("method=\"other\""), "invented methods are counted as other:\n{metrics}");
+    app.stop().await;
+}
