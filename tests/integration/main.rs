@@ -7,6 +7,7 @@ mod cli;
 mod frame;
 mod fuzz;
 mod hardening;
+mod hardening_origin;
 mod layout;
 mod mcap;
 mod recording;
