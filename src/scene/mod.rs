@@ -28,6 +28,7 @@
 //! coordinates after load (render cameras and lights, stream transforms, RGB-D poses) goes
 //! through [`Scene::origin`] too ([`Scene::mesh_to_world`], [`Scene::local_pose`]); images have
 //! no positions in them, so nothing the user gets back needs converting.
+//!
 //! Lengths are metres (or the OBJ's units, scaled by the transform), angles are radians once
 //! loaded (the JSON speaks degrees), intensities are W/sr.
 
