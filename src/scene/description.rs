@@ -651,7 +651,7 @@ fn coordinates(values: [f64; 3], field: &str) -> Result<(), SceneError> {
         if !(value.is_finite() && value.abs() <= MAX_COORDINATE_M) {
             return Err(SceneError::field(
                 format!("{field}[{i}]"),
-                format!("must be a finite number within +-{MAX_COORDINATE_M:e} m, got {value}"),
+                format!("must be a finite number within +-{MAX_COORDINATE_M:e} m, got {value:e}"),
             ));
         }
     }
@@ -887,8 +887,11 @@ mod tests {
         let message = error_of(&edit(r#""fov_y_deg": 45"#, r#""fov_y_deg": NaN"#));
         assert!(message.starts_with("camera.fov_y_deg:"), "{message}");
         // A number too large for f32 becomes infinite and is rejected by validation.
+        let message = error_of(&edit(r#""fov_y_deg": 45"#, r#""fov_y_deg": 1e39"#));
+        assert_eq!(message, "camera.fov_y_deg: must be a finite number, got inf");
+        // Positions are f64, bounded by MAX_COORDINATE_M.
         let message = error_of(&edit(r#""target": [0, 1, 0]"#, r#""target": [0, 1e39, 0]"#));
-        assert_eq!(message, "camera.target[1]: must be a finite number, got inf");
+        assert_eq!(message, "camera.target[1]: must be a finite number within +-1e7 m, got 1e39");
         // Too large for f64: the parser rejects it.
         let message = error_of(&edit(r#""intensity": [1, 1, 1]"#, r#""intensity": [1, 1e999, 1]"#));
         assert!(message.starts_with("light.intensity[1]:"), "{message}");
