@@ -135,7 +135,9 @@ pub enum View {
     /// The scene file's perspective camera.
     Scene(Camera),
     /// A pinhole camera (an RGB-D frame's): intrinsics, scaled to the render size, and a
-    /// camera-to-world pose in optical axes (x right, y down, z forward).
+    /// camera-to-world pose in optical axes (x right, y down, z forward). Given to
+    /// [`Renderer::set_view`] in the user's world coordinates (as recorded); the renderer keeps
+    /// it relative to the scene's origin.
     Pinhole { intrinsics: Intrinsics, camera_to_world: Affine3A },
 }
 
@@ -211,6 +213,9 @@ pub struct Renderer {
     /// Model-to-world of each mesh, as uploaded, and how many times it changed.
     placement: Vec<Mat4>,
     placement_generation: u64,
+    /// The scene's floating origin ([`scene::Scene::origin`]): RGB-D poses are made relative
+    /// to it.
+    origin: glam::DVec3,
 }
 
 impl Renderer {
@@ -249,6 +254,7 @@ impl Renderer {
             target: None,
             placement: scene.meshes.iter().map(|m| m.model_to_world).collect(),
             placement_generation: 0,
+            origin: scene.origin,
         })
     }
 
@@ -323,9 +329,21 @@ impl Renderer {
         &self.view
     }
 
-    /// Render from `view` from now on.
+    /// Render from `view` from now on (a pinhole pose in user coordinates, a [`Camera`] in the
+    /// scene's local frame, as loaded).
     pub fn set_view(&mut self, view: View) {
-        self.view = view;
+        self.view = match view {
+            View::Pinhole { intrinsics, camera_to_world } => {
+                View::Pinhole { intrinsics, camera_to_world: self.local_pose(&camera_to_world) }
+            }
+            scene_camera => scene_camera,
+        };
+    }
+
+    /// `pose`, in the user's world coordinates, relative to the scene's origin (the
+    /// translation subtracted in f64), as the GPU buffers are.
+    pub fn local_pose(&self, pose: &Affine3A) -> Affine3A {
+        scene::local_pose(self.origin, pose)
     }
 
     /// Light every following frame with `vals` (e.g. RGB-D VALs accumulated over frames), plus
@@ -352,7 +370,8 @@ impl Renderer {
         self.uploaded_vals = 0;
         self.rgbd_active = true;
         self.ensure_val_capacity(gpu)?;
-        self.rgbd.as_ref().expect("built above").technique.upload(gpu, frame)
+        let camera_to_world = self.local_pose(&frame.camera_to_world);
+        self.rgbd.as_ref().expect("built above").technique.upload(gpu, frame, &camera_to_world)
     }
 
     /// `frame`'s VALs alone, made on the GPU and read back (for accumulation across frames).

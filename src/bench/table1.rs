@@ -118,8 +118,8 @@ pub fn replicate(description: &SceneDescription, copies: usize) -> SceneDescript
         let (gx, gz) = ((i % side) as f32, (i / side) as f32);
         for mesh in &objects {
             let mut m = mesh.clone();
-            m.transform.translation[0] = -0.7 + cell * (gx + 0.5);
-            m.transform.translation[2] = -0.7 + cell * (gz + 0.5);
+            m.transform.translation[0] = f64::from(-0.7 + cell * (gx + 0.5));
+            m.transform.translation[2] = f64::from(-0.7 + cell * (gz + 0.5));
             m.transform.scale = match m.transform.scale {
                 ScaleDescription::Uniform(s) => ScaleDescription::Uniform(s * shrink),
                 ScaleDescription::PerAxis(s) => ScaleDescription::PerAxis(s.map(|v| v * shrink)),
@@ -145,7 +145,7 @@ mod tests {
         let r = replicate(&d, 10);
         assert_eq!(r.meshes.len(), 11);
         assert_eq!(r.meshes[0], d.meshes[0]);
-        let positions: Vec<[f32; 3]> = r.meshes[1..].iter().map(|m| m.transform.translation).collect();
+        let positions: Vec<[f64; 3]> = r.meshes[1..].iter().map(|m| m.transform.translation).collect();
         for (i, p) in positions.iter().enumerate() {
             assert_eq!(p[1], -0.1, "height kept");
             assert!(p[0].abs() <= 0.7 && p[2].abs() <= 0.7, "{p:?}");

@@ -124,7 +124,8 @@ pub fn virtual_depth(gpu: &Gpu, renderer: &Renderer, camera_to_world: Affine3A) 
     let Some(view) = renderer.camera_view() else {
         return Ok(Vec::new());
     };
-    let world_to_camera = camera_to_world.inverse();
+    // The flat scene is relative to the scene's origin: so must the pose be.
+    let world_to_camera = renderer.local_pose(&camera_to_world).inverse();
     let flat = &renderer.scene.flat;
     Ok(view
         .read(gpu)?

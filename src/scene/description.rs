@@ -25,7 +25,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use crate::rgbd::RgbdSettings;
-use glam::{EulerRot, Mat4, Quat, Vec3};
+use glam::{DMat4, DQuat, DVec3, EulerRot, Vec3};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
@@ -33,6 +33,10 @@ use super::{Camera, Material, SceneError, Settings, SpotLight};
 
 /// Most sparse points one mesh may have.
 pub const MAX_SPARSE_POINTS: u32 = 65_536;
+/// Largest magnitude of a world-space coordinate (a translation, the light's position, the
+/// camera's position and target), m: 10,000 km, the Earth's scale. Positions are held in f64
+/// and made relative to the scene's origin before they become f32 (see [`super::Scene::origin`]).
+pub const MAX_COORDINATE_M: f64 = 1.0e7;
 /// Largest image side, pixels.
 pub const MAX_IMAGE_SIDE: u32 = 8192;
 /// Smallest and largest RSM side, texels.
@@ -98,9 +102,9 @@ pub struct MeshDescription {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TransformDescription {
-    /// Translation, m.
+    /// Translation, m (f64: a mesh may sit far from the origin, see [`MAX_COORDINATE_M`]).
     #[serde(default)]
-    pub translation: [f32; 3],
+    pub translation: [f64; 3],
     /// Euler angles about X, then Y, then Z (glam `EulerRot::XYZ`), degrees.
     #[serde(default)]
     pub rotation_deg: [f32; 3],
@@ -262,8 +266,8 @@ impl MaterialDescription {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LightDescription {
-    /// World-space position, m.
-    pub position: [f32; 3],
+    /// World-space position, m (f64, see [`MAX_COORDINATE_M`]).
+    pub position: [f64; 3],
     /// World-space axis direction; normalised on load, must be nonzero.
     pub direction: [f32; 3],
     /// Inner half-angle, degrees, in [0, `outer_angle_deg`].
@@ -275,10 +279,11 @@ pub struct LightDescription {
 }
 
 impl LightDescription {
-    /// The light (assumes [`SceneDescription::validate`] passed).
-    pub fn to_spot_light(&self) -> SpotLight {
+    /// The light, its position relative to `origin` (the scene's [`super::Scene::origin`];
+    /// assumes [`SceneDescription::validate`] passed).
+    pub fn to_spot_light(&self, origin: DVec3) -> SpotLight {
         SpotLight {
-            position: Vec3::from_array(self.position),
+            position: (DVec3::from_array(self.position) - origin).as_vec3(),
             direction: Vec3::from_array(self.direction).normalize_or(Vec3::NEG_Y),
             inner_angle: self.inner_angle_deg.to_radians(),
             outer_angle: self.outer_angle_deg.to_radians(),
@@ -288,7 +293,7 @@ impl LightDescription {
 
     /// Checks ranges and consistency; `field` is this value's path (`light`, `camera`).
     pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        finite3(self.position, &format!("{field}.position"))?;
+        coordinates(self.position, &format!("{field}.position"))?;
         let direction_field = format!("{field}.direction");
         finite3(self.direction, &direction_field)?;
         if Vec3::from_array(self.direction).length() == 0.0 {
@@ -322,10 +327,10 @@ impl LightDescription {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CameraDescription {
-    /// World-space eye position, m.
-    pub position: [f32; 3],
-    /// World-space point looked at, m.
-    pub target: [f32; 3],
+    /// World-space eye position, m (f64, see [`MAX_COORDINATE_M`]).
+    pub position: [f64; 3],
+    /// World-space point looked at, m (f64).
+    pub target: [f64; 3],
     /// World-space up direction; default +Y.
     #[serde(default = "default_up")]
     pub up: [f32; 3],
@@ -342,11 +347,12 @@ fn default_up() -> [f32; 3] {
 }
 
 impl CameraDescription {
-    /// The camera (assumes [`SceneDescription::validate`] passed).
-    pub fn to_camera(&self) -> Camera {
+    /// The camera, its position and target relative to `origin` (the scene's
+    /// [`super::Scene::origin`]; assumes [`SceneDescription::validate`] passed).
+    pub fn to_camera(&self, origin: DVec3) -> Camera {
         Camera {
-            position: Vec3::from_array(self.position),
-            target: Vec3::from_array(self.target),
+            position: (DVec3::from_array(self.position) - origin).as_vec3(),
+            target: (DVec3::from_array(self.target) - origin).as_vec3(),
             up: Vec3::from_array(self.up).normalize_or(Vec3::Y),
             fov_y: self.fov_y_deg.to_radians(),
             width: self.width,
@@ -356,12 +362,12 @@ impl CameraDescription {
 
     /// Checks ranges and consistency; `field` is this value's path (`light`, `camera`).
     pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        finite3(self.position, &format!("{field}.position"))?;
+        coordinates(self.position, &format!("{field}.position"))?;
         let target_field = format!("{field}.target");
-        finite3(self.target, &target_field)?;
+        coordinates(self.target, &target_field)?;
         let up_field = format!("{field}.up");
         finite3(self.up, &up_field)?;
-        let view = Vec3::from_array(self.target) - Vec3::from_array(self.position);
+        let view = (DVec3::from_array(self.target) - DVec3::from_array(self.position)).as_vec3();
         let Some(view) = view.try_normalize() else {
             return Err(SceneError::field(
                 target_field,
@@ -535,20 +541,21 @@ pub fn validate_rgbd(r: &RgbdSettings, field: &str) -> Result<(), SceneError> {
 }
 
 impl TransformDescription {
-    /// The model-to-world matrix: scale, then rotation, then translation.
-    pub fn to_matrix(&self) -> Mat4 {
-        let [x, y, z] = self.rotation_deg.map(f32::to_radians);
-        Mat4::from_scale_rotation_translation(
-            self.scale.to_vec3(),
-            Quat::from_euler(EulerRot::XYZ, x, y, z),
-            Vec3::from_array(self.translation),
+    /// The model-to-world matrix: scale, then rotation, then translation, in f64 so that
+    /// composing it with an anchor and the scene's origin keeps millimetres at 10,000 km.
+    pub fn to_matrix(&self) -> DMat4 {
+        let [x, y, z] = self.rotation_deg.map(|d| f64::from(d).to_radians());
+        DMat4::from_scale_rotation_translation(
+            self.scale.to_vec3().as_dvec3(),
+            DQuat::from_euler(EulerRot::XYZ, x, y, z),
+            DVec3::from_array(self.translation),
         )
     }
 
     /// Checks that every number is finite and every scale factor positive; `field` is this
     /// transform's path.
     pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        finite3(self.translation, &format!("{field}.translation"))?;
+        coordinates(self.translation, &format!("{field}.translation"))?;
         finite3(self.rotation_deg, &format!("{field}.rotation_deg"))?;
         let scale_field = format!("{field}.scale");
         match self.scale {
@@ -634,6 +641,19 @@ fn finite(value: f32, field: &str) -> Result<(), SceneError> {
 fn finite3(values: [f32; 3], field: &str) -> Result<(), SceneError> {
     for (i, &value) in values.iter().enumerate() {
         finite(value, &format!("{field}[{i}]"))?;
+    }
+    Ok(())
+}
+
+/// Finite world-space coordinates of magnitude at most [`MAX_COORDINATE_M`].
+fn coordinates(values: [f64; 3], field: &str) -> Result<(), SceneError> {
+    for (i, &value) in values.iter().enumerate() {
+        if !(value.is_finite() && value.abs() <= MAX_COORDINATE_M) {
+            return Err(SceneError::field(
+                format!("{field}[{i}]"),
+                format!("must be a finite number within +-{MAX_COORDINATE_M:e} m, got {value:e}"),
+            ));
+        }
     }
     Ok(())
 }
@@ -803,18 +823,22 @@ mod tests {
         assert!(settings.glossy);
         assert_eq!(settings.seed, 1);
         assert_eq!(settings.exposure, None);
-        let camera = description.camera.to_camera();
+        let camera = description.camera.to_camera(DVec3::ZERO);
         assert_eq!(camera.up, Vec3::Y);
         assert!((camera.fov_y - 45f32.to_radians()).abs() < 1e-6);
         let mesh = &description.meshes[0];
-        assert_eq!(mesh.transform.to_matrix(), Mat4::IDENTITY);
+        assert_eq!(mesh.transform.to_matrix(), DMat4::IDENTITY);
         assert!(mesh.material.is_none() && mesh.materials.is_empty());
     }
 
     #[test]
     fn light_is_converted_to_radians_and_unit_direction() {
         let text = edit(r#""direction": [0, -1, 0]"#, r#""direction": [0, -4, 3]"#);
-        let light = SceneDescription::from_json_str(&text).expect("parses").light.expect("has a light").to_spot_light();
+        let light = SceneDescription::from_json_str(&text)
+            .expect("parses")
+            .light
+            .expect("has a light")
+            .to_spot_light(DVec3::ZERO);
         assert!(light.direction.abs_diff_eq(Vec3::new(0.0, -0.8, 0.6), 1e-6));
         assert!((light.inner_angle - 20f32.to_radians()).abs() < 1e-6);
         assert!((light.outer_angle - 30f32.to_radians()).abs() < 1e-6);
@@ -863,8 +887,11 @@ mod tests {
         let message = error_of(&edit(r#""fov_y_deg": 45"#, r#""fov_y_deg": NaN"#));
         assert!(message.starts_with("camera.fov_y_deg:"), "{message}");
         // A number too large for f32 becomes infinite and is rejected by validation.
+        let message = error_of(&edit(r#""fov_y_deg": 45"#, r#""fov_y_deg": 1e39"#));
+        assert_eq!(message, "camera.fov_y_deg: must be a finite number, got inf");
+        // Positions are f64, bounded by MAX_COORDINATE_M.
         let message = error_of(&edit(r#""target": [0, 1, 0]"#, r#""target": [0, 1e39, 0]"#));
-        assert_eq!(message, "camera.target[1]: must be a finite number, got inf");
+        assert_eq!(message, "camera.target[1]: must be a finite number within +-1e7 m, got 1e39");
         // Too large for f64: the parser rejects it.
         let message = error_of(&edit(r#""intensity": [1, 1, 1]"#, r#""intensity": [1, 1e999, 1]"#));
         assert!(message.starts_with("light.intensity[1]:"), "{message}");
@@ -1014,11 +1041,11 @@ mod tests {
         description.validate().expect("valid");
         let matrix = description.meshes[0].transform.to_matrix();
         // +X scaled by 1 and rotated 90 degrees about Y goes to -Z.
-        let x = matrix.transform_vector3(Vec3::X);
-        assert!(x.abs_diff_eq(Vec3::NEG_Z, 1e-6), "{x}");
-        let y = matrix.transform_vector3(Vec3::Y);
-        assert!(y.abs_diff_eq(Vec3::new(0.0, 2.0, 0.0), 1e-6), "{y}");
-        assert!(matrix.transform_point3(Vec3::ZERO).abs_diff_eq(Vec3::new(1.0, 2.0, 3.0), 1e-6));
+        let x = matrix.transform_vector3(DVec3::X);
+        assert!(x.abs_diff_eq(DVec3::NEG_Z, 1e-12), "{x}");
+        let y = matrix.transform_vector3(DVec3::Y);
+        assert!(y.abs_diff_eq(DVec3::new(0.0, 2.0, 0.0), 1e-12), "{y}");
+        assert!(matrix.transform_point3(DVec3::ZERO).abs_diff_eq(DVec3::new(1.0, 2.0, 3.0), 1e-12));
 
         let message =
             error_of(&edit(r#""sparse_points": 16"#, r#""sparse_points": 16, "transform": {"scale": [1, 2]}"#));

@@ -15,7 +15,20 @@
 //! 4. `sparse`: blue-noise sparse points (weighted sample elimination over area-proportional
 //!    candidates), each vertex's 8 nearest sparse points, and each point's occluder radius.
 //!
-//! Everything a mesh stores is in model space; [`Mesh::model_to_world`] places it in the world.
+//! Everything a mesh stores is in model space; [`Mesh::model_to_world`] places it in the
+//! scene's local world frame.
+//!
+//! **Floating origin.** A loaded scene's world-space quantities (mesh placements, the light,
+//! the camera) are f32 relative to [`Scene::origin`], the centre of the meshes' world-space
+//! bounding box, computed in f64 from the description (whose positions are f64). f32 keeps
+//! about 7 significant digits: at 100 km from the user's origin its spacing is 7.8 mm, and the
+//! RSM's depths, the gather's position sums and second moments and the biases in metres all
+//! lost their precision there (issue 19 item 8). Relative to the scene's centre, coordinates are
+//! as large as the scene itself, wherever the scene is. Everything a user gives in world
+//! coordinates after load (render cameras and lights, stream transforms, RGB-D poses) goes
+//! through [`Scene::origin`] too ([`Scene::mesh_to_world`], [`Scene::local_pose`]); images have
+//! no positions in them, so nothing the user gets back needs converting.
+//!
 //! Lengths are metres (or the OBJ's units, scaled by the transform), angles are radians once
 //! loaded (the JSON speaks degrees), intensities are W/sr.
 
@@ -30,12 +43,12 @@ mod texture;
 
 use std::path::{Path, PathBuf};
 
-use glam::{Mat3, Mat4, Vec2, Vec3};
+use glam::{Affine3A, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
-    CameraDescription, LightDescription, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion,
-    OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SettingsDescription,
-    TransformDescription, parse_json,
+    CameraDescription, LightDescription, MAX_COORDINATE_M, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription,
+    Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription,
+    SettingsDescription, TransformDescription, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
@@ -70,9 +83,14 @@ pub struct Scene {
     pub camera: Camera,
     /// Render settings.
     pub settings: Settings,
-    /// The description's `anchor`, already applied to every mesh's [`Mesh::model_to_world`];
-    /// kept to place a mesh given a new transform ([`Scene::mesh_to_world`]).
-    pub anchor: Mat4,
+    /// The description's `anchor` (user coordinates), already applied to every mesh's
+    /// [`Mesh::model_to_world`]; kept to place a mesh given a new transform
+    /// ([`Scene::mesh_to_world`]).
+    pub anchor: DMat4,
+    /// The floating origin, in the user's world coordinates (m): the centre of the meshes'
+    /// world-space bounding box. Every f32 world-space quantity of the scene (and of the GPU
+    /// buffers, the twins and the VALs made from it) is relative to it: user = local + origin.
+    pub origin: DVec3,
 }
 
 /// Normalised modified Phong material (DESIGN.md §1):
@@ -211,7 +229,9 @@ pub struct Settings {
 pub struct Mesh {
     /// Name, from the OBJ file's stem.
     pub name: String,
-    /// Model-to-world transform (scale, then Euler XYZ rotation, then translation).
+    /// Model to the scene's local world frame (world minus [`Scene::origin`]): the
+    /// description's transform (scale, then Euler XYZ rotation, then translation) after the
+    /// anchor, composed in f64 with the origin's translation and then rounded to f32.
     pub model_to_world: Mat4,
     /// Model-space vertex positions.
     pub positions: Vec<Vec3>,
@@ -410,15 +430,18 @@ impl Scene {
         let mut materials = Vec::new();
         let mut textures = texture::Textures::default();
         let mut meshes = Vec::with_capacity(description.meshes.len());
-        let anchor = description.anchor.as_ref().map_or(Mat4::IDENTITY, |a| a.to_matrix());
+        let anchor = description.anchor.as_ref().map_or(DMat4::IDENTITY, |a| a.to_matrix());
         let mut triangles = 0usize;
         for (index, mesh_description) in description.meshes.iter().enumerate() {
             let budget = TriangleBudget { left: max_triangles.saturating_sub(triangles), total: max_triangles };
-            let mut mesh =
-                load_mesh(mesh_description, index, base_dir, &settings, &budget, &mut materials, &mut textures)?;
+            let mesh = load_mesh(mesh_description, index, base_dir, &settings, &budget, &mut materials, &mut textures)?;
             triangles += mesh.triangles.len();
-            mesh.model_to_world = anchor * mesh.model_to_world;
             meshes.push(mesh);
+        }
+        let user_to_world: Vec<DMat4> = description.meshes.iter().map(|m| anchor * m.transform.to_matrix()).collect();
+        let origin = floating_origin(&meshes, &user_to_world, &description.camera);
+        for (mesh, transform) in meshes.iter_mut().zip(&user_to_world) {
+            mesh.model_to_world = local_matrix(origin, *transform);
         }
         if description.settings.occlusion == OcclusionSetting::Auto {
             let self_occluding = meshes.len() > 1 || meshes.iter().any(Mesh::may_occlude_itself);
@@ -428,20 +451,28 @@ impl Scene {
             meshes,
             materials,
             textures: textures.textures,
-            light: description.light.as_ref().map(|l| l.to_spot_light()),
-            camera: description.camera.to_camera(),
+            light: description.light.as_ref().map(|l| l.to_spot_light(origin)),
+            camera: description.camera.to_camera(origin),
             settings,
             anchor,
+            origin,
         })
     }
 
-    /// Model-to-world of mesh `index` given a replacement for its description's `transform`
-    /// (`None`: the loaded one): the anchor still applies, as in the scene file.
-    pub fn mesh_to_world(&self, index: usize, transform: Option<Mat4>) -> Mat4 {
+    /// Model-to-local-world of mesh `index` given a replacement for its description's
+    /// `transform` in user coordinates (`None`: the loaded one): the anchor still applies, as in
+    /// the scene file, and the result is relative to [`Scene::origin`].
+    pub fn mesh_to_world(&self, index: usize, transform: Option<DMat4>) -> Mat4 {
         match transform {
-            Some(t) => self.anchor * t,
+            Some(t) => local_matrix(self.origin, self.anchor * t),
             None => self.meshes[index].model_to_world,
         }
+    }
+
+    /// A pose given in the user's world coordinates (an RGB-D frame's camera-to-world) made
+    /// relative to [`Scene::origin`], the subtraction done in f64.
+    pub fn local_pose(&self, pose: &Affine3A) -> Affine3A {
+        local_pose(self.origin, pose)
     }
 
     /// Whether the glossy gather is needed: glossy is enabled and some triangle's material has
@@ -489,6 +520,34 @@ impl TriangleBudget {
 
 /// Loads mesh `index` of the description: OBJ, normals, subdivision, sparse points. Its
 /// materials are appended to `materials`, their textures to `textures`.
+/// The scene's floating origin ([`Scene::origin`]): the centre of the bounding box of every
+/// vertex in user world coordinates, computed in f64. The meshes are what the precision-critical
+/// sums (RSM depths, the gather's moments, occluder discs) run over, so their centre keeps every
+/// such coordinate as small as the scene; the camera and the light usually sit near or inside it.
+/// A scene without vertices uses the camera's position.
+fn floating_origin(meshes: &[Mesh], user_to_world: &[DMat4], camera: &CameraDescription) -> DVec3 {
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for (mesh, transform) in meshes.iter().zip(user_to_world) {
+        for p in &mesh.positions {
+            let world = transform.transform_point3(p.as_dvec3());
+            (lo, hi) = (lo.min(world), hi.max(world));
+        }
+    }
+    if lo.cmple(hi).all() { (lo + hi) * 0.5 } else { DVec3::from_array(camera.position) }
+}
+
+/// `pose` (user coordinates) relative to `origin`: the translation subtracted in f64.
+pub fn local_pose(origin: DVec3, pose: &Affine3A) -> Affine3A {
+    let mut local = *pose;
+    local.translation = (Vec3::from(pose.translation).as_dvec3() - origin).as_vec3().into();
+    local
+}
+
+/// `model_to_world` (user coordinates, f64) relative to `origin`, rounded to f32.
+fn local_matrix(origin: DVec3, model_to_world: DMat4) -> Mat4 {
+    (DMat4::from_translation(-origin) * model_to_world).as_mat4()
+}
+
 fn load_mesh(
     description: &MeshDescription,
     index: usize,
@@ -581,7 +640,8 @@ fn load_mesh(
     );
     Ok(Mesh {
         name,
-        model_to_world: description.transform.to_matrix(),
+        // Placed relative to the scene's origin once every mesh is loaded.
+        model_to_world: Mat4::IDENTITY,
         positions: geometry.positions,
         normals: geometry.normals,
         texcoords: geometry.texcoords,
@@ -709,9 +769,11 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         assert_eq!(scene.materials.len(), 1);
         assert_eq!(scene.materials[0].exponent, 30.0);
         assert!(scene.needs_glossy());
-        // World transform: the model-space corner (1, 1, 1) lands at 2 * (1, 1, 1) + (1, 2, 3).
+        // World transform: the model-space corner (1, 1, 1) lands at 2 * (1, 1, 1) + (1, 2, 3),
+        // in user coordinates (local + origin).
         let world = mesh.world_positions();
-        assert!(world.iter().any(|p| p.abs_diff_eq(Vec3::new(3.0, 4.0, 5.0), 1e-5)));
+        let user = |p: &Vec3| p.as_dvec3() + scene.origin;
+        assert!(world.iter().any(|p| user(p).abs_diff_eq(DVec3::new(3.0, 4.0, 5.0), 1e-5)));
         for n in mesh.world_normals() {
             assert!((n.length() - 1.0).abs() < 1e-5);
         }
@@ -719,6 +781,43 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
         for (world, model) in radii.iter().zip(&mesh.sparse.occluder_radii) {
             assert!((world - 2.0 * model).abs() < 1e-5);
         }
+    }
+
+    /// A scene 100 km out keeps its millimetres: the floating origin is the meshes' centre,
+    /// and the local positions are the user's minus it, exact to f32 at the scene's size
+    /// (the user-space f32 spacing there is 7.8 mm).
+    #[test]
+    fn far_scenes_are_local_to_their_centre() {
+        let dir = TempDir::new("far_scene");
+        dir.write("cube.obj", CUBE_OBJ);
+        let far = r#""obj": "cube.obj", "sparse_points": 8,
+                     "transform": {"translation": [100000.001, -70000.002, 30000.003]}"#;
+        let json = scene_json(far).replace(
+            r#""camera": {"position": [0, 1, 3.5], "target": [0, 1, 0]"#,
+            r#""camera": {"position": [100000.501, -69999.502, 30003.503], "target": [100000.501, -69999.502, 30000.503]"#,
+        );
+        let scene = Scene::from_json_str(&json, dir.path()).expect("scene loads");
+        let user = DVec3::new(100000.001, -70000.002, 30000.003);
+        assert!(scene.origin.abs_diff_eq(user + DVec3::splat(0.5), 1e-9), "origin {}", scene.origin);
+        let local = scene.meshes[0].world_positions();
+        for (p, model) in local.iter().zip(&scene.meshes[0].positions) {
+            assert!(p.abs_diff_eq(*model - Vec3::splat(0.5), 1e-7), "{p} for model {model}");
+        }
+        assert!(scene.camera.position.abs_diff_eq(Vec3::new(0.0, 0.0, 3.0), 1e-6), "{}", scene.camera.position);
+        let moved = DMat4::from_translation(user + DVec3::X);
+        assert!(
+            scene
+                .mesh_to_world(0, Some(moved))
+                .transform_point3(Vec3::ZERO)
+                .abs_diff_eq(Vec3::new(0.5, -0.5, -0.5), 1e-7)
+        );
+        let pose = Affine3A::from_translation(Vec3::new(100000.5, -70000.0, 30000.0));
+        let expected = (Vec3::new(100000.5, -70000.0, 30000.0).as_dvec3() - scene.origin).as_vec3();
+        assert!(Vec3::from(scene.local_pose(&pose).translation).abs_diff_eq(expected, 1e-7));
+
+        let too_far = scene_json(r#""obj": "cube.obj", "sparse_points": 8, "transform": {"translation": [2e7, 0, 0]}"#);
+        let message = Scene::from_json_str(&too_far, dir.path()).expect_err("too far").to_string();
+        assert!(message.contains("meshes[0].transform.translation[0]"), "{message}");
     }
 
     fn mesh_of(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Mesh {

@@ -85,8 +85,8 @@ pub struct RenderRequest {
 #[derive(Clone, Debug, Default, PartialEq, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LightOverride {
-    /// World-space position, m.
-    pub position: Option<[f32; 3]>,
+    /// World-space position, m (f64, as a scene file's `light.position`).
+    pub position: Option<[f64; 3]>,
     /// World-space axis direction, nonzero.
     pub direction: Option<[f32; 3]>,
     /// Inner half-angle, degrees, in [0, `outer_angle_deg`].

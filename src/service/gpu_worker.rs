@@ -129,7 +129,8 @@ pub struct StreamFrameJob {
     pub camera: Option<Camera>,
     pub light: Option<SpotLight>,
     /// Model-to-world overrides, by mesh index.
-    pub model_transforms: Vec<(u32, Mat4)>,
+    /// Replacements of meshes' transforms, in user coordinates (composed in f64).
+    pub model_transforms: Vec<(u32, glam::DMat4)>,
     pub method: Method,
     pub component: Component,
     pub exposure: Option<f32>,
@@ -446,7 +447,7 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, Work
 
 /// Model-to-world of every mesh of `scene`: as loaded, but where `transforms` (by mesh
 /// index) replaces a mesh's own transform (the scene's anchor still applies).
-fn placement(scene: &Scene, transforms: &[(u32, Mat4)]) -> Vec<Mat4> {
+fn placement(scene: &Scene, transforms: &[(u32, glam::DMat4)]) -> Vec<Mat4> {
     (0..scene.meshes.len())
         .map(|i| {
             let replaced = transforms.iter().find(|(mesh, _)| *mesh as usize == i).map(|(_, t)| *t);

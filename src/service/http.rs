@@ -305,6 +305,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
         exposure: description.settings.exposure,
         mesh_count: scene.meshes.len(),
         settings: scene.settings,
+        origin: scene.origin,
         info: info.clone(),
     };
     state.worker.add_scene(&id, scene).await?;
@@ -433,8 +434,8 @@ async fn render_scene(
     let quality = request.quality;
     quality.validate("quality").map_err(|e| ApiError::scene(&e, &state.assets))?;
     let job = RenderJob {
-        camera: camera.to_camera(),
-        light: light.map(|l| l.to_spot_light()),
+        camera: camera.to_camera(entry.origin),
+        light: light.map(|l| l.to_spot_light(entry.origin)),
         method: quality.method.into(),
         width: camera.width,
         height: camera.height,

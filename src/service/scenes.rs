@@ -133,6 +133,9 @@ pub struct SceneEntry {
     pub mesh_count: usize,
     /// The loaded scene's render settings (occlusion resolved): where a stream starts.
     pub settings: crate::scene::Settings,
+    /// The loaded scene's floating origin ([`crate::scene::Scene::origin`]): render and
+    /// stream cameras and lights, given in user coordinates, are made relative to it.
+    pub origin: glam::DVec3,
 }
 
 /// The scenes held, and the slots reserved by scenes being loaded.
@@ -286,6 +289,7 @@ mod tests {
             exposure: None,
             mesh_count: 0,
             settings: crate::scene::SettingsDescription::default().to_settings(false),
+            origin: glam::DVec3::ZERO,
         };
         a.commit(entry);
         assert_eq!(registry.len(), 1);

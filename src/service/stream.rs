@@ -111,6 +111,8 @@ struct Session {
     client: ClientId,
     scene_id: String,
     mesh_count: usize,
+    /// The scene's floating origin: the stream's cameras and lights are made relative to it.
+    origin: glam::DVec3,
     /// The scene's settings: what `Occlusion::Unspecified` goes back to.
     scene_settings: crate::scene::Settings,
     settings: Settings,
@@ -127,6 +129,7 @@ impl Session {
             client,
             scene_id,
             mesh_count: scene.mesh_count,
+            origin: scene.origin,
             settings: Settings {
                 camera: None,
                 light: scene.light.clone(),
@@ -284,8 +287,8 @@ impl Session {
         let job = StreamFrameJob {
             frame_id: message.frame_id,
             frame: message.frame,
-            camera: s.camera.as_ref().map(CameraDescription::to_camera),
-            light: s.light.as_ref().map(|l| l.to_spot_light()),
+            camera: s.camera.as_ref().map(|c| c.to_camera(self.origin)),
+            light: s.light.as_ref().map(|l| l.to_spot_light(self.origin)),
             model_transforms: s.model_transforms.iter().map(|(&mesh, t)| (mesh, t.to_matrix())).collect(),
             method: s.quality.method,
             component: s.quality.component,

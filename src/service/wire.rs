@@ -485,7 +485,7 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
         Some(camera) => Some(decode_camera(camera, limits)?),
     };
     let light = c.light.map(|l| LightOverride {
-        position: l.position.map(|v| [v.x, v.y, v.z]),
+        position: l.position.map(|v| [v.x, v.y, v.z].map(f64::from)),
         direction: l.direction.map(|v| [v.x, v.y, v.z]),
         inner_angle_deg: l.inner_angle_deg,
         outer_angle_deg: l.outer_angle_deg,
@@ -501,7 +501,7 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
             ));
         }
         let transform = TransformDescription {
-            translation: vec3(t.translation, &format!("{field}.translation"))?.to_array(),
+            translation: vec3(t.translation, &format!("{field}.translation"))?.as_dvec3().to_array(),
             rotation_deg: vec3(t.rotation_deg, &format!("{field}.rotation_deg"))?.to_array(),
             scale: t.scale.map_or(ScaleDescription::Uniform(1.0), |s| ScaleDescription::PerAxis([s.x, s.y, s.z])),
         };
@@ -546,8 +546,8 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
 fn decode_camera(c: proto::Camera, limits: &Limits) -> Result<CameraDescription, WireError> {
     let field = "control.camera";
     let camera = CameraDescription {
-        position: vec3(c.position, &format!("{field}.position"))?.to_array(),
-        target: vec3(c.target, &format!("{field}.target"))?.to_array(),
+        position: vec3(c.position, &format!("{field}.position"))?.as_dvec3().to_array(),
+        target: vec3(c.target, &format!("{field}.target"))?.as_dvec3().to_array(),
         up: c.up.map_or([0.0, 1.0, 0.0], |v| [v.x, v.y, v.z]),
         fov_y_deg: c.fov_y_deg,
         width: c.width,

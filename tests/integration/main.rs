@@ -8,6 +8,7 @@ mod fake_backend;
 mod frame;
 mod fuzz;
 mod hardening;
+mod hardening_origin;
 mod layout;
 mod mcap;
 mod recording;

@@ -95,7 +95,7 @@ fn run(
     contents[..initial.len()].copy_from_slice(initial);
     let vals = gpu.storage_buffer("test.vals", &contents, wgpu::BufferUsages::COPY_SRC).unwrap();
     let count = gpu.storage_buffer("test.val_count", &[initial.len() as u32], wgpu::BufferUsages::COPY_SRC).unwrap();
-    pass.upload(gpu, frame).unwrap();
+    pass.upload(gpu, frame, &frame.camera_to_world).unwrap();
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.rgbd") });
     let vals = Vals { buffer: vals, count, capacity };
     pass.append(gpu, &mut encoder, &f.scene, &vals, None);
@@ -233,8 +233,8 @@ fn rgbd_upload_refuses_a_frame_of_another_size() {
     let pass = RgbdVals::new(&f.gpu, &f.scene, SMALL, &RgbdSettings::default()).unwrap();
     let mut frame = synthetic_frame();
     frame.intrinsics.width = 32;
-    assert!(pass.upload(&f.gpu, &frame).is_err());
+    assert!(pass.upload(&f.gpu, &frame, &frame.camera_to_world).is_err());
     let mut frame = synthetic_frame();
     frame.depth.pop();
-    assert!(pass.upload(&f.gpu, &frame).is_err());
+    assert!(pass.upload(&f.gpu, &frame, &frame.camera_to_world).is_err());
 }

@@ -121,9 +121,10 @@ impl RgbdVals {
         self.grid.x * self.grid.y
     }
 
-    /// Write `frame` (its depth, colour, pose and intrinsics) for the next [`Self::append`].
-    /// Refuses a frame whose size differs from the pass's.
-    pub fn upload(&self, gpu: &Gpu, frame: &RgbdFrame) -> Result<(), GpuError> {
+    /// Write `frame` (its depth, colour and intrinsics) with `camera_to_world` (its pose made
+    /// relative to the scene's origin, [`crate::scene::Scene::local_pose`]) for the next
+    /// [`Self::append`]. Refuses a frame whose size differs from the pass's.
+    pub fn upload(&self, gpu: &Gpu, frame: &RgbdFrame, camera_to_world: &glam::Affine3A) -> Result<(), GpuError> {
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
         let f = &frame.intrinsics;
         if (f.width, f.height) != (w, h) {
@@ -145,7 +146,7 @@ impl RgbdVals {
             gpu.queue.write_buffer(&self.depth, 0, bytemuck::cast_slice(&frame.depth));
             gpu.queue.write_buffer(&self.color, 0, bytemuck::cast_slice(&color));
         }
-        let params = RawRgbdParams::new(f, &self.settings, &frame.camera_to_world);
+        let params = RawRgbdParams::new(f, &self.settings, camera_to_world);
         gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         Ok(())
     }
