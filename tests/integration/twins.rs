@@ -379,7 +379,7 @@ fn cpu_exact_reference_matches_gpu_exact() {
 /// The rest are silhouette pixels, where a centre on an edge goes either way.
 #[test]
 fn traced_pixel_centres_match_the_visibility_buffer() {
-    use relume::twin::bvh::Bvh;
+    use relume::twin::bvh::TraceBvh;
     use relume::twin::exact_cpu::CameraRays;
     let gpu = gpu();
     let mut renderer = Renderer::new(&gpu, &load_scene("cornell_bunny_small")).unwrap();
@@ -389,7 +389,7 @@ fn traced_pixel_centres_match_the_visibility_buffer() {
     let flat = &renderer.scene.flat;
     let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
     let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    let bvh = Bvh::build(&positions, &triangles);
+    let bvh = TraceBvh::build(&positions, &triangles);
     let world_to_clip = renderer.camera_to_clip(w, h);
     let camera = CameraRays::new(world_to_clip, w, h);
     let on_screen = |p: Vec3| {
