@@ -6,7 +6,7 @@ use super::BenchError;
 use crate::gpu::timing::TimingSource;
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, flip_mean, noise_corrected_relative_rmse, relative_rmse, relative_stderr};
-use crate::renderer::{Method, Rendered, Renderer, stage};
+use crate::renderer::{Components, Method, Rendered, Renderer, stage};
 use crate::scene::{Occlusion, OcclusionRule, Scene};
 use std::path::Path;
 use std::time::Instant;
@@ -71,6 +71,16 @@ pub enum ReferenceDevice {
     Gpu,
 }
 
+impl ReferenceDevice {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ReferenceDevice::Auto => "auto",
+            ReferenceDevice::Cpu => "cpu",
+            ReferenceDevice::Gpu => "gpu",
+        }
+    }
+}
+
 /// How the exact-visibility reference is computed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ExactOptions {
@@ -132,28 +142,54 @@ impl ExactOptions {
     }
 }
 
-/// An exact-visibility reference image with its noise and cost.
+/// An exact-visibility reference frame with its noise and cost.
 pub struct ExactReference {
-    pub indirect: LinearImage,
+    /// The frame: its indirect image is the reference; its direct image and stage timings are
+    /// the frame's (on the CPU, a direct-only GPU frame that made the VALs and the visibility
+    /// buffer, with the CPU reference as its indirect stage `exact_cpu::STAGE`).
+    pub frame: Rendered,
     /// Per pixel and channel the variance of the reference's estimate; `None` for a stride.
     pub variance: Option<Vec<glam::Vec3>>,
     pub device: ReferenceDevice,
-    /// Wall time of the reference itself (ms): the GPU pass's stage time, or the CPU's BVH build
-    /// and tracing (not the GPU frame that made the VALs and the visibility buffer).
-    pub ms: f64,
     /// CPU: shadow rays cast.
     pub shadow_rays: Option<u64>,
-    /// GPU: the pass's rounds.
-    pub rounds: u32,
-    /// VALs in the frame.
-    pub val_count: u32,
+}
+
+impl ExactReference {
+    /// The reference image (indirect light).
+    pub fn indirect(&self) -> &LinearImage {
+        &self.frame.indirect
+    }
+
+    /// Wall time of the reference itself (ms): the GPU pass's stage time, or the CPU's BVH build
+    /// and tracing (not the GPU frame that made the VALs and the visibility buffer).
+    pub fn ms(&self) -> f64 {
+        self.frame.indirect_ms()
+    }
+
+    /// `sqrt(sum s² / sum |g|²)`: the reference's own relative noise (`None` for a stride).
+    pub fn rel_stderr(&self) -> Option<f64> {
+        self.variance.as_deref().map(|v| relative_stderr(self.indirect(), v))
+    }
+
+    /// `test`'s relative RMSE against this reference, corrected for its noise (`None` for a
+    /// stride).
+    pub fn corrected_rel_rmse(&self, test: &LinearImage) -> Option<f64> {
+        self.variance.as_deref().map(|v| noise_corrected_relative_rmse(test, self.indirect(), v))
+    }
+
+    /// CPU: shadow rays per second of wall time (BVH build included).
+    pub fn rays_per_s(&self) -> Option<f64> {
+        self.shadow_rays.map(|n| n as f64 / (self.ms() * 1e-3))
+    }
 }
 
 /// The exact-visibility reference of `renderer`'s scene at `width` x `height` per `options`
 /// (checked with [`ExactOptions::check`]). The CPU path takes the VALs and the camera's
-/// visibility buffer from a sparse frame rendered first: with one sample per pixel its receivers
-/// are that buffer's pixels (exactly those the GPU methods shade); with more it traces primary
-/// rays at jittered positions through the same BVH as its shadow rays.
+/// visibility buffer from a direct-only frame rendered first (no indirect technique runs):
+/// with one sample per pixel its receivers are that buffer's pixels (exactly those the GPU
+/// methods shade); with more it traces primary rays at jittered positions through the same BVH
+/// as its shadow rays.
 pub fn exact_reference(
     gpu: &Gpu,
     renderer: &mut Renderer,
@@ -161,7 +197,7 @@ pub fn exact_reference(
     height: u32,
     options: &ExactOptions,
 ) -> Result<ExactReference, GpuError> {
-    use crate::twin::bvh::Bvh;
+    use crate::twin::bvh::TraceBvh;
     use crate::twin::exact_cpu::{self as cpu, CameraRays, PixelSampling, Receiver, Receivers, ValSampling};
     let device = options.device_on(gpu);
     if device == ReferenceDevice::Gpu {
@@ -169,15 +205,12 @@ pub fn exact_reference(
         let exact = options.val_stride == 1;
         return Ok(ExactReference {
             variance: exact.then(|| vec![glam::Vec3::ZERO; frame.indirect.pixels.len()]),
-            ms: frame.indirect_ms(),
-            indirect: frame.indirect,
+            frame,
             device,
             shadow_rays: None,
-            rounds: frame.exact_rounds,
-            val_count: frame.val_count,
         });
     }
-    let frame = renderer.render(gpu, Method::Sparse, width, height)?;
+    let mut frame = renderer.render_components(gpu, Method::Sparse, width, height, Components::DIRECT)?;
     let vals = renderer.read_vals(gpu)?;
     let hits = match renderer.camera_view() {
         Some(view) if options.spp == 1 => view.read(gpu)?,
@@ -188,7 +221,7 @@ pub fn exact_reference(
     let eye = renderer.view().eye();
     let positions: Vec<glam::Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
     let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    let bvh = Bvh::build(&positions, &triangles);
+    let bvh = TraceBvh::build(&positions, &triangles);
     let surface = |t: u32, b: glam::Vec2| {
         let (p, n, s) = flat.surface_at(t, b);
         Receiver::new(p, n, s, eye)
@@ -211,15 +244,10 @@ pub fn exact_reference(
     };
     let scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy() };
     let out = cpu::render(&scene, &receivers, width, height, sampling);
-    Ok(ExactReference {
-        indirect: out.image,
-        variance: out.variance,
-        device,
-        ms: start.elapsed().as_secs_f64() * 1e3,
-        shadow_rays: Some(out.shadow_rays),
-        rounds: 0,
-        val_count: frame.val_count,
-    })
+    frame.indirect = out.image;
+    frame.timings.stages.push((cpu::STAGE.to_owned(), start.elapsed().as_secs_f64() * 1e3));
+    frame.indirect_stages = vec![cpu::STAGE];
+    Ok(ExactReference { frame, variance: out.variance, device, shadow_rays: Some(out.shadow_rays) })
 }
 
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and
@@ -357,10 +385,9 @@ fn exact_comparison(
     images: Option<&Path>,
 ) -> Result<ExactComparison, BenchError> {
     let exact = exact_reference(gpu, renderer, w, h, options)?;
-    let variance = exact.variance.as_deref();
-    let exposure = exact.indirect.auto_exposure();
+    let exposure = exact.indirect().auto_exposure();
     if let Some(dir) = images {
-        write_png(&exact.indirect, &dir.join("indirect_exact.png"), exposure)?;
+        write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
     }
     let mut errors = Vec::new();
     let (mut occlusion_ms, mut gather_ms) = (0.0, 0.0);
@@ -374,8 +401,8 @@ fn exact_comparison(
         if let Some(dir) = images {
             write_png(&sparse.indirect, &dir.join(format!("indirect_sparse_occlusion_{key}.png")), exposure)?;
         }
-        let corrected = variance.map(|v| noise_corrected_relative_rmse(&sparse.indirect, &exact.indirect, v));
-        errors.push((indirect_error(&sparse.indirect, &exact.indirect), corrected));
+        let corrected = exact.corrected_rel_rmse(&sparse.indirect);
+        errors.push((indirect_error(&sparse.indirect, exact.indirect()), corrected));
         if key == "sum" {
             occlusion_ms = sparse.timings.total_of(&[stage::OCCLUSION]);
             gather_ms = sparse.timings.total_of(&[stage::GATHER]);
@@ -383,17 +410,17 @@ fn exact_comparison(
     }
     let [(off, off_c), (sum, sum_c), (product, product_c)] = errors[..] else { unreachable!("three modes measured") };
     Ok(ExactComparison {
-        exact_ms: exact.ms,
+        exact_ms: exact.ms(),
         exact_device: exact.device,
         exact_estimator: options.estimator(),
         exact_val_stride: options.val_stride,
         exact_samples: options.samples,
         exact_spp: options.spp,
-        exact_vals_used: options.samples.unwrap_or(exact.val_count / options.val_stride),
-        exact_rounds: exact.rounds,
+        exact_vals_used: options.samples.unwrap_or(exact.frame.val_count / options.val_stride),
+        exact_rounds: exact.frame.exact_rounds,
         exact_shadow_rays: exact.shadow_rays,
-        exact_rays_per_s: exact.shadow_rays.map(|n| n as f64 / (exact.ms * 1e-3)),
-        exact_rel_stderr: variance.map(|v| relative_stderr(&exact.indirect, v)),
+        exact_rays_per_s: exact.rays_per_s(),
+        exact_rel_stderr: exact.rel_stderr(),
         indirect_rel_rmse_vs_exact_off: off.rel_rmse,
         indirect_rel_rmse_vs_exact_off_corrected: off_c,
         indirect_flip_mean_vs_exact_off: off.flip_mean,

@@ -231,8 +231,9 @@ pub struct BenchOptions {
     pub grid: bool,
     /// A tiny sweep at a tiny resolution that runs in seconds (CI's smoke test).
     pub quick: bool,
-    /// Also compare against exact visibility over every `n`-th VAL.
-    pub exact_val_stride: Option<u32>,
+    /// Also compare against exact visibility, computed as these options say (checked with
+    /// [`compare::ExactOptions::check`]); on the device `compare` would choose.
+    pub exact: Option<compare::ExactOptions>,
     /// Render the brute-force reference and report the error against it.
     pub references: bool,
     /// The paper's Table 1 configurations on scenes built from this one ([`table1`]); the
@@ -322,6 +323,15 @@ pub struct ConfigResult {
     /// `--table1`: the paper's frames per second for this configuration (AMD Radeon 7870).
     pub paper_fps: Option<u32>,
     pub exact_ms: Option<f64>,
+    /// Where the exact reference ran (`cpu` or `gpu`).
+    pub exact_device: Option<compare::ReferenceDevice>,
+    /// The exact reference's own relative noise `sqrt(sum s² / sum |g|²)` (0 with every VAL at
+    /// the pixel centre; `None` for a stride, whose noise is not estimated).
+    pub exact_rel_stderr: Option<f64>,
+    /// `vs_exact`'s relative RMSE corrected for the reference's noise.
+    pub rel_rmse_vs_exact_corrected: Option<f64>,
+    /// CPU reference: shadow rays per second (BVH build included).
+    pub exact_rays_per_s: Option<f64>,
 }
 
 /// A bench run's results (`results.json`).
@@ -335,7 +345,10 @@ pub struct BenchResults {
     pub gpu_memory_note: &'static str,
     pub mode: &'static str,
     pub quick: bool,
+    /// With `--reference exact`: every n-th VAL (1: all).
     pub exact_val_stride: Option<u32>,
+    /// With `--reference exact`: "all", "stride" or "importance".
+    pub exact_estimator: Option<&'static str>,
     pub configs: Vec<ConfigResult>,
     /// The gather's throughput against an FMA-bound kernel, on the base configuration.
     pub fma: Option<fma::FmaReport>,
@@ -353,8 +366,11 @@ type RendererKey = (Option<u32>, Option<u32>, u32, bool);
 /// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
 /// `options.out`. `progress` is told each configuration as it starts.
 pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<BenchResults, BenchError> {
-    if let Some(0) = options.exact_val_stride {
-        return Err(flag_error("--val-stride", "must be at least 1, got 0"));
+    if let Some(exact) = &options.exact {
+        exact.check().map_err(|message| {
+            let (flag, why) = message.split_once(": ").unwrap_or(("--reference", message.as_str()));
+            flag_error(flag, why)
+        })?;
     }
     let path = &options.scene;
     let text = std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.clone(), source })?;
@@ -423,7 +439,8 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
             "one_axis_at_a_time"
         },
         quick: options.quick,
-        exact_val_stride: options.exact_val_stride,
+        exact_val_stride: options.exact.map(|e| e.val_stride),
+        exact_estimator: options.exact.map(|e| e.estimator()),
         configs: results,
         fma,
         temporal,
@@ -502,8 +519,8 @@ fn run_job(
                 true => Some(compare::brute_force_frame(gpu, &mut renderer, w, h)?),
                 false => None,
             };
-            let exact = match options.exact_val_stride {
-                Some(stride) => Some(compare::exact_frame(gpu, &mut renderer, w, h, stride)?),
+            let exact = match &options.exact {
+                Some(exact) => Some(compare::exact_reference(gpu, &mut renderer, w, h, exact)?),
                 None => None,
             };
             renderer.release_reference_passes();
@@ -533,8 +550,12 @@ fn run_job(
                     gpu_memory: memory,
                     gpu_memory_bytes: memory.total_bytes(),
                     vs_brute_force: brute.as_ref().map(|b| compare::indirect_error(&frame.indirect, &b.indirect)),
-                    vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, &x.indirect)),
-                    exact_ms: exact.as_ref().map(Rendered::indirect_ms),
+                    vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, x.indirect())),
+                    exact_ms: exact.as_ref().map(|x| x.ms()),
+                    exact_device: exact.as_ref().map(|x| x.device),
+                    exact_rel_stderr: exact.as_ref().and_then(|x| x.rel_stderr()),
+                    rel_rmse_vs_exact_corrected: exact.as_ref().and_then(|x| x.corrected_rel_rmse(&frame.indirect)),
+                    exact_rays_per_s: exact.as_ref().and_then(|x| x.rays_per_s()),
                     paper_fps: table1::paper_fps(&job.variant, &config, scene.sparse_point_count()),
                 });
             }
@@ -606,8 +627,12 @@ pub fn csv(results: &BenchResults) -> String {
         "rel_rmse_vs_brute_force",
         "flip_mean_vs_brute_force",
         "rel_rmse_vs_exact",
+        "rel_rmse_vs_exact_corrected",
+        "exact_rel_stderr",
         "flip_mean_vs_exact",
         "exact_ms",
+        "exact_device",
+        "exact_rays_per_s",
         "paper_fps",
     ]
     .iter()
@@ -643,8 +668,12 @@ pub fn csv(results: &BenchResults) -> String {
             opt(r.vs_brute_force.map(|e| e.rel_rmse)),
             opt(r.vs_brute_force.map(|e| e.flip_mean)),
             opt(r.vs_exact.map(|e| e.rel_rmse)),
+            opt(r.rel_rmse_vs_exact_corrected),
+            opt(r.exact_rel_stderr),
             opt(r.vs_exact.map(|e| e.flip_mean)),
             opt(r.exact_ms),
+            r.exact_device.map_or(String::new(), |d| d.as_str().to_owned()),
+            opt(r.exact_rays_per_s),
             r.paper_fps.map_or(String::new(), |f| f.to_string()),
         ];
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));

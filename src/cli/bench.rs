@@ -1,7 +1,7 @@
 //! `relume bench`: the sweep of quality settings, the paper's Table 1, the FMA and temporal
 //! measurements.
 
-use super::Reference;
+use super::{ExactArgs, Reference};
 use relume::gpu::Gpu;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -27,6 +27,8 @@ pub struct Args {
     /// With --reference exact: use every N-th VAL (flux x N).
     #[arg(long)]
     val_stride: Option<u32>,
+    #[command(flatten)]
+    exact: ExactArgs,
     /// Skip the plots (results.json and results.csv only).
     #[arg(long)]
     no_plots: bool,
@@ -52,12 +54,16 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(args.val_stride.is_none() || args.reference.is_some(), "--val-stride: only with --reference exact");
+    let exact = match args.reference {
+        Some(Reference::Exact) => Some(args.exact.options(args.val_stride.unwrap_or(1))?),
+        None => None,
+    };
     let options = relume::bench::BenchOptions {
         scene: args.scene,
         sweep: relume::bench::Sweep::parse(&args.sweep)?,
         grid: args.grid,
         quick: args.quick,
-        exact_val_stride: args.reference.map(|Reference::Exact| args.val_stride.unwrap_or(1)),
+        exact,
         references: !args.table1 && !args.no_references,
         table1: args.table1,
         out: args.out,

@@ -9,6 +9,7 @@ pub mod serve;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
+use relume::bench::compare::{ExactOptions, ReferenceDevice};
 use relume::scene::Scene;
 use std::path::Path;
 
@@ -62,6 +63,33 @@ impl Command {
 #[derive(Clone, Copy, ValueEnum)]
 pub enum Reference {
     Exact,
+}
+
+/// How `--reference exact` computes its reference (`compare`, `bench`): the options beyond
+/// `--val-stride`, which each command states itself.
+#[derive(clap::Args)]
+pub struct ExactArgs {
+    /// Exact reference: where it runs (auto: the CPU on CPU adapters or with
+    /// --reference-samples / --spp > 1, the GPU otherwise).
+    #[arg(long, value_enum, default_value_t = ReferenceDevice::Auto, requires = "reference")]
+    pub reference_device: ReferenceDevice,
+    /// Exact reference (CPU): N importance-sampled VALs per receiver instead of every VAL;
+    /// reports the reference's noise and noise-corrected errors.
+    #[arg(long, conflicts_with = "val_stride", requires = "reference")]
+    pub reference_samples: Option<u32>,
+    /// Exact reference (CPU): jittered samples per pixel (box filter); 1 = the pixel centre.
+    #[arg(long, default_value_t = 1, requires = "reference")]
+    pub spp: u32,
+}
+
+impl ExactArgs {
+    /// The checked options with every `val_stride`-th VAL; `Err` names the flag.
+    pub fn options(&self, val_stride: u32) -> anyhow::Result<ExactOptions> {
+        let options =
+            ExactOptions { device: self.reference_device, val_stride, samples: self.reference_samples, spp: self.spp };
+        options.check().map_err(anyhow::Error::msg)?;
+        Ok(options)
+    }
 }
 
 #[derive(clap::Args)]

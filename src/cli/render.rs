@@ -1,6 +1,7 @@
 //! `relume render`: a scene to PNG (and EXR), one component or all three.
 
 use super::{Size, checked_val_stride, load_lit};
+use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
 use relume::gpu::Gpu;
 use relume::image::LinearImage;
 use relume::renderer::{Component, Components, Method, Renderer};
@@ -34,10 +35,18 @@ pub struct Args {
     /// With --method exact: use every N-th VAL (flux x N), for large scenes.
     #[arg(long, default_value_t = 1)]
     val_stride: u32,
+    /// With --method exact: where the reference runs (auto: the CPU on CPU adapters, the GPU
+    /// otherwise; as `compare --reference-device`).
+    #[arg(long, value_enum)]
+    reference_device: Option<ReferenceDevice>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let val_stride = checked_val_stride(args.val_stride)?;
+    anyhow::ensure!(
+        args.reference_device.is_none() || args.method == Method::Exact,
+        "--reference-device: only with --method exact"
+    );
     if let Some(e) = args.exposure {
         anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure: must be a positive number, got {e}");
     }
@@ -47,7 +56,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut renderer = Renderer::new(&gpu, &scene)?;
     renderer.set_exact_val_stride(val_stride);
     let needs = if args.out_dir.is_some() { Components::ALL } else { args.component.needs() };
-    let frame = renderer.render_components(&gpu, args.method, w, h, needs)?;
+    let frame = match args.method {
+        // A direct-only image needs no reference.
+        Method::Exact if needs.indirect => {
+            let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
+            let options = ExactOptions { device, val_stride, samples: None, spp: 1 };
+            exact_reference(&gpu, &mut renderer, w, h, &options)?.frame
+        }
+        method => renderer.render_components(&gpu, method, w, h, needs)?,
+    };
     let exposure_of =
         |image: &LinearImage| args.exposure.or(scene.settings.exposure).unwrap_or_else(|| image.auto_exposure());
     let (written, exposure) = match &args.out_dir {

@@ -1,14 +1,22 @@
-//! The bounding volume hierarchy over the scene's triangles for exact visibility (DESIGN.md §5).
-//! One tree serves both references: it is built by the `obvhs` crate (PLOC with parallel
-//! reinsertion and SAH-driven leaf collapsing, its `medium_build` preset, no spatial splits),
-//! traversed on the CPU by obvhs itself ([`Bvh::segment_blocked`], [`Bvh::closest_hit`]: the CPU
-//! exact reference, `twin::exact_cpu`) and flattened into the stackless depth-first layout
-//! that `shaders/bvh.wgsl` traverses on the GPU. [`Bvh::occluded`] is that traversal's twin,
-//! [`ray_triangle`] the intersection's; every traversal here uses the same [`ray_triangle`], so
-//! CPU and GPU decide each shadow ray with the same arithmetic.
+//! The bounding volume hierarchies over the scene's triangles for exact visibility (DESIGN.md §5),
+//! both built by the `obvhs` crate from the same PLOC build (its `medium_build` preset, no
+//! spatial splits):
+//!
+//! - [`Bvh`], for the GPU pass: obvhs's binary tree (with SAH-driven leaf collapsing) flattened
+//!   into the stackless depth-first layout that `shaders/bvh.wgsl` traverses. [`Bvh::occluded`]
+//!   is that traversal's twin.
+//! - [`TraceBvh`], for the CPU exact reference (`twin::exact_cpu`): obvhs's compressed 8-wide
+//!   BVH (CWBVH), its fastest CPU traversal (SIMD node tests, ordered children), with an
+//!   early exit at the first blocker for shadow rays ([`TraceBvh::segment_blocked`]) and a
+//!   closest-hit query for primary rays ([`TraceBvh::closest_hit`]). Its triangles are stored in
+//!   the tree's leaf order with their edges precomputed ([`EdgeTriangle`]).
+//!
+//! Every traversal decides a triangle with the same Möller–Trumbore arithmetic
+//! ([`ray_triangle`], [`EdgeTriangle::hit`]), so CPU and GPU decide each shadow ray alike.
 
 use glam::{Vec2, Vec3, Vec3A};
 use obvhs::bvh2::Bvh2;
+use obvhs::cwbvh::CwBvh;
 use obvhs::ray::Ray;
 
 /// `|det|` below this fraction of `|e1| |e2| |d|` (the sine of the angle between the ray and the
@@ -29,18 +37,65 @@ pub struct BvhNode {
     pub count: u32,
 }
 
-/// The hierarchy: obvhs's tree for the CPU, and its flattened form for the GPU.
+/// The GPU pass's hierarchy: obvhs's binary tree, flattened.
 #[derive(Clone, Default)]
 pub struct Bvh {
     /// The GPU layout: nodes in depth-first order with miss links.
     pub nodes: Vec<BvhNode>,
     /// Triangle indices (into the scene's triangle list) in leaf order.
     pub order: Vec<u32>,
-    /// obvhs's binary tree (its leaves index `corners` and `tree.primitive_indices`).
-    tree: Bvh2,
-    /// Corners of each triangle in the tree's primitive order (`tree.primitive_indices[k]` is
-    /// the scene's triangle of `corners[k]`), so a leaf's triangles are contiguous in memory.
-    corners: Vec<[Vec3; 3]>,
+}
+
+/// A triangle prepared for the CPU traversal: its first corner, its two edges and
+/// `RAY_PARALLEL_EPSILON |e1| |e2|`, computed once with the same operations [`ray_triangle`]
+/// performs per ray, so [`EdgeTriangle::hit`] returns bit for bit what [`ray_triangle_hit`] does.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeTriangle {
+    a: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    /// `RAY_PARALLEL_EPSILON * |e1| * |e2|`.
+    parallel: f32,
+}
+
+impl EdgeTriangle {
+    pub fn new(a: Vec3, b: Vec3, c: Vec3) -> Self {
+        let (e1, e2) = (b - a, c - a);
+        Self { a, e1, e2, parallel: RAY_PARALLEL_EPSILON * e1.length() * e2.length() }
+    }
+
+    /// [`ray_triangle_hit`] with `d_length = |d|`.
+    #[inline(always)]
+    pub fn hit(&self, origin: Vec3, d: Vec3, d_length: f32) -> Option<(f32, Vec2)> {
+        let p = d.cross(self.e2);
+        let det = self.e1.dot(p);
+        // Relative: a degenerate (collinear) triangle's det is rounding noise whose sign and size
+        // depend on the float pipeline (FMA contraction made it a phantom hit on the GPU).
+        if det.abs() <= self.parallel * d_length {
+            return None;
+        }
+        let inv_det = 1.0 / det;
+        let s = origin - self.a;
+        let u = s.dot(p) * inv_det;
+        if !(0.0..=1.0).contains(&u) {
+            return None;
+        }
+        let q = s.cross(self.e1);
+        let v = d.dot(q) * inv_det;
+        if v < 0.0 || u + v > 1.0 {
+            return None;
+        }
+        Some((self.e2.dot(q) * inv_det, Vec2::new(u, v)))
+    }
+}
+
+/// The CPU reference's hierarchy: obvhs's CWBVH and its triangles in leaf order.
+#[derive(Clone, Default)]
+pub struct TraceBvh {
+    tree: CwBvh,
+    /// `triangles[k]` is the scene's triangle `tree.primitive_indices[k]`, so a leaf's triangles
+    /// are contiguous in memory.
+    triangles: Vec<EdgeTriangle>,
 }
 
 /// A ray's closest intersection: the scene's triangle, the distance along the ray's direction
@@ -53,25 +108,28 @@ pub struct TriangleHit {
     pub barycentrics: Vec2,
 }
 
+/// The scene's triangles as obvhs's input.
+fn obvhs_triangles(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<obvhs::triangle::Triangle> {
+    triangles
+        .iter()
+        .map(|t| {
+            let [v0, v1, v2] = t.map(|i| Vec3A::from(positions[i as usize]));
+            obvhs::triangle::Triangle { v0, v1, v2 }
+        })
+        .collect()
+}
+
 impl Bvh {
     /// Build over `triangles` (corner indices into `positions`) with obvhs.
     pub fn build(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
         if triangles.is_empty() {
             return Self::default();
         }
-        let tris: Vec<obvhs::triangle::Triangle> = triangles
-            .iter()
-            .map(|t| {
-                let [v0, v1, v2] = t.map(|i| Vec3A::from(positions[i as usize]));
-                obvhs::triangle::Triangle { v0, v1, v2 }
-            })
-            .collect();
+        let tris = obvhs_triangles(positions, triangles);
         let params = obvhs::BvhBuildParams::medium_build();
         let tree = obvhs::bvh2::builder::build_bvh2_from_tris(&tris, params, &mut Default::default());
-        let corners =
-            tree.primitive_indices.iter().map(|&i| triangles[i as usize].map(|v| positions[v as usize])).collect();
         let (nodes, order) = flatten(&tree);
-        Self { nodes, order, tree, corners }
+        Self { nodes, order }
     }
 
     /// Whether any triangle blocks the open segment from `origin` to `target`, through the
@@ -98,42 +156,61 @@ impl Bvh {
         }
         false
     }
+}
 
-    /// The same question as [`Bvh::occluded`], answered by obvhs's any-hit traversal of its own
-    /// tree (the CPU exact reference's shadow ray).
+impl TraceBvh {
+    /// Build over `triangles` (corner indices into `positions`) with obvhs: PLOC, reinsertion,
+    /// then the BVH2-to-CWBVH conversion with at most 3 triangles per leaf (its limit).
+    pub fn build(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
+        if triangles.is_empty() {
+            return Self::default();
+        }
+        let tris = obvhs_triangles(positions, triangles);
+        let params = obvhs::BvhBuildParams::medium_build();
+        let tree = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut Default::default());
+        let triangles = tree
+            .primitive_indices
+            .iter()
+            .map(|&i| {
+                let [a, b, c] = triangles[i as usize].map(|v| positions[v as usize]);
+                EdgeTriangle::new(a, b, c)
+            })
+            .collect();
+        Self { tree, triangles }
+    }
+
+    /// Whether any triangle blocks the open segment from `origin` to `target` (the same
+    /// question as [`Bvh::occluded`]): obvhs's CWBVH traversal, stopped at the first blocker.
+    #[inline]
     pub fn segment_blocked(&self, origin: Vec3, target: Vec3) -> bool {
-        if self.corners.is_empty() {
+        if self.triangles.is_empty() {
             return false;
         }
         let d = target - origin;
+        let d_length = d.length();
         let ray = Ray::new(origin.into(), d.into(), 0.0, 1.0);
-        !self.tree.ray_traverse_miss(ray, |_, k| {
-            let [a, b, c] = self.corners[k];
-            match ray_triangle(origin, d, a, b, c) {
-                Some(t) if t > 0.0 && t < 1.0 => t,
-                _ => f32::INFINITY,
-            }
+        !self.tree.ray_traverse_miss(ray, |_, k| match self.triangles[k].hit(origin, d, d_length) {
+            Some((t, _)) if t > 0.0 && t < 1.0 => t,
+            _ => f32::INFINITY,
         })
     }
 
     /// The nearest triangle the ray `origin + t direction`, t > 0, meets (obvhs's closest-hit
-    /// traversal with [`ray_triangle_hit`]).
+    /// traversal).
     pub fn closest_hit(&self, origin: Vec3, direction: Vec3) -> Option<TriangleHit> {
-        if self.corners.is_empty() {
+        if self.triangles.is_empty() {
             return None;
         }
         let ray = Ray::new(origin.into(), direction.into(), 0.0, f32::INFINITY);
+        let d_length = direction.length();
         let mut hit = obvhs::ray::RayHit::none();
         let mut best: Option<(f32, Vec2)> = None;
-        self.tree.ray_traverse(ray, &mut hit, |_, k| {
-            let [a, b, c] = self.corners[k];
-            match ray_triangle_hit(origin, direction, a, b, c) {
-                Some((t, uv)) if t > 0.0 && best.is_none_or(|(bt, _)| t < bt) => {
-                    best = Some((t, uv));
-                    t
-                }
-                _ => f32::INFINITY,
+        self.tree.ray_traverse(ray, &mut hit, |_, k| match self.triangles[k].hit(origin, direction, d_length) {
+            Some((t, uv)) if t > 0.0 && best.is_none_or(|(bt, _)| t < bt) => {
+                best = Some((t, uv));
+                t
             }
+            _ => f32::INFINITY,
         });
         let (t, barycentrics) = best?;
         Some(TriangleHit { triangle: self.tree.primitive_indices[hit.primitive_id as usize], t, barycentrics })
@@ -189,27 +266,7 @@ pub fn ray_triangle(origin: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<
 
 /// [`ray_triangle`] with the barycentrics `(u, v)` of the hit (weights of `b` and `c`).
 pub fn ray_triangle_hit(origin: Vec3, d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<(f32, Vec2)> {
-    let e1 = b - a;
-    let e2 = c - a;
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    // Relative: a degenerate (collinear) triangle's det is rounding noise whose sign and size
-    // depend on the float pipeline (FMA contraction made it a phantom hit on the GPU).
-    if det.abs() <= RAY_PARALLEL_EPSILON * e1.length() * e2.length() * d.length() {
-        return None;
-    }
-    let inv_det = 1.0 / det;
-    let s = origin - a;
-    let u = s.dot(p) * inv_det;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
-    }
-    let q = s.cross(e1);
-    let v = d.dot(q) * inv_det;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    Some((e2.dot(q) * inv_det, Vec2::new(u, v)))
+    EdgeTriangle::new(a, b, c).hit(origin, d, d.length())
 }
 
 #[cfg(test)]
@@ -217,7 +274,7 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// Both traversals (the GPU layout's twin and obvhs's own any-hit) agree with testing every
+    /// Both traversals (the GPU layout's twin and obvhs's CWBVH with early exit) agree with testing every
     /// triangle, on random segments through a soup of random triangles, and the closest hit with
     /// the nearest of all triangles (exact agreement: every path uses the same intersection
     /// routine, so only a traversal or flattening bug can make them differ).
@@ -235,6 +292,7 @@ mod tests {
             triangles.push([3 * i, 3 * i + 1, 3 * i + 2]);
         }
         let bvh = Bvh::build(&positions, &triangles);
+        let wide = TraceBvh::build(&positions, &triangles);
         assert!(bvh.nodes.len() > 200, "a tree, not a list: {} nodes", bvh.nodes.len());
         let mut seen = bvh.order.clone();
         seen.sort_unstable();
@@ -249,7 +307,7 @@ mod tests {
                 ray_triangle(o, t - o, a, b, c).is_some_and(|s| s > 0.0 && s < 1.0)
             });
             assert_eq!(bvh.occluded(&positions, &triangles, o, t), brute, "GPU layout: segment {o} -> {t}");
-            assert_eq!(bvh.segment_blocked(o, t), brute, "obvhs any-hit: segment {o} -> {t}");
+            assert_eq!(wide.segment_blocked(o, t), brute, "obvhs CWBVH: segment {o} -> {t}");
             let nearest = triangles
                 .iter()
                 .enumerate()
@@ -258,7 +316,7 @@ mod tests {
                     ray_triangle(o, t - o, a, b, c).filter(|s| *s > 0.0).map(|s| (k as u32, s))
                 })
                 .min_by(|x, y| x.1.total_cmp(&y.1));
-            let closest = bvh.closest_hit(o, t - o);
+            let closest = wide.closest_hit(o, t - o);
             assert_eq!(closest.map(|h| (h.triangle, h.t)), nearest, "closest hit along {o} -> {t}");
             if brute { hits += 1 } else { misses += 1 }
         }
@@ -267,13 +325,16 @@ mod tests {
 
     #[test]
     fn empty_and_single_triangle_scenes() {
-        let empty = Bvh::build(&[], &[]);
+        assert!(Bvh::build(&[], &[]).nodes.is_empty());
+        let empty = TraceBvh::build(&[], &[]);
         assert!(!empty.segment_blocked(Vec3::ZERO, Vec3::ONE) && empty.closest_hit(Vec3::ZERO, Vec3::X).is_none());
-        let one = Bvh::build(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
+        let (corners, tris) = ([Vec3::ZERO, Vec3::X, Vec3::Y], [[0, 1, 2]]);
+        let one = Bvh::build(&corners, &tris);
+        let wide = TraceBvh::build(&corners, &tris);
         assert_eq!(one.nodes.len(), 1);
         let (o, t) = (Vec3::new(0.2, 0.3, 1.0), Vec3::new(0.2, 0.3, -1.0));
-        assert!(one.occluded(&[Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]], o, t) && one.segment_blocked(o, t));
-        let hit = one.closest_hit(o, Vec3::NEG_Z).unwrap();
+        assert!(one.occluded(&corners, &tris, o, t) && wide.segment_blocked(o, t));
+        let hit = wide.closest_hit(o, Vec3::NEG_Z).unwrap();
         assert!((hit.t - 1.0).abs() < 1e-6 && (hit.barycentrics - Vec2::new(0.2, 0.3)).length() < 1e-6, "{hit:?}");
     }
 

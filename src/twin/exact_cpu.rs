@@ -2,7 +2,7 @@
 //! `shaders/exact.wgsl` (every VAL at every receiver, the disc form factor and Phong of
 //! [`val_radiance`], one shadow ray per receiver-VAL pair from `p + n RAY_OFFSET` to
 //! `l + n_l RAY_OFFSET`), over rayon's threads, with obvhs's any-hit traversal of
-//! [`Bvh`] for the shadow rays. For CPU adapters and CI, where the GPU pass runs on lavapipe.
+//! [`TraceBvh`] (obvhs's CWBVH) for the shadow rays. For CPU adapters and CI, where the GPU pass runs on lavapipe.
 //!
 //! Beyond the GPU pass it can estimate instead of sum ([`ValSampling::Importance`]: VALs drawn
 //! per receiver in proportion to their unoccluded contribution, an unbiased estimate) and
@@ -15,7 +15,7 @@
 //! sample per pixel; at uniformly random positions inside the pixel (a jittered box filter)
 //! otherwise.
 
-use super::bvh::Bvh;
+use super::bvh::TraceBvh;
 use super::{Material, Val, luminance, val_radiance, view_direction};
 use crate::image::LinearImage;
 use glam::{Mat4, Vec3, Vec4};
@@ -25,6 +25,9 @@ use rayon::prelude::*;
 /// Distance (m) receivers and VALs are pushed along their normals before a shadow ray is cast
 /// between them (the GPU pass's `RAY_OFFSET`).
 pub use crate::gpu::shader::RAY_OFFSET;
+
+/// The CPU reference's stage name in a frame's timings (BVH build and tracing).
+pub const STAGE: &str = "exact_cpu";
 
 /// Sub-pixel samples per pixel at most (`--spp`): receivers are made per pixel as it is shaded,
 /// so memory does not grow with it, but time does, linearly.
@@ -125,7 +128,7 @@ pub struct ExactImage {
 
 /// Everything one reference frame needs besides the receivers.
 pub struct ExactScene<'a> {
-    pub bvh: &'a Bvh,
+    pub bvh: &'a TraceBvh,
     pub vals: &'a [Val],
     pub glossy: bool,
 }
@@ -154,7 +157,7 @@ pub fn render(scene: &ExactScene, receivers: &Receivers, width: u32, height: u32
 }
 
 /// Pixel `i`'s receivers (one per sample; `None` where the sample sees background).
-fn pixel_receivers(receivers: &Receivers, bvh: &Bvh, i: usize, width: u32) -> Vec<Option<Receiver>> {
+fn pixel_receivers(receivers: &Receivers, bvh: &TraceBvh, i: usize, width: u32) -> Vec<Option<Receiver>> {
     match receivers {
         Receivers::Hits(hits) => vec![hits[i]],
         Receivers::Traced { camera, sampling, surface } => {
@@ -305,6 +308,7 @@ fn combine(estimates: &[Option<Halves>]) -> Pixel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::twin::bvh::Bvh;
     use crate::twin::shade_brute_force;
     use glam::Vec2;
 
@@ -313,7 +317,9 @@ mod tests {
     struct Room {
         positions: Vec<Vec3>,
         triangles: Vec<[u32; 3]>,
+        /// The GPU layout's tree, for `Bvh::occluded` (the twin of `bvh.wgsl`).
         bvh: Bvh,
+        trace: TraceBvh,
         vals: Vec<Val>,
     }
 
@@ -338,6 +344,7 @@ mod tests {
         ];
         let triangles = vec![[0, 2, 1], [0, 3, 2], [4, 6, 5], [4, 7, 6]];
         let bvh = Bvh::build(&positions, &triangles);
+        let trace = TraceBvh::build(&positions, &triangles);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
         let vals = (0..300)
             .map(|_| Val {
@@ -351,7 +358,7 @@ mod tests {
                 flux: Vec3::new(rng.random_range(0.0..1.0), rng.random_range(0.0..1.0), rng.random_range(0.0..1.0)),
             })
             .collect();
-        Room { positions, triangles, bvh, vals }
+        Room { positions, triangles, bvh, trace, vals }
     }
 
     /// Floor receivers along a line through the occluder's shadow: lit, penumbra and umbra.
@@ -368,7 +375,7 @@ mod tests {
     fn every_val_equals_brute_force_over_visible_vals() {
         let room = room();
         let hits = floor_receivers();
-        let scene = ExactScene { bvh: &room.bvh, vals: &room.vals, glossy: true };
+        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true };
         let out = render(&scene, &Receivers::Hits(&hits), hits.len() as u32, 1, ValSampling::All);
         let mut shadowed = 0;
         for (i, r) in hits.iter().enumerate() {
@@ -404,7 +411,7 @@ mod tests {
     fn importance_estimate_mean_over_seeds_converges_to_the_full_sum() {
         let room = room();
         let hits = floor_receivers();
-        let scene = ExactScene { bvh: &room.bvh, vals: &room.vals, glossy: true };
+        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true };
         let n = hits.len() as u32;
         let full = render(&scene, &Receivers::Hits(&hits), n, 1, ValSampling::All).image;
         let seeds = 200;
@@ -452,13 +459,13 @@ mod tests {
             let n = (p1 - p0).cross(p2 - p0).normalize();
             Receiver::new(crate::twin::barycentric(b, p0, p1, p2), n, SURFACE, EYE)
         };
-        let no_vals = ExactScene { bvh: &room.bvh, vals: &[], glossy: true };
+        let no_vals = ExactScene { bvh: &room.trace, vals: &[], glossy: true };
         for (x, y) in [(3u32, 30u32), (16, 16), (28, 25)] {
             let (o, d) = camera.ray(x as f32 + 0.5, y as f32 + 0.5);
             let sampling = PixelSampling { spp: 1, seed: 0 };
             let r = pixel_receivers(
                 &Receivers::Traced { camera: &camera, sampling, surface: &surface },
-                &room.bvh,
+                &room.trace,
                 (y * w + x) as usize,
                 w,
             );

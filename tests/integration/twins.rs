@@ -350,22 +350,26 @@ fn cpu_exact_reference_matches_gpu_exact() {
     let on_gpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Gpu)).unwrap();
     let on_cpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Cpu)).unwrap();
     assert_eq!((on_gpu.device, on_cpu.device), (ReferenceDevice::Gpu, ReferenceDevice::Cpu));
-    let scale = max_of((0..on_cpu.indirect.pixels.len()).map(|i| on_cpu.indirect.rgb(i)));
+    let scale = max_of((0..on_cpu.indirect().pixels.len()).map(|i| on_cpu.indirect().rgb(i)));
     assert!(scale > 0.0);
     let mut differing = 0;
-    for i in 0..on_cpu.indirect.pixels.len() {
-        assert_eq!(on_cpu.indirect.covered(i), on_gpu.indirect.covered(i), "coverage of pixel {i}");
-        let (c, g) = (on_cpu.indirect.rgb(i), on_gpu.indirect.rgb(i));
+    for i in 0..on_cpu.indirect().pixels.len() {
+        assert_eq!(on_cpu.indirect().covered(i), on_gpu.indirect().covered(i), "coverage of pixel {i}");
+        let (c, g) = (on_cpu.indirect().rgb(i), on_gpu.indirect().rgb(i));
         let bad = (c - g).abs().max_element() > REL * scale + 1e-9;
         if bad && differing < 5 {
             eprintln!("pixel {i}: GPU {g} CPU {c}");
         }
         differing += usize::from(bad);
     }
-    let covered = on_cpu.indirect.coverage();
+    let covered = on_cpu.indirect().coverage();
     assert!(differing * 100 <= covered, "{differing} of {covered} pixels differ");
+    // The CPU reference's frame ran no indirect technique of the GPU: its indirect stage is the
+    // CPU's own.
+    let stages: Vec<&str> = on_cpu.frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    assert!(stages.contains(&"exact_cpu") && !stages.contains(&"gather") && !stages.contains(&"exact"), "{stages:?}");
     let rays = on_cpu.shadow_rays.unwrap();
-    assert!(rays > 0 && rays <= covered as u64 * on_cpu.val_count as u64, "{rays} shadow rays");
+    assert!(rays > 0 && rays <= covered as u64 * on_cpu.frame.val_count as u64, "{rays} shadow rays");
     for r in [&on_cpu, &on_gpu] {
         assert!(r.variance.as_ref().unwrap().iter().all(|v| *v == Vec3::ZERO), "every VAL: no noise");
     }
@@ -379,7 +383,7 @@ fn cpu_exact_reference_matches_gpu_exact() {
 /// The rest are silhouette pixels, where a centre on an edge goes either way.
 #[test]
 fn traced_pixel_centres_match_the_visibility_buffer() {
-    use relume::twin::bvh::Bvh;
+    use relume::twin::bvh::TraceBvh;
     use relume::twin::exact_cpu::CameraRays;
     let gpu = gpu();
     let mut renderer = Renderer::new(&gpu, &load_scene("cornell_bunny_small")).unwrap();
@@ -389,7 +393,7 @@ fn traced_pixel_centres_match_the_visibility_buffer() {
     let flat = &renderer.scene.flat;
     let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
     let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    let bvh = Bvh::build(&positions, &triangles);
+    let bvh = TraceBvh::build(&positions, &triangles);
     let world_to_clip = renderer.camera_to_clip(w, h);
     let camera = CameraRays::new(world_to_clip, w, h);
     let on_screen = |p: Vec3| {

@@ -1,8 +1,9 @@
 // Disc-occluder visibility (DESIGN.md §4 step 3, paper §3.3): every other sparse point is a
 // disc that may hide part of the sphere standing for the light a sparse point gathered; the
 // gathered irradiance (and glossy irradiance) is scaled by the visible fraction before
-// renormalisation. Sparse points stream through workgroup memory in tiles. Rust twins in
-// `twin::occlusion`. OCCLUSION_PRODUCT selects the combination rule.
+// renormalisation. A disc occludes only when its plane separates the point from the sphere's
+// centre (`separates`). Sparse points stream through workgroup memory in tiles. Rust twins in
+// `disks/twin.rs`. OCCLUSION_PRODUCT selects the combination rule.
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read_write> gathered_diffuse: array<Gathered>;
@@ -41,6 +42,11 @@ fn project(x: vec3<f32>, n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, centre: vec3<
     }
     let form_factor = cos_x * abs(cos_shape) * area / (PI * d2 + area);
     return Projected(vec2<f32>(dot(u, t), dot(u, b)), sqrt(PI * form_factor), d, true);
+}
+
+// Whether the disc's plane strictly separates x from the light's centre c.
+fn separates(x: vec3<f32>, c: vec3<f32>, disc_position: vec3<f32>, disc_normal: vec3<f32>) -> bool {
+    return dot(disc_normal, x - disc_position) * dot(disc_normal, c - disc_position) < 0.0;
 }
 
 fn depth_scale(d: f32, d_s: f32, r: f32) -> f32 {
@@ -105,6 +111,9 @@ fn visibility(index: u32, local: u32) -> f32 {
                     continue;
                 }
                 let d = occluders[j];
+                if !separates(p.position, sphere.centre, d.position, d.normal) {
+                    continue;
+                }
                 let to_disc = d.position - p.position;
                 let len2 = dot(to_disc, to_disc);
                 var cos_disc = 1.0;

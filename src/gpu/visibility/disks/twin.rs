@@ -9,6 +9,14 @@
 //! approximated by axis-aligned squares of the same area, and a disc occludes the fraction of
 //! the sphere's square it overlaps, fully when it is nearer than the sphere's near side, scaled
 //! linearly to zero between the near side and the centre, not at all beyond the centre.
+//!
+//! A disc occludes only when its plane separates `x` from the sphere's centre ([`separates`]):
+//! the paper's test is angular and by depth only, so a disc lying on the lit surface itself (a
+//! wall point beside the VALs on that wall, seen from the ceiling) overlapped the sphere's square,
+//! was nearer than its near side, and darkened receivers that nothing occludes: on an open room
+//! every wall point darkened the walls and ceiling around it. In a convex room no wall disc
+//! separates a receiver from a light inside the room, so walls no longer occlude; the faces of
+//! an object between the two (either side of it) still do.
 
 use crate::twin::{COINCIDENT_DISTANCE_SQ, any_perpendicular};
 use glam::{Vec2, Vec3};
@@ -96,8 +104,17 @@ pub fn square_overlap(a: &Projected, b: &Projected) -> f32 {
     overlap(a.centre.x, b.centre.x) * overlap(a.centre.y, b.centre.y)
 }
 
+/// Whether the disc's plane strictly separates `x` from the light's centre `c` (the point light
+/// the sparse point's light is renormalised into): the only discs that can lie between them.
+pub fn separates(x: Vec3, c: Vec3, disc: &Disc) -> bool {
+    disc.normal.dot(x - disc.position) * disc.normal.dot(c - disc.position) < 0.0
+}
+
 /// Occlusion `o` in [0, 1] of the light sphere by one disc, seen from (`x`, `n`).
 pub fn disc_occlusion(x: Vec3, n: Vec3, sphere: &LightSphere, disc: &Disc) -> f32 {
+    if !separates(x, sphere.centre, disc) {
+        return 0.0;
+    }
     let t = any_perpendicular(n);
     let b = n.cross(t);
     let sphere_area = PI * sphere.radius * sphere.radius;
@@ -188,6 +205,43 @@ mod tests {
         for discs in [below, beside, beyond] {
             assert_eq!(visibility(Vec3::ZERO, Vec3::Y, &s, &discs, Combine::Sum), 1.0);
         }
+    }
+
+    /// The open-room bias: seen from the ceiling, discs on a lit wall between the ceiling and the
+    /// wall's VALs overlap the light sphere's square and are nearer than its near side, so the
+    /// paper's angular-and-depth test counts them as occluders (checked here term by term); they
+    /// lie beside the light, not between, and occlude nothing. The same discs moved 0.3 m off
+    /// the wall into the room, between ceiling and light, still occlude.
+    #[test]
+    fn discs_on_the_lit_wall_do_not_occlude() {
+        // VALs on the wall x = -1 (normal +X) around (-1, 1, 0), a 0.8 m square: per-axis standard
+        // deviation 0.8 / sqrt(12) in y and z, 0 in x.
+        let var = 0.64 / 12.0;
+        let sphere = light_sphere(Vec3::new(-1.0, 1.0, 0.0), Vec3::new(1.0, 1.0 + var, var));
+        let (x, n) = (Vec3::new(-0.6, 2.0, 0.0), -Vec3::Y);
+        // The wall's sparse points between the ceiling and the lit patch, 0.1 m apart.
+        let wall: Vec<Disc> = (0..6)
+            .flat_map(|i| (-3..=3).map(move |k| (i, k)))
+            .map(|(i, k)| Disc {
+                position: Vec3::new(-1.0, 1.45 + 0.1 * i as f32, 0.1 * k as f32),
+                normal: Vec3::X,
+                radius: 0.06,
+            })
+            .collect();
+        let (t, b) = (any_perpendicular(n), n.cross(any_perpendicular(n)));
+        let s = project(x, n, t, b, sphere.centre, 1.0, PI * sphere.radius * sphere.radius).unwrap();
+        let paper_would_occlude = wall.iter().any(|d| {
+            let cos = d.normal.dot((d.position - x).normalize());
+            project(x, n, t, b, d.position, cos, PI * d.radius * d.radius).is_some_and(|o| {
+                square_overlap(&s, &o) > 0.0 && depth_scale(o.distance, s.distance, sphere.radius) > 0.0
+            })
+        });
+        assert!(paper_would_occlude, "the case must be the biased one");
+        assert!(wall.iter().all(|d| !separates(x, sphere.centre, d)));
+        assert_eq!(visibility(x, n, &sphere, &wall, Combine::Sum), 1.0);
+        let in_front: Vec<Disc> = wall.iter().map(|d| Disc { position: d.position + Vec3::X * 0.3, ..*d }).collect();
+        let v = visibility(x, n, &sphere, &in_front, Combine::Sum);
+        assert!(v < 0.9, "discs between the ceiling and the light occlude: visibility {v}");
     }
 
     /// Inside the sphere the occlusion is scaled linearly with depth.
