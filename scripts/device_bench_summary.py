@@ -64,6 +64,7 @@ def main() -> int:
         json.dumps({"smoke": smoke, "adapter": adapter, "timing": timing, "steps": steps}, indent=1)
     )
 
+    shown = set()
     md = [f"# relume device benchmark{' (smoke: tiny sizes, not figures)' if smoke else ''}", ""]
     md += [f"Adapter: {adapter or 'unknown'}; timing source: {timing or 'unknown'}.", ""]
     md += ["| step | exit | wall s |", "|---|---|---|"]
@@ -71,11 +72,12 @@ def main() -> int:
 
     table1 = by_name.get("table1")
     if isinstance(table1, dict) and table1.get("configs"):
+        shown.add("table1")
         md += ["", "## Paper's Table 1 (target on an H100/H200: >= 1000 fps; 512k VALs >= 200 fps)", ""]
         md += ["| scene | triangles | sparse points | VALs | glossy | occlusion | size | frame ms | fps | paper fps |"]
         md += ["|---|---|---|---|---|---|---|---|---|---|"]
         for c in table1["configs"]:
-            cfg = c["config"]
+            cfg = c.get("config", c)  # the configuration is flattened into each result
             md.append(
                 f"| {c['variant']} | {c['triangles']} | {c['sparse_points']} | {c['vals']} | {cfg['glossy']} | "
                 f"{cfg['occlusion']} | {cfg['width']}x{cfg['height']} | {fmt(c['frame_ms'])} | "
@@ -85,6 +87,7 @@ def main() -> int:
     sweep = by_name.get("sweep")
     fma = sweep.get("fma") if isinstance(sweep, dict) else None
     if isinstance(fma, dict):
+        shown.add("sweep")
         md += ["", "## Gather vs the FMA kernel (target: >= 50 % of the FMA kernel)", ""]
         md += [f"FMA kernel: {fmt(fma['fma_per_s'])} FMA/s; {fma['vals']} VALs, {fma['sparse_points']} sparse points.", ""]
         md += ["| tile size | gather ms | pairs/s | pairs/s / FMA/s |", "|---|---|---|---|"]
@@ -95,6 +98,7 @@ def main() -> int:
 
     brute = by_name.get("sparse_vs_brute")
     if isinstance(brute, dict):
+        shown.add("sparse_vs_brute")
         md += ["", "## Sparse vs brute force (target at 1080p: >= 300x)", ""]
         md += [
             f"{brute['width']}x{brute['height']}, {brute['vals']} VALs, {brute['sparse_points']} sparse points: "
@@ -103,8 +107,10 @@ def main() -> int:
         ]
 
     exact = by_name.get("exact")
-    if isinstance(exact, dict) and isinstance(exact.get("exact"), dict):
-        e = exact["exact"]
+    # The exact comparison's fields are flattened into compare's report.
+    if isinstance(exact, dict) and "exact_ms" in exact:
+        e = exact
+        shown.add("exact")
         md += ["", "## Exact reference", ""]
         md += [
             f"{exact['width']}x{exact['height']}, {e['exact_vals_used']} VALs on the {e['exact_device']}: "
@@ -117,6 +123,7 @@ def main() -> int:
     if isinstance(replay, dict) and replay.get("frame_ms"):
         frames = replay["frame_ms"]
         steady = frames[1:] or frames
+        shown.add("replay")
         md += ["", "## Replay of the fixture recording", ""]
         md += [
             f"{replay['frames']} frames at {replay['width']}x{replay['height']}: mean frame {fmt(sum(steady) / len(steady))} ms "
@@ -125,6 +132,12 @@ def main() -> int:
             + "."
         ]
     (out / "results.md").write_text("\n".join(md) + "\n")
+    # A step that succeeded but whose figures could not be read means this script and relume's
+    # output drifted apart: fail, so that CI's smoke run notices.
+    unread = [s["name"] for s in steps if s["exit"] == 0 and s["name"] not in shown]
+    if unread:
+        print(f"device_bench_summary: no figures read from the output of {', '.join(unread)}", file=sys.stderr)
+        return 1
     return 0
 
 
