@@ -9,6 +9,7 @@ mod fuzz;
 mod hardening;
 mod layout;
 mod mcap;
+mod mr_differential;
 mod recording;
 mod redwood;
 mod replay;
