@@ -289,8 +289,8 @@ mod tests {
     }
 
     /// White furnace on the CPU: a uniform environment of radiance L gives irradiance pi L at
-    /// the centre for every normal, within the grid's quadrature error (measured here: under
-    /// 1.5% at 8 rows, under 0.4% at 16).
+    /// the centre for every normal, within the grid's quadrature error (the cell-centre rule:
+    /// measured 1.53 % at worst over these normals at 8 rows; bounds 2 % and 0.6 %).
     #[test]
     fn uniform_environment_gives_pi_l() {
         for (rows, tolerance) in [(8, 0.02), (16, 0.006)] {
