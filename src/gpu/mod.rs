@@ -11,6 +11,7 @@
 //! has a glossy material. Shared WGSL (structs, the DESIGN.md formulas, the scene bindings) is
 //! in `shader/`.
 
+pub mod differential;
 pub mod lights;
 pub mod pass;
 pub mod raster;
@@ -38,6 +39,7 @@ pub const PASSES: &[&pass::PassDesc] = &[
     &references::brute_force::PASS,
     &references::exact::PASS,
     &lights::direct::PASS,
+    &differential::PASS,
 ];
 
 /// Errors from the device and from pipeline creation.

@@ -6,8 +6,11 @@
 //! indirect image + timings out. The service's streams use [`virtual_depth`] and [`composite`]
 //! with the scene's shared renderer.
 
+pub mod differential;
+pub mod environment;
 pub mod replay;
 
+use crate::gpu::differential::Differential;
 use crate::gpu::timing::StageTimings;
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, encode_srgb};
@@ -15,7 +18,10 @@ use crate::renderer::{Method, Renderer, View};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
+use differential::{Emitter, LightField, MrSettings};
+use environment::Environment;
 use glam::{Affine3A, Vec3};
+use std::time::Instant;
 
 /// How replayed frames are lit and rendered.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,10 +73,31 @@ pub struct MrFrame {
 pub struct MrRenderer {
     renderer: Renderer,
     settings: RgbdSettings,
+    mr: MrSettings,
     options: MrOptions,
     accumulator: Option<ValAccumulator>,
     frames: u64,
+    /// Only with `settings.mr.differential`.
+    differential: Option<DifferentialState>,
+    environment: Environment,
+    /// Centre of the virtual content's bounding sphere: the environment's VALs surround it.
+    centre: Vec3,
 }
+
+/// The differential pass (its BVH of the virtual meshes as placed) and the virtual content's
+/// re-emitters and bounds.
+struct DifferentialState {
+    pass: Differential,
+    emitters: Vec<Emitter>,
+    bounds: (Vec3, Vec3),
+}
+
+/// Stage name of the differential rendering in a replay's timings (wall time: receivers on the
+/// CPU, the GPU rounds, the composite's relighting).
+pub const DIFFERENTIAL_STAGE: &str = "differential";
+
+/// Stage name of the environment's VALs (CPU: the `auto` estimate and the VALs' upload).
+pub const ENVIRONMENT_STAGE: &str = "environment";
 
 impl MrRenderer {
     pub fn new(gpu: &Gpu, scene: &Scene, options: MrOptions) -> anyhow::Result<Self> {
@@ -78,13 +105,33 @@ impl MrRenderer {
             Some(a) => Some(ValAccumulator::new(a.cell_size, a.max_vals, a.max_age_frames)?),
             None => None,
         };
+        let renderer = Renderer::new(gpu, scene)?;
+        let differential = match scene.settings.mr.differential {
+            false => None,
+            true => Some(DifferentialState {
+                pass: Differential::new(gpu, &renderer.scene)?,
+                emitters: differential::emitters(scene),
+                bounds: differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position))),
+            }),
+        };
+        let centre = renderer.scene.flat.bounding_sphere().0;
         Ok(Self {
-            renderer: Renderer::new(gpu, scene)?,
+            renderer,
             settings: scene.settings.rgbd,
+            mr: scene.settings.mr,
             options,
             accumulator,
             frames: 0,
+            differential,
+            environment: Environment::None,
+            centre,
         })
+    }
+
+    /// Light the following frames with `environment` too (`settings.environment`, read by
+    /// [`Environment::from_settings`]).
+    pub fn set_environment(&mut self, environment: Environment) {
+        self.environment = environment;
     }
 
     /// Relight `frame`: its VALs (or the accumulated set), the scene's spot light if any, the
@@ -92,21 +139,62 @@ impl MrRenderer {
     pub fn render_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<MrFrame, GpuError> {
         let (w, h) = (self.options.width, self.options.height);
         let settings = self.settings;
-        match &mut self.accumulator {
-            None => self.renderer.set_rgbd_frame(gpu, frame, &settings)?,
-            Some(acc) => {
+        // The differential pass and the environment need the real VALs on the CPU: they are
+        // read back, and the readback is timed as the `rgbd_vals` stage; the environment's VALs
+        // follow them.
+        let start = Instant::now();
+        let on_cpu = self.differential.is_some() || self.environment != Environment::None;
+        let real_vals = match (&mut self.accumulator, on_cpu) {
+            (None, false) => {
+                self.renderer.set_rgbd_frame(gpu, frame, &settings)?;
+                None
+            }
+            (None, true) => Some(self.renderer.rgbd_frame_vals(gpu, frame, &settings)?),
+            (Some(acc), _) => {
                 let vals = self.renderer.rgbd_frame_vals(gpu, frame, &settings)?;
                 acc.insert(self.frames, &vals);
-                self.renderer.set_vals(gpu, &acc.vals())?;
+                Some(acc.vals())
             }
+        };
+        let rgbd_ms = start.elapsed().as_secs_f64() * 1e3;
+        let start = Instant::now();
+        let real_vals = real_vals.map(|mut vals| {
+            let environment = self.environment.vals(self.centre, frame, &settings, &vals);
+            vals.extend(environment);
+            vals
+        });
+        if let Some(vals) = &real_vals {
+            self.renderer.set_vals(gpu, vals)?;
         }
+        let environment_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frames += 1;
         self.renderer.set_view(View::Pinhole { intrinsics: frame.intrinsics, camera_to_world: frame.camera_to_world });
-        let rendered = self.renderer.render(gpu, Method::Sparse, w, h)?;
+        let mut rendered = self.renderer.render(gpu, Method::Sparse, w, h)?;
+        if real_vals.is_some() {
+            rendered.timings.stages.insert(0, (crate::renderer::stage::RGBD_VALS.to_owned(), rgbd_ms));
+        }
+        if self.environment != Environment::None {
+            rendered.timings.stages.insert(1, (ENVIRONMENT_STAGE.to_owned(), environment_ms));
+        }
         let virtual_depth = virtual_depth(gpu, &self.renderer, frame.camera_to_world)?;
-        let composited =
-            composite(frame, &rendered.direct.add(&rendered.indirect), &virtual_depth, self.options.exposure);
         let sparse_irradiance = self.renderer.read_gathered_irradiance(gpu)?;
+        let background = match (&mut self.differential, &real_vals) {
+            (Some(d), Some(vals)) => {
+                let start = Instant::now();
+                let grid = differential::receivers(frame, &settings, &self.mr, d.bounds);
+                let mut all = vals.clone();
+                all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
+                let (light, _) = d.pass.run(gpu, &self.renderer.scene, &grid.receivers, &all, vals.len())?;
+                let field = LightField { grid: &grid, light: &light };
+                let background = differential::relight_camera(frame, &field, w, h, settings.radiance_scale);
+                rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), start.elapsed().as_secs_f64() * 1e3));
+                Some(background)
+            }
+            _ => None,
+        };
+        let virtual_rgb = rendered.direct.add(&rendered.indirect);
+        let composited =
+            composite_over(frame, background.as_deref(), &virtual_rgb, &virtual_depth, self.options.exposure);
         Ok(MrFrame {
             composited,
             indirect: rendered.indirect,
@@ -144,6 +232,18 @@ pub fn composite(
     virtual_depth: &[Option<f32>],
     exposure: f32,
 ) -> Vec<[u8; 3]> {
+    composite_over(frame, None, virtual_rgb, virtual_depth, exposure)
+}
+
+/// [`composite`] over `background` (sRGB at the output size, e.g. the camera image relit by
+/// [`differential::relight_camera`]) instead of the frame's colour where it is given.
+pub fn composite_over(
+    frame: &RgbdFrame,
+    background: Option<&[[u8; 3]]>,
+    virtual_rgb: &LinearImage,
+    virtual_depth: &[Option<f32>],
+    exposure: f32,
+) -> Vec<[u8; 3]> {
     let (w, h) = (virtual_rgb.width as usize, virtual_rgb.height as usize);
     let (fw, fh) = (frame.intrinsics.width as usize, frame.intrinsics.height as usize);
     (0..w * h)
@@ -157,7 +257,7 @@ pub fn composite(
                     let c = virtual_rgb.rgb(i) * exposure;
                     [encode_srgb(c.x), encode_srgb(c.y), encode_srgb(c.z)]
                 }
-                _ => frame.color[source],
+                _ => background.map_or(frame.color[source], |b| b[i]),
             }
         })
         .collect()

@@ -4,6 +4,7 @@
 use crate::gpu::Gpu;
 use crate::gpu::timing::TimingSource;
 use crate::image::LinearImage;
+use crate::mr::environment::Environment;
 use crate::mr::{AccumulateOptions, MrOptions, MrRenderer, relative_change};
 use crate::rgbd::recording::{Recording, RecordingOptions};
 use crate::scene::Scene;
@@ -66,6 +67,13 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
     let frames = options.frames.unwrap_or(usize::MAX).min(recording.len());
     let mr_options = MrOptions { width, height, exposure: options.exposure, accumulate: options.accumulate };
     let mut mr = MrRenderer::new(gpu, &scene, mr_options)?;
+    // `settings.environment` holds a path, so it is not among the scene's (plain-data) settings:
+    // it is read from the description, its map relative to the scene file.
+    let text =
+        std::fs::read_to_string(&options.scene).with_context(|| format!("reading {}", options.scene.display()))?;
+    let environment = crate::scene::SceneDescription::from_json_str(&text)?.settings.environment;
+    let base_dir = options.scene.parent().unwrap_or(Path::new("."));
+    mr.set_environment(Environment::from_settings(&environment, base_dir)?);
     let composited_dir = options.out.join("composited");
     let indirect_dir = options.out.join("indirect");
     for dir in [&composited_dir, &indirect_dir] {

@@ -24,6 +24,8 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
+use crate::mr::differential::MrSettings;
+use crate::mr::environment::{EnvironmentSettings, EnvironmentSource, MAX_ENVIRONMENT_ROWS};
 use crate::rgbd::RgbdSettings;
 use glam::{DMat4, DQuat, DVec3, EulerRot, Vec3};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
@@ -43,6 +45,8 @@ pub const MAX_IMAGE_SIDE: u32 = 8192;
 pub const RSM_RESOLUTION_RANGE: (u32, u32) = (8, 2048);
 /// Largest spot light outer half-angle, degrees.
 pub const MAX_OUTER_ANGLE_DEG: f32 = 80.0;
+/// Largest `settings.mr.receiver_margin` (m): receivers cost one pass over every VAL each.
+pub const MAX_RECEIVER_MARGIN: f32 = 10.0;
 /// Open interval of the vertical field of view, degrees.
 pub const FOV_Y_RANGE_DEG: (f32, f32) = (1.0, 170.0);
 
@@ -427,6 +431,14 @@ pub struct SettingsDescription {
     /// How RGB-D frames become VALs (replay and streams); every field has a default.
     #[serde(default)]
     pub rgbd: RgbdSettings,
+    /// Mixed-reality compositing (replay): differential rendering onto the real surfaces; every
+    /// field has a default.
+    #[serde(default)]
+    pub mr: MrSettings,
+    /// Light from the directions no VAL covers (replay only): `source` `"none"` (default),
+    /// `"auto"` or `"map"` (`crate::mr::environment`).
+    #[serde(default)]
+    pub environment: EnvironmentSettings,
 }
 
 /// Indirect occlusion mode.
@@ -487,6 +499,8 @@ impl Default for SettingsDescription {
             occlusion: OcclusionSetting::Auto,
             occlusion_rule: OcclusionRule::Product,
             rgbd: RgbdSettings::default(),
+            mr: MrSettings::default(),
+            environment: EnvironmentSettings::default(),
         }
     }
 }
@@ -509,6 +523,7 @@ impl SettingsDescription {
             },
             occlusion_rule: self.occlusion_rule,
             rgbd: self.rgbd,
+            mr: self.mr,
         }
     }
 
@@ -519,8 +534,40 @@ impl SettingsDescription {
         if let Some(exposure) = self.exposure {
             positive(exposure, &format!("{field}.exposure"))?;
         }
-        validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))
+        validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))?;
+        validate_mr(&self.mr, &format!("{field}.mr"))?;
+        validate_environment(&self.environment, &format!("{field}.environment"))
     }
+}
+
+/// Ranges of [`EnvironmentSettings`], naming the field of the first value out of range.
+pub fn validate_environment(e: &EnvironmentSettings, field: &str) -> Result<(), SceneError> {
+    positive(e.scale, &format!("{field}.scale"))?;
+    if !e.rotation_deg.is_finite() {
+        return Err(SceneError::field(
+            format!("{field}.rotation_deg"),
+            format!("must be finite, got {}", e.rotation_deg),
+        ));
+    }
+    let up = Vec3::from(e.up);
+    if !up.is_finite() || up.length_squared() < 1e-12 {
+        return Err(SceneError::field(format!("{field}.up"), format!("must be a finite non-zero vector, got {up}")));
+    }
+    int_in(e.rows, 2, MAX_ENVIRONMENT_ROWS, &format!("{field}.rows"))?;
+    if e.rows % 2 != 0 {
+        return Err(SceneError::field(format!("{field}.rows"), format!("must be even, got {}", e.rows)));
+    }
+    if e.source == EnvironmentSource::Map && e.map.is_none() {
+        return Err(SceneError::field(format!("{field}.map"), "source \"map\" needs a map path".to_owned()));
+    }
+    Ok(())
+}
+
+/// Ranges of [`MrSettings`], naming the field of the first value out of range.
+pub fn validate_mr(m: &MrSettings, field: &str) -> Result<(), SceneError> {
+    positive(m.receiver_margin, &format!("{field}.receiver_margin"))?;
+    in_closed(m.receiver_margin, 0.0, MAX_RECEIVER_MARGIN, &format!("{field}.receiver_margin"))?;
+    int_in(m.receiver_step, 1, 64, &format!("{field}.receiver_step"))
 }
 
 /// Ranges of [`RgbdSettings`], naming the field of the first value out of range.
@@ -977,6 +1024,7 @@ mod tests {
                 occlusion: Occlusion::Off,
                 occlusion_rule: OcclusionRule::Product,
                 rgbd: RgbdSettings::default(),
+                mr: MrSettings::default(),
             }
         );
         let message = error_of(&with_settings(r#"{"rgbd": {"min_depth": 2, "max_depth": 1}}"#));

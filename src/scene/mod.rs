@@ -221,6 +221,8 @@ pub struct Settings {
     pub occlusion_rule: OcclusionRule,
     /// How RGB-D frames become VALs.
     pub rgbd: crate::rgbd::RgbdSettings,
+    /// Mixed-reality compositing (differential rendering).
+    pub mr: crate::mr::differential::MrSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its

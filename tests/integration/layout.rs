@@ -158,3 +158,12 @@ fn pass_declarations_match_wgsl() {
         }
     }
 }
+
+#[test]
+fn mr_differential_structs_match_wgsl() {
+    use relume::gpu::differential::{RawDifferentialParams, RawReceiver, RawReceiverLight};
+    let m = module_of("differential");
+    check!(m, "DifferentialParams", RawDifferentialParams, [receiver_count, real_count, val_count, _pad0]);
+    check!(m, "Receiver", RawReceiver, [position, _pad0, normal, _pad1]);
+    check!(m, "ReceiverLight", RawReceiverLight, [unoccluded, blocked, added]);
+}

@@ -11,6 +11,7 @@ mod hardening;
 mod hardening_origin;
 mod layout;
 mod mcap;
+mod mr_differential;
 mod recording;
 mod redwood;
 mod replay;

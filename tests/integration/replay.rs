@@ -9,10 +9,13 @@ use relume::rgbd::recording::{Recording, RecordingOptions};
 use relume::scene::Scene;
 
 /// Small and coarse so the test stays fast on lavapipe: 160x120 output, one VAL per 16x16
-/// depth pixels (about 1,200 VALs).
+/// depth pixels (about 1,200 VALs). Without differential rendering: these tests check the
+/// real-to-virtual light and the compositing, which leaves the camera image untouched around
+/// the bunny; `mr_differential_*` below checks what the bunny does to the desk.
 fn small_scene() -> Scene {
     let mut scene = load_scene("mr_bunny");
     scene.settings.rgbd.grid_step = 16;
+    scene.settings.mr.differential = false;
     scene
 }
 
@@ -175,4 +178,36 @@ fn spot_light_and_frame_light_together() {
     assert!(both.timings.stages.iter().any(|(n, _)| n == "rsm_vals"));
     assert!(both.val_count > room_only.val_count, "{} vs {}", both.val_count, room_only.val_count);
     assert!(both.val_count <= room_only.val_count + 16 * 16);
+}
+
+/// Differential rendering in the replay: the desk around the bunny changes, mostly darker (the
+/// bunny's shadow: it blocks the light the desk receives from above, here the `auto`
+/// environment), and the camera image is untouched beyond the receiver margin.
+#[test]
+fn mr_differential_replay_shades_the_desk() {
+    use relume::mr::environment::{DirectionGrid, Environment};
+    let gpu = gpu();
+    let mut scene = small_scene();
+    scene.settings.mr.differential = true;
+    let frame = recording().frame(0).unwrap();
+    let mut plain = MrRenderer::new(&gpu, &small_scene(), options()).unwrap();
+    plain.set_environment(Environment::Auto(DirectionGrid::new(8, glam::Vec3::Z)));
+    let before = plain.render_frame(&gpu, &frame).unwrap();
+    let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
+    mr.set_environment(Environment::Auto(DirectionGrid::new(8, glam::Vec3::Z)));
+    let after = mr.render_frame(&gpu, &frame).unwrap();
+    assert!(after.timings.stages.iter().any(|(n, _)| n == relume::mr::DIFFERENTIAL_STAGE));
+    let luma = |c: [u8; 3]| u32::from(c[0]) + u32::from(c[1]) + u32::from(c[2]);
+    let (mut darker, mut brighter) = (0, 0);
+    for (i, (b, a)) in before.composited.iter().zip(&after.composited).enumerate() {
+        if after.indirect.covered(i) || a == b {
+            continue;
+        }
+        if luma(*a) < luma(*b) { darker += 1 } else { brighter += 1 }
+    }
+    eprintln!("around the bunny: {darker} pixels darker, {brighter} brighter");
+    assert!(darker > 50, "the bunny shades the desk: {darker} darker pixels");
+    assert!(darker > brighter, "{darker} darker vs {brighter} brighter");
+    // Far from the bunny (the top rows of the image, beyond the margin) nothing changes.
+    assert_eq!(before.composited[..160 * 10], after.composited[..160 * 10]);
 }

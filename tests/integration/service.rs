@@ -867,6 +867,9 @@ async fn a_recording_replays_through_the_server_as_offline() {
     scene["meshes"][0]["obj"] =
         fixture("meshes/stanford_bunny/stanford-bunny.obj").to_string_lossy().into_owned().into();
     scene["settings"]["rgbd"]["grid_step"] = 16.into();
+    // The stream path composites without differential rendering (issue 17 wires it into
+    // `relume replay` only so far): compare like with like.
+    scene["settings"]["mr"] = serde_json::json!({ "differential": false });
     let scene_path = dir.join("mr_bunny_coarse.json");
     std::fs::write(&scene_path, scene.to_string()).expect("scene written");
 

@@ -1,0 +1,230 @@
+//! Differential rendering onto real surfaces (`differential.wgsl` + the BVH traversal of
+//! `references/bvh.wgsl`; issue 17, after Debevec 1998 and Knecht et al., ISMAR 2010): per real
+//! receiver point, the irradiance of the real VALs, the part of it the virtual meshes block and
+//! the irradiance the virtual meshes' own sparse points add by reflection. `mr::differential`
+//! makes the receivers from a depth frame and turns these sums into the composite. Rust twin:
+//! [`twin::receiver_light`].
+//!
+//! Runs in rounds, like the exact reference (see `differential.wgsl`): the host dispatches until
+//! every receiver has seen every VAL.
+
+pub mod twin;
+
+use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write};
+use crate::gpu::raw::RawVal;
+use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::{TILE_SIZE, WORKGROUP_SIZE};
+use crate::gpu::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
+use crate::twin::Val;
+use crate::twin::bvh::Bvh;
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+pub use twin::{Receiver, ReceiverLight};
+
+pub const WGSL: &str = include_str!("differential.wgsl");
+const BVH: &str = include_str!("../references/bvh.wgsl");
+
+/// Loop iterations (VAL loop and BVH traversal together) one invocation runs per round: below
+/// llvmpipe's limit on all the loops of an invocation, with a margin (see `exact.wgsl`).
+pub const DIFFERENTIAL_LOOP_BUDGET: u32 = 60_000;
+const _: () = assert!(DIFFERENTIAL_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
+
+/// Rounds at most before [`Differential::run`] gives up (every round makes progress on every
+/// unfinished receiver, so only a driver that ignores the budget could need this many).
+const MAX_ROUNDS: u32 = 1 << 16;
+
+/// The pass's own WGSL: its constant, the BVH traversal, then `differential.wgsl`.
+pub fn body() -> String {
+    format!("const DIFFERENTIAL_LOOP_BUDGET: u32 = {DIFFERENTIAL_LOOP_BUDGET}u;\n{BVH}\n{WGSL}")
+}
+
+/// One invocation per receiver; `bvh_nodes` and `bvh_triangles` sit at bindings 4 and 5, where
+/// `bvh.wgsl` declares them.
+pub const PASS: PassDesc = PassDesc {
+    label: "differential",
+    bindings: &[
+        read("params"),
+        read("receivers"),
+        read("vals"),
+        read_write("light"),
+        read("bvh_nodes"),
+        read("bvh_triangles"),
+        read_write("progress"),
+        read_write("status"),
+    ],
+    entries: &[Entry::first("main", 8)],
+    workgroup: [WORKGROUP_SIZE, 1, 1],
+    default_source: |textured| PASS.source(&body(), textured),
+};
+
+/// WGSL `DifferentialParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawDifferentialParams {
+    pub receiver_count: u32,
+    /// `vals[.. real_count]` are the real VALs, the rest the virtual content's re-emitters.
+    pub real_count: u32,
+    pub val_count: u32,
+    pub _pad0: u32,
+}
+
+/// WGSL `Receiver`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawReceiver {
+    pub position: [f32; 3],
+    pub _pad0: f32,
+    pub normal: [f32; 3],
+    pub _pad1: f32,
+}
+
+/// WGSL `ReceiverLight` (W/m², RGB; `w` unused).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawReceiverLight {
+    pub unoccluded: [f32; 4],
+    pub blocked: [f32; 4],
+    pub added: [f32; 4],
+}
+
+impl From<&RawReceiverLight> for ReceiverLight {
+    fn from(r: &RawReceiverLight) -> Self {
+        let v = |c: [f32; 4]| Vec3::new(c[0], c[1], c[2]);
+        Self { unoccluded: v(r.unoccluded), blocked: v(r.blocked), added: v(r.added) }
+    }
+}
+
+/// Workgroups: 1-D [`WORKGROUP_SIZE`] on GPUs, one invocation on CPU adapters, for the reason
+/// `references::exact` gives (llvmpipe counts its loop limit per SIMD vector, so diverging
+/// lanes in the traversal share one limit).
+fn workgroup(gpu: &Gpu) -> [u32; 3] {
+    if gpu.is_cpu() { [1, 1, 1] } else { PASS.workgroup }
+}
+
+/// The BVH of `scene`'s triangles (the virtual meshes).
+pub fn scene_bvh(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>, Bvh) {
+    let flat = &scene.flat;
+    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
+    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let bvh = Bvh::build(&positions, &triangles);
+    (positions, triangles, bvh)
+}
+
+/// The pass for one scene placement: its BVH and buffers grown to the largest frame so far.
+pub struct Differential {
+    kernel: Kernel,
+    nodes: wgpu::Buffer,
+    order: wgpu::Buffer,
+    params: wgpu::Buffer,
+    status: wgpu::Buffer,
+    /// (receivers, light, progress) and their capacity in receivers.
+    per_receiver: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, usize)>,
+    /// VAL buffer and its capacity.
+    vals: Option<(wgpu::Buffer, usize)>,
+}
+
+impl Differential {
+    /// Build the BVH of `scene`'s triangles as placed now and the pass.
+    pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
+        let (_, _, bvh) = scene_bvh(scene);
+        let none = wgpu::BufferUsages::empty();
+        // A zero-filled node ends the traversal at once; a binding cannot be empty.
+        let nodes = if bvh.nodes.is_empty() { vec![Default::default()] } else { bvh.nodes };
+        let order = if bvh.order.is_empty() { vec![0] } else { bvh.order };
+        let nodes = gpu.storage_buffer("differential.bvh_nodes", &nodes, none)?;
+        let order = gpu.storage_buffer("differential.bvh_triangles", &order, none)?;
+        let workgroup = workgroup(gpu);
+        let source = PASS.source_with(&body(), scene.textured(), workgroup, TILE_SIZE);
+        let module = module_from_source(gpu, PASS.label, source)?;
+        let kernel = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("main"), &[], workgroup)?;
+        let params = gpu.storage_buffer("differential.params", &[RawDifferentialParams::default()], none)?;
+        let status = gpu.storage_buffer_sized::<u32>("differential.status", 2)?;
+        Ok(Self { kernel, nodes, order, params, status, per_receiver: None, vals: None })
+    }
+
+    /// The sums of [`twin::receiver_light`] at every receiver: `vals[.. real_count]` are the
+    /// real VALs, the rest the virtual content's re-emitters. Returns them and the rounds it
+    /// took. Submits and waits.
+    pub fn run(
+        &mut self,
+        gpu: &Gpu,
+        scene: &GpuScene,
+        receivers: &[Receiver],
+        vals: &[Val],
+        real_count: usize,
+    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
+        if receivers.is_empty() {
+            return Ok((Vec::new(), 0));
+        }
+        let n = receivers.len();
+        if self.per_receiver.as_ref().is_none_or(|p| p.3 < n) {
+            let receivers = gpu.storage_buffer_sized::<RawReceiver>("differential.receivers", n)?;
+            let light = gpu.storage_buffer_sized::<RawReceiverLight>("differential.light", n)?;
+            let progress = gpu.storage_buffer_sized::<u32>("differential.progress", n)?;
+            self.per_receiver = Some((receivers, light, progress, n));
+        }
+        let val_slots = vals.len().max(1);
+        if self.vals.as_ref().is_none_or(|v| v.1 < val_slots) {
+            self.vals = Some((gpu.storage_buffer_sized::<RawVal>("differential.vals", val_slots)?, val_slots));
+        }
+        let (receiver_buffer, light, progress, _) = self.per_receiver.as_ref().expect("made above");
+        let val_buffer = &self.vals.as_ref().expect("made above").0;
+        let raw: Vec<RawReceiver> = receivers
+            .iter()
+            .map(|r| RawReceiver { position: r.position.into(), normal: r.normal.into(), ..Default::default() })
+            .collect();
+        gpu.queue.write_buffer(receiver_buffer, 0, bytemuck::cast_slice(&raw));
+        if !vals.is_empty() {
+            let raw: Vec<RawVal> = vals.iter().map(RawVal::from).collect();
+            gpu.queue.write_buffer(val_buffer, 0, bytemuck::cast_slice(&raw));
+        }
+        let params = RawDifferentialParams {
+            receiver_count: n as u32,
+            real_count: real_count.min(vals.len()) as u32,
+            val_count: vals.len() as u32,
+            _pad0: 0,
+        };
+        gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let group = self.kernel.bind(
+            gpu,
+            &[
+                buffer("params", &self.params),
+                buffer("receivers", receiver_buffer),
+                buffer("vals", val_buffer),
+                buffer("light", light),
+                buffer("bvh_nodes", &self.nodes),
+                buffer("bvh_triangles", &self.order),
+                buffer("progress", progress),
+                buffer("status", &self.status),
+            ],
+        );
+        let mut rounds = 0;
+        loop {
+            let mut encoder = gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("differential.round") });
+            if rounds == 0 {
+                encoder.clear_buffer(progress, 0, Some(4 * n as u64));
+            }
+            encoder.clear_buffer(&self.status, 0, None);
+            self.kernel.dispatch(&mut encoder, &group, scene, [n as u32, 1, 1], None);
+            gpu.submit_and_wait(encoder)?;
+            rounds += 1;
+            let [left, stuck] = gpu.read_buffer::<u32>(&self.status, 2)?[..] else {
+                unreachable!("read_buffer returns the 2 elements asked for")
+            };
+            if left == 0 {
+                break;
+            }
+            if stuck > 0 || rounds >= MAX_ROUNDS {
+                return Err(GpuError::Incomplete(format!(
+                    "differential: {left} receivers unfinished after {rounds} rounds, {stuck} of them made no \
+                     progress (a shadow ray longer than {DIFFERENTIAL_LOOP_BUDGET} BVH steps)"
+                )));
+            }
+        }
+        let out = gpu.read_buffer::<RawReceiverLight>(light, n)?;
+        Ok((out.iter().map(ReceiverLight::from).collect(), rounds))
+    }
+}

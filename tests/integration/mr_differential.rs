@@ -1,0 +1,176 @@
+//! Differential rendering onto real surfaces (issue 17): the GPU pass against its CPU twin, and
+//! a real plate under a virtual box against the exact reference rendered with and without the
+//! box.
+
+use super::gpu;
+use glam::Vec3;
+use relume::gpu::differential::{Differential, Receiver, scene_bvh, twin};
+use relume::gpu::scene::{FlatScene, GpuScene};
+use relume::mr::differential::relit_radiance;
+use relume::scene::{Material, Scene};
+use relume::twin::Val;
+use relume::twin::bvh::Bvh;
+use relume::twin::exact_cpu::{self, ExactScene, Receivers, ValSampling};
+
+/// A closed cube from `lo` to `hi` as OBJ text (outward faces).
+fn cube_obj(lo: Vec3, hi: Vec3) -> String {
+    let mut obj = String::new();
+    for i in 0..8 {
+        let p = Vec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        );
+        obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
+    }
+    // Corner index = 1 + x + 2y + 4z.
+    obj += "f 1 3 4 2\nf 5 6 8 7\nf 1 2 6 5\nf 3 7 8 4\nf 1 5 7 3\nf 2 4 8 6\n";
+    obj
+}
+
+/// The virtual box: 0.2 m wide, floating 2 cm above the plate (z = 0), 0.2 m tall.
+fn box_scene(albedo: f32) -> Scene {
+    let obj = cube_obj(Vec3::new(-0.1, -0.1, 0.02), Vec3::new(0.1, 0.1, 0.22));
+    let json = serde_json::json!({
+        "meshes": [{ "obj": "box.obj", "obj_text": obj, "sparse_points": 96,
+                     "material": { "diffuse": [albedo, albedo, albedo] } }],
+        "camera": { "position": [0, -2, 1], "target": [0, 0, 0], "fov_y_deg": 45, "width": 64, "height": 48 }
+    });
+    Scene::from_json_str(&json.to_string(), std::path::Path::new(".")).expect("box scene")
+}
+
+/// An 8 x 8 grid of downward VALs 1 m above the plate, over [-0.5, 0.5]².
+fn lights_above() -> Vec<Val> {
+    (0..64)
+        .map(|i| Val {
+            position: Vec3::new(-0.5 + (i % 8) as f32 / 7.0, -0.5 + (i / 8) as f32 / 7.0, 1.0),
+            normal: -Vec3::Z,
+            area: 0.01,
+            flux: Vec3::new(1.0, 0.8, 0.6),
+        })
+        .collect()
+}
+
+/// Receivers on the plate z = 0 facing up: a 33 x 33 grid over [-0.8, 0.8]².
+fn plate_receivers() -> Vec<Receiver> {
+    (0..33 * 33)
+        .map(|i| Receiver {
+            position: Vec3::new(-0.8 + 0.05 * (i % 33) as f32, -0.8 + 0.05 * (i / 33) as f32, 0.0),
+            normal: Vec3::Z,
+        })
+        .collect()
+}
+
+fn gpu_box(gpu: &relume::gpu::Gpu, albedo: f32) -> (Scene, GpuScene) {
+    let scene = box_scene(albedo);
+    let flat = FlatScene::from_scene(&scene);
+    let gpu_scene = GpuScene::new(gpu, flat).expect("upload");
+    (scene, gpu_scene)
+}
+
+/// The GPU pass and its twin agree at every receiver, for real VALs (blocked light) and for the
+/// box's own sparse points re-emitting (added light). Both cast the same shadow rays with the
+/// same arithmetic (`twin::bvh::Bvh::occluded` is the traversal's twin), so they differ by the
+/// order of float sums only: 1e-4 of the receiver's total plus 1e-6 W/m² (one flipped
+/// ray toward a VAL of these fluxes would move a sum by over 1e-3 of it).
+#[test]
+fn mr_differential_gpu_matches_twin() {
+    let gpu = gpu();
+    let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
+    let mut vals = lights_above();
+    let real_count = vals.len();
+    let emitters = relume::mr::differential::emitters(&scene);
+    let lit: Vec<Vec3> = emitters.iter().map(|e| Vec3::splat(5.0) * (0.5 + 0.5 * e.normal.z.abs())).collect();
+    vals.extend(relume::mr::differential::emitter_vals(&emitters, &lit));
+    let receivers = plate_receivers();
+    let mut pass = Differential::new(&gpu, &gpu_scene).unwrap();
+    let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, &vals, real_count).unwrap();
+    let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
+    let (mut blocked, mut added) = (0, 0);
+    for (r, got) in receivers.iter().zip(&light) {
+        let want = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
+        let scale = (want.unoccluded + want.added).max_element();
+        let tol = 1e-4 * scale + 1e-6;
+        for (g, w, what) in [
+            (got.unoccluded, want.unoccluded, "unoccluded"),
+            (got.blocked, want.blocked, "blocked"),
+            (got.added, want.added, "added"),
+        ] {
+            assert!((g - w).abs().max_element() <= tol, "{what} at {}: GPU {g} vs CPU {w}", r.position);
+        }
+        blocked += usize::from(want.blocked.x > 0.0);
+        added += usize::from(want.added.x > 0.0);
+    }
+    eprintln!("{} receivers, {rounds} rounds: {blocked} shadowed, {added} lit by the box", receivers.len());
+    assert!(blocked > 50 && added > 50, "the test must exercise both sums: {blocked} shadowed, {added} lit");
+}
+
+/// A real plate (albedo 0.5, its camera radiance the exact reference without the box) under a
+/// virtual black box, lit by 64 VALs above: the composite `L + rho dE / pi`, with `rho`
+/// estimated from `L` and the receivers' irradiance, equals the exact reference rendered with the
+/// box in the scene. Both sum the same VALs with the same disc form factor and cast shadow rays
+/// through different traversals of different trees (obvhs's any-hit on plate + box, the GPU's
+/// stackless one on the box alone), so they differ by float rounding: 1e-4 relative. Where no
+/// plate-to-VAL segment crosses the box the composite is the camera radiance exactly.
+#[test]
+fn mr_differential_plate_darkens_as_exact_predicts() {
+    let gpu = gpu();
+    let (_, gpu_scene) = gpu_box(&gpu, 0.0);
+    let vals = lights_above();
+    let receivers = plate_receivers();
+    let mut pass = Differential::new(&gpu, &gpu_scene).unwrap();
+    let (light, _) = pass.run(&gpu, &gpu_scene, &receivers, &vals, vals.len()).unwrap();
+
+    // The exact reference of the plate alone and of the plate with the box.
+    let plate_positions = vec![
+        Vec3::new(-2.0, -2.0, 0.0),
+        Vec3::new(2.0, -2.0, 0.0),
+        Vec3::new(2.0, 2.0, 0.0),
+        Vec3::new(-2.0, 2.0, 0.0),
+    ];
+    let plate_triangles = vec![[0, 1, 2], [0, 2, 3]];
+    let (box_positions, box_triangles, _) = scene_bvh(&gpu_scene);
+    let mut positions = plate_positions.clone();
+    positions.extend(&box_positions);
+    let mut triangles = plate_triangles.clone();
+    triangles.extend(box_triangles.iter().map(|t| t.map(|i| i + 4)));
+    let without = Bvh::build(&plate_positions, &plate_triangles);
+    let with = Bvh::build(&positions, &triangles);
+    let surface = Material { diffuse: Vec3::splat(0.5), specular: Vec3::ZERO, exponent: 1.0, diffuse_texture: None };
+    let eye = Vec3::new(0.0, -2.0, 1.0);
+    let hits: Vec<Option<exact_cpu::Receiver>> =
+        receivers.iter().map(|r| Some(exact_cpu::Receiver::new(r.position, r.normal, surface, eye))).collect();
+    let n = receivers.len() as u32;
+    let render = |bvh: &Bvh| {
+        let scene = ExactScene { bvh, vals: &vals, glossy: false };
+        exact_cpu::render(&scene, &Receivers::Hits(&hits), n, 1, ValSampling::All).image
+    };
+    let (camera, reference) = (render(&without), render(&with));
+
+    let (mut darkened, mut untouched) = (0, 0);
+    for (i, (r, l)) in receivers.iter().zip(&light).enumerate() {
+        let (before, after) = (camera.rgb(i), reference.rgb(i));
+        let composite = relit_radiance(before, l);
+        let tol = 1e-4 * before.max_element() + 1e-9;
+        assert!(
+            (composite - after).abs().max_element() <= tol,
+            "at {}: composite {composite} vs exact {after}",
+            r.position
+        );
+        if after == before {
+            assert_eq!(l.blocked, Vec3::ZERO, "at {}", r.position);
+            assert_eq!(composite, before, "nothing may change where the box cannot reach ({})", r.position);
+            untouched += 1;
+        } else if after.x < 0.9 * before.x {
+            darkened += 1;
+        }
+    }
+    let centre = receivers.iter().position(|r| r.position.truncate().length() < 1e-3).expect("a centre receiver");
+    eprintln!(
+        "{darkened} receivers darkened by over 10%, {untouched} untouched; centre {} -> {}",
+        camera.rgb(centre),
+        reference.rgb(centre)
+    );
+    assert!(darkened >= 20 && untouched >= 100, "{darkened} darkened, {untouched} untouched");
+    assert!(reference.rgb(centre).x < 0.5 * camera.rgb(centre).x, "the box must shade the plate under it");
+}
