@@ -1,6 +1,7 @@
 //! Per-vertex interpolation (`interpolate.wgsl`, DESIGN.md §4 step 4): each vertex averages the
-//! point lights of its nearest sparse points with the scene's kernel, and carries their bound. Rust twins: `twin::interpolation_weights`,
-//! `twin::interpolate_lights`. Run by [`super::SparseMethod`].
+//! point lights of its nearest sparse points with the scene's kernel, and carries their bound.
+//! Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`. Run by
+//! [`super::SparseMethod`].
 
 use crate::gpu::pass::{Entry, PassDesc, read, read_write};
 use crate::gpu::shader::WORKGROUP_SIZE;
