@@ -54,6 +54,14 @@ impl LinearImage {
         LinearImage { width: self.width, height: self.height, pixels }
     }
 
+    /// Sum and largest value of the covered pixels' luminance.
+    pub fn luminance_sum_and_peak(&self) -> (f64, f64) {
+        (0..self.pixels.len())
+            .filter(|&i| self.covered(i))
+            .map(|i| luminance(self.rgb(i)) as f64)
+            .fold((0.0, 0.0), |(sum, peak), y| (sum + y, f64::max(peak, y)))
+    }
+
     /// Exposure that maps the 99th-percentile luminance of covered pixels to 1 (1 if dark).
     pub fn auto_exposure(&self) -> f32 {
         let mut y: Vec<f32> =

@@ -197,6 +197,8 @@ pub struct Renderer {
     view: View,
     occlusion: scene::Occlusion,
     occlusion_rule: scene::OcclusionRule,
+    /// The sparse method's interpolation kernel and light bound (`settings.sparse`).
+    sparse_shading: (scene::InterpolationKernel, scene::LightBound),
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The spot light's VALs (R² at most) after the uploaded ones.
@@ -248,6 +250,7 @@ impl Renderer {
             view: View::Scene(scene.camera),
             occlusion: scene.settings.occlusion,
             occlusion_rule: scene.settings.occlusion_rule,
+            sparse_shading: (scene.settings.sparse.kernel, scene.settings.sparse.bound),
             exact_val_stride: 1,
             scene: scene_gpu,
             indirect: Indirect::default(),
@@ -536,8 +539,14 @@ impl Renderer {
         if components.indirect {
             match method {
                 Method::Sparse => {
-                    let settings =
-                        SparseSettings { glossy, occlusion: self.occlusion, occlusion_rule: self.occlusion_rule };
+                    let (kernel, bound) = self.sparse_shading;
+                    let settings = SparseSettings {
+                        glossy,
+                        occlusion: self.occlusion,
+                        occlusion_rule: self.occlusion_rule,
+                        kernel,
+                        bound,
+                    };
                     built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
                         .fit(gpu, scene, capacity)?;
                 }

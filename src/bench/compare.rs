@@ -277,6 +277,11 @@ pub struct CompareReport {
     pub speedup: f64,
     pub indirect_rel_rmse: f64,
     pub indirect_flip_mean: f64,
+    /// Sparse / brute force, summed luminance: the energy the sparse method adds (> 1) or
+    /// loses (< 1), e.g. to `settings.sparse.bound`.
+    pub indirect_energy_ratio: f64,
+    /// Sparse / brute force, brightest pixel's luminance: fireflies show as ratios above 1.
+    pub indirect_peak_ratio: f64,
     /// The brute force's automatic exposure, at which FLIP tone-maps both.
     pub exposure: f32,
     /// Scene upload and pipeline creation (ms).
@@ -343,6 +348,8 @@ pub fn compare(
         write_comparison(dir, &sparse.indirect, &brute.indirect, error.exposure)?;
     }
     let (sparse_ms, brute_force_ms) = (sparse.indirect_ms(), brute.indirect_ms());
+    let ((sparse_sum, sparse_peak), (brute_sum, brute_peak)) =
+        (sparse.indirect.luminance_sum_and_peak(), brute.indirect.luminance_sum_and_peak());
     let exact = match exact {
         Some(options) => Some(exact_comparison(gpu, &mut renderer, (w, h), options, images)?),
         None => None,
@@ -368,6 +375,8 @@ pub fn compare(
         speedup: brute_force_ms / sparse_ms,
         indirect_rel_rmse: error.rel_rmse,
         indirect_flip_mean: error.flip_mean,
+        indirect_energy_ratio: sparse_sum / brute_sum,
+        indirect_peak_ratio: sparse_peak / brute_peak,
         exposure: error.exposure,
         setup_ms,
         sparse_stages_ms: sparse.timings.stages,

@@ -82,25 +82,25 @@ pub struct RawGathered {
     pub _pad2: f32,
 }
 
-/// WGSL `PointLight`: position (m) and intensity (W/sr).
+/// WGSL `PointLight`: position (m), intensity (W/sr) and bound (W/m², 0 = unbounded).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct RawPointLight {
     pub position: [f32; 3],
     pub _pad0: f32,
     pub intensity: [f32; 3],
-    pub _pad1: f32,
+    pub bound: f32,
 }
 
 impl From<&RawPointLight> for twin::PointLight {
     fn from(p: &RawPointLight) -> Self {
-        Self { position: p.position.into(), intensity: p.intensity.into() }
+        Self { position: p.position.into(), intensity: p.intensity.into(), bound: p.bound }
     }
 }
 
 impl From<&twin::PointLight> for RawPointLight {
     fn from(p: &twin::PointLight) -> Self {
-        Self { position: p.position.into(), _pad0: 0.0, intensity: p.intensity.into(), _pad1: 0.0 }
+        Self { position: p.position.into(), _pad0: 0.0, intensity: p.intensity.into(), bound: p.bound }
     }
 }
 

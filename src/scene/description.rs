@@ -439,6 +439,71 @@ pub struct SettingsDescription {
     /// `"auto"` or `"map"` (`crate::mr::environment`).
     #[serde(default)]
     pub environment: EnvironmentSettings,
+    /// The sparse method's interpolation, light bound and subdivision; every field has a
+    /// default.
+    #[serde(default)]
+    pub sparse: SparseShading,
+}
+
+/// How the sparse method turns gathered light into pixels (DESIGN.md §4 steps 0, 2, 4). The
+/// paper's form is `{"kernel": "paper", "bound": "off", "subdivision": 1}`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SparseShading {
+    /// Interpolation weights of a vertex's sparse neighbours; default `"smooth"`.
+    #[serde(default)]
+    pub kernel: InterpolationKernel,
+    /// Upper bound on the irradiance an interpolated light may deliver; default `"gathered"`.
+    #[serde(default)]
+    pub bound: LightBound,
+    /// Edges longer than this many sparse point spacings `sqrt(area / sparse_points)` are split
+    /// at load, in [1, 16]; default [`DEFAULT_SUBDIVISION`]. 1 is the paper's.
+    #[serde(default = "default_subdivision")]
+    pub subdivision: f32,
+}
+
+/// Subdivision edge length in sparse point spacings unless a scene says otherwise.
+pub const DEFAULT_SUBDIVISION: f32 = 2.0;
+
+/// Range of [`SparseShading::subdivision`].
+pub const SUBDIVISION_RANGE: (f32, f32) = (1.0, 16.0);
+
+fn default_subdivision() -> f32 {
+    DEFAULT_SUBDIVISION
+}
+
+impl Default for SparseShading {
+    fn default() -> Self {
+        SparseShading {
+            kernel: InterpolationKernel::default(),
+            bound: LightBound::default(),
+            subdivision: DEFAULT_SUBDIVISION,
+        }
+    }
+}
+
+/// Interpolation weights of a vertex's sparse neighbours (`twin::interpolation_weights`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum InterpolationKernel {
+    /// Paper eq. 12: `(1 - d / d_max) * clamp(n_v . n_j, 0, 1)`.
+    Paper,
+    /// `(1 - (d / d_max)^2)^2 * clamp(n_v . n_j, 0, 1)`, times a factor that falls to zero for
+    /// points behind the vertex's tangent plane (the other side of thin geometry).
+    #[default]
+    Smooth,
+}
+
+/// Upper bound on the irradiance an interpolated point light may deliver at a pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum LightBound {
+    /// None (the paper's).
+    Off,
+    /// The largest irradiance luminance that the sparse points it was interpolated from
+    /// gathered.
+    #[default]
+    Gathered,
 }
 
 /// Indirect occlusion mode.
@@ -501,6 +566,7 @@ impl Default for SettingsDescription {
             rgbd: RgbdSettings::default(),
             mr: MrSettings::default(),
             environment: EnvironmentSettings::default(),
+            sparse: SparseShading::default(),
         }
     }
 }
@@ -524,6 +590,7 @@ impl SettingsDescription {
             occlusion_rule: self.occlusion_rule,
             rgbd: self.rgbd,
             mr: self.mr,
+            sparse: self.sparse,
         }
     }
 
@@ -533,6 +600,12 @@ impl SettingsDescription {
         int_in(self.interpolation_neighbours, 1, super::MAX_NEIGHBOURS, &format!("{field}.interpolation_neighbours"))?;
         if let Some(exposure) = self.exposure {
             positive(exposure, &format!("{field}.exposure"))?;
+        }
+        let (lo, hi) = SUBDIVISION_RANGE;
+        let subdivision = self.sparse.subdivision;
+        if !(lo..=hi).contains(&subdivision) {
+            let message = format!("must be in [{lo}, {hi}], got {subdivision}");
+            return Err(SceneError::field(format!("{field}.sparse.subdivision"), message));
         }
         validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))?;
         validate_mr(&self.mr, &format!("{field}.mr"))?;
@@ -1025,7 +1098,20 @@ mod tests {
                 occlusion_rule: OcclusionRule::Product,
                 rgbd: RgbdSettings::default(),
                 mr: MrSettings::default(),
+                sparse: SparseShading::default(),
             }
+        );
+        let message = error_of(&with_settings(r#"{"sparse": {"subdivision": 0.5}}"#));
+        assert_eq!(message, "settings.sparse.subdivision: must be in [1, 16], got 0.5");
+        let message = error_of(&with_settings(r#"{"sparse": {"kernel": "cubic"}}"#));
+        assert!(message.starts_with("settings.sparse.kernel: unknown variant `cubic`"), "{message}");
+        let paper = r#"{"sparse": {"kernel": "paper", "bound": "off", "subdivision": 1}}"#;
+        let description = SceneDescription::from_json_str(&with_settings(paper)).expect("parses");
+        description.validate().expect("valid");
+        let sparse = description.settings.to_settings(false).sparse;
+        assert_eq!(
+            sparse,
+            SparseShading { kernel: InterpolationKernel::Paper, bound: LightBound::Off, subdivision: 1.0 }
         );
         let message = error_of(&with_settings(r#"{"rgbd": {"min_depth": 2, "max_depth": 1}}"#));
         assert_eq!(message, "settings.rgbd.max_depth: must be > min_depth (2), got 1");

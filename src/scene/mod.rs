@@ -9,9 +9,9 @@
 //! 2. `normals`: keep the OBJ's normals, or compute area-weighted normals with a 45° crease
 //!    angle, splitting vertices so each vertex has exactly one normal. Vertices split by a UV
 //!    seam share their normal where the surface is smooth across the seam.
-//! 3. `subdivide`: split every edge longer than the sparse point spacing
-//!    `sqrt(model area / sparse_points)` (conforming red-green refinement), so the per-vertex
-//!    interpolation of step 4 of the pipeline sees sparse points around every vertex.
+//! 3. `subdivide`: split every edge longer than `settings.sparse.subdivision` times the sparse
+//!    point spacing `sqrt(model area / sparse_points)` (conforming red-green refinement), so the
+//!    per-vertex interpolation of step 4 of the pipeline sees sparse points around every vertex.
 //! 4. `sparse`: blue-noise sparse points (weighted sample elimination over area-proportional
 //!    candidates), each vertex's 8 nearest sparse points, and each point's occluder radius.
 //!
@@ -46,9 +46,10 @@ use std::path::{Path, PathBuf};
 use glam::{Affine3A, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
-    CameraDescription, LightDescription, MAX_COORDINATE_M, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription,
-    Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription,
-    SettingsDescription, TransformDescription, parse_json,
+    CameraDescription, DEFAULT_SUBDIVISION, InterpolationKernel, LightBound, LightDescription, MAX_COORDINATE_M,
+    MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion, OcclusionRule, OcclusionSetting,
+    RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SettingsDescription, SparseShading, TransformDescription,
+    parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
@@ -223,6 +224,8 @@ pub struct Settings {
     pub rgbd: crate::rgbd::RgbdSettings,
     /// Mixed-reality compositing (differential rendering).
     pub mr: crate::mr::differential::MrSettings,
+    /// The sparse method's interpolation kernel, light bound and subdivision.
+    pub sparse: SparseShading,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its
@@ -600,8 +603,10 @@ fn load_mesh(
     let original_triangles = geometry.triangles.len();
     let normals_at = started.elapsed();
     let cap = budget.left.min(MAX_TRIANGLES_PER_MESH);
-    subdivide::subdivide(&mut geometry, spacing, cap).map_err(|limit| {
-        let what = format!("subdividing to the sparse point spacing {spacing} would go");
+    let max_edge = spacing * settings.sparse.subdivision;
+    subdivide::subdivide(&mut geometry, max_edge, cap).map_err(|limit| {
+        let what =
+            format!("subdividing to {max_edge} ({} sparse point spacings) would go", settings.sparse.subdivision);
         if limit < MAX_TRIANGLES_PER_MESH {
             budget.exceeded(format!("{field}.sparse_points"), &what)
         } else {

@@ -104,6 +104,7 @@ pub struct Val {
 /// The twins take a receiver's material as [`crate::scene::Material`] with its diffuse texture
 /// already sampled into `diffuse` (`diffuse_texture` is not read), as WGSL's `Material.material`.
 pub use crate::scene::Material;
+pub use crate::scene::{InterpolationKernel, LightBound};
 
 /// What the gather accumulates at one sparse point (DESIGN.md §4 step 1).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -162,6 +163,9 @@ pub fn view_direction(x: Vec3, n_x: Vec3, eye: Vec3) -> Vec3 {
 pub struct PointLight {
     pub position: Vec3,
     pub intensity: Vec3,
+    /// The largest irradiance luminance (W/m²) the light may deliver at a receiver
+    /// ([`bound_light`]); 0 is unbounded (the paper's form, `settings.sparse.bound: "off"`).
+    pub bound: f32,
 }
 
 /// Direction from `x` toward `target`, rotated toward `n` so that its cosine with `n` is at
@@ -190,14 +194,17 @@ pub fn any_perpendicular(n: Vec3) -> Vec3 {
 
 /// Diffuse renormalisation (DESIGN.md §4 step 2, paper eq. 11): a point light that, applied at
 /// `x`, reproduces the gathered irradiance `e` exactly. Finite and non-negative for every input.
+/// Its bound is the luminance of `e`: what the sparse point saw.
 pub fn renormalise_diffuse(x: Vec3, n: Vec3, e: Vec3, averaged_position: Vec3) -> PointLight {
     let (w, d) = renormalise_direction(x, n, averaged_position);
     let cos = n.dot(w);
-    PointLight { position: x + w * d, intensity: (e * (d * d / cos)).max(Vec3::ZERO) }
+    PointLight { position: x + w * d, intensity: (e * (d * d / cos)).max(Vec3::ZERO), bound: luminance(e).max(0.0) }
 }
 
 /// Glossy renormalisation: a point light that, applied at `x` with the Phong lobe toward
-/// `eye`, reproduces the gathered `g` (up to the [`MIN_GLOSSY_RESPONSE`] cap).
+/// `eye`, reproduces the gathered `g` (up to the [`MIN_GLOSSY_RESPONSE`] cap). Its bound is
+/// 0 here; the renormalise pass bounds it by the point's diffuse irradiance `E_x`
+/// (`G_x <= E_x`: a lobe is at most 1), as [`with_bound`] does.
 pub fn renormalise_glossy(x: Vec3, n: Vec3, k: f32, eye: Vec3, g: Vec3, averaged_position: Vec3) -> PointLight {
     let w_o = view_direction(x, n, eye);
     let (mut w, d) = renormalise_direction(x, n, averaged_position);
@@ -213,22 +220,29 @@ pub fn renormalise_glossy(x: Vec3, n: Vec3, k: f32, eye: Vec3, g: Vec3, averaged
         }
     }
     let intensity = if n.dot(w_o) > 0.0 { g * (d * d / response.max(MIN_GLOSSY_RESPONSE)) } else { Vec3::ZERO };
-    PointLight { position: x + w * d, intensity: intensity.max(Vec3::ZERO) }
+    PointLight { position: x + w * d, intensity: intensity.max(Vec3::ZERO), bound: 0.0 }
 }
 
-/// Interpolation weights of a vertex's sparse neighbours (DESIGN.md §4 step 4, paper eq. 12):
-/// `(1 - d_j / d_max) * clamp(dot(n_v, n_j), 0, 1)`. When every weight is zero the nearest
-/// neighbour facing the vertex's side (else the nearest) gets weight 1. `distances` must be
-/// sorted nearest first (as the k-d tree returns them); the result always sums to > 0 when
-/// `distances` is non-empty.
-pub fn interpolation_weights(n_v: Vec3, distances: &[f32], normals: &[Vec3]) -> Vec<f32> {
-    let d_max = distances.iter().copied().fold(0.0f32, f32::max);
-    let mut w: Vec<f32> = distances
+/// `light` bounded by the irradiance `e` (W/m², RGB): the renormalise pass's glossy light.
+pub fn with_bound(light: PointLight, e: Vec3) -> PointLight {
+    PointLight { bound: luminance(e).max(0.0), ..light }
+}
+
+/// Interpolation weights of a vertex's sparse neighbours (DESIGN.md §4 step 4) for the
+/// `kernel`. `offsets` are the neighbours' positions minus the vertex's, nearest first (as the
+/// k-d tree returns them), `normals` theirs. The result always sums to > 0 when `offsets` is
+/// non-empty.
+pub fn interpolation_weights(kernel: InterpolationKernel, n_v: Vec3, offsets: &[Vec3], normals: &[Vec3]) -> Vec<f32> {
+    let d_max = offsets.iter().map(|o| o.length()).fold(0.0f32, f32::max);
+    let mut w: Vec<f32> = offsets
         .iter()
         .zip(normals)
-        .map(|(&d, n)| {
-            let spatial = if d_max > 0.0 { 1.0 - d / d_max } else { 1.0 };
-            spatial.max(0.0) * n_v.dot(*n).clamp(0.0, 1.0)
+        .map(|(&o, n)| {
+            let facing = n_v.dot(*n).clamp(0.0, 1.0);
+            match kernel {
+                InterpolationKernel::Paper => paper_weight(o.length(), d_max) * facing,
+                InterpolationKernel::Smooth => smooth_weight(n_v, o, d_max) * facing,
+            }
         })
         .collect();
     if w.iter().sum::<f32>() <= 0.0 && !w.is_empty() {
@@ -238,9 +252,35 @@ pub fn interpolation_weights(n_v: Vec3, distances: &[f32], normals: &[Vec3]) -> 
     w
 }
 
+/// Paper eq. 12's spatial weight `1 - d / d_max` (1 when every neighbour sits at the vertex).
+/// Continuous as the neighbour set changes (a point enters or leaves at `d = d_max`, weight
+/// 0), but its gradient jumps there and at every neighbour, which draws the sparse spacing.
+pub fn paper_weight(d: f32, d_max: f32) -> f32 {
+    if d_max > 0.0 { (1.0 - d / d_max).max(0.0) } else { 1.0 }
+}
+
+/// Depth behind a vertex's tangent plane, as a fraction of `d_max`, at which the smooth
+/// kernel's weight reaches zero: points there lie on the other side of thin geometry (a
+/// pillar's other faces), not on this surface curving away.
+pub const PLANE_FALLOFF: f32 = 0.25;
+
+/// The smooth kernel's weight of a neighbour at `offset` from a vertex with normal `n_v`:
+/// `(1 - (d / d_max)^2)^2` (zero with zero slope at the support radius `d_max`, so the value
+/// and its gradient are continuous as the neighbour set changes), times
+/// `clamp(1 + dot(n_v, offset) / (PLANE_FALLOFF d_max), 0, 1)`.
+pub fn smooth_weight(n_v: Vec3, offset: Vec3, d_max: f32) -> f32 {
+    if d_max <= 0.0 {
+        return 1.0;
+    }
+    let q = (1.0 - offset.length_squared() / (d_max * d_max)).max(0.0);
+    let plane = (1.0 + n_v.dot(offset) / (PLANE_FALLOFF * d_max)).clamp(0.0, 1.0);
+    q * q * plane
+}
+
 /// Weighted mean of point lights (positions and intensities), weights from
-/// [`interpolation_weights`].
-pub fn interpolate_lights(weights: &[f32], lights: &[PointLight]) -> PointLight {
+/// [`interpolation_weights`]. With `bound` [`LightBound::Gathered`] the result's bound is the
+/// largest bound among the lights of positive weight, else 0 (unbounded).
+pub fn interpolate_lights(weights: &[f32], lights: &[PointLight], bound: LightBound) -> PointLight {
     let total: f32 = weights.iter().sum();
     if total <= 0.0 {
         return PointLight::default();
@@ -249,8 +289,26 @@ pub fn interpolate_lights(weights: &[f32], lights: &[PointLight]) -> PointLight 
     for (w, l) in weights.iter().zip(lights) {
         out.position += l.position * (w / total);
         out.intensity += l.intensity * (w / total);
+        if bound == LightBound::Gathered && *w > 0.0 {
+            out.bound = out.bound.max(l.bound);
+        }
     }
     out
+}
+
+/// `light` with its intensity scaled down so that the irradiance luminance it delivers at
+/// (`p`, `n`) is at most its bound (unchanged when the bound is 0). This is what keeps an
+/// interpolated light that lands close to a surface from making a firefly the gather never
+/// saw; the energy it removes is measured by `relume compare` (README).
+pub fn bound_light(p: Vec3, n: Vec3, light: &PointLight) -> PointLight {
+    if light.bound <= 0.0 {
+        return *light;
+    }
+    let v = light.position - p;
+    let d2 = v.length_squared().max(MIN_LIGHT_DISTANCE * MIN_LIGHT_DISTANCE);
+    let e = luminance(light.intensity) * n.dot(v / d2.sqrt()).max(0.0) / d2;
+    let scale = if e > light.bound { light.bound / e } else { 1.0 };
+    PointLight { intensity: light.intensity * scale, ..*light }
 }
 
 /// Radiance (W/(m² sr)) toward `eye` from a point light at a receiver (`p`, `n`) through the
@@ -272,8 +330,9 @@ pub fn point_light_radiance(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, lig
     }
 }
 
-/// Per-pixel sparse shading (DESIGN.md §4 step 5): the diffuse and glossy point lights applied
-/// with the pixel's own position, normal, material and view direction.
+/// Per-pixel sparse shading (DESIGN.md §4 step 5): the diffuse and glossy point lights, each
+/// bounded ([`bound_light`]), applied with the pixel's own position, normal, material and view
+/// direction.
 pub fn shade_sparse(
     p: Vec3,
     n: Vec3,
@@ -282,9 +341,9 @@ pub fn shade_sparse(
     diffuse: &PointLight,
     glossy: Option<&PointLight>,
 ) -> Vec3 {
-    let mut l = point_light_radiance(p, n, surface, eye, diffuse, false);
+    let mut l = point_light_radiance(p, n, surface, eye, &bound_light(p, n, diffuse), false);
     if let Some(g) = glossy {
-        l += point_light_radiance(p, n, surface, eye, g, true);
+        l += point_light_radiance(p, n, surface, eye, &bound_light(p, n, g), true);
     }
     l
 }

@@ -129,15 +129,18 @@ fn brute_force_equals_gather_at_the_point() {
 
 #[test]
 fn interpolation_weights_fall_back_to_nearest_compatible() {
-    // All neighbours equally far: every spatial factor is 1 - 1 = 0.
-    let w = interpolation_weights(Vec3::Y, &[1.0, 1.0, 1.0], &[-Vec3::Y, Vec3::Y, Vec3::Y]);
-    assert_eq!(w, vec![0.0, 1.0, 0.0]);
-    // All facing away: the nearest gets it.
-    let w = interpolation_weights(Vec3::Y, &[0.1, 0.2], &[-Vec3::Y, -Vec3::Y]);
-    assert_eq!(w, vec![1.0, 0.0]);
-    // Coincident points (d_max = 0) are weighted by normals alone.
-    let w = interpolation_weights(Vec3::Y, &[0.0, 0.0], &[Vec3::Y, Vec3::Y]);
-    assert_eq!(w, vec![1.0, 1.0]);
+    for kernel in [InterpolationKernel::Paper, InterpolationKernel::Smooth] {
+        let at = |ds: &[f32]| ds.iter().map(|&d| Vec3::X * d).collect::<Vec<_>>();
+        // All neighbours equally far: every spatial factor is 0.
+        let w = interpolation_weights(kernel, Vec3::Y, &at(&[1.0, 1.0, 1.0]), &[-Vec3::Y, Vec3::Y, Vec3::Y]);
+        assert_eq!(w, vec![0.0, 1.0, 0.0]);
+        // All facing away: the nearest gets it.
+        let w = interpolation_weights(kernel, Vec3::Y, &at(&[0.1, 0.2]), &[-Vec3::Y, -Vec3::Y]);
+        assert_eq!(w, vec![1.0, 0.0]);
+        // Coincident points (d_max = 0) are weighted by normals alone.
+        let w = interpolation_weights(kernel, Vec3::Y, &at(&[0.0, 0.0]), &[Vec3::Y, Vec3::Y]);
+        assert_eq!(w, vec![1.0, 1.0]);
+    }
 }
 
 #[test]
@@ -243,14 +246,160 @@ proptest! {
     /// DESIGN.md §4 step 4 extremes: weights are finite, non-negative and never all zero.
     #[test]
     fn interpolation_weights_are_usable(
-        ds in prop::collection::vec(0.0f32..1e4, 1..=8),
+        offsets in prop::collection::vec(prop::array::uniform3(-1e4f32..1e4), 1..=8),
         ns in prop::collection::vec(prop::array::uniform3(-1.0f32..1.0), 8),
+        smooth in any::<bool>(),
     ) {
-        let mut ds = ds;
-        ds.sort_by(f32::total_cmp);
-        let ns: Vec<Vec3> = ns.into_iter().take(ds.len()).map(|n| Vec3::from(n).normalize_or(Vec3::X)).collect();
-        let w = interpolation_weights(Vec3::Y, &ds, &ns);
+        let mut offsets: Vec<Vec3> = offsets.into_iter().map(Vec3::from).collect();
+        offsets.sort_by(|a, b| a.length().total_cmp(&b.length()));
+        let ns: Vec<Vec3> = ns.into_iter().take(offsets.len()).map(|n| Vec3::from(n).normalize_or(Vec3::X)).collect();
+        let kernel = if smooth { InterpolationKernel::Smooth } else { InterpolationKernel::Paper };
+        let w = interpolation_weights(kernel, Vec3::Y, &offsets, &ns);
         prop_assert!(w.iter().all(|w| w.is_finite() && *w >= 0.0));
         prop_assert!(w.iter().sum::<f32>() > 0.0);
+    }
+}
+
+/// A flat wall (z = 0, normal +z) with sparse points on a jittered unit grid, each carrying a
+/// renormalised light from a gather of its own random VALs, and the irradiance luminance that
+/// a receiver at `(x, y)` gets from the light interpolated over its `k` nearest points with
+/// `kernel` (unbounded: the bound is tested in `bound_light_caps_only_what_the_gather_did_not_see`).
+struct Wall {
+    points: Vec<Vec3>,
+    lights: Vec<PointLight>,
+}
+
+impl Wall {
+    fn new(side: usize, seed: u64) -> Wall {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut points = Vec::new();
+        let mut lights = Vec::new();
+        for i in 0..side {
+            for j in 0..side {
+                let jitter = Vec3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), 0.0);
+                let x = Vec3::new(i as f32, j as f32, 0.0) + jitter;
+                // VALs above the wall, facing it, in a different place for every point: the
+                // averaged positions and intensities differ from point to point.
+                let vals: Vec<Val> = (0..4)
+                    .map(|_| Val {
+                        position: x + Vec3::new(rng.random_range(-2.0..2.0), rng.random_range(-2.0..2.0), 1.5),
+                        normal: -Vec3::Z,
+                        area: 0.01,
+                        flux: Vec3::splat(rng.random_range(0.5..3.0)),
+                    })
+                    .collect();
+                let g = gather_point(x, Vec3::Z, 0.0, x + Vec3::Z, &vals);
+                lights.push(renormalise_diffuse(x, Vec3::Z, g.irradiance, g.diffuse_position));
+                points.push(x);
+            }
+        }
+        Wall { points, lights }
+    }
+
+    fn irradiance(&self, receiver: Vec3, k: usize, weigh: impl Fn(&[Vec3], &[Vec3]) -> Vec<f32>) -> f32 {
+        let mut order: Vec<usize> = (0..self.points.len()).collect();
+        order.sort_by(|&a, &b| {
+            let (da, db) = (self.points[a].distance(receiver), self.points[b].distance(receiver));
+            da.total_cmp(&db).then(a.cmp(&b))
+        });
+        order.truncate(k);
+        let offsets: Vec<Vec3> = order.iter().map(|&i| self.points[i] - receiver).collect();
+        let w = weigh(&offsets, &vec![Vec3::Z; k]);
+        let lights: Vec<PointLight> = order.iter().map(|&i| self.lights[i]).collect();
+        let light = interpolate_lights(&w, &lights, LightBound::Off);
+        let v = light.position - receiver;
+        luminance(light.intensity) * Vec3::Z.dot(v.normalize()).max(0.0) / v.length_squared()
+    }
+
+    /// Irradiance along the line y = 5.3 from `x0`, `count` steps of `step` spacings.
+    fn line(
+        &self,
+        k: usize,
+        x0: f32,
+        step: f32,
+        count: usize,
+        weigh: impl Fn(&[Vec3], &[Vec3]) -> Vec<f32>,
+    ) -> Vec<f32> {
+        (0..=count).map(|i| self.irradiance(Vec3::new(x0 + i as f32 * step, 5.3, 0.0), k, &weigh)).collect()
+    }
+
+    /// The largest step of the irradiance, relative to its mean, along x = 3..8 (dozens of
+    /// neighbour-set boundaries) in steps of 1e-3 spacings, and the largest step again in
+    /// steps of 1e-4 over the 1e-3 step where it occurred. A continuous light's largest step
+    /// shrinks about tenfold with the step; a jump does not shrink.
+    fn largest_step(&self, k: usize, weigh: impl Fn(&[Vec3], &[Vec3]) -> Vec<f32> + Copy) -> (f32, f32) {
+        let coarse = self.line(k, 3.0, 1e-3, 5000, weigh);
+        let mean = coarse.iter().sum::<f32>() / coarse.len() as f32;
+        let (at, step) = coarse
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .enumerate()
+            .fold((0, 0.0f32), |best, (i, d)| if d > best.1 { (i, d) } else { best });
+        let fine = self.line(k, 3.0 + at as f32 * 1e-3, 1e-4, 10, weigh);
+        let fine_step = fine.windows(2).map(|w| (w[1] - w[0]).abs()).fold(0.0, f32::max);
+        (step / mean, fine_step / mean)
+    }
+}
+
+/// Issue 21 item 2: a receiver moving along a flat wall across neighbour-set boundaries gets
+/// continuously varying light. Tolerance: a largest step of at most 5 % of the mean per 1e-3
+/// spacings (the light varies by a few times its mean per spacing where few neighbours
+/// share it), and refining that step tenfold must shrink it at least threefold (a jump does
+/// not shrink). Equal weights over the k nearest (a kernel that is not zero at the edge of its
+/// support) must fail the refinement, so this test can fail. The paper's `1 - d / d_max` is
+/// continuous too (a point enters or leaves the set at `d = d_max`, weight 0).
+#[test]
+fn smooth_interpolation_is_continuous_along_a_wall() {
+    let wall = Wall::new(12, 21);
+    for k in [4, 8, 16] {
+        for kernel in [InterpolationKernel::Smooth, InterpolationKernel::Paper] {
+            let (coarse, fine) = wall.largest_step(k, |o, n| interpolation_weights(kernel, Vec3::Z, o, n));
+            eprintln!("k {k} {kernel:?}: largest step {coarse:.2e}, refined {fine:.2e}");
+            assert!(coarse < 5e-2, "k {k} {kernel:?}: the light steps by {coarse} of the mean");
+            assert!(fine < coarse / 3.0, "k {k} {kernel:?}: a jump: {coarse} at 1e-3, {fine} at 1e-4");
+        }
+        let (coarse, fine) = wall.largest_step(k, |o, _| vec![1.0; o.len()]);
+        eprintln!("k {k} equal weights: largest step {coarse:.2e}, refined {fine:.2e}");
+        assert!(fine > coarse / 3.0, "k {k}: equal weights must jump: {coarse} at 1e-3, {fine} at 1e-4");
+    }
+}
+
+/// Issue 21 item 2: the smooth kernel gives no weight to points behind the vertex's tangent
+/// plane by more than `PLANE_FALLOFF` of the support radius, even when they face the same way
+/// (a thin slab's parallel faces, a pillar's neighbouring face seen from its corner), and full
+/// weight to points on the plane.
+#[test]
+fn smooth_kernel_ignores_points_behind_the_surface() {
+    let offsets = [Vec3::new(0.2, 0.0, 0.0), Vec3::new(0.0, 0.5, -0.4), Vec3::new(-1.0, 0.0, 0.0)];
+    let normals = [Vec3::Z; 3];
+    let w = interpolation_weights(InterpolationKernel::Smooth, Vec3::Z, &offsets, &normals);
+    assert!(w[0] > 0.9, "{w:?}");
+    assert_eq!(w[1], 0.0, "{w:?}");
+    assert_eq!(w[2], 0.0, "the farthest point is the support radius: {w:?}");
+    let paper = interpolation_weights(InterpolationKernel::Paper, Vec3::Z, &offsets, &normals);
+    assert!(paper[1] > 0.0, "the paper's weights do not see the plane: {paper:?}");
+}
+
+/// Issue 21 item 1: a light that would deliver more irradiance than its bound is scaled to the
+/// bound exactly; one within it, or unbounded, is untouched; and a renormalised light applied
+/// at its own sparse point is within its bound (it reproduces the gathered irradiance).
+#[test]
+fn bound_light_caps_only_what_the_gather_did_not_see() {
+    let close = PointLight { position: Vec3::new(0.0, 0.0, 0.01), intensity: Vec3::ONE, bound: 2.0 };
+    let bounded = bound_light(Vec3::ZERO, Vec3::Z, &close);
+    let delivered = luminance(bounded.intensity) / 0.01f32.powi(2);
+    assert!((delivered - 2.0).abs() < 1e-4, "{delivered}");
+    let far = PointLight { position: Vec3::new(0.0, 0.0, 10.0), ..close };
+    assert_eq!(bound_light(Vec3::ZERO, Vec3::Z, &far), far);
+    let unbounded = PointLight { bound: 0.0, ..close };
+    assert_eq!(bound_light(Vec3::ZERO, Vec3::Z, &unbounded), unbounded);
+
+    for seed in 0..20 {
+        let vals = random_vals(seed, 30);
+        let g = gather_point(Vec3::ZERO, Vec3::Y, 0.0, Vec3::Y, &vals);
+        let light = renormalise_diffuse(Vec3::ZERO, Vec3::Y, g.irradiance, g.diffuse_position);
+        let applied = bound_light(Vec3::ZERO, Vec3::Y, &light);
+        assert!((applied.intensity - light.intensity).abs().max_element() <= 1e-4 * light.intensity.max_element());
     }
 }

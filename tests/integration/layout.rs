@@ -47,7 +47,7 @@ fn rust_structs_match_wgsl() {
     check!(m, "Material", RawMaterial, [diffuse, exponent, specular, diffuse_texture]);
     check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
     check!(m, "Gathered", RawGathered, [irradiance, weight, position, _pad1, second_moment, _pad2]);
-    check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, _pad1]);
+    check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, bound]);
     check!(
         m,
         "Frame",

@@ -45,7 +45,8 @@ fn sparse_pipeline_matches_cpu_twins() {
         let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
         let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
         cpu_sparse.0.push(twin::renormalise_diffuse(x, n, gd.irradiance.into(), gd.position.into()));
-        cpu_sparse.1.push(twin::renormalise_glossy(x, n, p.exponent, eye, gg.irradiance.into(), gg.position.into()));
+        let glossy = twin::renormalise_glossy(x, n, p.exponent, eye, gg.irradiance.into(), gg.position.into());
+        cpu_sparse.1.push(twin::with_bound(glossy, gd.irradiance.into()));
     }
     for (cpu, gpu_lights, what) in
         [(&cpu_sparse.0, &mid.sparse_diffuse, "I_d"), (&cpu_sparse.1, &mid.sparse_glossy, "I_s")]
@@ -54,6 +55,13 @@ fn sparse_pipeline_matches_cpu_twins() {
         for (i, (c, g)) in cpu.iter().zip(gpu_lights).enumerate() {
             let g = light(g);
             assert_close(g.intensity, c.intensity, REL, scale, 1e-9, &format!("{what} at sparse point {i}"));
+            let bound_scale = cpu.iter().map(|l| l.bound).fold(0.0, f32::max);
+            assert!(
+                (g.bound - c.bound).abs() <= REL * bound_scale + 1e-9,
+                "{what} bound at {i}: {} vs {}",
+                g.bound,
+                c.bound
+            );
             if c.intensity.max_element() > 1e-3 * scale {
                 assert_close(g.position, c.position, 1e-3, 1.0, 1e-4, &format!("{what} position at {i}"));
             }
@@ -61,7 +69,7 @@ fn sparse_pipeline_matches_cpu_twins() {
     }
 
     // Step 4: interpolation, from the GPU's own sparse lights.
-    assert_interpolation_matches_twin(flat, &mid);
+    assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse);
 
     // Step 5: per-pixel shading, from the GPU's visibility buffer and vertex lights.
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
@@ -86,6 +94,13 @@ fn sparse_pipeline_matches_cpu_twins() {
                     l[corners[1]].intensity,
                     l[corners[2]].intensity,
                 ),
+                bound: twin::barycentric(
+                    h.barycentrics,
+                    Vec3::splat(l[corners[0]].bound),
+                    Vec3::splat(l[corners[1]].bound),
+                    Vec3::splat(l[corners[2]].bound),
+                )
+                .x,
             };
             twin::shade_sparse(p, n, &surface, eye, &lerp(&vd), Some(&lerp(&vs)))
         }));
@@ -478,6 +493,7 @@ fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
 fn assert_interpolation_matches_twin(
     flat: &relume::gpu::scene::FlatScene,
     mid: &relume::renderer::SparseIntermediates,
+    shading: relume::scene::SparseShading,
 ) {
     let sparse_d: Vec<PointLight> = mid.sparse_diffuse.iter().map(light).collect();
     let sparse_s: Vec<PointLight> = mid.sparse_glossy.iter().map(light).collect();
@@ -486,12 +502,12 @@ fn assert_interpolation_matches_twin(
         let vertex = flat.vertices[v];
         let ids: Vec<usize> = ids.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
         let sp = |i: usize| flat.sparse_points[i];
-        let distances: Vec<f32> =
-            ids.iter().map(|&i| Vec3::from(vertex.position).distance(sp(i).position.into())).collect();
+        let offsets: Vec<Vec3> =
+            ids.iter().map(|&i| Vec3::from(sp(i).position) - Vec3::from(vertex.position)).collect();
         let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
-        let w = twin::interpolation_weights(vertex.normal.into(), &distances, &normals);
-        let d = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>());
-        let s = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>());
+        let w = twin::interpolation_weights(shading.kernel, vertex.normal.into(), &offsets, &normals);
+        let d = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>(), shading.bound);
+        let s = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>(), shading.bound);
         assert_close(
             light(&mid.vertex_diffuse[v]).intensity,
             d.intensity,
@@ -501,6 +517,8 @@ fn assert_interpolation_matches_twin(
             &format!("vertex {v} I_d"),
         );
         assert_close(light(&mid.vertex_glossy[v]).position, s.position, 1e-3, 1.0, 1e-4, &format!("vertex {v} l_s"));
+        let gpu_bound = light(&mid.vertex_diffuse[v]).bound;
+        assert!((gpu_bound - d.bound).abs() <= 1e-5 * d.bound.max(1.0), "vertex {v} bound: {gpu_bound} vs {}", d.bound);
     }
 }
 
@@ -520,7 +538,11 @@ fn interpolation_takes_the_scene_neighbour_count() {
         let frame = renderer.render(&gpu, Method::Sparse, 24, 20).unwrap();
         let flat = &renderer.scene.flat;
         assert_eq!((flat.neighbours, flat.vertex_neighbours.len()), (k, k as usize * flat.vertices.len()));
-        assert_interpolation_matches_twin(flat, &renderer.read_sparse_intermediates(&gpu).unwrap());
+        assert_interpolation_matches_twin(
+            flat,
+            &renderer.read_sparse_intermediates(&gpu).unwrap(),
+            scene.settings.sparse,
+        );
         images.push(frame.indirect.pixels);
     }
     assert_ne!(images[0], images[1], "4 and 16 neighbours interpolate differently");

@@ -55,12 +55,13 @@ struct Gathered {
     _pad2: f32,
 }
 
-// A renormalised point light: position (m) and intensity (W/sr).
+// A renormalised point light: position (m), intensity (W/sr), and the largest irradiance
+// luminance (W/m²) it may deliver at a receiver, 0 for unbounded (`twin::bound_light`).
 struct PointLight {
     position: vec3<f32>,
     _pad0: f32,
     intensity: vec3<f32>,
-    _pad1: f32,
+    bound: f32,
 }
 
 // Per-frame constants shared by every pass.
@@ -174,7 +175,7 @@ fn renormalise_direction(x: vec3<f32>, n: vec3<f32>, target_position: vec3<f32>)
 fn renormalise_diffuse(x: vec3<f32>, n: vec3<f32>, e: vec3<f32>, averaged_position: vec3<f32>) -> PointLight {
     let r = renormalise_direction(x, n, averaged_position);
     let cos = dot(n, r.direction);
-    return PointLight(x + r.direction * r.distance, 0.0, max(e * (r.distance * r.distance / cos), vec3<f32>(0.0)), 0.0);
+    return PointLight(x + r.direction * r.distance, 0.0, max(e * (r.distance * r.distance / cos), vec3<f32>(0.0)), max(luminance(e), 0.0));
 }
 
 fn renormalise_glossy(x: vec3<f32>, n: vec3<f32>, k: f32, eye: vec3<f32>, g: vec3<f32>, averaged_position: vec3<f32>) -> PointLight {

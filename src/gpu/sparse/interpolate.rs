@@ -1,15 +1,24 @@
 //! Per-vertex interpolation (`interpolate.wgsl`, DESIGN.md §4 step 4): each vertex averages the
-//! point lights of its nearest sparse points. Rust twins: `twin::interpolation_weights`,
-//! `twin::interpolate_lights`. Run by [`super::SparseMethod`].
+//! point lights of its nearest sparse points with the scene's kernel, and carries their bound.
+//! Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`. Run by
+//! [`super::SparseMethod`].
 
 use crate::gpu::pass::{Entry, PassDesc, read, read_write};
 use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::scene::{InterpolationKernel, LightBound};
 
 pub const WGSL: &str = include_str!("interpolate.wgsl");
 
-/// The pass's own WGSL for `neighbours` sparse points per vertex.
-pub fn body(neighbours: u32) -> String {
-    format!("const NEIGHBOURS: u32 = {neighbours}u;\n{WGSL}")
+/// The pass's own WGSL for `neighbours` sparse points per vertex, the `kernel`'s weights and
+/// the `bound`.
+pub fn body(neighbours: u32, kernel: InterpolationKernel, bound: LightBound) -> String {
+    let smooth = kernel == InterpolationKernel::Smooth;
+    let bounded = bound == LightBound::Gathered;
+    format!(
+        "const NEIGHBOURS: u32 = {neighbours}u;\nconst SMOOTH_KERNEL: bool = {smooth};\n\
+         const BOUNDED: bool = {bounded};\nconst PLANE_FALLOFF: f32 = {:?};\n{WGSL}",
+        crate::twin::PLANE_FALLOFF
+    )
 }
 
 /// One invocation per vertex.
@@ -25,5 +34,8 @@ pub const PASS: PassDesc = PassDesc {
     ],
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 6)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
-    default_source: |textured| PASS.source(&body(crate::scene::DEFAULT_NEIGHBOURS), textured),
+    default_source: |textured| {
+        let body = body(crate::scene::DEFAULT_NEIGHBOURS, InterpolationKernel::default(), LightBound::default());
+        PASS.source(&body, textured)
+    },
 };

@@ -1,7 +1,10 @@
 // Per-vertex interpolation (DESIGN.md §4 step 4, paper eqs. 12-13): each vertex averages the
-// point lights of its NEIGHBOURS nearest sparse points with weights
-// (1 - d / d_max) * clamp(dot(n_v, n_x), 0, 1). Rust twins: `twin::interpolation_weights`,
-// `twin::interpolate_lights`.
+// point lights of its NEIGHBOURS nearest sparse points. The weights are the paper's
+// (1 - d / d_max) * clamp(dot(n_v, n_x), 0, 1) when SMOOTH_KERNEL is false, else the smooth
+// kernel (1 - (d / d_max)^2)^2 * clamp(dot(n_v, n_x), 0, 1) * plane factor. When BOUNDED, the
+// vertex's light carries the largest bound of its neighbours of positive weight, else 0
+// (unbounded). NEIGHBOURS, SMOOTH_KERNEL, BOUNDED and PLANE_FALLOFF are prepended
+// (`interpolate::body`). Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`.
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> vertex_neighbours: array<array<u32, NEIGHBOURS>>;
@@ -10,19 +13,28 @@
 @group(0) @binding(4) var<storage, read> sparse_glossy: array<PointLight>;
 @group(0) @binding(5) var<storage, read_write> vertex_glossy: array<PointLight>;
 
-fn interpolation_weights(n_v: vec3<f32>, distances: array<f32, NEIGHBOURS>, normals: array<vec3<f32>, NEIGHBOURS>, count: u32) -> array<f32, NEIGHBOURS> {
+// `twin::paper_weight` and `twin::smooth_weight`.
+fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
+    if d_max <= 0.0 {
+        return 1.0;
+    }
+    if !SMOOTH_KERNEL {
+        return max(1.0 - length(offset) / d_max, 0.0);
+    }
+    let q = max(1.0 - dot(offset, offset) / (d_max * d_max), 0.0);
+    let plane = clamp(1.0 + dot(n_v, offset) / (PLANE_FALLOFF * d_max), 0.0, 1.0);
+    return q * q * plane;
+}
+
+fn interpolation_weights(n_v: vec3<f32>, offsets: array<vec3<f32>, NEIGHBOURS>, normals: array<vec3<f32>, NEIGHBOURS>, count: u32) -> array<f32, NEIGHBOURS> {
     var d_max = 0.0;
     for (var j = 0u; j < count; j++) {
-        d_max = max(d_max, distances[j]);
+        d_max = max(d_max, length(offsets[j]));
     }
     var w: array<f32, NEIGHBOURS>;
     var total = 0.0;
     for (var j = 0u; j < count; j++) {
-        var spatial = 1.0;
-        if d_max > 0.0 {
-            spatial = 1.0 - distances[j] / d_max;
-        }
-        w[j] = max(spatial, 0.0) * clamp(dot(n_v, normals[j]), 0.0, 1.0);
+        w[j] = spatial_weight(n_v, offsets[j], d_max) * clamp(dot(n_v, normals[j]), 0.0, 1.0);
         total += w[j];
     }
     if total <= 0.0 && count > 0u {
@@ -47,7 +59,7 @@ struct Neighbourhood {
 fn neighbourhood(v: u32) -> Neighbourhood {
     let vertex = vertices[v];
     let ids = vertex_neighbours[v];
-    var distances: array<f32, NEIGHBOURS>;
+    var offsets: array<vec3<f32>, NEIGHBOURS>;
     var normals: array<vec3<f32>, NEIGHBOURS>;
     var count = 0u;
     for (var j = 0u; j < NEIGHBOURS; j++) {
@@ -55,16 +67,28 @@ fn neighbourhood(v: u32) -> Neighbourhood {
             break;
         }
         let p = sparse_points[ids[j]];
-        distances[j] = distance(vertex.position, p.position);
+        offsets[j] = p.position - vertex.position;
         normals[j] = p.normal;
         count += 1u;
     }
-    let w = interpolation_weights(vertex.normal, distances, normals, count);
+    let w = interpolation_weights(vertex.normal, offsets, normals, count);
     var total = 0.0;
     for (var j = 0u; j < count; j++) {
         total += w[j];
     }
     return Neighbourhood(ids, w, count, total);
+}
+
+// The weighted mean of the lights `l` of the neighbourhood and, when BOUNDED, the largest
+// bound among them.
+fn accumulate(out: PointLight, l: PointLight, weight: f32, total: f32) -> PointLight {
+    var r = out;
+    r.position += l.position * (weight / total);
+    r.intensity += l.intensity * (weight / total);
+    if BOUNDED && weight > 0.0 {
+        r.bound = max(r.bound, l.bound);
+    }
+    return r;
 }
 
 fn interpolate_diffuse(nb: Neighbourhood) -> PointLight {
@@ -73,10 +97,7 @@ fn interpolate_diffuse(nb: Neighbourhood) -> PointLight {
         return out;
     }
     for (var j = 0u; j < nb.count; j++) {
-        let l = sparse_diffuse[nb.ids[j]];
-        let f = nb.weights[j] / nb.total;
-        out.position += l.position * f;
-        out.intensity += l.intensity * f;
+        out = accumulate(out, sparse_diffuse[nb.ids[j]], nb.weights[j], nb.total);
     }
     return out;
 }
@@ -87,10 +108,7 @@ fn interpolate_glossy(nb: Neighbourhood) -> PointLight {
         return out;
     }
     for (var j = 0u; j < nb.count; j++) {
-        let l = sparse_glossy[nb.ids[j]];
-        let f = nb.weights[j] / nb.total;
-        out.position += l.position * f;
-        out.intensity += l.intensity * f;
+        out = accumulate(out, sparse_glossy[nb.ids[j]], nb.weights[j], nb.total);
     }
     return out;
 }

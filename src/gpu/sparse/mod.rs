@@ -14,7 +14,7 @@ use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::{self, SparseVisibility};
 use crate::gpu::{Gpu, GpuError, Lobes};
-use crate::scene::{Occlusion, OcclusionRule};
+use crate::scene::{InterpolationKernel, LightBound, Occlusion, OcclusionRule};
 use gather::Gather;
 
 /// What the sparse technique is built for: a change rebuilds it.
@@ -23,6 +23,8 @@ pub struct SparseSettings {
     pub glossy: bool,
     pub occlusion: Occlusion,
     pub occlusion_rule: OcclusionRule,
+    pub kernel: InterpolationKernel,
+    pub bound: LightBound,
 }
 
 /// The sparse method's passes and the buffers between them.
@@ -54,7 +56,7 @@ impl SparseMethod {
                 gpu,
                 scene,
                 &interpolate::PASS,
-                &interpolate::body(scene.flat.neighbours),
+                &interpolate::body(scene.flat.neighbours, settings.kernel, settings.bound),
                 glossy,
             )?,
             shade: Kernels::lobes(gpu, scene, &shade::PASS, shade::WGSL, glossy)?,

@@ -1,6 +1,7 @@
 // Renormalisation (DESIGN.md §4 step 2, paper eq. 11): per sparse point, a diffuse (and glossy)
-// point light that reproduces exactly what was gathered there. Rust twins:
-// `twin::renormalise_diffuse`, `twin::renormalise_glossy`.
+// point light that reproduces exactly what was gathered there, bounded by the point's diffuse
+// irradiance (`PointLight.bound`). Rust twins: `twin::renormalise_diffuse`,
+// `twin::renormalise_glossy`, `twin::with_bound`.
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> gathered_diffuse: array<Gathered>;
@@ -27,5 +28,7 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
     let g = gathered_diffuse[id.x];
     sparse_diffuse[id.x] = renormalise_diffuse(p.position, p.normal, g.irradiance, g.position);
     let s = gathered_glossy[id.x];
-    sparse_glossy[id.x] = renormalise_glossy(p.position, p.normal, p.exponent, frame.eye, s.irradiance, s.position);
+    var glossy = renormalise_glossy(p.position, p.normal, p.exponent, frame.eye, s.irradiance, s.position);
+    glossy.bound = max(luminance(g.irradiance), 0.0);
+    sparse_glossy[id.x] = glossy;
 }

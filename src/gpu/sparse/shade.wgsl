@@ -1,6 +1,6 @@
 // Per-pixel sparse shading (DESIGN.md §4 step 5): the per-vertex point lights are interpolated
-// across the visible triangle and applied with the pixel's own position, normal and material.
-// Rust twin: `twin::shade_sparse`.
+// across the visible triangle, bounded (`bound_light`) and applied with the pixel's own
+// position, normal and material. Rust twins: `twin::shade_sparse`, `twin::bound_light`.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
@@ -8,7 +8,24 @@
 @group(0) @binding(3) var<storage, read> vertex_glossy: array<PointLight>;
 
 fn lerp_light(a: PointLight, b: PointLight, c: PointLight, bary: vec2<f32>) -> PointLight {
-    return PointLight(barycentric(bary, a.position, b.position, c.position), 0.0, barycentric(bary, a.intensity, b.intensity, c.intensity), 0.0);
+    let bound = dot(vec3<f32>(1.0 - bary.x - bary.y, bary.x, bary.y), vec3<f32>(a.bound, b.bound, c.bound));
+    return PointLight(barycentric(bary, a.position, b.position, c.position), 0.0, barycentric(bary, a.intensity, b.intensity, c.intensity), bound);
+}
+
+// `light` scaled down so that the irradiance luminance it delivers at (`p`, `n`) is at most
+// its bound (unchanged when the bound is 0).
+fn bound_light(p: vec3<f32>, n: vec3<f32>, light: PointLight) -> PointLight {
+    if light.bound <= 0.0 {
+        return light;
+    }
+    let v = light.position - p;
+    let d2 = max(dot(v, v), MIN_LIGHT_DISTANCE * MIN_LIGHT_DISTANCE);
+    let e = luminance(light.intensity) * max(dot(n, v * inverseSqrt(d2)), 0.0) / d2;
+    var out = light;
+    if e > light.bound {
+        out.intensity = light.intensity * (light.bound / e);
+    }
+    return out;
 }
 
 // The visible surface at a pixel and where on its triangle.
@@ -30,13 +47,15 @@ fn pixel_at(id: vec2<u32>) -> Pixel {
 fn diffuse_radiance(p: Pixel) -> vec3<f32> {
     let c = p.corners;
     let light = lerp_light(vertex_diffuse[c.x], vertex_diffuse[c.y], vertex_diffuse[c.z], p.barycentrics);
-    return point_light_radiance(p.surface.position, p.surface.normal, p.surface.material, frame.eye, light, false);
+    let bounded = bound_light(p.surface.position, p.surface.normal, light);
+    return point_light_radiance(p.surface.position, p.surface.normal, p.surface.material, frame.eye, bounded, false);
 }
 
 fn glossy_radiance(p: Pixel) -> vec3<f32> {
     let c = p.corners;
     let light = lerp_light(vertex_glossy[c.x], vertex_glossy[c.y], vertex_glossy[c.z], p.barycentrics);
-    return point_light_radiance(p.surface.position, p.surface.normal, p.surface.material, frame.eye, light, true);
+    let bounded = bound_light(p.surface.position, p.surface.normal, light);
+    return point_light_radiance(p.surface.position, p.surface.normal, p.surface.material, frame.eye, bounded, true);
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
