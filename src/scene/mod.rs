@@ -33,8 +33,9 @@ use std::path::{Path, PathBuf};
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
-    CameraDescription, LightDescription, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion,
-    OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SettingsDescription,
+    CameraDescription, ClusterMethod, ClusterSettings, LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS,
+    MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion, OcclusionRule,
+    OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SettingsDescription, SoftShadows,
     TransformDescription, parse_json,
 };
 pub use error::SceneError;
@@ -203,6 +204,8 @@ pub struct Settings {
     pub occlusion_rule: OcclusionRule,
     /// How RGB-D frames become VALs.
     pub rgbd: crate::rgbd::RgbdSettings,
+    /// The `Clusters` visibility mode's settings.
+    pub clusters: ClusterSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its

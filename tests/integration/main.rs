@@ -4,6 +4,7 @@
 mod accuracy;
 mod bench;
 mod cli;
+mod clusters;
 mod frame;
 mod fuzz;
 mod hardening;
