@@ -294,6 +294,8 @@ pub struct ExactComparison {
     pub clusters_ms: f64,
     /// Its gather (with the per-VAL visibility), ms.
     pub clusters_gather_ms: f64,
+    /// Every stage of that frame.
+    pub clusters_stages_ms: Vec<(String, f64)>,
     /// The disks' stage with the "sum" rule (ms).
     pub occlusion_ms: f64,
     /// The gather in the same frame (ms).
@@ -373,6 +375,7 @@ fn exact_comparison(
     }
     let mut errors = Vec::new();
     let (mut occlusion_ms, mut gather_ms, mut clusters_ms, mut clusters_gather_ms) = (0.0, 0.0, 0.0, 0.0);
+    let mut clusters_stages_ms = Vec::new();
     for (key, occlusion, rule) in [
         ("off", Occlusion::Off, OcclusionRule::Sum),
         ("sum", Occlusion::Disks, OcclusionRule::Sum),
@@ -394,6 +397,7 @@ fn exact_comparison(
             clusters_ms =
                 sparse.timings.total_of(&[stage::CLUSTERING, stage::CLUSTER_SHADOW_MAPS, stage::CLUSTER_VISIBILITY]);
             clusters_gather_ms = sparse.timings.total_of(&[stage::GATHER]);
+            clusters_stages_ms = sparse.timings.stages.clone();
         }
     }
     let [(off, off_c), (sum, sum_c), (product, product_c), (clusters, clusters_c)] = errors[..] else {
@@ -425,6 +429,7 @@ fn exact_comparison(
         indirect_flip_mean_vs_exact_clusters: clusters.flip_mean,
         clusters_ms,
         clusters_gather_ms,
+        clusters_stages_ms,
         occlusion_ms,
         gather_ms,
     })

@@ -9,7 +9,7 @@
 //! ranges, one dispatch each, every range merging into the sums of the ones before
 //! ([`Kernels::val_ranges`]). GPUs take every VAL in one dispatch.
 
-use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, with_lobes};
+use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, read, read_write, with_lobes};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::{TILE_SIZE, VAL_TILES};
 use crate::gpu::technique::Vals;
@@ -29,16 +29,21 @@ pub fn body(groups: Option<u32>) -> String {
     format!("{VAL_TILES}\n{visibility}\n{WGSL}")
 }
 
+/// The bindings of [`GROUPED_PASS`]; [`PASS`] has the first five (no group table).
+const BINDINGS: &[Binding] = &[
+    read("sparse_points"),
+    read("vals"),
+    read("val_count"),
+    read_write("gathered_diffuse"),
+    read_write("gathered_glossy"),
+    read("group_of_val"),
+    read("group_visibility"),
+];
+
 /// One invocation per sparse point, `TILE_SIZE` per workgroup (the tile is the workgroup's).
 pub const PASS: PassDesc = PassDesc {
     label: "gather",
-    bindings: &[
-        read("sparse_points"),
-        read("vals"),
-        read("val_count"),
-        read_write("gathered_diffuse"),
-        read_write("gathered_glossy"),
-    ],
+    bindings: BINDINGS.split_at(5).0,
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 5)],
     workgroup: [TILE_SIZE, 1, 1],
     default_source: |textured| PASS.source(&body(None), textured),
@@ -46,15 +51,7 @@ pub const PASS: PassDesc = PassDesc {
 
 /// The gather of a group visibility mode: [`PASS`] plus the group table.
 pub const GROUPED_PASS: PassDesc = PassDesc {
-    bindings: &[
-        read("sparse_points"),
-        read("vals"),
-        read("val_count"),
-        read_write("gathered_diffuse"),
-        read_write("gathered_glossy"),
-        read("group_of_val"),
-        read("group_visibility"),
-    ],
+    bindings: BINDINGS,
     entries: &[Entry { name: "main", bindings: 7, except: &["gathered_glossy"] }, Entry::first("main_glossy", 7)],
     default_source: |textured| GROUPED_PASS.source(&body(Some(64)), textured),
     ..PASS

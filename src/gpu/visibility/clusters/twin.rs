@@ -251,7 +251,7 @@ pub fn blocker_search(
             n += 1;
         }
     }
-    (n > 0).then(|| sum / n as f32)
+    (n > 0).then_some(sum / n as f32)
 }
 
 /// PCF: fraction of the taps within `radius` texels that no blocker hides.
