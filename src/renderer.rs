@@ -100,6 +100,10 @@ pub mod stage {
     pub const VISIBILITY: &str = CameraView::STAGE;
     pub const GATHER: &str = sparse::gather::PASS.label;
     pub const OCCLUSION: &str = visibility::disks::PASS.label;
+    /// The `Clusters` visibility mode's stages.
+    pub const CLUSTERING: &str = visibility::clusters::CLUSTERING_STAGE;
+    pub const CLUSTER_SHADOW_MAPS: &str = visibility::clusters::SHADOW_MAPS_STAGE;
+    pub const CLUSTER_VISIBILITY: &str = visibility::clusters::VISIBILITY.label;
     pub const RENORMALISE: &str = sparse::renormalise::PASS.label;
     pub const INTERPOLATE: &str = sparse::interpolate::PASS.label;
     pub const SHADE: &str = sparse::shade::PASS.label;
@@ -199,6 +203,8 @@ pub struct Renderer {
     occlusion_rule: scene::OcclusionRule,
     /// The sparse method's interpolation kernel and light bound (`settings.sparse`).
     sparse_shading: (scene::InterpolationKernel, scene::LightBound),
+    /// The `Clusters` visibility mode's settings.
+    clusters: scene::ClusterSettings,
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The spot light's VALs (R² at most) after the uploaded ones.
@@ -251,6 +257,7 @@ impl Renderer {
             occlusion: scene.settings.occlusion,
             occlusion_rule: scene.settings.occlusion_rule,
             sparse_shading: (scene.settings.sparse.kernel, scene.settings.sparse.bound),
+            clusters: scene.settings.clusters,
             exact_val_stride: 1,
             scene: scene_gpu,
             indirect: Indirect::default(),
@@ -293,6 +300,11 @@ impl Renderer {
     /// is pixels x VALs x BVH traversal. 1 (the default) uses them all.
     pub fn set_exact_val_stride(&mut self, stride: u32) {
         self.exact_val_stride = stride.max(1);
+    }
+
+    /// Change the `Clusters` visibility settings from the next sparse frame on.
+    pub fn set_clusters(&mut self, clusters: scene::ClusterSettings) {
+        self.clusters = clusters;
     }
 
     /// Change the occlusion mode from the next sparse frame on.
@@ -546,6 +558,7 @@ impl Renderer {
                         occlusion_rule: self.occlusion_rule,
                         kernel,
                         bound,
+                        clusters: self.clusters,
                     };
                     built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
                         .fit(gpu, scene, capacity)?;
@@ -647,6 +660,14 @@ impl Renderer {
     pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::twin::Val>, GpuError> {
         let n = self.live_val_count(gpu)? as usize;
         Ok(gpu.read_buffer::<RawVal>(&self.vals.buffer, n)?.iter().map(Into::into).collect())
+    }
+
+    /// The sparse method's group visibility mode, once a sparse frame with one was rendered.
+    pub fn group_visibility(&self) -> Option<&dyn crate::gpu::visibility::GroupVisibility> {
+        match &self.sparse()?.visibility {
+            Some(crate::gpu::visibility::Mode::Groups(g)) => Some(g.as_ref()),
+            _ => None,
+        }
     }
 
     /// The sparse technique, once a sparse frame was rendered.

@@ -319,6 +319,16 @@ pub struct ExactComparison {
     pub indirect_rel_rmse_vs_exact_product: f64,
     pub indirect_rel_rmse_vs_exact_product_corrected: Option<f64>,
     pub indirect_flip_mean_vs_exact_product: f64,
+    /// Sparse with the `clusters` visibility mode at the scene's cluster settings.
+    pub indirect_rel_rmse_vs_exact_clusters: f64,
+    pub indirect_rel_rmse_vs_exact_clusters_corrected: Option<f64>,
+    pub indirect_flip_mean_vs_exact_clusters: f64,
+    /// The `clusters` mode's three stages (clustering, shadow maps, visibility), ms.
+    pub clusters_ms: f64,
+    /// Its gather (with the per-VAL visibility), ms.
+    pub clusters_gather_ms: f64,
+    /// Every stage of that frame.
+    pub clusters_stages_ms: Vec<(String, f64)>,
     /// The disks' stage with the "sum" rule (ms).
     pub occlusion_ms: f64,
     /// The gather in the same frame (ms).
@@ -385,7 +395,8 @@ pub fn compare(
     })
 }
 
-/// Sparse with occlusion off, "sum" and "product" against the exact-visibility reference.
+/// Sparse with occlusion off, "sum", "product" and "clusters" against the exact-visibility
+/// reference.
 fn exact_comparison(
     gpu: &Gpu,
     renderer: &mut Renderer,
@@ -399,11 +410,13 @@ fn exact_comparison(
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
     }
     let mut errors = Vec::new();
-    let (mut occlusion_ms, mut gather_ms) = (0.0, 0.0);
+    let (mut occlusion_ms, mut gather_ms, mut clusters_ms, mut clusters_gather_ms) = (0.0, 0.0, 0.0, 0.0);
+    let mut clusters_stages_ms = Vec::new();
     for (key, occlusion, rule) in [
         ("off", Occlusion::Off, OcclusionRule::Sum),
         ("sum", Occlusion::Disks, OcclusionRule::Sum),
         ("product", Occlusion::Disks, OcclusionRule::Product),
+        ("clusters", Occlusion::Clusters, OcclusionRule::Product),
     ] {
         renderer.set_occlusion(occlusion, rule);
         let sparse = renderer.render(gpu, Method::Sparse, w, h)?;
@@ -416,8 +429,16 @@ fn exact_comparison(
             occlusion_ms = sparse.timings.total_of(&[stage::OCCLUSION]);
             gather_ms = sparse.timings.total_of(&[stage::GATHER]);
         }
+        if key == "clusters" {
+            clusters_ms =
+                sparse.timings.total_of(&[stage::CLUSTERING, stage::CLUSTER_SHADOW_MAPS, stage::CLUSTER_VISIBILITY]);
+            clusters_gather_ms = sparse.timings.total_of(&[stage::GATHER]);
+            clusters_stages_ms = sparse.timings.stages.clone();
+        }
     }
-    let [(off, off_c), (sum, sum_c), (product, product_c)] = errors[..] else { unreachable!("three modes measured") };
+    let [(off, off_c), (sum, sum_c), (product, product_c), (clusters, clusters_c)] = errors[..] else {
+        unreachable!("four modes measured")
+    };
     Ok(ExactComparison {
         exact_ms: exact.ms(),
         exact_device: exact.device,
@@ -439,6 +460,12 @@ fn exact_comparison(
         indirect_rel_rmse_vs_exact_product: product.rel_rmse,
         indirect_rel_rmse_vs_exact_product_corrected: product_c,
         indirect_flip_mean_vs_exact_product: product.flip_mean,
+        indirect_rel_rmse_vs_exact_clusters: clusters.rel_rmse,
+        indirect_rel_rmse_vs_exact_clusters_corrected: clusters_c,
+        indirect_flip_mean_vs_exact_clusters: clusters.flip_mean,
+        clusters_ms,
+        clusters_gather_ms,
+        clusters_stages_ms,
         occlusion_ms,
         gather_ms,
     })

@@ -67,13 +67,13 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
     let tiles: &[u32] = if quick { &[32, 64] } else { &[32, 64, 128, 256] };
     let mut gather_variants = Vec::new();
     for &tile_size in tiles.iter().filter(|&&t| t <= max_size) {
-        let mut pass = Gather::with_tile_size(gpu, &renderer.scene, glossy, tile_size)?;
+        let mut pass = Gather::with_tile_size(gpu, &renderer.scene, glossy, None, tile_size)?;
         pass.fit(gpu, &renderer.scene, renderer.val_capacity())?;
         let mut best = f64::INFINITY;
         // One warm-up dispatch, then the timed ones.
         for i in 0..=repeats {
             let mut rec = Recorder::new(gpu, "bench.gather", 1);
-            rec.stage("gather", |e, s| pass.record(gpu, e, &renderer.scene, &renderer.vals, &gathered, s))?;
+            rec.stage("gather", |e, s| pass.record(gpu, e, &renderer.scene, &renderer.vals, &gathered, None, s))?;
             let ms = rec.finish()?.stages[0].1;
             if i > 0 {
                 best = best.min(ms);

@@ -108,7 +108,8 @@ impl Sweep {
                     sweep.occlusion = Some(parse_each(&flag, &values, |v| match v {
                         "off" => Ok(Occlusion::Off),
                         "disks" => Ok(Occlusion::Disks),
-                        _ => Err("expected `off` or `disks`".to_owned()),
+                        "clusters" => Ok(Occlusion::Clusters),
+                        _ => Err("expected `off`, `disks` or `clusters`".to_owned()),
                     })?);
                 }
                 "glossy" => {
@@ -574,6 +575,7 @@ pub fn describe(c: &Config) -> String {
         match c.occlusion {
             Occlusion::Off => "off",
             Occlusion::Disks => "disks",
+            Occlusion::Clusters => "clusters",
         },
         if c.glossy { "on" } else { "off" },
         c.width,
@@ -723,7 +725,7 @@ mod tests {
             ("sparse_points=0", "--sweep sparse_points: `0`: must be in 1..=65536"),
             ("sparse_points=12k", "--sweep sparse_points: `12k`: not a whole number"),
             ("rsm_resolution=4", "--sweep rsm_resolution: `4`: must be in 8..=2048"),
-            ("occlusion=on", "--sweep occlusion: `on`: expected `off` or `disks`"),
+            ("occlusion=on", "--sweep occlusion: `on`: expected `off`, `disks` or `clusters`"),
             ("glossy=maybe", "--sweep glossy: `maybe`"),
             ("resolution=0x10", "--sweep resolution: `0x10`: must be in 1..=8192"),
             ("resolution=64,", "--sweep resolution: empty value"),

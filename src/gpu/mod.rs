@@ -31,7 +31,10 @@ use bytemuck::Pod;
 pub const PASSES: &[&pass::PassDesc] = &[
     &lights::rsm::PASS,
     &lights::rgbd::PASS,
+    &visibility::clusters::CLUSTERING,
+    &visibility::clusters::VISIBILITY,
     &sparse::gather::PASS,
+    &sparse::gather::GROUPED_PASS,
     &visibility::disks::PASS,
     &sparse::renormalise::PASS,
     &sparse::interpolate::PASS,

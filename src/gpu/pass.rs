@@ -22,6 +22,8 @@ pub enum Slot {
     StorageReadWrite,
     /// `texture_2d<u32>`
     TextureUint,
+    /// `texture_depth_2d`
+    Depth,
 }
 
 impl Slot {
@@ -34,6 +36,11 @@ impl Slot {
             },
             Slot::TextureUint => wgpu::BindingType::Texture {
                 sample_type: wgpu::TextureSampleType::Uint,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            Slot::Depth => wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Depth,
                 view_dimension: wgpu::TextureViewDimension::D2,
                 multisampled: false,
             },
@@ -62,6 +69,11 @@ pub const fn read_write(name: &'static str) -> Binding {
 /// `var name: texture_2d<u32>`
 pub const fn texture(name: &'static str) -> Binding {
     Binding { name, slot: Slot::TextureUint }
+}
+
+/// `var name: texture_depth_2d`
+pub const fn depth_texture(name: &'static str) -> Binding {
+    Binding { name, slot: Slot::Depth }
 }
 
 /// An entry point and the pass's bindings it uses: the first `bindings` of them, but those

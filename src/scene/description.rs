@@ -419,10 +419,12 @@ pub struct SettingsDescription {
     /// Sparse points each vertex interpolates from (paper eqs. 12-13), 1..=16; default 8.
     #[serde(default = "default_neighbours")]
     pub interpolation_neighbours: u32,
-    /// Indirect occlusion: `"auto"` (default), `"off"` or `"disks"` (DESIGN.md §4 step 3).
-    /// `"auto"` is `"disks"` when the scene can occlude itself: more than one mesh, or a mesh
-    /// that is neither a convex object nor a convex room ([`crate::scene::Scene`]).
-    #[serde(default)]
+    /// Indirect visibility: `"auto"` (default), `"off"`, `"disks"` (DESIGN.md §4 step 3) or
+    /// `"clusters"` (shadow maps of k-means clusters of the VALs, `clusters` below). `"auto"`
+    /// is `"disks"` when the scene can occlude itself: more than one mesh, or a mesh that is
+    /// neither a convex object nor a convex room ([`crate::scene::Scene`]). The JSON key is
+    /// `visibility`; `occlusion` is its deprecated alias (accepted, not both at once).
+    #[serde(default, rename = "visibility", alias = "occlusion")]
     pub occlusion: OcclusionSetting,
     /// How disc occluders combine: `"product"` (default: measured closer to exact) or `"sum"`
     /// (the paper's).
@@ -443,6 +445,9 @@ pub struct SettingsDescription {
     /// default.
     #[serde(default)]
     pub sparse: SparseShading,
+    /// The `"clusters"` visibility mode; every field has a default.
+    #[serde(default)]
+    pub clusters: ClusterSettings,
 }
 
 /// How the sparse method turns gathered light into pixels (DESIGN.md §4 steps 0, 2, 4). The
@@ -482,6 +487,50 @@ impl Default for SparseShading {
     }
 }
 
+/// Settings of the `"clusters"` visibility mode (papers 000 §4-5, 001): the frame's VALs
+/// grouped by k-means, one paraboloid shadow map per cluster, soft shadows per sparse point and
+/// cluster.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClusterSettings {
+    /// How VALs are grouped: `"kmeans"` (the only one so far).
+    pub method: ClusterMethod,
+    /// Clusters (shadow maps), in 1..=[`MAX_CLUSTERS`]; default 64.
+    pub count: u32,
+    /// Side of each cluster's shadow map, texels, in 16..=1024; default 128. All maps share
+    /// one atlas of `ceil(sqrt(count))` maps per side, at most [`MAX_CLUSTER_ATLAS_SIDE`] texels.
+    pub shadow_map_resolution: u32,
+    /// Shadow filter: `"pcss"` (default), `"pcf"` or `"hard"`.
+    pub soft: SoftShadows,
+    /// Weight of the angle between normals (per radian) against the position distance in
+    /// units of the scene's bounding diagonal, in [0, 100]; default 0.43 (paper 000's
+    /// `w_a / w_x = 0.3 / 0.7`).
+    pub normal_weight: f32,
+    /// k-means iterations per frame, in 1..=[`MAX_KMEANS_ITERATIONS`], each started from the
+    /// previous frame's centres; default 4.
+    pub iterations: u32,
+}
+
+/// Most clusters of the `"clusters"` visibility mode.
+pub const MAX_CLUSTERS: u32 = 256;
+/// Most k-means iterations per frame.
+pub const MAX_KMEANS_ITERATIONS: u32 = 32;
+/// Widest shadow-map atlas of the `"clusters"` mode (texels per side: 64 MiB of depth).
+pub const MAX_CLUSTER_ATLAS_SIDE: u32 = 4096;
+
+impl Default for ClusterSettings {
+    fn default() -> Self {
+        Self {
+            method: ClusterMethod::Kmeans,
+            count: 64,
+            shadow_map_resolution: 128,
+            soft: SoftShadows::Pcss,
+            normal_weight: 0.43,
+            iterations: 4,
+        }
+    }
+}
+
 /// Interpolation weights of a vertex's sparse neighbours (`twin::interpolation_weights`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -506,6 +555,54 @@ pub enum LightBound {
     Gathered,
 }
 
+impl ClusterSettings {
+    /// Shadow maps per atlas side.
+    pub fn atlas_columns(&self) -> u32 {
+        (self.count as f64).sqrt().ceil() as u32
+    }
+
+    fn validate(&self, field: &str) -> Result<(), SceneError> {
+        int_in(self.count, 1, MAX_CLUSTERS, &format!("{field}.count"))?;
+        int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
+        in_closed(self.normal_weight, 0.0, 100.0, &format!("{field}.normal_weight"))?;
+        int_in(self.iterations, 1, MAX_KMEANS_ITERATIONS, &format!("{field}.iterations"))?;
+        let side = self.atlas_columns() * self.shadow_map_resolution;
+        if side > MAX_CLUSTER_ATLAS_SIDE {
+            return Err(SceneError::field(
+                format!("{field}.shadow_map_resolution"),
+                format!(
+                    "{} maps of {} texels need an atlas of {side} texels per side, over {MAX_CLUSTER_ATLAS_SIDE}",
+                    self.count, self.shadow_map_resolution
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// How the `"clusters"` mode groups VALs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ClusterMethod {
+    /// k-means on position and normal angle (paper 000 §5.1).
+    #[default]
+    Kmeans,
+}
+
+/// How a cluster's shadow is filtered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum SoftShadows {
+    /// Percentage-closer soft shadows: blocker search, penumbra from the cluster's radius and
+    /// the mean blocker distance, PCF of that width (paper 001).
+    #[default]
+    Pcss,
+    /// PCF of a fixed width (1.5 texels).
+    Pcf,
+    /// One texel.
+    Hard,
+}
+
 /// Indirect occlusion mode.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -513,6 +610,8 @@ pub enum Occlusion {
     #[default]
     Off,
     Disks,
+    /// Shadow maps of clusters of VALs ([`ClusterSettings`]).
+    Clusters,
 }
 
 /// Indirect occlusion as a scene file asks for it.
@@ -524,6 +623,7 @@ pub enum OcclusionSetting {
     Auto,
     Off,
     Disks,
+    Clusters,
 }
 
 /// Combination rule of disc occluders.
@@ -567,6 +667,7 @@ impl Default for SettingsDescription {
             mr: MrSettings::default(),
             environment: EnvironmentSettings::default(),
             sparse: SparseShading::default(),
+            clusters: ClusterSettings::default(),
         }
     }
 }
@@ -584,6 +685,7 @@ impl SettingsDescription {
             occlusion: match self.occlusion {
                 OcclusionSetting::Off => Occlusion::Off,
                 OcclusionSetting::Disks => Occlusion::Disks,
+                OcclusionSetting::Clusters => Occlusion::Clusters,
                 OcclusionSetting::Auto if self_occluding => Occlusion::Disks,
                 OcclusionSetting::Auto => Occlusion::Off,
             },
@@ -591,6 +693,7 @@ impl SettingsDescription {
             rgbd: self.rgbd,
             mr: self.mr,
             sparse: self.sparse,
+            clusters: self.clusters,
         }
     }
 
@@ -609,7 +712,8 @@ impl SettingsDescription {
         }
         validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))?;
         validate_mr(&self.mr, &format!("{field}.mr"))?;
-        validate_environment(&self.environment, &format!("{field}.environment"))
+        validate_environment(&self.environment, &format!("{field}.environment"))?;
+        self.clusters.validate(&format!("{field}.clusters"))
     }
 }
 
@@ -1099,6 +1203,7 @@ mod tests {
                 rgbd: RgbdSettings::default(),
                 mr: MrSettings::default(),
                 sparse: SparseShading::default(),
+                clusters: ClusterSettings::default(),
             }
         );
         let message = error_of(&with_settings(r#"{"sparse": {"subdivision": 0.5}}"#));
@@ -1117,6 +1222,26 @@ mod tests {
         assert_eq!(message, "settings.rgbd.max_depth: must be > min_depth (2), got 1");
         let message = error_of(&with_settings(r#"{"rgbd": {"grid_step": 0}}"#));
         assert_eq!(message, "settings.rgbd.grid_step: must be in 1..=64, got 0");
+        // `visibility`, and `occlusion` its deprecated alias; not both.
+        for key in ["visibility", "occlusion"] {
+            let text = with_settings(&format!(r#"{{"{key}": "clusters", "clusters": {{"count": 8, "soft": "pcf"}}}}"#));
+            let d = SceneDescription::from_json_str(&text).expect("parses");
+            d.validate().expect("valid");
+            let s = d.settings.to_settings(true);
+            assert_eq!(s.occlusion, Occlusion::Clusters, "{key}");
+            assert_eq!(s.clusters, ClusterSettings { count: 8, soft: SoftShadows::Pcf, ..ClusterSettings::default() });
+        }
+        assert!(
+            SceneDescription::from_json_str(&with_settings(r#"{"visibility": "off", "occlusion": "off"}"#)).is_err()
+        );
+        let message = error_of(&with_settings(r#"{"clusters": {"count": 0}}"#));
+        assert_eq!(message, "settings.clusters.count: must be in 1..=256, got 0");
+        let message = error_of(&with_settings(r#"{"clusters": {"count": 256, "shadow_map_resolution": 1024}}"#));
+        assert!(message.starts_with("settings.clusters.shadow_map_resolution: 256 maps of 1024"), "{message}");
+        let message = error_of(&with_settings(r#"{"clusters": {"normal_weight": -1}}"#));
+        assert_eq!(message, "settings.clusters.normal_weight: must be in [0, 100], got -1");
+        let message = error_of(&with_settings(r#"{"clusters": {"iterations": 33}}"#));
+        assert_eq!(message, "settings.clusters.iterations: must be in 1..=32, got 33");
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
         let message = error_of(&with_settings(r#"{"interpolation_neighbours": 17}"#));

@@ -46,9 +46,10 @@ use std::path::{Path, PathBuf};
 use glam::{Affine3A, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use description::{
-    CameraDescription, DEFAULT_SUBDIVISION, InterpolationKernel, LightBound, LightDescription, MAX_COORDINATE_M,
-    MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion, OcclusionRule, OcclusionSetting,
-    RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SettingsDescription, SparseShading, TransformDescription,
+    CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, InterpolationKernel, LightBound,
+    LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS,
+    MaterialDescription, MeshDescription, Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE,
+    ScaleDescription, SceneDescription, SettingsDescription, SoftShadows, SparseShading, TransformDescription,
     parse_json,
 };
 pub use error::SceneError;
@@ -226,6 +227,8 @@ pub struct Settings {
     pub mr: crate::mr::differential::MrSettings,
     /// The sparse method's interpolation kernel, light bound and subdivision.
     pub sparse: SparseShading,
+    /// The `Clusters` visibility mode's settings.
+    pub clusters: ClusterSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its

@@ -45,6 +45,10 @@ fn rust_structs_match_wgsl() {
     check!(m, "Val", RawVal, [position, area, normal, _pad0, flux, _pad1]);
     check!(m, "Vertex", RawVertex, [position, s, normal, t]);
     check!(m, "Material", RawMaterial, [diffuse, exponent, specular, diffuse_texture]);
+    let clustering = module_of("clustering");
+    use relume::gpu::visibility::clusters::{RawCluster, RawClusterSums};
+    check!(clustering, "Cluster", RawCluster, [position, count, normal, radius]);
+    check!(clustering, "ClusterSums", RawClusterSums, [offset, count, normal, offset_sq]);
     check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
     check!(m, "Gathered", RawGathered, [irradiance, weight, position, _pad1, second_moment, _pad2]);
     check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, bound]);
@@ -108,6 +112,10 @@ fn slot_of(module: &naga::Module, global: &naga::GlobalVariable) -> relume::gpu:
             naga::AddressSpace::Handle,
             naga::TypeInner::Image { class: naga::ImageClass::Sampled { kind: naga::ScalarKind::Uint, .. }, .. },
         ) => Slot::TextureUint,
+        (
+            naga::AddressSpace::Handle,
+            naga::TypeInner::Image { class: naga::ImageClass::Depth { multi: false }, .. },
+        ) => Slot::Depth,
         (space, ty) => panic!("{:?}: no slot for {space:?} {ty:?}", global.name),
     }
 }

@@ -4,6 +4,7 @@
 mod accuracy;
 mod bench;
 mod cli;
+mod clusters;
 mod fake_backend;
 mod frame;
 mod fuzz;

@@ -62,12 +62,18 @@ pub fn source_with_tile_size(pass: &str, textured: bool, tile_size: u32) -> Stri
 }
 
 /// Every shader's complete source, by pass label: the compute passes of
-/// [`crate::gpu::PASSES`] at their default parameters and the visibility raster (for the
+/// [`crate::gpu::PASSES`] at their default parameters and the rasters (visibility, cluster shadow maps) (for the
 /// layout and compilation tests).
 pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
     crate::gpu::PASSES
         .iter()
         .map(|p| (p.label, (p.default_source)(textured)))
-        .chain([("visibility", crate::gpu::raster::source(textured))])
+        .chain([
+            ("visibility", crate::gpu::raster::source(textured)),
+            (
+                crate::gpu::visibility::clusters::SHADOW_MAPS_STAGE,
+                crate::gpu::visibility::clusters::default_shadow_maps_source(textured),
+            ),
+        ])
         .collect()
 }

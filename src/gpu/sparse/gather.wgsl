@@ -9,6 +9,10 @@
 // LLVMPIPE_LOOP_LIMIT), so there the VALs are split into ranges, one dispatch each, and every
 // range after the first merges its sums into what the earlier ones wrote (`Gathered.weight`
 // carries the weight sum the means need).
+//
+// `val_visibility(point, val)` is the fraction of a VAL's light that reaches the point: 1
+// without a group visibility mode (prepended by `gather.rs`), else its group's entry of the
+// table (`gpu/visibility/group.wgsl`).
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> vals: array<Val>;
@@ -39,7 +43,7 @@ fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(p.position, p.normal, val.position, val.normal, val.area);
-            let f = geo.weight * geo.cos_receiver;
+            let f = geo.weight * geo.cos_receiver * val_visibility(index, base + j);
             let e_j = val.flux * f;
             let y = luminance(val.flux) * f;
             s.e += e_j;

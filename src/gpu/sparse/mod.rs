@@ -12,26 +12,27 @@ use crate::gpu::raw::{RawGathered, RawPointLight};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
-use crate::gpu::visibility::{self, SparseVisibility};
+use crate::gpu::visibility::{self, Mode};
 use crate::gpu::{Gpu, GpuError, Lobes};
-use crate::scene::{InterpolationKernel, LightBound, Occlusion, OcclusionRule};
+use crate::scene::{ClusterSettings, InterpolationKernel, LightBound, Occlusion, OcclusionRule};
 use gather::Gather;
 
 /// What the sparse technique is built for: a change rebuilds it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SparseSettings {
     pub glossy: bool,
     pub occlusion: Occlusion,
     pub occlusion_rule: OcclusionRule,
     pub kernel: InterpolationKernel,
     pub bound: LightBound,
+    pub clusters: ClusterSettings,
 }
 
 /// The sparse method's passes and the buffers between them.
 pub struct SparseMethod {
     gather: Gather,
     /// `None` when visibility is off.
-    visibility: Option<Box<dyn SparseVisibility>>,
+    pub visibility: Option<Mode>,
     renormalise: Kernels,
     interpolate: Kernels,
     shade: Kernels,
@@ -48,9 +49,21 @@ impl SparseMethod {
         let glossy = settings.glossy;
         let n = scene.flat.sparse_points.len();
         let v = scene.flat.vertices.len();
+        let visibility = visibility::for_settings(
+            gpu,
+            scene,
+            settings.occlusion,
+            settings.occlusion_rule,
+            &settings.clusters,
+            glossy,
+        )?;
+        let groups = match &visibility {
+            Some(Mode::Groups(g)) => Some(g.table().groups),
+            _ => None,
+        };
         Ok(Self {
-            gather: Gather::new(gpu, scene, glossy)?,
-            visibility: visibility::for_settings(gpu, scene, settings.occlusion, settings.occlusion_rule, glossy)?,
+            gather: Gather::new(gpu, scene, glossy, groups)?,
+            visibility,
             renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy)?,
             interpolate: Kernels::lobes(
                 gpu,
@@ -68,22 +81,40 @@ impl SparseMethod {
 
     /// Cover frames of up to `max_vals` VALs.
     pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
+        if let Some(Mode::Groups(g)) = &mut self.visibility {
+            g.fit(gpu, max_vals)?;
+        }
         self.gather.fit(gpu, scene, max_vals)
     }
 }
 
 impl Technique for SparseMethod {
     fn stages(&self) -> Vec<&'static str> {
-        let mut stages = vec![gather::PASS.label];
-        stages.extend(self.visibility.as_ref().map(|v| v.stage()));
+        let mut stages = Vec::new();
+        if let Some(Mode::Groups(g)) = &self.visibility {
+            stages.extend(g.stages());
+        }
+        stages.push(gather::PASS.label);
+        if let Some(Mode::Scale(v)) = &self.visibility {
+            stages.push(v.stage());
+        }
         stages.extend([renormalise::PASS.label, interpolate::PASS.label, shade::PASS.label]);
         stages
     }
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         let (scene, vals) = (frame.scene, frame.vals);
-        rec.stage(gather::PASS.label, |e, s| self.gather.record(gpu, e, scene, vals, &self.gathered, s))?;
-        if let Some(v) = &self.visibility {
+        let table = match &self.visibility {
+            Some(Mode::Groups(g)) => {
+                g.record(gpu, frame, rec)?;
+                Some(g.table())
+            }
+            _ => None,
+        };
+        rec.stage(gather::PASS.label, |e, s| {
+            self.gather.record(gpu, e, scene, vals, &self.gathered, table.as_ref(), s)
+        })?;
+        if let Some(Mode::Scale(v)) = &self.visibility {
             rec.stage(v.stage(), |e, s| v.record(gpu, e, scene, &self.gathered, s))?;
         }
         let (points, vertices) = (scene.flat.sparse_count(), scene.flat.vertex_count());

@@ -1,21 +1,30 @@
-//! Visibility modes of the sparse method: a stage between the gather and the renormalisation
-//! that scales what each sparse point gathered by the fraction of it that arrives (DESIGN.md §4
-//! step 3).
+//! Visibility modes of the sparse method (DESIGN.md §4 step 3). A mode is one of two kinds:
+//!
+//! - a **scaling** mode ([`SparseVisibility`]: `disks/`) runs between the gather and the
+//!   renormalisation and scales what each sparse point gathered by the fraction of it that
+//!   arrives;
+//! - a **group visibility** mode ([`GroupVisibility`]: `clusters/`) runs before the gather and
+//!   produces a table `group_visibility[point * groups + group]` (the fraction of group
+//!   `group`'s light that reaches sparse point `point`) and `group_of_val[val]` (each VAL's
+//!   group); the gather then scales every VAL's contribution by its group's visibility at the
+//!   receiver (`group.wgsl`). Per-VAL visibility needs this form: the k-means clusters of paper
+//!   000 produce it, and so will imperfect shadow maps (seed 004) as a second producer.
 //!
 //! A mode is a folder here holding its Rust, its WGSL and its CPU twin (`disks/`: `mod.rs`,
-//! `disks.wgsl`, `twin.rs`), a type that implements [`SparseVisibility`], and one line in
-//! [`for_settings`], where the scene's setting picks it. Nothing else changes: the sparse
-//! technique runs whatever [`for_settings`] returns, and its stage appears in the timings
-//! under [`SparseVisibility::stage`].
+//! `disks.wgsl`, `twin.rs`), a type that implements one of the traits, and one line in
+//! [`for_settings`], where the scene's setting picks it. Its stages appear in the timings under
+//! their names.
 
+pub mod clusters;
 pub mod disks;
 
 use crate::gpu::scene::GpuScene;
-use crate::gpu::timing::Span;
+use crate::gpu::technique::Frame;
+use crate::gpu::timing::{Recorder, Span};
 use crate::gpu::{Gpu, GpuError, Lobes};
-use crate::scene::{Occlusion, OcclusionRule};
+use crate::scene::{ClusterSettings, Occlusion, OcclusionRule};
 
-/// A visibility mode, as the sparse technique runs it.
+/// A visibility mode that scales the gathered sums, as the sparse technique runs it.
 pub trait SparseVisibility {
     /// The stage's name in the frame's timings.
     fn stage(&self) -> &'static str;
@@ -32,16 +41,64 @@ pub trait SparseVisibility {
     );
 }
 
+/// The WGSL the gather includes for a group visibility mode: the two bindings and
+/// `val_visibility(point, val)`; `GROUP_COUNT` is prepended by [`group_wgsl`].
+pub const GROUP_WGSL: &str = include_str!("group.wgsl");
+
+/// [`GROUP_WGSL`] for `groups` groups.
+pub fn group_wgsl(groups: u32) -> String {
+    format!("const GROUP_COUNT: u32 = {groups}u;\n{GROUP_WGSL}")
+}
+
+/// The buffers a group visibility mode hands to the gather.
+pub struct GroupTable<'a> {
+    /// Groups per sparse point (the table's row length).
+    pub groups: u32,
+    /// `array<u32>`, one per VAL: its group.
+    pub group_of_val: &'a wgpu::Buffer,
+    /// `array<f32>`, `sparse points x groups`: fraction of each group's light reaching each point.
+    pub visibility: &'a wgpu::Buffer,
+}
+
+/// A visibility mode that gives every (sparse point, group of VALs) a visibility, recorded
+/// before the gather, which consumes it per VAL.
+pub trait GroupVisibility: std::any::Any {
+    /// Its stages, in order: their names in the frame's timings.
+    fn stages(&self) -> Vec<&'static str>;
+
+    /// What the gather reads.
+    fn table(&self) -> GroupTable<'_>;
+
+    /// Cover frames of up to `max_vals` VALs.
+    fn fit(&mut self, gpu: &Gpu, max_vals: u32) -> Result<(), GpuError>;
+
+    /// Record its stages: fill [`GroupVisibility::table`] for the frame's VALs.
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError>;
+
+    /// For tests and tools that know the concrete mode.
+    fn as_any(&self) -> &dyn std::any::Any;
+}
+
+/// A visibility mode of either kind.
+pub enum Mode {
+    Scale(Box<dyn SparseVisibility>),
+    Groups(Box<dyn GroupVisibility>),
+}
+
 /// The mode the settings ask for; `None` when visibility is off (no stage, no buffer).
 pub fn for_settings(
     gpu: &Gpu,
     scene: &GpuScene,
     mode: Occlusion,
     rule: OcclusionRule,
+    clusters: &ClusterSettings,
     glossy: bool,
-) -> Result<Option<Box<dyn SparseVisibility>>, GpuError> {
+) -> Result<Option<Mode>, GpuError> {
     Ok(match mode {
         Occlusion::Off => None,
-        Occlusion::Disks => Some(Box::new(disks::Disks::new(gpu, scene, glossy, rule == OcclusionRule::Product)?)),
+        Occlusion::Disks => {
+            Some(Mode::Scale(Box::new(disks::Disks::new(gpu, scene, glossy, rule == OcclusionRule::Product)?)))
+        }
+        Occlusion::Clusters => Some(Mode::Groups(Box::new(clusters::Clusters::new(gpu, scene, clusters)?))),
     })
 }

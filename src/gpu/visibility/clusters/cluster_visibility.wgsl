@@ -1,0 +1,132 @@
+// Per (sparse point, cluster): the fraction of the cluster's light reaching the point through
+// its shadow map, with percentage-closer soft shadows (paper 001): blocker search, penumbra
+// from the cluster's radius and the mean blocker distance (paper 000 Fig. 3), PCF over a
+// SHADOW_TAPS² grid. Receiver-plane depths: each tap compares the map's distance with the
+// distance along the tap's own ray to the receiver's tangent plane, so a planar receiver never
+// shadows itself. Writes `group_visibility[point * CLUSTER_COUNT + k]`. Rust twin:
+// `twin::cluster_visibility` (same names).
+
+@group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
+@group(0) @binding(1) var<storage, read> clusters: array<Cluster>;
+@group(0) @binding(2) var shadow_atlas: texture_depth_2d;
+@group(0) @binding(3) var<storage, read_write> group_visibility: array<f32>;
+
+const NOTHING: f32 = 3.0e38;
+
+// Distance (m) in cluster k's map at `texel`; NOTHING outside the map or where nothing was drawn.
+fn map_depth(k: u32, texel: vec2<i32>) -> f32 {
+    let r = i32(MAP_RESOLUTION);
+    if texel.x < 0 || texel.y < 0 || texel.x >= r || texel.y >= r {
+        return NOTHING;
+    }
+    let d = textureLoad(shadow_atlas, vec2<i32>(atlas_origin(k)) + texel, 0);
+    if d >= 1.0 {
+        return NOTHING;
+    }
+    return d * DEPTH_FAR;
+}
+
+fn receiver_plane_depth(offset: vec3<f32>, normal: vec3<f32>, v: vec3<f32>) -> f32 {
+    let den = dot(v, normal);
+    let num = dot(offset, normal);
+    if den < -1e-4 && num < 0.0 {
+        return num / den;
+    }
+    return NOTHING;
+}
+
+// The blocker's distance at `texel`, or -1 when it holds none.
+fn blocker_at(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>, texel: vec2<i32>) -> f32 {
+    let z = map_depth(k, texel);
+    if z >= NOTHING {
+        return -1.0;
+    }
+    let v = paraboloid_direction(texel_disc(texel), c.normal);
+    let zr = min(receiver_plane_depth(offset, normal, v), length(offset) * 4.0);
+    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS) {
+        return z;
+    }
+    return -1.0;
+}
+
+fn tap(centre: vec2<f32>, radius: f32, i: u32) -> vec2<i32> {
+    let s = vec2<f32>(f32(i % SHADOW_TAPS), f32(i / SHADOW_TAPS)) / f32(SHADOW_TAPS - 1u) * 2.0 - 1.0;
+    return vec2<i32>(floor(centre + s * radius));
+}
+
+// Mean distance of the blockers among the taps, or -1 when there are none.
+fn blocker_search(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>, centre: vec2<f32>, radius: f32) -> f32 {
+    var sum = 0.0;
+    var n = 0u;
+    for (var i = 0u; i < SHADOW_TAPS * SHADOW_TAPS; i++) {
+        let z = blocker_at(k, c, offset, normal, tap(centre, radius, i));
+        if z >= 0.0 {
+            sum += z;
+            n += 1u;
+        }
+    }
+    if n == 0u {
+        return -1.0;
+    }
+    return sum / f32(n);
+}
+
+fn pcf(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>, centre: vec2<f32>, radius: f32) -> f32 {
+    var blocked = 0u;
+    for (var i = 0u; i < SHADOW_TAPS * SHADOW_TAPS; i++) {
+        if blocker_at(k, c, offset, normal, tap(centre, radius, i)) >= 0.0 {
+            blocked += 1u;
+        }
+    }
+    return 1.0 - f32(blocked) / f32(SHADOW_TAPS * SHADOW_TAPS);
+}
+
+fn penumbra_angle(radius: f32, z_blocker: f32, z_receiver: f32) -> f32 {
+    return radius * max(z_receiver - z_blocker, 0.0) / (z_blocker * z_receiver);
+}
+
+fn texels_per_radian(cos_theta: f32) -> f32 {
+    return f32(MAP_RESOLUTION) * 0.5 / (1.0 + cos_theta);
+}
+
+fn cluster_visibility(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>) -> f32 {
+    let zr = length(offset);
+    if c.count == 0.0 || zr <= 0.0 {
+        return 1.0;
+    }
+    let v = offset / zr;
+    let cos_theta = dot(v, c.normal);
+    if cos_theta <= 0.0 || dot(normal, v) >= 0.0 {
+        return 1.0;
+    }
+    let centre = disc_texel(paraboloid_project(v, c.normal));
+    let per_radian = texels_per_radian(cos_theta);
+    let max_texels = MAX_SHADOW_FILTER_ANGLE * per_radian;
+    if SOFT_SHADOWS == SOFT_HARD {
+        return pcf(k, c, offset, normal, centre, 0.0);
+    }
+    if SOFT_SHADOWS == SOFT_PCF {
+        return pcf(k, c, offset, normal, centre, PCF_RADIUS_TEXELS);
+    }
+    let near = max(c.radius * CLUSTER_NEAR_FRACTION, 1e-4 * zr);
+    let search = min(penumbra_angle(c.radius, near, zr) * per_radian, max_texels);
+    let zb = blocker_search(k, c, offset, normal, centre, search);
+    if zb < 0.0 {
+        return 1.0;
+    }
+    let w = min(penumbra_angle(c.radius, zb, zr) * per_radian, max_texels);
+    return pcf(k, c, offset, normal, centre, w);
+}
+
+// One invocation per (sparse point, cluster).
+@compute @workgroup_size(WORKGROUP_X)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    let k = id.y;
+    if i >= frame.sparse_count || k >= CLUSTER_COUNT {
+        return;
+    }
+    let p = sparse_points[i];
+    let c = clusters[k];
+    group_visibility[i * CLUSTER_COUNT + k] = cluster_visibility(k, c, p.position - c.position, p.normal);
+}

@@ -1,0 +1,501 @@
+//! Clustered visibility (papers 000 §4-5 and 001), a group visibility mode
+//! ([`super::GroupVisibility`]): every frame the VALs are grouped by k-means on position and
+//! normal angle (`clustering.wgsl`, started from the previous frame's centres), every cluster
+//! gets one paraboloid shadow map around its normal (`shadow_maps.wgsl`, all maps in one depth
+//! atlas), and every (sparse point, cluster) pair a soft-shadow visibility
+//! (`cluster_visibility.wgsl`: PCSS, PCF or hard), which the gather applies to each of the
+//! cluster's VALs. Rust twin: [`twin`].
+
+pub mod twin;
+
+use super::{GroupTable, GroupVisibility};
+use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, depth_texture, module_from_source, read, read_write, view};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::gpu::technique::Frame;
+use crate::gpu::timing::Recorder;
+use crate::gpu::{Gpu, GpuError};
+use crate::scene::{ClusterSettings, SoftShadows};
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+const PARABOLOID: &str = include_str!("paraboloid.wgsl");
+pub const CLUSTERING_WGSL: &str = include_str!("clustering.wgsl");
+pub const SHADOW_MAPS_WGSL: &str = include_str!("shadow_maps.wgsl");
+pub const VISIBILITY_WGSL: &str = include_str!("cluster_visibility.wgsl");
+
+/// VALs per block of the k-means update's partial sums (one invocation per cluster and block
+/// loops over them: far under llvmpipe's loop limit).
+pub const PARTIAL_BLOCK: u32 = 256;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Stage names in the frame's timings.
+pub const CLUSTERING_STAGE: &str = "clustering";
+pub const SHADOW_MAPS_STAGE: &str = "cluster_shadow_maps";
+
+/// WGSL `Cluster`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawCluster {
+    pub position: [f32; 3],
+    pub count: f32,
+    pub normal: [f32; 3],
+    pub radius: f32,
+}
+
+impl From<&RawCluster> for twin::Cluster {
+    fn from(c: &RawCluster) -> Self {
+        Self { position: c.position.into(), count: c.count, normal: c.normal.into(), radius: c.radius }
+    }
+}
+
+/// WGSL `ClusterSums`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawClusterSums {
+    pub offset: [f32; 3],
+    pub count: f32,
+    pub normal: [f32; 3],
+    pub offset_sq: f32,
+}
+
+/// The scene-dependent lengths of the mode: 1 / the scene's bounding diagonal scales the
+/// clustering distance, and shadow maps store distances up to twice the diagonal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneScale {
+    pub diagonal: f32,
+}
+
+impl SceneScale {
+    pub fn of(scene: &GpuScene) -> Self {
+        let (lo, hi) = scene.flat.vertices.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), v| {
+            let p = Vec3::from(v.position);
+            (lo.min(p), hi.max(p))
+        });
+        let diagonal = (hi - lo).length();
+        Self { diagonal: if diagonal.is_finite() && diagonal > 0.0 { diagonal } else { 1.0 } }
+    }
+
+    pub fn depth_far(&self) -> f32 {
+        2.0 * self.diagonal
+    }
+
+    pub fn kmeans(&self, settings: &ClusterSettings) -> twin::KmeansParams {
+        twin::KmeansParams { position_scale: 1.0 / self.diagonal, normal_weight: settings.normal_weight }
+    }
+}
+
+/// The constants every shader of the mode starts with, then `paraboloid.wgsl`.
+pub fn header(settings: &ClusterSettings, scale: SceneScale) -> String {
+    let soft = match settings.soft {
+        SoftShadows::Pcss => 0,
+        SoftShadows::Pcf => 1,
+        SoftShadows::Hard => 2,
+    };
+    format!(
+        "const CLUSTER_COUNT: u32 = {}u;\n\
+         const POSITION_SCALE: f32 = {:e};\n\
+         const NORMAL_WEIGHT: f32 = {:e};\n\
+         const PARTIAL_BLOCK: u32 = {PARTIAL_BLOCK}u;\n\
+         const MAP_RESOLUTION: u32 = {}u;\n\
+         const ATLAS_COLUMNS: u32 = {}u;\n\
+         const DEPTH_FAR: f32 = {:e};\n\
+         const SOFT_PCSS: u32 = 0u;\n\
+         const SOFT_PCF: u32 = 1u;\n\
+         const SOFT_HARD: u32 = 2u;\n\
+         const SOFT_SHADOWS: u32 = {soft}u;\n\
+         const SHADOW_TAPS: u32 = {}u;\n\
+         const PCF_RADIUS_TEXELS: f32 = {:e};\n\
+         const MAX_SHADOW_FILTER_ANGLE: f32 = {:e};\n\
+         const CLUSTER_NEAR_FRACTION: f32 = {:e};\n\
+         const SHADOW_RELATIVE_BIAS: f32 = {:e};\n\
+         const SHADOW_RASTER_SLACK: f32 = {:e};\n{PARABOLOID}",
+        settings.count,
+        1.0 / scale.diagonal,
+        settings.normal_weight,
+        settings.shadow_map_resolution,
+        settings.atlas_columns(),
+        scale.depth_far(),
+        twin::SHADOW_TAPS,
+        twin::PCF_RADIUS_TEXELS,
+        twin::MAX_SHADOW_FILTER_ANGLE,
+        twin::CLUSTER_NEAR_FRACTION,
+        twin::SHADOW_RELATIVE_BIAS,
+        twin::SHADOW_RASTER_SLACK,
+    )
+}
+
+fn default_header() -> String {
+    header(&ClusterSettings::default(), SceneScale { diagonal: 1.0 })
+}
+
+/// k-means: four entry points over one set of bindings.
+pub const CLUSTERING: PassDesc = PassDesc {
+    label: CLUSTERING_STAGE,
+    bindings: &[
+        read("vals"),
+        read("val_count"),
+        read_write("clusters"),
+        read_write("group_of_val"),
+        read_write("cluster_partials"),
+    ],
+    entries: &[
+        Entry::first("kmeans_seed", 3),
+        Entry::first("kmeans_assign", 4),
+        Entry::first("kmeans_partial", 5),
+        Entry { name: "kmeans_reduce", bindings: 5, except: &["group_of_val"] },
+    ],
+    workgroup: [WORKGROUP_SIZE, 1, 1],
+    default_source: |textured| CLUSTERING.source(&format!("{}\n{CLUSTERING_WGSL}", default_header()), textured),
+};
+
+/// Per (sparse point, cluster) visibility.
+pub const VISIBILITY: PassDesc = PassDesc {
+    label: "cluster_visibility",
+    bindings: &[read("sparse_points"), read("clusters"), depth_texture("shadow_atlas"), read_write("group_visibility")],
+    entries: &[Entry::first("main", 4)],
+    workgroup: [WORKGROUP_SIZE, 1, 1],
+    default_source: |textured| VISIBILITY.source(&format!("{}\n{VISIBILITY_WGSL}", default_header()), textured),
+};
+
+/// The shadow-map raster's complete WGSL (vertex and fragment stages).
+pub fn shadow_maps_source(settings: &ClusterSettings, scale: SceneScale, textured: bool) -> String {
+    crate::gpu::shader::source(&format!("{}\n{SHADOW_MAPS_WGSL}", header(settings, scale)), textured)
+}
+
+/// The shadow-map raster at the default settings (for the compilation test).
+pub fn default_shadow_maps_source(textured: bool) -> String {
+    shadow_maps_source(&ClusterSettings::default(), SceneScale { diagonal: 1.0 }, textured)
+}
+
+struct ShadowMaps {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::RenderPipeline,
+    atlas: wgpu::Texture,
+    atlas_view: wgpu::TextureView,
+}
+
+impl ShadowMaps {
+    fn new(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings, scale: SceneScale) -> Result<Self, GpuError> {
+        let label = SHADOW_MAPS_STAGE;
+        let module = module_from_source(gpu, label, shadow_maps_source(settings, scale, scene.textured()))?;
+        let side = settings.atlas_columns() * settings.shadow_map_resolution;
+        let limit = gpu.device.limits().max_texture_dimension_2d;
+        if side > limit {
+            return Err(GpuError::TooLarge {
+                what: format!("{label}.atlas side (texels)"),
+                needed: side.into(),
+                limit: limit.into(),
+            });
+        }
+        let (layout, pipeline) = gpu.build_checked(label, || {
+            let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(&format!("{label}.layout")),
+                entries: &[wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                }],
+            });
+            let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(&format!("{label}.pipeline_layout")),
+                bind_group_layouts: &[Some(&layout), Some(&scene.layout)],
+                immediate_size: 0,
+            });
+            let pipeline = gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(&format!("{label}.pipeline")),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[],
+                }),
+                multiview_mask: None,
+                cache: None,
+            });
+            (layout, pipeline)
+        })?;
+        let atlas = gpu.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(&format!("{label}.atlas")),
+            size: wgpu::Extent3d { width: side, height: side, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let atlas_view = atlas.create_view(&Default::default());
+        Ok(Self { layout, pipeline, atlas, atlas_view })
+    }
+}
+
+/// The clustered visibility mode: its passes, the clusters (kept from frame to frame) and the
+/// group table it hands to the gather.
+pub struct Clusters {
+    settings: ClusterSettings,
+    scale: SceneScale,
+    seed: Kernel,
+    assign: Kernel,
+    partial: Kernel,
+    reduce: Kernel,
+    shadow_maps: ShadowMaps,
+    visibility: Kernel,
+    /// `array<Cluster>`: this frame's centres, the next frame's start.
+    clusters: wgpu::Buffer,
+    /// `array<u32>`, one per VAL of [`Clusters::capacity`].
+    group_of_val: wgpu::Buffer,
+    /// `array<ClusterSums>`, clusters x blocks of [`PARTIAL_BLOCK`] VALs.
+    partials: wgpu::Buffer,
+    /// VALs the per-VAL buffers hold.
+    capacity: u32,
+    /// `array<f32>`, sparse points x clusters.
+    group_visibility: wgpu::Buffer,
+}
+
+impl Clusters {
+    pub fn new(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings) -> Result<Self, GpuError> {
+        let scale = SceneScale::of(scene);
+        let head = header(settings, scale);
+        let textured = scene.textured();
+        let module = module_from_source(
+            gpu,
+            CLUSTERING.label,
+            CLUSTERING.source(&format!("{head}\n{CLUSTERING_WGSL}"), textured),
+        )?;
+        let kernel = |name: &str| {
+            Kernel::build(gpu, scene, &CLUSTERING, &module, CLUSTERING.entry(name), &[], CLUSTERING.workgroup)
+        };
+        let vis_module = module_from_source(
+            gpu,
+            VISIBILITY.label,
+            VISIBILITY.source(&format!("{head}\n{VISIBILITY_WGSL}"), textured),
+        )?;
+        let m = settings.count as usize;
+        let points = scene.flat.sparse_count() as usize;
+        Ok(Self {
+            settings: *settings,
+            scale,
+            seed: kernel("kmeans_seed")?,
+            assign: kernel("kmeans_assign")?,
+            partial: kernel("kmeans_partial")?,
+            reduce: kernel("kmeans_reduce")?,
+            shadow_maps: ShadowMaps::new(gpu, scene, settings, scale)?,
+            visibility: Kernel::build(
+                gpu,
+                scene,
+                &VISIBILITY,
+                &vis_module,
+                VISIBILITY.entry("main"),
+                &[],
+                VISIBILITY.workgroup,
+            )?,
+            clusters: gpu.storage_buffer_sized::<RawCluster>("clustering.clusters", m)?,
+            group_of_val: gpu.storage_buffer_sized::<u32>("clustering.group_of_val", 1)?,
+            partials: gpu.storage_buffer_sized::<RawClusterSums>("clustering.cluster_partials", m)?,
+            capacity: 1,
+            group_visibility: gpu.storage_buffer_sized::<f32>("cluster_visibility.group_visibility", points * m)?,
+        })
+    }
+
+    fn blocks(&self) -> u32 {
+        self.capacity.div_ceil(PARTIAL_BLOCK)
+    }
+
+    /// Read back what the last frame computed (tests and tools): the clusters, each of the
+    /// first `vals` VALs' cluster, the visibility table and the shadow maps.
+    pub fn read(&self, gpu: &Gpu, vals: usize, points: usize) -> Result<ClusterReadback, GpuError> {
+        let m = self.settings.count as usize;
+        let clusters: Vec<RawCluster> = gpu.read_buffer(&self.clusters, m)?;
+        let res = self.settings.shadow_map_resolution;
+        let side = self.settings.atlas_columns() * res;
+        let row = (side * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let staging = gpu.storage_buffer_sized::<u8>("cluster_shadow_maps.readback", (row * side) as usize)?;
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("cluster_shadow_maps.readback") });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.shadow_maps.atlas,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::DepthOnly,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &staging,
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: None },
+            },
+            wgpu::Extent3d { width: side, height: side, depth_or_array_layers: 1 },
+        );
+        gpu.submit_and_wait(encoder)?;
+        let words: Vec<f32> = gpu.read_buffer(&staging, (row / 4 * side) as usize)?;
+        let far = self.scale.depth_far();
+        let maps = (0..m)
+            .map(|k| {
+                let (cx, cy) = (
+                    (k as u32 % self.settings.atlas_columns()) * res,
+                    (k as u32 / self.settings.atlas_columns()) * res,
+                );
+                (0..res * res)
+                    .map(|i| {
+                        let d = words[((cy + i / res) * row / 4 + cx + i % res) as usize];
+                        if d >= 1.0 { f32::INFINITY } else { d * far }
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(ClusterReadback {
+            clusters: clusters.iter().map(Into::into).collect(),
+            group_of_val: gpu.read_buffer(&self.group_of_val, vals.min(self.capacity as usize))?,
+            visibility: gpu.read_buffer(&self.group_visibility, points * m)?,
+            maps,
+            kmeans: self.scale.kmeans(&self.settings),
+            settings: self.settings,
+        })
+    }
+}
+
+/// What [`Clusters::read`] returns.
+pub struct ClusterReadback {
+    pub clusters: Vec<twin::Cluster>,
+    pub group_of_val: Vec<u32>,
+    /// Sparse points x clusters.
+    pub visibility: Vec<f32>,
+    /// Per cluster, its shadow map: distances (m), `f32::INFINITY` where nothing was drawn.
+    pub maps: Vec<Vec<f32>>,
+    pub kmeans: twin::KmeansParams,
+    pub settings: ClusterSettings,
+}
+
+impl GroupVisibility for Clusters {
+    fn stages(&self) -> Vec<&'static str> {
+        vec![CLUSTERING_STAGE, SHADOW_MAPS_STAGE, VISIBILITY.label]
+    }
+
+    fn table(&self) -> GroupTable<'_> {
+        GroupTable { groups: self.settings.count, group_of_val: &self.group_of_val, visibility: &self.group_visibility }
+    }
+
+    fn fit(&mut self, gpu: &Gpu, max_vals: u32) -> Result<(), GpuError> {
+        if max_vals > self.capacity {
+            self.capacity = max_vals;
+            self.group_of_val = gpu.storage_buffer_sized::<u32>("clustering.group_of_val", max_vals as usize)?;
+            let partials = self.settings.count as usize * self.blocks() as usize;
+            self.partials = gpu.storage_buffer_sized::<RawClusterSums>("clustering.cluster_partials", partials)?;
+        }
+        Ok(())
+    }
+
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
+        let scene = frame.scene;
+        let m = self.settings.count;
+        let resources = [
+            buffer("vals", &frame.vals.buffer),
+            buffer("val_count", &frame.vals.count),
+            buffer("clusters", &self.clusters),
+            buffer("group_of_val", &self.group_of_val),
+            buffer("cluster_partials", &self.partials),
+        ];
+        let bind = |k: &Kernel, names: usize, except: &str| {
+            let r: Vec<_> = resources[..names]
+                .iter()
+                .filter(|r| r.name != except)
+                .map(|r| crate::gpu::pass::Res { name: r.name, resource: r.resource.clone() })
+                .collect();
+            k.bind(gpu, &r)
+        };
+        let groups = [
+            bind(&self.seed, 3, ""),
+            bind(&self.assign, 4, ""),
+            bind(&self.partial, 5, ""),
+            bind(&self.reduce, 5, "group_of_val"),
+        ];
+        let steps: [(&Kernel, [u32; 3]); 4] = [
+            (&self.seed, [m, 1, 1]),
+            (&self.assign, [self.capacity, 1, 1]),
+            (&self.partial, [m, self.blocks(), 1]),
+            (&self.reduce, [m, 1, 1]),
+        ];
+        let iterations = self.settings.iterations as usize;
+        rec.stage(CLUSTERING_STAGE, |e, s| {
+            let parts = iterations * steps.len();
+            for i in 0..iterations {
+                for (j, ((kernel, invocations), group)) in steps.iter().zip(&groups).enumerate() {
+                    let timestamps = s.as_ref().map(|s| s.compute_part(i * steps.len() + j, parts));
+                    kernel.dispatch(e, group, scene, *invocations, timestamps);
+                }
+            }
+        })?;
+        let maps = &self.shadow_maps;
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&format!("{SHADOW_MAPS_STAGE}.bind_group")),
+            layout: &maps.layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: self.clusters.as_entire_binding() }],
+        });
+        rec.stage(SHADOW_MAPS_STAGE, |e, s| {
+            let mut pass = e.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some(SHADOW_MAPS_STAGE),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &maps.atlas_view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: s.as_ref().map(|s| s.render()),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&maps.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.set_bind_group(1, &scene.bind_group, &[]);
+            let (res, columns) = (self.settings.shadow_map_resolution, self.settings.atlas_columns());
+            let corners = scene.flat.indices.len() as u32;
+            for k in 0..m {
+                let (x, y) = ((k % columns) * res, (k / columns) * res);
+                pass.set_viewport(x as f32, y as f32, res as f32, res as f32, 0.0, 1.0);
+                pass.set_scissor_rect(x, y, res, res);
+                pass.draw(0..corners, k..k + 1);
+            }
+        })?;
+        let group = self.visibility.bind(
+            gpu,
+            &[
+                buffer("sparse_points", &scene.sparse_points),
+                buffer("clusters", &self.clusters),
+                view("shadow_atlas", &maps.atlas_view),
+                buffer("group_visibility", &self.group_visibility),
+            ],
+        );
+        let points = scene.flat.sparse_count();
+        rec.stage(VISIBILITY.label, |e, s| {
+            self.visibility.dispatch(e, &group, scene, [points, m, 1], s.as_ref().map(|s| s.compute()))
+        })
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
+    }
+}

@@ -1,0 +1,44 @@
+// One cluster of VALs and the paraboloid projection of its shadow map around its normal
+// (paper 000 §4.2): the front hemisphere fills the unit disc. Shared by the clustering, the
+// shadow-map raster and the visibility pass; the constants (`clusters/mod.rs`) come first.
+// Rust twin: `twin.rs` (same names).
+
+struct Cluster {
+    // Mean position of its lit VALs (m).
+    position: vec3<f32>,
+    // Lit VALs assigned to it (0: empty).
+    count: f32,
+    normal: vec3<f32>,
+    // Radius of the disc light standing for it (m).
+    radius: f32,
+}
+
+fn paraboloid_project(v: vec3<f32>, normal: vec3<f32>) -> vec2<f32> {
+    let t = any_perpendicular(normal);
+    let b = cross(normal, t);
+    return vec2<f32>(dot(v, t), dot(v, b)) / max(1.0 + dot(v, normal), 1e-6);
+}
+
+fn paraboloid_direction(q: vec2<f32>, normal: vec3<f32>) -> vec3<f32> {
+    let t = any_perpendicular(normal);
+    let b = cross(normal, t);
+    let r2 = dot(q, q);
+    let vn = (1.0 - r2) / (1.0 + r2);
+    let s = 1.0 + vn;
+    return normalize(t * q.x * s + b * q.y * s + normal * vn);
+}
+
+fn texel_disc(texel: vec2<i32>) -> vec2<f32> {
+    let r = f32(MAP_RESOLUTION);
+    return vec2<f32>((f32(texel.x) + 0.5) / r * 2.0 - 1.0, 1.0 - (f32(texel.y) + 0.5) / r * 2.0);
+}
+
+fn disc_texel(q: vec2<f32>) -> vec2<f32> {
+    let r = f32(MAP_RESOLUTION);
+    return vec2<f32>((q.x + 1.0) * 0.5 * r, (1.0 - q.y) * 0.5 * r);
+}
+
+// Top-left texel of cluster `k`'s map in the atlas.
+fn atlas_origin(k: u32) -> vec2<u32> {
+    return vec2<u32>(k % ATLAS_COLUMNS, k / ATLAS_COLUMNS) * MAP_RESOLUTION;
+}
