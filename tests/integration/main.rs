@@ -6,6 +6,7 @@ mod bench;
 mod cli;
 mod frame;
 mod fuzz;
+mod gltf;
 mod hardening;
 mod layout;
 mod mcap;
