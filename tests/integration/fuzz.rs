@@ -347,7 +347,8 @@ proptest! {
         let mut gltf: Value = serde_json::from_str(&text).expect("JSON");
         let mut paths = Vec::new();
         leaves(&gltf, String::new(), &mut paths);
-        *gltf.pointer_mut(choice.get(&paths)).expect("a leaf") = replacement;
+        let path = choice.get(&paths);
+        *gltf.pointer_mut(path).expect("a leaf") = replacement;
         load_gltf(&dir, "box.gltf", gltf.to_string().as_bytes());
     }
 }

@@ -74,6 +74,7 @@ fn gltf_and_obj_cornell_boxes_render_the_same_image() {
     let gltf = render(&load(r#""gltf": "cornell_box_gltf/CornellBox-Original.gltf""#));
     assert!(obj.coverage() > 3000, "the box fills the view");
     let error = relative_rmse(&gltf, &obj);
+    eprintln!("glTF vs OBJ Cornell box, 64x64 sparse: relative RMSE {error:.3e}");
     assert!(error < 1e-4, "glTF vs OBJ relative RMSE {error}");
 }
 
@@ -102,5 +103,6 @@ fn whole_scene_glb_matches_the_json_scene() {
     assert!((camera.fov_y - expected.fov_y).abs() < 1e-6 && camera.width == 64 && camera.height == 64);
 
     let error = relative_rmse(&render(&scene), &render(&obj_scene()));
+    eprintln!(".glb whole scene vs JSON + OBJ scene, 64x64 sparse: relative RMSE {error:.3e}");
     assert!(error < 1e-3, ".glb scene vs JSON + OBJ scene: relative RMSE {error}");
 }
