@@ -35,7 +35,7 @@ use super::description::{
     CameraDescription, LightDescription, MaterialDescription, MeshDescription, SceneDescription, SettingsDescription,
     key_path, parse_json,
 };
-use super::obj::{LoadedMesh, json_material, list, weld};
+use super::obj::{LoadedMesh, Merged, json_material, list};
 use super::texture::Textures;
 use super::{MAX_TRIANGLES_PER_MESH, Material, SceneError, TriangleBudget};
 
@@ -674,21 +674,9 @@ pub(crate) fn load(
         if let Some(bad) = texcoords.iter().flatten().find(|t| !t.is_finite()) {
             return Err(at.error(format!("{name}: TEXCOORD_0 {bad} is not finite")));
         }
-        merged.append(Primitive { world: *world, positions, normals, texcoords, indices, material });
+        merged.append_primitive(Primitive { world: *world, positions, normals, texcoords, indices, material });
     }
-    let normals = match (merged.with_normals, merged.without_normals) {
-        (0, _) => None,
-        (_, 0) => Some(merged.normals),
-        (with, without) => {
-            tracing::warn!(
-                file = %at.file.display(),
-                "{with} triangles have normals and {without} do not; computing all normals"
-            );
-            None
-        }
-    };
-    let welded = weld(merged.positions, normals, merged.texcoords, merged.triangles, merged.triangle_materials);
-    Ok(welded.into_mesh(at.file.clone(), resolver.materials))
+    Ok(merged.into_mesh(at.file.clone(), resolver.materials))
 }
 
 /// `skip_groups` must name nodes and `materials` glTF materials of the file.
@@ -728,24 +716,11 @@ struct Primitive {
     material: u32,
 }
 
-/// The primitive instances concatenated, in world (the glTF scene's) space.
-#[derive(Default)]
-struct Merged {
-    positions: Vec<Vec3>,
-    /// Zero for vertices of primitives without normals.
-    normals: Vec<Vec3>,
-    /// Zero for vertices of primitives without texture coordinates.
-    texcoords: Vec<Vec2>,
-    triangles: Vec<[u32; 3]>,
-    triangle_materials: Vec<u32>,
-    with_normals: usize,
-    without_normals: usize,
-}
-
+/// The primitive instances are concatenated in world (the glTF scene's) space.
 impl Merged {
     /// Appends the vertices the primitive's triangles use, in order of first use (as the OBJ
     /// loader orders them), transformed to world space.
-    fn append(&mut self, p: Primitive) {
+    fn append_primitive(&mut self, p: Primitive) {
         let normal_matrix = Mat3::from_mat4(p.world).inverse().transpose();
         let mirrored = Mat3::from_mat4(p.world).determinant() < 0.0;
         let mut remap = vec![u32::MAX; p.positions.len()];
@@ -767,9 +742,9 @@ impl Merged {
             triangles.push(if mirrored { [a, c, b] } else { [a, b, c] });
         }
         if p.normals.is_some() {
-            self.with_normals += triangles.len();
+            self.faces_with_normals += triangles.len();
         } else {
-            self.without_normals += triangles.len();
+            self.faces_without_normals += triangles.len();
         }
         self.triangle_materials.extend(std::iter::repeat_n(p.material, triangles.len()));
         self.triangles.extend(triangles);

@@ -171,19 +171,7 @@ pub(crate) fn load(
         let after = if skip.is_empty() { "" } else { " after skip_groups" };
         return Err(file_error(None, format!("no triangles to load{after}")));
     }
-    let normals = match (merged.faces_with_normals, merged.faces_without_normals) {
-        (0, _) => None,
-        (_, 0) => Some(merged.normals),
-        (with, without) => {
-            tracing::warn!(
-                file = %file.display(),
-                "{with} faces have normals and {without} do not; computing all normals"
-            );
-            None
-        }
-    };
-    let welded = weld(merged.positions, normals, merged.texcoords, merged.triangles, merged.triangle_materials);
-    Ok(welded.into_mesh(file, resolver.materials))
+    Ok(merged.into_mesh(file, resolver.materials))
 }
 
 /// What the pre-scan learned besides "no errors".
@@ -567,21 +555,39 @@ enum Texcoords {
     None,
 }
 
-/// The groups of an OBJ concatenated.
+/// The groups of an OBJ (or the primitives of a glTF, `super::gltf`) concatenated.
 #[derive(Default)]
-struct Merged {
-    positions: Vec<Vec3>,
+pub(crate) struct Merged {
+    pub positions: Vec<Vec3>,
     /// Zero for vertices of groups without normals.
-    normals: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
     /// Zero for vertices of groups without texture coordinates.
-    texcoords: Vec<Vec2>,
-    triangles: Vec<[u32; 3]>,
-    triangle_materials: Vec<u32>,
-    faces_with_normals: usize,
-    faces_without_normals: usize,
+    pub texcoords: Vec<Vec2>,
+    pub triangles: Vec<[u32; 3]>,
+    pub triangle_materials: Vec<u32>,
+    pub faces_with_normals: usize,
+    pub faces_without_normals: usize,
 }
 
 impl Merged {
+    /// The welded mesh of `file`: the file's normals when every face has them, else none (they
+    /// are computed, with a warning when only some faces had them).
+    pub(crate) fn into_mesh(self, file: PathBuf, materials: Vec<Material>) -> LoadedMesh {
+        let normals = match (self.faces_with_normals, self.faces_without_normals) {
+            (0, _) => None,
+            (_, 0) => Some(self.normals),
+            (with, without) => {
+                tracing::warn!(
+                    file = %file.display(),
+                    "{with} faces have normals and {without} do not; computing all normals"
+                );
+                None
+            }
+        };
+        weld(self.positions, normals, self.texcoords, self.triangles, self.triangle_materials)
+            .into_mesh(file, materials)
+    }
+
     /// Appends a group's vertices and triangles; says which of its faces have texture
     /// coordinates.
     fn append(&mut self, mesh: &tobj::Mesh, material: u32) -> Result<Texcoords, String> {
@@ -635,7 +641,7 @@ impl Merged {
 }
 
 /// Welded geometry.
-pub(crate) struct Welded {
+struct Welded {
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
     texcoords: Vec<Vec2>,
@@ -646,7 +652,7 @@ pub(crate) struct Welded {
 /// Merges vertices with bit-identical position, texture coordinates and (when there are
 /// normals) normal, so that groups sharing positions share vertices while UV seams and hard
 /// edges stay split; drops triangles with two corners at one position.
-pub(crate) fn weld(
+fn weld(
     positions: Vec<Vec3>,
     normals: Option<Vec<Vec3>>,
     texcoords: Vec<Vec2>,
