@@ -80,8 +80,14 @@ pub struct SceneDescription {
 #[serde(deny_unknown_fields)]
 pub struct MeshDescription {
     /// OBJ file, relative to the scene file's directory. With `obj_text`, only the mesh's name
-    /// (its stem) and the name used in messages.
+    /// (its stem) and the name used in messages. Required unless `gltf` is given.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub obj: String,
+    /// glTF 2.0 file (`.gltf` or `.glb`) instead of `obj`, relative to the scene file's
+    /// directory: every mesh of its default scene, placed by its node transforms, becomes this
+    /// one mesh (README "glTF"); `skip_groups` names nodes and `materials` glTF materials.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gltf: Option<String>,
     /// The OBJ file's text inline, instead of reading `obj`. It may not load MTL files
     /// (`mtllib`): give its materials with `material`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -97,7 +103,8 @@ pub struct MeshDescription {
     /// Replaces MTL materials by name; wins over `material`. Unknown names are errors.
     #[serde(default)]
     pub materials: BTreeMap<String, MaterialDescription>,
-    /// OBJ groups/objects (`g`/`o` names) not to load. Unknown names are errors.
+    /// OBJ groups/objects (`g`/`o` names), or glTF nodes (with their children), not to load.
+    /// Unknown names are errors.
     #[serde(default)]
     pub skip_groups: Vec<String>,
 }
@@ -796,8 +803,26 @@ impl TransformDescription {
 
 impl MeshDescription {
     fn validate(&self, field: &str) -> Result<(), SceneError> {
-        if self.obj.trim().is_empty() {
-            return Err(SceneError::field(format!("{field}.obj"), "must name an OBJ file, got an empty string"));
+        match (&self.gltf, self.obj.is_empty()) {
+            (None, true) => {
+                return Err(SceneError::field(
+                    format!("{field}.obj"),
+                    "required field is missing: give `obj` (an OBJ file) or `gltf` (a glTF 2.0 file)",
+                ));
+            }
+            (None, false) if self.obj.trim().is_empty() => {
+                return Err(SceneError::field(format!("{field}.obj"), "must name an OBJ file, got an empty string"));
+            }
+            (Some(_), false) => {
+                return Err(SceneError::field(format!("{field}.gltf"), "give `obj` or `gltf`, not both"));
+            }
+            (Some(gltf), true) if gltf.trim().is_empty() => {
+                return Err(SceneError::field(format!("{field}.gltf"), "must name a glTF file, got an empty string"));
+            }
+            (Some(_), true) if self.obj_text.is_some() => {
+                return Err(SceneError::field(format!("{field}.obj_text"), "only with `obj`, not with `gltf`"));
+            }
+            _ => {}
         }
         self.transform.validate(&format!("{field}.transform"))?;
         int_in(self.sparse_points, 1, MAX_SPARSE_POINTS, &format!("{field}.sparse_points"))?;

@@ -34,6 +34,7 @@
 
 mod description;
 mod error;
+mod gltf;
 mod hash;
 mod normals;
 mod obj;
@@ -45,6 +46,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{Affine3A, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
+pub use self::gltf::{GltfSceneDescription, LUMENS_PER_WATT, MAX_GLTF_BYTES, phong_from_pbr};
 pub use description::{
     CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, InterpolationKernel, LightBound,
     LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS,
@@ -235,7 +237,7 @@ pub struct Settings {
 /// sparse points.
 #[derive(Clone, Debug)]
 pub struct Mesh {
-    /// Name, from the OBJ file's stem.
+    /// Name, from the mesh file's stem (OBJ or glTF).
     pub name: String,
     /// Model to the scene's local world frame (world minus [`Scene::origin`]): the
     /// description's transform (scale, then Euler XYZ rotation, then translation) after the
@@ -405,8 +407,14 @@ fn transform_normals(normal_matrix: Mat3, normals: &[Vec3]) -> Vec<Vec3> {
 impl Scene {
     /// Parses and validates scene JSON and loads every mesh it names; OBJ paths are relative to
     /// `base_dir`.
+    /// A JSON object with a top-level `gltf` field is a [`GltfSceneDescription`]: the whole
+    /// scene from one glTF file (its meshes, spot light and camera) with relume's settings.
     pub fn from_json_str(text: &str, base_dir: &Path) -> Result<Scene, SceneError> {
-        let description = SceneDescription::from_json_str(text)?;
+        let description = if GltfSceneDescription::is_one(text) {
+            GltfSceneDescription::from_json_str(text)?.to_scene_description(base_dir)?
+        } else {
+            SceneDescription::from_json_str(text)?
+        };
         Self::from_description(&description, base_dir)
     }
 
@@ -510,13 +518,13 @@ impl Scene {
 
 /// Triangles a mesh may have after subdivision: what the scene's meshes before it left of the
 /// scene's `total`.
-struct TriangleBudget {
-    left: usize,
-    total: usize,
+pub(crate) struct TriangleBudget {
+    pub left: usize,
+    pub total: usize,
 }
 
 impl TriangleBudget {
-    fn exceeded(&self, field: String, what: &str) -> SceneError {
+    pub(crate) fn exceeded(&self, field: String, what: &str) -> SceneError {
         let message = if self.left < self.total {
             format!("{what} over the {} triangles left of the scene's limit of {}", self.left, self.total)
         } else {
@@ -567,10 +575,14 @@ fn load_mesh(
 ) -> Result<Mesh, SceneError> {
     let started = std::time::Instant::now();
     let field = format!("meshes[{index}]");
-    let loaded = obj::load(description, &field, base_dir, textures)?;
+    // glTF checks its triangle count against the budget before it reads any vertex data.
+    let (loaded, file_field) = match description.gltf {
+        Some(_) => (gltf::load(description, &field, base_dir, budget, textures)?, format!("{field}.gltf")),
+        None => (obj::load(description, &field, base_dir, textures)?, format!("{field}.obj")),
+    };
     if loaded.triangles.len() > budget.left {
         let what = format!("the OBJ has {} triangles,", loaded.triangles.len());
-        return Err(budget.exceeded(format!("{field}.obj"), &what));
+        return Err(budget.exceeded(file_field, &what));
     }
     let file = loaded.file.clone();
     let loaded_at = started.elapsed();
@@ -595,7 +607,7 @@ fn load_mesh(
     let area = geometry.area();
     if area <= 0.0 || !area.is_finite() {
         return Err(SceneError::Obj {
-            field: format!("{field}.obj"),
+            field: file_field,
             file,
             line: None,
             message: format!("the mesh has no usable surface area (total {area} square units)"),

@@ -19,14 +19,15 @@ use super::hash::fast_hash_map;
 use super::texture::{Textures, parse_map_statement};
 use super::{Material, SceneError};
 
-/// One OBJ file as a single mesh, before normals, subdivision and sparse points.
+/// One mesh file (OBJ here, glTF in `super::gltf`) as a single mesh, before normals,
+/// subdivision and sparse points.
 #[derive(Clone, Debug)]
-pub(crate) struct LoadedObj {
-    /// The OBJ file as opened (`base_dir` joined with the scene's path).
+pub(crate) struct LoadedMesh {
+    /// The mesh file as opened (`base_dir` joined with the scene's path).
     pub file: PathBuf,
     /// Model-space positions, welded.
     pub positions: Vec<Vec3>,
-    /// The OBJ's normals, one per vertex, when every loaded face has them.
+    /// The file's normals, one per vertex, when every loaded face has them.
     pub normals: Option<Vec<Vec3>>,
     /// Texture coordinates, one per vertex; zero for vertices of faces without `vt`.
     pub texcoords: Vec<Vec2>,
@@ -59,7 +60,7 @@ pub(crate) fn load(
     field: &str,
     base_dir: &Path,
     textures: &mut Textures,
-) -> Result<LoadedObj, SceneError> {
+) -> Result<LoadedMesh, SceneError> {
     let obj_field = format!("{field}.obj");
     let file = base_dir.join(&description.obj);
     let file_error = |line: Option<usize>, message: String| SceneError::Obj {
@@ -170,27 +171,7 @@ pub(crate) fn load(
         let after = if skip.is_empty() { "" } else { " after skip_groups" };
         return Err(file_error(None, format!("no triangles to load{after}")));
     }
-    let normals = match (merged.faces_with_normals, merged.faces_without_normals) {
-        (0, _) => None,
-        (_, 0) => Some(merged.normals),
-        (with, without) => {
-            tracing::warn!(
-                file = %file.display(),
-                "{with} faces have normals and {without} do not; computing all normals"
-            );
-            None
-        }
-    };
-    let welded = weld(merged.positions, normals, merged.texcoords, merged.triangles, merged.triangle_materials);
-    Ok(LoadedObj {
-        file,
-        positions: welded.positions,
-        normals: welded.normals,
-        texcoords: welded.texcoords,
-        triangles: welded.triangles,
-        triangle_materials: welded.triangle_materials,
-        materials: resolver.materials,
-    })
+    Ok(merged.into_mesh(file, resolver.materials))
 }
 
 /// What the pre-scan learned besides "no errors".
@@ -410,8 +391,30 @@ fn check_material_overrides(
     Ok(())
 }
 
+/// Converts a JSON material (validated already), loading its texture relative to the scene
+/// file's directory `base_dir`; `field` is the material's path.
+pub(crate) fn json_material(
+    json: &MaterialDescription,
+    field: &str,
+    base_dir: &Path,
+    textures: &mut Textures,
+) -> Result<Material, SceneError> {
+    let mut material = json.to_material();
+    if let Some(texture) = &json.diffuse_texture {
+        let path = base_dir.join(texture);
+        let index = textures.load(&path).map_err(|message| SceneError::Obj {
+            field: format!("{field}.diffuse_texture"),
+            file: path.clone(),
+            line: None,
+            message,
+        })?;
+        material.diffuse_texture = Some(index);
+    }
+    Ok(material)
+}
+
 /// `a, b, c`, or `nothing`.
-fn list<'a>(names: impl Iterator<Item = &'a &'a str>) -> String {
+pub(crate) fn list<'a>(names: impl Iterator<Item = &'a &'a str>) -> String {
     let names: Vec<&str> = names.copied().collect();
     if names.is_empty() { "nothing".to_owned() } else { names.join(", ") }
 }
@@ -455,21 +458,8 @@ impl MaterialResolver<'_> {
         Ok(index)
     }
 
-    /// Converts a JSON material (validated already), loading its texture relative to the
-    /// scene file's directory; `field` is the material's path.
     fn convert_json(&mut self, json: &MaterialDescription, field: &str) -> Result<Material, SceneError> {
-        let mut material = json.to_material();
-        if let Some(texture) = &json.diffuse_texture {
-            let path = self.base_dir.join(texture);
-            let index = self.textures.load(&path).map_err(|message| SceneError::Obj {
-                field: format!("{field}.diffuse_texture"),
-                file: path.clone(),
-                line: None,
-                message,
-            })?;
-            material.diffuse_texture = Some(index);
-        }
-        Ok(material)
+        json_material(json, field, self.base_dir, self.textures)
     }
 
     /// Converts an MTL material: `Kd` to diffuse, `Ks` to specular, `Ns` to exponent, `map_Kd`
@@ -565,21 +555,39 @@ enum Texcoords {
     None,
 }
 
-/// The groups of an OBJ concatenated.
+/// The groups of an OBJ (or the primitives of a glTF, `super::gltf`) concatenated.
 #[derive(Default)]
-struct Merged {
-    positions: Vec<Vec3>,
+pub(crate) struct Merged {
+    pub positions: Vec<Vec3>,
     /// Zero for vertices of groups without normals.
-    normals: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
     /// Zero for vertices of groups without texture coordinates.
-    texcoords: Vec<Vec2>,
-    triangles: Vec<[u32; 3]>,
-    triangle_materials: Vec<u32>,
-    faces_with_normals: usize,
-    faces_without_normals: usize,
+    pub texcoords: Vec<Vec2>,
+    pub triangles: Vec<[u32; 3]>,
+    pub triangle_materials: Vec<u32>,
+    pub faces_with_normals: usize,
+    pub faces_without_normals: usize,
 }
 
 impl Merged {
+    /// The welded mesh of `file`: the file's normals when every face has them, else none (they
+    /// are computed, with a warning when only some faces had them).
+    pub(crate) fn into_mesh(self, file: PathBuf, materials: Vec<Material>) -> LoadedMesh {
+        let normals = match (self.faces_with_normals, self.faces_without_normals) {
+            (0, _) => None,
+            (_, 0) => Some(self.normals),
+            (with, without) => {
+                tracing::warn!(
+                    file = %file.display(),
+                    "{with} faces have normals and {without} do not; computing all normals"
+                );
+                None
+            }
+        };
+        weld(self.positions, normals, self.texcoords, self.triangles, self.triangle_materials)
+            .into_mesh(file, materials)
+    }
+
     /// Appends a group's vertices and triangles; says which of its faces have texture
     /// coordinates.
     fn append(&mut self, mesh: &tobj::Mesh, material: u32) -> Result<Texcoords, String> {
@@ -695,6 +703,21 @@ fn weld(
     }
 }
 
+impl Welded {
+    /// The mesh of `file` with this geometry and its `materials`.
+    pub(crate) fn into_mesh(self, file: PathBuf, materials: Vec<Material>) -> LoadedMesh {
+        LoadedMesh {
+            file,
+            positions: self.positions,
+            normals: self.normals,
+            texcoords: self.texcoords,
+            triangles: self.triangles,
+            triangle_materials: self.triangle_materials,
+            materials,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::test_util::TempDir;
@@ -704,6 +727,7 @@ mod tests {
         MeshDescription {
             obj: obj.to_owned(),
             obj_text: None,
+            gltf: None,
             transform: Default::default(),
             sparse_points: 16,
             material: None,
@@ -712,7 +736,7 @@ mod tests {
         }
     }
 
-    fn load_text(dir: &TempDir, obj: &str, description: &MeshDescription) -> Result<LoadedObj, SceneError> {
+    fn load_text(dir: &TempDir, obj: &str, description: &MeshDescription) -> Result<LoadedMesh, SceneError> {
         dir.write(&description.obj, obj);
         load(description, "meshes[0]", dir.path(), &mut Textures::default())
     }

@@ -1,4 +1,4 @@
-//! Diffuse textures: decoding image files (PNG, OpenEXR) into sRGB-encoded RGBA8, the scene's
+//! Diffuse textures: decoding image files (PNG, JPEG, OpenEXR) into sRGB-encoded RGBA8, the scene's
 //! texture table (one entry per file, however many materials use it), and the `map_Kd`
 //! statement's options.
 
@@ -33,9 +33,23 @@ impl Textures {
             return Ok(index);
         }
         let texture = decode(path).map_err(|message| format!("texture {}: {message}", path.display()))?;
+        self.insert(canonical, texture)
+    }
+
+    /// The index of the texture encoded in `bytes` (an image embedded in a glTF file), which
+    /// `key` names (`scene.glb#images[2]`): decoded on first use of `key`.
+    pub fn load_bytes(&mut self, key: PathBuf, bytes: &[u8]) -> Result<u32, String> {
+        if let Some(&index) = self.by_file.get(&key) {
+            return Ok(index);
+        }
+        let texture = decode_bytes(bytes, &key).map_err(|message| format!("texture {}: {message}", key.display()))?;
+        self.insert(key, texture)
+    }
+
+    fn insert(&mut self, key: PathBuf, texture: Texture) -> Result<u32, String> {
         let index = u32::try_from(self.textures.len()).map_err(|_| "too many textures".to_owned())?;
         self.textures.push(texture);
-        self.by_file.insert(canonical, index);
+        self.by_file.insert(key, index);
         Ok(index)
     }
 }
@@ -45,12 +59,16 @@ impl Textures {
 /// sRGB-encoded.
 pub(crate) fn decode(path: &Path) -> Result<Texture, String> {
     let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
+    decode_bytes(&bytes, path)
+}
+
+/// [`decode`] for an image file's bytes; `path` names it in the texture.
+fn decode_bytes(bytes: &[u8], path: &Path) -> Result<Texture, String> {
     let reader = || -> Result<ImageReader<Cursor<&[u8]>>, String> {
-        let reader = ImageReader::new(Cursor::new(bytes.as_slice()))
-            .with_guessed_format()
-            .map_err(|e| format!("cannot read: {e}"))?;
+        let reader =
+            ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| format!("cannot read: {e}"))?;
         if reader.format().is_none() {
-            return Err("not an image file relume can read (PNG or OpenEXR)".to_owned());
+            return Err("not an image file relume can read (PNG, JPEG or OpenEXR)".to_owned());
         }
         Ok(reader)
     };

@@ -50,10 +50,14 @@ pub fn admit(text: &str, assets: &Path, limits: &Limits) -> Result<SceneDescript
         match &mesh.obj_text {
             Some(text) => check_mesh_bytes(text.len() as u64, &format!("{field}.obj_text"), limits)?,
             None => {
-                let obj_field = format!("{field}.obj");
-                let file = confine(assets, &mesh.obj, &obj_field)?;
+                // A glTF's own buffers and images are confined to its directory by its reader.
+                let (file_field, relative) = match &mesh.gltf {
+                    Some(gltf) => (format!("{field}.gltf"), gltf),
+                    None => (format!("{field}.obj"), &mesh.obj),
+                };
+                let file = confine(assets, relative, &file_field)?;
                 let bytes = std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0);
-                check_mesh_bytes(bytes, &obj_field, limits)?;
+                check_mesh_bytes(bytes, &file_field, limits)?;
             }
         }
         let materials = mesh
@@ -75,7 +79,7 @@ fn check_mesh_bytes(bytes: u64, field: &str, limits: &Limits) -> Result<(), ApiE
         return Err(ApiError::limit(
             limit::MAX_MESH_BYTES,
             Some(field.to_owned()),
-            format!("{field}: the OBJ is {bytes} bytes, over the limit of {}", limits.max_mesh_bytes),
+            format!("{field}: the mesh file is {bytes} bytes, over the limit of {}", limits.max_mesh_bytes),
         ));
     }
     Ok(())

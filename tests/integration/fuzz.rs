@@ -1,6 +1,7 @@
-//! Fuzzing, bounded so it runs in CI: proptest over the stream message decoder and the scene
-//! description parser (the service's admission of scenes included). Neither may panic, and
-//! what they accept must be consistent. `PROPTEST_CASES=N` runs more cases locally.
+//! Fuzzing, bounded so it runs in CI: proptest over the stream message decoder, the scene
+//! description parser (the service's admission of scenes included) and the glTF reader (mutated
+//! `.glb` bytes, and `.gltf` fields replaced). None may panic, and what they accept must be
+//! consistent. `PROPTEST_CASES=N` runs more cases locally.
 
 use proptest::prelude::*;
 use prost::Message as _;
@@ -293,5 +294,61 @@ proptest! {
     #[test]
     fn parsing_arbitrary_text_never_panics(text in ".{0,200}") {
         admit(&text);
+    }
+}
+
+/// Loads `bytes` as the glTF of a one-mesh scene (as `name` in `dir`) and as a whole
+/// `.glb` scene: never a panic, and an error names the field that led to the file.
+fn load_gltf(dir: &std::path::Path, name: &str, bytes: &[u8]) {
+    std::fs::write(dir.join(name), bytes).expect("write");
+    let mesh = format!(
+        r#"{{"meshes": [{{"gltf": "{name}", "sparse_points": 8}}],
+            "camera": {{"position": [0, 1, 3], "target": [0, 1, 0], "fov_y_deg": 40, "width": 8, "height": 8}}}}"#
+    );
+    if let Err(error) = relume::scene::Scene::from_json_str(&mesh, dir) {
+        assert!(error.to_string().starts_with("meshes[0]."), "{error}");
+    }
+    let whole = format!(r#"{{"gltf": "{name}", "sparse_points": 8, "width": 8, "height": 8}}"#);
+    if let Err(error) = relume::scene::Scene::from_json_str(&whole, dir) {
+        assert!(!error.to_string().is_empty());
+    }
+}
+
+/// Leaves a glTF field may be replaced by: the values that break naive readers.
+fn gltf_value() -> impl Strategy<Value = Value> {
+    prop_oneof![
+        (0..8u64).prop_map(Value::from),
+        any::<i64>().prop_map(Value::from),
+        Just(Value::from(u32::MAX)),
+        Just(Value::from(u64::MAX)),
+        any::<f64>().prop_map(|f| serde_json::Number::from_f64(f).map_or(Value::Null, Value::Number)),
+        Just(Value::from(1e39)),
+        Just(Value::Null),
+        Just(Value::Array(Vec::new())),
+        prop_oneof![Just("../Cargo.toml".to_owned()), Just("data:,".to_owned()), ".{0,8}"].prop_map(Value::String),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(CASES))]
+
+    #[test]
+    fn loading_mutated_glb_never_panics(edits in proptest::collection::vec((any::<usize>(), any::<u8>(), any::<u8>()), 1..8)) {
+        let dir = super::scratch("fuzz-glb");
+        let glb = std::fs::read(fixture("meshes/cornell_box_gltf/CornellBox-Original.glb")).expect("fixture");
+        load_gltf(&dir, "box.glb", &mutate(glb, &edits));
+    }
+
+    #[test]
+    fn loading_gltf_with_a_mutated_field_never_panics(choice in any::<proptest::sample::Index>(), replacement in gltf_value()) {
+        let dir = super::scratch("fuzz-gltf");
+        std::fs::copy(fixture("meshes/cornell_box_gltf/CornellBox-Original.bin"), dir.join("CornellBox-Original.bin")).expect("copy");
+        let text = std::fs::read_to_string(fixture("meshes/cornell_box_gltf/CornellBox-Original.gltf")).expect("fixture");
+        let mut gltf: Value = serde_json::from_str(&text).expect("JSON");
+        let mut paths = Vec::new();
+        leaves(&gltf, String::new(), &mut paths);
+        let path = choice.get(&paths);
+        *gltf.pointer_mut(path).expect("a leaf") = replacement;
+        load_gltf(&dir, "box.gltf", gltf.to_string().as_bytes());
     }
 }

@@ -8,6 +8,7 @@ mod clusters;
 mod fake_backend;
 mod frame;
 mod fuzz;
+mod gltf;
 mod hardening;
 mod hardening_origin;
 mod layout;
