@@ -22,7 +22,7 @@ use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use crate::twin::Val;
 use crate::twin::rgbd::{grid_size, srgb_to_linear};
-use glam::{UVec2, Vec3};
+use glam::{Affine3A, UVec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
 
@@ -79,15 +79,22 @@ pub struct ReceiverGrid {
     pub receivers: Vec<Receiver>,
 }
 
-/// The receivers of `frame` (world space) within `mr.receiver_margin` of the box
-/// `bounds` (min, max corners, m).
-pub fn receivers(frame: &RgbdFrame, rgbd: &RgbdSettings, mr: &MrSettings, bounds: (Vec3, Vec3)) -> ReceiverGrid {
+/// The receivers of `frame`, its camera at `camera_to_world` (the scene's frame: relative to
+/// its floating origin, as the flattened scene and `bounds` are), within `mr.receiver_margin`
+/// of the box `bounds` (min, max corners, m).
+pub fn receivers(
+    frame: &RgbdFrame,
+    camera_to_world: &Affine3A,
+    rgbd: &RgbdSettings,
+    mr: &MrSettings,
+    bounds: (Vec3, Vec3),
+) -> ReceiverGrid {
     let settings = RgbdSettings { grid_step: mr.receiver_step.max(1), ..*rgbd };
     let size = grid_size(&frame.intrinsics, &settings);
     let (lo, hi) = (bounds.0 - mr.receiver_margin, bounds.1 + mr.receiver_margin);
     let mut grid =
         ReceiverGrid { settings, size, cells: vec![None; (size.x * size.y) as usize], receivers: Vec::new() };
-    for (cell, val) in crate::twin::rgbd::rgbd_vals_by_cell(frame, &settings) {
+    for (cell, val) in crate::twin::rgbd::rgbd_vals_by_cell_posed(frame, camera_to_world, &settings) {
         if val.position.cmpge(lo).all() && val.position.cmple(hi).all() {
             grid.cells[(cell.y * size.x + cell.x) as usize] = Some(grid.receivers.len() as u32);
             grid.receivers.push(Receiver { position: val.position, normal: val.normal });

@@ -181,7 +181,8 @@ impl MrRenderer {
         let background = match (&mut self.differential, &real_vals) {
             (Some(d), Some(vals)) => {
                 let start = Instant::now();
-                let grid = differential::receivers(frame, &settings, &self.mr, d.bounds);
+                let pose = self.renderer.local_pose(&frame.camera_to_world);
+                let grid = differential::receivers(frame, &pose, &settings, &self.mr, d.bounds);
                 let mut all = vals.clone();
                 all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
                 let (light, _) = d.pass.run(gpu, &self.renderer.scene, &grid.receivers, &all, vals.len())?;

@@ -738,7 +738,7 @@ pub fn validate_environment(e: &EnvironmentSettings, field: &str) -> Result<(), 
         return Err(SceneError::field(format!("{field}.up"), format!("must be a finite non-zero vector, got {up}")));
     }
     int_in(e.rows, 2, MAX_ENVIRONMENT_ROWS, &format!("{field}.rows"))?;
-    if e.rows % 2 != 0 {
+    if !e.rows.is_multiple_of(2) {
         return Err(SceneError::field(format!("{field}.rows"), format!("must be even, got {}", e.rows)));
     }
     if e.source == EnvironmentSource::Map && e.map.is_none() {

@@ -172,7 +172,7 @@ fn light_description(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> R
     }
     let intensity = Vec3::from(light.color()) * light.intensity() / LUMENS_PER_WATT;
     let description = LightDescription {
-        position: world.transform_point3(Vec3::ZERO).to_array(),
+        position: world.transform_point3(Vec3::ZERO).as_dvec3().to_array(),
         direction: world.transform_vector3(Vec3::NEG_Z).normalize_or_zero().to_array(),
         inner_angle_deg: inner.to_degrees(),
         outer_angle_deg: outer.to_degrees(),
@@ -204,8 +204,9 @@ fn camera_description(
     let position = world.transform_point3(Vec3::ZERO);
     let forward = world.transform_vector3(Vec3::NEG_Z).normalize_or_zero();
     let description = CameraDescription {
-        position: position.to_array(),
-        target: (position + forward).to_array(),
+        // Scene positions are f64 (the floating origin); glTF's node transforms are f32.
+        position: position.as_dvec3().to_array(),
+        target: (position.as_dvec3() + forward.as_dvec3()).to_array(),
         up: world.transform_vector3(Vec3::Y).normalize_or_zero().to_array(),
         fov_y_deg: perspective.yfov().to_degrees(),
         width,
@@ -907,11 +908,11 @@ mod tests {
         if name.ends_with(".glb") {
             let extra = doc["buffers"][0]["byteLength"].as_u64().unwrap_or(0) as usize;
             bin.resize(bin.len().max(extra), 0);
-            while bin.len() % 4 != 0 {
+            while !bin.len().is_multiple_of(4) {
                 bin.push(0);
             }
             let mut text = doc.to_string().into_bytes();
-            while text.len() % 4 != 0 {
+            while !text.len().is_multiple_of(4) {
                 text.push(b' ');
             }
             let mut glb = b"glTF".to_vec();
@@ -1035,7 +1036,9 @@ mod tests {
     fn malformed_files_name_the_object_and_field() {
         let dir = TempDir::new("gltf-errors");
         let mesh_node = || json!([{"name": "thing", "mesh": 0}]);
-        let cases: Vec<(&str, Box<dyn FnOnce(&mut Value)>, &str)> = vec![
+        // (file, how to break it, what the error must say)
+        type Case<'a> = (&'a str, Box<dyn FnOnce(&mut Value)>, &'a str);
+        let cases: Vec<Case> = vec![
             (
                 "index.gltf",
                 Box::new(|d| d["accessors"][1]["count"] = json!(6)),
@@ -1174,7 +1177,7 @@ mod tests {
                 }
                 (Ok(description), None) => {
                     let light = description.light.as_ref().expect("the spot light");
-                    assert!(Vec3::from(light.position).abs_diff_eq(Vec3::new(0.0, 3.0, 0.0), 1e-6));
+                    assert!(glam::DVec3::from(light.position).abs_diff_eq(glam::DVec3::new(0.0, 3.0, 0.0), 1e-6));
                     assert!(Vec3::from(light.direction).abs_diff_eq(Vec3::NEG_Y, 1e-6), "{light:?}");
                     assert!((light.outer_angle_deg - 0.5f32.to_degrees()).abs() < 1e-4);
                     assert_eq!(light.intensity, [1.0, 0.5, 0.5], "683 cd is 1 W/sr");

@@ -199,8 +199,7 @@ impl Server {
     ) -> Result<Server, ServeError> {
         let addr = config.addr;
         let state = AppState::start(config, start).await?;
-        let listener =
-            tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
+        let listener = tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
         Ok(Server { listener, state })
     }
 

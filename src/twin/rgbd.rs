@@ -290,14 +290,22 @@ pub fn rgbd_vals(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<Val> {
 
 /// [`rgbd_vals`] with each VAL's grid cell (to match the GPU's output, whose order differs).
 pub fn rgbd_vals_by_cell(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<(UVec2, Val)> {
+    rgbd_vals_by_cell_posed(frame, &frame.camera_to_world, settings)
+}
+
+/// [`rgbd_vals_by_cell`] with the camera at `camera_to_world` instead of the frame's own pose
+/// (e.g. the pose relative to a scene's floating origin, `Renderer::local_pose`).
+pub fn rgbd_vals_by_cell_posed(
+    frame: &RgbdFrame,
+    camera_to_world: &Affine3A,
+    settings: &RgbdSettings,
+) -> Vec<(UVec2, Val)> {
     let i = &frame.intrinsics;
     let grid = grid_depths(frame, settings);
     let g = grid_size(i, settings);
     (0..g.y)
         .flat_map(|gy| (0..g.x).map(move |gx| UVec2::new(gx, gy)))
-        .filter_map(|cell| {
-            grid_cell_val(&grid, &frame.color, i, &frame.camera_to_world, settings, cell).map(|v| (cell, v))
-        })
+        .filter_map(|cell| grid_cell_val(&grid, &frame.color, i, camera_to_world, settings, cell).map(|v| (cell, v)))
         .collect()
 }
 

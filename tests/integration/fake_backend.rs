@@ -71,4 +71,3 @@ impl Backend for FakeBackend {
         self.frame(id, width, height)
     }
 }
-

@@ -87,7 +87,8 @@ fn gltf_and_obj_cornell_boxes_render_the_same_image() {
 fn whole_scene_glb_matches_the_json_scene() {
     let scene = Scene::load(&fixture("scenes/cornell_gltf_small.json")).expect("loads the .glb scene");
     let json: SceneDescription = SceneDescription::from_json_str(&cornell_json(r#""obj": "x.obj""#)).expect("parses");
-    let (light, expected) = (scene.light.expect("the .glb's spot light"), json.light.expect("light").to_spot_light());
+    let (light, expected) =
+        (scene.light.expect("the .glb's spot light"), json.light.expect("light").to_spot_light(scene.origin));
     assert!(light.position.abs_diff_eq(expected.position, 1e-5), "{light:?} vs {expected:?}");
     assert!(light.direction.abs_diff_eq(expected.direction, 1e-5), "{light:?} vs {expected:?}");
     assert!(
@@ -95,7 +96,7 @@ fn whole_scene_glb_matches_the_json_scene() {
             && (light.outer_angle - expected.outer_angle).abs() < 1e-6
     );
     assert!(light.intensity.abs_diff_eq(expected.intensity, 1e-5 * 10.0), "{light:?} vs {expected:?}");
-    let (camera, expected) = (scene.camera, json.camera.to_camera());
+    let (camera, expected) = (scene.camera, json.camera.to_camera(scene.origin));
     assert!(camera.position.abs_diff_eq(expected.position, 1e-5), "{camera:?} vs {expected:?}");
     let (view, expected_view) =
         ((camera.target - camera.position).normalize(), (expected.target - expected.position).normalize());

@@ -4,7 +4,6 @@
 //! render and answers grey images), so scheduling and limits are tested without a GPU and
 //! with known render times; scenes are still parsed and loaded for real.
 
-use std::collections::HashSet;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -16,12 +15,7 @@ use http_body_util::{BodyExt, Full};
 use hyper::{Method, StatusCode};
 use hyper_util::client::legacy::Client;
 use hyper_util::client::legacy::connect::HttpConnector;
-use relume::gpu::timing::{StageTimings, TimingSource};
-use relume::image::LinearImage;
-use relume::renderer::Rendered;
-use relume::scene::Scene;
-use relume::service::gpu_worker::{Frame, RenderJob, StreamFrameJob};
-use relume::service::{Backend, Config, GpuWorker, Server, WorkerError};
+use relume::service::{Config, GpuWorker, Server};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;

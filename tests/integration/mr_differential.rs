@@ -9,7 +9,7 @@ use relume::gpu::scene::{FlatScene, GpuScene};
 use relume::mr::differential::relit_radiance;
 use relume::scene::{Material, Scene};
 use relume::twin::Val;
-use relume::twin::bvh::Bvh;
+use relume::twin::bvh::TraceBvh;
 use relume::twin::exact_cpu::{self, ExactScene, Receivers, ValSampling};
 
 /// A closed cube from `lo` to `hi` as OBJ text (outward faces).
@@ -77,12 +77,16 @@ fn gpu_box(gpu: &relume::gpu::Gpu, albedo: f32) -> (Scene, GpuScene) {
 fn mr_differential_gpu_matches_twin() {
     let gpu = gpu();
     let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
-    let mut vals = lights_above();
+    // The pass works in the scene's frame, relative to its floating origin (the box's centre):
+    // the real lights and receivers, given in world coordinates, are moved into it.
+    let origin = scene.origin.as_vec3();
+    let mut vals: Vec<Val> = lights_above().into_iter().map(|v| Val { position: v.position - origin, ..v }).collect();
     let real_count = vals.len();
     let emitters = relume::mr::differential::emitters(&scene);
     let lit: Vec<Vec3> = emitters.iter().map(|e| Vec3::splat(5.0) * (0.5 + 0.5 * e.normal.z.abs())).collect();
     vals.extend(relume::mr::differential::emitter_vals(&emitters, &lit));
-    let receivers = plate_receivers();
+    let receivers: Vec<Receiver> =
+        plate_receivers().into_iter().map(|r| Receiver { position: r.position - origin, ..r }).collect();
     let mut pass = Differential::new(&gpu, &gpu_scene).unwrap();
     let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, &vals, real_count).unwrap();
     let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
@@ -134,14 +138,14 @@ fn mr_differential_plate_darkens_as_exact_predicts() {
     positions.extend(&box_positions);
     let mut triangles = plate_triangles.clone();
     triangles.extend(box_triangles.iter().map(|t| t.map(|i| i + 4)));
-    let without = Bvh::build(&plate_positions, &plate_triangles);
-    let with = Bvh::build(&positions, &triangles);
+    let without = TraceBvh::build(&plate_positions, &plate_triangles);
+    let with = TraceBvh::build(&positions, &triangles);
     let surface = Material { diffuse: Vec3::splat(0.5), specular: Vec3::ZERO, exponent: 1.0, diffuse_texture: None };
     let eye = Vec3::new(0.0, -2.0, 1.0);
     let hits: Vec<Option<exact_cpu::Receiver>> =
         receivers.iter().map(|r| Some(exact_cpu::Receiver::new(r.position, r.normal, surface, eye))).collect();
     let n = receivers.len() as u32;
-    let render = |bvh: &Bvh| {
+    let render = |bvh: &TraceBvh| {
         let scene = ExactScene { bvh, vals: &vals, glossy: false };
         exact_cpu::render(&scene, &Receivers::Hits(&hits), n, 1, ValSampling::All).image
     };
