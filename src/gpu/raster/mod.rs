@@ -10,7 +10,7 @@ use glam::Mat4;
 
 pub const WGSL: &str = include_str!("visibility.wgsl");
 const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The pass's complete WGSL (a render pipeline: vertex and fragment stages).
 pub fn source(textured: bool) -> String {
@@ -52,42 +52,8 @@ impl Visibility {
                     count: None,
                 }],
             });
-            let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("visibility.pipeline_layout"),
-                bind_group_layouts: &[Some(&layout), Some(&scene.layout)],
-                immediate_size: 0,
-            });
-            let pipeline = gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("visibility.pipeline"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: FORMAT,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+            let target = wgpu::ColorTargetState { format: FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL };
+            let pipeline = scene_raster_pipeline(gpu, "visibility", &module, &layout, &scene.layout, &[Some(target)]);
             (layout, pipeline)
         })?;
         Ok(Self { layout, pipeline })
@@ -235,4 +201,49 @@ impl VisibilityTarget {
         }
         Ok(out)
     }
+}
+
+/// A render pipeline that rasterises the flattened scene (`vs_main` over its triangles, no
+/// vertex buffers, no culling) with a `Less` depth test into [`DEPTH_FORMAT`], `fs_main`
+/// writing `targets` (none for a depth-only map); bind groups 0 (`layout`) and 1 (the scene).
+pub(crate) fn scene_raster_pipeline(
+    gpu: &Gpu,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::BindGroupLayout,
+    scene_layout: &wgpu::BindGroupLayout,
+    targets: &[Option<wgpu::ColorTargetState>],
+) -> wgpu::RenderPipeline {
+    let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(&format!("{label}.pipeline_layout")),
+        bind_group_layouts: &[Some(layout), Some(scene_layout)],
+        immediate_size: 0,
+    });
+    gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(&format!("{label}.pipeline")),
+        layout: Some(&pipeline_layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }

@@ -27,7 +27,8 @@ pub const VISIBILITY_WGSL: &str = include_str!("cluster_visibility.wgsl");
 /// VALs per block of the k-means update's partial sums (one invocation per cluster and block
 /// loops over them: far under llvmpipe's loop limit).
 pub const PARTIAL_BLOCK: u32 = 256;
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+// The atlas is rasterised by [`crate::gpu::raster::scene_raster_pipeline`], so it has its depth format.
+use crate::gpu::raster::DEPTH_FORMAT;
 
 /// Stage names in the frame's timings.
 pub const CLUSTERING_STAGE: &str = "clustering";
@@ -202,38 +203,7 @@ impl ShadowMaps {
                     count: None,
                 }],
             });
-            let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(&format!("{label}.pipeline_layout")),
-                bind_group_layouts: &[Some(&layout), Some(&scene.layout)],
-                immediate_size: 0,
-            });
-            let pipeline = gpu.device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(&format!("{label}.pipeline")),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState { cull_mode: None, ..Default::default() },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+            let pipeline = crate::gpu::raster::scene_raster_pipeline(gpu, label, &module, &layout, &scene.layout, &[]);
             (layout, pipeline)
         })?;
         let atlas = gpu.device.create_texture(&wgpu::TextureDescriptor {
