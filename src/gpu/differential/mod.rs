@@ -30,10 +30,6 @@ const BVH: &str = include_str!("../references/bvh.wgsl");
 pub const DIFFERENTIAL_LOOP_BUDGET: u32 = 60_000;
 const _: () = assert!(DIFFERENTIAL_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 
-/// Rounds at most before [`Differential::run`] gives up (every round makes progress on every
-/// unfinished receiver, so only a driver that ignores the budget could need this many).
-const MAX_ROUNDS: u32 = 1 << 16;
-
 /// The pass's own WGSL: its constant, the BVH traversal, then `differential.wgsl`.
 pub fn body() -> String {
     format!("const DIFFERENTIAL_LOOP_BUDGET: u32 = {DIFFERENTIAL_LOOP_BUDGET}u;\n{BVH}\n{WGSL}")
@@ -211,17 +207,14 @@ impl Differential {
             self.kernel.dispatch(&mut encoder, &group, scene, [n as u32, 1, 1], None);
             gpu.submit_and_wait(encoder)?;
             rounds += 1;
-            let [left, stuck] = gpu.read_buffer::<u32>(&self.status, 2)?[..] else {
-                unreachable!("read_buffer returns the 2 elements asked for")
-            };
-            if left == 0 {
+            if crate::gpu::references::exact::rounds_done(
+                gpu,
+                &self.status,
+                rounds,
+                "differential: receivers",
+                DIFFERENTIAL_LOOP_BUDGET,
+            )? {
                 break;
-            }
-            if stuck > 0 || rounds >= MAX_ROUNDS {
-                return Err(GpuError::Incomplete(format!(
-                    "differential: {left} receivers unfinished after {rounds} rounds, {stuck} of them made no \
-                     progress (a shadow ray longer than {DIFFERENTIAL_LOOP_BUDGET} BVH steps)"
-                )));
             }
         }
         let out = gpu.read_buffer::<RawReceiverLight>(light, n)?;
