@@ -37,8 +37,20 @@ fn assert_kmeans_matches(start: &[twin::Cluster], vals: &[relume::twin::Val], r:
     let groups = twin::kmeans(&mut clusters, vals, &r.kmeans, r.settings.iterations);
     let differ = groups.iter().zip(&r.group_of_val).filter(|(a, b)| a != b).count();
     assert!(differ * 200 <= vals.len(), "{differ} of {} VALs in another cluster", vals.len());
+    // A VAL that went to the other cluster moves both centres by up to its distance from them
+    // (<= 2 radii) over the cluster's count: the centres agree to 1e-3 of the diagonal plus that.
+    let mut flips = vec![0u32; clusters.len()];
+    for (&a, &b) in groups.iter().zip(&r.group_of_val).filter(|(a, b)| a != b) {
+        for k in [a, b] {
+            if let Some(f) = flips.get_mut(k as usize) {
+                *f += 1;
+            }
+        }
+    }
     for (k, (cpu, gpu)) in clusters.iter().zip(&r.clusters).enumerate() {
-        assert!((cpu.position - gpu.position).length() <= 1e-3 * diagonal, "cluster {k}: GPU {gpu:?} CPU {cpu:?}");
+        let moved = flips[k] as f32 * 2.0 * cpu.radius.max(gpu.radius) / cpu.count.min(gpu.count).max(1.0);
+        let tolerance = 1e-3 * diagonal + moved;
+        assert!((cpu.position - gpu.position).length() <= tolerance, "cluster {k}: GPU {gpu:?} CPU {cpu:?}");
         assert!((cpu.count - gpu.count).abs() <= 0.005 * vals.len() as f32, "cluster {k}: GPU {gpu:?} CPU {cpu:?}");
     }
 }
