@@ -36,7 +36,8 @@ pub struct Args {
     /// With --accumulate: VALs older than this many frames are dropped.
     #[arg(long, default_value_t = 300)]
     max_age: u32,
-    /// Exposure of the virtual object in the composite (1 keeps the radiance_scale calibration).
+    /// Exposure of the virtual object in the composite (1: on the camera's scale, its radiance
+    /// divided by radiance_scale as the room's was multiplied).
     #[arg(long, default_value_t = 1.0)]
     exposure: f32,
     /// Intrinsics for a recording without intrinsics.json: fx,fy,cx,cy (default: TUM's).

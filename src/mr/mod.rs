@@ -29,9 +29,11 @@ pub struct MrOptions {
     /// Output size; the frame's intrinsics are scaled to it.
     pub width: u32,
     pub height: u32,
-    /// Exposure of the virtual object's radiance before sRGB encoding. The default 1 keeps the
-    /// calibration of `radiance_scale`: a white room pixel of radiance L lights a white virtual
-    /// surface to at most L.
+    /// Exposure of the virtual object in the composite, on the camera's scale: its radiance is
+    /// divided by `radiance_scale` (camera value = radiance / `radiance_scale`, as the room's
+    /// VALs were made) and multiplied by this before sRGB encoding ([`display_scale`]). The
+    /// default 1 shows a virtual surface as the camera would show a real one of the same
+    /// radiance, whatever `radiance_scale` is.
     pub exposure: f32,
     /// Accumulate VALs across frames into a world-space set (None: each frame's VALs only).
     pub accumulate: Option<AccumulateOptions>,
@@ -194,8 +196,13 @@ impl MrRenderer {
             _ => None,
         };
         let virtual_rgb = rendered.direct.add(&rendered.indirect);
-        let composited =
-            composite_over(frame, background.as_deref(), &virtual_rgb, &virtual_depth, self.options.exposure);
+        let composited = composite_over(
+            frame,
+            background.as_deref(),
+            &virtual_rgb,
+            &virtual_depth,
+            display_scale(self.options.exposure, settings.radiance_scale),
+        );
         Ok(MrFrame {
             composited,
             indirect: rendered.indirect,
@@ -221,6 +228,14 @@ pub fn virtual_depth(gpu: &Gpu, renderer: &Renderer, camera_to_world: Affine3A) 
         .iter()
         .map(|hit| hit.map(|h| world_to_camera.transform_point3(flat.surface_at(h.triangle, h.barycentrics).0).z))
         .collect())
+}
+
+/// The factor from the virtual object's radiance (W/(m² sr)) to the camera's linear value in
+/// the composite: `exposure / radiance_scale`, the inverse of the calibration that made the
+/// room's VALs (`L = radiance_scale * srgb_to_linear(rgb)`), so the object and the room are on
+/// one scale; `exposure` alone when `radiance_scale` is 0 (a room that emits nothing).
+pub fn display_scale(exposure: f32, radiance_scale: f32) -> f32 {
+    if radiance_scale > 0.0 { exposure / radiance_scale } else { exposure }
 }
 
 /// The camera image with the virtual object drawn where it is visible: where it covers the
@@ -288,6 +303,19 @@ mod tests {
             depth: vec![depth; (w * h) as usize],
             camera_to_world: glam::Affine3A::IDENTITY,
         }
+    }
+
+    /// A virtual surface of the radiance a room pixel was calibrated to (`L = radiance_scale *
+    /// linear(rgb)`) is shown at that pixel's own value at exposure 1, whatever the scale.
+    #[test]
+    fn the_composite_shows_radiance_on_the_cameras_scale() {
+        for radiance_scale in [0.5f32, 1.0, 3.0, 40.0] {
+            let linear = crate::twin::rgbd::srgb_to_linear(Vec3::new(0.6, 0.3, 0.9));
+            let shown = display_scale(1.0, radiance_scale) * (radiance_scale * linear);
+            assert!(shown.abs_diff_eq(linear, 1e-6), "scale {radiance_scale}: {shown} vs {linear}");
+            assert_eq!(display_scale(2.0, radiance_scale), 2.0 * display_scale(1.0, radiance_scale));
+        }
+        assert_eq!(display_scale(0.7, 0.0), 0.7, "a room that emits nothing leaves the exposure as it is");
     }
 
     /// The camera image passes through where the virtual object is absent or behind the real

@@ -479,8 +479,8 @@ fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> 
         }
         let started = Instant::now();
         let depth = mr::virtual_depth(gpu, renderer, job.frame.camera_to_world)?;
-        let image =
-            mr::composite(&job.frame, &rendered.direct.add(&rendered.indirect), &depth, job.exposure.unwrap_or(1.0));
+        let scale = mr::display_scale(job.exposure.unwrap_or(1.0), job.rgbd.radiance_scale);
+        let image = mr::composite(&job.frame, &rendered.direct.add(&rendered.indirect), &depth, scale);
         return Ok((rendered, Some((image, started.elapsed().as_secs_f64() * 1e3))));
     };
     renderer.set_camera(camera);
