@@ -71,8 +71,39 @@ pub enum GpuError {
 /// Loop iterations after which llvmpipe (lavapipe) ends every loop of a shader invocation,
 /// silently: `LP_MAX_TGSI_LOOP_ITERATIONS` in Mesa's gallivm, "shared between every loop in a
 /// shader" and counted per SIMD vector of invocations. Passes whose loops can run longer must
-/// split their work (`gpu::references::exact` runs in rounds).
+/// split their work into rounds ([`rounds_done`]: the exact reference, the differential pass).
 pub const LLVMPIPE_LOOP_LIMIT: u32 = 65_535;
+
+/// Rounds at most before a pass that runs in rounds gives up (each makes progress on every
+/// unfinished item, so only a driver that ignores the loop budget could need this many).
+const MAX_ROUNDS: u32 = 1 << 16;
+
+/// After `rounds` rounds of a pass that runs in rounds under llvmpipe's loop limit (the exact
+/// reference, the differential pass): whether its `status` buffer (`[left, stuck]`, the items
+/// unfinished and those of them that made no progress) says every item is done. An item that
+/// made no progress, or more than [`MAX_ROUNDS`] rounds, is an error naming `what` (e.g.
+/// "exact visibility: pixels") and the per-round loop `budget`.
+pub(crate) fn rounds_done(
+    gpu: &Gpu,
+    status: &wgpu::Buffer,
+    rounds: u32,
+    what: &str,
+    budget: u32,
+) -> Result<bool, GpuError> {
+    let [left, stuck] = gpu.read_buffer::<u32>(status, 2)?[..] else {
+        unreachable!("read_buffer returns the 2 elements asked for")
+    };
+    if left == 0 {
+        return Ok(true);
+    }
+    if stuck > 0 || rounds >= MAX_ROUNDS {
+        return Err(GpuError::Incomplete(format!(
+            "{what}: {left} unfinished after {rounds} rounds, {stuck} of them made no progress (a shadow ray \
+             longer than {budget} BVH steps)"
+        )));
+    }
+    Ok(false)
+}
 
 /// A pair of per-lobe buffers: the diffuse one always, the glossy one only when the scene has a
 /// glossy material.

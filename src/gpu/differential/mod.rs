@@ -207,13 +207,8 @@ impl Differential {
             self.kernel.dispatch(&mut encoder, &group, scene, [n as u32, 1, 1], None);
             gpu.submit_and_wait(encoder)?;
             rounds += 1;
-            if crate::gpu::references::exact::rounds_done(
-                gpu,
-                &self.status,
-                rounds,
-                "differential: receivers",
-                DIFFERENTIAL_LOOP_BUDGET,
-            )? {
+            if crate::gpu::rounds_done(gpu, &self.status, rounds, "differential: receivers", DIFFERENTIAL_LOOP_BUDGET)?
+            {
                 break;
             }
         }

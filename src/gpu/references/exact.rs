@@ -21,37 +21,6 @@ const BVH: &str = include_str!("bvh.wgsl");
 pub const EXACT_LOOP_BUDGET: u32 = 60_000;
 const _: () = assert!(EXACT_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 
-/// Rounds at most before [`Technique::finish`] gives up (each makes progress on every unfinished
-/// pixel, so only a driver that ignores the budget could need this many).
-const MAX_ROUNDS: u32 = 1 << 16;
-
-/// After `rounds` rounds of a pass that runs in rounds under llvmpipe's loop limit (the exact
-/// reference, the differential pass): whether its `status` buffer (`[left, stuck]`, the items
-/// unfinished and those of them that made no progress) says every item is done. An item that
-/// made no progress, or more than [`MAX_ROUNDS`] rounds, is an error naming `what` (e.g.
-/// "exact visibility: pixels") and the per-round loop `budget`.
-pub(crate) fn rounds_done(
-    gpu: &Gpu,
-    status: &wgpu::Buffer,
-    rounds: u32,
-    what: &str,
-    budget: u32,
-) -> Result<bool, GpuError> {
-    let [left, stuck] = gpu.read_buffer::<u32>(status, 2)?[..] else {
-        unreachable!("read_buffer returns the 2 elements asked for")
-    };
-    if left == 0 {
-        return Ok(true);
-    }
-    if stuck > 0 || rounds >= MAX_ROUNDS {
-        return Err(GpuError::Incomplete(format!(
-            "{what}: {left} unfinished after {rounds} rounds, {stuck} of them made no progress (a shadow ray \
-             longer than {budget} BVH steps)"
-        )));
-    }
-    Ok(false)
-}
-
 /// The pass's own WGSL using every `val_stride`-th VAL.
 pub fn body(val_stride: u32) -> String {
     format!(
@@ -182,7 +151,7 @@ impl Technique for Exact {
         let group = self.bind(gpu, frame);
         let mut count = 1;
         loop {
-            if rounds_done(gpu, &self.status, count, "exact visibility: pixels", EXACT_LOOP_BUDGET)? {
+            if crate::gpu::rounds_done(gpu, &self.status, count, "exact visibility: pixels", EXACT_LOOP_BUDGET)? {
                 break;
             }
             let mut encoder =
