@@ -11,6 +11,8 @@ have_lavapipe() {
 packages=""
 have_lavapipe || packages="mesa-vulkan-drivers libvulkan1"
 command -v c++ >/dev/null || packages="$packages g++"
+# scripts/device-bench.sh writes its summary with python3 (standard library only).
+command -v python3 >/dev/null || packages="$packages python3"
 if [ -n "$packages" ]; then
     sudo=""
     if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
