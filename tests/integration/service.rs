@@ -849,6 +849,29 @@ fn the_binary_serves_until_sigterm() {
     stderr.read_to_string(&mut log).expect("reads the rest");
     assert!(status.success(), "{status}\n{log}");
     assert!(log.contains("SIGTERM received") && log.contains("stopped"), "{log}");
+
+    // SIGTERM the moment "serving" is logged, with no request between: the handlers must
+    // already listen then (a signal before them kills the process, as CI once saw).
+    let mut child = Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(["serve", "--addr", "127.0.0.1:0"])
+        .env("RELUME_ASSETS", fixture(""))
+        .env("NO_COLOR", "1")
+        .env_remove("RUST_LOG")
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starts");
+    let mut stderr = BufReader::new(child.stderr.take().expect("stderr"));
+    let mut log = String::new();
+    while !log.contains("serving") {
+        let mut line = String::new();
+        assert!(stderr.read_line(&mut line).expect("reads") > 0, "exited early:\n{log}");
+        log.push_str(&line);
+    }
+    let killed = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill runs");
+    assert!(killed.success());
+    let status = child.wait().expect("exits");
+    stderr.read_to_string(&mut log).expect("reads the rest");
+    assert!(status.success(), "SIGTERM right after \"serving\": {status}\n{log}");
 }
 
 /// `relume replay --server`: the fixture recording through the service gives the same
