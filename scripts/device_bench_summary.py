@@ -116,7 +116,9 @@ def main() -> int:
             f"{exact['width']}x{exact['height']}, {e['exact_vals_used']} VALs on the {e['exact_device']}: "
             f"{fmt(e['exact_ms'])} ms in {e['exact_rounds']} rounds"
             + (f", {fmt(e['exact_rays_per_s'])} shadow rays/s" if e.get("exact_rays_per_s") else "")
-            + f"; sparse vs exact (product rule) rel RMSE {fmt(e['indirect_rel_rmse_vs_exact_product'])}."
+            + "; sparse vs exact rel RMSE: "
+            + ", ".join(f"{m['mode']} {fmt(m['rel_rmse'])}" for m in e.get("modes_vs_exact", []))
+            + "."
         ]
 
     replay = by_name.get("replay")

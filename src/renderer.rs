@@ -22,6 +22,7 @@ use crate::gpu::scene::{FlatScene, GpuScene};
 use crate::gpu::sparse::{SparseMethod, SparseSettings};
 use crate::gpu::technique::{CameraTarget, Frame, Technique, Vals};
 use crate::gpu::timing::{Recorder, StageTimings};
+use crate::gpu::visibility::VisibilitySettings;
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::image::LinearImage;
 use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
@@ -104,6 +105,11 @@ pub mod stage {
     pub const CLUSTERING: &str = visibility::clusters::CLUSTERING_STAGE;
     pub const CLUSTER_SHADOW_MAPS: &str = visibility::clusters::SHADOW_MAPS_STAGE;
     pub const CLUSTER_VISIBILITY: &str = visibility::clusters::VISIBILITY.label;
+    /// The `Ism` visibility mode's stages.
+    pub const ISM_SAMPLING: &str = visibility::ism::SAMPLING_STAGE;
+    pub const ISM_SPLAT: &str = visibility::ism::SPLAT_STAGE;
+    pub const ISM_PULL_PUSH: &str = visibility::ism::PULL_PUSH_STAGE;
+    pub const ISM_VISIBILITY: &str = visibility::ism::VISIBILITY.label;
     pub const RENORMALISE: &str = sparse::renormalise::PASS.label;
     pub const INTERPOLATE: &str = sparse::interpolate::PASS.label;
     pub const SHADE: &str = sparse::shade::PASS.label;
@@ -199,12 +205,10 @@ pub struct Renderer {
     camera: CameraView,
     glossy: bool,
     view: View,
-    occlusion: scene::Occlusion,
-    occlusion_rule: scene::OcclusionRule,
+    /// The sparse method's visibility mode and every mode's settings.
+    visibility: VisibilitySettings,
     /// The sparse method's interpolation kernel and light bound (`settings.sparse`).
     sparse_shading: (scene::InterpolationKernel, scene::LightBound),
-    /// The `Clusters` visibility mode's settings.
-    clusters: scene::ClusterSettings,
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The spot light's VALs (R² at most) after the uploaded ones.
@@ -254,10 +258,8 @@ impl Renderer {
             spot,
             glossy,
             view: View::Scene(scene.camera),
-            occlusion: scene.settings.occlusion,
-            occlusion_rule: scene.settings.occlusion_rule,
+            visibility: VisibilitySettings::of(&scene.settings),
             sparse_shading: (scene.settings.sparse.kernel, scene.settings.sparse.bound),
-            clusters: scene.settings.clusters,
             exact_val_stride: 1,
             scene: scene_gpu,
             indirect: Indirect::default(),
@@ -302,14 +304,19 @@ impl Renderer {
         self.exact_val_stride = stride.max(1);
     }
 
-    /// Change the `Clusters` visibility settings from the next sparse frame on.
-    pub fn set_clusters(&mut self, clusters: scene::ClusterSettings) {
-        self.clusters = clusters;
+    /// Change the visibility mode and its settings from the next sparse frame on.
+    pub fn set_visibility(&mut self, visibility: VisibilitySettings) {
+        self.visibility = visibility;
     }
 
-    /// Change the occlusion mode from the next sparse frame on.
+    /// The visibility mode and its settings.
+    pub fn visibility(&self) -> VisibilitySettings {
+        self.visibility
+    }
+
+    /// Change the occlusion mode from the next sparse frame on (the modes' settings stay).
     pub fn set_occlusion(&mut self, occlusion: scene::Occlusion, rule: scene::OcclusionRule) {
-        (self.occlusion, self.occlusion_rule) = (occlusion, rule);
+        (self.visibility.mode, self.visibility.rule) = (occlusion, rule);
     }
 
     /// Allow or forbid the glossy lobe (it still runs only when a material is glossy) from the
@@ -552,14 +559,7 @@ impl Renderer {
             match method {
                 Method::Sparse => {
                     let (kernel, bound) = self.sparse_shading;
-                    let settings = SparseSettings {
-                        glossy,
-                        occlusion: self.occlusion,
-                        occlusion_rule: self.occlusion_rule,
-                        kernel,
-                        bound,
-                        clusters: self.clusters,
-                    };
+                    let settings = SparseSettings { glossy, visibility: self.visibility, kernel, bound };
                     built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
                         .fit(gpu, scene, capacity)?;
                 }
@@ -660,6 +660,15 @@ impl Renderer {
     pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::twin::Val>, GpuError> {
         let n = self.live_val_count(gpu)? as usize;
         Ok(gpu.read_buffer::<RawVal>(&self.vals.buffer, n)?.iter().map(Into::into).collect())
+    }
+
+    /// The stages of the sparse method's visibility mode, as last built (none when off).
+    pub fn visibility_stages(&self) -> Vec<&'static str> {
+        match self.sparse().and_then(|s| s.visibility.as_ref()) {
+            None => Vec::new(),
+            Some(crate::gpu::visibility::Mode::Scale(m)) => vec![m.stage()],
+            Some(crate::gpu::visibility::Mode::Groups(g)) => g.stages(),
+        }
     }
 
     /// The sparse method's group visibility mode, once a sparse frame with one was rendered.

@@ -292,9 +292,26 @@ pub struct CompareReport {
     pub exact: Option<ExactComparison>,
 }
 
-/// Sparse with occlusion off, "sum" and "product" against the exact-visibility reference, each
-/// raw error beside the one corrected for the reference's own noise (`None` for a stride, whose
-/// noise is not estimated).
+/// One visibility mode of the sparse method against the exact-visibility reference.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ModeVsExact {
+    /// `off`, `sum`, `product` (the disks' rules), `clusters` or `ism`.
+    pub mode: &'static str,
+    pub rel_rmse: f64,
+    /// The error with the reference's own noise taken out (`None` for a stride, whose noise
+    /// is not estimated).
+    pub rel_rmse_corrected: Option<f64>,
+    /// Mean FLIP at the exact image's exposure.
+    pub flip_mean: f64,
+    /// The mode's own stages (ms; 0 for `off`).
+    pub visibility_ms: f64,
+    /// The gather of the same frame (ms): with a group mode it applies the per-VAL visibility.
+    pub gather_ms: f64,
+    /// Every stage of that frame.
+    pub stages_ms: Vec<(String, f64)>,
+}
+
+/// The sparse method's visibility modes against the exact-visibility reference.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ExactComparison {
     pub exact_ms: f64,
@@ -310,29 +327,10 @@ pub struct ExactComparison {
     pub exact_rays_per_s: Option<f64>,
     /// `sqrt(sum s² / sum |g|²)`: the reference's own relative noise.
     pub exact_rel_stderr: Option<f64>,
-    pub indirect_rel_rmse_vs_exact_off: f64,
-    pub indirect_rel_rmse_vs_exact_off_corrected: Option<f64>,
-    pub indirect_flip_mean_vs_exact_off: f64,
-    pub indirect_rel_rmse_vs_exact_sum: f64,
-    pub indirect_rel_rmse_vs_exact_sum_corrected: Option<f64>,
-    pub indirect_flip_mean_vs_exact_sum: f64,
-    pub indirect_rel_rmse_vs_exact_product: f64,
-    pub indirect_rel_rmse_vs_exact_product_corrected: Option<f64>,
-    pub indirect_flip_mean_vs_exact_product: f64,
-    /// Sparse with the `clusters` visibility mode at the scene's cluster settings.
-    pub indirect_rel_rmse_vs_exact_clusters: f64,
-    pub indirect_rel_rmse_vs_exact_clusters_corrected: Option<f64>,
-    pub indirect_flip_mean_vs_exact_clusters: f64,
-    /// The `clusters` mode's three stages (clustering, shadow maps, visibility), ms.
-    pub clusters_ms: f64,
-    /// Its gather (with the per-VAL visibility), ms.
-    pub clusters_gather_ms: f64,
-    /// Every stage of that frame.
-    pub clusters_stages_ms: Vec<(String, f64)>,
-    /// The disks' stage with the "sum" rule (ms).
-    pub occlusion_ms: f64,
-    /// The gather in the same frame (ms).
-    pub gather_ms: f64,
+    /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
+    /// with the `sum` and the `product` rule, `clusters` (the scene's `settings.clusters`) and
+    /// `ism` (its `settings.ism`).
+    pub modes_vs_exact: Vec<ModeVsExact>,
 }
 
 /// Measure `scene` at `width` x `height` as `relume compare` does; with `exact`, also against
@@ -395,8 +393,7 @@ pub fn compare(
     })
 }
 
-/// Sparse with occlusion off, "sum", "product" and "clusters" against the exact-visibility
-/// reference.
+/// Sparse with every visibility mode against the exact-visibility reference.
 fn exact_comparison(
     gpu: &Gpu,
     renderer: &mut Renderer,
@@ -409,36 +406,31 @@ fn exact_comparison(
     if let Some(dir) = images {
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
     }
-    let mut errors = Vec::new();
-    let (mut occlusion_ms, mut gather_ms, mut clusters_ms, mut clusters_gather_ms) = (0.0, 0.0, 0.0, 0.0);
-    let mut clusters_stages_ms = Vec::new();
+    let mut modes = Vec::new();
     for (key, occlusion, rule) in [
         ("off", Occlusion::Off, OcclusionRule::Sum),
         ("sum", Occlusion::Disks, OcclusionRule::Sum),
         ("product", Occlusion::Disks, OcclusionRule::Product),
         ("clusters", Occlusion::Clusters, OcclusionRule::Product),
+        ("ism", Occlusion::Ism, OcclusionRule::Product),
     ] {
         renderer.set_occlusion(occlusion, rule);
         let sparse = renderer.render(gpu, Method::Sparse, w, h)?;
         if let Some(dir) = images {
             write_png(&sparse.indirect, &dir.join(format!("indirect_sparse_occlusion_{key}.png")), exposure)?;
         }
-        let corrected = exact.corrected_rel_rmse(&sparse.indirect);
-        errors.push((indirect_error(&sparse.indirect, exact.indirect()), corrected));
-        if key == "sum" {
-            occlusion_ms = sparse.timings.total_of(&[stage::OCCLUSION]);
-            gather_ms = sparse.timings.total_of(&[stage::GATHER]);
-        }
-        if key == "clusters" {
-            clusters_ms =
-                sparse.timings.total_of(&[stage::CLUSTERING, stage::CLUSTER_SHADOW_MAPS, stage::CLUSTER_VISIBILITY]);
-            clusters_gather_ms = sparse.timings.total_of(&[stage::GATHER]);
-            clusters_stages_ms = sparse.timings.stages.clone();
-        }
+        let error = indirect_error(&sparse.indirect, exact.indirect());
+        let visibility_stages = renderer.visibility_stages();
+        modes.push(ModeVsExact {
+            mode: key,
+            rel_rmse: error.rel_rmse,
+            rel_rmse_corrected: exact.corrected_rel_rmse(&sparse.indirect),
+            flip_mean: error.flip_mean,
+            visibility_ms: sparse.timings.total_of(&visibility_stages),
+            gather_ms: sparse.timings.total_of(&[stage::GATHER]),
+            stages_ms: sparse.timings.stages.clone(),
+        });
     }
-    let [(off, off_c), (sum, sum_c), (product, product_c), (clusters, clusters_c)] = errors[..] else {
-        unreachable!("four modes measured")
-    };
     Ok(ExactComparison {
         exact_ms: exact.ms(),
         exact_device: exact.device,
@@ -451,23 +443,7 @@ fn exact_comparison(
         exact_shadow_rays: exact.shadow_rays,
         exact_rays_per_s: exact.rays_per_s(),
         exact_rel_stderr: exact.rel_stderr(),
-        indirect_rel_rmse_vs_exact_off: off.rel_rmse,
-        indirect_rel_rmse_vs_exact_off_corrected: off_c,
-        indirect_flip_mean_vs_exact_off: off.flip_mean,
-        indirect_rel_rmse_vs_exact_sum: sum.rel_rmse,
-        indirect_rel_rmse_vs_exact_sum_corrected: sum_c,
-        indirect_flip_mean_vs_exact_sum: sum.flip_mean,
-        indirect_rel_rmse_vs_exact_product: product.rel_rmse,
-        indirect_rel_rmse_vs_exact_product_corrected: product_c,
-        indirect_flip_mean_vs_exact_product: product.flip_mean,
-        indirect_rel_rmse_vs_exact_clusters: clusters.rel_rmse,
-        indirect_rel_rmse_vs_exact_clusters_corrected: clusters_c,
-        indirect_flip_mean_vs_exact_clusters: clusters.flip_mean,
-        clusters_ms,
-        clusters_gather_ms,
-        clusters_stages_ms,
-        occlusion_ms,
-        gather_ms,
+        modes_vs_exact: modes,
     })
 }
 

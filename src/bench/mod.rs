@@ -109,7 +109,8 @@ impl Sweep {
                         "off" => Ok(Occlusion::Off),
                         "disks" => Ok(Occlusion::Disks),
                         "clusters" => Ok(Occlusion::Clusters),
-                        _ => Err("expected `off`, `disks` or `clusters`".to_owned()),
+                        "ism" => Ok(Occlusion::Ism),
+                        _ => Err("expected `off`, `disks`, `clusters` or `ism`".to_owned()),
                     })?);
                 }
                 "glossy" => {
@@ -576,6 +577,7 @@ pub fn describe(c: &Config) -> String {
             Occlusion::Off => "off",
             Occlusion::Disks => "disks",
             Occlusion::Clusters => "clusters",
+            Occlusion::Ism => "ism",
         },
         if c.glossy { "on" } else { "off" },
         c.width,
@@ -725,7 +727,7 @@ mod tests {
             ("sparse_points=0", "--sweep sparse_points: `0`: must be in 1..=65536"),
             ("sparse_points=12k", "--sweep sparse_points: `12k`: not a whole number"),
             ("rsm_resolution=4", "--sweep rsm_resolution: `4`: must be in 8..=2048"),
-            ("occlusion=on", "--sweep occlusion: `on`: expected `off`, `disks` or `clusters`"),
+            ("occlusion=on", "--sweep occlusion: `on`: expected `off`, `disks`, `clusters` or `ism`"),
             ("glossy=maybe", "--sweep glossy: `maybe`"),
             ("resolution=0x10", "--sweep resolution: `0x10`: must be in 1..=8192"),
             ("resolution=64,", "--sweep resolution: empty value"),

@@ -426,8 +426,9 @@ pub struct SettingsDescription {
     /// Sparse points each vertex interpolates from (paper eqs. 12-13), 1..=16; default 8.
     #[serde(default = "default_neighbours")]
     pub interpolation_neighbours: u32,
-    /// Indirect visibility: `"auto"` (default), `"off"`, `"disks"` (DESIGN.md §4 step 3) or
-    /// `"clusters"` (shadow maps of k-means clusters of the VALs, `clusters` below). `"auto"`
+    /// Indirect visibility: `"auto"` (default), `"off"`, `"disks"` (DESIGN.md §4 step 3),
+    /// `"clusters"` (shadow maps of k-means clusters of the VALs, `clusters` below) or `"ism"`
+    /// (imperfect shadow maps of VALs drawn by flux, `ism` below). `"auto"`
     /// is `"disks"` when the scene can occlude itself: more than one mesh, or a mesh that is
     /// neither a convex object nor a convex room ([`crate::scene::Scene`]). The JSON key is
     /// `visibility`; `occlusion` is its deprecated alias (accepted, not both at once).
@@ -455,6 +456,9 @@ pub struct SettingsDescription {
     /// The `"clusters"` visibility mode; every field has a default.
     #[serde(default)]
     pub clusters: ClusterSettings,
+    /// The `"ism"` visibility mode (imperfect shadow maps); every field has a default.
+    #[serde(default)]
+    pub ism: IsmSettings,
 }
 
 /// How the sparse method turns gathered light into pixels (DESIGN.md §4 steps 0, 2, 4). The
@@ -535,6 +539,105 @@ impl Default for ClusterSettings {
             normal_weight: 0.43,
             iterations: 4,
         }
+    }
+}
+
+/// Settings of the `"ism"` visibility mode (paper 004, imperfect shadow maps): every frame
+/// `count` VALs are drawn by flux (the paper's importance-sampled VPLs), every VAL joins the
+/// nearest drawn one, and each group gets a low-resolution paraboloid shadow map splatted from
+/// its own random subset of points on the meshes, its holes filled by pull-push.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct IsmSettings {
+    /// Shadow maps (VALs drawn by flux) per frame, in 1..=[`MAX_ISMS`]; default 1024 (the
+    /// paper's VPL count).
+    pub count: u32,
+    /// Side of each paraboloid map, texels: a power of two in 16..=512; default 64.
+    pub resolution: u32,
+    /// Points splatted into each map, in 16..=[`MAX_ISM_POINTS`]; default `null`: the paper's
+    /// rule `P ≈ N_res · N_vpl / 4`, a quarter of a map's `π/4 · resolution²` texels per map.
+    pub points: Option<u32>,
+    /// Pull-push levels, in 0..=4 (0: no hole filling); default 2 (the paper's).
+    pub pull_push_levels: u32,
+    /// Depths differing by at most this fraction of the scene's bounding diagonal (times
+    /// `2^level`) are averaged by the pull, in (0, 1]; default 0.05 (the paper's 5 %).
+    pub pull_threshold: f32,
+    /// A depth differing from the coarser level's by more than this fraction of the diagonal
+    /// (times `2^level`) is replaced by the push, in (0, 1]; default 0.05.
+    pub push_threshold: f32,
+    /// Shadow filter: `"pcss"`, `"pcf"` (default) or `"hard"`.
+    pub soft: SoftShadows,
+}
+
+/// Most imperfect shadow maps per frame.
+pub const MAX_ISMS: u32 = 4096;
+/// Most points splatted into one imperfect shadow map.
+pub const MAX_ISM_POINTS: u32 = 65536;
+/// Most texels of all imperfect shadow maps together (the finest level; 256 MiB).
+pub const MAX_ISM_TEXELS: u64 = 1 << 26;
+/// Most points splatted per frame (all maps together).
+pub const MAX_ISM_SPLATS: u64 = 1 << 27;
+
+impl Default for IsmSettings {
+    fn default() -> Self {
+        Self {
+            count: 1024,
+            resolution: 64,
+            points: None,
+            pull_push_levels: 2,
+            pull_threshold: 0.05,
+            push_threshold: 0.05,
+            soft: SoftShadows::Pcf,
+        }
+    }
+}
+
+impl IsmSettings {
+    /// Points splatted into each map: `points`, or the paper's rule.
+    pub fn points_per_map(&self) -> u32 {
+        self.points.unwrap_or_else(|| {
+            let texels = std::f64::consts::FRAC_PI_4 * f64::from(self.resolution).powi(2);
+            ((texels / 4.0).round() as u32).clamp(16, MAX_ISM_POINTS)
+        })
+    }
+
+    fn validate(&self, field: &str) -> Result<(), SceneError> {
+        int_in(self.count, 1, MAX_ISMS, &format!("{field}.count"))?;
+        let r = self.resolution;
+        if !(16..=512).contains(&r) || !r.is_power_of_two() {
+            return Err(SceneError::field(
+                format!("{field}.resolution"),
+                format!("must be a power of two in 16..=512, got {r}"),
+            ));
+        }
+        if let Some(points) = self.points {
+            int_in(points, 16, MAX_ISM_POINTS, &format!("{field}.points"))?;
+        }
+        int_in(self.pull_push_levels, 0, 4, &format!("{field}.pull_push_levels"))?;
+        for (value, name) in [(self.pull_threshold, "pull_threshold"), (self.push_threshold, "push_threshold")] {
+            if !(value > 0.0 && value <= 1.0) {
+                return Err(SceneError::field(format!("{field}.{name}"), format!("must be in (0, 1], got {value}")));
+            }
+        }
+        let texels = u64::from(self.count) * u64::from(r) * u64::from(r);
+        if texels > MAX_ISM_TEXELS {
+            return Err(SceneError::field(
+                format!("{field}.resolution"),
+                format!("{} maps of {r}x{r} texels are {texels} texels, over {MAX_ISM_TEXELS}", self.count),
+            ));
+        }
+        let splats = u64::from(self.count) * u64::from(self.points_per_map());
+        if splats > MAX_ISM_SPLATS {
+            return Err(SceneError::field(
+                format!("{field}.points"),
+                format!(
+                    "{} maps of {} points are {splats} points, over {MAX_ISM_SPLATS}",
+                    self.count,
+                    self.points_per_map()
+                ),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -619,6 +722,8 @@ pub enum Occlusion {
     Disks,
     /// Shadow maps of clusters of VALs ([`ClusterSettings`]).
     Clusters,
+    /// Imperfect shadow maps of VALs drawn by flux ([`IsmSettings`]).
+    Ism,
 }
 
 /// Indirect occlusion as a scene file asks for it.
@@ -631,6 +736,7 @@ pub enum OcclusionSetting {
     Off,
     Disks,
     Clusters,
+    Ism,
 }
 
 /// Combination rule of disc occluders.
@@ -675,6 +781,7 @@ impl Default for SettingsDescription {
             environment: EnvironmentSettings::default(),
             sparse: SparseShading::default(),
             clusters: ClusterSettings::default(),
+            ism: IsmSettings::default(),
         }
     }
 }
@@ -693,6 +800,7 @@ impl SettingsDescription {
                 OcclusionSetting::Off => Occlusion::Off,
                 OcclusionSetting::Disks => Occlusion::Disks,
                 OcclusionSetting::Clusters => Occlusion::Clusters,
+                OcclusionSetting::Ism => Occlusion::Ism,
                 OcclusionSetting::Auto if self_occluding => Occlusion::Disks,
                 OcclusionSetting::Auto => Occlusion::Off,
             },
@@ -701,6 +809,7 @@ impl SettingsDescription {
             mr: self.mr,
             sparse: self.sparse,
             clusters: self.clusters,
+            ism: self.ism,
         }
     }
 
@@ -720,7 +829,8 @@ impl SettingsDescription {
         validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))?;
         validate_mr(&self.mr, &format!("{field}.mr"))?;
         validate_environment(&self.environment, &format!("{field}.environment"))?;
-        self.clusters.validate(&format!("{field}.clusters"))
+        self.clusters.validate(&format!("{field}.clusters"))?;
+        self.ism.validate(&format!("{field}.ism"))
     }
 }
 
@@ -1229,6 +1339,7 @@ mod tests {
                 mr: MrSettings::default(),
                 sparse: SparseShading::default(),
                 clusters: ClusterSettings::default(),
+                ism: IsmSettings::default(),
             }
         );
         let message = error_of(&with_settings(r#"{"sparse": {"subdivision": 0.5}}"#));
@@ -1267,6 +1378,28 @@ mod tests {
         assert_eq!(message, "settings.clusters.normal_weight: must be in [0, 100], got -1");
         let message = error_of(&with_settings(r#"{"clusters": {"iterations": 33}}"#));
         assert_eq!(message, "settings.clusters.iterations: must be in 1..=32, got 33");
+        let text = with_settings(r#"{"visibility": "ism", "ism": {"count": 16, "resolution": 32, "points": 100}}"#);
+        let d = SceneDescription::from_json_str(&text).expect("parses");
+        d.validate().expect("valid");
+        let s = d.settings.to_settings(false);
+        assert_eq!(s.occlusion, Occlusion::Ism);
+        assert_eq!(s.ism, IsmSettings { count: 16, resolution: 32, points: Some(100), ..IsmSettings::default() });
+        // The paper's rule: a quarter of the pi/4 * 64^2 texels of a 64x64 map.
+        assert_eq!(IsmSettings::default().points_per_map(), 804);
+        for (ism, want) in [
+            (r#"{"count": 0}"#, "settings.ism.count: must be in 1..=4096, got 0"),
+            (r#"{"resolution": 48}"#, "settings.ism.resolution: must be a power of two in 16..=512, got 48"),
+            (r#"{"points": 8}"#, "settings.ism.points: must be in 16..=65536, got 8"),
+            (r#"{"pull_push_levels": 5}"#, "settings.ism.pull_push_levels: must be in 0..=4, got 5"),
+            (r#"{"pull_threshold": 0}"#, "settings.ism.pull_threshold: must be in (0, 1], got 0"),
+            (r#"{"push_threshold": 2}"#, "settings.ism.push_threshold: must be in (0, 1], got 2"),
+            (r#"{"count": 4096, "resolution": 256}"#, "settings.ism.resolution: 4096 maps of 256x256 texels"),
+            (r#"{"count": 4096, "points": 65536}"#, "settings.ism.points: 4096 maps of 65536 points"),
+            (r#"{"spread": 1}"#, "settings.ism.spread: unknown field"),
+        ] {
+            let message = error_of(&with_settings(&format!(r#"{{"ism": {ism}}}"#)));
+            assert!(message.starts_with(want), "{ism}: {message}");
+        }
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
         let message = error_of(&with_settings(r#"{"interpolation_neighbours": 17}"#));

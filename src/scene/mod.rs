@@ -48,11 +48,11 @@ use glam::{Affine3A, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use self::gltf::{GltfSceneDescription, LUMENS_PER_WATT, MAX_GLTF_BYTES, phong_from_pbr};
 pub use description::{
-    CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, InterpolationKernel, LightBound,
-    LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS,
-    MaterialDescription, MeshDescription, Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE,
-    ScaleDescription, SceneDescription, SettingsDescription, SoftShadows, SparseShading, TransformDescription,
-    parse_json,
+    CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, InterpolationKernel, IsmSettings,
+    LightBound, LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_ISM_POINTS,
+    MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription,
+    MeshDescription, Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription,
+    SceneDescription, SettingsDescription, SoftShadows, SparseShading, TransformDescription, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
@@ -231,6 +231,8 @@ pub struct Settings {
     pub sparse: SparseShading,
     /// The `Clusters` visibility mode's settings.
     pub clusters: ClusterSettings,
+    /// The `Ism` visibility mode's settings.
+    pub ism: IsmSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its

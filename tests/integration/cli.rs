@@ -106,10 +106,15 @@ fn compare_reports_the_cpu_reference_and_its_noise() {
     let stderr_rel = v["exact_rel_stderr"].as_f64().unwrap();
     assert!(stderr_rel > 0.0 && stderr_rel.is_finite(), "a sampled reference has noise: {stderr_rel}");
     assert!(v["exact_shadow_rays"].as_u64().unwrap() > 0 && v["exact_rays_per_s"].as_f64().unwrap() > 0.0);
-    for key in ["off", "sum", "product"] {
-        let raw = v[format!("indirect_rel_rmse_vs_exact_{key}")].as_f64().unwrap();
-        let corrected = v[format!("indirect_rel_rmse_vs_exact_{key}_corrected")].as_f64().unwrap();
+    let modes = v["modes_vs_exact"].as_array().expect("every mode against exact");
+    let keys: Vec<&str> = modes.iter().map(|m| m["mode"].as_str().unwrap()).collect();
+    assert_eq!(keys, ["off", "sum", "product", "clusters", "ism"]);
+    for m in modes {
+        let (key, raw, corrected) =
+            (&m["mode"], m["rel_rmse"].as_f64().unwrap(), m["rel_rmse_corrected"].as_f64().unwrap());
         assert!(corrected >= 0.0 && corrected <= raw, "{key}: corrected {corrected} vs raw {raw}");
+        let visibility_ms = m["visibility_ms"].as_f64().unwrap();
+        assert_eq!(visibility_ms == 0.0, key == "off", "{key}: its own stages took {visibility_ms} ms");
     }
 }
 

@@ -11,6 +11,7 @@ mod fuzz;
 mod gltf;
 mod hardening;
 mod hardening_origin;
+mod ism;
 mod layout;
 mod mcap;
 mod mr_differential;

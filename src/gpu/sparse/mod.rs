@@ -12,20 +12,18 @@ use crate::gpu::raw::{RawGathered, RawPointLight};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
-use crate::gpu::visibility::{self, Mode};
+use crate::gpu::visibility::{self, Mode, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError, Lobes};
-use crate::scene::{ClusterSettings, InterpolationKernel, LightBound, Occlusion, OcclusionRule};
+use crate::scene::{InterpolationKernel, LightBound};
 use gather::Gather;
 
 /// What the sparse technique is built for: a change rebuilds it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SparseSettings {
     pub glossy: bool,
-    pub occlusion: Occlusion,
-    pub occlusion_rule: OcclusionRule,
+    pub visibility: VisibilitySettings,
     pub kernel: InterpolationKernel,
     pub bound: LightBound,
-    pub clusters: ClusterSettings,
 }
 
 /// The sparse method's passes and the buffers between them.
@@ -49,14 +47,7 @@ impl SparseMethod {
         let glossy = settings.glossy;
         let n = scene.flat.sparse_points.len();
         let v = scene.flat.vertices.len();
-        let visibility = visibility::for_settings(
-            gpu,
-            scene,
-            settings.occlusion,
-            settings.occlusion_rule,
-            &settings.clusters,
-            glossy,
-        )?;
+        let visibility = visibility::for_settings(gpu, scene, &settings.visibility, glossy)?;
         let groups = match &visibility {
             Some(Mode::Groups(g)) => Some(g.table().groups),
             _ => None,

@@ -3,26 +3,28 @@
 //! - a **scaling** mode ([`SparseVisibility`]: `disks/`) runs between the gather and the
 //!   renormalisation and scales what each sparse point gathered by the fraction of it that
 //!   arrives;
-//! - a **group visibility** mode ([`GroupVisibility`]: `clusters/`) runs before the gather and
+//! - a **group visibility** mode ([`GroupVisibility`]: `clusters/`, `ism/`) runs before the gather and
 //!   produces a table `group_visibility[point * groups + group]` (the fraction of group
 //!   `group`'s light that reaches sparse point `point`) and `group_of_val[val]` (each VAL's
 //!   group); the gather then scales every VAL's contribution by its group's visibility at the
 //!   receiver (`group.wgsl`). Per-VAL visibility needs this form: the k-means clusters of paper
-//!   000 produce it, and so will imperfect shadow maps (seed 004) as a second producer.
+//!   000 produce it, and the imperfect shadow maps of paper 004 (`ism/`: VALs drawn by flux
+//!   instead of k-means, maps splatted from points instead of rasterised, the same lookup).
 //!
 //! A mode is a folder here holding its Rust, its WGSL and its CPU twin (`disks/`: `mod.rs`,
-//! `disks.wgsl`, `twin.rs`), a type that implements one of the traits, and one line in
-//! [`for_settings`], where the scene's setting picks it. Its stages appear in the timings under
+//! `disks.wgsl`, `twin.rs`), a type that implements one of the traits, its settings as a field
+//! of [`VisibilitySettings`], and one line in [`for_settings`], where the scene's setting picks it. Its stages appear in the timings under
 //! their names.
 
 pub mod clusters;
 pub mod disks;
+pub mod ism;
 
 use crate::gpu::scene::GpuScene;
 use crate::gpu::technique::Frame;
 use crate::gpu::timing::{Recorder, Span};
 use crate::gpu::{Gpu, GpuError, Lobes};
-use crate::scene::{ClusterSettings, Occlusion, OcclusionRule};
+use crate::scene::{ClusterSettings, IsmSettings, Occlusion, OcclusionRule, Settings};
 
 /// A visibility mode that scales the gathered sums, as the sparse technique runs it.
 pub trait SparseVisibility {
@@ -85,20 +87,36 @@ pub enum Mode {
     Groups(Box<dyn GroupVisibility>),
 }
 
+/// Everything that picks and parametrises the visibility mode: a mode's settings live here,
+/// so a new mode adds its field and its line in [`for_settings`], nothing else on the way.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VisibilitySettings {
+    pub mode: Occlusion,
+    /// How the disks' occluders combine.
+    pub rule: OcclusionRule,
+    pub clusters: ClusterSettings,
+    pub ism: IsmSettings,
+}
+
+impl VisibilitySettings {
+    pub fn of(settings: &Settings) -> Self {
+        Self { mode: settings.occlusion, rule: settings.occlusion_rule, clusters: settings.clusters, ism: settings.ism }
+    }
+}
+
 /// The mode the settings ask for; `None` when visibility is off (no stage, no buffer).
 pub fn for_settings(
     gpu: &Gpu,
     scene: &GpuScene,
-    mode: Occlusion,
-    rule: OcclusionRule,
-    clusters: &ClusterSettings,
+    settings: &VisibilitySettings,
     glossy: bool,
 ) -> Result<Option<Mode>, GpuError> {
-    Ok(match mode {
+    Ok(match settings.mode {
         Occlusion::Off => None,
         Occlusion::Disks => {
-            Some(Mode::Scale(Box::new(disks::Disks::new(gpu, scene, glossy, rule == OcclusionRule::Product)?)))
+            Some(Mode::Scale(Box::new(disks::Disks::new(gpu, scene, glossy, settings.rule == OcclusionRule::Product)?)))
         }
-        Occlusion::Clusters => Some(Mode::Groups(Box::new(clusters::Clusters::new(gpu, scene, clusters)?))),
+        Occlusion::Clusters => Some(Mode::Groups(Box::new(clusters::Clusters::new(gpu, scene, &settings.clusters)?))),
+        Occlusion::Ism => Some(Mode::Groups(Box::new(ism::mode(gpu, scene, &settings.ism)?))),
     })
 }

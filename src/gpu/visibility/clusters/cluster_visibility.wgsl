@@ -6,25 +6,12 @@
 // shadows itself. Writes `group_visibility[point * CLUSTER_COUNT + k]`. Rust twin:
 // `twin::cluster_visibility` (same names).
 
+// The maps are binding 2, read by `map_depth(k, texel)`: the rasterised atlas
+// (`raster_depth.wgsl`) or the imperfect shadow maps (`../ism/ism_lookup.wgsl`), prepended.
+
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> clusters: array<Cluster>;
-@group(0) @binding(2) var shadow_atlas: texture_depth_2d;
 @group(0) @binding(3) var<storage, read_write> group_visibility: array<f32>;
-
-const NOTHING: f32 = 3.0e38;
-
-// Distance (m) in cluster k's map at `texel`; NOTHING outside the map or where nothing was drawn.
-fn map_depth(k: u32, texel: vec2<i32>) -> f32 {
-    let r = i32(MAP_RESOLUTION);
-    if texel.x < 0 || texel.y < 0 || texel.x >= r || texel.y >= r {
-        return NOTHING;
-    }
-    let d = textureLoad(shadow_atlas, vec2<i32>(atlas_origin(k)) + texel, 0);
-    if d >= 1.0 {
-        return NOTHING;
-    }
-    return d * DEPTH_FAR;
-}
 
 fn receiver_plane_depth(offset: vec3<f32>, normal: vec3<f32>, v: vec3<f32>) -> f32 {
     let den = dot(v, normal);

@@ -8,6 +8,7 @@
 
 pub mod twin;
 
+use super::ism;
 use super::{GroupTable, GroupVisibility};
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, depth_texture, module_from_source, read, read_write, view};
 use crate::gpu::scene::GpuScene;
@@ -15,7 +16,7 @@ use crate::gpu::shader::WORKGROUP_SIZE;
 use crate::gpu::technique::Frame;
 use crate::gpu::timing::Recorder;
 use crate::gpu::{Gpu, GpuError};
-use crate::scene::{ClusterSettings, SoftShadows};
+use crate::scene::{ClusterSettings, IsmSettings, SoftShadows};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -23,6 +24,8 @@ const PARABOLOID: &str = include_str!("paraboloid.wgsl");
 pub const CLUSTERING_WGSL: &str = include_str!("clustering.wgsl");
 pub const SHADOW_MAPS_WGSL: &str = include_str!("shadow_maps.wgsl");
 pub const VISIBILITY_WGSL: &str = include_str!("cluster_visibility.wgsl");
+/// The rasterised atlas as the visibility pass reads it (`map_depth`).
+pub const RASTER_DEPTH_WGSL: &str = include_str!("raster_depth.wgsl");
 
 /// VALs per block of the k-means update's partial sums (one invocation per cluster and block
 /// loops over them: far under llvmpipe's loop limit).
@@ -156,8 +159,13 @@ pub const VISIBILITY: PassDesc = PassDesc {
     bindings: &[read("sparse_points"), read("clusters"), depth_texture("shadow_atlas"), read_write("group_visibility")],
     entries: &[Entry::first("main", 4)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
-    default_source: |textured| VISIBILITY.source(&format!("{}\n{VISIBILITY_WGSL}", default_header()), textured),
+    default_source: |textured| VISIBILITY.source(&visibility_body(&default_header()), textured),
 };
+
+/// The visibility pass's WGSL after `head`, reading the rasterised atlas.
+pub fn visibility_body(head: &str) -> String {
+    format!("{head}\n{RASTER_DEPTH_WGSL}\n{VISIBILITY_WGSL}")
+}
 
 /// The shadow-map raster's complete WGSL (vertex and fragment stages).
 pub fn shadow_maps_source(settings: &ClusterSettings, scale: SceneScale, textured: bool) -> String {
@@ -223,16 +231,33 @@ impl ShadowMaps {
     }
 }
 
-/// The clustered visibility mode: its passes, the clusters (kept from frame to frame) and the
-/// group table it hands to the gather.
+/// How the groups are seeded each frame.
+enum Seeding {
+    /// k-means from the last frame's centres, empty clusters reseeded (`kmeans_seed`).
+    Kmeans { seed: Kernel },
+    /// VALs drawn by flux (the imperfect shadow maps').
+    Flux(ism::FluxSampling),
+}
+
+/// Where the groups' shadow maps come from.
+enum Maps {
+    /// Rasterised from the triangles (exact depths).
+    Raster(ShadowMaps),
+    /// Imperfect shadow maps splatted from points, with pull-push.
+    Ism(ism::Maps),
+}
+
+/// The clustered visibility mode, and with flux seeding and imperfect shadow maps the `"ism"`
+/// mode: its passes, the groups (kept from frame to frame) and the group table it hands to the
+/// gather.
 pub struct Clusters {
     settings: ClusterSettings,
     scale: SceneScale,
-    seed: Kernel,
+    seeding: Seeding,
     assign: Kernel,
     partial: Kernel,
     reduce: Kernel,
-    shadow_maps: ShadowMaps,
+    maps: Maps,
     visibility: Kernel,
     /// `array<Cluster>`: this frame's centres, the next frame's start.
     clusters: wgpu::Buffer,
@@ -247,9 +272,27 @@ pub struct Clusters {
 }
 
 impl Clusters {
+    /// The `"clusters"` mode: k-means, rasterised maps.
     pub fn new(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings) -> Result<Self, GpuError> {
+        Self::build(gpu, scene, settings, None)
+    }
+
+    /// The `"ism"` mode: VALs drawn by flux, one assignment and update, imperfect shadow maps.
+    pub fn imperfect(gpu: &Gpu, scene: &GpuScene, ism: &IsmSettings) -> Result<Self, GpuError> {
+        Self::build(gpu, scene, &ism::cluster_settings(ism), Some(ism))
+    }
+
+    fn build(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        settings: &ClusterSettings,
+        ism: Option<&IsmSettings>,
+    ) -> Result<Self, GpuError> {
         let scale = SceneScale::of(scene);
-        let head = header(settings, scale);
+        let head = match ism {
+            Some(ism) => ism::header(ism, scale),
+            None => header(settings, scale),
+        };
         let textured = scene.textured();
         let module = module_from_source(
             gpu,
@@ -259,35 +302,46 @@ impl Clusters {
         let kernel = |name: &str| {
             Kernel::build(gpu, scene, &CLUSTERING, &module, CLUSTERING.entry(name), &[], CLUSTERING.workgroup)
         };
-        let vis_module = module_from_source(
-            gpu,
-            VISIBILITY.label,
-            VISIBILITY.source(&format!("{head}\n{VISIBILITY_WGSL}"), textured),
-        )?;
+        let (seeding, maps, visibility_desc, visibility_body) = match ism {
+            Some(ism) => (
+                Seeding::Flux(ism::FluxSampling::new(gpu, scene, &head)?),
+                Maps::Ism(ism::Maps::new(gpu, scene, &head, settings.count, ism::IsmParams::of(ism, scale))?),
+                &ism::VISIBILITY,
+                ism::visibility_body(&head),
+            ),
+            None => (
+                Seeding::Kmeans { seed: kernel("kmeans_seed")? },
+                Maps::Raster(ShadowMaps::new(gpu, scene, settings, scale)?),
+                &VISIBILITY,
+                visibility_body(&head),
+            ),
+        };
+        let vis_module =
+            module_from_source(gpu, visibility_desc.label, visibility_desc.source(&visibility_body, textured))?;
         let m = settings.count as usize;
         let points = scene.flat.sparse_count() as usize;
         Ok(Self {
             settings: *settings,
             scale,
-            seed: kernel("kmeans_seed")?,
+            seeding,
             assign: kernel("kmeans_assign")?,
             partial: kernel("kmeans_partial")?,
             reduce: kernel("kmeans_reduce")?,
-            shadow_maps: ShadowMaps::new(gpu, scene, settings, scale)?,
+            maps,
             visibility: Kernel::build(
                 gpu,
                 scene,
-                &VISIBILITY,
+                visibility_desc,
                 &vis_module,
-                VISIBILITY.entry("main"),
+                visibility_desc.entry("main"),
                 &[],
-                VISIBILITY.workgroup,
+                visibility_desc.workgroup,
             )?,
             clusters: gpu.storage_buffer_sized::<RawCluster>("clustering.clusters", m)?,
             group_of_val: gpu.storage_buffer_sized::<u32>("clustering.group_of_val", 1)?,
             partials: gpu.storage_buffer_sized::<RawClusterSums>("clustering.cluster_partials", m)?,
             capacity: 1,
-            group_visibility: gpu.storage_buffer_sized::<f32>("cluster_visibility.group_visibility", points * m)?,
+            group_visibility: gpu.storage_buffer_sized::<f32>("group_visibility", points * m)?,
         })
     }
 
@@ -300,8 +354,31 @@ impl Clusters {
     pub fn read(&self, gpu: &Gpu, vals: usize, points: usize) -> Result<ClusterReadback, GpuError> {
         let m = self.settings.count as usize;
         let clusters: Vec<RawCluster> = gpu.read_buffer(&self.clusters, m)?;
-        let res = self.settings.shadow_map_resolution;
-        let side = self.settings.atlas_columns() * res;
+        let maps = match &self.maps {
+            Maps::Raster(maps) => maps.read(gpu, &self.settings, self.scale)?,
+            Maps::Ism(maps) => maps.read(gpu)?,
+        };
+        Ok(ClusterReadback {
+            clusters: clusters.iter().map(Into::into).collect(),
+            group_of_val: gpu.read_buffer(&self.group_of_val, vals.min(self.capacity as usize))?,
+            visibility: gpu.read_buffer(&self.group_visibility, points * m)?,
+            maps,
+            kmeans: self.scale.kmeans(&self.settings),
+            settings: self.settings,
+            ism: match &self.maps {
+                Maps::Ism(maps) => Some(maps.params()),
+                Maps::Raster(_) => None,
+            },
+        })
+    }
+}
+
+impl ShadowMaps {
+    /// Every cluster's map: distances (m), `f32::INFINITY` where nothing was drawn.
+    fn read(&self, gpu: &Gpu, settings: &ClusterSettings, scale: SceneScale) -> Result<Vec<Vec<f32>>, GpuError> {
+        let m = settings.count as usize;
+        let res = settings.shadow_map_resolution;
+        let side = settings.atlas_columns() * res;
         let row = (side * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let staging = gpu.storage_buffer_sized::<u8>("cluster_shadow_maps.readback", (row * side) as usize)?;
         let mut encoder = gpu
@@ -309,7 +386,7 @@ impl Clusters {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("cluster_shadow_maps.readback") });
         encoder.copy_texture_to_buffer(
             wgpu::TexelCopyTextureInfo {
-                texture: &self.shadow_maps.atlas,
+                texture: &self.atlas,
                 mip_level: 0,
                 origin: wgpu::Origin3d::ZERO,
                 aspect: wgpu::TextureAspect::DepthOnly,
@@ -322,13 +399,11 @@ impl Clusters {
         );
         gpu.submit_and_wait(encoder)?;
         let words: Vec<f32> = gpu.read_buffer(&staging, (row / 4 * side) as usize)?;
-        let far = self.scale.depth_far();
-        let maps = (0..m)
+        let far = scale.depth_far();
+        let columns = settings.atlas_columns();
+        Ok((0..m)
             .map(|k| {
-                let (cx, cy) = (
-                    (k as u32 % self.settings.atlas_columns()) * res,
-                    (k as u32 / self.settings.atlas_columns()) * res,
-                );
+                let (cx, cy) = ((k as u32 % columns) * res, (k as u32 / columns) * res);
                 (0..res * res)
                     .map(|i| {
                         let d = words[((cy + i / res) * row / 4 + cx + i % res) as usize];
@@ -336,14 +411,48 @@ impl Clusters {
                     })
                     .collect()
             })
-            .collect();
-        Ok(ClusterReadback {
-            clusters: clusters.iter().map(Into::into).collect(),
-            group_of_val: gpu.read_buffer(&self.group_of_val, vals.min(self.capacity as usize))?,
-            visibility: gpu.read_buffer(&self.group_visibility, points * m)?,
-            maps,
-            kmeans: self.scale.kmeans(&self.settings),
-            settings: self.settings,
+            .collect())
+    }
+
+    /// Draw every cluster's map.
+    fn record(
+        &self,
+        gpu: &Gpu,
+        scene: &GpuScene,
+        clusters: &wgpu::Buffer,
+        settings: &ClusterSettings,
+        rec: &mut Recorder<'_>,
+    ) -> Result<(), GpuError> {
+        let m = settings.count;
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(&format!("{SHADOW_MAPS_STAGE}.bind_group")),
+            layout: &self.layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: clusters.as_entire_binding() }],
+        });
+        rec.stage(SHADOW_MAPS_STAGE, |e, s| {
+            let mut pass = e.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some(SHADOW_MAPS_STAGE),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.atlas_view,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: s.as_ref().map(|s| s.render()),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.set_bind_group(1, &scene.bind_group, &[]);
+            let (res, columns) = (settings.shadow_map_resolution, settings.atlas_columns());
+            let corners = scene.flat.indices.len() as u32;
+            for k in 0..m {
+                let (x, y) = ((k % columns) * res, (k / columns) * res);
+                pass.set_viewport(x as f32, y as f32, res as f32, res as f32, 0.0, 1.0);
+                pass.set_scissor_rect(x, y, res, res);
+                pass.draw(0..corners, k..k + 1);
+            }
         })
     }
 }
@@ -358,11 +467,25 @@ pub struct ClusterReadback {
     pub maps: Vec<Vec<f32>>,
     pub kmeans: twin::KmeansParams,
     pub settings: ClusterSettings,
+    /// The imperfect shadow maps' lengths, in the `"ism"` mode.
+    pub ism: Option<ism::IsmParams>,
 }
 
 impl GroupVisibility for Clusters {
     fn stages(&self) -> Vec<&'static str> {
-        vec![CLUSTERING_STAGE, SHADOW_MAPS_STAGE, VISIBILITY.label]
+        let mut stages = vec![match self.seeding {
+            Seeding::Kmeans { .. } => CLUSTERING_STAGE,
+            Seeding::Flux(_) => ism::SAMPLING_STAGE,
+        }];
+        match &self.maps {
+            Maps::Raster(_) => stages.push(SHADOW_MAPS_STAGE),
+            Maps::Ism(maps) => stages.extend(maps.stages()),
+        }
+        stages.push(match self.maps {
+            Maps::Raster(_) => VISIBILITY.label,
+            Maps::Ism(_) => ism::VISIBILITY.label,
+        });
+        stages
     }
 
     fn table(&self) -> GroupTable<'_> {
@@ -370,6 +493,9 @@ impl GroupVisibility for Clusters {
     }
 
     fn fit(&mut self, gpu: &Gpu, max_vals: u32) -> Result<(), GpuError> {
+        if let Seeding::Flux(flux) = &mut self.seeding {
+            flux.fit(gpu, max_vals)?;
+        }
         if max_vals > self.capacity {
             self.capacity = max_vals;
             self.group_of_val = gpu.storage_buffer_sized::<u32>("clustering.group_of_val", max_vals as usize)?;
@@ -397,70 +523,55 @@ impl GroupVisibility for Clusters {
                 .collect();
             k.bind(gpu, &r)
         };
-        let groups = [
-            bind(&self.seed, 3, ""),
-            bind(&self.assign, 4, ""),
-            bind(&self.partial, 5, ""),
-            bind(&self.reduce, 5, "group_of_val"),
+        let update = [
+            (&self.assign, bind(&self.assign, 4, ""), [self.capacity, 1, 1]),
+            (&self.partial, bind(&self.partial, 5, ""), [m, self.blocks(), 1]),
+            (&self.reduce, bind(&self.reduce, 5, "group_of_val"), [m, 1, 1]),
         ];
-        let steps: [(&Kernel, [u32; 3]); 4] = [
-            (&self.seed, [m, 1, 1]),
-            (&self.assign, [self.capacity, 1, 1]),
-            (&self.partial, [m, self.blocks(), 1]),
-            (&self.reduce, [m, 1, 1]),
-        ];
-        let iterations = self.settings.iterations as usize;
-        rec.stage(CLUSTERING_STAGE, |e, s| {
-            let parts = iterations * steps.len();
-            for i in 0..iterations {
-                for (j, ((kernel, invocations), group)) in steps.iter().zip(&groups).enumerate() {
+        // Seed and update: k-means `iterations` times, or the flux draw and one update.
+        let (stage, steps, rounds) = match &self.seeding {
+            Seeding::Kmeans { seed } => {
+                let mut steps = vec![(seed, bind(seed, 3, ""), [m, 1, 1])];
+                steps.extend(update);
+                (CLUSTERING_STAGE, steps, self.settings.iterations as usize)
+            }
+            Seeding::Flux(flux) => {
+                let mut steps: Vec<_> = flux.steps(gpu, frame.vals, &self.clusters, m).into();
+                steps.extend(update);
+                (ism::SAMPLING_STAGE, steps, 1)
+            }
+        };
+        rec.stage(stage, |e, s| {
+            let parts = rounds * steps.len();
+            for i in 0..rounds {
+                for (j, (kernel, group, invocations)) in steps.iter().enumerate() {
                     let timestamps = s.as_ref().map(|s| s.compute_part(i * steps.len() + j, parts));
                     kernel.dispatch(e, group, scene, *invocations, timestamps);
                 }
             }
         })?;
-        let maps = &self.shadow_maps;
-        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(&format!("{SHADOW_MAPS_STAGE}.bind_group")),
-            layout: &maps.layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: self.clusters.as_entire_binding() }],
-        });
-        rec.stage(SHADOW_MAPS_STAGE, |e, s| {
-            let mut pass = e.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some(SHADOW_MAPS_STAGE),
-                color_attachments: &[],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &maps.atlas_view,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Store }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: s.as_ref().map(|s| s.render()),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&maps.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.set_bind_group(1, &scene.bind_group, &[]);
-            let (res, columns) = (self.settings.shadow_map_resolution, self.settings.atlas_columns());
-            let corners = scene.flat.indices.len() as u32;
-            for k in 0..m {
-                let (x, y) = ((k % columns) * res, (k / columns) * res);
-                pass.set_viewport(x as f32, y as f32, res as f32, res as f32, 0.0, 1.0);
-                pass.set_scissor_rect(x, y, res, res);
-                pass.draw(0..corners, k..k + 1);
+        let atlas = match &self.maps {
+            Maps::Raster(maps) => {
+                maps.record(gpu, scene, &self.clusters, &self.settings, rec)?;
+                view("shadow_atlas", &maps.atlas_view)
             }
-        })?;
+            Maps::Ism(maps) => {
+                maps.record(gpu, scene, &self.clusters, rec)?;
+                buffer("ism_atlas", &maps.levels[0])
+            }
+        };
         let group = self.visibility.bind(
             gpu,
             &[
                 buffer("sparse_points", &scene.sparse_points),
                 buffer("clusters", &self.clusters),
-                view("shadow_atlas", &maps.atlas_view),
+                atlas,
                 buffer("group_visibility", &self.group_visibility),
             ],
         );
         let points = scene.flat.sparse_count();
-        rec.stage(VISIBILITY.label, |e, s| {
+        let label = self.stages().last().copied().unwrap_or(VISIBILITY.label);
+        rec.stage(label, |e, s| {
             self.visibility.dispatch(e, &group, scene, [points, m, 1], s.as_ref().map(|s| s.compute()))
         })
     }

@@ -3,6 +3,9 @@
 // shadow-map raster and the visibility pass; the constants (`clusters/mod.rs`) come first.
 // Rust twin: `twin.rs` (same names).
 
+// No depth: outside a map, or nothing drawn there.
+const NOTHING: f32 = 3.0e38;
+
 struct Cluster {
     // Mean position of its lit VALs (m).
     position: vec3<f32>,

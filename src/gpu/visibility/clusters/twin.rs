@@ -115,18 +115,23 @@ pub fn kmeans(clusters: &mut [Cluster], vals: &[Val], params: &KmeansParams, ite
     let mut groups = vec![0; vals.len()];
     for _ in 0..iterations {
         kmeans_seed(clusters, vals);
-        for (g, v) in groups.iter_mut().zip(vals) {
-            *g = kmeans_assign(v.position, v.normal, clusters, params);
+        groups = kmeans_step(clusters, vals, params);
+    }
+    groups
+}
+
+/// One assignment and update from `clusters` as they are (no seeding); returns each VAL's
+/// cluster.
+pub fn kmeans_step(clusters: &mut [Cluster], vals: &[Val], params: &KmeansParams) -> Vec<u32> {
+    let groups: Vec<u32> = vals.iter().map(|v| kmeans_assign(v.position, v.normal, clusters, params)).collect();
+    let mut sums = vec![ClusterSums::default(); clusters.len()];
+    for (g, v) in groups.iter().zip(vals) {
+        if val_is_lit(v) {
+            sums[*g as usize].add(v, clusters[*g as usize].position);
         }
-        let mut sums = vec![ClusterSums::default(); clusters.len()];
-        for (g, v) in groups.iter().zip(vals) {
-            if val_is_lit(v) {
-                sums[*g as usize].add(v, clusters[*g as usize].position);
-            }
-        }
-        for (c, s) in clusters.iter_mut().zip(&sums) {
-            *c = kmeans_centre(c, s);
-        }
+    }
+    for (c, s) in clusters.iter_mut().zip(&sums) {
+        *c = kmeans_centre(c, s);
     }
     groups
 }

@@ -1,0 +1,17 @@
+// The rasterised shadow maps as the visibility pass reads them: one depth atlas, distances
+// stored as a fraction of DEPTH_FAR (`shadow_maps.wgsl`).
+
+@group(0) @binding(2) var shadow_atlas: texture_depth_2d;
+
+// Distance (m) in cluster k's map at `texel`; NOTHING outside the map or where nothing was drawn.
+fn map_depth(k: u32, texel: vec2<i32>) -> f32 {
+    let r = i32(MAP_RESOLUTION);
+    if texel.x < 0 || texel.y < 0 || texel.x >= r || texel.y >= r {
+        return NOTHING;
+    }
+    let d = textureLoad(shadow_atlas, vec2<i32>(atlas_origin(k)) + texel, 0);
+    if d >= 1.0 {
+        return NOTHING;
+    }
+    return d * DEPTH_FAR;
+}

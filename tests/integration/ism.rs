@@ -1,0 +1,142 @@
+//! The imperfect shadow maps mode (`gpu::visibility::ism`) against its CPU twins
+//! (`gpu::visibility::ism::twin`, and the clusters' lookup twin) on the same inputs: the flux
+//! draw and the update on the GPU's own VALs, every map splatted and pull-pushed around the
+//! GPU's own group centres, the visibility of every (sparse point, group) on the GPU's own
+//! maps, and the gather with it.
+//!
+//! Tolerances: the groups compare distances lavapipe computes with a few ulp of error (`acos`,
+//! `sqrt`), so as in `clusters.rs` 0.5 % of VALs may join another group. A point's texel is
+//! `floor` of a projected position: a point within an ulp of a texel edge may land in the
+//! neighbour, and its distance (a `length`) may differ in the last bits, which pull-push then
+//! spreads over up to 4x4 texels; so 2 % of texels may differ by more than 1e-4 relative. The
+//! lookup and the gather use the clusters' tolerances (1 % of entries, mean under 1e-3; 1e-3
+//! relative).
+
+use super::{assert_close, gpu};
+use glam::Vec3;
+use relume::gpu::visibility::clusters::{ClusterReadback, Clusters, twin};
+use relume::gpu::visibility::ism::twin as ism_twin;
+use relume::renderer::{Method, Renderer};
+use relume::scene::Scene;
+
+fn ism_scene(settings: &str) -> Scene {
+    let dir = super::fixture("scenes");
+    let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let json = base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"ism\", \"ism\": {settings}"));
+    assert_ne!(json, base);
+    Scene::from_json_str(&json, &dir).unwrap()
+}
+
+fn readback(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals: usize) -> ClusterReadback {
+    let g = renderer.group_visibility().expect("the ism mode ran");
+    let c = g.as_any().downcast_ref::<Clusters>().expect("the ism mode is built on the clusters' machinery");
+    c.read(gpu, vals, renderer.scene.flat.sparse_points.len()).unwrap()
+}
+
+#[test]
+fn ism_matches_cpu_twins() {
+    let count = 24;
+    let scene = ism_scene(&format!(r#"{{"count": {count}, "resolution": 32, "points": 400, "soft": "pcss"}}"#));
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    let at = stages.iter().position(|s| *s == "ism_sampling").expect("an ism_sampling stage");
+    let want = ["ism_sampling", "ism_splat", "ism_pull_push", "ism_visibility", "gather"];
+    assert_eq!(&stages[at..at + 5], &want[..], "{stages:?}");
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let r = readback(&renderer, &gpu, vals.len());
+    let params = r.ism.expect("the ism mode's lengths");
+
+    // The groups: flux seeds, one assignment and update.
+    let (clusters, groups) = ism_twin::groups(&vals, count, &r.kmeans);
+    let differ = groups.iter().zip(&r.group_of_val).filter(|(a, b)| a != b).count();
+    assert!(differ * 200 <= vals.len(), "{differ} of {} VALs in another group", vals.len());
+    let diagonal = 1.0 / r.kmeans.position_scale;
+    let lit = clusters.iter().filter(|c| c.count > 0.0).count();
+    assert!(lit > count as usize / 2, "most draws are distinct lit VALs: {lit} of {count}");
+    if differ == 0 {
+        for (k, (cpu, gpu)) in clusters.iter().zip(&r.clusters).enumerate() {
+            assert!((cpu.position - gpu.position).length() <= 1e-3 * diagonal, "group {k}: GPU {gpu:?} CPU {cpu:?}");
+            assert_eq!(cpu.count, gpu.count, "group {k}");
+        }
+    }
+
+    // The maps around the GPU's own centres.
+    let flat = &renderer.scene.flat;
+    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| Vec3::from(v.position)).collect();
+    let cdf = ism_twin::triangle_cdf(&positions, &flat.indices);
+    let (mut texels, mut texels_differ, mut drawn) = (0, 0, 0);
+    for (k, c) in r.clusters.iter().enumerate() {
+        let mut map = ism_twin::splat(c, k as u32, &params, &cdf, &positions, &flat.indices);
+        ism_twin::pull_push(&mut map, params.resolution, &params);
+        for (a, b) in map.iter().zip(&r.maps[k]) {
+            texels += 1;
+            drawn += usize::from(b.is_finite());
+            let same = (a.is_infinite() && b.is_infinite()) || (a - b).abs() <= 1e-4 * a.abs().max(1.0);
+            texels_differ += usize::from(!same);
+        }
+    }
+    assert!(texels_differ * 50 <= texels, "{texels_differ} of {texels} texels differ");
+    assert!(drawn * 4 > texels, "the maps hold depths: {drawn} of {texels} texels");
+
+    // Visibility on the GPU's own maps.
+    let m = r.clusters.len();
+    let (mut differ, mut sum_diff, mut shadowed) = (0, 0.0, 0);
+    for (i, p) in flat.sparse_points.iter().enumerate() {
+        for (k, c) in r.clusters.iter().enumerate() {
+            let tile = twin::DepthTile { resolution: params.resolution, depths: &r.maps[k] };
+            let receiver =
+                twin::ShadowReceiver { offset: Vec3::from(p.position) - c.position, normal: p.normal.into() };
+            let cpu = twin::cluster_visibility(&tile, c, &receiver, r.settings.soft);
+            let gpu = r.visibility[i * m + k];
+            let d = (cpu - gpu).abs();
+            sum_diff += d;
+            differ += usize::from(d > 1e-3);
+            shadowed += usize::from(gpu < 0.5);
+        }
+    }
+    let n = flat.sparse_points.len() * m;
+    assert!(differ * 100 <= n, "{differ} of {n} visibilities differ");
+    assert!(sum_diff / (n as f32) < 1e-3, "mean difference {}", sum_diff / n as f32);
+    assert!(shadowed > 0, "the bunny must shadow some sparse points from some group");
+
+    // The gather: every VAL's irradiance times its group's visibility at the point.
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let expected: Vec<Vec3> = flat
+        .sparse_points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
+            vals.iter()
+                .zip(&r.group_of_val)
+                .map(|(v, g)| relume::twin::val_irradiance(x, n, v) * r.visibility[i * m + *g as usize])
+                .sum()
+        })
+        .collect();
+    let scale = expected.iter().map(|e| e.max_element()).fold(0.0, f32::max);
+    for (i, e) in expected.iter().enumerate() {
+        assert_close(mid.gathered_diffuse[i].irradiance.into(), *e, 1e-3, scale, 1e-9, &format!("E at {i}"));
+    }
+}
+
+/// Without pull-push the stages are the splat alone; a scene without lit VALs (a dark spot
+/// light) gives empty groups and full visibility, with no NaN.
+#[test]
+fn ism_without_pull_push_and_without_light() {
+    let scene = ism_scene(r#"{"count": 8, "resolution": 16, "pull_push_levels": 0}"#);
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    assert!(stages.contains(&"ism_splat") && !stages.contains(&"ism_pull_push"), "{stages:?}");
+    let mut dark = scene.clone();
+    let light = dark.light.as_mut().expect("the fixture has a spot light");
+    light.intensity = Vec3::ZERO;
+    let mut renderer = Renderer::new(&gpu, &dark).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
+    let r = readback(&renderer, &gpu, 0);
+    assert!(r.visibility.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)), "{:?}", &r.visibility[..8]);
+    assert!(frame.indirect.pixels.iter().all(|p| p.iter().all(|c| c.is_finite())));
+}
