@@ -5,6 +5,13 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
+/// The default of [`Config::ticket_seconds`].
+pub const DEFAULT_TICKET_SECONDS: u64 = 30;
+
+/// The largest [`Config::ticket_seconds`] the command line takes (an hour); longer values set
+/// in code are treated as this.
+pub const MAX_TICKET_SECONDS: u64 = 3600;
+
 /// How `relume serve` runs.
 #[derive(Clone, Debug, clap::Args)]
 pub struct Config {
@@ -16,9 +23,15 @@ pub struct Config {
     #[arg(long, env = "RELUME_ASSETS", default_value = ".")]
     pub assets: PathBuf,
     /// Bearer token required on every `/v1` route (`Authorization: Bearer <token>`); without
-    /// it the API is open. `/healthz` and `/metrics` never need it.
+    /// it the API is open. `/healthz` and `/metrics` never need it. A stream may present a
+    /// ticket from `POST /v1/tickets` instead (`?ticket=`), for browsers, which cannot set a
+    /// WebSocket's headers.
     #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+    /// Seconds a ticket from `POST /v1/tickets` stays valid (1..=3600); it is also single use.
+    #[arg(long, env = "RELUME_TICKET_SECONDS", default_value_t = DEFAULT_TICKET_SECONDS,
+        value_parser = clap::value_parser!(u64).range(1..=MAX_TICKET_SECONDS))]
+    pub ticket_seconds: u64,
     /// Seconds that in-flight requests, queued renders and open streams get to finish after
     /// SIGINT or SIGTERM before they are dropped.
     #[arg(long, env = "RELUME_SHUTDOWN_GRACE_SECONDS", default_value_t = 30)]
@@ -37,6 +50,7 @@ impl Config {
             addr,
             assets: assets.into(),
             token: None,
+            ticket_seconds: DEFAULT_TICKET_SECONDS,
             shutdown_grace_seconds: 30,
             limits: Limits::default(),
             timeouts: Timeouts::default(),
@@ -92,6 +106,10 @@ pub struct Limits {
     /// more is answered 503 and closed.
     #[arg(long, env = "RELUME_MAX_CONNECTIONS", default_value_t = Limits::default().max_connections)]
     pub max_connections: usize,
+    /// Most tickets (`POST /v1/tickets`) issued and neither used nor expired; one more is
+    /// refused with 503 and `Retry-After` (when the oldest expires). 0 turns tickets off.
+    #[arg(long, env = "RELUME_MAX_TICKETS", default_value_t = Limits::default().max_tickets)]
+    pub max_tickets: usize,
 }
 
 impl Default for Limits {
@@ -110,6 +128,7 @@ impl Default for Limits {
             max_pixels: 4 << 20,
             max_streams: 8,
             max_connections: 128,
+            max_tickets: 32,
         }
     }
 }
@@ -130,6 +149,7 @@ pub mod limit {
     pub const MAX_PIXELS: &str = "max_pixels";
     pub const MAX_STREAMS: &str = "max_streams";
     pub const MAX_CONNECTIONS: &str = "max_connections";
+    pub const MAX_TICKETS: &str = "max_tickets";
 }
 
 /// A limit exceeded by a request or stream message, before any work was done for it; the

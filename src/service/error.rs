@@ -158,9 +158,9 @@ impl ApiError {
 
 impl From<LimitExceeded> for ApiError {
     /// 413 for limits in bytes, 503 for the server's capacity (`max_streams`,
-    /// `max_connections`), 400 otherwise.
+    /// `max_connections`, `max_tickets`), 400 otherwise.
     fn from(e: LimitExceeded) -> ApiError {
-        let status = if [limit::MAX_STREAMS, limit::MAX_CONNECTIONS].contains(&e.limit) {
+        let status = if [limit::MAX_STREAMS, limit::MAX_CONNECTIONS, limit::MAX_TICKETS].contains(&e.limit) {
             StatusCode::SERVICE_UNAVAILABLE
         } else if e.limit.ends_with("_bytes") {
             StatusCode::PAYLOAD_TOO_LARGE

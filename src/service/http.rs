@@ -29,7 +29,7 @@ use super::error::{ApiError, Code, ErrorBody};
 use super::gpu_worker::{RenderJob, RenderOutput, WorkerError};
 use super::scenes::{self, SceneEntry};
 use super::schedule::ClientId;
-use super::{recordings, stream, viewer};
+use super::{recordings, stream, tickets, viewer};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -46,17 +46,19 @@ use super::{recordings, stream, viewer};
     tags(
         (name = "scenes", description = "Scenes and their renders"),
         (name = "recordings", description = "RGB-D recordings held by the server, frame by frame as stream messages"),
+        (name = "tickets", description = "Single-use tickets that open a stream without the bearer token, for \
+            browsers (which cannot set a WebSocket's headers)"),
         (name = "service", description = "Health and metrics")
     )
 )]
 struct ApiDoc;
 
-/// Declares the optional bearer token.
+/// Declares the optional bearer token, and the ticket a stream may present instead.
 struct BearerAuth;
 
 impl utoipa::Modify for BearerAuth {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
-        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        use utoipa::openapi::security::{ApiKey, ApiKeyValue, HttpAuthScheme, HttpBuilder, SecurityScheme};
         let components = openapi.components.get_or_insert_with(Default::default);
         components.add_security_scheme(
             "bearer",
@@ -67,22 +69,36 @@ impl utoipa::Modify for BearerAuth {
                     .build(),
             ),
         );
+        components.add_security_scheme(
+            "ticket",
+            SecurityScheme::ApiKey(ApiKey::Query(ApiKeyValue::with_description(
+                tickets::TICKET_PARAMETER,
+                "A single-use ticket from POST /v1/tickets, in place of the bearer token on a stream's \
+                 WebSocket handshake (browsers cannot set its headers).",
+            ))),
+        );
     }
 }
 
-/// The routes, documented; `/v1` ones behind the token check.
+/// The routes, documented; `/v1` ones behind the token check, streams also open to a ticket.
 fn routes(state: Option<Arc<AppState>>) -> OpenApiRouter<Arc<AppState>> {
     let mut v1 = OpenApiRouter::new()
         .routes(routes!(create_scene))
         .routes(routes!(get_scene, delete_scene))
         .routes(routes!(render_scene))
-        .routes(routes!(stream::open_stream))
+        .routes(routes!(tickets::issue_ticket))
         .routes(routes!(recordings::list_recordings))
         .routes(routes!(recordings::recording_frame));
+    let mut streams = OpenApiRouter::new().routes(routes!(stream::open_stream));
     if let Some(state) = state {
-        v1 = v1.route_layer(middleware::from_fn_with_state(state, require_token));
+        v1 = v1.route_layer(middleware::from_fn_with_state(state.clone(), require_token));
+        streams = streams.route_layer(middleware::from_fn_with_state(state, require_token_or_ticket));
     }
-    OpenApiRouter::with_openapi(ApiDoc::openapi()).routes(routes!(healthz)).routes(routes!(metrics)).merge(v1)
+    OpenApiRouter::with_openapi(ApiDoc::openapi())
+        .routes(routes!(healthz))
+        .routes(routes!(metrics))
+        .merge(v1)
+        .merge(streams)
 }
 
 /// The OpenAPI 3.1 document of the API.
@@ -155,22 +171,51 @@ fn method_label(method: &axum::http::Method) -> &'static str {
 
 /// Refuses `/v1` requests without the configured bearer token.
 async fn require_token(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
-    if let Some(token) = &state.config.token {
-        let given = request
-            .headers()
-            .get(header::AUTHORIZATION)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "));
-        if !given.is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes())) {
-            return ApiError::new(
-                StatusCode::UNAUTHORIZED,
-                Code::Unauthorized,
-                "missing or wrong bearer token (Authorization: Bearer <token>)",
-            )
-            .into_response();
-        }
+    match authorize(&state, &request, false) {
+        Ok(()) => next.run(request).await,
+        Err(error) => error.into_response(),
     }
-    next.run(request).await
+}
+
+/// Refuses stream handshakes with neither the configured bearer token nor a valid ticket.
+async fn require_token_or_ticket(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
+    match authorize(&state, &request, true) {
+        Ok(()) => next.run(request).await,
+        Err(error) => error.into_response(),
+    }
+}
+
+/// The one check of who may use a `/v1` route: where `tickets` are accepted (stream
+/// handshakes) and the query has a `ticket`, that ticket, spent here, valid or not, and the
+/// header is not looked at; otherwise `Authorization: Bearer <token>` when the server has a
+/// token. 401 `unauthorized` when neither holds.
+fn authorize(state: &AppState, request: &Request, tickets: bool) -> Result<(), ApiError> {
+    let unauthorized = |message: &str| ApiError::new(StatusCode::UNAUTHORIZED, Code::Unauthorized, message);
+    if tickets && let Some(ticket) = tickets::from_query(request.uri())? {
+        if state.tickets.redeem(&ticket) {
+            return Ok(());
+        }
+        return Err(unauthorized(
+            "unknown, used or expired ticket (POST /v1/tickets issues one; each opens one stream)",
+        ));
+    }
+    let Some(token) = &state.config.token else {
+        return Ok(());
+    };
+    let given = request
+        .headers()
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    if given.is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes())) {
+        Ok(())
+    } else if tickets {
+        Err(unauthorized(
+            "missing or wrong bearer token (Authorization: Bearer <token>, or ?ticket= from POST /v1/tickets)",
+        ))
+    } else {
+        Err(unauthorized("missing or wrong bearer token (Authorization: Bearer <token>)"))
+    }
 }
 
 /// Equality whose time does not depend on where the inputs differ.
@@ -554,10 +599,12 @@ mod tests {
             "/v1/scenes/{id}/stream",
             "/v1/recordings",
             "/v1/recordings/{name}/frames/{index}",
+            "/v1/tickets",
         ] {
             assert!(doc["paths"][route].is_object(), "{route} missing");
         }
         assert!(doc["components"]["schemas"]["SceneDescription"].is_object());
         assert!(doc["components"]["securitySchemes"]["bearer"].is_object());
+        assert_eq!(doc["components"]["securitySchemes"]["ticket"]["in"], "query");
     }
 }

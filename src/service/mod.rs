@@ -5,6 +5,8 @@
 //! - [`stream`]: `/v1/scenes/{id}/stream`, the WebSocket stream (protobuf messages of
 //!   `proto/relume.proto`, decoded and encoded by [`wire`]): RGB-D frames in, relit frames
 //!   out.
+//! - [`tickets`]: `POST /v1/tickets`, single-use tickets that open a stream without the bearer
+//!   token, for browsers (which cannot set a WebSocket's headers).
 //! - [`recordings`]: `/v1/recordings`, the RGB-D recordings under the asset directory, frame by
 //!   frame as stream messages; [`viewer`]: the browser viewer at `/`, files built into the
 //!   binary.
@@ -36,6 +38,7 @@ pub mod recordings;
 pub mod scenes;
 pub mod schedule;
 pub mod stream;
+pub mod tickets;
 pub mod viewer;
 pub mod wire;
 
@@ -75,6 +78,8 @@ pub struct AppState {
     pub assets: PathBuf,
     pub scenes: scenes::SceneRegistry,
     pub recordings: recordings::Recordings,
+    /// Tickets issued by `POST /v1/tickets` and not yet used.
+    pub tickets: tickets::Tickets,
     pub worker: GpuWorker,
     pub metrics: Arc<Metrics>,
     shutdown: watch::Sender<bool>,
@@ -107,6 +112,7 @@ impl AppState {
         Ok(Arc::new(AppState {
             scenes: scenes::SceneRegistry::new(config.limits.max_scenes),
             recordings: recordings::Recordings::new(&assets),
+            tickets: tickets::Tickets::new(config.ticket_seconds, config.limits.max_tickets),
             config,
             assets,
             worker,

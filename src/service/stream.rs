@@ -34,23 +34,31 @@ use super::wire::{
 
 /// Opens the WebSocket stream of a scene.
 ///
-/// 404 before the upgrade when there is no such scene.
+/// 404 before the upgrade when there is no such scene. With `--token`, the handshake carries
+/// the bearer token or, from a browser (which cannot set a WebSocket's headers), a ticket from
+/// `POST /v1/tickets` as `?ticket=`, spent by this handshake whatever its answer.
 #[utoipa::path(
     get,
     path = "/v1/scenes/{id}/stream",
     tag = "scenes",
-    params(("id" = String, Path, description = "The scene's id")),
+    params(
+        ("id" = String, Path, description = "The scene's id"),
+        ("ticket" = Option<String>, Query, description = "A single-use ticket from `POST /v1/tickets`, in place \
+            of the bearer token; checked (and spent) whenever it is given"),
+    ),
     responses(
         (status = 101, description = "WebSocket stream: one `relume.v1.Envelope` (proto/relume.proto) per \
             binary message. Each RGB-D frame is answered with the relit frame (`RenderedFrame`) or an \
             `Error`; each control message with a `SettingsAck` or an `Error`."),
-        (status = 400, description = "Not a WebSocket upgrade request", body = super::error::ErrorBody),
-        (status = 401, description = "Missing or wrong bearer token", body = super::error::ErrorBody),
+        (status = 400, description = "Not a WebSocket upgrade request, or `ticket` given more than once",
+            body = super::error::ErrorBody),
+        (status = 401, description = "Missing or wrong bearer token, or an unknown, used or expired ticket",
+            body = super::error::ErrorBody),
         (status = 404, description = "No such scene", body = super::error::ErrorBody),
         (status = 503, description = "Shutting down, or max_streams streams are open (`limit` names it)",
             body = super::error::ErrorBody),
     ),
-    security((), ("bearer" = []))
+    security((), ("bearer" = []), ("ticket" = []))
 )]
 pub async fn open_stream(
     State(state): State<Arc<AppState>>,

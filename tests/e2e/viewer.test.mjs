@@ -1,5 +1,7 @@
-// End-to-end test of the browser viewer: `relume serve` on a free port, Debian's chromium
-// (headless, driven by playwright-core), the page playing the bundled recording. It checks
+// End-to-end test of the browser viewer: `relume serve` on a free port with a token, Debian's
+// chromium (headless, driven by playwright-core), the page playing the bundled recording. It
+// checks that a page without the token asks for it and connects once it is entered, that the
+// page given the token in its URL fragment opens its streams with tickets; and
 // that frames arrive with their stage timings, that the page's hand-written protobuf codec
 // and the server's (prost) agree both ways, that the indirect-only view and the sliders
 // change the next frames and the settings the page reports, that dropped frames, stream
@@ -10,6 +12,7 @@
 // (default /usr/bin/chromium), BLESS=1 to also write docs/images/viewer.png.
 
 import { spawn } from "node:child_process";
+import { randomBytes } from "node:crypto";
 import { copyFileSync, mkdirSync } from "node:fs";
 import path from "node:path";
 import { createInterface } from "node:readline";
@@ -22,6 +25,8 @@ const binary = process.env.RELUME_BIN ?? path.join(process.env.CARGO_TARGET_DIR 
 const screenshot = path.join(root, "out", "e2e", "viewer.png");
 const readmeScreenshot = path.join(root, "docs", "images", "viewer.png");
 const WAIT_MS = 60_000;
+// The server's bearer token: the page must get it from the user and open streams with tickets.
+const TOKEN = randomBytes(18).toString("base64url");
 const started = Date.now();
 
 function step(text) {
@@ -35,7 +40,7 @@ function assert(condition, message) {
 // Starts the server; resolves with its address once it logs "serving".
 function startServer() {
   const server = spawn(binary, ["serve", "--addr", "127.0.0.1:0", "--assets", path.join(root, "fixtures")], {
-    env: { ...process.env, NO_COLOR: "1", RUST_LOG: process.env.RUST_LOG ?? "info" },
+    env: { ...process.env, NO_COLOR: "1", RUST_LOG: process.env.RUST_LOG ?? "info", RELUME_TOKEN: TOKEN },
     stdio: ["ignore", "inherit", "pipe"],
   });
   const log = [];
@@ -63,13 +68,37 @@ async function main() {
       args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
         "--disable-background-networking", "--disable-component-update", "--disable-sync"],
     });
+
+    // The server wants its token: the API refuses a request without it.
+    const refused = await fetch(`http://${addr}/v1/recordings`);
+    assert(refused.status === 401 && (await refused.json()).error.code === "unauthorized", "the API wants the token");
+
+    // A page opened without the token says so and shows the token field; entered there, the
+    // token gets the page its stream through a ticket. (A page of its own: its refused
+    // requests are console errors.)
+    const asking = await browser.newPage();
+    asking.setDefaultTimeout(WAIT_MS);
+    await asking.goto(`http://${addr}/?downscale=4`);
+    await asking.waitForFunction(() => window.relumeViewer.needsToken);
+    assert(await asking.locator("#token-form").isVisible(), "the token field is shown");
+    const asked = await asking.locator("#status").textContent();
+    assert(asked.includes("token"), `the status asks for the token: ${asked}`);
+    await asking.locator("#token").fill(TOKEN);
+    await asking.getByRole("button", { name: "Connect" }).click();
+    await asking.waitForFunction(() => window.relumeViewer.framesShown >= 1);
+    const askedUrl = await asking.evaluate(() => window.relumeViewer.socket.url);
+    assert(/\/stream\?ticket=[A-Za-z0-9_-]{43}$/.test(askedUrl), `the stream opened with a ticket: ${askedUrl}`);
+    assert(!(await asking.locator("#token-form").isVisible()), "the token field is hidden again");
+    await asking.close();
+    step("a page without the token asks for it, then streams with a ticket");
+
     const page = await browser.newPage({ viewport: { width: 1200, height: 800 } });
     const pageErrors = [];
     page.on("pageerror", (error) => pageErrors.push(error.message));
     page.on("console", (message) => { if (message.type() === "error") pageErrors.push(message.text()); });
     page.setDefaultTimeout(WAIT_MS);
 
-    await page.goto(`http://${addr}/?downscale=2`);
+    await page.goto(`http://${addr}/?downscale=2#token=${TOKEN}`);
     const viewer = () => page.evaluate(() => {
       const s = window.relumeViewer;
       return { framesShown: s.framesShown, applied: { ...s.applied }, connection: s.connection, errors: [...s.errors],
@@ -88,6 +117,8 @@ async function main() {
     step(`${v.framesShown} frames, ${v.lastFrame.width}x${v.lastFrame.height}, ${v.lastFrame.valCount} VALs`);
     assert(v.connection === "live", `status live, got ${v.connection}`);
     assert(v.errors.length === 0, `no errors at start: ${v.errors}`);
+    const streamUrl = await page.evaluate(() => window.relumeViewer.socket.url);
+    assert(/\/stream\?ticket=[A-Za-z0-9_-]{43}$/.test(streamUrl), `the stream opened with a ticket: ${streamUrl}`);
     assert(v.lastFrame.width === 320 && v.lastFrame.height === 240, "downscale=2 of 640x480");
     assert(v.lastFrame.png?.join() === "137,80,78,71", "a PNG");
     for (const stage of ["decode", "queue", "rgbd_vals", "gather", "shade", "composite", "encode"]) {
@@ -100,15 +131,16 @@ async function main() {
     // the server, and the server's RgbdFrame (encoded by prost) decodes in the page.
     assert(v.applied.gridStep === 8 && v.applied.component === 1 && v.applied.occlusion !== undefined
       && v.applied.glossy === true, `the first control was acknowledged: ${JSON.stringify(v.applied)}`);
-    const decoded = await page.evaluate(async () => {
+    const decoded = await page.evaluate(async (token) => {
       const { decodeEnvelope, encodeControl } = await import("/proto.js");
-      const response = await fetch("/v1/recordings/tum_fr1_xyz/frames/5?downscale=8");
+      const response = await fetch("/v1/recordings/tum_fr1_xyz/frames/5?downscale=8",
+        { headers: { authorization: `Bearer ${token}` } });
       const frame = decodeEnvelope(await response.arrayBuffer());
       const control = Array.from(encodeControl({ requestId: 300, quality: { component: 3, format: 1 },
         rgbd: { gridStep: 12 }, render: { occlusion: 2, glossy: false } }));
       return { version: frame.version, kind: frame.kind, body: frame.body, width: response.headers.get("x-relume-width"),
         control };
-    });
+    }, TOKEN);
     assert(decoded.version === 1 && decoded.kind === "rgbdFrame", `an RgbdFrame envelope: ${decoded.kind}`);
     assert(decoded.body.frameId === 5 && String(decoded.body.intrinsics.width) === decoded.width
       && decoded.body.intrinsics.height === 60 && Math.abs(decoded.body.intrinsics.fx - 525 / 8) < 1e-3,
@@ -151,7 +183,8 @@ async function main() {
     await page.waitForFunction(() => window.relumeViewer.applied.occlusion === true);
     step("occlusion and glossy");
 
-    // Sparse points: the scene is re-created with the new count and frames resume on it.
+    // Sparse points: the scene is re-created with the new count and frames resume on it, on a
+    // stream opened with a new ticket.
     const oldScene = v.scene;
     await page.locator("#sparse").fill("10");
     await page.waitForFunction((id) => window.relumeViewer.scene?.id !== id && window.relumeViewer.connection === "live"
@@ -159,17 +192,20 @@ async function main() {
     v = await framesAfter((await viewer()).framesShown + 2);
     assert(v.scene.sparse_points < oldScene.sparse_points, `fewer sparse points: ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
     assert((await setting("sparse points")) === String(v.scene.sparse_points), "sparse points reported");
+    const reopenedUrl = await page.evaluate(() => window.relumeViewer.socket.url);
+    assert(reopenedUrl.includes("?ticket=") && reopenedUrl !== streamUrl, `a new ticket: ${reopenedUrl}`);
     step(`sparse points ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
 
     // Real time: frames sent at 30 fps, faster than lavapipe renders them; the server drops
     // the ones it cannot keep up with and the page shows the count. (A burst of one frame sent
     // five times makes sure of drops on any machine: the newest waiting frame wins.)
     await page.locator("#realtime").check();
-    await page.evaluate(async () => {
-      const response = await fetch("/v1/recordings/tum_fr1_xyz/frames/0?downscale=2");
+    await page.evaluate(async (token) => {
+      const response = await fetch("/v1/recordings/tum_fr1_xyz/frames/0?downscale=2",
+        { headers: { authorization: `Bearer ${token}` } });
       const bytes = new Uint8Array(await response.arrayBuffer());
       for (let i = 0; i < 5; i++) window.relumeViewer.socket.send(bytes);
-    });
+    }, TOKEN);
     await page.waitForFunction(() => window.relumeViewer.droppedFrames > 0);
     v = await framesAfter((await viewer()).framesShown + 1);
     const dropped = await page.locator("#dropped").textContent();

@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use bytes::Bytes;
-use futures_util::StreamExt;
+use futures_util::{SinkExt, StreamExt};
 use http_body_util::{BodyExt, Full};
 use hyper::{Method, StatusCode};
 use hyper_util::client::legacy::Client;
@@ -188,6 +188,37 @@ async fn open_streams_are_capped_before_the_upgrade() {
         }
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ticket_opens_one_real_stream_on_a_server_with_a_token() {
+    let server = fake_server(0, |c| c.token = Some("s3cret".to_owned())).await;
+    let id = server.create(&inline_scene()).await;
+    let reply = server.request(Method::POST, "/v1/tickets", Bytes::new()).await;
+    assert_eq!(reply.status, StatusCode::OK, "{}", reply.json());
+    let ticket = reply.json()["ticket"].as_str().expect("a ticket").to_owned();
+    let refused = |result: Result<_, tungstenite::Error>| match result {
+        Err(tungstenite::Error::Http(response)) => {
+            assert_eq!(response.status(), StatusCode::UNAUTHORIZED);
+            let body: Value = serde_json::from_slice(response.body().as_deref().expect("a body")).expect("JSON");
+            assert_eq!(body["error"]["code"], "unauthorized", "{body}");
+        }
+        Err(other) => panic!("expected 401, got {other}"),
+        Ok(_) => panic!("expected 401, the stream opened"),
+    };
+    // A browser's handshake: no Authorization header.
+    let url = format!("ws://{}/v1/scenes/{id}/stream", server.addr);
+    refused(tokio_tungstenite::connect_async(&url).await);
+    let with_ticket = format!("{url}?ticket={ticket}");
+    let (mut stream, response) = tokio_tungstenite::connect_async(&with_ticket).await.expect("the ticket opens it");
+    assert_eq!(response.status(), StatusCode::SWITCHING_PROTOCOLS);
+    // The stream is live: a message that is not an Envelope gets an answer, not a close.
+    stream.send(tungstenite::Message::binary(vec![0xff, 0xff, 0xff])).await.expect("sent");
+    let answer = tokio::time::timeout(Duration::from_secs(10), stream.next()).await.expect("an answer in time");
+    assert!(matches!(answer, Some(Ok(tungstenite::Message::Binary(_)))), "{answer:?}");
+    refused(tokio_tungstenite::connect_async(&with_ticket).await);
+    drop(stream);
     server.stop().await;
 }
 

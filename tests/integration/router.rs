@@ -175,3 +175,131 @@ async fn metrics_labels_stay_a_closed_set() {
     assert!(metrics.contains("method=\"other\""), "invented methods are counted as other:\n{metrics}");
     app.stop().await;
 }
+
+/// A WebSocket handshake of the scene's stream, with `query` (e.g. `?ticket=...`) and the
+/// token `app` holds. It carries a (never completed) upgrade, so that a handshake the router
+/// lets through is answered 101.
+async fn handshake(app: &App, id: &str, query: &str) -> Reply {
+    let mut request = hyper::Request::get(format!("/v1/scenes/{id}/stream{query}"))
+        .header("upgrade", "websocket")
+        .header("connection", "Upgrade")
+        .header("sec-websocket-key", "dGhlIHNhbXBsZSBub25jZQ==")
+        .header("sec-websocket-version", "13");
+    if let Some(token) = &app.token {
+        request = request.header("authorization", format!("Bearer {token}"));
+    }
+    let mut request = request.body(Body::empty()).expect("request");
+    let upgrade = hyper::upgrade::on(&mut request);
+    request.extensions_mut().insert(upgrade);
+    app.send(request).await
+}
+
+/// `POST /v1/tickets` with the token `app` holds: the ticket.
+async fn ticket(app: &App) -> String {
+    let reply = app.request(Method::POST, "/v1/tickets", Bytes::new()).await;
+    assert_eq!(reply.status, StatusCode::OK, "{}", reply.json());
+    assert_eq!(reply.header("cache-control"), "no-store");
+    reply.json()["ticket"].as_str().expect("a ticket").to_owned()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ticket_opens_one_stream_in_place_of_the_token() {
+    let mut app = App::start(|c| c.token = Some("s3cret".to_owned())).await;
+    let id = app.create(&inline_scene()).await;
+    // Tickets are issued with the token only.
+    app.token = None;
+    app.request(Method::POST, "/v1/tickets", Bytes::new()).await.error(401, "unauthorized");
+    app.token = Some("wrong".to_owned());
+    app.request(Method::POST, "/v1/tickets", Bytes::new()).await.error(401, "unauthorized");
+    app.token = Some("s3cret".to_owned());
+    let reply = app.request(Method::POST, "/v1/tickets", Bytes::new()).await;
+    assert_eq!(reply.status, StatusCode::OK);
+    assert_eq!(reply.json()["expires_in_seconds"], 30);
+    let first = reply.json()["ticket"].as_str().expect("a ticket").to_owned();
+    assert_eq!(app.state.tickets.outstanding(), 1);
+
+    // Without the token, the ticket opens the stream once; the same ticket again, an unknown
+    // one, and none at all are refused before the upgrade with the JSON error.
+    app.token = None;
+    assert_eq!(handshake(&app, &id, &format!("?ticket={first}")).await.status, StatusCode::SWITCHING_PROTOCOLS);
+    let reused = handshake(&app, &id, &format!("?ticket={first}")).await;
+    let error = reused.error(401, "unauthorized");
+    assert!(error["message"].as_str().is_some_and(|m| m.contains("ticket")), "{error}");
+    assert_eq!(reused.header("www-authenticate"), "Bearer");
+    handshake(&app, &id, "?ticket=not-a-ticket").await.error(401, "unauthorized");
+    handshake(&app, &id, "?ticket=").await.error(401, "unauthorized");
+    handshake(&app, &id, "").await.error(401, "unauthorized");
+    assert_eq!(app.state.tickets.outstanding(), 0);
+
+    // A ticket given is the credential: a wrong one is refused even beside the right token.
+    app.token = Some("s3cret".to_owned());
+    handshake(&app, &id, "?ticket=not-a-ticket").await.error(401, "unauthorized");
+    assert_eq!(handshake(&app, &id, "").await.status, StatusCode::SWITCHING_PROTOCOLS);
+    let twice = handshake(&app, &id, "?ticket=a&ticket=b").await.error(400, "invalid_field");
+    assert_eq!(twice["field"], "ticket");
+
+    // Tickets open streams only: another route wants the token and leaves the ticket unspent.
+    let second = ticket(&app).await;
+    app.token = None;
+    app.get(&format!("/v1/scenes/{id}?ticket={second}")).await.error(401, "unauthorized");
+    app.request(Method::POST, &format!("/v1/tickets?ticket={second}"), Bytes::new()).await.error(401, "unauthorized");
+    assert_eq!(handshake(&app, &id, &format!("?ticket={second}")).await.status, StatusCode::SWITCHING_PROTOCOLS);
+    // A ticket spent on a handshake refused after the check (no such scene) is spent all the same.
+    app.token = Some("s3cret".to_owned());
+    let third = ticket(&app).await;
+    app.token = None;
+    handshake(&app, "nope", &format!("?ticket={third}")).await.error(404, "not_found");
+    handshake(&app, &id, &format!("?ticket={third}")).await.error(401, "unauthorized");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_expired_ticket_is_refused() {
+    let mut app = App::start(|c| {
+        c.token = Some("s3cret".to_owned());
+        c.ticket_seconds = 1;
+    })
+    .await;
+    let id = app.create(&inline_scene()).await;
+    let reply = app.request(Method::POST, "/v1/tickets", Bytes::new()).await;
+    assert_eq!(reply.json()["expires_in_seconds"], 1);
+    let expired = reply.json()["ticket"].as_str().expect("a ticket").to_owned();
+    tokio::time::sleep(Duration::from_millis(1100)).await;
+    app.token = None;
+    handshake(&app, &id, &format!("?ticket={expired}")).await.error(401, "unauthorized");
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_outstanding_tickets_are_bounded() {
+    let mut app = App::start(|c| {
+        c.token = Some("s3cret".to_owned());
+        c.limits.max_tickets = 2;
+    })
+    .await;
+    let id = app.create(&inline_scene()).await;
+    let first = ticket(&app).await;
+    ticket(&app).await;
+    let refused = app.request(Method::POST, "/v1/tickets", Bytes::new()).await;
+    assert_eq!(refused.error(503, "limit_exceeded")["limit"], "max_tickets");
+    let retry: u32 = refused.header("retry-after").parse().expect("Retry-After in seconds");
+    assert!((1..=30).contains(&retry), "Retry-After {retry}");
+    assert_eq!(app.state.tickets.outstanding(), 2);
+    // A used ticket frees its place.
+    app.token = None;
+    assert_eq!(handshake(&app, &id, &format!("?ticket={first}")).await.status, StatusCode::SWITCHING_PROTOCOLS);
+    app.token = Some("s3cret".to_owned());
+    ticket(&app).await;
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn without_a_token_tickets_are_issued_and_checked_when_given() {
+    let app = App::start(|_| {}).await;
+    let id = app.create(&inline_scene()).await;
+    let ticket = ticket(&app).await;
+    assert_eq!(handshake(&app, &id, "").await.status, StatusCode::SWITCHING_PROTOCOLS);
+    assert_eq!(handshake(&app, &id, &format!("?ticket={ticket}")).await.status, StatusCode::SWITCHING_PROTOCOLS);
+    handshake(&app, &id, &format!("?ticket={ticket}")).await.error(401, "unauthorized");
+    app.stop().await;
+}

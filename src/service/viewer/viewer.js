@@ -6,10 +6,17 @@
 //
 // URL parameters (all optional): scene=<URL of a scene file> (default /default-scene.json),
 // recording=<name>, downscale=<1..8>, grid=<VAL grid step>.
+//
+// A server run with --token: the page takes the token from the URL fragment (#token=<token>,
+// which the browser never sends to the server) or, after a 401, from the field it then shows.
+// It sends it as `Authorization: Bearer` on /v1 requests and, since a browser cannot set a
+// WebSocket's headers, opens each stream with a single-use ticket (POST /v1/tickets,
+// `?ticket=`) instead.
 
 import { Component, ImageFormat, Occlusion, decodeEnvelope, encodeControl } from "./proto.js";
 
 const params = new URLSearchParams(location.search);
+const fragment = new URLSearchParams(location.hash.slice(1));
 const $ = (id) => document.getElementById(id);
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 const COMPONENT_NAMES = { [Component.FULL]: "composited", [Component.DIRECT]: "direct only", [Component.INDIRECT]: "indirect only" };
@@ -45,6 +52,8 @@ const state = {
   droppedFrames: 0,
   errors: [],
   connection: "connecting",
+  token: fragment.get("token") || null, // the server's bearer token, if it wants one
+  needsToken: false, // a /v1 request was refused with 401
 };
 window.relumeViewer = state;
 
@@ -166,10 +175,16 @@ function showFrame(frame, sent) {
 // ----------------------------------------------------------------------------------------
 // HTTP
 
+// `options` with the bearer token, when the page has one, on requests to the API (/v1).
+function withToken(url, options = {}) {
+  if (!state.token || !url.startsWith("/v1/")) return options;
+  return { ...options, headers: { ...options.headers, authorization: `Bearer ${state.token}` } };
+}
+
 async function fetchOk(url, options) {
   let response;
   try {
-    response = await fetch(url, options);
+    response = await fetch(url, withToken(url, options));
   } catch (error) {
     throw new Error(`${url}: the server cannot be reached (${error.message})`);
   }
@@ -179,7 +194,9 @@ async function fetchOk(url, options) {
       const body = await response.json();
       detail = `${body.error.code}: ${body.error.message}`;
     } catch (_) { /* not a JSON error */ }
-    throw new Error(`${options?.method ?? "GET"} ${url}: ${response.status} ${detail}`);
+    const error = new Error(`${options?.method ?? "GET"} ${url}: ${response.status} ${detail}`);
+    error.status = response.status;
+    throw error;
   }
   return response;
 }
@@ -195,7 +212,10 @@ async function createScene() {
   });
   const previous = state.scene;
   state.scene = await response.json();
-  if (previous) fetch(`/v1/scenes/${previous.id}`, { method: "DELETE" }).catch(() => {});
+  if (previous) {
+    const url = `/v1/scenes/${previous.id}`;
+    fetch(url, withToken(url, { method: "DELETE" })).catch(() => {});
+  }
   log("info", `scene ${state.scene.id}: ${state.scene.triangles} triangles, ${state.scene.sparse_points} sparse points`);
 }
 
@@ -267,8 +287,15 @@ function answered(frameId) {
   }
 }
 
-function openStream(generation) {
-  const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/v1/scenes/${state.scene.id}/stream`;
+// Opens the scene's stream; with a token, through a ticket (the handshake cannot carry the
+// header).
+async function openStream(generation) {
+  let url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/v1/scenes/${state.scene.id}/stream`;
+  if (state.token) {
+    const { ticket } = await (await fetchOk("/v1/tickets", { method: "POST" })).json();
+    if (generation !== state.generation) return;
+    url += `?ticket=${encodeURIComponent(ticket)}`;
+  }
   const socket = new WebSocket(url);
   socket.binaryType = "arraybuffer";
   state.socket = socket;
@@ -342,9 +369,16 @@ async function connect() {
     await createScene();
     if (first) state.wanted.occlusion = state.scene.occlusion === "disks";
     if (generation !== state.generation) return;
-    openStream(generation);
+    await openStream(generation);
   } catch (error) {
-    setStatus("error", `${error.message} — click to retry`);
+    if (error.status === 401) {
+      state.needsToken = true;
+      $("token-form").hidden = false;
+      $("token").focus();
+      setStatus("error", state.token ? "wrong token: enter the server's token" : "this server wants its token: enter it");
+    } else {
+      setStatus("error", `${error.message} — click to retry`);
+    }
     log("error", error.message);
   }
   showSettings();
@@ -365,6 +399,22 @@ function bind() {
     $("play").textContent = state.playing ? "Pause" : "Play";
   });
   $("realtime").addEventListener("change", (event) => { state.realtime = event.target.checked; });
+  window.addEventListener("hashchange", () => {
+    const token = new URLSearchParams(location.hash.slice(1)).get("token");
+    if (token && token !== state.token) {
+      state.token = token;
+      state.needsToken = false;
+      $("token-form").hidden = true;
+      connect();
+    }
+  });
+  $("token-form").addEventListener("submit", (event) => {
+    event.preventDefault();
+    state.token = $("token").value.trim() || null;
+    state.needsToken = false;
+    $("token-form").hidden = true;
+    connect();
+  });
   $("status").addEventListener("click", () => {
     if (state.connection === "closed" || state.connection === "error") connect();
   });
