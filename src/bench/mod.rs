@@ -17,6 +17,7 @@ pub mod temporal;
 
 use self::compare::IndirectError;
 use crate::gpu::timing::TimingSource;
+use crate::gpu::visibility::VisibilitySettings;
 use crate::gpu::{Gpu, GpuError, MemoryInUse};
 use crate::renderer::{Rendered, Renderer, stage};
 use crate::scene::{MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError};
@@ -60,6 +61,33 @@ pub struct Config {
     pub glossy: bool,
     pub width: u32,
     pub height: u32,
+    /// The `ism` mode's settings where they differ from the scene's `settings.ism` (set only
+    /// when `occlusion` is `ism`).
+    pub ism_count: Option<u32>,
+    pub ism_resolution: Option<u32>,
+    pub ism_points: Option<u32>,
+    pub ism_pull_push_levels: Option<u32>,
+}
+
+impl Config {
+    /// The `ism` settings of this configuration: `base` with its overrides.
+    pub fn ism_settings(&self, base: &crate::scene::IsmSettings) -> crate::scene::IsmSettings {
+        crate::scene::IsmSettings {
+            count: self.ism_count.unwrap_or(base.count),
+            resolution: self.ism_resolution.unwrap_or(base.resolution),
+            points: self.ism_points.or(base.points),
+            pull_push_levels: self.ism_pull_push_levels.unwrap_or(base.pull_push_levels),
+            ..*base
+        }
+    }
+
+    /// Whether any `ism` setting is overridden.
+    fn has_ism(&self) -> bool {
+        self.ism_count.is_some()
+            || self.ism_resolution.is_some()
+            || self.ism_points.is_some()
+            || self.ism_pull_push_levels.is_some()
+    }
 }
 
 /// The values given for each axis (`None`: the axis is not swept).
@@ -71,10 +99,26 @@ pub struct Sweep {
     pub occlusion: Option<Vec<Occlusion>>,
     pub glossy: Option<Vec<bool>>,
     pub resolution: Option<Vec<(u32, u32)>>,
+    /// The `ism` mode's axes: each value is measured with `occlusion` `ism`.
+    pub ism_count: Option<Vec<u32>>,
+    pub ism_resolution: Option<Vec<u32>>,
+    pub ism_points: Option<Vec<u32>>,
+    pub ism_pull_push_levels: Option<Vec<u32>>,
 }
 
 /// The axis names `--sweep` accepts.
-pub const AXES: &[&str] = &["sparse_points", "neighbours", "rsm_resolution", "occlusion", "glossy", "resolution"];
+pub const AXES: &[&str] = &[
+    "sparse_points",
+    "neighbours",
+    "rsm_resolution",
+    "occlusion",
+    "glossy",
+    "resolution",
+    "ism_count",
+    "ism_resolution",
+    "ism_points",
+    "ism_pull_push_levels",
+];
 
 impl Sweep {
     /// Parse `--sweep axis=v1,v2,...` arguments; each axis at most once.
@@ -125,6 +169,26 @@ impl Sweep {
                     duplicate(sweep.resolution.is_some())?;
                     sweep.resolution = Some(parse_each(&flag, &values, parse_resolution)?);
                 }
+                "ism_count" => {
+                    duplicate(sweep.ism_count.is_some())?;
+                    sweep.ism_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, crate::scene::MAX_ISMS))?);
+                }
+                "ism_resolution" => {
+                    duplicate(sweep.ism_resolution.is_some())?;
+                    sweep.ism_resolution = Some(parse_each(&flag, &values, |v| {
+                        let n = int_in(v, 16, 512)?;
+                        if n.is_power_of_two() { Ok(n) } else { Err("must be a power of two in 16..=512".to_owned()) }
+                    })?);
+                }
+                "ism_points" => {
+                    duplicate(sweep.ism_points.is_some())?;
+                    let max = crate::scene::MAX_ISM_POINTS;
+                    sweep.ism_points = Some(parse_each(&flag, &values, |v| int_in(v, 16, max))?);
+                }
+                "ism_pull_push_levels" => {
+                    duplicate(sweep.ism_pull_push_levels.is_some())?;
+                    sweep.ism_pull_push_levels = Some(parse_each(&flag, &values, |v| int_in(v, 0, 4))?);
+                }
                 "neighbours" | "neighbors" => {
                     duplicate(sweep.neighbours.is_some())?;
                     let max = crate::scene::MAX_NEIGHBOURS;
@@ -160,15 +224,20 @@ impl Sweep {
                         for &glossy in &one(&self.glossy, base.glossy) {
                             for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
                                 for &occlusion in &one(&self.occlusion, base.occlusion) {
-                                    push(Config {
-                                        sparse_points_per_mesh: sparse,
-                                        neighbours,
-                                        rsm_resolution: rsm,
-                                        occlusion,
-                                        glossy,
-                                        width,
-                                        height,
-                                    });
+                                    for ism in self.ism_variants(base) {
+                                        let c = Config {
+                                            sparse_points_per_mesh: sparse,
+                                            neighbours,
+                                            rsm_resolution: rsm,
+                                            occlusion,
+                                            glossy,
+                                            width,
+                                            height,
+                                            ..ism
+                                        };
+                                        // ISM values only mean something in the ism mode.
+                                        push(if occlusion == Occlusion::Ism { c } else { c.without_ism() });
+                                    }
                                 }
                             }
                         }
@@ -196,7 +265,43 @@ impl Sweep {
         for &(width, height) in self.resolution.iter().flatten() {
             push(Config { width, height, ..*base });
         }
+        let ism = Config { occlusion: Occlusion::Ism, ..*base };
+        for &v in self.ism_count.iter().flatten() {
+            push(Config { ism_count: Some(v), ..ism });
+        }
+        for &v in self.ism_resolution.iter().flatten() {
+            push(Config { ism_resolution: Some(v), ..ism });
+        }
+        for &v in self.ism_points.iter().flatten() {
+            push(Config { ism_points: Some(v), ..ism });
+        }
+        for &v in self.ism_pull_push_levels.iter().flatten() {
+            push(Config { ism_pull_push_levels: Some(v), ..ism });
+        }
         out
+    }
+
+    /// Every combination of the ISM axes' values as overrides on `base` (the grid).
+    fn ism_variants(&self, base: &Config) -> Vec<Config> {
+        let mut out = Vec::new();
+        let opts =
+            |v: &Option<Vec<u32>>, b: Option<u32>| v.clone().map_or(vec![b], |v| v.into_iter().map(Some).collect());
+        for ism_count in opts(&self.ism_count, base.ism_count) {
+            for ism_resolution in opts(&self.ism_resolution, base.ism_resolution) {
+                for ism_points in opts(&self.ism_points, base.ism_points) {
+                    for ism_pull_push_levels in opts(&self.ism_pull_push_levels, base.ism_pull_push_levels) {
+                        out.push(Config { ism_count, ism_resolution, ism_points, ism_pull_push_levels, ..*base });
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+impl Config {
+    fn without_ism(self) -> Config {
+        Config { ism_count: None, ism_resolution: None, ism_points: None, ism_pull_push_levels: None, ..self }
     }
 }
 
@@ -266,6 +371,10 @@ impl BenchOptions {
             glossy: scene.settings.glossy,
             width: description.camera.width,
             height: description.camera.height,
+            ism_count: None,
+            ism_resolution: None,
+            ism_points: None,
+            ism_pull_push_levels: None,
         };
         let mut sweep = self.sweep.clone();
         if self.quick {
@@ -513,7 +622,14 @@ fn run_job(
             let mut sparse_frames = Vec::new();
             for c in group.iter().filter(|c| (c.width, c.height) == (w, h)) {
                 progress(&format!("{}: {}", job.variant, describe(c)));
-                renderer.set_occlusion(c.occlusion, scene.settings.occlusion_rule);
+                let ism = c.ism_settings(&scene.settings.ism);
+                ism.validate("settings.ism").map_err(|e| flag_error("--sweep", format!("{}: {e}", describe(c))))?;
+                renderer.set_visibility(VisibilitySettings {
+                    mode: c.occlusion,
+                    rule: scene.settings.occlusion_rule,
+                    clusters: scene.settings.clusters,
+                    ism,
+                });
                 let frame = compare::sparse_frame(gpu, &mut renderer, w, h)?;
                 sparse_frames.push((*c, frame, gpu.memory_in_use()));
             }
@@ -582,7 +698,18 @@ pub fn describe(c: &Config) -> String {
         if c.glossy { "on" } else { "off" },
         c.width,
         c.height
-    )
+    ) + &if c.has_ism() {
+        let v = |o: Option<u32>| o.map_or("scene".to_owned(), |n| n.to_string());
+        format!(
+            ", ism {} maps of {}, {} points, {} pull-push levels",
+            v(c.ism_count),
+            v(c.ism_resolution),
+            v(c.ism_points),
+            v(c.ism_pull_push_levels)
+        )
+    } else {
+        String::new()
+    }
 }
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<(), BenchError> {
@@ -638,6 +765,10 @@ pub fn csv(results: &BenchResults) -> String {
         "exact_device",
         "exact_rays_per_s",
         "paper_fps",
+        "ism_count",
+        "ism_resolution",
+        "ism_points",
+        "ism_pull_push_levels",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -680,6 +811,8 @@ pub fn csv(results: &BenchResults) -> String {
             opt(r.exact_rays_per_s),
             r.paper_fps.map_or(String::new(), |f| f.to_string()),
         ];
+        let ism = |o: Option<u32>| o.map_or(String::new(), |n| n.to_string());
+        row.extend([ism(c.ism_count), ism(c.ism_resolution), ism(c.ism_points), ism(c.ism_pull_push_levels)]);
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
     }
@@ -702,6 +835,10 @@ mod tests {
         glossy: true,
         width: 100,
         height: 50,
+        ism_count: None,
+        ism_resolution: None,
+        ism_points: None,
+        ism_pull_push_levels: None,
     };
 
     #[test]
@@ -734,6 +871,10 @@ mod tests {
             ("speed=1", "--sweep speed: unknown axis"),
             ("neighbours=4,17", "--sweep neighbours: `17`: must be in 1..=16"),
             ("sparse_points", "--sweep: expected AXIS=V1,V2"),
+            ("ism_resolution=48", "--sweep ism_resolution: `48`: must be a power of two in 16..=512"),
+            ("ism_count=0", "--sweep ism_count: `0`: must be in 1..=4096"),
+            ("ism_points=8", "--sweep ism_points: `8`: must be in 16..=65536"),
+            ("ism_pull_push_levels=5", "--sweep ism_pull_push_levels: `5`: must be in 0..=4"),
         ] {
             let e = Sweep::parse(&args(&[arg])).unwrap_err().to_string();
             assert!(e.starts_with(wanted), "{arg}: {e}");
@@ -755,6 +896,27 @@ mod tests {
         let k: Vec<Option<u32>> = c.iter().map(|c| c.neighbours).collect();
         assert_eq!(k, [None, Some(4), Some(8), Some(16)]);
         assert_eq!(s.configs(&BASE, true).len(), 3, "the grid replaces the base's count");
+    }
+
+    /// An ISM axis measures the `ism` mode at each value; in the grid, ISM values apply only to
+    /// the `ism` configurations (the others would repeat themselves).
+    #[test]
+    fn ism_axes_measure_the_ism_mode() {
+        let s = Sweep::parse(&args(&["ism_resolution=32,64", "ism_pull_push_levels=0"])).unwrap();
+        let c = s.configs(&BASE, false);
+        assert_eq!(c.len(), 4, "{c:?}");
+        assert!(c[1..].iter().all(|c| c.occlusion == Occlusion::Ism));
+        assert_eq!((c[1].ism_resolution, c[3].ism_pull_push_levels), (Some(32), Some(0)));
+        let ism = c[1].ism_settings(&crate::scene::IsmSettings::default());
+        assert_eq!((ism.resolution, ism.count), (32, crate::scene::IsmSettings::default().count));
+        assert!(
+            describe(&c[1]).ends_with("ism scene maps of 32, scene points, scene pull-push levels"),
+            "{}",
+            describe(&c[1])
+        );
+        let s = Sweep::parse(&args(&["occlusion=off,ism", "ism_resolution=32,64"])).unwrap();
+        let c = s.configs(&BASE, true);
+        assert_eq!(c.len(), 3, "off once, ism at two resolutions: {c:?}");
     }
 
     #[test]

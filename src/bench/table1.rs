@@ -72,6 +72,10 @@ pub fn jobs(description: &SceneDescription, scene: &Scene, quick: bool) -> Vec<J
                             glossy,
                             width,
                             height,
+                            ism_count: None,
+                            ism_resolution: None,
+                            ism_points: None,
+                            ism_pull_push_levels: None,
                         });
                     }
                 }
@@ -165,6 +169,10 @@ mod tests {
             glossy: true,
             width: 1920,
             height: 1080,
+            ism_count: None,
+            ism_resolution: None,
+            ism_points: None,
+            ism_pull_push_levels: None,
         };
         assert_eq!(paper_fps("table1_730k", &config, 4092), Some(23));
         assert_eq!(

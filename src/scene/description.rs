@@ -601,7 +601,9 @@ impl IsmSettings {
         })
     }
 
-    fn validate(&self, field: &str) -> Result<(), SceneError> {
+    /// Check every field and the bounds on memory and work, naming the first bad field under
+    /// `field`.
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
         int_in(self.count, 1, MAX_ISMS, &format!("{field}.count"))?;
         let r = self.resolution;
         if !(16..=512).contains(&r) || !r.is_power_of_two() {
