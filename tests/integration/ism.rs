@@ -12,9 +12,9 @@
 //! lookup and the gather use the clusters' tolerances (1 % of entries, mean under 1e-3; 1e-3
 //! relative).
 
-use super::{assert_close, gpu};
+use super::gpu;
 use glam::Vec3;
-use relume::gpu::visibility::clusters::{ClusterReadback, Clusters, twin};
+use relume::gpu::visibility::clusters::{ClusterReadback, Clusters};
 use relume::gpu::visibility::ism::twin as ism_twin;
 use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
@@ -80,45 +80,8 @@ fn ism_matches_cpu_twins() {
     assert!(texels_differ * 50 <= texels, "{texels_differ} of {texels} texels differ");
     assert!(drawn * 4 > texels, "the maps hold depths: {drawn} of {texels} texels");
 
-    // Visibility on the GPU's own maps.
-    let m = r.clusters.len();
-    let (mut differ, mut sum_diff, mut shadowed) = (0, 0.0, 0);
-    for (i, p) in flat.sparse_points.iter().enumerate() {
-        for (k, c) in r.clusters.iter().enumerate() {
-            let tile = twin::DepthTile { resolution: params.resolution, depths: &r.maps[k] };
-            let receiver =
-                twin::ShadowReceiver { offset: Vec3::from(p.position) - c.position, normal: p.normal.into() };
-            let cpu = twin::cluster_visibility(&tile, c, &receiver, r.settings.soft);
-            let gpu = r.visibility[i * m + k];
-            let d = (cpu - gpu).abs();
-            sum_diff += d;
-            differ += usize::from(d > 1e-3);
-            shadowed += usize::from(gpu < 0.5);
-        }
-    }
-    let n = flat.sparse_points.len() * m;
-    assert!(differ * 100 <= n, "{differ} of {n} visibilities differ");
-    assert!(sum_diff / (n as f32) < 1e-3, "mean difference {}", sum_diff / n as f32);
-    assert!(shadowed > 0, "the bunny must shadow some sparse points from some group");
-
-    // The gather: every VAL's irradiance times its group's visibility at the point.
-    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
-    let expected: Vec<Vec3> = flat
-        .sparse_points
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
-            vals.iter()
-                .zip(&r.group_of_val)
-                .map(|(v, g)| relume::twin::val_irradiance(x, n, v) * r.visibility[i * m + *g as usize])
-                .sum()
-        })
-        .collect();
-    let scale = expected.iter().map(|e| e.max_element()).fold(0.0, f32::max);
-    for (i, e) in expected.iter().enumerate() {
-        assert_close(mid.gathered_diffuse[i].irradiance.into(), *e, 1e-3, scale, 1e-9, &format!("E at {i}"));
-    }
+    // Visibility on the GPU's own maps, and the gather with it.
+    super::clusters::assert_lookup_and_gather_match(&renderer, &gpu, &vals, &r, params.resolution);
 }
 
 /// Without pull-push the stages are the splat alone; a scene without lit VALs (a dark spot

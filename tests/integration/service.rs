@@ -817,16 +817,20 @@ fn the_binary_serves_until_sigterm() {
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("no-such-dir"), "{}", String::from_utf8_lossy(&bad.stderr));
 
-    let mut child = Command::new(env!("CARGO_BIN_EXE_relume"))
-        .args(["serve", "--addr", "127.0.0.1:0", "--max-queue", "3"])
-        .env("RELUME_ASSETS", fixture(""))
-        .env("NO_COLOR", "1")
-        .env_remove("RUST_LOG")
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("starts");
-    let mut stderr = BufReader::new(child.stderr.take().expect("stderr"));
-    let mut log = String::new();
+    let serve = |extra: &[&str]| {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_relume"))
+            .args(["serve", "--addr", "127.0.0.1:0"])
+            .args(extra)
+            .env("RELUME_ASSETS", fixture(""))
+            .env("NO_COLOR", "1")
+            .env_remove("RUST_LOG")
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("starts");
+        let stderr = BufReader::new(child.stderr.take().expect("stderr"));
+        (child, stderr, String::new())
+    };
+    let (mut child, mut stderr, mut log) = serve(&["--max-queue", "3"]);
     let port = loop {
         let mut line = String::new();
         assert!(stderr.read_line(&mut line).expect("reads") > 0, "exited early:\n{log}");
@@ -852,16 +856,7 @@ fn the_binary_serves_until_sigterm() {
 
     // SIGTERM the moment "serving" is logged, with no request between: the handlers must
     // already listen then (a signal before them kills the process, as CI once saw).
-    let mut child = Command::new(env!("CARGO_BIN_EXE_relume"))
-        .args(["serve", "--addr", "127.0.0.1:0"])
-        .env("RELUME_ASSETS", fixture(""))
-        .env("NO_COLOR", "1")
-        .env_remove("RUST_LOG")
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("starts");
-    let mut stderr = BufReader::new(child.stderr.take().expect("stderr"));
-    let mut log = String::new();
+    let (mut child, mut stderr, mut log) = serve(&[]);
     while !log.contains("serving") {
         let mut line = String::new();
         assert!(stderr.read_line(&mut line).expect("reads") > 0, "exited early:\n{log}");

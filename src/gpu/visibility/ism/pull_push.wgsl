@@ -11,10 +11,15 @@ override LEVEL: u32 = 0u;
 @group(0) @binding(0) var<storage, read_write> fine: array<u32>;
 @group(0) @binding(1) var<storage, read_write> coarse: array<u32>;
 
+// The finer level's side; the coarser one's is half of it.
+fn fine_side() -> u32 {
+    return MAP_RESOLUTION >> LEVEL;
+}
+
 // One invocation per (coarse texel, map).
 @compute @workgroup_size(WORKGROUP_X)
 fn pull(@builtin(global_invocation_id) id: vec3<u32>) {
-    let fine_res = MAP_RESOLUTION >> LEVEL;
+    let fine_res = fine_side();
     let coarse_res = fine_res / 2u;
     let i = id.x;
     let k = id.y;
@@ -48,8 +53,7 @@ fn pull(@builtin(global_invocation_id) id: vec3<u32>) {
 // One invocation per (fine texel, map).
 @compute @workgroup_size(WORKGROUP_X)
 fn push(@builtin(global_invocation_id) id: vec3<u32>) {
-    let fine_res = MAP_RESOLUTION >> LEVEL;
-    let coarse_res = fine_res / 2u;
+    let fine_res = fine_side();
     let i = id.x;
     let k = id.y;
     if i >= fine_res * fine_res || k >= CLUSTER_COUNT {
@@ -57,7 +61,7 @@ fn push(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let x = i % fine_res;
     let y = i / fine_res;
-    let parent = coarse[map_texel_index(k, coarse_res, x / 2u, y / 2u)];
+    let parent = coarse[map_texel_index(k, fine_res / 2u, x / 2u, y / 2u)];
     if parent == 0u {
         return;
     }
