@@ -303,6 +303,9 @@ pub struct ModeVsExact {
     pub rel_rmse_corrected: Option<f64>,
     /// Mean FLIP at the exact image's exposure.
     pub flip_mean: f64,
+    /// Summed indirect luminance over the exact image's: above 1 light leaks, below 1 the
+    /// mode occludes too much.
+    pub energy_ratio: f64,
     /// The mode's own stages (ms; 0 for `off`).
     pub visibility_ms: f64,
     /// The gather of the same frame (ms): with a group mode it applies the per-VAL visibility.
@@ -426,7 +429,9 @@ fn exact_comparison(
             rel_rmse: error.rel_rmse,
             rel_rmse_corrected: exact.corrected_rel_rmse(&sparse.indirect),
             flip_mean: error.flip_mean,
-            visibility_ms: sparse.timings.total_of(&visibility_stages),
+            energy_ratio: sparse.indirect.luminance_sum_and_peak().0 / exact.indirect().luminance_sum_and_peak().0,
+            // `off` has no stage of its own: 0, not the empty sum's -0.
+            visibility_ms: if visibility_stages.is_empty() { 0.0 } else { sparse.timings.total_of(&visibility_stages) },
             gather_ms: sparse.timings.total_of(&[stage::GATHER]),
             stages_ms: sparse.timings.stages.clone(),
         });

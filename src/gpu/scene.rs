@@ -14,6 +14,9 @@ pub struct FlatScene {
     /// Three per triangle, into `vertices`.
     pub indices: Vec<u32>,
     pub triangle_materials: Vec<u32>,
+    /// Per triangle, its mesh's sparse points per m² (as placed): where the scene wants detail,
+    /// which the imperfect shadow maps' points follow.
+    pub triangle_sparse_density: Vec<f32>,
     pub materials: Vec<RawMaterial>,
     pub sparse_points: Vec<RawSparsePoint>,
     /// Sparse points per vertex in `vertex_neighbours` (the scene's `interpolation_neighbours`).
@@ -82,15 +85,25 @@ impl FlatScene {
             let placed = mesh.placed(transform);
             let vertex_base = flat.vertices.len() as u32;
             let sparse_base = flat.sparse_points.len() as u32;
-            let world = placed.positions().into_iter().zip(placed.normals());
-            for ((p, n), uv) in world.zip(&mesh.texcoords) {
+            let positions = placed.positions();
+            let area: f64 = mesh
+                .triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| positions[i as usize]);
+                    0.5 * f64::from((b - a).cross(c - a).length())
+                })
+                .sum();
+            let sparse = &mesh.sparse;
+            let density = if area > 0.0 { (sparse.triangles.len() as f64 / area) as f32 } else { 0.0 };
+            for ((p, n), uv) in positions.into_iter().zip(placed.normals()).zip(&mesh.texcoords) {
                 flat.vertices.push(RawVertex { position: p.into(), s: uv.x, normal: n.into(), t: 1.0 - uv.y });
             }
             for (t, m) in mesh.triangles.iter().zip(&mesh.triangle_materials) {
                 flat.indices.extend(t.iter().map(|i| i + vertex_base));
                 flat.triangle_materials.push(*m);
+                flat.triangle_sparse_density.push(density);
             }
-            let sparse = &mesh.sparse;
             let world = placed.sparse_positions().into_iter().zip(placed.sparse_normals());
             for (((p, n), radius), triangle) in world.zip(placed.occluder_radii()).zip(&sparse.triangles) {
                 let material = mesh.triangle_materials[*triangle as usize] as usize;

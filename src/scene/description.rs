@@ -552,7 +552,8 @@ pub struct IsmSettings {
     /// Shadow maps (VALs drawn by flux) per frame, in 1..=[`MAX_ISMS`]; default 1024 (the
     /// paper's VPL count).
     pub count: u32,
-    /// Side of each paraboloid map, texels: a power of two in 16..=512; default 64.
+    /// Side of each paraboloid map, texels: a power of two in 16..=512; default 128 (the
+    /// paper's).
     pub resolution: u32,
     /// Points splatted into each map, in 16..=[`MAX_ISM_POINTS`]; default `null`: the paper's
     /// rule `P ≈ N_res · N_vpl / 4`, a quarter of a map's `π/4 · resolution²` texels per map.
@@ -567,14 +568,20 @@ pub struct IsmSettings {
     pub push_threshold: f32,
     /// Shadow filter: `"pcss"`, `"pcf"` (default) or `"hard"`.
     pub soft: SoftShadows,
+    /// Slope-scaled depth bias of the lookup, texels, in [0, 16]: a splatted point lies
+    /// anywhere in its texel, so a receiver's own surface seen at a grazing angle may lie
+    /// nearer than its tangent plane along the texel's centre ray by this many texel angles
+    /// times the tangent of the incidence; default 1.
+    pub slope_bias: f32,
 }
 
 /// Most imperfect shadow maps per frame.
 pub const MAX_ISMS: u32 = 4096;
 /// Most points splatted into one imperfect shadow map.
 pub const MAX_ISM_POINTS: u32 = 65536;
-/// Most texels of all imperfect shadow maps together (the finest level; 256 MiB).
-pub const MAX_ISM_TEXELS: u64 = 1 << 26;
+/// Most texels of all imperfect shadow maps together (the finest level, 128 MiB: wgpu's default
+/// and lavapipe's largest storage buffer binding).
+pub const MAX_ISM_TEXELS: u64 = 1 << 25;
 /// Most points splatted per frame (all maps together).
 pub const MAX_ISM_SPLATS: u64 = 1 << 27;
 
@@ -582,12 +589,13 @@ impl Default for IsmSettings {
     fn default() -> Self {
         Self {
             count: 1024,
-            resolution: 64,
+            resolution: 128,
             points: None,
             pull_push_levels: 2,
             pull_threshold: 0.05,
             push_threshold: 0.05,
             soft: SoftShadows::Pcf,
+            slope_bias: 1.0,
         }
     }
 }
@@ -616,6 +624,7 @@ impl IsmSettings {
             int_in(points, 16, MAX_ISM_POINTS, &format!("{field}.points"))?;
         }
         int_in(self.pull_push_levels, 0, 4, &format!("{field}.pull_push_levels"))?;
+        in_closed(self.slope_bias, 0.0, 16.0, &format!("{field}.slope_bias"))?;
         for (value, name) in [(self.pull_threshold, "pull_threshold"), (self.push_threshold, "push_threshold")] {
             if !(value > 0.0 && value <= 1.0) {
                 return Err(SceneError::field(format!("{field}.{name}"), format!("must be in (0, 1], got {value}")));
@@ -1386,8 +1395,8 @@ mod tests {
         let s = d.settings.to_settings(false);
         assert_eq!(s.occlusion, Occlusion::Ism);
         assert_eq!(s.ism, IsmSettings { count: 16, resolution: 32, points: Some(100), ..IsmSettings::default() });
-        // The paper's rule: a quarter of the pi/4 * 64^2 texels of a 64x64 map.
-        assert_eq!(IsmSettings::default().points_per_map(), 804);
+        // The paper's rule: a quarter of the pi/4 * 128^2 texels of a 128x128 map.
+        assert_eq!(IsmSettings::default().points_per_map(), 3217);
         for (ism, want) in [
             (r#"{"count": 0}"#, "settings.ism.count: must be in 1..=4096, got 0"),
             (r#"{"resolution": 48}"#, "settings.ism.resolution: must be a power of two in 16..=512, got 48"),
@@ -1395,9 +1404,10 @@ mod tests {
             (r#"{"pull_push_levels": 5}"#, "settings.ism.pull_push_levels: must be in 0..=4, got 5"),
             (r#"{"pull_threshold": 0}"#, "settings.ism.pull_threshold: must be in (0, 1], got 0"),
             (r#"{"push_threshold": 2}"#, "settings.ism.push_threshold: must be in (0, 1], got 2"),
-            (r#"{"count": 4096, "resolution": 256}"#, "settings.ism.resolution: 4096 maps of 256x256 texels"),
-            (r#"{"count": 4096, "points": 65536}"#, "settings.ism.points: 4096 maps of 65536 points"),
+            (r#"{"count": 1024, "resolution": 256}"#, "settings.ism.resolution: 1024 maps of 256x256 texels"),
+            (r#"{"count": 4096, "resolution": 32, "points": 65536}"#, "settings.ism.points: 4096 maps of 65536 points"),
             (r#"{"spread": 1}"#, "settings.ism.spread: unknown field"),
+            (r#"{"slope_bias": -1}"#, "settings.ism.slope_bias: must be in [0, 16], got -1"),
         ] {
             let message = error_of(&with_settings(&format!(r#"{{"ism": {ism}}}"#)));
             assert!(message.starts_with(want), "{ism}: {message}");

@@ -83,12 +83,13 @@ pub(super) fn assert_lookup_and_gather_match(
     r: &ClusterReadback,
     resolution: u32,
 ) {
+    let slope_bias_texels = r.ism.map_or(0.0, |p| p.slope_bias_texels);
     let flat = &renderer.scene.flat;
     let m = r.clusters.len();
     let (mut differ, mut sum_diff, mut shadowed) = (0, 0.0, 0);
     for (i, p) in flat.sparse_points.iter().enumerate() {
         for (k, c) in r.clusters.iter().enumerate() {
-            let tile = twin::DepthTile { resolution, depths: &r.maps[k] };
+            let tile = twin::DepthTile { resolution, depths: &r.maps[k], slope_bias_texels };
             let receiver =
                 twin::ShadowReceiver { offset: Vec3::from(p.position) - c.position, normal: p.normal.into() };
             let cpu = twin::cluster_visibility(&tile, c, &receiver, r.settings.soft);

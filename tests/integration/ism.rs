@@ -65,7 +65,7 @@ fn ism_matches_cpu_twins() {
     // The maps around the GPU's own centres.
     let flat = &renderer.scene.flat;
     let positions: Vec<Vec3> = flat.vertices.iter().map(|v| Vec3::from(v.position)).collect();
-    let cdf = ism_twin::triangle_cdf(&positions, &flat.indices);
+    let cdf = ism_twin::triangle_cdf(&positions, &flat.indices, &flat.triangle_sparse_density);
     let (mut texels, mut texels_differ, mut drawn) = (0, 0, 0);
     for (k, c) in r.clusters.iter().enumerate() {
         let mut map = ism_twin::splat(c, k as u32, &params, &cdf, &positions, &flat.indices);

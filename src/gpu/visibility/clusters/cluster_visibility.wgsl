@@ -30,10 +30,23 @@ fn blocker_at(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>, texel: v
     }
     let v = paraboloid_direction(texel_disc(texel), c.normal);
     let zr = min(receiver_plane_depth(offset, normal, v), length(offset) * 4.0);
-    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS) {
+    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(v, c.normal, normal)) {
         return z;
     }
     return -1.0;
+}
+
+// Slope-scaled bias for maps whose depths were not taken along each texel's centre ray (the
+// imperfect shadow maps' splatted points lie anywhere in their texel): across
+// SLOPE_BIAS_TEXELS texels the receiver's plane moves by that many texel angles times the
+// tangent of the ray's incidence on it, relative to its distance. 0 for the rasterised maps.
+fn slope_bias(v: vec3<f32>, map_normal: vec3<f32>, receiver_normal: vec3<f32>) -> f32 {
+    if SLOPE_BIAS_TEXELS == 0.0 {
+        return 0.0;
+    }
+    let cos_i = clamp(-dot(v, receiver_normal), 1e-3, 1.0);
+    let tan_i = min(sqrt(1.0 - cos_i * cos_i) / cos_i, MAX_SLOPE);
+    return SLOPE_BIAS_TEXELS * tan_i / texels_per_radian(dot(v, map_normal));
 }
 
 fn tap(centre: vec2<f32>, radius: f32, i: u32) -> vec2<i32> {

@@ -89,8 +89,14 @@ impl SceneScale {
     }
 }
 
-/// The constants every shader of the mode starts with, then `paraboloid.wgsl`.
+/// The constants every shader of the mode starts with, then `paraboloid.wgsl`; the rasterised
+/// maps hold exact depths per texel, so no slope-scaled bias.
 pub fn header(settings: &ClusterSettings, scale: SceneScale) -> String {
+    header_with_slope_bias(settings, scale, 0.0)
+}
+
+/// [`header`] with `slope_bias_texels` of slope-scaled bias (`twin::slope_bias`).
+pub fn header_with_slope_bias(settings: &ClusterSettings, scale: SceneScale, slope_bias_texels: f32) -> String {
     let soft = match settings.soft {
         SoftShadows::Pcss => 0,
         SoftShadows::Pcf => 1,
@@ -113,6 +119,8 @@ pub fn header(settings: &ClusterSettings, scale: SceneScale) -> String {
          const MAX_SHADOW_FILTER_ANGLE: f32 = {:e};\n\
          const CLUSTER_NEAR_FRACTION: f32 = {:e};\n\
          const SHADOW_RELATIVE_BIAS: f32 = {:e};\n\
+         const SLOPE_BIAS_TEXELS: f32 = {slope_bias_texels:e};\n\
+         const MAX_SLOPE: f32 = {:e};\n\
          const SHADOW_RASTER_SLACK: f32 = {:e};\n{PARABOLOID}",
         settings.count,
         1.0 / scale.diagonal,
@@ -125,6 +133,7 @@ pub fn header(settings: &ClusterSettings, scale: SceneScale) -> String {
         twin::MAX_SHADOW_FILTER_ANGLE,
         twin::CLUSTER_NEAR_FRACTION,
         twin::SHADOW_RELATIVE_BIAS,
+        twin::MAX_SLOPE,
         twin::SHADOW_RASTER_SLACK,
     )
 }

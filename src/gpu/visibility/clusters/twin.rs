@@ -192,6 +192,8 @@ pub const SHADOW_RELATIVE_BIAS: f32 = 0.02;
 pub struct DepthTile<'a> {
     pub resolution: u32,
     pub depths: &'a [f32],
+    /// Texels of slope-scaled bias ([`slope_bias`]): 0 for exact depths per texel.
+    pub slope_bias_texels: f32,
 }
 
 impl DepthTile<'_> {
@@ -229,7 +231,21 @@ fn blocker_at(tile: &DepthTile<'_>, cluster: &Cluster, r: &ShadowReceiver, texel
     }
     let v = paraboloid_direction(texel_disc(texel, tile.resolution), cluster.normal);
     let zr = receiver_plane_depth(r, v).min(r.offset.length() * 4.0);
-    (z < zr * (1.0 - SHADOW_RELATIVE_BIAS)).then_some(z)
+    (z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(tile, v, cluster.normal, r.normal))).then_some(z)
+}
+
+/// Most tangent of the incidence angle the slope-scaled bias uses (about 84°).
+pub const MAX_SLOPE: f32 = 10.0;
+
+/// WGSL `slope_bias`: `slope_bias_texels` texel angles times the tangent of the ray's incidence
+/// on the receiver's plane (relative depth); 0 for maps with exact per-texel depths.
+pub fn slope_bias(tile: &DepthTile<'_>, v: Vec3, map_normal: Vec3, receiver_normal: Vec3) -> f32 {
+    if tile.slope_bias_texels == 0.0 {
+        return 0.0;
+    }
+    let cos_i = (-v.dot(receiver_normal)).clamp(1e-3, 1.0);
+    let tan_i = ((1.0 - cos_i * cos_i).sqrt() / cos_i).min(MAX_SLOPE);
+    tile.slope_bias_texels * tan_i / texels_per_radian(v.dot(map_normal), tile.resolution)
 }
 
 /// The `SHADOW_TAPS`² grid of texels over `[-radius, radius]²` around `centre` (texel coords).
@@ -406,7 +422,7 @@ mod tests {
     #[test]
     fn blocker_search_and_pcf_on_a_hand_made_map() {
         let (depths, cluster) = half_map();
-        let tile = DepthTile { resolution: 64, depths: &depths };
+        let tile = DepthTile { resolution: 64, depths: &depths, slope_bias_texels: 0.0 };
         let r = receiver(0.0);
         let t = tile_of(&cluster, &r, 64);
         // Receiver straight ahead: texel coordinate 32.0, the edge; taps at 32 + {-4,-2,0,2,4}.
@@ -431,7 +447,7 @@ mod tests {
     #[test]
     fn receivers_facing_away_are_unaffected() {
         let depths = vec![0.5; 64 * 64];
-        let tile = DepthTile { resolution: 64, depths: &depths };
+        let tile = DepthTile { resolution: 64, depths: &depths, slope_bias_texels: 0.0 };
         let cluster = Cluster { position: Vec3::ZERO, count: 10.0, normal: Vec3::Z, radius: 0.2 };
         for soft in [Soft::Pcss, Soft::Pcf, Soft::Hard] {
             let away = ShadowReceiver { offset: Vec3::new(0.0, 0.0, 2.0), normal: Vec3::Z };
@@ -463,7 +479,7 @@ mod tests {
     fn plate_casts_umbra_penumbra_and_light() {
         let (res, h, zb, zr) = (256, 0.5, 1.0, 2.0);
         let depths = plate_map(res, h, zb);
-        let tile = DepthTile { resolution: res, depths: &depths };
+        let tile = DepthTile { resolution: res, depths: &depths, slope_bias_texels: 0.0 };
         let cluster = Cluster { position: Vec3::ZERO, count: 10.0, normal: Vec3::Z, radius: 0.1 };
         let vis = |x: f32| {
             let r = ShadowReceiver { offset: Vec3::new(x, 0.0, zr), normal: Vec3::NEG_Z };

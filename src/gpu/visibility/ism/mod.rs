@@ -63,6 +63,9 @@ pub struct IsmParams {
     pub pull_threshold: f32,
     pub push_threshold: f32,
     pub depth_far: f32,
+    /// Slope-scaled bias of the lookup (texels; `clusters::twin::slope_bias`): a splatted
+    /// point lies anywhere in its texel, not on the texel's centre ray.
+    pub slope_bias_texels: f32,
 }
 
 impl IsmParams {
@@ -74,6 +77,7 @@ impl IsmParams {
             pull_threshold: ism.pull_threshold * scale.diagonal,
             push_threshold: ism.push_threshold * scale.diagonal,
             depth_far: scale.depth_far(),
+            slope_bias_texels: ism.slope_bias,
         }
     }
 }
@@ -88,7 +92,7 @@ pub fn header(ism: &IsmSettings, scale: SceneScale) -> String {
          const PUSH_THRESHOLD: f32 = {:e};\n\
          const SAMPLE_BLOCK: u32 = {SAMPLE_BLOCK}u;\n\
          const POINT_SEED: u32 = {POINT_SEED}u;\n{ISM_WGSL}",
-        clusters::header(&cluster_settings(ism), scale),
+        clusters::header_with_slope_bias(&cluster_settings(ism), scale, p.slope_bias_texels),
         p.points,
         p.pull_threshold,
         p.push_threshold,
@@ -245,7 +249,7 @@ impl Maps {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let positions: Vec<Vec3> = scene.flat.vertices.iter().map(|v| Vec3::from(v.position)).collect();
-        let cdf = twin::triangle_cdf(&positions, &scene.flat.indices);
+        let cdf = twin::triangle_cdf(&positions, &scene.flat.indices, &scene.flat.triangle_sparse_density);
         Ok(Self {
             params,
             count,

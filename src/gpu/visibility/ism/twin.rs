@@ -79,14 +79,20 @@ pub fn groups(vals: &[Val], count: u32, params: &KmeansParams) -> (Vec<Cluster>,
     (clusters, groups)
 }
 
-/// Running sums of the triangle areas (what the points are drawn from), in f32 as uploaded.
-pub fn triangle_cdf(positions: &[Vec3], indices: &[u32]) -> Vec<f32> {
+/// Running sums of each triangle's area times `density[triangle]` (its mesh's sparse points per
+/// m²: the points are spread over the meshes as the scene's sparse points are, so a small
+/// object the scene details gets its share), in f32 as uploaded. Without densities (or all
+/// zero) plain areas.
+pub fn triangle_cdf(positions: &[Vec3], indices: &[u32], density: &[f32]) -> Vec<f32> {
+    let weighted = density.iter().any(|&d| d > 0.0);
     let mut sum = 0.0f64;
     indices
         .chunks_exact(3)
-        .map(|t| {
-            let [a, b, c] = [0, 1, 2].map(|i| positions[t[i] as usize]);
-            sum += 0.5 * f64::from((b - a).cross(c - a).length());
+        .enumerate()
+        .map(|(i, t)| {
+            let [a, b, c] = [0, 1, 2].map(|k| positions[t[k] as usize]);
+            let weight = if weighted { f64::from(density.get(i).copied().unwrap_or(0.0)) } else { 1.0 };
+            sum += 0.5 * f64::from((b - a).cross(c - a).length()) * weight;
             sum as f32
         })
         .collect()
@@ -223,7 +229,15 @@ mod tests {
     const INF: f32 = f32::INFINITY;
 
     fn params(resolution: u32, points: u32, levels: u32) -> IsmParams {
-        IsmParams { resolution, points, levels, pull_threshold: 0.05, push_threshold: 0.05, depth_far: 100.0 }
+        IsmParams {
+            resolution,
+            points,
+            levels,
+            pull_threshold: 0.05,
+            push_threshold: 0.05,
+            depth_far: 100.0,
+            slope_bias_texels: crate::scene::IsmSettings::default().slope_bias,
+        }
     }
 
     #[test]
@@ -312,8 +326,9 @@ mod tests {
             Vec3::new(10.0, 1.0, 0.0),
         ];
         let indices = [0, 1, 2, 3, 4, 5];
-        let cdf = triangle_cdf(&positions, &indices);
+        let cdf = triangle_cdf(&positions, &indices, &[]);
         assert_eq!(cdf, vec![0.5, 2.0]);
+        assert_eq!(triangle_cdf(&positions, &indices, &[6.0, 1.0]), vec![3.0, 4.5], "weighted by density");
         let n = 4000;
         let on_second = (0..n).filter(|&j| ism_point(3, j, n, &cdf, &positions, &indices).x >= 10.0).count();
         assert!((on_second as f32 / n as f32 - 0.75).abs() < 0.03, "{on_second} of {n}");
@@ -322,6 +337,41 @@ mod tests {
             assert!(p.z == 0.0 && p.y >= 0.0 && (p.x < 1.0 + 1e-6 && p.x + p.y <= 1.0 + 1e-5 || p.x >= 10.0), "{p}");
         }
         assert_ne!(ism_point(0, 0, n, &cdf, &positions, &indices), ism_point(1, 0, n, &cdf, &positions, &indices));
+    }
+
+    /// A floor seen at grazing angles from a light above it holds only the floor's own points:
+    /// without the slope-scaled bias, a point splatted off its texel's centre ray lies nearer
+    /// than the receiver's tangent plane along that ray and the floor shadows itself; one texel
+    /// of bias covers that offset.
+    #[test]
+    fn slope_bias_stops_a_grazing_floor_shadowing_itself() {
+        let positions = [
+            Vec3::new(-8.0, -1.0, 0.2),
+            Vec3::new(8.0, -1.0, 0.2),
+            Vec3::new(8.0, -1.0, 12.0),
+            Vec3::new(-8.0, -1.0, 12.0),
+        ];
+        let indices = [0, 1, 2, 0, 2, 3];
+        let cdf = triangle_cdf(&positions, &indices, &[]);
+        let light = Cluster { position: Vec3::ZERO, count: 1.0, normal: Vec3::Z, radius: 0.0 };
+        let receivers: Vec<ShadowReceiver> = (0..64)
+            .map(|i| {
+                let (x, z) = ((i % 8) as f32 - 3.5, 1.0 + (i / 8) as f32 * 1.3);
+                ShadowReceiver { offset: Vec3::new(x, -1.0, z), normal: Vec3::Y }
+            })
+            .collect();
+        // Dense points and no pull-push: every texel holds the floor's own nearest point, so the
+        // only mismatch is where in its texel that point lies (under one texel).
+        let shadowed = |slope_bias_texels: f32| {
+            let p = IsmParams { slope_bias_texels, ..params(64, 200_000, 0) };
+            let map = splat(&light, 0, &p, &cdf, &positions, &indices);
+            let tile = DepthTile { resolution: 64, depths: &map, slope_bias_texels };
+            receivers.iter().filter(|r| cluster_visibility(&tile, &light, r, SoftShadows::Pcf) < 1.0).count()
+        };
+        let without = shadowed(0.0);
+        assert!(without > 16, "without the bias the floor shadows itself: {without} of 64 receivers");
+        let with = shadowed(1.0);
+        assert_eq!(with, 0, "with one texel of bias no receiver is shadowed (without: {without})");
     }
 
     /// The analytic plate: a 1 m square plate 1 m in front of a light, a receiver plane 2 m
@@ -337,7 +387,7 @@ mod tests {
             Vec3::new(-0.5, 0.5, 1.0),
         ];
         let indices = [0, 1, 2, 0, 2, 3];
-        let cdf = triangle_cdf(&positions, &indices);
+        let cdf = triangle_cdf(&positions, &indices, &[]);
         let light = Cluster { position: Vec3::ZERO, count: 1.0, normal: Vec3::Z, radius: 0.0 };
         // Receivers on z = 2 inside the shadow's core (|x|, |y| <= 0.8 m, the plate's shadow
         // reaches 1 m), facing the light.
@@ -351,7 +401,7 @@ mod tests {
             let p = params(64, points, levels);
             let mut map = splat(&light, 0, &p, &cdf, &positions, &indices);
             pull_push(&mut map, 64, &p);
-            let tile = DepthTile { resolution: 64, depths: &map };
+            let tile = DepthTile { resolution: 64, depths: &map, slope_bias_texels: p.slope_bias_texels };
             receivers.iter().map(|r| cluster_visibility(&tile, &light, r, SoftShadows::Hard)).sum::<f32>()
                 / receivers.len() as f32
         };
@@ -365,7 +415,7 @@ mod tests {
         let p = params(64, 300, 2);
         let mut map = splat(&light, 0, &p, &cdf, &positions, &indices);
         pull_push(&mut map, 64, &p);
-        let tile = DepthTile { resolution: 64, depths: &map };
+        let tile = DepthTile { resolution: 64, depths: &map, slope_bias_texels: p.slope_bias_texels };
         let beside = ShadowReceiver { offset: Vec3::new(2.0, 0.3, 2.0), normal: -Vec3::Z };
         assert_eq!(cluster_visibility(&tile, &light, &beside, SoftShadows::Hard), 1.0);
     }
