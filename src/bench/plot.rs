@@ -77,14 +77,30 @@ pub fn write_all(dir: &Path, results: &BenchResults) -> Drawn {
     Ok(())
 }
 
-/// A short label: `s<sparse per mesh> R<rsm> <occlusion> <glossy> <W>x<H>`.
+/// A short label: `s<sparse per mesh> R<rsm> <visibility> <glossy> <W>x<H>`, the visibility
+/// mode's name when it is on, with an ism configuration's overrides (`ism m1024 r64 p800 pp2`).
 fn short_label(r: &ConfigResult) -> String {
     let c = &r.config;
+    let visibility = match c.occlusion {
+        Occlusion::Off => String::new(),
+        Occlusion::Disks => " disks".to_owned(),
+        Occlusion::Clusters => " clusters".to_owned(),
+        Occlusion::Ism => {
+            let part = |prefix: &str, v: Option<u32>| v.map_or(String::new(), |n| format!(" {prefix}{n}"));
+            format!(
+                " ism{}{}{}{}",
+                part("m", c.ism_count),
+                part("r", c.ism_resolution),
+                part("p", c.ism_points),
+                part("pp", c.ism_pull_push_levels)
+            )
+        }
+    };
     format!(
         "s{} R{}{}{} {}x{}",
         c.sparse_points_per_mesh.map_or("*".to_owned(), |n| n.to_string()),
         c.rsm_resolution,
-        if c.occlusion == Occlusion::Disks { " occ" } else { "" },
+        visibility,
         if c.glossy { "" } else { " noglossy" },
         c.width,
         c.height
