@@ -520,6 +520,22 @@ pub struct ClusterSettings {
     /// k-means iterations per frame, in 1..=[`MAX_KMEANS_ITERATIONS`], each started from the
     /// previous frame's centres; default 4.
     pub iterations: u32,
+    /// Where the clusters' shadow maps come from: `"raster"` (default: every triangle
+    /// rasterised into every map, exact depths) or `"ism"` (imperfect shadow maps splatted
+    /// from points with pull-push, as `settings.ism` says for points, pull-push and bias;
+    /// `shadow_map_resolution` must then be a power of two up to 512).
+    pub shadow_maps: ShadowMapSource,
+}
+
+/// Where the `"clusters"` mode's shadow maps come from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ShadowMapSource {
+    /// Rasterised triangles: exact depth per texel.
+    #[default]
+    Raster,
+    /// Imperfect shadow maps (paper 004).
+    Ism,
 }
 
 /// Most clusters of the `"clusters"` visibility mode.
@@ -538,6 +554,7 @@ impl Default for ClusterSettings {
             soft: SoftShadows::Pcss,
             normal_weight: 0.43,
             iterations: 4,
+            shadow_maps: ShadowMapSource::Raster,
         }
     }
 }
@@ -687,6 +704,19 @@ impl ClusterSettings {
         int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
         in_closed(self.normal_weight, 0.0, 100.0, &format!("{field}.normal_weight"))?;
         int_in(self.iterations, 1, MAX_KMEANS_ITERATIONS, &format!("{field}.iterations"))?;
+        if self.shadow_maps == ShadowMapSource::Ism {
+            let r = self.shadow_map_resolution;
+            let texels = u64::from(self.count) * u64::from(r) * u64::from(r);
+            if !r.is_power_of_two() || r > 512 || texels > MAX_ISM_TEXELS {
+                return Err(SceneError::field(
+                    format!("{field}.shadow_map_resolution"),
+                    format!(
+                        "imperfect shadow maps need a power of two up to 512 and at most {MAX_ISM_TEXELS} texels in all, got {} maps of {r}",
+                        self.count
+                    ),
+                ));
+            }
+        }
         let side = self.atlas_columns() * self.shadow_map_resolution;
         if side > MAX_CLUSTER_ATLAS_SIDE {
             return Err(SceneError::field(
@@ -1389,6 +1419,13 @@ mod tests {
         assert_eq!(message, "settings.clusters.normal_weight: must be in [0, 100], got -1");
         let message = error_of(&with_settings(r#"{"clusters": {"iterations": 33}}"#));
         assert_eq!(message, "settings.clusters.iterations: must be in 1..=32, got 33");
+        let message = error_of(&with_settings(r#"{"clusters": {"shadow_maps": "ism", "shadow_map_resolution": 96}}"#));
+        assert!(
+            message.starts_with("settings.clusters.shadow_map_resolution: imperfect shadow maps need"),
+            "{message}"
+        );
+        let message = error_of(&with_settings(r#"{"clusters": {"shadow_maps": "points"}}"#));
+        assert!(message.starts_with("settings.clusters.shadow_maps: unknown variant `points`"), "{message}");
         let text = with_settings(r#"{"visibility": "ism", "ism": {"count": 16, "resolution": 32, "points": 100}}"#);
         let d = SceneDescription::from_json_str(&text).expect("parses");
         d.validate().expect("valid");

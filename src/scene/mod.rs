@@ -52,7 +52,8 @@ pub use description::{
     LightBound, LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_ISM_POINTS,
     MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription,
     MeshDescription, Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription,
-    SceneDescription, SettingsDescription, SoftShadows, SparseShading, TransformDescription, parse_json,
+    SceneDescription, SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription,
+    parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;

@@ -62,7 +62,16 @@ fn ism_matches_cpu_twins() {
         }
     }
 
-    // The maps around the GPU's own centres.
+    assert_maps_match(&renderer, &r);
+
+    // Visibility on the GPU's own maps, and the gather with it.
+    super::clusters::assert_lookup_and_gather_match(&renderer, &gpu, &vals, &r, params.resolution);
+}
+
+/// Every map, splatted and pull-pushed by the twin around the GPU's own centres, against the
+/// GPU's (2 % of texels may differ, see the module's note), and most maps hold depths.
+fn assert_maps_match(renderer: &Renderer, r: &ClusterReadback) {
+    let params = r.ism.expect("imperfect maps");
     let flat = &renderer.scene.flat;
     let positions: Vec<Vec3> = flat.vertices.iter().map(|v| Vec3::from(v.position)).collect();
     let cdf = ism_twin::triangle_cdf(&positions, &flat.indices, &flat.triangle_sparse_density);
@@ -79,9 +88,31 @@ fn ism_matches_cpu_twins() {
     }
     assert!(texels_differ * 50 <= texels, "{texels_differ} of {texels} texels differ");
     assert!(drawn * 4 > texels, "the maps hold depths: {drawn} of {texels} texels");
+}
 
-    // Visibility on the GPU's own maps, and the gather with it.
-    super::clusters::assert_lookup_and_gather_match(&renderer, &gpu, &vals, &r, params.resolution);
+/// The clusters mode with `shadow_maps: "ism"`: k-means groups, imperfect maps, the same
+/// lookup; maps, lookup and gather against the twins.
+#[test]
+fn clusters_with_imperfect_maps_match_cpu_twins() {
+    let dir = super::fixture("scenes");
+    let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let clusters =
+        r#""clusters": {"count": 12, "shadow_map_resolution": 32, "shadow_maps": "ism"}, "ism": {"points": 500}"#;
+    let json = base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"clusters\", {clusters}"));
+    assert_ne!(json, base);
+    let scene = Scene::from_json_str(&json, &dir).unwrap();
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    let at = stages.iter().position(|s| *s == "clustering").expect("a clustering stage");
+    let want = ["clustering", "ism_splat", "ism_pull_push", "ism_visibility", "gather"];
+    assert_eq!(&stages[at..at + 5], &want[..], "{stages:?}");
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let r = readback(&renderer, &gpu, vals.len());
+    assert_eq!((r.clusters.len(), r.ism.map(|p| (p.resolution, p.points))), (12, Some((32, 500))));
+    assert_maps_match(&renderer, &r);
+    super::clusters::assert_lookup_and_gather_match(&renderer, &gpu, &vals, &r, 32);
 }
 
 /// Without pull-push the stages are the splat alone; a scene without lit VALs (a dark spot

@@ -116,7 +116,9 @@ pub fn for_settings(
         Occlusion::Disks => {
             Some(Mode::Scale(Box::new(disks::Disks::new(gpu, scene, glossy, settings.rule == OcclusionRule::Product)?)))
         }
-        Occlusion::Clusters => Some(Mode::Groups(Box::new(clusters::Clusters::new(gpu, scene, &settings.clusters)?))),
+        Occlusion::Clusters => {
+            Some(Mode::Groups(Box::new(clusters::Clusters::new(gpu, scene, &settings.clusters, &settings.ism)?)))
+        }
         Occlusion::Ism => Some(Mode::Groups(Box::new(ism::mode(gpu, scene, &settings.ism)?))),
     })
 }

@@ -16,7 +16,7 @@ use crate::gpu::shader::WORKGROUP_SIZE;
 use crate::gpu::technique::Frame;
 use crate::gpu::timing::Recorder;
 use crate::gpu::{Gpu, GpuError};
-use crate::scene::{ClusterSettings, IsmSettings, SoftShadows};
+use crate::scene::{ClusterSettings, IsmSettings, ShadowMapSource, SoftShadows};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -281,25 +281,29 @@ pub struct Clusters {
 }
 
 impl Clusters {
-    /// The `"clusters"` mode: k-means, rasterised maps.
-    pub fn new(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings) -> Result<Self, GpuError> {
-        Self::build(gpu, scene, settings, None)
+    /// The `"clusters"` mode: k-means, rasterised maps or (`shadow_maps: "ism"`) imperfect
+    /// ones as `ism` says for points, pull-push and bias.
+    pub fn new(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings, ism: &IsmSettings) -> Result<Self, GpuError> {
+        let maps = (settings.shadow_maps == ShadowMapSource::Ism).then(|| ism::for_clusters(settings, ism));
+        Self::build(gpu, scene, settings, false, maps.as_ref())
     }
 
     /// The `"ism"` mode: VALs drawn by flux, one assignment and update, imperfect shadow maps.
     pub fn imperfect(gpu: &Gpu, scene: &GpuScene, ism: &IsmSettings) -> Result<Self, GpuError> {
-        Self::build(gpu, scene, &ism::cluster_settings(ism), Some(ism))
+        Self::build(gpu, scene, &ism::cluster_settings(ism), true, Some(ism))
     }
 
+    /// Groups seeded by flux (else by k-means), with imperfect maps when `ism` is given.
     fn build(
         gpu: &Gpu,
         scene: &GpuScene,
         settings: &ClusterSettings,
+        flux: bool,
         ism: Option<&IsmSettings>,
     ) -> Result<Self, GpuError> {
         let scale = SceneScale::of(scene);
         let head = match ism {
-            Some(ism) => ism::header(ism, scale),
+            Some(ism) => ism::header_with(settings, ism, scale),
             None => header(settings, scale),
         };
         let textured = scene.textured();
@@ -311,19 +315,17 @@ impl Clusters {
         let kernel = |name: &str| {
             Kernel::build(gpu, scene, &CLUSTERING, &module, CLUSTERING.entry(name), &[], CLUSTERING.workgroup)
         };
-        let (seeding, maps, visibility_desc, visibility_body) = match ism {
+        let seeding = match flux {
+            true => Seeding::Flux(ism::FluxSampling::new(gpu, scene, &head)?),
+            false => Seeding::Kmeans { seed: kernel("kmeans_seed")? },
+        };
+        let (maps, visibility_desc, visibility_body) = match ism {
             Some(ism) => (
-                Seeding::Flux(ism::FluxSampling::new(gpu, scene, &head)?),
                 Maps::Ism(ism::Maps::new(gpu, scene, &head, settings.count, ism::IsmParams::of(ism, scale))?),
                 &ism::VISIBILITY,
                 ism::visibility_body(&head),
             ),
-            None => (
-                Seeding::Kmeans { seed: kernel("kmeans_seed")? },
-                Maps::Raster(ShadowMaps::new(gpu, scene, settings, scale)?),
-                &VISIBILITY,
-                visibility_body(&head),
-            ),
+            None => (Maps::Raster(ShadowMaps::new(gpu, scene, settings, scale)?), &VISIBILITY, visibility_body(&head)),
         };
         let vis_module =
             module_from_source(gpu, visibility_desc.label, visibility_desc.source(&visibility_body, textured))?;

@@ -50,6 +50,7 @@ pub fn cluster_settings(ism: &IsmSettings) -> ClusterSettings {
         soft: ism.soft,
         normal_weight: ClusterSettings::default().normal_weight,
         iterations: 1,
+        shadow_maps: crate::scene::ShadowMapSource::Ism,
     }
 }
 
@@ -85,6 +86,17 @@ impl IsmParams {
 /// The constants of every shader of the mode: the clusters' header, then the mode's own and
 /// `ism.wgsl`.
 pub fn header(ism: &IsmSettings, scale: SceneScale) -> String {
+    header_with(&cluster_settings(ism), ism, scale)
+}
+
+/// The `ism` settings of imperfect shadow maps for `clusters` (`clusters.shadow_maps: "ism"`):
+/// one map per cluster at its resolution, with its filter.
+pub fn for_clusters(clusters: &ClusterSettings, ism: &IsmSettings) -> IsmSettings {
+    IsmSettings { count: clusters.count, resolution: clusters.shadow_map_resolution, soft: clusters.soft, ..*ism }
+}
+
+/// [`header`] for the groups of `clusters`, with imperfect maps as `ism` says.
+pub fn header_with(clusters: &ClusterSettings, ism: &IsmSettings, scale: SceneScale) -> String {
     let p = IsmParams::of(ism, scale);
     format!(
         "{}\nconst ISM_POINTS: u32 = {}u;\n\
@@ -92,7 +104,7 @@ pub fn header(ism: &IsmSettings, scale: SceneScale) -> String {
          const PUSH_THRESHOLD: f32 = {:e};\n\
          const SAMPLE_BLOCK: u32 = {SAMPLE_BLOCK}u;\n\
          const POINT_SEED: u32 = {POINT_SEED}u;\n{ISM_WGSL}",
-        clusters::header_with_slope_bias(&cluster_settings(ism), scale, p.slope_bias_texels),
+        clusters::header_with_slope_bias(clusters, scale, p.slope_bias_texels),
         p.points,
         p.pull_threshold,
         p.push_threshold,
