@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what the browser viewer's end-to-end test (tests/e2e/) needs: Debian's chromium,
 # Node.js with npm, and playwright-core at the version of tests/e2e/package-lock.json (no
-# browser download: the test drives /usr/bin/chromium). Idempotent; source it or run it.
+# browser download: the test drives /usr/bin/chromium), with protobufjs, from which
+# scripts/viewer-protobuf.mjs copies the viewer's protobuf codec. Idempotent; source it or run it.
 set -euo pipefail
 
 e2e_packages=""

@@ -6,6 +6,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
 source scripts/e2e-setup.sh
+# The viewer's vendored protobuf.js and protobuf descriptor are what the script writes.
+node scripts/viewer-protobuf.mjs --check
 cargo fmt --check
 cargo clippy --all-targets --quiet -- -D warnings
 cargo test

@@ -911,9 +911,13 @@ mod tests {
         assert_eq!(decode(&bytes, &limits()).expect_err("server body").code, ErrorCode::UnexpectedMessage);
     }
 
-    /// The bytes the viewer's hand-written encoder (src/service/viewer/proto.js) writes for
+    /// The bytes the viewer's encoder (protobuf.js in src/service/viewer/proto.js) writes for
     /// one Control; tests/e2e/viewer.test.mjs checks that the page writes exactly these.
     const VIEWER_CONTROL: [u8; 23] = [8, 1, 26, 19, 8, 172, 2, 42, 4, 16, 3, 32, 1, 50, 2, 8, 12, 58, 4, 8, 2, 16, 0];
+    /// Another: a request id of 0 and `Quality.component` left out (no presence, default
+    /// value), floats, and `glossy` alone; also checked by tests/e2e/viewer.test.mjs.
+    const VIEWER_CONTROL_FLOATS: [u8; 28] =
+        [8, 1, 26, 24, 42, 9, 16, 1, 29, 0, 0, 0, 63, 32, 2, 50, 7, 8, 4, 37, 0, 0, 32, 64, 58, 2, 16, 1];
 
     #[test]
     fn the_viewers_control_bytes_are_prosts_and_decode() {
@@ -925,6 +929,14 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(envelope(Body::Control(control.clone())), VIEWER_CONTROL);
+        let floats = proto::Control {
+            request_id: 0,
+            quality: Some(proto::Quality { component: 1, exposure: Some(0.5), format: 2, ..Default::default() }),
+            rgbd: Some(proto::RgbdSettings { grid_step: Some(4), radiance_scale: Some(2.5), ..Default::default() }),
+            render: Some(proto::RenderSettings { occlusion: None, glossy: Some(true) }),
+            ..Default::default()
+        };
+        assert_eq!(envelope(Body::Control(floats)), VIEWER_CONTROL_FLOATS);
         let ClientMessage::Control(c) = decode(&VIEWER_CONTROL, &limits()).expect("valid") else { panic!("control") };
         assert_eq!(c.request_id, 300);
         assert_eq!(c.quality.expect("quality").component, Component::Indirect);

@@ -2,8 +2,8 @@
 // chromium (headless, driven by playwright-core), the page playing the bundled recording. It
 // checks that a page without the token asks for it and connects once it is entered, that the
 // page given the token in its URL fragment opens its streams with tickets; and
-// that frames arrive with their stage timings, that the page's hand-written protobuf codec
-// and the server's (prost) agree both ways, that the indirect-only view and the sliders
+// that frames arrive with their stage timings, that the page's protobuf codec (protobuf.js,
+// served by relume) and the server's (prost) agree both ways, that the indirect-only view and the sliders
 // change the next frames and the settings the page reports, that dropped frames, stream
 // errors and a server that goes away are shown; and it takes the README's screenshot.
 //
@@ -138,16 +138,23 @@ async function main() {
       const frame = decodeEnvelope(await response.arrayBuffer());
       const control = Array.from(encodeControl({ requestId: 300, quality: { component: 3, format: 1 },
         rgbd: { gridStep: 12 }, render: { occlusion: 2, glossy: false } }));
+      const floats = Array.from(encodeControl({ requestId: 0, quality: { component: 1, exposure: 0.5, format: 2 },
+        rgbd: { gridStep: 4, radianceScale: 2.5 }, render: { glossy: true } }));
+      const library = window.protobuf?.build;
       return { version: frame.version, kind: frame.kind, body: frame.body, width: response.headers.get("x-relume-width"),
-        control };
+        control, floats, library };
     }, TOKEN);
     assert(decoded.version === 1 && decoded.kind === "rgbdFrame", `an RgbdFrame envelope: ${decoded.kind}`);
     assert(decoded.body.frameId === 5 && String(decoded.body.intrinsics.width) === decoded.width
       && decoded.body.intrinsics.height === 60 && Math.abs(decoded.body.intrinsics.fx - 525 / 8) < 1e-3,
       `the frame's id and intrinsics: ${JSON.stringify(decoded.body)}`);
-    // Bytes protoc / prost write for the same Control (field order, fixed32 float, bool).
+    assert(decoded.library === "light", `protobuf.js's light build, served by relume: ${decoded.library}`);
+    // Bytes protoc / prost write for the same Controls (field order, fixed32 float, bool, default
+    // values left out unless the field has presence): src/service/wire.rs checks them with prost.
     const expected = [8, 1, 26, 19, 8, 172, 2, 42, 4, 16, 3, 32, 1, 50, 2, 8, 12, 58, 4, 8, 2, 16, 0];
     assert(decoded.control.join() === expected.join(), `Control bytes ${decoded.control}`);
+    const expectedFloats = [8, 1, 26, 24, 42, 9, 16, 1, 29, 0, 0, 0, 63, 32, 2, 50, 7, 8, 4, 37, 0, 0, 32, 64, 58, 2, 16, 1];
+    assert(decoded.floats.join() === expectedFloats.join(), `Control bytes ${decoded.floats}`);
 
     // One click to the indirect-only view: acknowledged, and the next frames are not composited.
     await page.getByRole("button", { name: "Indirect only" }).click();

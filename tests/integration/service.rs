@@ -693,6 +693,9 @@ async fn the_viewer_and_the_recordings_are_served() {
         ("/", "text/html; charset=utf-8"),
         ("/viewer.js", "text/javascript; charset=utf-8"),
         ("/proto.js", "text/javascript; charset=utf-8"),
+        ("/relume.proto.json", "application/json"),
+        ("/vendor/protobufjs/protobuf.min.js", "text/javascript; charset=utf-8"),
+        ("/vendor/protobufjs/LICENSE", "text/plain; charset=utf-8"),
         ("/viewer.css", "text/css; charset=utf-8"),
         ("/default-scene.json", "application/json"),
     ] {
