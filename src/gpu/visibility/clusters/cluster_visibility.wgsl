@@ -30,10 +30,17 @@ fn blocker_at(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>, texel: v
     }
     let v = paraboloid_direction(texel_disc(texel), c.normal);
     let zr = min(receiver_plane_depth(offset, normal, v), length(offset) * 4.0);
-    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(v, c.normal, normal)) {
+    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(v, c.normal, normal) * depth_spread(z)) {
         return z;
     }
     return -1.0;
+}
+
+// Texels a stored depth stands for: 2^level for an imperfect map's depth made at that pull-push
+// level (its lowest 3 bits, `../ism/ism.wgsl`); only multiplies the slope bias, which is 0
+// for the rasterised maps.
+fn depth_spread(z: f32) -> f32 {
+    return f32(1u << (bitcast<u32>(z) & 7u));
 }
 
 // Slope-scaled bias for maps whose depths were not taken along each texel's centre ray (the

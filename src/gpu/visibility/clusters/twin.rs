@@ -231,7 +231,14 @@ fn blocker_at(tile: &DepthTile<'_>, cluster: &Cluster, r: &ShadowReceiver, texel
     }
     let v = paraboloid_direction(texel_disc(texel, tile.resolution), cluster.normal);
     let zr = receiver_plane_depth(r, v).min(r.offset.length() * 4.0);
-    (z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(tile, v, cluster.normal, r.normal))).then_some(z)
+    (z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(tile, v, cluster.normal, r.normal) * depth_spread(z)))
+        .then_some(z)
+}
+
+/// WGSL `depth_spread`: texels a stored depth stands for, `2^level` from its lowest 3 bits (an
+/// imperfect map's pull-push level; it only scales the slope bias, 0 for rasterised maps).
+pub fn depth_spread(z: f32) -> f32 {
+    (1u32 << (z.to_bits() & 7)) as f32
 }
 
 /// Most tangent of the incidence angle the slope-scaled bias uses (about 84°).

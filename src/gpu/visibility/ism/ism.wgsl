@@ -5,8 +5,16 @@
 // the nearest point wins by `atomicMax` (distances are positive floats: their bits order like
 // them). Rust twin: `twin.rs`.
 
+// The lowest 3 bits of a stored distance (3 ulps of it) say at which level it was made: 0 for
+// a splatted point, l + 1 for a pull of level l's texels (pushed down unchanged). The lookup
+// widens its slope-scaled bias by 2^level (`cluster_visibility.wgsl`, `depth_spread`): a
+// pulled depth stands for a block of 2^level texels.
+fn encode_depth_at(distance: f32, level: u32) -> u32 {
+    return 0xffffffffu - ((bitcast<u32>(distance) & ~7u) | level);
+}
+
 fn encode_depth(distance: f32) -> u32 {
-    return 0xffffffffu - bitcast<u32>(distance);
+    return encode_depth_at(distance, 0u);
 }
 
 // Distance (m) of an encoded texel; NOTHING where it is empty.

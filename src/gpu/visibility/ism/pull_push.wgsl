@@ -45,7 +45,7 @@ fn pull(@builtin(global_invocation_id) id: vec3<u32>) {
                 n += 1.0;
             }
         }
-        out = encode_depth(sum / n);
+        out = encode_depth_at(sum / n, LEVEL + 1u);
     }
     coarse[map_texel_index(k, coarse_res, x, y)] = out;
 }

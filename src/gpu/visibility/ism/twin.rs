@@ -10,9 +10,14 @@ use super::{IsmParams, POINT_SEED, SAMPLE_BLOCK};
 use crate::twin::{Val, luminance};
 use glam::Vec3;
 
-/// WGSL `encode_depth`.
+/// `distance` with its lowest 3 bits set to `level` (WGSL `encode_depth_at`, decoded).
+pub fn at_level(distance: f32, level: u32) -> f32 {
+    f32::from_bits((distance.to_bits() & !7) | level)
+}
+
+/// WGSL `encode_depth`: a splatted distance (level 0).
 pub fn encode_depth(distance: f32) -> u32 {
-    u32::MAX - distance.to_bits()
+    u32::MAX - at_level(distance, 0).to_bits()
 }
 
 /// WGSL `decode_depth`, empty as `f32::INFINITY`.
@@ -157,7 +162,7 @@ pub fn splat(
             continue;
         }
         let texel = &mut map[(t.y as u32 * n + t.x as u32) as usize];
-        *texel = texel.min(distance);
+        *texel = texel.min(at_level(distance, 0));
     }
     map
 }
@@ -184,7 +189,7 @@ pub fn pull(fine: &[f32], fine_side: u32, level: u32, threshold: f32) -> Vec<f32
                     n += 1.0;
                 }
             }
-            sum / n
+            at_level(sum / n, level + 1)
         })
         .collect()
 }
@@ -243,13 +248,15 @@ mod tests {
     #[test]
     fn depth_encoding_orders_like_distance_and_zero_is_empty() {
         assert_eq!(decode_depth(0), INF);
-        let ds = [1e-6f32, 0.5, 1.0, 1.0000001, 3.0, 1e6];
+        let ds = [1e-6f32, 0.5, 1.0, 1.000_001, 3.0, 1e6];
         for w in ds.windows(2) {
             assert!(encode_depth(w[0]) > encode_depth(w[1]), "nearer must encode larger: {w:?}");
         }
         for d in ds {
-            assert_eq!(decode_depth(encode_depth(d)), d);
+            assert_eq!(decode_depth(encode_depth(d)), at_level(d, 0));
+            assert!((at_level(d, 0) - d).abs() <= 8.0 * f32::EPSILON * d, "3 ulps at most");
         }
+        assert_eq!(at_level(1.0, 3).to_bits() & 7, 3);
     }
 
     /// Hand-made 4x4 map: a hole inside a flat surface at 1 m is filled with 1 m, an outlier at
@@ -269,19 +276,20 @@ mod tests {
         let coarse = pull(&map, 4, 0, p.pull_threshold);
         // Top-left: 1,1,1 (the hole skipped); top-right: 1.02 and two 1.0 within 0.05 of 1.0,
         // 5.0 rejected; bottom-left: empty; bottom-right: 2.
-        assert_eq!(coarse[0], 1.0);
-        assert!((coarse[1] - (1.02 + 1.0 + 1.0) / 3.0).abs() < 1e-6, "{coarse:?}");
+        let close = |a: f32, b: f32| (a - b).abs() < 1e-6;
+        assert!(close(coarse[0], 1.0) && coarse[0].to_bits() & 7 == 1, "made at level 1: {coarse:?}");
+        assert!(close(coarse[1], (1.02 + 1.0 + 1.0) / 3.0), "{coarse:?}");
         assert_eq!(coarse[2], INF);
-        assert_eq!(coarse[3], 2.0);
+        assert!(close(coarse[3], 2.0));
         pull_push(&mut map, 4, &p);
-        assert_eq!(map[1], 1.0, "the hole takes its parent's depth");
+        assert!(close(map[1], 1.0) && map[1].to_bits() & 7 == 1, "the hole takes its parent's depth");
         assert_eq!(map[2], 1.02, "a step under the threshold stays");
         assert!((map[7] - coarse[1]).abs() < 1e-6, "the outlier takes its parent's depth");
         assert_eq!(&map[8..10], &[INF, INF], "nothing to fill from at one level");
         // Two levels: the empty quadrant takes the mean of the whole map's near cluster.
         let mut two = vec![1.0, 1.0, INF, INF, 1.0, 1.0, INF, INF, INF, INF, INF, INF, INF, INF, INF, INF];
         pull_push(&mut two, 4, &params(4, 0, 2));
-        assert!(two.iter().all(|&d| d == 1.0), "{two:?}");
+        assert!(two.iter().all(|&d| (d - 1.0).abs() < 1e-6), "{two:?}");
     }
 
     /// Pull keeps the near surface: a texel block half at 1 m, half at 3 m averages the 1 m
