@@ -33,19 +33,29 @@ fn readback(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals: usize) -> Cluster
     c.read(gpu, vals, renderer.scene.flat.sparse_points.len()).unwrap()
 }
 
+/// One 16x16 sparse frame of `scene` with imperfect maps: its stages are `grouping` (how the
+/// groups are made), the splat, pull-push and lookup, then the gather; the VALs and the readback.
+fn render_group_mode(
+    scene: &Scene,
+    grouping: &str,
+) -> (relume::gpu::Gpu, Renderer, Vec<relume::twin::Val>, ClusterReadback) {
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    let at = stages.iter().position(|s| *s == grouping).expect("the grouping stage");
+    let want = [grouping, "ism_splat", "ism_pull_push", "ism_visibility", "gather"];
+    assert_eq!(&stages[at..at + 5], &want[..], "{stages:?}");
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let r = readback(&renderer, &gpu, vals.len());
+    (gpu, renderer, vals, r)
+}
+
 #[test]
 fn ism_matches_cpu_twins() {
     let count = 24;
     let scene = ism_scene(&format!(r#"{{"count": {count}, "resolution": 32, "points": 400, "soft": "pcss"}}"#));
-    let gpu = gpu();
-    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
-    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
-    let at = stages.iter().position(|s| *s == "ism_sampling").expect("an ism_sampling stage");
-    let want = ["ism_sampling", "ism_splat", "ism_pull_push", "ism_visibility", "gather"];
-    assert_eq!(&stages[at..at + 5], &want[..], "{stages:?}");
-    let vals = renderer.read_vals(&gpu).unwrap();
-    let r = readback(&renderer, &gpu, vals.len());
+    let (gpu, renderer, vals, r) = render_group_mode(&scene, "ism_sampling");
     let params = r.ism.expect("the ism mode's lengths");
 
     // The groups: flux seeds, one assignment and update.
@@ -101,15 +111,7 @@ fn clusters_with_imperfect_maps_match_cpu_twins() {
     let json = base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"clusters\", {clusters}"));
     assert_ne!(json, base);
     let scene = Scene::from_json_str(&json, &dir).unwrap();
-    let gpu = gpu();
-    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
-    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
-    let at = stages.iter().position(|s| *s == "clustering").expect("a clustering stage");
-    let want = ["clustering", "ism_splat", "ism_pull_push", "ism_visibility", "gather"];
-    assert_eq!(&stages[at..at + 5], &want[..], "{stages:?}");
-    let vals = renderer.read_vals(&gpu).unwrap();
-    let r = readback(&renderer, &gpu, vals.len());
+    let (gpu, renderer, vals, r) = render_group_mode(&scene, "clustering");
     assert_eq!((r.clusters.len(), r.ism.map(|p| (p.resolution, p.points))), (12, Some((32, 500))));
     assert_maps_match(&renderer, &r);
     super::clusters::assert_lookup_and_gather_match(&renderer, &gpu, &vals, &r, 32);
