@@ -664,11 +664,7 @@ impl Renderer {
 
     /// The stages of the sparse method's visibility mode, as last built (none when off).
     pub fn visibility_stages(&self) -> Vec<&'static str> {
-        match self.sparse().and_then(|s| s.visibility.as_ref()) {
-            None => Vec::new(),
-            Some(crate::gpu::visibility::Mode::Scale(m)) => vec![m.stage()],
-            Some(crate::gpu::visibility::Mode::Groups(g)) => g.stages(),
-        }
+        self.sparse().and_then(|s| s.visibility.as_ref()).map_or_else(Vec::new, |m| m.stages())
     }
 
     /// The sparse method's group visibility mode, once a sparse frame with one was rendered.

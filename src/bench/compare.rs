@@ -406,6 +406,7 @@ fn exact_comparison(
 ) -> Result<ExactComparison, BenchError> {
     let exact = exact_reference(gpu, renderer, w, h, options)?;
     let exposure = exact.indirect().auto_exposure();
+    let exact_sum = exact.indirect().luminance_sum_and_peak().0;
     if let Some(dir) = images {
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
     }
@@ -429,7 +430,7 @@ fn exact_comparison(
             rel_rmse: error.rel_rmse,
             rel_rmse_corrected: exact.corrected_rel_rmse(&sparse.indirect),
             flip_mean: error.flip_mean,
-            energy_ratio: sparse.indirect.luminance_sum_and_peak().0 / exact.indirect().luminance_sum_and_peak().0,
+            energy_ratio: sparse.indirect.luminance_sum_and_peak().0 / exact_sum,
             // `off` has no stage of its own: 0, not the empty sum's -0.
             visibility_ms: if visibility_stages.is_empty() { 0.0 } else { sparse.timings.total_of(&visibility_stages) },
             gather_ms: sparse.timings.total_of(&[stage::GATHER]),

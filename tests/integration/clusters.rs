@@ -17,18 +17,25 @@ use relume::gpu::visibility::clusters::{ClusterReadback, Clusters, twin};
 use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
 
-fn clusters_scene(settings: &str) -> Scene {
+/// `cornell_bunny_small.json` with `"visibility": mode` and `settings` (more entries of
+/// `settings`, e.g. `"clusters": {...}`) in place of its `"occlusion": "off"`.
+pub(super) fn small_scene_with(mode: &str, settings: &str) -> Scene {
     let dir = super::fixture("scenes");
     let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
-    let json =
-        base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"clusters\", \"clusters\": {settings}"));
+    let json = base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"{mode}\", {settings}"));
     assert_ne!(json, base);
     Scene::from_json_str(&json, &dir).unwrap()
 }
 
-fn readback(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals: usize) -> ClusterReadback {
-    let g = renderer.group_visibility().expect("the clusters mode ran");
-    let c = g.as_any().downcast_ref::<Clusters>().expect("clusters");
+fn clusters_scene(settings: &str) -> Scene {
+    small_scene_with("clusters", &format!("\"clusters\": {settings}"))
+}
+
+/// What the last frame's group visibility mode (clusters or ism: both are [`Clusters`])
+/// computed.
+pub(super) fn readback(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals: usize) -> ClusterReadback {
+    let g = renderer.group_visibility().expect("a group visibility mode ran");
+    let c = g.as_any().downcast_ref::<Clusters>().expect("clusters and ism are built on Clusters");
     c.read(gpu, vals, renderer.scene.flat.sparse_points.len()).unwrap()
 }
 

@@ -12,25 +12,16 @@
 //! lookup and the gather use the clusters' tolerances (1 % of entries, mean under 1e-3; 1e-3
 //! relative).
 
+use super::clusters::{readback, small_scene_with};
 use super::gpu;
 use glam::Vec3;
-use relume::gpu::visibility::clusters::{ClusterReadback, Clusters};
+use relume::gpu::visibility::clusters::ClusterReadback;
 use relume::gpu::visibility::ism::twin as ism_twin;
 use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
 
 fn ism_scene(settings: &str) -> Scene {
-    let dir = super::fixture("scenes");
-    let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
-    let json = base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"ism\", \"ism\": {settings}"));
-    assert_ne!(json, base);
-    Scene::from_json_str(&json, &dir).unwrap()
-}
-
-fn readback(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals: usize) -> ClusterReadback {
-    let g = renderer.group_visibility().expect("the ism mode ran");
-    let c = g.as_any().downcast_ref::<Clusters>().expect("the ism mode is built on the clusters' machinery");
-    c.read(gpu, vals, renderer.scene.flat.sparse_points.len()).unwrap()
+    small_scene_with("ism", &format!("\"ism\": {settings}"))
 }
 
 /// One 16x16 sparse frame of `scene` with imperfect maps: its stages are `grouping` (how the
@@ -104,13 +95,10 @@ fn assert_maps_match(renderer: &Renderer, r: &ClusterReadback) {
 /// lookup; maps, lookup and gather against the twins.
 #[test]
 fn clusters_with_imperfect_maps_match_cpu_twins() {
-    let dir = super::fixture("scenes");
-    let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
-    let clusters =
-        r#""clusters": {"count": 12, "shadow_map_resolution": 32, "shadow_maps": "ism"}, "ism": {"points": 500}"#;
-    let json = base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"clusters\", {clusters}"));
-    assert_ne!(json, base);
-    let scene = Scene::from_json_str(&json, &dir).unwrap();
+    let scene = small_scene_with(
+        "clusters",
+        r#""clusters": {"count": 12, "shadow_map_resolution": 32, "shadow_maps": "ism"}, "ism": {"points": 500}"#,
+    );
     let (gpu, renderer, vals, r) = render_group_mode(&scene, "clustering");
     assert_eq!((r.clusters.len(), r.ism.map(|p| (p.resolution, p.points))), (12, Some((32, 500))));
     assert_maps_match(&renderer, &r);

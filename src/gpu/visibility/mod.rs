@@ -87,6 +87,16 @@ pub enum Mode {
     Groups(Box<dyn GroupVisibility>),
 }
 
+impl Mode {
+    /// Its own stages, in order (the sparse technique puts them before or after the gather).
+    pub fn stages(&self) -> Vec<&'static str> {
+        match self {
+            Mode::Scale(m) => vec![m.stage()],
+            Mode::Groups(g) => g.stages(),
+        }
+    }
+}
+
 /// Everything that picks and parametrises the visibility mode: a mode's settings live here,
 /// so a new mode adds its field and its line in [`for_settings`], nothing else on the way.
 #[derive(Clone, Copy, Debug, PartialEq)]

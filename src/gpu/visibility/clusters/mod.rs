@@ -356,6 +356,22 @@ impl Clusters {
         })
     }
 
+    /// The stage that seeds and updates the groups.
+    fn grouping_stage(&self) -> &'static str {
+        match self.seeding {
+            Seeding::Kmeans { .. } => CLUSTERING_STAGE,
+            Seeding::Flux(_) => ism::SAMPLING_STAGE,
+        }
+    }
+
+    /// The lookup's stage: its pass's label.
+    fn visibility_stage(&self) -> &'static str {
+        match self.maps {
+            Maps::Raster(_) => VISIBILITY.label,
+            Maps::Ism(_) => ism::VISIBILITY.label,
+        }
+    }
+
     fn blocks(&self) -> u32 {
         self.capacity.div_ceil(PARTIAL_BLOCK)
     }
@@ -484,18 +500,12 @@ pub struct ClusterReadback {
 
 impl GroupVisibility for Clusters {
     fn stages(&self) -> Vec<&'static str> {
-        let mut stages = vec![match self.seeding {
-            Seeding::Kmeans { .. } => CLUSTERING_STAGE,
-            Seeding::Flux(_) => ism::SAMPLING_STAGE,
-        }];
+        let mut stages = vec![self.grouping_stage()];
         match &self.maps {
             Maps::Raster(_) => stages.push(SHADOW_MAPS_STAGE),
             Maps::Ism(maps) => stages.extend(maps.stages()),
         }
-        stages.push(match self.maps {
-            Maps::Raster(_) => VISIBILITY.label,
-            Maps::Ism(_) => ism::VISIBILITY.label,
-        });
+        stages.push(self.visibility_stage());
         stages
     }
 
@@ -540,19 +550,19 @@ impl GroupVisibility for Clusters {
             (&self.reduce, bind(&self.reduce, 5, "group_of_val"), [m, 1, 1]),
         ];
         // Seed and update: k-means `iterations` times, or the flux draw and one update.
-        let (stage, steps, rounds) = match &self.seeding {
+        let (steps, rounds) = match &self.seeding {
             Seeding::Kmeans { seed } => {
                 let mut steps = vec![(seed, bind(seed, 3, ""), [m, 1, 1])];
                 steps.extend(update);
-                (CLUSTERING_STAGE, steps, self.settings.iterations as usize)
+                (steps, self.settings.iterations as usize)
             }
             Seeding::Flux(flux) => {
                 let mut steps: Vec<_> = flux.steps(gpu, frame.vals, &self.clusters, m).into();
                 steps.extend(update);
-                (ism::SAMPLING_STAGE, steps, 1)
+                (steps, 1)
             }
         };
-        rec.stage(stage, |e, s| {
+        rec.stage(self.grouping_stage(), |e, s| {
             let parts = rounds * steps.len();
             for i in 0..rounds {
                 for (j, (kernel, group, invocations)) in steps.iter().enumerate() {
@@ -581,8 +591,7 @@ impl GroupVisibility for Clusters {
             ],
         );
         let points = scene.flat.sparse_count();
-        let label = self.stages().last().copied().unwrap_or(VISIBILITY.label);
-        rec.stage(label, |e, s| {
+        rec.stage(self.visibility_stage(), |e, s| {
             self.visibility.dispatch(e, &group, scene, [points, m, 1], s.as_ref().map(|s| s.compute()))
         })
     }
