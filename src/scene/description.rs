@@ -1084,7 +1084,7 @@ fn unit_interval3(values: [f32; 3], field: &str) -> Result<(), SceneError> {
     Ok(())
 }
 
-fn int_in(value: u32, lo: u32, hi: u32, field: &str) -> Result<(), SceneError> {
+pub(super) fn int_in(value: u32, lo: u32, hi: u32, field: &str) -> Result<(), SceneError> {
     if (lo..=hi).contains(&value) {
         Ok(())
     } else {

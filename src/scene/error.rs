@@ -68,6 +68,19 @@ impl SceneError {
         SceneError::Field { field: field.into(), message: message.into() }
     }
 
+    /// The same error about `rename(field)`: for a description made from another form of
+    /// input, whose fields sit elsewhere ([`super::GltfSceneDescription::field_in_form`]).
+    pub fn with_field(mut self, rename: impl FnOnce(&str) -> String) -> SceneError {
+        match &mut self {
+            SceneError::Read { .. } => {}
+            SceneError::Json { field, .. }
+            | SceneError::Field { field, .. }
+            | SceneError::Obj { field, .. }
+            | SceneError::TooManyTriangles { field, .. } => *field = rename(field),
+        }
+        self
+    }
+
     /// The JSON field path the error is about.
     pub fn field_path(&self) -> Option<&str> {
         match self {

@@ -32,8 +32,8 @@ use gltf::mesh::{Mode, Semantic};
 use serde::{Deserialize, Serialize};
 
 use super::description::{
-    CameraDescription, LightDescription, MaterialDescription, MeshDescription, SceneDescription, SettingsDescription,
-    key_path, parse_json,
+    CameraDescription, LightDescription, MAX_IMAGE_SIDE, MaterialDescription, MeshDescription, SceneDescription,
+    SettingsDescription, int_in, key_path, parse_json,
 };
 use super::obj::{LoadedMesh, Merged, json_material, list};
 use super::texture::Textures;
@@ -55,7 +55,7 @@ pub const LUMENS_PER_WATT: f32 = 683.0;
 /// {"gltf": "cornell_box.glb", "sparse_points": 512, "width": 64, "height": 64,
 ///  "skip_groups": ["light"], "settings": {"rsm_resolution": 32}}
 /// ```
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct GltfSceneDescription {
     /// The glTF 2.0 file (`.gltf` or `.glb`), relative to the scene file's directory.
@@ -88,6 +88,22 @@ impl GltfSceneDescription {
             .is_ok_and(|object| object.contains_key("gltf"))
     }
 
+    /// Where a field of the [`SceneDescription`] this stands for
+    /// ([`GltfSceneDescription::to_scene_description`]) sits in this form, so that an error
+    /// found in that description names what the user wrote: the one mesh's fields are
+    /// top-level here (`meshes[0].skip_groups[1]` is `skip_groups[1]`, the mesh itself and its
+    /// file `gltf`, all meshes' sparse points `sparse_points`), and the camera's size is
+    /// `width` and `height`. Other fields (`settings.*`) are where they were.
+    pub fn field_in_form(field: &str) -> String {
+        match field {
+            "meshes[0]" | "meshes[0].gltf" => "gltf".to_owned(),
+            "meshes" => "sparse_points".to_owned(),
+            "camera" | "camera.width" => "width".to_owned(),
+            "camera.height" => "height".to_owned(),
+            _ => field.strip_prefix("meshes[0].").unwrap_or(field).to_owned(),
+        }
+    }
+
     /// Parses the JSON, with [`SceneDescription::from_json_str`]'s errors.
     pub fn from_json_str(text: &str) -> Result<GltfSceneDescription, SceneError> {
         parse_json(text)
@@ -101,6 +117,8 @@ impl GltfSceneDescription {
         if self.gltf.trim().is_empty() {
             return Err(SceneError::field("gltf", "must name a glTF file, got an empty string"));
         }
+        int_in(self.width, 1, MAX_IMAGE_SIDE, "width")?;
+        int_in(self.height, 1, MAX_IMAGE_SIDE, "height")?;
         let document = open(&file, &at)?;
         let skip: BTreeSet<&str> = self.skip_groups.iter().map(String::as_str).collect();
         let nodes = instances(&document, &skip, &at)?;
@@ -1196,5 +1214,14 @@ mod tests {
         write(&dir, "blind.gltf", json!([{"mesh": 0}]), |_| {});
         let message = scene("blind.gltf").expect_err("no camera").to_string();
         assert!(message.contains("no camera node"), "{message}");
+
+        // Errors found once the whole scene is a scene description name the fields as written.
+        let text = r#"{"gltf": "good.gltf", "sparse_points": 4, "width": 32, "height": 16, "skip_groups": ["x"]}"#;
+        let error = super::super::Scene::from_json_str(text, dir.path()).map(|_| ()).expect_err("no node x");
+        assert_eq!(error.field_path(), Some("skip_groups[0]"), "{error}");
+        assert!(error.to_string().starts_with("skip_groups[0]: "), "{error}");
+        let text = r#"{"gltf": "good.gltf", "sparse_points": 4, "width": 0, "height": 16}"#;
+        let error = super::super::Scene::from_json_str(text, dir.path()).map(|_| ()).expect_err("no pixels");
+        assert_eq!(error.to_string(), "width: must be in 1..=8192, got 0");
     }
 }

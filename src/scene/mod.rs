@@ -413,12 +413,12 @@ impl Scene {
     /// A JSON object with a top-level `gltf` field is a [`GltfSceneDescription`]: the whole
     /// scene from one glTF file (its meshes, spot light and camera) with relume's settings.
     pub fn from_json_str(text: &str, base_dir: &Path) -> Result<Scene, SceneError> {
-        let description = if GltfSceneDescription::is_one(text) {
-            GltfSceneDescription::from_json_str(text)?.to_scene_description(base_dir)?
-        } else {
-            SceneDescription::from_json_str(text)?
-        };
-        Self::from_description(&description, base_dir)
+        if GltfSceneDescription::is_one(text) {
+            let description = GltfSceneDescription::from_json_str(text)?.to_scene_description(base_dir)?;
+            return Self::from_description(&description, base_dir)
+                .map_err(|e| e.with_field(GltfSceneDescription::field_in_form));
+        }
+        Self::from_description(&SceneDescription::from_json_str(text)?, base_dir)
     }
 
     /// Reads a scene file; OBJ paths are relative to the directory that holds it.

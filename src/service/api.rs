@@ -4,7 +4,20 @@
 use serde::{Deserialize, Serialize};
 
 use crate::renderer::Method;
-use crate::scene::{CameraDescription, LightDescription, Occlusion, Scene, SceneError};
+use crate::scene::{
+    CameraDescription, GltfSceneDescription, LightDescription, Occlusion, Scene, SceneDescription, SceneError,
+};
+
+/// The body of `POST /v1/scenes`, for the API description: a scene description, or a whole
+/// scene from one glTF file (a JSON object with a top-level `gltf` field). The route reads the
+/// body itself (`service::scenes::load`) so that its errors name the field of the form sent.
+#[derive(Deserialize, utoipa::ToSchema)]
+#[serde(untagged)]
+#[allow(dead_code, clippy::large_enum_variant)]
+pub enum SceneRequest {
+    Scene(SceneDescription),
+    Gltf(GltfSceneDescription),
+}
 
 /// What `POST /v1/scenes` and `GET /v1/scenes/{id}` answer.
 #[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]

@@ -132,6 +132,18 @@ impl ApiError {
         ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, Code::Internal, "internal error (logged on the server)")
     }
 
+    /// The same error about `rename(field)`, also where its message starts with the field.
+    pub fn with_field(mut self, rename: impl Fn(&str) -> String) -> ApiError {
+        if let Some(field) = self.field.take() {
+            let renamed = rename(&field);
+            if let Some(rest) = self.message.strip_prefix(field.as_str()) {
+                self.message = format!("{renamed}{rest}");
+            }
+            self.field = Some(renamed);
+        }
+        self
+    }
+
     /// A scene error, as the client should see it: `asset_root` (the server's directory) is
     /// removed from file paths in the message.
     pub fn scene(error: &SceneError, asset_root: &std::path::Path) -> ApiError {

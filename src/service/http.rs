@@ -23,7 +23,7 @@ use crate::gpu::timing::TimingSource;
 use crate::scene::{Scene, SceneDescription, parse_json};
 
 use super::AppState;
-use super::api::{Health, ImageFormat, RenderRequest, SceneInfo};
+use super::api::{Health, ImageFormat, RenderRequest, SceneInfo, SceneRequest};
 use super::config::limit;
 use super::error::{ApiError, Code, ErrorBody};
 use super::gpu_worker::{RenderJob, RenderOutput, WorkerError};
@@ -306,14 +306,16 @@ async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
 
 /// Creates a scene from a scene description.
 ///
-/// Mesh (`obj`) and texture paths are relative to the server's asset directory and may not leave it; a mesh may instead carry its OBJ text
-/// in `obj_text` (no `mtllib`; materials via `material`). Loading (sparse point placement)
-/// happens before the answer.
+/// Mesh (`obj`, `gltf`) and texture paths are relative to the server's asset directory and may not leave it; a mesh may instead carry its OBJ text
+/// in `obj_text` (no `mtllib`; materials via `material`). The body may also be a whole scene
+/// from one glTF file in the asset directory (a top-level `gltf` field: its meshes, spot light
+/// and camera, with relume's settings). Loading (sparse point placement) happens before the
+/// answer.
 #[utoipa::path(
     post,
     path = "/v1/scenes",
     tag = "scenes",
-    request_body(content = SceneDescription, description = "A scene description (README, \"Scene files\")"),
+    request_body(content = SceneRequest, description = "A scene description, or a whole glTF scene (README, \"Scene files\", \"glTF\")"),
     responses(
         (status = 201, description = "Created", body = SceneInfo,
             headers(("Location" = String, description = "/v1/scenes/{id}"))),
@@ -335,10 +337,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
     let id = reservation.id.clone();
     let loader = state.clone();
     let loaded = tokio::task::spawn_blocking(move || -> Result<(SceneDescription, Scene), ApiError> {
-        let description = scenes::admit(utf8(&bytes)?, &loader.assets, &loader.config.limits)?;
-        let scene = Scene::from_description_within(&description, &loader.assets, loader.config.limits.max_triangles)
-            .map_err(|e| ApiError::scene(&e, &loader.assets))?;
-        Ok((description, scene))
+        scenes::load(utf8(&bytes)?, &loader.assets, &loader.config.limits)
     })
     .await
     .map_err(ApiError::internal)?;

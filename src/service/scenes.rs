@@ -9,17 +9,45 @@ use std::sync::{Arc, Mutex};
 
 use axum::http::StatusCode;
 
-use crate::scene::{CameraDescription, LightDescription, SceneDescription};
+use crate::scene::{CameraDescription, GltfSceneDescription, LightDescription, Scene, SceneDescription};
 
 use super::api::SceneInfo;
 use super::config::{Limits, limit};
 use super::error::{ApiError, Code};
 
-/// Parses and validates a scene description sent by a client, and checks what the scene
-/// module does not: the service's limits, and that every file it names is inside `assets`
-/// (canonical). Reads no mesh; touches the file system only to resolve paths.
-pub fn admit(text: &str, assets: &Path, limits: &Limits) -> Result<SceneDescription, ApiError> {
+/// Admits a scene description sent by a client ([`admit`]) and loads it within the limits:
+/// the description and its scene. Errors about a whole glTF scene name its fields
+/// ([`GltfSceneDescription::field_in_form`]).
+pub fn load(text: &str, assets: &Path, limits: &Limits) -> Result<(SceneDescription, Scene), ApiError> {
+    if GltfSceneDescription::is_one(text) {
+        let load = || {
+            let whole = GltfSceneDescription::from_json_str(text).map_err(|e| ApiError::scene(&e, assets))?;
+            let file = confine(assets, &whole.gltf, "gltf")?;
+            check_mesh_bytes(std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0), "gltf", limits)?;
+            let description = whole.to_scene_description(assets).map_err(|e| ApiError::scene(&e, assets))?;
+            load_description(description, assets, limits)
+        };
+        return load().map_err(|e| e.with_field(GltfSceneDescription::field_in_form));
+    }
     let description = SceneDescription::from_json_str(text).map_err(|e| ApiError::scene(&e, assets))?;
+    load_description(description, assets, limits)
+}
+
+fn load_description(
+    description: SceneDescription,
+    assets: &Path,
+    limits: &Limits,
+) -> Result<(SceneDescription, Scene), ApiError> {
+    admit(&description, assets, limits)?;
+    let scene = Scene::from_description_within(&description, assets, limits.max_triangles)
+        .map_err(|e| ApiError::scene(&e, assets))?;
+    Ok((description, scene))
+}
+
+/// Validates a parsed scene description sent by a client, and checks what the scene module
+/// does not: the service's limits, and that every file it names is inside `assets`
+/// (canonical). Reads no mesh; touches the file system only to resolve paths.
+pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> Result<(), ApiError> {
     description.validate().map_err(|e| ApiError::scene(&e, assets))?;
     let r = description.settings.rsm_resolution;
     if r as u64 * r as u64 > limits.max_vals as u64 {
@@ -71,7 +99,7 @@ pub fn admit(text: &str, assets: &Path, limits: &Limits) -> Result<SceneDescript
             }
         }
     }
-    Ok(description)
+    Ok(())
 }
 
 fn check_mesh_bytes(bytes: u64, field: &str, limits: &Limits) -> Result<(), ApiError> {

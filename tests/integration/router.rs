@@ -303,3 +303,56 @@ async fn without_a_token_tickets_are_issued_and_checked_when_given() {
     handshake(&app, &id, &format!("?ticket={ticket}")).await.error(401, "unauthorized");
     app.stop().await;
 }
+
+/// Issue 20: a whole glTF scene (a top-level `gltf` field) is admitted like a mesh file: its
+/// path confined to the asset directory, its size under `max_mesh_bytes`, its fields and the
+/// file's own errors answered with 400 JSON naming the field.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_whole_gltf_scene_is_admitted_like_a_mesh_file() {
+    let app = App::start(|c| c.limits.max_mesh_bytes = 4096).await;
+    let scene = |gltf: &str| {
+        json!({"gltf": gltf, "sparse_points": 64, "width": 16, "height": 16,
+                                     "skip_groups": ["light"], "settings": {"rsm_resolution": 16}})
+    };
+    for path in ["../Cargo.toml", "/etc/passwd", "meshes/../../src/lib.rs"] {
+        let error = app.post("/v1/scenes", &scene(path)).await.error(400, "path_outside_assets");
+        assert_eq!(error["field"], "gltf");
+        assert!(!error["message"].as_str().unwrap().contains(&fixture("").display().to_string()), "{error}");
+    }
+    let error = app.post("/v1/scenes", &scene("meshes/missing.glb")).await.error(400, "invalid_scene");
+    assert_eq!(error["field"], "gltf");
+    // The .glb is 7,684 bytes, over this server's 4,096.
+    let error = app.post("/v1/scenes", &scene("meshes/cornell_box_gltf/CornellBox-Original.glb")).await;
+    let error = error.error(413, "limit_exceeded");
+    assert_eq!((error["limit"].as_str(), error["field"].as_str()), (Some("max_mesh_bytes"), Some("gltf")));
+
+    // The .gltf (its JSON 8,631 bytes) is over it too; with room for it, a typo and a bad value
+    // are named, and the scene loads.
+    let app = App::start(|_| {}).await;
+    let gltf = "meshes/cornell_box_gltf/CornellBox-Original.glb";
+    let mut typo = scene(gltf);
+    typo["sparse_point"] = json!(8);
+    let error = app.post("/v1/scenes", &typo).await.error(400, "invalid_json");
+    assert!(error["message"].as_str().unwrap().contains("sparse_point"), "{error}");
+    let mut unknown = scene(gltf);
+    unknown["skip_groups"] = json!(["lamp"]);
+    let error = app.post("/v1/scenes", &unknown).await.error(400, "invalid_scene");
+    assert_eq!(error["field"], "skip_groups[0]", "the field as sent, not the mesh it stands for");
+    assert!(error["message"].as_str().unwrap().starts_with("skip_groups[0]: "), "{error}");
+    assert!(error["message"].as_str().unwrap().contains("lamp"), "{error}");
+    let mut zero = scene(gltf);
+    zero["sparse_points"] = json!(0);
+    assert_eq!(app.post("/v1/scenes", &zero).await.error(400, "invalid_field")["field"], "sparse_points");
+    let mut wide = scene(gltf);
+    wide["height"] = json!(9000);
+    assert_eq!(app.post("/v1/scenes", &wide).await.error(400, "invalid_field")["field"], "height");
+    wide["height"] = json!(5000);
+    wide["width"] = json!(5000);
+    let error = app.post("/v1/scenes", &wide).await.error(400, "limit_exceeded");
+    assert_eq!((error["limit"].as_str(), error["field"].as_str()), (Some("max_frame_side"), Some("width")));
+    let id = app.create(&scene(gltf)).await;
+    let info = app.get(&format!("/v1/scenes/{id}")).await.json();
+    assert_eq!(info["sparse_points"], 64);
+    assert_eq!(info["camera"]["width"], 16);
+    app.stop().await;
+}

@@ -943,3 +943,47 @@ async fn a_recording_replays_through_the_server_as_offline() {
         assert!(virtual_pixels > 1000, "frame {i}: the bunny is drawn ({virtual_pixels} pixels)");
     }
 }
+
+/// Issue 20: a whole scene from one glTF file (its meshes, spot light and camera, with relume's
+/// settings beside it), sent as `fixtures/scenes/cornell_gltf_small.json` reads it, renders
+/// through the service as the renderer renders that file in this process.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_whole_gltf_scene_renders_through_the_service_as_from_its_file() {
+    const SIDE: u32 = 32;
+    let text = std::fs::read_to_string(fixture("scenes/cornell_gltf_small.json")).expect("fixture");
+    let mut scene: Value = serde_json::from_str(&text).expect("JSON");
+    (scene["width"], scene["height"]) = (SIDE.into(), SIDE.into());
+    let local = relume::scene::Scene::from_json_str(&scene.to_string(), &fixture("scenes")).expect("loads");
+    // The same file, named relative to the server's asset directory (`fixtures/`).
+    let mut served = scene.clone();
+    served["gltf"] = json!("meshes/cornell_box_gltf/CornellBox-Original.glb");
+
+    let server = TestServer::start(|_| {}).await;
+    let id = server.create(&served).await;
+    let info = server.get(&format!("/v1/scenes/{id}")).await.json();
+    assert_eq!(info["sparse_points"], 512);
+    assert_eq!(info["triangles"], local.triangle_count());
+    assert_eq!((info["camera"]["width"].as_u64(), info["camera"]["height"].as_u64()), (Some(32), Some(32)));
+    assert!(info["light"]["intensity"].is_array(), "the glTF's spot light: {info}");
+
+    let request = json!({"quality": {"method": "sparse", "component": "indirect", "format": "f32"}});
+    let render = server.post(&format!("/v1/scenes/{id}/render"), &request).await;
+    assert_eq!(render.status, StatusCode::OK, "{}", String::from_utf8_lossy(&render.body));
+    let served: Vec<[f32; 4]> = render
+        .body
+        .chunks_exact(16)
+        .map(|p| std::array::from_fn(|c| f32::from_le_bytes(p[4 * c..4 * c + 4].try_into().expect("4 bytes"))))
+        .collect();
+    server.stop().await;
+
+    let gpu = super::gpu();
+    let mut renderer = relume::renderer::Renderer::new(&gpu, &local).expect("renderer");
+    let frame = renderer.render(&gpu, relume::renderer::Method::Sparse, SIDE, SIDE).expect("renders");
+    let served = relume::image::LinearImage { width: SIDE, height: SIDE, pixels: served };
+    assert!(frame.indirect.coverage() > (SIDE * SIDE / 2) as usize, "the box fills the view");
+    assert_eq!(served.coverage(), frame.indirect.coverage());
+    // Same device, same scene, same settings: only the order in which the RSM appends VALs
+    // (atomicAdd) and so the order of the gather's float sums may differ, a few ulps.
+    let error = relume::image::relative_rmse(&served, &frame.indirect);
+    assert!(error < 1e-4, "served vs in-process indirect: rel RMSE {error}");
+}
