@@ -186,12 +186,12 @@ async fn require_token_or_ticket(State(state): State<Arc<AppState>>, request: Re
 }
 
 /// The one check of who may use a `/v1` route: where `tickets` are accepted (stream
-/// handshakes) and the query has a `ticket`, that ticket, spent here, valid or not, and the
-/// header is not looked at; otherwise `Authorization: Bearer <token>` when the server has a
+/// handshakes) and the handshake presents a ticket (`?ticket=` or a `relume.ticket.`
+/// subprotocol), that ticket, spent here, valid or not, and `Authorization` is not looked at; otherwise `Authorization: Bearer <token>` when the server has a
 /// token. 401 `unauthorized` when neither holds.
 fn authorize(state: &AppState, request: &Request, tickets: bool) -> Result<(), ApiError> {
     let unauthorized = |message: &str| ApiError::new(StatusCode::UNAUTHORIZED, Code::Unauthorized, message);
-    if tickets && let Some(ticket) = tickets::from_query(request.uri())? {
+    if tickets && let Some(ticket) = tickets::presented(request.uri(), request.headers())? {
         if state.tickets.redeem(&ticket) {
             return Ok(());
         }
@@ -211,7 +211,8 @@ fn authorize(state: &AppState, request: &Request, tickets: bool) -> Result<(), A
         Ok(())
     } else if tickets {
         Err(unauthorized(
-            "missing or wrong bearer token (Authorization: Bearer <token>, or ?ticket= from POST /v1/tickets)",
+            "missing or wrong bearer token (Authorization: Bearer <token>, or a ticket from POST /v1/tickets as \
+             ?ticket= or Sec-WebSocket-Protocol: relume.v1, relume.ticket.<ticket>)",
         ))
     } else {
         Err(unauthorized("missing or wrong bearer token (Authorization: Bearer <token>)"))

@@ -36,7 +36,9 @@ use super::wire::{
 ///
 /// 404 before the upgrade when there is no such scene. With `--token`, the handshake carries
 /// the bearer token or, from a browser (which cannot set a WebSocket's headers), a ticket from
-/// `POST /v1/tickets` as `?ticket=`, spent by this handshake whatever its answer.
+/// `POST /v1/tickets` as `?ticket=` or as the subprotocol `relume.ticket.<ticket>` offered
+/// beside `relume.v1` (`Sec-WebSocket-Protocol: relume.v1, relume.ticket.<ticket>`), spent by
+/// this handshake whatever its answer. A handshake that offers `relume.v1` gets it selected.
 #[utoipa::path(
     get,
     path = "/v1/scenes/{id}/stream",
@@ -45,12 +47,15 @@ use super::wire::{
         ("id" = String, Path, description = "The scene's id"),
         ("ticket" = Option<String>, Query, description = "A single-use ticket from `POST /v1/tickets`, in place \
             of the bearer token; checked (and spent) whenever it is given"),
+        ("Sec-WebSocket-Protocol" = Option<String>, Header, description = "`relume.v1` (selected when \
+            offered), and optionally `relume.ticket.<ticket>`: a ticket in place of `?ticket=`, out of the URL"),
     ),
     responses(
         (status = 101, description = "WebSocket stream: one `relume.v1.Envelope` (proto/relume.proto) per \
             binary message. Each RGB-D frame is answered with the relit frame (`RenderedFrame`) or an \
             `Error`; each control message with a `SettingsAck` or an `Error`."),
-        (status = 400, description = "Not a WebSocket upgrade request, or `ticket` given more than once",
+        (status = 400, description = "Not a WebSocket upgrade request, a ticket given more than once, or a \
+            ticket subprotocol without `relume.v1` beside it",
             body = super::error::ErrorBody),
         (status = 401, description = "Missing or wrong bearer token, or an unknown, used or expired ticket",
             body = super::error::ErrorBody),
@@ -79,6 +84,7 @@ pub async fn open_stream(
     // `max_message_bytes`; larger ones close the connection (1009, message too big). This is
     // also the most a stream buffers of an incoming message.
     let transport_limit = transport_limit(&state.config.limits);
+    let upgrade = upgrade.protocols([super::tickets::STREAM_PROTOCOL]);
     Ok(upgrade.max_message_size(transport_limit).max_frame_size(transport_limit).on_upgrade(move |socket| async move {
         let _open = open;
         Session::new(state.clone(), client, id, &scene).run(socket).await;

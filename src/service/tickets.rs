@@ -3,7 +3,13 @@
 //! (browsers, and so the viewer).
 //!
 //! A client that holds the token asks for a ticket and opens
-//! `/v1/scenes/{id}/stream?ticket=<ticket>` within `ticket_seconds`. The first handshake that
+//! `/v1/scenes/{id}/stream?ticket=<ticket>` within `ticket_seconds`, or, to keep the ticket out
+//! of URLs (and so out of access logs and browser history), offers it as a WebSocket
+//! subprotocol, `Sec-WebSocket-Protocol: relume.v1, relume.ticket.<ticket>` (the pattern of
+//! Kubernetes' bearer-token subprotocol; browsers: `new WebSocket(url, ["relume.v1",
+//! "relume.ticket." + ticket])`); the server selects `relume.v1`, which the client must offer
+//! beside the ticket because a browser fails a handshake whose protocols it offered were all
+//! left unselected. The first handshake that
 //! presents a ticket consumes it, whatever the answer; an unknown, used or expired ticket is
 //! refused with 401 `unauthorized` before the upgrade. A ticket is 32 bytes from the operating
 //! system's CSPRNG (`getrandom`) in base64url without padding, URL-safe as it is. At most
@@ -20,7 +26,7 @@ use std::time::{Duration, Instant};
 
 use axum::Json;
 use axum::extract::State;
-use axum::http::{HeaderValue, Uri, header};
+use axum::http::{HeaderMap, HeaderValue, Uri, header};
 use axum::response::{IntoResponse, Response};
 use base64::Engine as _;
 use serde::Serialize;
@@ -34,6 +40,12 @@ pub const TICKET_BYTES: usize = 32;
 
 /// The query parameter of a stream handshake that carries a ticket.
 pub const TICKET_PARAMETER: &str = "ticket";
+
+/// The WebSocket subprotocol of relume's stream, selected when a handshake offers it.
+pub const STREAM_PROTOCOL: &str = "relume.v1";
+
+/// A subprotocol offered as this followed by a ticket carries the ticket.
+pub const TICKET_PROTOCOL_PREFIX: &str = "relume.ticket.";
 
 /// A ticket, as `POST /v1/tickets` answers it.
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
@@ -103,6 +115,47 @@ impl Tickets {
         let now = Instant::now();
         self.lock().values().filter(|expires| **expires > now).count()
     }
+}
+
+/// The ticket a stream handshake presents, as `?ticket=` ([`from_query`]) or as a
+/// `relume.ticket.<ticket>` subprotocol ([`from_protocols`]); 400 when it is given twice, in
+/// one place or both.
+pub fn presented(uri: &Uri, headers: &HeaderMap) -> Result<Option<String>, ApiError> {
+    match (from_query(uri)?, from_protocols(headers)?) {
+        (Some(_), Some(_)) => Err(ApiError::invalid_field(
+            TICKET_PARAMETER,
+            "given both as ?ticket= and as a Sec-WebSocket-Protocol; give it once",
+        )),
+        (query, protocol) => Ok(query.or(protocol)),
+    }
+}
+
+/// The ticket of a `relume.ticket.<ticket>` entry of the `Sec-WebSocket-Protocol` headers, if
+/// there is one; 400 when there are two, or when `relume.v1` is not offered beside it (a
+/// browser would fail the handshake the server answers without a protocol it offered).
+pub fn from_protocols(headers: &HeaderMap) -> Result<Option<String>, ApiError> {
+    let mut found = None;
+    let mut offers_stream_protocol = false;
+    for value in headers.get_all(header::SEC_WEBSOCKET_PROTOCOL) {
+        let Ok(value) = value.to_str() else {
+            return Err(ApiError::invalid_field("Sec-WebSocket-Protocol", "not visible ASCII"));
+        };
+        for protocol in value.split(',').map(str::trim) {
+            offers_stream_protocol |= protocol == STREAM_PROTOCOL;
+            let Some(ticket) = protocol.strip_prefix(TICKET_PROTOCOL_PREFIX) else { continue };
+            if found.is_some() {
+                return Err(ApiError::invalid_field(TICKET_PARAMETER, "given more than once"));
+            }
+            found = Some(ticket.to_owned());
+        }
+    }
+    if found.is_some() && !offers_stream_protocol {
+        return Err(ApiError::invalid_field(
+            "Sec-WebSocket-Protocol",
+            format!("a {TICKET_PROTOCOL_PREFIX}<ticket> subprotocol needs {STREAM_PROTOCOL} offered beside it"),
+        ));
+    }
+    Ok(found)
 }
 
 /// The `ticket` query parameter of `uri`, percent-decoded, if there is one; 400 when it is

@@ -1,7 +1,8 @@
 // End-to-end test of the browser viewer: `relume serve` on a free port with a token, Debian's
 // chromium (headless, driven by playwright-core), the page playing the bundled recording. It
 // checks that a page without the token asks for it and connects once it is entered, that the
-// page given the token in its URL fragment opens its streams with tickets; and
+// page given the token in its URL fragment opens its streams with tickets (offered as a
+// WebSocket subprotocol, out of the URL); and
 // that frames arrive with their stage timings, that the page's protobuf codec (protobuf.js,
 // served by relume) and the server's (prost) agree both ways, that the indirect-only view and the sliders
 // change the next frames and the settings the page reports, that dropped frames, stream
@@ -35,6 +36,22 @@ function step(text) {
 
 function assert(condition, message) {
   if (!condition) throw new Error(`assertion failed: ${message}`);
+}
+
+// How the page's current stream was opened: its URL, the subprotocol the server selected and
+// the ticket the page offered beside it.
+function streamOpening(page) {
+  return page.evaluate(() => {
+    const { socket, streamTicket } = window.relumeViewer;
+    return { url: socket.url, protocol: socket.protocol, ticket: streamTicket };
+  });
+}
+
+// A stream opened with a ticket as a subprotocol: none in the URL, `relume.v1` selected, a
+// ticket of 43 base64url characters offered. (The server wants its token, so the frames that
+// arrived on it are the proof that the server took the ticket.)
+function ticketed({ url, protocol, ticket }) {
+  return /\/stream$/.test(url) && protocol === "relume.v1" && /^[A-Za-z0-9_-]{43}$/.test(ticket ?? "");
 }
 
 // Starts the server; resolves with its address once it logs "serving".
@@ -86,8 +103,8 @@ async function main() {
     await asking.locator("#token").fill(TOKEN);
     await asking.getByRole("button", { name: "Connect" }).click();
     await asking.waitForFunction(() => window.relumeViewer.framesShown >= 1);
-    const askedUrl = await asking.evaluate(() => window.relumeViewer.socket.url);
-    assert(/\/stream\?ticket=[A-Za-z0-9_-]{43}$/.test(askedUrl), `the stream opened with a ticket: ${askedUrl}`);
+    const askedOpening = await streamOpening(asking);
+    assert(ticketed(askedOpening), `the stream opened with a ticket subprotocol: ${JSON.stringify(askedOpening)}`);
     assert(!(await asking.locator("#token-form").isVisible()), "the token field is hidden again");
     await asking.close();
     step("a page without the token asks for it, then streams with a ticket");
@@ -117,8 +134,8 @@ async function main() {
     step(`${v.framesShown} frames, ${v.lastFrame.width}x${v.lastFrame.height}, ${v.lastFrame.valCount} VALs`);
     assert(v.connection === "live", `status live, got ${v.connection}`);
     assert(v.errors.length === 0, `no errors at start: ${v.errors}`);
-    const streamUrl = await page.evaluate(() => window.relumeViewer.socket.url);
-    assert(/\/stream\?ticket=[A-Za-z0-9_-]{43}$/.test(streamUrl), `the stream opened with a ticket: ${streamUrl}`);
+    const opened = await streamOpening(page);
+    assert(ticketed(opened), `the stream opened with a ticket subprotocol: ${JSON.stringify(opened)}`);
     assert(v.lastFrame.width === 320 && v.lastFrame.height === 240, "downscale=2 of 640x480");
     assert(v.lastFrame.png?.join() === "137,80,78,71", "a PNG");
     for (const stage of ["decode", "queue", "rgbd_vals", "gather", "shade", "composite", "encode"]) {
@@ -199,8 +216,8 @@ async function main() {
     v = await framesAfter((await viewer()).framesShown + 2);
     assert(v.scene.sparse_points < oldScene.sparse_points, `fewer sparse points: ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
     assert((await setting("sparse points")) === String(v.scene.sparse_points), "sparse points reported");
-    const reopenedUrl = await page.evaluate(() => window.relumeViewer.socket.url);
-    assert(reopenedUrl.includes("?ticket=") && reopenedUrl !== streamUrl, `a new ticket: ${reopenedUrl}`);
+    const reopened = await streamOpening(page);
+    assert(ticketed(reopened) && reopened.ticket !== opened.ticket, `a new ticket: ${JSON.stringify(reopened)}`);
     step(`sparse points ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
 
     // Real time: frames sent at 30 fps, faster than lavapipe renders them; the server drops

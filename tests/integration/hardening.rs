@@ -219,6 +219,25 @@ async fn a_ticket_opens_one_real_stream_on_a_server_with_a_token() {
     assert!(matches!(answer, Some(Ok(tungstenite::Message::Binary(_)))), "{answer:?}");
     refused(tokio_tungstenite::connect_async(&with_ticket).await);
     drop(stream);
+
+    // The ticket as a subprotocol, out of the URL, as the viewer sends it; the client (which
+    // checks that the selected protocol is one it offered) gets `relume.v1`.
+    let reply = server.request(Method::POST, "/v1/tickets", Bytes::new()).await;
+    let ticket = reply.json()["ticket"].as_str().expect("a ticket").to_owned();
+    let offering = || {
+        use tungstenite::client::IntoClientRequest as _;
+        let mut request = url.as_str().into_client_request().expect("a request");
+        let offer = format!("relume.v1, relume.ticket.{ticket}").parse().expect("a header value");
+        request.headers_mut().insert("sec-websocket-protocol", offer);
+        request
+    };
+    let (mut stream, response) = tokio_tungstenite::connect_async(offering()).await.expect("the ticket opens it");
+    assert_eq!(response.headers()["sec-websocket-protocol"], "relume.v1");
+    stream.send(tungstenite::Message::binary(vec![0xff, 0xff, 0xff])).await.expect("sent");
+    let answer = tokio::time::timeout(Duration::from_secs(10), stream.next()).await.expect("an answer in time");
+    assert!(matches!(answer, Some(Ok(tungstenite::Message::Binary(_)))), "{answer:?}");
+    refused(tokio_tungstenite::connect_async(offering()).await);
+    drop(stream);
     server.stop().await;
 }
 

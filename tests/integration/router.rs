@@ -180,6 +180,11 @@ async fn metrics_labels_stay_a_closed_set() {
 /// token `app` holds. It carries a (never completed) upgrade, so that a handshake the router
 /// lets through is answered 101.
 async fn handshake(app: &App, id: &str, query: &str) -> Reply {
+    handshake_offering(app, id, query, &[]).await
+}
+
+/// [`handshake`] with these `Sec-WebSocket-Protocol` headers.
+async fn handshake_offering(app: &App, id: &str, query: &str, protocols: &[&str]) -> Reply {
     let mut request = hyper::Request::get(format!("/v1/scenes/{id}/stream{query}"))
         .header("upgrade", "websocket")
         .header("connection", "Upgrade")
@@ -187,6 +192,9 @@ async fn handshake(app: &App, id: &str, query: &str) -> Reply {
         .header("sec-websocket-version", "13");
     if let Some(token) = &app.token {
         request = request.header("authorization", format!("Bearer {token}"));
+    }
+    for protocol in protocols {
+        request = request.header("sec-websocket-protocol", *protocol);
     }
     let mut request = request.body(Body::empty()).expect("request");
     let upgrade = hyper::upgrade::on(&mut request);
@@ -250,6 +258,46 @@ async fn a_ticket_opens_one_stream_in_place_of_the_token() {
     app.token = None;
     handshake(&app, "nope", &format!("?ticket={third}")).await.error(404, "not_found");
     handshake(&app, &id, &format!("?ticket={third}")).await.error(401, "unauthorized");
+    app.stop().await;
+}
+
+/// The ticket as a subprotocol (`relume.ticket.<ticket>` beside `relume.v1`), out of the URL:
+/// the same single use, `relume.v1` selected, and clear 400s for a ticket offered twice or
+/// without `relume.v1` (a browser would fail a handshake that selects none of its offers).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ticket_can_ride_in_the_websocket_subprotocol() {
+    let mut app = App::start(|c| c.token = Some("s3cret".to_owned())).await;
+    let id = app.create(&inline_scene()).await;
+    let first = ticket(&app).await;
+    let (second, third) = (ticket(&app).await, ticket(&app).await);
+    app.token = None;
+    let offer = |ticket: &str| format!("relume.v1, relume.ticket.{ticket}");
+    let opened = handshake_offering(&app, &id, "", &[&offer(&first)]).await;
+    assert_eq!(opened.status, StatusCode::SWITCHING_PROTOCOLS);
+    assert_eq!(opened.header("sec-websocket-protocol"), "relume.v1");
+    handshake_offering(&app, &id, "", &[&offer(&first)]).await.error(401, "unauthorized");
+    // In two header lines, in either order.
+    let split = [format!("relume.ticket.{second}"), "relume.v1".to_owned()];
+    let opened = handshake_offering(&app, &id, "", &[&split[0], &split[1]]).await;
+    assert_eq!(opened.status, StatusCode::SWITCHING_PROTOCOLS);
+
+    let error = handshake_offering(&app, &id, "", &[&format!("relume.ticket.{third}")]).await;
+    let error = error.error(400, "invalid_field");
+    assert_eq!(error["field"], "Sec-WebSocket-Protocol");
+    assert!(error["message"].as_str().unwrap().contains("relume.v1"), "{error}");
+    let error = handshake_offering(&app, &id, &format!("?ticket={third}"), &[&offer(&third)]).await;
+    assert_eq!(error.error(400, "invalid_field")["field"], "ticket");
+    let twice = format!("relume.v1, relume.ticket.{third}, relume.ticket.x");
+    assert_eq!(handshake_offering(&app, &id, "", &[&twice]).await.error(400, "invalid_field")["field"], "ticket");
+    // None of those spent it: it was never checked.
+    assert_eq!(handshake_offering(&app, &id, "", &[&offer(&third)]).await.status, StatusCode::SWITCHING_PROTOCOLS);
+    handshake_offering(&app, &id, "", &["relume.v1, relume.ticket.nope"]).await.error(401, "unauthorized");
+    // `relume.v1` alone carries no credential, and is still selected for the token holder.
+    handshake_offering(&app, &id, "", &["relume.v1"]).await.error(401, "unauthorized");
+    app.token = Some("s3cret".to_owned());
+    let opened = handshake_offering(&app, &id, "", &["relume.v1"]).await;
+    assert_eq!(opened.header("sec-websocket-protocol"), "relume.v1");
+    assert_eq!(app.state.tickets.outstanding(), 0);
     app.stop().await;
 }
 

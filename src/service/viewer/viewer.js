@@ -10,8 +10,8 @@
 // A server run with --token: the page takes the token from the URL fragment (#token=<token>,
 // which the browser never sends to the server) or, after a 401, from the field it then shows.
 // It sends it as `Authorization: Bearer` on /v1 requests and, since a browser cannot set a
-// WebSocket's headers, opens each stream with a single-use ticket (POST /v1/tickets,
-// `?ticket=`) instead.
+// WebSocket's headers, opens each stream with a single-use ticket (POST /v1/tickets) offered
+// as the subprotocol `relume.ticket.<ticket>` beside `relume.v1`, which keeps it out of URLs.
 
 import { Component, ImageFormat, Occlusion, decodeEnvelope, encodeControl } from "./proto.js";
 
@@ -41,6 +41,7 @@ const state = {
   scene: null, // SceneInfo of the scene in use
   recording: null, // RecordingInfo being played
   socket: null,
+  streamTicket: null, // the (spent) ticket the current stream was opened with, if any
   generation: 0, // bumped on every (re)connection: older playback loops stop
   playing: true,
   realtime: false,
@@ -288,15 +289,18 @@ function answered(frameId) {
 }
 
 // Opens the scene's stream; with a token, through a ticket (the handshake cannot carry the
-// header).
+// header) offered as a subprotocol. The server selects `relume.v1`.
 async function openStream(generation) {
-  let url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/v1/scenes/${state.scene.id}/stream`;
+  const url = `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/v1/scenes/${state.scene.id}/stream`;
+  const protocols = ["relume.v1"];
+  state.streamTicket = null;
   if (state.token) {
     const { ticket } = await (await fetchOk("/v1/tickets", { method: "POST" })).json();
     if (generation !== state.generation) return;
-    url += `?ticket=${encodeURIComponent(ticket)}`;
+    protocols.push(`relume.ticket.${ticket}`);
+    state.streamTicket = ticket;
   }
-  const socket = new WebSocket(url);
+  const socket = new WebSocket(url, protocols);
   socket.binaryType = "arraybuffer";
   state.socket = socket;
   state.applied = {};
