@@ -1,6 +1,6 @@
 //! glTF 2.0 (`.gltf` with its buffers, or one `.glb`) with the `gltf` crate: a mesh entry's
 //! `gltf` file, or a whole scene ([`GltfSceneDescription`]: meshes, the `KHR_lights_punctual`
-//! spot light and the camera of one file, with relume's settings beside it).
+//! spot or point light and the camera of one file, with relume's settings beside it).
 //!
 //! - **Meshes.** Every mesh of the file's default scene (else its first), each node's world
 //!   transform baked into the positions (normals by the inverse transpose, winding flipped under
@@ -32,8 +32,8 @@ use gltf::mesh::{Mode, Semantic};
 use serde::{Deserialize, Serialize};
 
 use super::description::{
-    CameraDescription, LightDescription, MAX_IMAGE_SIDE, MaterialDescription, MeshDescription, SceneDescription,
-    SettingsDescription, int_in, key_path, parse_json,
+    CameraDescription, LightDescription, MAX_IMAGE_SIDE, MAX_OUTER_ANGLE_DEG, MaterialDescription, MeshDescription,
+    SceneDescription, SettingsDescription, int_in, key_path, parse_json,
 };
 use super::obj::{LoadedMesh, Merged, json_material, list};
 use super::texture::Textures;
@@ -48,7 +48,7 @@ pub const MAX_GLTF_BYTES: u64 = 1 << 30;
 pub const LUMENS_PER_WATT: f32 = 683.0;
 
 /// A whole scene from one glTF file: its meshes (as one relume mesh), its
-/// `KHR_lights_punctual` spot light (at most one) and its camera (the first perspective camera
+/// `KHR_lights_punctual` spot or point light (at most one) and its camera (the first perspective camera
 /// in node order), with the relume settings that glTF has no place for.
 ///
 /// ```json
@@ -127,7 +127,7 @@ impl GltfSceneDescription {
         for (node, world) in &nodes {
             let name = NodeName(node);
             if let Some(punctual) = node.light() {
-                let description = light_description(&punctual, *world).map_err(|message| {
+                let description = light_description(&punctual, *world, || mesh_bounds(&nodes)).map_err(|message| {
                     at.error(format!(
                         "{name}: its KHR_lights_punctual light (`lights[{}]`): {message}",
                         punctual.index()
@@ -168,16 +168,27 @@ impl GltfSceneDescription {
     }
 }
 
-/// A glTF light as relume's spot light, validated. Point and directional lights are errors:
-/// relume's only emitter is one spot light (DESIGN.md §2).
-fn light_description(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> Result<LightDescription, String> {
+/// A glTF light as relume's spot light, validated. relume's only emitter is one spot light
+/// (DESIGN.md §2): a point light outside the meshes' bounding sphere (`bounds`, asked only for
+/// a point light) is the spot light that lights every mesh as it would ([`point_as_spot`]);
+/// one inside it, and directional lights, are errors.
+fn light_description(
+    light: &gltf::khr_lights_punctual::Light,
+    world: Mat4,
+    bounds: impl FnOnce() -> Result<(Vec3, f32), String>,
+) -> Result<LightDescription, String> {
     use gltf::khr_lights_punctual::Kind;
+    let intensity = Vec3::from(light.color()) * light.intensity() / LUMENS_PER_WATT;
+    let position = world.transform_point3(Vec3::ZERO);
     let (inner, outer) = match light.kind() {
         Kind::Spot { inner_cone_angle, outer_cone_angle } => (inner_cone_angle, outer_cone_angle),
         Kind::Point => {
-            return Err("a point light: relume's scene has one spot light and no point lights; \
-                        make it a spot light or remove it"
-                .to_owned());
+            if light.range().is_some() {
+                tracing::warn!("KHR_lights_punctual `range` ignored: relume's lights fall off as 1/d²");
+            }
+            let description = point_as_spot(position, intensity, bounds()?)?;
+            description.validate("light").map_err(|e| e.to_string())?;
+            return Ok(description);
         }
         Kind::Directional => {
             return Err("a directional light: relume's scene has one spot light and no directional \
@@ -188,9 +199,8 @@ fn light_description(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> R
     if light.range().is_some() {
         tracing::warn!("KHR_lights_punctual `range` ignored: relume's spot light falls off as 1/d²");
     }
-    let intensity = Vec3::from(light.color()) * light.intensity() / LUMENS_PER_WATT;
     let description = LightDescription {
-        position: world.transform_point3(Vec3::ZERO).as_dvec3().to_array(),
+        position: position.as_dvec3().to_array(),
         direction: world.transform_vector3(Vec3::NEG_Z).normalize_or_zero().to_array(),
         inner_angle_deg: inner.to_degrees(),
         outer_angle_deg: outer.to_degrees(),
@@ -198,6 +208,86 @@ fn light_description(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> R
     };
     description.validate("light").map_err(|e| e.to_string())?;
     Ok(description)
+}
+
+/// How much wider than the meshes' bounding sphere seen from a point light the cone of the
+/// spot light that stands for it is: rounding never leaves geometry on the cone's hard edge.
+const POINT_CONE_MARGIN: f32 = 1.01;
+
+/// A point light at `position` as the spot light that lights everything inside the sphere
+/// `(centre, radius)` exactly as the point light does: aimed at the centre, its inner and outer
+/// half-angles equal (no falloff inside, DESIGN.md §2) and the sphere's angular radius from
+/// the light (times [`POINT_CONE_MARGIN`]). The same radiant intensity, the same 1/d². An error
+/// when the light is inside the sphere or so near that the cone would pass
+/// [`MAX_OUTER_ANGLE_DEG`] (one perspective RSM cannot see around a point light).
+fn point_as_spot(position: Vec3, intensity: Vec3, (centre, radius): (Vec3, f32)) -> Result<LightDescription, String> {
+    let to_centre = centre.as_dvec3() - position.as_dvec3();
+    let distance = to_centre.length();
+    let needed_deg = if distance > radius as f64 {
+        ((radius as f64 / distance).asin().to_degrees() as f32 * POINT_CONE_MARGIN).max(0.01)
+    } else {
+        f32::INFINITY
+    };
+    if needed_deg > MAX_OUTER_ANGLE_DEG {
+        let (where_, needs) = if needed_deg.is_finite() {
+            ("so near", format!("a cone of {needed_deg:.1}° half-angle to reach them all"))
+        } else {
+            ("inside", "light all around".to_owned())
+        };
+        return Err(format!(
+            "a point light {where_} the meshes' bounding sphere (centre {centre}, radius {radius} m) that it would \
+             need {needs}; relume's one emitter is a spot light of at most {MAX_OUTER_ANGLE_DEG}°: move the light \
+             further out or make it a spot light"
+        ));
+    }
+    Ok(LightDescription {
+        position: position.as_dvec3().to_array(),
+        direction: (to_centre / distance).as_vec3().to_array(),
+        inner_angle_deg: needed_deg,
+        outer_angle_deg: needed_deg,
+        intensity: intensity.to_array(),
+    })
+}
+
+/// The bounding sphere (centre, radius), in the world, of the meshes of `nodes`, from their
+/// `POSITION` accessors' `min` and `max` (which glTF requires) and the nodes' world transforms:
+/// no buffer is read.
+fn mesh_bounds(nodes: &[(gltf::Node, Mat4)]) -> Result<(Vec3, f32), String> {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for (node, world) in nodes {
+        let Some(mesh) = node.mesh() else { continue };
+        for primitive in mesh.primitives() {
+            let Some(positions) = primitive.get(&Semantic::Positions) else { continue };
+            let corner = |value: Option<gltf::json::Value>| -> Option<Vec3> {
+                let array = value?;
+                let array = array.as_array()?;
+                let v: Vec<f32> = array.iter().filter_map(|x| x.as_f64()).map(|x| x as f32).collect();
+                (v.len() == 3 && v.iter().all(|x| x.is_finite())).then(|| Vec3::new(v[0], v[1], v[2]))
+            };
+            let (Some(min), Some(max)) = (corner(positions.min()), corner(positions.max())) else {
+                return Err(format!(
+                    "accessors[{}] (POSITION of meshes[{}]) has no finite 3-number `min` and `max`, which glTF \
+                     requires and a point light needs for the meshes' bounds",
+                    positions.index(),
+                    mesh.index()
+                ));
+            };
+            for i in 0..8 {
+                let p = Vec3::new(
+                    if i & 1 == 0 { min.x } else { max.x },
+                    if i & 2 == 0 { min.y } else { max.y },
+                    if i & 4 == 0 { min.z } else { max.z },
+                );
+                let p = world.transform_point3(p);
+                (lo, hi) = (lo.min(p), hi.max(p));
+            }
+        }
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Err("a point light, and no mesh for it to light (its bounds are needed)".to_owned());
+    }
+    Ok(((lo + hi) * 0.5, (hi - lo).length() * 0.5))
 }
 
 /// A glTF perspective camera (looking down its node's -Z, +Y up) as relume's camera.
@@ -1169,12 +1259,11 @@ mod tests {
         let camera = json!([{"type": "perspective", "perspective": {"yfov": 0.7, "znear": 0.1}}]);
         for (file, kind, cameras, expected) in [
             (
-                "point.gltf",
-                "point",
+                "sun.gltf",
+                "directional",
                 camera.clone(),
-                Some("nodes[1] (`lamp`): its KHR_lights_punctual light (`lights[0]`): a point light"),
+                Some("nodes[1] (`lamp`): its KHR_lights_punctual light (`lights[0]`): a directional light"),
             ),
-            ("sun.gltf", "directional", camera.clone(), Some("a directional light")),
             (
                 "spot.gltf",
                 "spot",
@@ -1211,6 +1300,39 @@ mod tests {
                 (other, expected) => panic!("{file}: expected {expected:?}, got {other:?}"),
             }
         }
+        // A point light outside the meshes' bounds is the spot light aimed at their bounding
+        // sphere with no falloff over it: every vertex inside its cone, the same intensity.
+        let with_point_light = |d: &mut Value| {
+            d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+            d["extensions"] = lights("point");
+            d["cameras"] = camera.clone();
+        };
+        write(&dir, "point.gltf", nodes.clone(), with_point_light);
+        let light = scene("point.gltf").expect("a point light outside the meshes").light.expect("a light");
+        assert_eq!(light.intensity, [1.0, 0.5, 0.5], "683 cd is 1 W/sr");
+        assert_eq!(light.inner_angle_deg, light.outer_angle_deg, "no falloff inside the cone");
+        // The triangle (0,0,0) (1,0,0) (0,1,0): bounding sphere centre (0.5, 0.5, 0), radius
+        // 0.5·√2, seen from the lamp at (0, 3, 0).
+        let (apex, axis) = (glam::DVec3::from(light.position).as_vec3(), Vec3::from(light.direction));
+        assert!(apex.abs_diff_eq(Vec3::new(0.0, 3.0, 0.0), 1e-6));
+        let centre = Vec3::new(0.5, 0.5, 0.0);
+        assert!(axis.abs_diff_eq((centre - apex).normalize(), 1e-6), "aimed at the centre: {axis}");
+        let sphere_deg = (0.5f32.sqrt() / (centre - apex).length()).asin().to_degrees();
+        assert!((light.outer_angle_deg - sphere_deg * POINT_CONE_MARGIN).abs() < 1e-3, "{light:?}");
+        for vertex in [Vec3::ZERO, Vec3::X, Vec3::Y] {
+            let angle = (vertex - apex).angle_between(axis).to_degrees();
+            assert!(angle < light.outer_angle_deg, "vertex {vertex} at {angle}° outside the cone");
+        }
+        let mut near = nodes.clone();
+        near[1]["translation"] = json!([0.3, 0.3, 0.0]);
+        write(&dir, "inside.gltf", near.clone(), with_point_light);
+        let message = scene("inside.gltf").expect_err("inside the meshes").to_string();
+        assert!(message.contains("a point light inside the meshes' bounding sphere"), "{message}");
+        near[1]["translation"] = json!([0.5, 0.5, 0.71]);
+        write(&dir, "near.gltf", near, with_point_light);
+        let message = scene("near.gltf").expect_err("too near the meshes").to_string();
+        assert!(message.contains("so near") && message.contains("make it a spot light"), "{message}");
+
         write(&dir, "blind.gltf", json!([{"mesh": 0}]), |_| {});
         let message = scene("blind.gltf").expect_err("no camera").to_string();
         assert!(message.contains("no camera node"), "{message}");
