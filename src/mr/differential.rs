@@ -17,7 +17,7 @@
 //!    explains (lit by light no VAL stands for) from darkening more than a white surface would.
 //!    Receiver values are interpolated bilinearly to pixels.
 
-use crate::gpu::differential::{Receiver, ReceiverLight};
+use crate::gpu::differential::{DifferentialDevice, Receiver, ReceiverLight};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use crate::twin::Val;
@@ -42,11 +42,14 @@ pub struct MrSettings {
     pub receiver_margin: f32,
     /// One receiver per `receiver_step x receiver_step` depth pixels, 1..=64; default 4.
     pub receiver_step: u32,
+    /// Where the differential pass runs: `auto` (default: the CPU on CPU adapters such as
+    /// lavapipe, the GPU otherwise), `gpu` or `cpu`. Both give the same sums.
+    pub device: DifferentialDevice,
 }
 
 impl Default for MrSettings {
     fn default() -> Self {
-        Self { differential: true, receiver_margin: 0.3, receiver_step: 4 }
+        Self { differential: true, receiver_margin: 0.3, receiver_step: 4, device: DifferentialDevice::Auto }
     }
 }
 

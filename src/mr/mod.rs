@@ -111,7 +111,7 @@ impl MrRenderer {
         let differential = match scene.settings.mr.differential {
             false => None,
             true => Some(DifferentialState {
-                pass: Differential::new(gpu, &renderer.scene)?,
+                pass: Differential::on(gpu, &renderer.scene, scene.settings.mr.device)?,
                 emitters: differential::emitters(scene),
                 bounds: differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position))),
             }),

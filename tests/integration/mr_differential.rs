@@ -4,7 +4,7 @@
 
 use super::gpu;
 use glam::Vec3;
-use relume::gpu::differential::{Differential, Receiver, scene_bvh, twin};
+use relume::gpu::differential::{Differential, DifferentialDevice, Receiver, scene_bvh, twin};
 use relume::gpu::scene::{FlatScene, GpuScene};
 use relume::mr::differential::relit_radiance;
 use relume::scene::{Material, Scene};
@@ -69,10 +69,11 @@ fn gpu_box(gpu: &relume::gpu::Gpu, albedo: f32) -> (Scene, GpuScene) {
 }
 
 /// The GPU pass and its twin agree at every receiver, for real VALs (blocked light) and for the
-/// box's own sparse points re-emitting (added light). Both cast the same shadow rays with the
-/// same arithmetic (`twin::bvh::Bvh::occluded` is the traversal's twin), so they differ by the
-/// order of float sums only: 1e-4 of the receiver's total plus 1e-6 W/m² (one flipped
-/// ray toward a VAL of these fluxes would move a sum by over 1e-3 of it).
+/// box's own sparse points re-emitting (added light), and so does the CPU backend (the twin
+/// over rayon). All cast the same shadow rays with the same arithmetic
+/// (`twin::bvh::Bvh::occluded` is the GPU traversal's twin), so they differ by the order of
+/// float sums only: 1e-4 of the receiver's total plus 1e-6 W/m² (one flipped ray toward a VAL
+/// of these fluxes would move a sum by over 1e-3 of it).
 #[test]
 fn mr_differential_gpu_matches_twin() {
     let gpu = gpu();
@@ -87,26 +88,29 @@ fn mr_differential_gpu_matches_twin() {
     vals.extend(relume::mr::differential::emitter_vals(&emitters, &lit));
     let receivers: Vec<Receiver> =
         plate_receivers().into_iter().map(|r| Receiver { position: r.position - origin, ..r }).collect();
-    let mut pass = Differential::new(&gpu, &gpu_scene).unwrap();
-    let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, &vals, real_count).unwrap();
     let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
-    let (mut blocked, mut added) = (0, 0);
-    for (r, got) in receivers.iter().zip(&light) {
-        let want = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
-        let scale = (want.unoccluded + want.added).max_element();
-        let tol = 1e-4 * scale + 1e-6;
-        for (g, w, what) in [
-            (got.unoccluded, want.unoccluded, "unoccluded"),
-            (got.blocked, want.blocked, "blocked"),
-            (got.added, want.added, "added"),
-        ] {
-            assert!((g - w).abs().max_element() <= tol, "{what} at {}: GPU {g} vs CPU {w}", r.position);
+    for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
+        let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
+        assert_eq!(pass.device(), device);
+        let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, &vals, real_count).unwrap();
+        let (mut blocked, mut added) = (0, 0);
+        for (r, got) in receivers.iter().zip(&light) {
+            let want = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
+            let scale = (want.unoccluded + want.added).max_element();
+            let tol = 1e-4 * scale + 1e-6;
+            for (g, w, what) in [
+                (got.unoccluded, want.unoccluded, "unoccluded"),
+                (got.blocked, want.blocked, "blocked"),
+                (got.added, want.added, "added"),
+            ] {
+                assert!((g - w).abs().max_element() <= tol, "{device:?} {what} at {}: {g} vs twin {w}", r.position);
+            }
+            blocked += usize::from(want.blocked.x > 0.0);
+            added += usize::from(want.added.x > 0.0);
         }
-        blocked += usize::from(want.blocked.x > 0.0);
-        added += usize::from(want.added.x > 0.0);
+        eprintln!("{device:?}: {} receivers, {rounds} rounds: {blocked} shadowed, {added} lit", receivers.len());
+        assert!(blocked > 50 && added > 50, "the test must exercise both sums: {blocked} shadowed, {added} lit");
     }
-    eprintln!("{} receivers, {rounds} rounds: {blocked} shadowed, {added} lit by the box", receivers.len());
-    assert!(blocked > 50 && added > 50, "the test must exercise both sums: {blocked} shadowed, {added} lit");
 }
 
 /// A real plate (albedo 0.5, its camera radiance the exact reference without the box) under a
@@ -122,6 +126,8 @@ fn mr_differential_plate_darkens_as_exact_predicts() {
     let (_, gpu_scene) = gpu_box(&gpu, 0.0);
     let vals = lights_above();
     let receivers = plate_receivers();
+    // On this machine's CPU adapter `new` picks the CPU backend; `mr_differential_gpu_matches_twin`
+    // holds the GPU pass to the same sums.
     let mut pass = Differential::new(&gpu, &gpu_scene).unwrap();
     let (light, _) = pass.run(&gpu, &gpu_scene, &receivers, &vals, vals.len()).unwrap();
 

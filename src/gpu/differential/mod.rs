@@ -6,7 +6,8 @@
 //! [`twin::receiver_light`].
 //!
 //! Runs in rounds, like the exact reference (see `differential.wgsl`): the host dispatches until
-//! every receiver has seen every VAL.
+//! every receiver has seen every VAL. On CPU adapters it runs on the CPU instead
+//! ([`DifferentialDevice`]): the twin's sums over rayon's threads.
 
 pub mod twin;
 
@@ -107,8 +108,99 @@ pub fn scene_bvh(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>, Bvh) {
     (positions, triangles, bvh)
 }
 
-/// The pass for one scene placement: its BVH and buffers grown to the largest frame so far.
+/// Where the differential pass runs (`settings.mr.device`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum DifferentialDevice {
+    /// The CPU on CPU adapters, the GPU otherwise. On lavapipe the GPU pass runs one
+    /// invocation per workgroup (for llvmpipe's loop limit, see [`workgroup`]) and is two
+    /// orders of magnitude slower than the CPU backend (README, "Mixed reality that looks
+    /// right").
+    #[default]
+    Auto,
+    /// `differential.wgsl`.
+    Gpu,
+    /// The twin, [`twin::receiver_light`], over rayon's threads: the GPU traversal's twin
+    /// (`Bvh::occluded`), so every shadow ray is decided as the GPU pass decides it. (obvhs's
+    /// CWBVH traversal, the CPU exact reference's, decides rays that graze a triangle's edge or
+    /// a node's box otherwise: on the plate-and-box test one receiver in 1,089 differed.)
+    Cpu,
+}
+
+/// The differential pass for one scene placement, on the GPU or the CPU.
 pub struct Differential {
+    backend: Backend,
+}
+
+#[allow(clippy::large_enum_variant)]
+enum Backend {
+    Gpu(GpuPass),
+    /// The virtual triangles and their BVH.
+    Cpu {
+        positions: Vec<Vec3>,
+        triangles: Vec<[u32; 3]>,
+        bvh: Bvh,
+    },
+}
+
+impl Differential {
+    /// The pass over `scene`'s triangles as placed now, on [`DifferentialDevice::Auto`].
+    pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
+        Self::on(gpu, scene, DifferentialDevice::Auto)
+    }
+
+    /// The pass over `scene`'s triangles as placed now, on `device`.
+    pub fn on(gpu: &Gpu, scene: &GpuScene, device: DifferentialDevice) -> Result<Self, GpuError> {
+        let cpu = match device {
+            DifferentialDevice::Auto => gpu.is_cpu(),
+            DifferentialDevice::Gpu => false,
+            DifferentialDevice::Cpu => true,
+        };
+        let backend = if cpu {
+            let (positions, triangles, bvh) = scene_bvh(scene);
+            Backend::Cpu { positions, triangles, bvh }
+        } else {
+            Backend::Gpu(GpuPass::new(gpu, scene)?)
+        };
+        Ok(Self { backend })
+    }
+
+    /// Where it runs.
+    pub fn device(&self) -> DifferentialDevice {
+        match self.backend {
+            Backend::Gpu(_) => DifferentialDevice::Gpu,
+            Backend::Cpu { .. } => DifferentialDevice::Cpu,
+        }
+    }
+
+    /// The sums of [`twin::receiver_light`] at every receiver: `vals[.. real_count]` are the
+    /// real VALs, the rest the virtual content's re-emitters. Returns them and the GPU rounds
+    /// it took (0 on the CPU). Submits and waits.
+    pub fn run(
+        &mut self,
+        gpu: &Gpu,
+        scene: &GpuScene,
+        receivers: &[Receiver],
+        vals: &[Val],
+        real_count: usize,
+    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
+        match &mut self.backend {
+            Backend::Gpu(pass) => pass.run(gpu, scene, receivers, vals, real_count),
+            Backend::Cpu { positions, triangles, bvh } => {
+                use rayon::prelude::*;
+                let real_count = real_count.min(vals.len());
+                let light = receivers
+                    .par_iter()
+                    .map(|r| twin::receiver_light(r, vals, real_count, bvh, positions, triangles))
+                    .collect();
+                Ok((light, 0))
+            }
+        }
+    }
+}
+
+/// The GPU pass for one scene placement: its BVH and buffers grown to the largest frame so far.
+struct GpuPass {
     kernel: Kernel,
     nodes: wgpu::Buffer,
     order: wgpu::Buffer,
@@ -120,9 +212,9 @@ pub struct Differential {
     vals: Option<(wgpu::Buffer, usize)>,
 }
 
-impl Differential {
+impl GpuPass {
     /// Build the BVH of `scene`'s triangles as placed now and the pass.
-    pub fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
+    fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
         let (_, _, bvh) = scene_bvh(scene);
         let none = wgpu::BufferUsages::empty();
         // A zero-filled node ends the traversal at once; a binding cannot be empty.
@@ -139,10 +231,8 @@ impl Differential {
         Ok(Self { kernel, nodes, order, params, status, per_receiver: None, vals: None })
     }
 
-    /// The sums of [`twin::receiver_light`] at every receiver: `vals[.. real_count]` are the
-    /// real VALs, the rest the virtual content's re-emitters. Returns them and the rounds it
-    /// took. Submits and waits.
-    pub fn run(
+    /// [`Differential::run`] on the GPU.
+    fn run(
         &mut self,
         gpu: &Gpu,
         scene: &GpuScene,

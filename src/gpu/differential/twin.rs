@@ -44,6 +44,16 @@ pub fn receiver_light(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
 ) -> ReceiverLight {
+    receiver_light_with(receiver, vals, real_count, |origin, target| bvh.occluded(positions, triangles, origin, target))
+}
+
+/// The sums at `receiver`, with `blocked(from, to)` deciding each shadow ray.
+fn receiver_light_with(
+    receiver: &Receiver,
+    vals: &[Val],
+    real_count: usize,
+    blocked: impl Fn(Vec3, Vec3) -> bool,
+) -> ReceiverLight {
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
     let mut sums = ReceiverLight::default();
     for (j, val) in vals.iter().enumerate() {
@@ -53,7 +63,7 @@ pub fn receiver_light(
             continue;
         }
         let e = val.flux * f;
-        let blocked = bvh.occluded(positions, triangles, origin, val.position + val.normal * RAY_OFFSET);
+        let blocked = blocked(origin, val.position + val.normal * RAY_OFFSET);
         if j < real_count {
             sums.unoccluded += e;
             if blocked {
