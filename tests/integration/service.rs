@@ -242,6 +242,7 @@ fn pose(x: f32, y: f32, z: f32, w: f32) -> proto::Pose {
             translation: Some(proto::Vec3 { x: 0.0, y: 1.0, z: 2.0 }),
             rotation: Some(proto::Quaternion { x, y, z, w }),
         })),
+        translation_f64: None,
     }
 }
 
@@ -469,6 +470,7 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
         transform: Some(proto::pose::Transform::Matrix(proto::Matrix4 {
             column_major: vec![2.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0],
         })),
+        translation_f64: None,
     });
     let e = ws.expect_error(envelope(Body::RgbdFrame(f)), ErrorCode::InvalidField).await;
     assert_eq!(e.field, "rgbd_frame.camera_to_world.matrix.column_major");
