@@ -617,6 +617,7 @@ impl Renderer {
                     inner_angle: 0.0,
                     outer_angle: 0.5,
                     intensity: Vec3::ZERO,
+                    up: Vec3::Z,
                 },
                 0,
                 Mat4::IDENTITY,

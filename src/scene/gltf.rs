@@ -177,6 +177,7 @@ fn light_description(light: &gltf::khr_lights_punctual::Light, world: Mat4) -> R
         inner_angle_deg: inner.to_degrees(),
         outer_angle_deg: outer.to_degrees(),
         intensity: intensity.to_array(),
+        up: None,
     };
     description.validate("light").map_err(|e| e.to_string())?;
     Ok(description)

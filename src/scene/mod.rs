@@ -177,6 +177,23 @@ pub struct SpotLight {
     pub outer_angle: f32,
     /// Radiant intensity on the axis, W/sr, linear RGB, each channel >= 0.
     pub intensity: Vec3,
+    /// World-space unit up of the light's frame (not parallel to `direction`): orients the
+    /// RSM's grid about the axis, as a camera's up orients its image.
+    pub up: Vec3,
+}
+
+impl SpotLight {
+    /// The up a light without one gets: world +Y, or +Z when the unit `direction` is within
+    /// about 8° of vertical (|y| > 0.99).
+    pub fn default_up(direction: Vec3) -> Vec3 {
+        if direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y }
+    }
+
+    /// World to the light's view space (right-handed, looking down -Z along `direction`, +Y
+    /// toward `up`): the frame of the RSM's grid.
+    pub fn world_to_light(&self) -> Mat4 {
+        glam::camera::rh::view::look_at_mat4(self.position, self.position + self.direction, self.up)
+    }
 }
 
 /// A perspective camera (right-handed, looking from `position` toward `target`).

@@ -512,6 +512,7 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
         inner_angle_deg: l.inner_angle_deg,
         outer_angle_deg: l.outer_angle_deg,
         intensity: l.intensity.map(|v| [v.x, v.y, v.z]),
+        up: l.up.map(|v| [v.x, v.y, v.z]),
     });
     let mut model_transforms: Vec<(u32, TransformDescription)> = Vec::with_capacity(c.model_transforms.len());
     for (i, t) in c.model_transforms.into_iter().enumerate() {

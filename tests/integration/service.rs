@@ -298,6 +298,11 @@ async fn scenes_are_created_rendered_and_deleted() {
     assert!(floats.iter().all(|v| v.is_finite() && *v >= 0.0));
     assert!(floats.chunks_exact(4).any(|p| p[0] > 0.0 && p[3] == 1.0), "indirect light on covered pixels");
 
+    // The light's frame: a zero `up` is refused, naming the field.
+    let zero_up = json!({"light": {"up": [0, 0, 0]}});
+    let reply = server.post(&format!("/v1/scenes/{id}/render"), &zero_up).await;
+    assert_eq!(reply.error(400, "invalid_field")["field"], "light.up");
+
     let metrics = server.get("/metrics").await;
     assert_eq!(metrics.status, StatusCode::OK);
     assert!(metrics.header("content-type").starts_with("text/plain; version=0.0.4"));
@@ -506,6 +511,13 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
     assert_eq!((e.field.as_str(), e.request_id), ("control.light.inner_angle_deg", Some(21)));
     let e = ws
         .expect_error(
+            control(&|c| c.light = Some(proto::LightOverride { up: v3(0.0, 0.0, 0.0), ..Default::default() })),
+            ErrorCode::InvalidField,
+        )
+        .await;
+    assert_eq!((e.field.as_str(), e.request_id), ("control.light.up", Some(21)));
+    let e = ws
+        .expect_error(
             control(&|c| {
                 c.model_transforms = vec![proto::ModelTransform {
                     mesh_index: 3,
@@ -563,7 +575,7 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
 
     let metrics = String::from_utf8_lossy(&server.get("/metrics").await.body).into_owned();
     assert!(metrics.contains("relume_stream_errors_total{code=\"ERROR_CODE_INVALID_FIELD\"}"), "{metrics}");
-    assert!(metrics.contains("relume_stream_messages_total{kind=\"control\"} 3"), "{metrics}");
+    assert!(metrics.contains("relume_stream_messages_total{kind=\"control\"} 4"), "{metrics}");
     // Other clients were not affected.
     assert_eq!(server.get(&format!("/v1/scenes/{id}")).await.status, StatusCode::OK);
     server.stop().await;
