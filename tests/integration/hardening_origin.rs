@@ -23,10 +23,10 @@ const SIDE: u32 = 96;
 
 /// Largest relative RMSE between the moved and the original indirect image: the issue's
 /// target. Measured on lavapipe: a pure move gives a bit-identical image (0, the local
-/// coordinates come out the same), a turn about the vertical 0.05-0.8 % at any distance (also
-/// 332 m away): the rotated vertices, light direction and depth range round differently in f32,
-/// which flips the triangle some silhouette and RSM texels see. A millimetre lost at 100 km
-/// (f32 spacing 7.8 mm) gave 58 % before the floating origin.
+/// coordinates come out the same), a turn about the vertical 0.2-1.0 % and a tilt 0.5-1.1 %,
+/// the same at any distance, the origin included: what depends on the turn is not precision
+/// (see the tilt test below). A millimetre lost at 100 km (f32 spacing 7.8 mm) gave 58 %
+/// before the floating origin.
 const TOLERANCE: f64 = 0.01;
 
 fn read_description(name: &str) -> SceneDescription {
@@ -44,11 +44,8 @@ fn description() -> SceneDescription {
 /// user's origin, then by `translation`; returns it with that move as an f64 transform (which
 /// the test applies to a recording's poses too). The anchor (composed with the scene's own, if
 /// any) places the meshes, and the light's and camera's positions and directions are mapped by
-/// the same f64 matrix.
-///
-/// The turn is about the vertical because the spot light's RSM has no roll of its own: its
-/// grid's up is world +Y, so a tilt of the whole scene also turns the RSM grid against the
-/// scene and resamples the VALs, a different image that is no precision loss.
+/// the same f64 matrix, the light's `up` too (its default when it has none), so the RSM grid
+/// turns with the scene.
 fn moved(description: &SceneDescription, translation: DVec3, rotation: DQuat) -> (SceneDescription, DAffine3) {
     let old = description.anchor.as_ref().map_or(DMat4::IDENTITY, TransformDescription::to_matrix);
     let (scale, old_rotation, old_translation) = old.to_scale_rotation_translation();
@@ -67,7 +64,9 @@ fn moved(description: &SceneDescription, translation: DVec3, rotation: DQuat) ->
     let mut d = description.clone();
     d.anchor = Some(anchor);
     if let Some(light) = d.light.as_mut() {
-        (light.position, light.direction) = (point(light.position), vector(light.direction));
+        let up = light.up.unwrap_or_else(|| light.to_spot_light(DVec3::ZERO).up.to_array());
+        (light.position, light.direction, light.up) =
+            (point(light.position), vector(light.direction), Some(vector(up)));
     }
     let camera = &mut d.camera;
     (camera.position, camera.target, camera.up) = (point(camera.position), point(camera.target), vector(camera.up));
@@ -87,13 +86,16 @@ fn original(gpu: &Gpu) -> &'static LinearImage {
     ORIGINAL.get_or_init(|| indirect(gpu, &description()).0)
 }
 
-fn error_when_moved(gpu: &Gpu, translation: DVec3, yaw_deg: f32) -> f64 {
-    let rotation = DQuat::from_rotation_y(f64::from(yaw_deg).to_radians());
+fn error_when_moved(gpu: &Gpu, translation: DVec3, rotation: DQuat) -> f64 {
     let (image, origin) = indirect(gpu, &moved(&description(), translation, rotation).0);
     // The floating origin follows the scene: it sits at the moved scene's centre.
     assert!(origin.distance(translation) < 5.0, "origin {origin} for a scene moved to {translation}");
     let error = relative_rmse(&image, original(gpu));
-    eprintln!("moved by {translation} m, turned {yaw_deg}°: indirect rel RMSE {error:.2e}");
+    let (axis, angle) = rotation.to_axis_angle();
+    eprintln!(
+        "moved by {translation} m, turned {:.1}° about {axis:.3}: indirect rel RMSE {error:.2e}",
+        angle.to_degrees()
+    );
     error
 }
 
@@ -103,7 +105,7 @@ fn the_issues_far_scenes_render_as_at_the_origin() {
     let gpu = gpu();
     for km in [1.0, 10.0 / std::f64::consts::SQRT_2, 100.0 / std::f64::consts::SQRT_2] {
         let translation = DVec3::new(km * 1e3, 0.0, km * 1e3);
-        let error = error_when_moved(&gpu, translation, 0.0);
+        let error = error_when_moved(&gpu, translation, DQuat::IDENTITY);
         assert!(error <= TOLERANCE, "moved by {translation} m: indirect rel RMSE {error} > {TOLERANCE}");
     }
 }
@@ -205,8 +207,8 @@ fn turn(axis: [f64; 3], angle_deg: f64) -> DQuat {
 
 proptest! {
     // Each case loads the scene and renders 96² with occlusion on lavapipe (a few seconds).
-    // A fixed seed: the same 6 cases every run (turns measured 0.05-0.6 % with it, 0.3-0.8 %
-    // with random seeds, against the 1 % bound).
+    // A fixed seed: the same 6 cases every run (turns about the vertical measured 0.21-0.99 %
+    // with it, the same at any distance, against the 1 % bound).
     #![proptest_config(ProptestConfig {
         cases: 6,
         failure_persistence: None,
@@ -220,12 +222,34 @@ proptest! {
     fn a_scene_moved_anywhere_within_100_km_renders_as_at_the_origin(
         direction in prop::array::uniform3(-1.0f64..1.0),
         distance in 0.0f64..100e3,
-        yaw_deg in 0.0f32..360.0,
+        yaw_deg in 0.0f64..360.0,
     ) {
         let direction = DVec3::from_array(direction).try_normalize().unwrap_or(DVec3::X);
         let translation = direction * distance;
-        let error = error_when_moved(&gpu(), translation, yaw_deg);
+        let error = error_when_moved(&gpu(), translation, turn([0.0, 1.0, 0.0], yaw_deg));
         prop_assert!(error <= TOLERANCE, "moved by {} m, turned {}°: rel RMSE {} > {}", translation, yaw_deg, error, TOLERANCE);
+    }
+
+    /// Anywhere within 100 km, turned about any axis (tilts): the light's `up` turns with the
+    /// scene, so the RSM grid stays put on it. Measured with this seed 0.50-1.08 % (the first
+    /// case 0.91 %, the shrunk failure a 273° turn about -Z at the origin 1.08 %), the same at
+    /// any distance, 0.8-1.1 % with occlusion off; before `light.up` the grid turned against
+    /// the scene and the first case gave 2.02 %, the turns about -Z 1.99 %. What is left is a
+    /// dependence on the world's axes outside the floating origin, the RSM grid and the disc
+    /// occluders, not yet found: over the 1 % target.
+    #[test]
+    #[ignore = "tilts measure 0.50-1.08 % against the 1 % target (README \"Far from the origin\")"]
+    fn a_scene_moved_and_tilted_renders_as_at_the_origin(
+        direction in prop::array::uniform3(-1.0f64..1.0),
+        distance in 0.0f64..100e3,
+        axis in prop::array::uniform3(-1.0f64..1.0),
+        angle_deg in 0.0f64..360.0,
+    ) {
+        let direction = DVec3::from_array(direction).try_normalize().unwrap_or(DVec3::X);
+        let translation = direction * distance;
+        let rotation = turn(axis, angle_deg);
+        let error = error_when_moved(&gpu(), translation, rotation);
+        prop_assert!(error <= TOLERANCE, "moved by {} m, turned {:?}: rel RMSE {} > {}", translation, rotation, error, TOLERANCE);
     }
 }
 
