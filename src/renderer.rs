@@ -27,7 +27,7 @@ use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::image::LinearImage;
 use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
 use crate::scene::{self, Camera, Scene, SpotLight};
-use glam::{Affine3A, Mat4, Vec3, Vec4};
+use glam::{Affine3A, DAffine3, Mat4, Vec3, Vec4};
 
 /// How the indirect light is computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
@@ -145,9 +145,8 @@ pub enum View {
     /// The scene file's perspective camera.
     Scene(Camera),
     /// A pinhole camera (an RGB-D frame's): intrinsics, scaled to the render size, and a
-    /// camera-to-world pose in optical axes (x right, y down, z forward). Given to
-    /// [`Renderer::set_view`] in the user's world coordinates (as recorded); the renderer keeps
-    /// it relative to the scene's origin.
+    /// camera-to-world pose in optical axes (x right, y down, z forward), relative to the
+    /// scene's origin ([`Renderer::set_pinhole_view`] takes it in the user's world coordinates).
     Pinhole { intrinsics: Intrinsics, camera_to_world: Affine3A },
 }
 
@@ -351,20 +350,15 @@ impl Renderer {
         &self.view
     }
 
-    /// Render from `view` from now on (a pinhole pose in user coordinates, a [`Camera`] in the
-    /// scene's local frame, as loaded).
-    pub fn set_view(&mut self, view: View) {
-        self.view = match view {
-            View::Pinhole { intrinsics, camera_to_world } => {
-                View::Pinhole { intrinsics, camera_to_world: self.local_pose(&camera_to_world) }
-            }
-            scene_camera => scene_camera,
-        };
+    /// Render from a pinhole camera (an RGB-D frame's) from now on: `camera_to_world` in the
+    /// user's world coordinates (f64, as recorded), kept relative to the scene's origin.
+    pub fn set_pinhole_view(&mut self, intrinsics: Intrinsics, camera_to_world: &DAffine3) {
+        self.view = View::Pinhole { intrinsics, camera_to_world: self.local_pose(camera_to_world) };
     }
 
-    /// `pose`, in the user's world coordinates, relative to the scene's origin (the
-    /// translation subtracted in f64), as the GPU buffers are.
-    pub fn local_pose(&self, pose: &Affine3A) -> Affine3A {
+    /// `pose`, in the user's world coordinates (f64), relative to the scene's origin (the
+    /// translation subtracted in f64, then rounded to f32), as the GPU buffers are.
+    pub fn local_pose(&self, pose: &DAffine3) -> Affine3A {
         scene::local_pose(self.origin, pose)
     }
 
@@ -623,6 +617,7 @@ impl Renderer {
                     inner_angle: 0.0,
                     outer_angle: 0.5,
                     intensity: Vec3::ZERO,
+                    up: Vec3::Z,
                 },
                 0,
                 Mat4::IDENTITY,

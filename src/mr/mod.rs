@@ -14,13 +14,13 @@ use crate::gpu::differential::Differential;
 use crate::gpu::timing::StageTimings;
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, encode_srgb};
-use crate::renderer::{Method, Renderer, View};
+use crate::renderer::{Method, Renderer};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use differential::{Emitter, LightField, MrSettings};
 use environment::Environment;
-use glam::{Affine3A, Vec3};
+use glam::{DAffine3, Vec3};
 use std::time::Instant;
 
 /// How replayed frames are lit and rendered.
@@ -170,7 +170,7 @@ impl MrRenderer {
         }
         let environment_ms = start.elapsed().as_secs_f64() * 1e3;
         self.frames += 1;
-        self.renderer.set_view(View::Pinhole { intrinsics: frame.intrinsics, camera_to_world: frame.camera_to_world });
+        self.renderer.set_pinhole_view(frame.intrinsics, &frame.camera_to_world);
         let mut rendered = self.renderer.render(gpu, Method::Sparse, w, h)?;
         if real_vals.is_some() {
             rendered.timings.stages.insert(0, (crate::renderer::stage::RGBD_VALS.to_owned(), rgbd_ms));
@@ -178,7 +178,7 @@ impl MrRenderer {
         if self.environment != Environment::None {
             rendered.timings.stages.insert(1, (ENVIRONMENT_STAGE.to_owned(), environment_ms));
         }
-        let virtual_depth = virtual_depth(gpu, &self.renderer, frame.camera_to_world)?;
+        let virtual_depth = virtual_depth(gpu, &self.renderer, &frame.camera_to_world)?;
         let sparse_irradiance = self.renderer.read_gathered_irradiance(gpu)?;
         let background = match (&mut self.differential, &real_vals) {
             (Some(d), Some(vals)) => {
@@ -215,13 +215,14 @@ impl MrRenderer {
 }
 
 /// Optical depth (m, along `camera_to_world`'s z) of the virtual content at each pixel of the
-/// last frame `renderer` rendered (from that camera); `None` where no geometry covers it.
-pub fn virtual_depth(gpu: &Gpu, renderer: &Renderer, camera_to_world: Affine3A) -> Result<Vec<Option<f32>>, GpuError> {
+/// last frame `renderer` rendered (from that camera, given in the user's world coordinates);
+/// `None` where no geometry covers it.
+pub fn virtual_depth(gpu: &Gpu, renderer: &Renderer, camera_to_world: &DAffine3) -> Result<Vec<Option<f32>>, GpuError> {
     let Some(view) = renderer.camera_view() else {
         return Ok(Vec::new());
     };
     // The flat scene is relative to the scene's origin: so must the pose be.
-    let world_to_camera = renderer.local_pose(&camera_to_world).inverse();
+    let world_to_camera = renderer.local_pose(camera_to_world).inverse();
     let flat = &renderer.scene.flat;
     Ok(view
         .read(gpu)?
@@ -301,7 +302,7 @@ mod tests {
             intrinsics: Intrinsics { width: w, height: h, fx: 10.0, fy: 10.0, cx: 1.5, cy: 1.5 },
             color: (0..w * h).map(|i| [i as u8, 7, 9]).collect(),
             depth: vec![depth; (w * h) as usize],
-            camera_to_world: glam::Affine3A::IDENTITY,
+            camera_to_world: DAffine3::IDENTITY,
         }
     }
 

@@ -7,7 +7,7 @@
 //! - [`accumulate`]: a persistent world-space VAL set across frames (paper §5, restriction 3).
 //! - `twin::rgbd`: the CPU twin of the VAL generation; `gpu::lights::rgbd`: the GPU pass.
 
-use glam::Affine3A;
+use glam::DAffine3;
 use serde::{Deserialize, Serialize};
 
 pub mod accumulate;
@@ -62,8 +62,10 @@ pub struct RgbdFrame {
     pub color: Vec<[u8; 3]>,
     /// Depth along the optical axis (m), row-major, `width * height`; 0, negative or NaN = none.
     pub depth: Vec<f32>,
-    /// Camera-to-world in optical axes (x right, y down, z forward).
-    pub camera_to_world: Affine3A,
+    /// Camera-to-world in optical axes (x right, y down, z forward), in the user's world
+    /// coordinates and f64 (as recorded or sent; f32 keeps 7.8 mm at 100 km from the origin):
+    /// made relative to a scene's floating origin, then f32, by [`crate::scene::local_pose`].
+    pub camera_to_world: DAffine3,
 }
 
 impl RgbdFrame {
@@ -165,7 +167,7 @@ mod tests {
             intrinsics: Intrinsics { width: 4, height: 2, fx: 4.0, fy: 4.0, cx: 1.5, cy: 0.5 },
             color: [0u8, 10, 50, 50, 20, 30, 50, 50].iter().map(|&c| [c, c, 255]).collect(),
             depth: vec![1.0, 1.0, 0.0, f32::NAN, 5.0, -1.0, 0.0, 0.0],
-            camera_to_world: Affine3A::from_translation(glam::Vec3::X),
+            camera_to_world: DAffine3::from_translation(glam::DVec3::X),
         };
         let half = frame.downsampled(2);
         assert_eq!(half.intrinsics, Intrinsics { width: 2, height: 1, fx: 2.0, fy: 2.0, cx: 0.5, cy: 0.0 });

@@ -27,7 +27,7 @@ use std::fs::File;
 use std::io::{BufReader, ErrorKind};
 use std::path::{Path, PathBuf};
 
-use glam::{Affine3A, Quat, Vec3};
+use glam::{DAffine3, DQuat, DVec3};
 use image::{ColorType, DynamicImage, ImageDecoder, ImageFormat, ImageReader};
 use serde::Deserialize;
 
@@ -147,8 +147,9 @@ pub struct Recording {
     has_groundtruth: bool,
     /// Depth timestamps (s) of the kept frames, increasing.
     timestamps: Vec<f64>,
-    /// Camera-to-world (optical axes) at each timestamp.
-    poses: Vec<Affine3A>,
+    /// Camera-to-world (optical axes) at each timestamp, in f64 as recorded (a recording far
+    /// from the origin keeps its millimetres; [`crate::scene::local_pose`] rounds to f32).
+    poses: Vec<DAffine3>,
     frames: Frames,
     stats: AssociationStats,
     layout: Layout,
@@ -189,7 +190,7 @@ pub(super) struct Parts {
     pub depth_scale: f32,
     pub has_groundtruth: bool,
     pub timestamps: Vec<f64>,
-    pub poses: Vec<Affine3A>,
+    pub poses: Vec<DAffine3>,
     pub frames: Frames,
     pub stats: AssociationStats,
     pub layout: Layout,
@@ -273,7 +274,7 @@ impl Recording {
                 continue;
             };
             let pose = match &groundtruth {
-                None => Some(Affine3A::IDENTITY),
+                None => Some(DAffine3::IDENTITY),
                 Some(samples) => interpolate_pose(samples, t, tolerance),
             };
             let Some(pose) = pose else {
@@ -348,8 +349,8 @@ impl Recording {
         &self.timestamps
     }
 
-    /// Camera-to-world pose (optical axes: x right, y down, z forward) of each frame.
-    pub fn poses(&self) -> &[Affine3A] {
+    /// Camera-to-world pose (optical axes: x right, y down, z forward) of each frame, f64.
+    pub fn poses(&self) -> &[DAffine3] {
         &self.poses
     }
 
@@ -581,13 +582,13 @@ fn parse_frame_list(file: &str, text: &str) -> Result<Vec<FrameEntry>, Recording
 }
 
 /// One line of `groundtruth.txt` (or one transform of an MCAP file): camera-to-world at
-/// `timestamp`.
+/// `timestamp`, in f64 as recorded (f32 keeps 7.8 mm at 100 km from the origin).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct PoseSample {
     pub timestamp: f64,
-    pub translation: Vec3,
+    pub translation: DVec3,
     /// Unit.
-    pub rotation: Quat,
+    pub rotation: DQuat,
 }
 
 impl PoseSample {
@@ -599,11 +600,11 @@ impl PoseSample {
         if norm.is_nan() || (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
             return Err(format!("quaternion (x y z w) has norm {norm}, not 1 (within {QUATERNION_NORM_TOLERANCE})"));
         }
-        let q = quaternion.map(|c| (c / norm) as f32);
+        let q = quaternion.map(|c| c / norm);
         Ok(PoseSample {
             timestamp,
-            translation: Vec3::from_array(translation.map(|c| c as f32)),
-            rotation: Quat::from_array(q).normalize(),
+            translation: DVec3::from_array(translation),
+            rotation: DQuat::from_array(q).normalize(),
         })
     }
 }
@@ -639,7 +640,7 @@ pub(super) fn nearest(sorted: &[f64], t: f64) -> Option<usize> {
 
 /// Camera-to-world at `t` from increasing `samples`: interpolated between the bracketing pair,
 /// the end sample just outside the trajectory; `None` when no sample lies within `tolerance`.
-pub(super) fn interpolate_pose(samples: &[PoseSample], t: f64, tolerance: f64) -> Option<Affine3A> {
+pub(super) fn interpolate_pose(samples: &[PoseSample], t: f64, tolerance: f64) -> Option<DAffine3> {
     let after = samples.partition_point(|s| s.timestamp <= t);
     let (a, b) = match (after.checked_sub(1).map(|i| samples[i]), samples.get(after)) {
         (Some(a), Some(b)) => (a, *b),
@@ -649,9 +650,9 @@ pub(super) fn interpolate_pose(samples: &[PoseSample], t: f64, tolerance: f64) -
     if (t - a.timestamp).abs().min((b.timestamp - t).abs()) > tolerance {
         return None;
     }
-    let s = if b.timestamp > a.timestamp { ((t - a.timestamp) / (b.timestamp - a.timestamp)) as f32 } else { 0.0 };
+    let s = if b.timestamp > a.timestamp { (t - a.timestamp) / (b.timestamp - a.timestamp) } else { 0.0 };
     let rotation = a.rotation.slerp(b.rotation, s).normalize();
-    Some(Affine3A::from_rotation_translation(rotation, a.translation.lerp(b.translation, s)))
+    Some(DAffine3::from_rotation_translation(rotation, a.translation.lerp(b.translation, s)))
 }
 
 /// The format of a recording's image file by its extension: JPEG for `.jpg`/`.jpeg`, else PNG.
@@ -719,10 +720,10 @@ fn load_depth(dir: &Path, file: &Path, intrinsics: &Intrinsics, depth_scale: f32
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::f32::consts::FRAC_PI_2;
+    use std::f64::consts::FRAC_PI_2;
 
-    fn sample(timestamp: f64, x: f32, angle: f32) -> PoseSample {
-        PoseSample { timestamp, translation: Vec3::new(x, 0.0, 0.0), rotation: Quat::from_rotation_z(angle) }
+    fn sample(timestamp: f64, x: f64, angle: f64) -> PoseSample {
+        PoseSample { timestamp, translation: DVec3::new(x, 0.0, 0.0), rotation: DQuat::from_rotation_z(angle) }
     }
 
     #[test]
@@ -757,7 +758,7 @@ mod tests {
     fn groundtruth_normalises_quaternions_and_rejects_bad_ones() {
         let samples = parse_groundtruth("# gt\n1.0 1 2 3 0 0 0 1.0004\n").unwrap();
         assert_eq!(samples.len(), 1);
-        assert_eq!(samples[0].translation, Vec3::new(1.0, 2.0, 3.0));
+        assert_eq!(samples[0].translation, DVec3::new(1.0, 2.0, 3.0));
         assert!((samples[0].rotation.length() - 1.0).abs() < 1e-6);
 
         let cases = [
@@ -770,6 +771,15 @@ mod tests {
         }
         let error = parse_groundtruth("# gt\n1.0 0 0 0 0 0 0 0.99\n").unwrap_err().to_string();
         assert!(error.starts_with("groundtruth.txt line 2: quaternion (qx qy qz qw) has norm 0.99"), "{error}");
+    }
+
+    #[test]
+    fn groundtruth_far_from_the_origin_keeps_its_digits() {
+        // f32 would round these to 7.8 mm steps; the pose is f64 up to `local_pose`.
+        let samples = parse_groundtruth("1.0 100000.0001 -70000.0003 5 0 0 0 1\n").unwrap();
+        assert_eq!(samples[0].translation, DVec3::new(100000.0001, -70000.0003, 5.0));
+        let pose = interpolate_pose(&samples, 1.0, 0.02).unwrap();
+        assert_eq!(pose.translation, samples[0].translation);
     }
 
     #[test]
@@ -789,9 +799,9 @@ mod tests {
         let samples = [sample(0.0, 0.0, 0.0), sample(0.01, 1.0, FRAC_PI_2)];
         let pose = interpolate_pose(&samples, 0.0025, 0.02).unwrap();
         let (scale, rotation, translation) = pose.to_scale_rotation_translation();
-        assert!(scale.abs_diff_eq(Vec3::ONE, 1e-5));
-        assert!(translation.abs_diff_eq(Vec3::new(0.25, 0.0, 0.0), 1e-5), "{translation}");
-        assert!(rotation.abs_diff_eq(Quat::from_rotation_z(FRAC_PI_2 / 4.0), 1e-6), "{rotation}");
+        assert!(scale.abs_diff_eq(DVec3::ONE, 1e-12));
+        assert!(translation.abs_diff_eq(DVec3::new(0.25, 0.0, 0.0), 1e-12), "{translation}");
+        assert!(rotation.abs_diff_eq(DQuat::from_rotation_z(FRAC_PI_2 / 4.0), 1e-12), "{rotation}");
     }
 
     #[test]
@@ -801,7 +811,7 @@ mod tests {
         b.rotation = -b.rotation;
         let pose = interpolate_pose(&[sample(0.0, 0.0, 0.0), b], 0.005, 0.02).unwrap();
         let (_, rotation, _) = pose.to_scale_rotation_translation();
-        assert!(rotation.abs_diff_eq(Quat::from_rotation_z(0.1), 1e-6), "{rotation}");
+        assert!(rotation.abs_diff_eq(DQuat::from_rotation_z(0.1), 1e-12), "{rotation}");
     }
 
     #[test]
@@ -809,9 +819,9 @@ mod tests {
         let samples = [sample(1.0, 0.0, 0.0), sample(1.01, 1.0, 0.0), sample(2.0, 2.0, 0.0)];
         // Just outside: the end sample.
         let before = interpolate_pose(&samples, 0.99, 0.02).unwrap();
-        assert_eq!(before.translation, Vec3::ZERO.into());
+        assert_eq!(before.translation, DVec3::ZERO);
         let after = interpolate_pose(&samples, 2.015, 0.02).unwrap();
-        assert_eq!(after.translation, Vec3::new(2.0, 0.0, 0.0).into());
+        assert_eq!(after.translation, DVec3::new(2.0, 0.0, 0.0));
         // Further outside, or in the middle of a 1 s tracking gap.
         assert!(interpolate_pose(&samples, 0.97, 0.02).is_none());
         assert!(interpolate_pose(&samples, 2.03, 0.02).is_none());

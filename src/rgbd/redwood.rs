@@ -19,7 +19,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::{Affine3A, Mat3, Mat4, Vec4};
+use glam::{DAffine3, DMat3, DMat4, DVec4};
 use serde::Deserialize;
 
 use super::Intrinsics;
@@ -34,7 +34,7 @@ pub const REDWOOD_DEPTH_SCALE: f32 = 1000.0;
 pub const REDWOOD_FRAME_RATE_HZ: f64 = 30.0;
 /// Largest entry of `|R Rᵀ - I|` accepted for a `trajectory.log` rotation block (Open3D writes
 /// about 16 digits; the shared sample's worst is 1.7e-6).
-pub const ROTATION_TOLERANCE: f32 = 1e-3;
+pub const ROTATION_TOLERANCE: f64 = 1e-3;
 
 const DEPTH_DIR: &str = "depth";
 /// Colour folder names, in order of preference.
@@ -83,7 +83,7 @@ pub fn open(dir: &Path, options: &RecordingOptions) -> Result<Recording, Recordi
         }
         Err(RecordingError::Missing { .. }) => {
             tracing::warn!("{}: no {TRAJECTORY_FILE}; every frame gets the identity pose", dir.display());
-            (vec![Affine3A::IDENTITY; pairs.len()], false)
+            (vec![DAffine3::IDENTITY; pairs.len()], false)
         }
         Err(e) => return Err(e),
     };
@@ -209,8 +209,9 @@ fn pair_by_name(dir: &Path) -> Result<Vec<FramePair>, RecordingError> {
 
 /// `trajectory.log`: per entry a metadata line of three integers, then four rows of the
 /// camera-to-world matrix. Each must be rigid: last row `0 0 0 1`, rotation orthonormal within
-/// [`ROTATION_TOLERANCE`] with determinant +1.
-fn parse_trajectory(text: &str) -> Result<Vec<Affine3A>, RecordingError> {
+/// [`ROTATION_TOLERANCE`] with determinant +1. Read in f64, as written (a trajectory far from
+/// the origin keeps its millimetres).
+fn parse_trajectory(text: &str) -> Result<Vec<DAffine3>, RecordingError> {
     const FILE: &str = TRAJECTORY_FILE;
     let lines: Vec<(usize, Vec<&str>)> = data_lines(text).collect();
     let mut poses = Vec::with_capacity(lines.len() / 5);
@@ -222,7 +223,7 @@ fn parse_trajectory(text: &str) -> Result<Vec<Affine3A>, RecordingError> {
         if entry.len() < 5 {
             return Err(line_error(FILE, *meta_line, format!("entry has {} of the 4 matrix rows", entry.len() - 1)));
         }
-        let mut rows = [Vec4::ZERO; 4];
+        let mut rows = [DVec4::ZERO; 4];
         for ((line, fields), row) in entry[1..].iter().zip(&mut rows) {
             if fields.len() != 4 {
                 return Err(line_error(
@@ -231,22 +232,22 @@ fn parse_trajectory(text: &str) -> Result<Vec<Affine3A>, RecordingError> {
                     format!("expected a matrix row of 4 numbers, got {}", fields.len()),
                 ));
             }
-            let mut v = [0.0f32; 4];
+            let mut v = [0.0f64; 4];
             for (i, (value, field)) in v.iter_mut().zip(fields).enumerate() {
-                *value = parse_number(FILE, *line, &format!("column {}", i + 1), field)? as f32;
+                *value = parse_number(FILE, *line, &format!("column {}", i + 1), field)?;
             }
-            *row = Vec4::from_array(v);
+            *row = DVec4::from_array(v);
         }
         let last_line = entry[4].0;
-        if rows[3] != Vec4::new(0.0, 0.0, 0.0, 1.0) {
+        if rows[3] != DVec4::new(0.0, 0.0, 0.0, 1.0) {
             return Err(line_error(FILE, last_line, format!("last matrix row must be 0 0 0 1, got {}", rows[3])));
         }
-        let matrix = Mat4::from_cols(rows[0], rows[1], rows[2], rows[3]).transpose();
-        let rotation = Mat3::from_mat4(matrix);
-        let error = (rotation * rotation.transpose() - Mat3::IDENTITY)
+        let matrix = DMat4::from_cols(rows[0], rows[1], rows[2], rows[3]).transpose();
+        let rotation = DMat3::from_mat4(matrix);
+        let error = (rotation * rotation.transpose() - DMat3::IDENTITY)
             .to_cols_array()
             .iter()
-            .fold(0.0f32, |a, b| a.max(b.abs()));
+            .fold(0.0f64, |a, b| a.max(b.abs()));
         let rigid = error <= ROTATION_TOLERANCE && rotation.determinant() > 0.0;
         if !rigid {
             return Err(line_error(
@@ -259,7 +260,7 @@ fn parse_trajectory(text: &str) -> Result<Vec<Affine3A>, RecordingError> {
             ));
         }
         let (_, q, t) = matrix.to_scale_rotation_translation();
-        poses.push(Affine3A::from_rotation_translation(q.normalize(), t));
+        poses.push(DAffine3::from_rotation_translation(q.normalize(), t));
     }
     Ok(poses)
 }
@@ -274,8 +275,8 @@ mod tests {
     fn trajectory_entries_become_camera_to_world_poses() {
         let poses = parse_trajectory(&format!("{POSE}{}", POSE.replacen("0 0 1", "1 1 2", 1))).unwrap();
         assert_eq!(poses.len(), 2);
-        let p = poses[0].transform_point3(glam::Vec3::new(1.0, 1.0, 1.0));
-        assert!(p.abs_diff_eq(glam::Vec3::new(3.0, 2.0, 3.0), 1e-6), "{p}");
+        let p = poses[0].transform_point3(glam::DVec3::new(1.0, 1.0, 1.0));
+        assert!(p.abs_diff_eq(glam::DVec3::new(3.0, 2.0, 3.0), 1e-12), "{p}");
     }
 
     #[test]

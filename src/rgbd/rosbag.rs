@@ -35,7 +35,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use byteorder::LittleEndian;
-use glam::Affine3A;
+use glam::DAffine3;
 use serde::{Deserialize, Serialize};
 
 use super::Intrinsics;
@@ -678,14 +678,14 @@ impl Transforms {
 
     /// Root-to-`frame` placement at `t`: the chain of parent transforms composed, each
     /// interpolated (static ones as they are); `None` when one has no sample within `tolerance`.
-    fn at(&self, frame: &str, t: f64, tolerance: f64) -> Option<Affine3A> {
-        let mut pose = Affine3A::IDENTITY;
+    fn at(&self, frame: &str, t: f64, tolerance: f64) -> Option<DAffine3> {
+        let mut pose = DAffine3::IDENTITY;
         let mut current = frame;
         for _ in 0..=self.edges.len() {
             let Some(edge) = self.edges.get(current) else { return Some(pose) };
             let local = if edge.is_static {
                 let s = edge.samples.first()?;
-                Affine3A::from_rotation_translation(s.rotation, s.translation)
+                DAffine3::from_rotation_translation(s.rotation, s.translation)
             } else {
                 interpolate_pose(&edge.samples, t, tolerance)?
             };
@@ -704,9 +704,9 @@ enum PoseSource {
 }
 
 impl PoseSource {
-    fn at(&self, camera_frame: &str, t: f64, tolerance: f64) -> Option<Affine3A> {
+    fn at(&self, camera_frame: &str, t: f64, tolerance: f64) -> Option<DAffine3> {
         match self {
-            PoseSource::None => Some(Affine3A::IDENTITY),
+            PoseSource::None => Some(DAffine3::IDENTITY),
             PoseSource::Samples(samples) => interpolate_pose(samples, t, tolerance),
             PoseSource::Tf(transforms) => transforms.at(camera_frame, t, tolerance),
         }

@@ -287,18 +287,29 @@ pub struct LightDescription {
     pub outer_angle_deg: f32,
     /// Radiant intensity on the axis, W/sr, linear RGB, each >= 0.
     pub intensity: [f32; 3],
+    /// World-space up of the light's frame: the RSM grid's rows run across it (as a camera's
+    /// `up`); finite, nonzero, not parallel to `direction`. Default: +Y, or +Z for a light
+    /// within about 8° of vertical ([`SpotLight::default_up`]). A scene turned as a whole turns
+    /// its light's `up` with it, so the RSM grid stays put on the scene.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<[f32; 3]>,
 }
 
 impl LightDescription {
     /// The light, its position relative to `origin` (the scene's [`super::Scene::origin`];
     /// assumes [`SceneDescription::validate`] passed).
     pub fn to_spot_light(&self, origin: DVec3) -> SpotLight {
+        let direction = Vec3::from_array(self.direction).normalize_or(Vec3::NEG_Y);
         SpotLight {
             position: (DVec3::from_array(self.position) - origin).as_vec3(),
-            direction: Vec3::from_array(self.direction).normalize_or(Vec3::NEG_Y),
+            direction,
             inner_angle: self.inner_angle_deg.to_radians(),
             outer_angle: self.outer_angle_deg.to_radians(),
             intensity: Vec3::from_array(self.intensity),
+            up: self
+                .up
+                .and_then(|up| Vec3::from_array(up).try_normalize())
+                .unwrap_or_else(|| SpotLight::default_up(direction)),
         }
     }
 
@@ -329,6 +340,21 @@ impl LightDescription {
         let intensity_field = format!("{field}.intensity");
         for (i, &value) in self.intensity.iter().enumerate() {
             at_least(value, 0.0, &format!("{intensity_field}[{i}]"))?;
+        }
+        if let Some(up) = self.up {
+            let up_field = format!("{field}.up");
+            finite3(up, &up_field)?;
+            let Some(unit) = Vec3::from_array(up).try_normalize() else {
+                return Err(SceneError::field(up_field, format!("must be nonzero, got {up:?}")));
+            };
+            // sin of the angle between direction and up; below ~0.06 degrees the frame is
+            // ill-defined (as for the camera).
+            if Vec3::from_array(self.direction).normalize_or(Vec3::NEG_Y).cross(unit).length() < 1e-3 {
+                return Err(SceneError::field(
+                    up_field,
+                    format!("must not be parallel to the light's direction, got {up:?}"),
+                ));
+            }
         }
         Ok(())
     }
@@ -1242,6 +1268,13 @@ mod tests {
         assert!(light.direction.abs_diff_eq(Vec3::new(0.0, -0.8, 0.6), 1e-6));
         assert!((light.inner_angle - 20f32.to_radians()).abs() < 1e-6);
         assert!((light.outer_angle - 30f32.to_radians()).abs() < 1e-6);
+        // No `up`: the default, world +Y away from vertical, +Z near it.
+        assert_eq!(light.up, Vec3::Y);
+        assert_eq!(SpotLight::default_up(Vec3::NEG_Y), Vec3::Z);
+        let tilted = edit(r#""direction": [0, -1, 0]"#, r#""direction": [0, -1, 0], "up": [2, 0, 0]"#);
+        let description = SceneDescription::from_json_str(&tilted).expect("parses");
+        description.validate().expect("valid");
+        assert_eq!(description.light.expect("has a light").to_spot_light(DVec3::ZERO).up, Vec3::X);
     }
 
     #[test]
@@ -1332,6 +1365,12 @@ mod tests {
                 "light.direction: must be nonzero, got [0, 0, 0]",
             ),
             (r#""intensity": [1, 1, 1]"#, r#""intensity": [1, -1, 1]"#, "light.intensity[1]: must be >= 0, got -1"),
+            (
+                r#""intensity": [1, 1, 1]"#,
+                r#""intensity": [1, 1, 1], "up": [0, 2, 0]"#,
+                "light.up: must not be parallel to the light's direction",
+            ),
+            (r#""intensity": [1, 1, 1]"#, r#""intensity": [1, 1, 1], "up": [0, 0, 0]"#, "light.up: must be nonzero"),
             (r#""fov_y_deg": 45"#, r#""fov_y_deg": 170"#, "camera.fov_y_deg: must be in (1, 170), got 170"),
             (r#""width": 64"#, r#""width": 0"#, "camera.width: must be in 1..=8192, got 0"),
             (r#""height": 48"#, r#""height": 9000"#, "camera.height: must be in 1..=8192, got 9000"),

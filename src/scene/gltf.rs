@@ -205,6 +205,7 @@ fn light_description(
         inner_angle_deg: inner.to_degrees(),
         outer_angle_deg: outer.to_degrees(),
         intensity: intensity.to_array(),
+        up: None,
     };
     description.validate("light").map_err(|e| e.to_string())?;
     Ok(description)

@@ -44,7 +44,7 @@ mod texture;
 
 use std::path::{Path, PathBuf};
 
-use glam::{Affine3A, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
+use glam::{Affine3A, DAffine3, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use self::gltf::{GltfSceneDescription, LUMENS_PER_WATT, MAX_GLTF_BYTES, phong_from_pbr};
 pub use description::{
@@ -177,6 +177,23 @@ pub struct SpotLight {
     pub outer_angle: f32,
     /// Radiant intensity on the axis, W/sr, linear RGB, each channel >= 0.
     pub intensity: Vec3,
+    /// World-space unit up of the light's frame (not parallel to `direction`): orients the
+    /// RSM's grid about the axis, as a camera's up orients its image.
+    pub up: Vec3,
+}
+
+impl SpotLight {
+    /// The up a light without one gets: world +Y, or +Z when the unit `direction` is within
+    /// about 8° of vertical (|y| > 0.99).
+    pub fn default_up(direction: Vec3) -> Vec3 {
+        if direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y }
+    }
+
+    /// World to the light's view space (right-handed, looking down -Z along `direction`, +Y
+    /// toward `up`): the frame of the RSM's grid.
+    pub fn world_to_light(&self) -> Mat4 {
+        glam::camera::rh::view::look_at_mat4(self.position, self.position + self.direction, self.up)
+    }
 }
 
 /// A perspective camera (right-handed, looking from `position` toward `target`).
@@ -488,9 +505,9 @@ impl Scene {
         }
     }
 
-    /// A pose given in the user's world coordinates (an RGB-D frame's camera-to-world) made
-    /// relative to [`Scene::origin`], the subtraction done in f64.
-    pub fn local_pose(&self, pose: &Affine3A) -> Affine3A {
+    /// A pose given in the user's world coordinates (an RGB-D frame's camera-to-world, f64)
+    /// made relative to [`Scene::origin`], the subtraction done in f64.
+    pub fn local_pose(&self, pose: &DAffine3) -> Affine3A {
         local_pose(self.origin, pose)
     }
 
@@ -555,11 +572,10 @@ fn floating_origin(meshes: &[Mesh], user_to_world: &[DMat4], camera: &CameraDesc
     if lo.cmple(hi).all() { (lo + hi) * 0.5 } else { DVec3::from_array(camera.position) }
 }
 
-/// `pose` (user coordinates) relative to `origin`: the translation subtracted in f64.
-pub fn local_pose(origin: DVec3, pose: &Affine3A) -> Affine3A {
-    let mut local = *pose;
-    local.translation = (Vec3::from(pose.translation).as_dvec3() - origin).as_vec3().into();
-    local
+/// `pose` (user coordinates, f64) relative to `origin`: the translation subtracted in f64, and
+/// only then everything rounded to f32.
+pub fn local_pose(origin: DVec3, pose: &DAffine3) -> Affine3A {
+    Affine3A::from_mat3_translation(pose.matrix3.as_mat3(), (pose.translation - origin).as_vec3())
 }
 
 /// `model_to_world` (user coordinates, f64) relative to `origin`, rounded to f32.
@@ -836,9 +852,12 @@ f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
                 .transform_point3(Vec3::ZERO)
                 .abs_diff_eq(Vec3::new(0.5, -0.5, -0.5), 1e-7)
         );
-        let pose = Affine3A::from_translation(Vec3::new(100000.5, -70000.0, 30000.0));
-        let expected = (Vec3::new(100000.5, -70000.0, 30000.0).as_dvec3() - scene.origin).as_vec3();
-        assert!(Vec3::from(scene.local_pose(&pose).translation).abs_diff_eq(expected, 1e-7));
+        // A pose's sub-millimetre survives: f32 would round 100 km to 7.8 mm steps.
+        let at = DVec3::new(100000.0012, -70000.0007, 30000.0003);
+        let pose = DAffine3::from_rotation_translation(glam::DQuat::from_rotation_y(0.3), at);
+        let local = scene.local_pose(&pose);
+        assert!(Vec3::from(local.translation).abs_diff_eq((at - scene.origin).as_vec3(), 1e-7));
+        assert!(local.matrix3.abs_diff_eq(glam::Mat3A::from_rotation_y(0.3), 1e-7));
 
         let too_far = scene_json(r#""obj": "cube.obj", "sparse_points": 8, "transform": {"translation": [2e7, 0, 0]}"#);
         let message = Scene::from_json_str(&too_far, dir.path()).expect_err("too far").to_string();

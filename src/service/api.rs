@@ -108,6 +108,9 @@ pub struct LightOverride {
     pub outer_angle_deg: Option<f32>,
     /// Radiant intensity on the axis, W/sr, linear RGB, each >= 0.
     pub intensity: Option<[f32; 3]>,
+    /// World-space up of the light's frame (orients the RSM grid), as a scene file's
+    /// `light.up`: finite, nonzero, not parallel to the direction.
+    pub up: Option<[f32; 3]>,
 }
 
 impl LightOverride {
@@ -126,6 +129,7 @@ impl LightOverride {
             inner_angle_deg: self.inner_angle_deg.unwrap_or(base.inner_angle_deg),
             outer_angle_deg: self.outer_angle_deg.unwrap_or(base.outer_angle_deg),
             intensity: self.intensity.unwrap_or(base.intensity),
+            up: self.up.or(base.up),
         };
         light.validate(field)?;
         Ok(light)

@@ -23,7 +23,7 @@ use tokio::sync::oneshot;
 
 use crate::gpu::{Gpu, GpuError};
 use crate::mr;
-use crate::renderer::{Method, Rendered, Renderer, View};
+use crate::renderer::{Method, Rendered, Renderer};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::{Camera, Occlusion, Scene, SpotLight};
 
@@ -472,13 +472,13 @@ fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> 
     renderer.set_rgbd_frame(gpu, &job.frame, &job.rgbd)?;
     let Some(camera) = job.camera else {
         let k = job.frame.intrinsics;
-        renderer.set_view(View::Pinhole { intrinsics: k, camera_to_world: job.frame.camera_to_world });
+        renderer.set_pinhole_view(k, &job.frame.camera_to_world);
         let rendered = renderer.render(gpu, job.method, k.width, k.height)?;
         if job.component != Component::Full {
             return Ok((rendered, None));
         }
         let started = Instant::now();
-        let depth = mr::virtual_depth(gpu, renderer, job.frame.camera_to_world)?;
+        let depth = mr::virtual_depth(gpu, renderer, &job.frame.camera_to_world)?;
         let scale = mr::display_scale(job.exposure.unwrap_or(1.0), job.rgbd.radiance_scale);
         let image = mr::composite(&job.frame, &rendered.direct.add(&rendered.indirect), &depth, scale);
         return Ok((rendered, Some((image, started.elapsed().as_secs_f64() * 1e3))));

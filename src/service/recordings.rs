@@ -180,7 +180,8 @@ pub async fn list_recordings(State(state): State<Arc<AppState>>) -> Result<Json<
 ///
 /// The answer is a protobuf `relume.v1.Envelope` (proto/relume.proto) whose body is the frame
 /// as an `RgbdFrame` (`frame_id` = `index`, raw RGB8 colour, f32 depth in metres, pose as a
-/// column-major matrix): send it unchanged on a stream. `downscale` shrinks it first (colour
+/// column-major matrix with its translation also in f64, `translation_f64`): send it unchanged
+/// on a stream. `downscale` shrinks it first (colour
 /// averaged, depth the median of valid measurements, intrinsics scaled).
 #[utoipa::path(
     get,

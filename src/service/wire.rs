@@ -7,11 +7,13 @@
 //! Field paths in errors follow the proto field names from the envelope's body down, e.g.
 //! `rgbd_frame.color.rgb8` or `control.model_transforms[2].scale`.
 
-use glam::{Affine3A, Mat3, Mat4, Quat, Vec3};
+use glam::{DAffine3, DVec3, Mat3, Mat4, Quat, Vec3};
 use prost::Message;
 
 use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
-use crate::scene::{CameraDescription, Occlusion, ScaleDescription, SceneError, TransformDescription};
+use crate::scene::{
+    CameraDescription, MAX_COORDINATE_M, Occlusion, ScaleDescription, SceneError, TransformDescription,
+};
 
 use super::api::{Component, LightOverride};
 use super::config::{LimitExceeded, Limits, limit};
@@ -419,9 +421,29 @@ fn finite_vec3(v: Option<proto::Vec3>, field: &str) -> Result<Vec3, WireError> {
     Ok(v)
 }
 
-fn decode_pose(pose: Option<proto::Pose>, field: &str) -> Result<Affine3A, WireError> {
+/// A pose: its `transform` (f32) widened to f64, the translation replaced by
+/// `translation_f64` when that is set.
+fn decode_pose(pose: Option<proto::Pose>, field: &str) -> Result<DAffine3, WireError> {
+    let pose = pose.unwrap_or_default();
+    let mut decoded = decode_transform(pose.transform, field)?;
+    if let Some(t) = pose.translation_f64 {
+        let field = format!("{field}.translation_f64");
+        for (axis, value) in ["x", "y", "z"].into_iter().zip([t.x, t.y, t.z]) {
+            if !(value.is_finite() && value.abs() <= MAX_COORDINATE_M) {
+                return Err(WireError::invalid(
+                    format!("{field}.{axis}"),
+                    format!("must be a finite number within +-{MAX_COORDINATE_M:e} m, got {value:e}"),
+                ));
+            }
+        }
+        decoded.translation = DVec3::new(t.x, t.y, t.z);
+    }
+    Ok(decoded)
+}
+
+fn decode_transform(transform: Option<proto::pose::Transform>, field: &str) -> Result<DAffine3, WireError> {
     use proto::pose::Transform;
-    match pose.and_then(|p| p.transform) {
+    match transform {
         None => Err(WireError::invalid(field, "required field is missing (translation_rotation or matrix)")),
         Some(Transform::TranslationRotation(tr)) => {
             let base = format!("{field}.translation_rotation");
@@ -439,7 +461,7 @@ fn decode_pose(pose: Option<proto::Pose>, field: &str) -> Result<Affine3A, WireE
                     format!("must be a unit quaternion (norm within {POSE_TOLERANCE} of 1), got norm {norm}"),
                 ));
             }
-            Ok(Affine3A::from_rotation_translation(q / norm, translation))
+            Ok(DAffine3::from_rotation_translation((q / norm).as_dquat().normalize(), translation.as_dvec3()))
         }
         Some(Transform::Matrix(m)) => {
             let field = format!("{field}.matrix.column_major");
@@ -468,7 +490,7 @@ fn decode_pose(pose: Option<proto::Pose>, field: &str) -> Result<Affine3A, WireE
                         ),
                     ));
                 }
-                Ok(Affine3A::from_mat4(matrix))
+                Ok(DAffine3::from_mat4(matrix.as_dmat4()))
             } else {
                 Err(WireError::invalid(
                     field,
@@ -490,6 +512,7 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
         inner_angle_deg: l.inner_angle_deg,
         outer_angle_deg: l.outer_angle_deg,
         intensity: l.intensity.map(|v| [v.x, v.y, v.z]),
+        up: l.up.map(|v| [v.x, v.y, v.z]),
     });
     let mut model_transforms: Vec<(u32, TransformDescription)> = Vec::with_capacity(c.model_transforms.len());
     for (i, t) in c.model_transforms.into_iter().enumerate() {
@@ -654,9 +677,11 @@ pub fn encode(message: ServerMessage) -> Vec<u8> {
 }
 
 /// The client's encoding of a frame (raw RGB8 colour, f32 metres depth, column-major pose
-/// matrix): what a Rust client sends, and what the tests round-trip through [`decode`].
+/// matrix with the translation also in f64, `translation_f64`): what a Rust client sends, and
+/// what the tests round-trip through [`decode`].
 pub fn encode_rgbd_frame(frame_id: u64, frame: &RgbdFrame) -> Vec<u8> {
     let i = frame.intrinsics;
+    let t = frame.camera_to_world.translation;
     let body = proto::envelope::Body::RgbdFrame(proto::RgbdFrame {
         frame_id,
         timestamp: frame.timestamp,
@@ -674,8 +699,9 @@ pub fn encode_rgbd_frame(frame_id: u64, frame: &RgbdFrame) -> Vec<u8> {
         }),
         camera_to_world: Some(proto::Pose {
             transform: Some(proto::pose::Transform::Matrix(proto::Matrix4 {
-                column_major: Mat4::from(frame.camera_to_world).to_cols_array().to_vec(),
+                column_major: glam::DMat4::from(frame.camera_to_world).as_mat4().to_cols_array().to_vec(),
             })),
+            translation_f64: Some(proto::DVec3 { x: t.x, y: t.y, z: t.z }),
         }),
     });
     proto::Envelope { version: PROTOCOL_VERSION, body: Some(body) }.encode_to_vec()
@@ -714,6 +740,7 @@ mod tests {
                     translation: Some(proto::Vec3 { x: 0.0, y: 0.0, z: 2.0 }),
                     rotation: Some(proto::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 }),
                 })),
+                translation_f64: None,
             }),
         }
     }
@@ -739,7 +766,7 @@ mod tests {
         assert_eq!(m.frame.color[4 + 2], [2, 1, 7]);
         assert_eq!(m.frame.depth.len(), 12);
         assert!((m.frame.depth[3] - 1.3).abs() < 1e-6, "{}", m.frame.depth[3]);
-        assert!(m.frame.camera_to_world.translation.abs_diff_eq(glam::Vec3A::new(0.0, 0.0, 2.0), 0.0));
+        assert!(m.frame.camera_to_world.translation.abs_diff_eq(DVec3::new(0.0, 0.0, 2.0), 0.0));
     }
 
     #[test]
@@ -750,8 +777,11 @@ mod tests {
         let mut original = m.frame;
         original.depth[0] = f32::NAN;
         original.depth[1] = 0.0;
-        original.camera_to_world =
-            Affine3A::from_rotation_translation(Quat::from_rotation_y(0.7), Vec3::new(1.0, 2.0, 3.0));
+        // 100 km out with a sub-millimetre part: the f64 translation comes back exactly.
+        original.camera_to_world = DAffine3::from_rotation_translation(
+            glam::DQuat::from_rotation_y(0.7),
+            DVec3::new(100e3 + 1e-4, 2.0, -70e3 - 3e-4),
+        );
         let ClientMessage::Frame(again) = decode(&encode_rgbd_frame(9, &original), &limits()).expect("valid") else {
             panic!("not a frame");
         };
@@ -759,7 +789,8 @@ mod tests {
         assert_eq!(again.frame.color, original.color);
         assert!(again.frame.depth[0].is_nan());
         assert_eq!(again.frame.depth[1..], original.depth[1..]);
-        assert!(again.frame.camera_to_world.abs_diff_eq(original.camera_to_world, 1e-6));
+        assert!(again.frame.camera_to_world.matrix3.abs_diff_eq(original.camera_to_world.matrix3, 1e-6));
+        assert_eq!(again.frame.camera_to_world.translation, original.camera_to_world.translation);
     }
 
     #[test]
@@ -830,6 +861,7 @@ mod tests {
                 translation: Some(proto::Vec3 { x: 0.0, y: 0.0, z: 0.0 }),
                 rotation: Some(proto::Quaternion { x, y: 0.0, z: 0.0, w }),
             })),
+            translation_f64: None,
         };
         let field = "rgbd_frame.camera_to_world.translation_rotation.rotation";
         let e = decode_frame_err(|f| f.camera_to_world = Some(tr(f32::NAN, 1.0)));
@@ -846,6 +878,7 @@ mod tests {
             transform: Some(proto::pose::Transform::Matrix(proto::Matrix4 {
                 column_major: m.to_cols_array().to_vec(),
             })),
+            translation_f64: None,
         };
         let field = "rgbd_frame.camera_to_world.matrix.column_major";
         for bad in [
@@ -860,6 +893,7 @@ mod tests {
         let e = decode_frame_err(|f| {
             f.camera_to_world = Some(proto::Pose {
                 transform: Some(proto::pose::Transform::Matrix(proto::Matrix4 { column_major: vec![1.0; 12] })),
+                translation_f64: None,
             })
         });
         assert!(e.message.contains("16 numbers"), "{}", e.message);
@@ -870,6 +904,29 @@ mod tests {
         let mut f = frame();
         f.camera_to_world = Some(matrix(Mat4::from_rotation_translation(Quat::from_rotation_x(1.0), Vec3::ONE)));
         decode(&envelope(Body::RgbdFrame(f)), &limits()).expect("a rigid matrix");
+    }
+
+    #[test]
+    fn a_double_translation_replaces_the_float_one() {
+        let far = DVec3::new(100e3 + 2e-4, -3.0, 70e3 - 1e-4);
+        let mut f = frame();
+        f.camera_to_world.as_mut().unwrap().translation_f64 = Some(proto::DVec3 { x: far.x, y: far.y, z: far.z });
+        let ClientMessage::Frame(m) = decode(&envelope(Body::RgbdFrame(f)), &limits()).expect("valid") else {
+            panic!("not a frame");
+        };
+        assert_eq!(m.frame.camera_to_world.translation, far);
+        let bad = [
+            (proto::DVec3 { x: f64::NAN, y: 0.0, z: 0.0 }, "x"),
+            (proto::DVec3 { x: 0.0, y: 2e7, z: 0.0 }, "y"),
+            (proto::DVec3 { x: 0.0, y: 0.0, z: f64::NEG_INFINITY }, "z"),
+        ];
+        for (t, axis) in bad {
+            let e = decode_frame_err(|f| f.camera_to_world.as_mut().unwrap().translation_f64 = Some(t));
+            assert_eq!(e.field.as_deref(), Some(format!("rgbd_frame.camera_to_world.translation_f64.{axis}").as_str()));
+        }
+        // The transform is still required and checked.
+        let e = decode_frame_err(|f| f.camera_to_world.as_mut().unwrap().transform = None);
+        assert_eq!(e.field.as_deref(), Some("rgbd_frame.camera_to_world"));
     }
 
     #[test]

@@ -289,8 +289,10 @@ pub fn rgbd_vals(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<Val> {
 }
 
 /// [`rgbd_vals`] with each VAL's grid cell (to match the GPU's output, whose order differs).
+/// The frame's pose is rounded to f32 as it is (relative to the user's origin).
 pub fn rgbd_vals_by_cell(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<(UVec2, Val)> {
-    rgbd_vals_by_cell_posed(frame, &frame.camera_to_world, settings)
+    let camera_to_world = crate::scene::local_pose(glam::DVec3::ZERO, &frame.camera_to_world);
+    rgbd_vals_by_cell_posed(frame, &camera_to_world, settings)
 }
 
 /// [`rgbd_vals_by_cell`] with the camera at `camera_to_world` instead of the frame's own pose
@@ -312,7 +314,7 @@ pub fn rgbd_vals_by_cell_posed(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::{Quat, Vec2};
+    use glam::Vec2;
 
     const TUM: Intrinsics = Intrinsics::TUM;
 
@@ -328,7 +330,7 @@ mod tests {
             intrinsics,
             color: pixels().map(|(u, v)| color(u, v)).collect(),
             depth: pixels().map(|(u, v)| depth(u, v)).collect(),
-            camera_to_world: Affine3A::IDENTITY,
+            camera_to_world: glam::DAffine3::IDENTITY,
         }
     }
 
@@ -531,11 +533,12 @@ mod tests {
         let mut f = frame(TUM, |u, v| plane_depth(&TUM, m, 2.0, u, v), |u, v| [(u % 256) as u8, (v % 256) as u8, 9]);
         let s = RgbdSettings { grid_step: 16, ..Default::default() };
         let camera = rgbd_vals(&f, &s);
-        let pose = Affine3A::from_rotation_translation(
-            Quat::from_axis_angle(Vec3::new(1.0, 2.0, -0.5).normalize(), 1.1),
-            Vec3::new(0.5, -2.0, 3.0),
+        let pose = glam::DAffine3::from_rotation_translation(
+            glam::DQuat::from_axis_angle(glam::DVec3::new(1.0, 2.0, -0.5).normalize(), 1.1),
+            glam::DVec3::new(0.5, -2.0, 3.0),
         );
         f.camera_to_world = pose;
+        let pose = crate::scene::local_pose(glam::DVec3::ZERO, &pose);
         let world = rgbd_vals(&f, &s);
         assert_eq!(world.len(), camera.len());
         for (c, w) in camera.iter().zip(&world) {

@@ -24,6 +24,17 @@ pub fn rsm_texel_ndc(ix: u32, iy: u32, resolution: u32) -> Vec2 {
     Vec2::new((ix as f32 + 0.5) / r * 2.0 - 1.0, 1.0 - (iy as f32 + 0.5) / r * 2.0)
 }
 
+/// World-space unit direction from the spot through the centre of the RSM texel at `ndc`: the
+/// grid lies in the light's frame ([`SpotLight::world_to_light`]: forward `direction`, right
+/// `direction x up`, up completing them) on the image plane at unit distance, whose edges are at
+/// `tan(outer_angle)`. The twin of the RSM raster's `light_to_clip`.
+pub fn rsm_texel_direction(ndc: Vec2, spot: &SpotLight) -> Vec3 {
+    let forward = spot.direction.normalize();
+    let right = forward.cross(spot.up).normalize();
+    let up = right.cross(forward);
+    (forward + (ndc.x * right + ndc.y * up) * spot.outer_angle.tan()).normalize()
+}
+
 /// Solid angle (sr) of the RSM texel centred at `ndc` for a square perspective RSM whose
 /// half-angle is `outer_angle`: texel area on the unit-distance image plane times `cos^3`.
 /// Returns (solid angle, cosine of the texel centre's angle off the axis).

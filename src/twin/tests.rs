@@ -160,6 +160,7 @@ fn spot_cone_flux_matches_closed_form_for_a_hard_edge() {
         inner_angle: 0.5,
         outer_angle: 0.5,
         intensity: Vec3::ONE,
+        up: Vec3::Z,
     };
     let got = spot_cone_flux(&spot, 10_000).x;
     let want = 2.0 * PI * (1.0 - 0.5f32.cos());
@@ -176,22 +177,47 @@ fn rsm_flux_sums_to_cone_flux_on_a_plane() {
         inner_angle: 20f32.to_radians(),
         outer_angle: 35f32.to_radians(),
         intensity: Vec3::new(3.0, 2.0, 1.0),
+        up: Vec3::new(1.0, 0.0, 1.0).normalize(),
     };
     let rho = Vec3::new(0.8, 0.5, 0.2);
     let r = 256;
     let mut total = Vec3::ZERO;
-    let t = spot.outer_angle.tan();
     for iy in 0..r {
         for ix in 0..r {
             let ndc = rsm_texel_ndc(ix, iy, r);
-            // Light looks down -Y; image x = world x, image y = world z (any orthonormal frame).
-            let dir = Vec3::new(ndc.x * t, -1.0, ndc.y * t);
+            // Light looks down -Y, its grid turned 45° about the axis by `up`.
+            let dir = rsm_texel_direction(ndc, &spot);
             let y = spot.position + dir * (2.0 / dir.y.abs());
             total += rsm_texel_val(ndc, r, &spot, y, Vec3::Y, rho).flux;
         }
     }
     let want = rho * spot_cone_flux(&spot, 10_000);
     assert!((total - want).abs().max_element() <= 0.005 * want.max_element(), "{total} vs {want}");
+}
+
+/// The twin's texel directions are the RSM raster's: projected through the light's view and
+/// square perspective (as `SpotVals::light_to_clip`), they land on the texel centres they came
+/// from, for the default up and a tilted one.
+#[test]
+fn rsm_texel_directions_project_to_their_texels() {
+    let direction = Vec3::new(-1.6, -0.3, -0.8).normalize();
+    for up in [SpotLight::default_up(direction), Vec3::new(0.3, 0.2, 1.0).normalize()] {
+        let spot = SpotLight {
+            position: Vec3::new(1.0, 2.0, 3.0),
+            direction,
+            inner_angle: 0.2,
+            outer_angle: 0.4,
+            intensity: Vec3::ONE,
+            up,
+        };
+        let clip = glam::camera::rh::proj::directx::perspective(2.0 * spot.outer_angle, 1.0, 0.1, 10.0)
+            * spot.world_to_light();
+        for (ix, iy) in [(0, 0), (3, 7), (15, 15), (9, 2)] {
+            let ndc = rsm_texel_ndc(ix, iy, 16);
+            let p = clip.project_point3(spot.position + rsm_texel_direction(ndc, &spot));
+            assert!(p.truncate().abs_diff_eq(ndc, 1e-5), "up {up}: texel ({ix}, {iy}) at {p}, not {ndc}");
+        }
+    }
 }
 
 fn finite_non_negative(v: Vec3) -> bool {

@@ -32,6 +32,7 @@ fn valid_frame(w: u32, h: u32) -> Vec<u8> {
                 translation: Some(proto::Vec3 { x: 1.0, y: 2.0, z: 3.0 }),
                 rotation: Some(proto::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 }),
             })),
+            translation_f64: None,
         }),
     };
     proto::Envelope { version: PROTOCOL_VERSION, body: Some(Body::RgbdFrame(frame)) }.encode_to_vec()
@@ -180,7 +181,7 @@ proptest! {
             depth: Some(proto::Depth {
                 data: Some(proto::depth::Data::U16(proto::DepthU16 { data: vec![2; depth_len], units_per_metre })),
             }),
-            camera_to_world: Some(proto::Pose { transform: Some(transform) }),
+            camera_to_world: Some(proto::Pose { transform: Some(transform), translation_f64: None }),
         };
         let bytes = proto::Envelope { version: PROTOCOL_VERSION, body: Some(Body::RgbdFrame(frame)) }.encode_to_vec();
         let limits = limits();

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::{Affine3A, Mat3, Quat, Vec3};
+use glam::{DAffine3, DMat3, DQuat, DVec3, Vec3};
 use relume::rgbd::Intrinsics;
 use relume::rgbd::recording::{Recording, RecordingError, RecordingOptions};
 
@@ -55,16 +55,16 @@ fn recording_fixture_poses_are_rigid_and_smooth() {
     let recording = open_fixture();
     let poses = recording.poses();
     for (i, pose) in poses.iter().enumerate() {
-        let r = Mat3::from(pose.matrix3);
-        assert!((r * r.transpose()).abs_diff_eq(Mat3::IDENTITY, 1e-5), "frame {i}: rotation not orthonormal");
-        assert!((r.determinant() - 1.0).abs() < 1e-5, "frame {i}: determinant {}", r.determinant());
-        let q = Quat::from_mat3(&r);
-        assert!((q.length() - 1.0).abs() < 1e-5);
+        let r: DMat3 = pose.matrix3;
+        assert!((r * r.transpose()).abs_diff_eq(DMat3::IDENTITY, 1e-12), "frame {i}: rotation not orthonormal");
+        assert!((r.determinant() - 1.0).abs() < 1e-12, "frame {i}: determinant {}", r.determinant());
+        let q = DQuat::from_mat3(&r);
+        assert!((q.length() - 1.0).abs() < 1e-12);
     }
     // fr1/xyz moves about 0.3 m/s and turns slowly: at ~30 Hz the largest steps are 14 mm and
     // 1.2 degrees.
     for (i, pair) in poses.windows(2).enumerate() {
-        let step = Vec3::from(pair[1].translation - pair[0].translation).length();
+        let step = (pair[1].translation - pair[0].translation).length();
         let (_, q0, _) = pair[0].to_scale_rotation_translation();
         let (_, q1, _) = pair[1].to_scale_rotation_translation();
         let angle = q0.angle_between(q1).to_degrees();
@@ -73,10 +73,10 @@ fn recording_fixture_poses_are_rigid_and_smooth() {
     // First frame (depth 1305031102.160407) against the ground truth lines around it, lerped
     // and normalised by hand.
     let first = poses[0];
-    let expected_translation = Vec3::new(1.34437, 0.62721, 1.66173);
-    assert!(Vec3::from(first.translation).abs_diff_eq(expected_translation, 1e-4), "{}", first.translation);
+    let expected_translation = DVec3::new(1.34437, 0.62721, 1.66173);
+    assert!(first.translation.abs_diff_eq(expected_translation, 1e-4), "{}", first.translation);
     let (_, rotation, _) = first.to_scale_rotation_translation();
-    let expected = Quat::from_xyzw(0.658250, 0.611042, -0.294449, -0.326548);
+    let expected = DQuat::from_xyzw(0.658250, 0.611042, -0.294449, -0.326548);
     assert!(rotation.abs_diff_eq(expected, 1e-5) || rotation.abs_diff_eq(-expected, 1e-5), "{rotation}");
 }
 
@@ -166,8 +166,8 @@ fn recording_synthetic_loads_and_interpolates() {
     assert_eq!(recording.len(), 3);
     assert_eq!(recording.stats().shared_colour, 0);
     for (i, pose) in recording.poses().iter().enumerate() {
-        let x = 0.03 * i as f32;
-        assert!(pose.abs_diff_eq(Affine3A::from_translation(Vec3::new(x, 0.0, 0.0)), 1e-5), "{i}: {pose:?}");
+        let x = 0.03 * i as f64;
+        assert!(pose.abs_diff_eq(DAffine3::from_translation(DVec3::new(x, 0.0, 0.0)), 1e-12), "{i}: {pose:?}");
     }
     let frame = recording.frame(1).unwrap();
     assert_eq!(frame.intrinsics.width, 4);
@@ -194,8 +194,8 @@ fn recording_without_groundtruth_has_identity_poses() {
     let recording = synthetic.open().unwrap();
     assert_eq!(recording.len(), 3);
     assert!(!recording.has_groundtruth());
-    assert!(recording.poses().iter().all(|pose| *pose == Affine3A::IDENTITY));
-    assert_eq!(recording.frame(2).unwrap().camera_to_world, Affine3A::IDENTITY);
+    assert!(recording.poses().iter().all(|pose| *pose == DAffine3::IDENTITY));
+    assert_eq!(recording.frame(2).unwrap().camera_to_world, DAffine3::IDENTITY);
 }
 
 #[test]

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::{Affine3A, Mat4, Vec3};
+use glam::{DAffine3, DMat4, Mat4, Vec3};
 use relume::rgbd::Intrinsics;
 use relume::rgbd::recording::{Layout, Recording, RecordingOptions};
 
@@ -52,7 +52,7 @@ fn redwood_fixture_is_detected_and_read() {
     for (i, (pose, matrix)) in recording.poses().iter().zip(&matrices).enumerate() {
         // The quaternion round trip of a rotation orthonormal to 1.7e-6 (SOURCE.md) moves
         // entries by a few 1e-6.
-        assert!(Mat4::from(*pose).abs_diff_eq(*matrix, 1e-5), "frame {i}: {pose:?} vs {matrix:?}");
+        assert!(DMat4::from(*pose).as_mat4().abs_diff_eq(*matrix, 1e-5), "frame {i}: {pose:?} vs {matrix:?}");
     }
 
     let pixels = 640 * 480;
@@ -104,7 +104,7 @@ fn redwood_without_optional_files_falls_back() {
     let recording = Recording::open(&dir, &options).unwrap();
     assert_eq!((recording.len(), *recording.intrinsics()), (5, k));
     assert!(!recording.has_groundtruth());
-    assert!(recording.poses().iter().all(|p| *p == Affine3A::IDENTITY));
+    assert!(recording.poses().iter().all(|p| *p == DAffine3::IDENTITY));
     let scaled = recording.frame(2).unwrap();
     let reference = open(&fixture_dir()).frame(2).unwrap();
     assert_eq!(scaled.color, reference.color, "the same files, paired by name");
@@ -155,7 +155,7 @@ fn redwood_errors_name_the_file_and_field() {
 fn redwood_replays() {
     let dir = fixture_dir();
     let first = open(&dir).poses()[0];
-    let anchor = first.transform_point3(Vec3::new(0.0, 0.1, 1.2));
+    let anchor = first.transform_point3(glam::DVec3::new(0.0, 0.1, 1.2));
     let scene_dir = scratch("redwood_replay_scene");
     let bunny = fixture("meshes/stanford_bunny/stanford-bunny.obj");
     let scene = format!(

@@ -15,7 +15,7 @@
 //! threshold, so both sides make the same VALs.
 
 use super::{gpu, load_scene};
-use glam::{Affine3A, Quat, UVec2, Vec3};
+use glam::{Affine3A, DAffine3, DQuat, DVec3, UVec2, Vec3};
 use relume::gpu::Gpu;
 use relume::gpu::lights::rgbd::RgbdVals;
 use relume::gpu::raw::RawVal;
@@ -28,11 +28,16 @@ use std::collections::HashMap;
 
 const SMALL: Intrinsics = Intrinsics { width: 64, height: 48, fx: 60.0, fy: 60.0, cx: 31.5, cy: 23.5 };
 
-fn pose() -> Affine3A {
-    Affine3A::from_rotation_translation(
-        Quat::from_axis_angle(Vec3::new(0.3, 1.0, -0.2).normalize(), 0.7),
-        Vec3::new(-0.4, 1.2, 2.5),
+fn pose() -> DAffine3 {
+    DAffine3::from_rotation_translation(
+        DQuat::from_axis_angle(DVec3::new(0.3, 1.0, -0.2).normalize(), 0.7),
+        DVec3::new(-0.4, 1.2, 2.5),
     )
+}
+
+/// `frame`'s pose in f32, as the GPU pass takes it (the user's origin is the scene's here).
+fn local(frame: &RgbdFrame) -> Affine3A {
+    relume::scene::local_pose(DVec3::ZERO, &frame.camera_to_world)
 }
 
 /// A sloped wall ~2.2 m away, a box at 1.2 m in front of it (a 1 m depth step), a hole of no
@@ -95,7 +100,7 @@ fn run(
     contents[..initial.len()].copy_from_slice(initial);
     let vals = gpu.storage_buffer("test.vals", &contents, wgpu::BufferUsages::COPY_SRC).unwrap();
     let count = gpu.storage_buffer("test.val_count", &[initial.len() as u32], wgpu::BufferUsages::COPY_SRC).unwrap();
-    pass.upload(gpu, frame, &frame.camera_to_world).unwrap();
+    pass.upload(gpu, frame, &local(frame)).unwrap();
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("test.rgbd") });
     let vals = Vals { buffer: vals, count, capacity };
     pass.append(gpu, &mut encoder, &f.scene, &vals, None);
@@ -108,7 +113,7 @@ const SENTINEL: RawVal =
 
 /// The grid cell whose centre pixel a VAL's position projects to.
 fn cell_of(val: &Val, frame: &RgbdFrame, settings: &RgbdSettings) -> UVec2 {
-    let p = frame.camera_to_world.inverse().transform_point3(val.position);
+    let p = local(frame).inverse().transform_point3(val.position);
     let i = &frame.intrinsics;
     let (u, v) = ((p.x / p.z * i.fx + i.cx).round(), (p.y / p.z * i.fy + i.cy).round());
     let step = settings.grid_step.max(1);
@@ -233,8 +238,8 @@ fn rgbd_upload_refuses_a_frame_of_another_size() {
     let pass = RgbdVals::new(&f.gpu, &f.scene, SMALL, &RgbdSettings::default()).unwrap();
     let mut frame = synthetic_frame();
     frame.intrinsics.width = 32;
-    assert!(pass.upload(&f.gpu, &frame, &frame.camera_to_world).is_err());
+    assert!(pass.upload(&f.gpu, &frame, &local(&frame)).is_err());
     let mut frame = synthetic_frame();
     frame.depth.pop();
-    assert!(pass.upload(&f.gpu, &frame, &frame.camera_to_world).is_err());
+    assert!(pass.upload(&f.gpu, &frame, &local(&frame)).is_err());
 }

@@ -242,6 +242,7 @@ fn pose(x: f32, y: f32, z: f32, w: f32) -> proto::Pose {
             translation: Some(proto::Vec3 { x: 0.0, y: 1.0, z: 2.0 }),
             rotation: Some(proto::Quaternion { x, y, z, w }),
         })),
+        translation_f64: None,
     }
 }
 
@@ -296,6 +297,11 @@ async fn scenes_are_created_rendered_and_deleted() {
     assert_eq!(floats.len(), 24 * 16 * 4);
     assert!(floats.iter().all(|v| v.is_finite() && *v >= 0.0));
     assert!(floats.chunks_exact(4).any(|p| p[0] > 0.0 && p[3] == 1.0), "indirect light on covered pixels");
+
+    // The light's frame: a zero `up` is refused, naming the field.
+    let zero_up = json!({"light": {"up": [0, 0, 0]}});
+    let reply = server.post(&format!("/v1/scenes/{id}/render"), &zero_up).await;
+    assert_eq!(reply.error(400, "invalid_field")["field"], "light.up");
 
     let metrics = server.get("/metrics").await;
     assert_eq!(metrics.status, StatusCode::OK);
@@ -469,6 +475,7 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
         transform: Some(proto::pose::Transform::Matrix(proto::Matrix4 {
             column_major: vec![2.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0],
         })),
+        translation_f64: None,
     });
     let e = ws.expect_error(envelope(Body::RgbdFrame(f)), ErrorCode::InvalidField).await;
     assert_eq!(e.field, "rgbd_frame.camera_to_world.matrix.column_major");
@@ -502,6 +509,13 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
         )
         .await;
     assert_eq!((e.field.as_str(), e.request_id), ("control.light.inner_angle_deg", Some(21)));
+    let e = ws
+        .expect_error(
+            control(&|c| c.light = Some(proto::LightOverride { up: v3(0.0, 0.0, 0.0), ..Default::default() })),
+            ErrorCode::InvalidField,
+        )
+        .await;
+    assert_eq!((e.field.as_str(), e.request_id), ("control.light.up", Some(21)));
     let e = ws
         .expect_error(
             control(&|c| {
@@ -561,7 +575,7 @@ async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
 
     let metrics = String::from_utf8_lossy(&server.get("/metrics").await.body).into_owned();
     assert!(metrics.contains("relume_stream_errors_total{code=\"ERROR_CODE_INVALID_FIELD\"}"), "{metrics}");
-    assert!(metrics.contains("relume_stream_messages_total{kind=\"control\"} 3"), "{metrics}");
+    assert!(metrics.contains("relume_stream_messages_total{kind=\"control\"} 4"), "{metrics}");
     // Other clients were not affected.
     assert_eq!(server.get(&format!("/v1/scenes/{id}")).await.status, StatusCode::OK);
     server.stop().await;

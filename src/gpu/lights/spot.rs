@@ -11,7 +11,7 @@ use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::{Gpu, GpuError};
 use crate::scene::SpotLight;
-use glam::{Mat4, Vec3};
+use glam::Mat4;
 
 /// Stage names.
 pub const RSM_RASTER: &str = "rsm_raster";
@@ -51,13 +51,11 @@ impl SpotVals {
     }
 
     /// World to the light's clip space: a square perspective over the outer cone, near and far
-    /// fitted to the scene.
+    /// fitted to the scene, its rows across the light's `up` ([`SpotLight::world_to_light`]).
     pub fn light_to_clip(&self, scene: &GpuScene) -> Mat4 {
         let s = &self.light;
-        let up = if s.direction.y.abs() > 0.99 { Vec3::Z } else { Vec3::Y };
         let (near, far) = scene.flat.depth_range(s.position);
-        glam::camera::rh::proj::directx::perspective(2.0 * s.outer_angle, 1.0, near, far)
-            * glam::camera::rh::view::look_at_mat4(s.position, s.position + s.direction, up)
+        glam::camera::rh::proj::directx::perspective(2.0 * s.outer_angle, 1.0, near, far) * s.world_to_light()
     }
 }
 
