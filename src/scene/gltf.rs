@@ -247,6 +247,7 @@ fn point_as_spot(position: Vec3, intensity: Vec3, (centre, radius): (Vec3, f32))
         inner_angle_deg: needed_deg,
         outer_angle_deg: needed_deg,
         intensity: intensity.to_array(),
+        up: None,
     })
 }
 
