@@ -9,6 +9,6 @@ cd "$(dirname "$0")/.."
 source scripts/setup.sh
 cargo build --release --quiet
 mkdir -p out
-./target/release/relume replay fixtures/recordings/tum_fr1_xyz --scene fixtures/scenes/mr_bunny.json --out out/replay
+./target/release/relume replay fixtures/recordings/tum_fr1_xyz --scene fixtures/scenes/mr_bunny_differential.json --out out/replay
 ./target/release/relume render fixtures/scenes/cornell_bunny.json --out-dir out/cornell_bunny
 echo "images in out/replay/ and out/"

@@ -80,6 +80,8 @@ pub struct ReceiverGrid {
     /// Per cell (row-major): its index in `receivers`, if it has one.
     pub cells: Vec<Option<u32>>,
     pub receivers: Vec<Receiver>,
+    /// Per receiver, the camera's radiance there (W/(m² sr)): its RGB-D VAL's `flux / (pi a)`.
+    pub radiance: Vec<Vec3>,
 }
 
 /// The receivers of `frame`, its camera at `camera_to_world` (the scene's frame: relative to
@@ -95,12 +97,12 @@ pub fn receivers(
     let settings = RgbdSettings { grid_step: mr.receiver_step.max(1), ..*rgbd };
     let size = grid_size(&frame.intrinsics, &settings);
     let (lo, hi) = (bounds.0 - mr.receiver_margin, bounds.1 + mr.receiver_margin);
-    let mut grid =
-        ReceiverGrid { settings, size, cells: vec![None; (size.x * size.y) as usize], receivers: Vec::new() };
+    let mut grid = ReceiverGrid { settings, size, cells: vec![None; (size.x * size.y) as usize], ..Default::default() };
     for (cell, val) in crate::twin::rgbd::rgbd_vals_by_cell_posed(frame, camera_to_world, &settings) {
         if val.position.cmpge(lo).all() && val.position.cmple(hi).all() {
             grid.cells[(cell.y * size.x + cell.x) as usize] = Some(grid.receivers.len() as u32);
             grid.receivers.push(Receiver { position: val.position, normal: val.normal });
+            grid.radiance.push(if val.area > 0.0 { val.flux / (PI * val.area) } else { Vec3::ZERO });
         }
     }
     grid
@@ -255,6 +257,7 @@ mod tests {
             size: UVec2::new(2, 1),
             cells: vec![Some(0), Some(1)],
             receivers: vec![Receiver { position: Vec3::ZERO, normal: Vec3::Z }; 2],
+            radiance: vec![Vec3::ONE; 2],
         };
         let light = [
             ReceiverLight { unoccluded: Vec3::ONE, blocked: Vec3::ZERO, added: Vec3::ZERO },

@@ -16,13 +16,19 @@
 //!   azimuth 0 about `up` from the world axis nearest perpendicular to it, azimuth growing
 //!   counter-clockwise about `up`), each cell the mean of `SUBSAMPLES²` nearest-pixel samples,
 //!   times `scale`, turned by `rotation_deg` about `up`;
-//! - `auto`: the frame's mean observed radiance (over pixels with valid depth), in every cell
-//!   that no real VAL's direction from the virtual content's centre falls in. The mean is the
-//!   one figure the frame gives for the room as a whole; filling only the cells the camera did
-//!   not see keeps what it did see from counting twice. It is a guess: the real room's ceiling
-//!   lamps are far brighter than its mean, its dark corners darker.
+//! - `auto`: one radiance in every cell that no real VAL's direction from the virtual content's
+//!   centre falls in (filling only the cells the camera did not see keeps what it did see from
+//!   counting twice). Its level is the frame's mean observed radiance (over pixels with valid
+//!   depth), raised, when the differential pass has receivers, to the least level that lets
+//!   the receivers' brightness be reflected light ([`explaining_level`]): a real surface
+//!   reflects at most what it receives (albedo <= 1), so a desk brighter than the seen VALs can
+//!   light it is lit from where the camera did not look, by at least that much. Both are
+//!   estimates: the mean is the one figure the frame gives for the room as a whole; the
+//!   receivers' level is a lower bound that puts the missing light in every unseen direction
+//!   alike, where the real room has a few bright lamps.
 
-use crate::twin::Val;
+use super::differential::ReceiverGrid;
+use crate::twin::{Val, val_irradiance};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
@@ -244,20 +250,73 @@ impl Environment {
     }
 
     /// This frame's environment VALs around `centre` (the virtual content's), given the real
-    /// VALs lighting it (`auto` fills the cells they leave empty with the frame's mean radiance).
+    /// VALs lighting it and, with the differential pass, its receivers (`auto` fills the cells
+    /// the real VALs leave empty; module docs).
     pub fn vals(
         &self,
         centre: Vec3,
         frame: &crate::rgbd::RgbdFrame,
         settings: &crate::rgbd::RgbdSettings,
         real: &[Val],
+        receivers: Option<&ReceiverGrid>,
     ) -> Vec<Val> {
         match self {
             Environment::None => Vec::new(),
-            Environment::Auto(grid) => grid.vals(centre, &grid.unseen(centre, real, mean_radiance(frame, settings))),
+            Environment::Auto(grid) => {
+                let unseen = grid.unseen(centre, real, Vec3::ONE);
+                let mean = mean_radiance(frame, settings);
+                let level = match receivers {
+                    Some(r) => mean.max(explaining_level(r, real, &grid.vals(centre, &unseen))),
+                    None => mean,
+                };
+                tracing::debug!(%mean, %level, "auto environment level");
+                grid.vals(centre, &unseen.iter().map(|u| *u * level).collect::<Vec<_>>())
+            }
             Environment::Map { grid, radiance } => grid.vals(centre, radiance),
         }
     }
+}
+
+/// Receivers [`explaining_level`] looks at, at most (evenly strided): the median needs few, and
+/// each costs a sum over every real VAL.
+pub const CALIBRATION_RECEIVERS: usize = 256;
+
+/// A receiver's unit environment (`unit`'s VALs: radiance 1 in the unseen cells) must give it
+/// at least this irradiance (W/m², out of pi for a whole unseen hemisphere) to take part:
+/// where almost nothing is unseen, the level it would ask for is noise.
+pub const MIN_UNSEEN_IRRADIANCE: f32 = 0.05 * PI;
+
+/// The least environment radiance (per channel, W/(m² sr)) that lets the receivers' camera
+/// radiance be reflected light: at a receiver of radiance `L`, seen-VAL irradiance `E_seen`
+/// (no visibility, as the differential pass's `unoccluded`) and unit-environment irradiance
+/// `E_unit`, albedo <= 1 needs `pi L <= E_seen + level E_unit`, so `level >= (pi L - E_seen) /
+/// E_unit`. The median over the receivers (at most [`CALIBRATION_RECEIVERS`], those with
+/// `E_unit >= MIN_UNSEEN_IRRADIANCE`), so that a few specular highlights or mis-placed
+/// receivers do not set it; zero without receivers.
+pub fn explaining_level(receivers: &ReceiverGrid, real: &[Val], unit: &[Val]) -> Vec3 {
+    let n = receivers.receivers.len();
+    let stride = n.div_ceil(CALIBRATION_RECEIVERS).max(1);
+    let mut needed: [Vec<f32>; 3] = Default::default();
+    for i in (0..n).step_by(stride) {
+        let (r, l) = (&receivers.receivers[i], receivers.radiance[i]);
+        let irradiance = |vals: &[Val]| -> Vec3 { vals.iter().map(|v| val_irradiance(r.position, r.normal, v)).sum() };
+        let e_unit = irradiance(unit);
+        if e_unit.min_element() < MIN_UNSEEN_IRRADIANCE {
+            continue;
+        }
+        let level = ((PI * l - irradiance(real)) / e_unit).max(Vec3::ZERO);
+        for (c, values) in needed.iter_mut().enumerate() {
+            values.push(level[c]);
+        }
+    }
+    let median = |values: &mut Vec<f32>| {
+        if values.is_empty() {
+            return 0.0;
+        }
+        let mid = values.len() / 2;
+        *values.select_nth_unstable_by(mid, f32::total_cmp).1
+    };
+    Vec3::new(median(&mut needed[0]), median(&mut needed[1]), median(&mut needed[2]))
 }
 
 /// Mean observed radiance of `frame` (W/(m² sr)): `radiance_scale * srgb_to_linear(rgb)` over
@@ -308,6 +367,40 @@ mod tests {
             eprintln!("{rows} rows: worst relative error {worst:.5}");
             assert!(worst < tolerance, "{rows} rows: {worst}");
         }
+    }
+
+    /// The level that explains a receiver's radiance: under a whole unseen sky (`E_unit` = pi
+    /// within the 8-row grid's 2 %), a receiver of radiance `L` lit by nothing seen needs `L`
+    /// (albedo 1); a seen VAL's irradiance lowers it by `E_seen / E_unit`; a receiver that the
+    /// unseen cells barely reach takes no part, and the median ignores one outlier of three.
+    #[test]
+    fn explaining_level_is_the_least_that_keeps_albedo_at_most_one() {
+        use crate::gpu::differential::Receiver;
+        let grid = DirectionGrid::new(8, Vec3::Z);
+        let unit = grid.vals(Vec3::ZERO, &grid.unseen(Vec3::ZERO, &[], Vec3::ONE));
+        let up = Receiver { position: Vec3::ZERO, normal: Vec3::Z };
+        let receivers =
+            |radiance: Vec<Vec3>| ReceiverGrid { receivers: vec![up; radiance.len()], radiance, ..Default::default() };
+        let l = Vec3::new(2.0, 1.0, 0.5);
+        let level = explaining_level(&receivers(vec![l]), &[], &unit);
+        assert!((level / l - 1.0).abs().max_element() < 0.02, "{level}");
+
+        let lamp = Val { position: Vec3::new(0.0, 0.0, 2.0), normal: -Vec3::Z, area: 0.01, flux: Vec3::splat(30.0) };
+        let e_seen = val_irradiance(Vec3::ZERO, Vec3::Z, &lamp);
+        let e_unit = irradiance(&unit, Vec3::ZERO, Vec3::Z);
+        let want = ((PI * l - e_seen) / e_unit).max(Vec3::ZERO);
+        let level = explaining_level(&receivers(vec![l]), &[lamp], &unit);
+        assert!((level - want).abs().max_element() < 1e-5, "{level} vs {want}");
+        assert!(want.z == 0.0 && want.x > 0.0, "the lamp explains the blue channel alone: {want}");
+
+        let bright = Vec3::splat(100.0);
+        let level = explaining_level(&receivers(vec![l, bright, l]), &[], &unit);
+        assert!((level / l - 1.0).abs().max_element() < 0.02, "the median: {level}");
+        // Only the sky below the horizon is unseen: a receiver facing up gets none of it.
+        let below: Vec<Vec3> =
+            (0..grid.cells()).map(|i| if grid.cell(i).0.z < 0.0 { Vec3::ONE } else { Vec3::ZERO }).collect();
+        let level = explaining_level(&receivers(vec![l]), &[], &grid.vals(Vec3::ZERO, &below));
+        assert_eq!(level, Vec3::ZERO);
     }
 
     /// A map whose columns are shifted by a quarter of its width is the map turned by 90

@@ -159,9 +159,16 @@ impl MrRenderer {
             }
         };
         let rgbd_ms = start.elapsed().as_secs_f64() * 1e3;
+        // The differential pass's receivers: its stage, and the `auto` environment's level.
+        let start = Instant::now();
+        let grid = self.differential.as_ref().map(|d| {
+            let pose = self.renderer.local_pose(&frame.camera_to_world);
+            differential::receivers(frame, &pose, &settings, &self.mr, d.bounds)
+        });
+        let receivers_ms = start.elapsed().as_secs_f64() * 1e3;
         let start = Instant::now();
         let real_vals = real_vals.map(|mut vals| {
-            let environment = self.environment.vals(self.centre, frame, &settings, &vals);
+            let environment = self.environment.vals(self.centre, frame, &settings, &vals, grid.as_ref());
             vals.extend(environment);
             vals
         });
@@ -180,17 +187,36 @@ impl MrRenderer {
         }
         let virtual_depth = virtual_depth(gpu, &self.renderer, &frame.camera_to_world)?;
         let sparse_irradiance = self.renderer.read_gathered_irradiance(gpu)?;
-        let background = match (&mut self.differential, &real_vals) {
-            (Some(d), Some(vals)) => {
+        let background = match (&mut self.differential, &real_vals, &grid) {
+            (Some(d), Some(vals), Some(grid)) => {
                 let start = Instant::now();
-                let pose = self.renderer.local_pose(&frame.camera_to_world);
-                let grid = differential::receivers(frame, &pose, &settings, &self.mr, d.bounds);
                 let mut all = vals.clone();
                 all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
                 let (light, _) = d.pass.run(gpu, &self.renderer.scene, &grid.receivers, &all, vals.len())?;
-                let field = LightField { grid: &grid, light: &light };
+                if tracing::enabled!(tracing::Level::DEBUG) {
+                    let fraction = |l: &crate::gpu::differential::ReceiverLight| {
+                        l.blocked.max_element() / l.unoccluded.max_element().max(1e-12)
+                    };
+                    let net = |l: &crate::gpu::differential::ReceiverLight| {
+                        l.change().element_sum() / l.unoccluded.element_sum().max(1e-12)
+                    };
+                    let shadowed = light.iter().filter(|l| fraction(l) > 0.1).count();
+                    let darkened = light.iter().filter(|l| net(l) < -0.1).count();
+                    let most = light.iter().map(fraction).fold(0.0f32, f32::max);
+                    let darkest = light.iter().map(net).fold(0.0f32, f32::min);
+                    tracing::debug!(
+                        receivers = light.len(),
+                        shadowed,
+                        darkened,
+                        most,
+                        darkest,
+                        "differential: blocked fraction (over 10 %: shadowed) and net change (under -10 %: darkened)"
+                    );
+                }
+                let field = LightField { grid, light: &light };
                 let background = differential::relight_camera(frame, &field, w, h, settings.radiance_scale);
-                rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), start.elapsed().as_secs_f64() * 1e3));
+                let ms = receivers_ms + start.elapsed().as_secs_f64() * 1e3;
+                rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), ms));
                 Some(background)
             }
             _ => None,
