@@ -127,6 +127,36 @@ fn brute_force_equals_gather_at_the_point() {
     assert!((brute - via_gather).abs().max_element() <= 1e-5 * brute.max_element());
 }
 
+/// A vertex whose neighbours lie on a perpendicular surface weighs them as in the unturned
+/// scene (cosine exactly 0) when a turn leaves their cosines a few 1e-8 either side of 0:
+/// nothing, and the fallback picks the same neighbour.
+#[test]
+fn perpendicular_neighbours_weigh_nothing_however_the_scene_is_turned() {
+    for kernel in [InterpolationKernel::Paper, InterpolationKernel::Smooth] {
+        let offsets = [Vec3::X * 0.1, Vec3::Z * 0.2, Vec3::X * 0.3];
+        let square = interpolation_weights(kernel, Vec3::Y, &offsets, &[Vec3::X, Vec3::X, -Vec3::Y]);
+        assert_eq!(square, vec![1.0, 0.0, 0.0]);
+        let tilted = |e: f32| (Vec3::X + Vec3::Y * e).normalize();
+        let turned = interpolation_weights(kernel, Vec3::Y, &offsets, &[tilted(3e-8), tilted(-3e-8), -Vec3::Y]);
+        assert_eq!(turned, square);
+        // Neighbours that do face the vertex weigh as before.
+        let facing = interpolation_weights(kernel, Vec3::Y, &offsets, &[Vec3::Y, Vec3::X, Vec3::Y]);
+        assert!(facing[0] > 0.0 && facing[1] == 0.0);
+    }
+}
+
+/// A light of negligible weight (a neighbour at the support radius, weight 0 in one turn of
+/// the scene and 1e-17 in another) lends the result no bound.
+#[test]
+fn a_negligible_weight_lends_no_bound() {
+    let light = |bound: f32| PointLight { position: Vec3::ZERO, intensity: Vec3::ONE, bound };
+    let lights = [light(0.05), light(0.12)];
+    for w in [0.0, 1e-17, 1e-5] {
+        assert_eq!(interpolate_lights(&[1.0, w], &lights, LightBound::Gathered).bound, 0.05, "weight {w}");
+    }
+    assert_eq!(interpolate_lights(&[1.0, 1e-3], &lights, LightBound::Gathered).bound, 0.12);
+}
+
 #[test]
 fn interpolation_weights_fall_back_to_nearest_compatible() {
     for kernel in [InterpolationKernel::Paper, InterpolationKernel::Smooth] {

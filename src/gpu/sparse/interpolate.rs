@@ -16,8 +16,11 @@ pub fn body(neighbours: u32, kernel: InterpolationKernel, bound: LightBound) -> 
     let bounded = bound == LightBound::Gathered;
     format!(
         "const NEIGHBOURS: u32 = {neighbours}u;\nconst SMOOTH_KERNEL: bool = {smooth};\n\
-         const BOUNDED: bool = {bounded};\nconst PLANE_FALLOFF: f32 = {:?};\n{WGSL}",
-        crate::twin::PLANE_FALLOFF
+         const BOUNDED: bool = {bounded};\nconst PLANE_FALLOFF: f32 = {:?};\n\
+         const FACING_EPSILON: f32 = {:?};\nconst BOUND_WEIGHT_FLOOR: f32 = {:?};\n{WGSL}",
+        crate::twin::PLANE_FALLOFF,
+        crate::twin::FACING_EPSILON,
+        crate::twin::BOUND_WEIGHT_FLOOR
     )
 }
 

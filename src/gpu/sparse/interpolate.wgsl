@@ -1,9 +1,10 @@
 // Per-vertex interpolation (DESIGN.md §4 step 4, paper eqs. 12-13): each vertex averages the
 // point lights of its NEIGHBOURS nearest sparse points. The weights are the paper's
-// (1 - d / d_max) * clamp(dot(n_v, n_x), 0, 1) when SMOOTH_KERNEL is false, else the smooth
-// kernel (1 - (d / d_max)^2)^2 * clamp(dot(n_v, n_x), 0, 1) * plane factor. When BOUNDED, the
+// (1 - d / d_max) * facing(n_v, n_x) when SMOOTH_KERNEL is false, else the smooth kernel
+// (1 - (d / d_max)^2)^2 * facing(n_v, n_x) * plane factor (`facing` is the paper's
+// clamp(dot(n_v, n_x), 0, 1) with cosines up to FACING_EPSILON taken as 0). When BOUNDED, the
 // vertex's light carries the largest bound of its neighbours of positive weight, else 0
-// (unbounded). NEIGHBOURS, SMOOTH_KERNEL, BOUNDED and PLANE_FALLOFF are prepended
+// (unbounded). NEIGHBOURS, SMOOTH_KERNEL, BOUNDED, PLANE_FALLOFF and FACING_EPSILON are prepended
 // (`interpolate::body`). Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`.
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
@@ -26,6 +27,12 @@ fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
     return q * q * plane;
 }
 
+// `twin::facing`: cosines up to FACING_EPSILON count as facing away, so that perpendicular
+// surfaces weigh exactly nothing however the scene is turned.
+fn facing(n_v: vec3<f32>, n: vec3<f32>) -> f32 {
+    return clamp((dot(n_v, n) - FACING_EPSILON) / (1.0 - FACING_EPSILON), 0.0, 1.0);
+}
+
 fn interpolation_weights(n_v: vec3<f32>, offsets: array<vec3<f32>, NEIGHBOURS>, normals: array<vec3<f32>, NEIGHBOURS>, count: u32) -> array<f32, NEIGHBOURS> {
     var d_max = 0.0;
     for (var j = 0u; j < count; j++) {
@@ -34,13 +41,13 @@ fn interpolation_weights(n_v: vec3<f32>, offsets: array<vec3<f32>, NEIGHBOURS>, 
     var w: array<f32, NEIGHBOURS>;
     var total = 0.0;
     for (var j = 0u; j < count; j++) {
-        w[j] = spatial_weight(n_v, offsets[j], d_max) * clamp(dot(n_v, normals[j]), 0.0, 1.0);
+        w[j] = spatial_weight(n_v, offsets[j], d_max) * facing(n_v, normals[j]);
         total += w[j];
     }
     if total <= 0.0 && count > 0u {
         var fallback = 0u;
         for (var j = count; j > 0u; j--) {
-            if dot(n_v, normals[j - 1u]) > 0.0 {
+            if dot(n_v, normals[j - 1u]) > FACING_EPSILON {
                 fallback = j - 1u;
             }
         }
@@ -80,12 +87,12 @@ fn neighbourhood(v: u32) -> Neighbourhood {
 }
 
 // The weighted mean of the lights `l` of the neighbourhood and, when BOUNDED, the largest
-// bound among them.
+// bound among those whose share of the weight is over BOUND_WEIGHT_FLOOR (`twin::interpolate_lights`).
 fn accumulate(out: PointLight, l: PointLight, weight: f32, total: f32) -> PointLight {
     var r = out;
     r.position += l.position * (weight / total);
     r.intensity += l.intensity * (weight / total);
-    if BOUNDED && weight > 0.0 {
+    if BOUNDED && weight > BOUND_WEIGHT_FLOOR * total {
         r.bound = max(r.bound, l.bound);
     }
     return r;
