@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod compare;
 pub mod load;
+pub mod record_synthetic;
 pub mod render;
 pub mod replay;
 pub mod serve;
@@ -35,6 +36,10 @@ pub enum Command {
     /// file) with a scene's virtual content: writes composited and indirect-only frames and a
     /// timing and stability summary.
     Replay(replay::Args),
+    /// Render a synthetic TUM RGB-D recording of a scene's lit room (colour = direct radiance
+    /// / radiance_scale, depth, ground-truth poses along an arc) for closed-loop tests of
+    /// `replay` (see README, "Closed loop: synthetic recordings").
+    RecordSynthetic(record_synthetic::Args),
     /// Load benchmark of the service: streams replaying a recording plus HTTP render clients,
     /// for a fixed time; prints throughput, latency percentiles, dropped frames, peak memory.
     Load(load::Args),
@@ -52,6 +57,7 @@ impl Command {
             Command::Compare(args) => compare::run(args),
             Command::Bench(args) => bench::run(args),
             Command::Replay(args) => replay::run(args),
+            Command::RecordSynthetic(args) => record_synthetic::run(args),
             Command::Load(args) => load::run(args),
             Command::Serve(config) => serve::run(config),
             Command::Openapi => serve::openapi(),

@@ -9,6 +9,7 @@
 pub mod differential;
 pub mod environment;
 pub mod replay;
+pub mod synthetic;
 
 use crate::gpu::differential::Differential;
 use crate::gpu::timing::StageTimings;

@@ -22,6 +22,7 @@ mod rgbd;
 mod router;
 mod rsm;
 mod service;
+mod synthetic;
 mod textures;
 mod twins;
 
