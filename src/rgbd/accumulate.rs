@@ -6,7 +6,13 @@
 //! newer frame's VAL replaces an older one there (the same surface seen again). VALs of one
 //! frame that share a cell are merged into one so their flux is kept. Entries older than the
 //! age limit are dropped, and beyond the capacity the oldest go first. A surface seen again may
-//! land in a neighbouring cell, so its old and new VALs can coexist until the old one ages out.
+//! land in a neighbouring cell; so a new VAL also replaces older frames' VALs whose positions
+//! lie within the patch it stands for ([`PATCH_REACH`] × √area of its position; at most
+//! [`MAX_PATCH_SPAN`] cells each way): where VALs are further apart than the cell size (coarse
+//! grids, distant surfaces) each pose's VALs would otherwise fill cells of their own and the
+//! same surface would be counted once per pose. (Measured by `synthetic::closed_loop_*` before
+//! this rule: 8 accumulated poses of a room lit the bunny 3.1–3.7× too brightly, rel RMSE 2.59
+//! against the RSM path.)
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::mem::size_of;
@@ -17,6 +23,16 @@ use crate::twin::Val;
 
 /// Integer grid coordinates of a cell; ordered x, then y, then z.
 type CellKey = (i32, i32, i32);
+
+/// A new VAL replaces older frames' VALs whose positions are within this many √area of its own
+/// (module docs): half the diagonal of the square footprint a VAL of that area stands for
+/// (0.707) and a margin, so that VALs of the same surface from another pose, on a grid as
+/// fine as the new one, all fall inside some new VAL's reach.
+pub const PATCH_REACH: f32 = 0.75;
+
+/// Cells searched each way from a new VAL's cell for older VALs in its patch, at most: bounds
+/// the work per VAL ((2 × 4 + 1)³ lookups) when VALs are far larger than the cells.
+pub const MAX_PATCH_SPAN: i32 = 4;
 
 /// A bad [`ValAccumulator`] parameter.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -93,17 +109,46 @@ impl ValAccumulator {
             tracing::debug!("frame {frame_index}: ignored {ignored} VALs with non-finite or negative fields");
         }
 
-        for (key, merge) in merged {
+        let merged: Vec<(CellKey, Val)> = merged.into_iter().map(|(key, merge)| (key, merge.val())).collect();
+        self.replace_patches(frame_index, &merged);
+        for (key, val) in merged {
             if let Some(old) = self.cells.get(&key) {
                 if old.frame > frame_index {
                     continue;
                 }
                 self.by_age.remove(&(old.frame, key));
             }
-            self.cells.insert(key, Entry { frame: frame_index, val: merge.val() });
+            self.cells.insert(key, Entry { frame: frame_index, val });
             self.by_age.insert((frame_index, key));
         }
         self.evict(newest);
+    }
+
+    /// Drops the entries of frames before `frame_index` whose positions lie within the patch of
+    /// one of `vals` (module docs).
+    fn replace_patches(&mut self, frame_index: u64, vals: &[(CellKey, Val)]) {
+        let mut replaced = BTreeSet::new();
+        for (key, val) in vals {
+            let reach = PATCH_REACH * val.area.sqrt();
+            let span = ((reach / self.cell_size_m).ceil() as i32).clamp(0, MAX_PATCH_SPAN);
+            for dz in -span..=span {
+                for dy in -span..=span {
+                    for dx in -span..=span {
+                        let cell = (key.0.saturating_add(dx), key.1.saturating_add(dy), key.2.saturating_add(dz));
+                        if let Some(old) = self.cells.get(&cell)
+                            && old.frame < frame_index
+                            && old.val.position.distance(val.position) < reach
+                        {
+                            replaced.insert((old.frame, cell));
+                        }
+                    }
+                }
+            }
+        }
+        for (frame, cell) in replaced {
+            self.by_age.remove(&(frame, cell));
+            self.cells.remove(&cell);
+        }
     }
 
     /// Drops entries older than the age limit, then the oldest beyond the capacity.
@@ -211,9 +256,39 @@ impl Merge {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec2;
 
     fn val(x: f32, y: f32, z: f32, flux: f32) -> Val {
         Val { position: Vec3::new(x, y, z), normal: Vec3::Z, area: 0.01, flux: Vec3::splat(flux) }
+    }
+
+    /// One floor seen from two poses whose VALs (10 cm apart, twice the 5 cm cell) fall on
+    /// grids shifted by a fraction of their spacing: the second pose's VALs replace the first's
+    /// in their patches, so the floor's flux stays one pose's, not two (before the patch rule:
+    /// 2x), at every shift; a pose that sees a new part of the floor adds it.
+    #[test]
+    fn a_surface_seen_again_on_a_coarse_grid_is_counted_once() {
+        let floor = |shift: Vec2, x0: f32| -> Vec<Val> {
+            (0..100)
+                .map(|i| {
+                    let (x, y) = (x0 + 0.1 * (i % 10) as f32 + shift.x, 0.1 * (i / 10) as f32 + shift.y);
+                    val(x + 0.005, y + 0.005, 0.0, 1.0)
+                })
+                .collect()
+        };
+        for shift in [Vec2::new(0.05, 0.05), Vec2::new(0.03, 0.07), Vec2::new(0.05, 0.0), Vec2::ZERO] {
+            let mut acc = ValAccumulator::new(0.05, 10_000, 100).unwrap();
+            acc.insert(0, &floor(Vec2::ZERO, 0.0));
+            acc.insert(1, &floor(shift, 0.0));
+            let flux: f32 = acc.vals().iter().map(|v| v.flux.x).sum();
+            // The second floor reaches 0.05-0.07 m past the first on two sides; the first's VALs
+            // out there stay: at most one row and one column of it.
+            assert!((100.0..=119.0).contains(&flux), "shift {shift}: flux {flux} of one pose's 100");
+        }
+        let mut acc = ValAccumulator::new(0.05, 10_000, 100).unwrap();
+        acc.insert(0, &floor(Vec2::ZERO, 0.0));
+        acc.insert(1, &floor(Vec2::ZERO, 1.0));
+        assert_eq!(acc.vals().len(), 200, "two halves of a 2 m floor");
     }
 
     #[test]
