@@ -20,6 +20,10 @@ pub struct Args {
     /// Width of the camera's horizontal arc around its target, degrees (0..=300).
     #[arg(long, default_value_t = DEFAULT_ARC_DEG)]
     arc_deg: f64,
+    /// Turn of the arc's centre from the scene camera about its up axis, degrees
+    /// (-180..=180): an arc turned away from the lit surfaces records less of them.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    turn_deg: f64,
     #[command(flatten)]
     size: Size,
     /// Radiance (W/(m² sr)) written as colour 1 (default: the largest direct radiance over
@@ -37,6 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         width,
         height,
         arc_deg: args.arc_deg,
+        turn_deg: args.turn_deg,
         radiance_scale: args.radiance_scale,
     };
     options.check().map_err(|(flag, message)| anyhow::anyhow!("--{flag}: {message}"))?;

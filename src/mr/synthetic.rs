@@ -21,8 +21,10 @@
 //! ([`SyntheticMetadata`]: the radiance scale and the trajectory).
 //!
 //! Trajectory: the scene camera's eye swept along a horizontal arc around its target (about
-//! the camera's up axis through the target), `arc_deg` wide and centred on the scene camera,
-//! frames evenly spaced from `-arc_deg / 2` to `+arc_deg / 2` (one frame: the scene camera).
+//! the camera's up axis through the target), `arc_deg` wide and centred on the scene camera
+//! turned by `turn_deg`, frames evenly spaced from `turn_deg - arc_deg / 2` to
+//! `turn_deg + arc_deg / 2` (one frame, no turn: the scene camera). Turning the arc away from
+//! the lit surfaces measures what the replay loses when the camera does not see them.
 
 use crate::gpu::Gpu;
 use crate::image::encode_srgb;
@@ -46,6 +48,8 @@ pub const DEFAULT_ARC_DEG: f64 = 60.0;
 pub const MAX_FRAMES: u32 = 1000;
 /// Bounds of `arc_deg`: less than a full turn, so no two frames coincide.
 pub const MAX_ARC_DEG: f64 = 300.0;
+/// Bounds of `turn_deg`: either way round, half a turn.
+pub const MAX_TURN_DEG: f64 = 180.0;
 /// Written beside the TUM files: how the colours were made.
 pub const METADATA_FILE: &str = "synthetic.json";
 
@@ -60,6 +64,9 @@ pub struct SyntheticOptions {
     pub height: u32,
     /// Width of the arc (degrees), in 0..=[`MAX_ARC_DEG`].
     pub arc_deg: f64,
+    /// Turn of the arc's centre from the scene camera about its up axis (degrees), in
+    /// -[`MAX_TURN_DEG`]..=[`MAX_TURN_DEG`].
+    pub turn_deg: f64,
     /// Radiance (W/(m² sr)) written as a colour of 1; `None`: the largest direct radiance of
     /// any channel over all frames, so nothing clips.
     pub radiance_scale: Option<f32>,
@@ -73,6 +80,9 @@ impl SyntheticOptions {
         }
         if !(self.arc_deg.is_finite() && (0.0..=MAX_ARC_DEG).contains(&self.arc_deg)) {
             return Err(("arc-deg", format!("must be in 0..={MAX_ARC_DEG}, got {}", self.arc_deg)));
+        }
+        if !(self.turn_deg.is_finite() && (-MAX_TURN_DEG..=MAX_TURN_DEG).contains(&self.turn_deg)) {
+            return Err(("turn-deg", format!("must be in -{MAX_TURN_DEG}..={MAX_TURN_DEG}, got {}", self.turn_deg)));
         }
         if let Some(s) = self.radiance_scale
             && !(s.is_finite() && s > 0.0)
@@ -97,6 +107,7 @@ pub struct SyntheticMetadata {
     pub depth_missing_fraction: f64,
     pub frames: u32,
     pub arc_deg: f64,
+    pub turn_deg: f64,
     pub frame_rate_hz: f64,
     pub width: u32,
     pub height: u32,
@@ -114,7 +125,7 @@ pub fn intrinsics(scene: &Scene, width: u32, height: u32) -> Intrinsics {
 
 /// Camera-to-world (optical axes: x right, y down, z forward; user world coordinates) of each
 /// of `frames` frames along the arc (see the module docs).
-pub fn trajectory(scene: &Scene, frames: u32, arc_deg: f64) -> Vec<DAffine3> {
+pub fn trajectory(scene: &Scene, frames: u32, arc_deg: f64, turn_deg: f64) -> Vec<DAffine3> {
     let camera = &scene.camera;
     let target = scene.origin + camera.target.as_dvec3();
     let eye = scene.origin + camera.position.as_dvec3();
@@ -122,7 +133,7 @@ pub fn trajectory(scene: &Scene, frames: u32, arc_deg: f64) -> Vec<DAffine3> {
     (0..frames)
         .map(|i| {
             let s = if frames > 1 { f64::from(i) / f64::from(frames - 1) - 0.5 } else { 0.0 };
-            let angle = (arc_deg * s).to_radians();
+            let angle = (turn_deg + arc_deg * s).to_radians();
             let eye = target + DQuat::from_axis_angle(up, angle) * (eye - target);
             look_at_optical(eye, target, up)
         })
@@ -144,7 +155,7 @@ pub fn record(gpu: &Gpu, scene: &Scene, options: &SyntheticOptions) -> anyhow::R
     anyhow::ensure!(scene.light.is_some(), "the scene has no light: a synthetic recording needs a lit room");
     let (w, h) = (options.width, options.height);
     let k = intrinsics(scene, w, h);
-    let poses = trajectory(scene, options.frames, options.arc_deg);
+    let poses = trajectory(scene, options.frames, options.arc_deg, options.turn_deg);
     let mut renderer = Renderer::new(gpu, scene)?;
     let mut render = |pose: &DAffine3| -> anyhow::Result<_> {
         renderer.set_pinhole_view(k, pose);
@@ -223,6 +234,7 @@ pub fn record(gpu: &Gpu, scene: &Scene, options: &SyntheticOptions) -> anyhow::R
         depth_missing_fraction: missing as f64 / pixels,
         frames: options.frames,
         arc_deg: options.arc_deg,
+        turn_deg: options.turn_deg,
         frame_rate_hz: FRAME_RATE_HZ,
         width: w,
         height: h,
@@ -268,6 +280,7 @@ mod tests {
             width: 64,
             height: 48,
             arc_deg: 60.0,
+            turn_deg: 0.0,
             radiance_scale: None,
         };
         assert_eq!(ok.check(), Ok(()));
@@ -276,6 +289,8 @@ mod tests {
         assert_eq!(flag(SyntheticOptions { frames: MAX_FRAMES + 1, ..ok.clone() }), "frames");
         assert_eq!(flag(SyntheticOptions { arc_deg: -1.0, ..ok.clone() }), "arc-deg");
         assert_eq!(flag(SyntheticOptions { arc_deg: f64::NAN, ..ok.clone() }), "arc-deg");
+        assert_eq!(flag(SyntheticOptions { turn_deg: 181.0, ..ok.clone() }), "turn-deg");
+        assert_eq!(flag(SyntheticOptions { turn_deg: f64::INFINITY, ..ok.clone() }), "turn-deg");
         assert_eq!(flag(SyntheticOptions { radiance_scale: Some(0.0), ..ok.clone() }), "radiance-scale");
         assert_eq!(flag(SyntheticOptions { radiance_scale: Some(f32::INFINITY), ..ok }), "radiance-scale");
     }

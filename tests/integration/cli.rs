@@ -137,6 +137,53 @@ fn exact_reference_flags_are_checked() {
     }
 }
 
+/// `record-synthetic`: every out-of-range flag and a scene without a spot light are named, not
+/// panics; a good call writes a recording that `Recording::open` reads, one frame per pose.
+#[test]
+fn record_synthetic_checks_its_flags_and_writes_a_readable_recording() {
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let scene = scene.to_str().unwrap();
+    let out = super::scratch("cli-record-synthetic");
+    let out = out.to_str().unwrap();
+    for (args, flag) in [
+        (&["--frames", "0"][..], "--frames"),
+        (&["--frames", "1001"][..], "--frames"),
+        (&["--arc-deg", "301"][..], "--arc-deg"),
+        (&["--turn-deg", "-181"][..], "--turn-deg"),
+        (&["--turn-deg", "nan"][..], "--turn-deg"),
+        (&["--radiance-scale=0"][..], "--radiance-scale"),
+        (&["--width", "0"][..], "width"),
+    ] {
+        let o = relume(&[&["record-synthetic", scene, "--out", out][..], args].concat());
+        assert!(!o.status.success(), "{args:?} must fail");
+        assert!(stderr(&o).contains(flag) && !stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
+    }
+    let unlit = fixture("scenes/mr_bunny.json");
+    let o = relume(&["record-synthetic", unlit.to_str().unwrap(), "--out", out]);
+    assert!(!o.status.success() && !stderr(&o).contains("panicked"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("light"), "names the missing spot light: {}", stderr(&o));
+
+    let o = relume(&[
+        "record-synthetic",
+        scene,
+        "--out",
+        out,
+        "--frames",
+        "3",
+        "--turn-deg",
+        "-20",
+        "--width",
+        "24",
+        "--height",
+        "16",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let options = relume::rgbd::recording::RecordingOptions::default();
+    let recording = relume::rgbd::recording::Recording::open(std::path::Path::new(out), &options).expect("reads back");
+    assert_eq!(recording.len(), 3);
+    assert_eq!((recording.intrinsics().width, recording.intrinsics().height), (24, 16));
+}
+
 /// `replay --server` and `load`: bad flags and an unreachable server are named, not panics.
 #[test]
 fn client_commands_name_bad_flags_and_unreachable_servers() {

@@ -49,6 +49,7 @@ struct Loop {
 /// with the bunny alone at `grid_step`, and compare with the RSM path.
 /// `accumulate`: the accumulator's cell (m), or `None` to light the bunny with the last frame.
 fn closed_loop(name: &str, frames: u32, arc_deg: f64, size: u32, grid_step: u32, accumulate: Option<f32>) -> Loop {
+    let turn_deg = env("CL_TURN", 0.0);
     let gpu = gpu();
     let fixture = fixture_json();
     // The bunny is mesh 0 in both scenes that hold it, so its sparse points (seeded by the
@@ -56,8 +57,15 @@ fn closed_loop(name: &str, frames: u32, arc_deg: f64, size: u32, grid_step: u32,
     let reference_scene = scene_of(&with_meshes(&fixture, &[1, 0]));
     let room = scene_of(&with_meshes(&fixture, &[0]));
     let dir = scratch(name);
-    let options =
-        SyntheticOptions { out: dir.clone(), frames, width: size, height: size, arc_deg, radiance_scale: None };
+    let options = SyntheticOptions {
+        out: dir.clone(),
+        frames,
+        width: size,
+        height: size,
+        arc_deg,
+        turn_deg,
+        radiance_scale: None,
+    };
     let metadata = record(&gpu, &room, &options).unwrap();
     assert_eq!(metadata.clipped_fraction, 0.0);
 
@@ -90,14 +98,14 @@ fn closed_loop(name: &str, frames: u32, arc_deg: f64, size: u32, grid_step: u32,
     let sum = |v: &[glam::Vec3]| v.iter().copied().sum::<glam::Vec3>();
     let result = Loop { rel_rmse: rel_rmse(&replayed, &reference), ratio: sum(&replayed) / sum(&reference) };
     eprintln!(
-        "closed loop {name}: {frames} frames, {arc_deg}° arc, {size}x{size}, grid_step {grid_step}, accumulate \
+        "closed loop {name}: {frames} frames, {arc_deg}° arc turned {turn_deg}°, {size}x{size}, grid_step {grid_step}, accumulate \
          {accumulate:?}: rel RMSE {:.4}, replay / RSM {:.3}",
         result.rel_rmse, result.ratio
     );
     result
 }
 
-/// `CL_FRAMES`, `CL_ARC`, `CL_SIZE`, `CL_STEP` and, for the accumulated loop, `CL_CELL` (the
+/// `CL_FRAMES`, `CL_ARC`, `CL_TURN`, `CL_SIZE`, `CL_STEP` and, for the accumulated loop, `CL_CELL` (the
 /// accumulator's cell, m) override the measured configuration (README, "Closed loop").
 fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)
