@@ -205,7 +205,9 @@ fn light_description(
         inner_angle_deg: inner.to_degrees(),
         outer_angle_deg: outer.to_degrees(),
         intensity: intensity.to_array(),
-        up: None,
+        // The node's +Y, as for a camera: the light's frame turns with the node, so a file
+        // turned as a whole keeps its RSM grid on the scene.
+        up: Some(world.transform_vector3(Vec3::Y).normalize_or_zero().to_array()),
     };
     description.validate("light").map_err(|e| e.to_string())?;
     Ok(description)
@@ -1288,6 +1290,8 @@ mod tests {
                     let light = description.light.as_ref().expect("the spot light");
                     assert!(glam::DVec3::from(light.position).abs_diff_eq(glam::DVec3::new(0.0, 3.0, 0.0), 1e-6));
                     assert!(Vec3::from(light.direction).abs_diff_eq(Vec3::NEG_Y, 1e-6), "{light:?}");
+                    let up = Vec3::from(light.up.expect("the node's +Y"));
+                    assert!(up.abs_diff_eq(Vec3::NEG_Z, 1e-6), "the lamp's +Y turned with it: {up}");
                     assert!((light.outer_angle_deg - 0.5f32.to_degrees()).abs() < 1e-4);
                     assert_eq!(light.intensity, [1.0, 0.5, 0.5], "683 cd is 1 W/sr");
                     let camera = &description.camera;
