@@ -86,14 +86,7 @@ impl FlatScene {
             let vertex_base = flat.vertices.len() as u32;
             let sparse_base = flat.sparse_points.len() as u32;
             let positions = placed.positions();
-            let area: f64 = mesh
-                .triangles
-                .iter()
-                .map(|t| {
-                    let [a, b, c] = t.map(|i| positions[i as usize]);
-                    0.5 * f64::from((b - a).cross(c - a).length())
-                })
-                .sum();
+            let area = crate::scene::surface_area(&positions, &mesh.triangles);
             let sparse = &mesh.sparse;
             let density = if area > 0.0 { (sparse.triangles.len() as f64 / area) as f32 } else { 0.0 };
             for ((p, n), uv) in positions.into_iter().zip(placed.normals()).zip(&mesh.texcoords) {

@@ -196,14 +196,7 @@ pub fn emitters(scene: &Scene) -> Vec<Emitter> {
     for mesh in &scene.meshes {
         let placed = mesh.placed(mesh.model_to_world);
         let positions = placed.positions();
-        let area: f32 = mesh
-            .triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| positions[i as usize]);
-                0.5 * (b - a).cross(c - a).length()
-            })
-            .sum();
+        let area = crate::scene::surface_area(&positions, &mesh.triangles) as f32;
         let count = mesh.sparse.positions.len().max(1) as f32;
         let points = placed.sparse_positions().into_iter().zip(placed.sparse_normals()).zip(&mesh.sparse.triangles);
         for ((position, normal), triangle) in points {

@@ -717,8 +717,13 @@ impl Geometry {
 
     /// Total surface area, square model units.
     pub fn area(&self) -> f64 {
-        (0..self.triangles.len()).map(|t| self.triangle_area(t)).sum()
+        surface_area(&self.positions, &self.triangles)
     }
+}
+
+/// Total area of `triangles` (corner indices into `positions`), in f64 as [`triangle_area`].
+pub fn surface_area(positions: &[Vec3], triangles: &[[u32; 3]]) -> f64 {
+    triangles.iter().map(|t| triangle_area(t.map(|i| positions[i as usize]))).sum()
 }
 
 /// Area of a triangle, computed in f64 so that large flat triangles keep their precision.
