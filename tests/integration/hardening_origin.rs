@@ -200,6 +200,12 @@ fn recording_error_when_moved(gpu: &Gpu, occlusion: OcclusionSetting, translatio
     error
 }
 
+/// A move of `distance` m along `direction` from proptest's numbers (a zero direction stands
+/// for +X).
+fn offset(direction: [f64; 3], distance: f64) -> DVec3 {
+    DVec3::from_array(direction).try_normalize().unwrap_or(DVec3::X) * distance
+}
+
 /// A unit axis and an angle from proptest's numbers (a zero axis stands for +Y).
 fn turn(axis: [f64; 3], angle_deg: f64) -> DQuat {
     let axis = DVec3::from_array(axis).try_normalize().unwrap_or(DVec3::Y);
@@ -226,8 +232,7 @@ proptest! {
         distance in 0.0f64..100e3,
         yaw_deg in 0.0f64..360.0,
     ) {
-        let direction = DVec3::from_array(direction).try_normalize().unwrap_or(DVec3::X);
-        let translation = direction * distance;
+        let translation = offset(direction, distance);
         let error = error_when_moved(&gpu(), translation, turn([0.0, 1.0, 0.0], yaw_deg));
         prop_assert!(error <= TOLERANCE, "moved by {} m, turned {}°: rel RMSE {} > {}", translation, yaw_deg, error, TOLERANCE);
     }
@@ -255,8 +260,7 @@ proptest! {
         axis in prop::array::uniform3(-1.0f64..1.0),
         angle_deg in 0.0f64..360.0,
     ) {
-        let direction = DVec3::from_array(direction).try_normalize().unwrap_or(DVec3::X);
-        let translation = direction * distance;
+        let translation = offset(direction, distance);
         let rotation = turn(axis, angle_deg);
         let error = error_when_moved(&gpu(), translation, rotation);
         prop_assert!(error <= TOLERANCE, "moved by {} m, turned {:?}: rel RMSE {} > {}", translation, rotation, error, TOLERANCE);
@@ -291,8 +295,7 @@ proptest! {
         axis in prop::array::uniform3(-1.0f64..1.0),
         angle_deg in 0.0f64..360.0,
     ) {
-        let direction = DVec3::from_array(direction).try_normalize().unwrap_or(DVec3::X);
-        let translation = direction * distance;
+        let translation = offset(direction, distance);
         let rotation = turn(axis, angle_deg);
         let error = recording_error_when_moved(&gpu(), OcclusionSetting::Off, translation, rotation);
         prop_assert!(error <= TOLERANCE, "moved by {} m, turned {:?}: rel RMSE {} > {}", translation, rotation, error, TOLERANCE);
