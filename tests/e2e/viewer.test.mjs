@@ -96,13 +96,16 @@ async function main() {
     const asking = await browser.newPage();
     asking.setDefaultTimeout(WAIT_MS);
     await asking.goto(`http://${addr}/?downscale=4`);
-    await asking.waitForFunction(() => window.relumeViewer.needsToken);
+    // `window.relumeViewer` exists once viewer.js's module graph (protobuf.js and the descriptor,
+    // fetched by proto.js) has run, which can be after `goto`'s load event: `?.` until then, since
+    // a predicate that throws fails the wait at once instead of polling.
+    await asking.waitForFunction(() => window.relumeViewer?.needsToken);
     assert(await asking.locator("#token-form").isVisible(), "the token field is shown");
     const asked = await asking.locator("#status").textContent();
     assert(asked.includes("token"), `the status asks for the token: ${asked}`);
     await asking.locator("#token").fill(TOKEN);
     await asking.getByRole("button", { name: "Connect" }).click();
-    await asking.waitForFunction(() => window.relumeViewer.framesShown >= 1);
+    await asking.waitForFunction(() => window.relumeViewer?.framesShown >= 1);
     const askedOpening = await streamOpening(asking);
     assert(ticketed(askedOpening), `the stream opened with a ticket subprotocol: ${JSON.stringify(askedOpening)}`);
     assert(!(await asking.locator("#token-form").isVisible()), "the token field is hidden again");
@@ -124,7 +127,7 @@ async function main() {
           png: s.lastFrame.png ? Array.from(s.lastFrame.png.subarray(0, 4)) : null } };
     });
     const framesAfter = async (n) => {
-      await page.waitForFunction((n) => window.relumeViewer.framesShown >= n, n);
+      await page.waitForFunction((n) => window.relumeViewer?.framesShown >= n, n);
       return viewer();
     };
     const setting = (name) => page.locator(`#settings dd[data-setting="${name}"]`).textContent();
