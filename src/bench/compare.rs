@@ -197,6 +197,20 @@ pub fn exact_reference(
     height: u32,
     options: &ExactOptions,
 ) -> Result<ExactReference, GpuError> {
+    exact_reference_seeded(gpu, renderer, width, height, options, REFERENCE_SEED)
+}
+
+/// [`exact_reference`] with the CPU reference's random numbers drawn from `seed`: an estimate
+/// independent of the one [`REFERENCE_SEED`] gives (the equal-error curve's,
+/// [`super::equal_error`]).
+pub fn exact_reference_seeded(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    width: u32,
+    height: u32,
+    options: &ExactOptions,
+    seed: u64,
+) -> Result<ExactReference, GpuError> {
     use crate::twin::bvh::TraceBvh;
     use crate::twin::exact_cpu::{self as cpu, CameraRays, PixelSampling, Receiver, Receivers, ValSampling};
     let device = options.device_on(gpu);
@@ -231,14 +245,10 @@ pub fn exact_reference(
     let receivers = if options.spp == 1 {
         Receivers::Hits(&resolved)
     } else {
-        Receivers::Traced {
-            camera: &camera,
-            sampling: PixelSampling { spp: options.spp, seed: REFERENCE_SEED },
-            surface: &surface,
-        }
+        Receivers::Traced { camera: &camera, sampling: PixelSampling { spp: options.spp, seed }, surface: &surface }
     };
     let sampling = match (options.samples, options.val_stride) {
-        (Some(samples), _) => ValSampling::Importance { samples, seed: REFERENCE_SEED },
+        (Some(samples), _) => ValSampling::Importance { samples, seed },
         (None, 1) => ValSampling::All,
         (None, s) => ValSampling::Stride(s),
     };

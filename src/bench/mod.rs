@@ -10,6 +10,7 @@
 //! `grid` takes the Cartesian product instead.
 
 pub mod compare;
+pub mod equal_error;
 pub mod fma;
 pub mod plot;
 pub mod table1;
@@ -341,6 +342,9 @@ pub struct BenchOptions {
     /// Also compare against exact visibility, computed as these options say (checked with
     /// [`compare::ExactOptions::check`]); on the device `compare` would choose.
     pub exact: Option<compare::ExactOptions>,
+    /// With `exact`: the converging estimator's sample counts for the speed at equal error
+    /// ([`equal_error`]), each in `2..=MAX_VAL_SAMPLES`.
+    pub equal_error: Option<Vec<u32>>,
     /// Render the brute-force reference and report the error against it.
     pub references: bool,
     /// The paper's Table 1 configurations on scenes built from this one ([`table1`]); the
@@ -443,6 +447,9 @@ pub struct ConfigResult {
     pub rel_rmse_vs_exact_corrected: Option<f64>,
     /// CPU reference: shadow rays per second (BVH build included).
     pub exact_rays_per_s: Option<f64>,
+    /// With `--equal-error`: the time the converging estimator needs for this configuration's
+    /// error against exact, and the speed-up (`equal_error_curves` holds the estimator's curve).
+    pub at_equal_error: Option<equal_error::AtEqualError>,
 }
 
 /// A bench run's results (`results.json`).
@@ -461,6 +468,8 @@ pub struct BenchResults {
     /// With `--reference exact`: "all", "stride" or "importance".
     pub exact_estimator: Option<&'static str>,
     pub configs: Vec<ConfigResult>,
+    /// With `--equal-error`: the converging estimator's error against time, per image size.
+    pub equal_error_curves: Vec<equal_error::EqualErrorCurve>,
     /// The gather's throughput against an FMA-bound kernel, on the base configuration.
     pub fma: Option<fma::FmaReport>,
     /// Temporal stability on the base configuration.
@@ -482,6 +491,19 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
             let (flag, why) = message.split_once(": ").unwrap_or(("--reference", message.as_str()));
             flag_error(flag, why)
         })?;
+    }
+    match (&options.equal_error, &options.exact) {
+        (Some(_), None) => return Err(flag_error("--equal-error", "needs --reference exact")),
+        (Some(samples), Some(_)) => {
+            let max = crate::twin::exact_cpu::MAX_VAL_SAMPLES;
+            if let Some(n) = samples.iter().find(|n| !(2..=max).contains(*n)) {
+                return Err(flag_error("--equal-error", format!("sample counts must be in 2..={max}, got {n}")));
+            }
+            if samples.is_empty() {
+                return Err(flag_error("--equal-error", "needs at least one sample count"));
+            }
+        }
+        _ => {}
     }
     let path = &options.scene;
     let text = std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.clone(), source })?;
@@ -510,10 +532,11 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         vec![Job { variant: "scene".to_owned(), configs: options.configs(&description, &scene), description }]
     };
     let mut results = Vec::new();
+    let mut curves = Vec::new();
     let mut timing = None;
     let mut base_scene = None;
     for job in &jobs {
-        let base = run_job(gpu, options, job, &base_dir, &mut results, progress).map_err(|e| match e {
+        let base = run_job(gpu, options, job, &base_dir, &mut results, &mut curves, progress).map_err(|e| match e {
             BenchError::Scene { source, .. } => BenchError::Scene { path: path.clone(), source },
             e => e,
         })?;
@@ -553,6 +576,7 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         exact_val_stride: options.exact.map(|e| e.val_stride),
         exact_estimator: options.exact.map(|e| e.estimator()),
         configs: results,
+        equal_error_curves: curves,
         fma,
         temporal,
     };
@@ -581,6 +605,7 @@ fn run_job(
     job: &Job,
     base_dir: &Path,
     results: &mut Vec<ConfigResult>,
+    curves: &mut Vec<equal_error::EqualErrorCurve>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Scene, BenchError> {
     let scene_error = |source| BenchError::Scene { path: PathBuf::new(), source };
@@ -641,6 +666,16 @@ fn run_job(
                 Some(exact) => Some(compare::exact_reference(gpu, &mut renderer, w, h, exact)?),
                 None => None,
             };
+            let curve = match (&options.equal_error, &exact) {
+                (Some(samples), Some(reference)) => {
+                    let label = format!("{}: R {rsm}, glossy {glossy}, {w}x{h}", job.variant);
+                    progress(&format!("{label}: converging estimator, samples {samples:?}"));
+                    let curve = equal_error::measure(label, gpu, &mut renderer, w, h, reference, samples)?;
+                    curves.push(curve.clone());
+                    Some(curve)
+                }
+                _ => None,
+            };
             renderer.release_reference_passes();
             for (config, frame, memory) in sparse_frames {
                 let sparse_indirect_ms = frame.indirect_ms();
@@ -674,6 +709,13 @@ fn run_job(
                     exact_rel_stderr: exact.as_ref().and_then(|x| x.rel_stderr()),
                     rel_rmse_vs_exact_corrected: exact.as_ref().and_then(|x| x.corrected_rel_rmse(&frame.indirect)),
                     exact_rays_per_s: exact.as_ref().and_then(|x| x.rays_per_s()),
+                    at_equal_error: exact.as_ref().zip(curve.as_ref()).and_then(|(x, c)| {
+                        equal_error::at_error(
+                            &c.points,
+                            equal_error::error_against(x, &frame.indirect),
+                            sparse_indirect_ms,
+                        )
+                    }),
                     paper_fps: table1::paper_fps(&job.variant, &config, scene.sparse_point_count()),
                 });
             }
@@ -764,6 +806,9 @@ pub fn csv(results: &BenchResults) -> String {
         "exact_ms",
         "exact_device",
         "exact_rays_per_s",
+        "equal_error_estimator_ms",
+        "speedup_at_equal_error",
+        "equal_error_extrapolated",
         "paper_fps",
         "ism_count",
         "ism_resolution",
@@ -809,6 +854,9 @@ pub fn csv(results: &BenchResults) -> String {
             opt(r.exact_ms),
             r.exact_device.map_or(String::new(), |d| d.as_str().to_owned()),
             opt(r.exact_rays_per_s),
+            opt(r.at_equal_error.map(|a| a.estimator_ms)),
+            opt(r.at_equal_error.map(|a| a.speedup)),
+            r.at_equal_error.map_or(String::new(), |a| a.extrapolated.to_string()),
             r.paper_fps.map_or(String::new(), |f| f.to_string()),
         ];
         let ism = |o: Option<u32>| o.map_or(String::new(), |n| n.to_string());

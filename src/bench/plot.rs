@@ -145,12 +145,26 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
     exact: bool,
 ) -> Drawn {
     root.fill(&WHITE).map_err(err)?;
-    let error = |r: &ConfigResult| if exact { r.vs_exact } else { r.vs_brute_force }.map(|e| e.rel_rmse);
+    // Against exact, the error with the reference's noise taken out where it is known, as the
+    // converging estimator's curve is measured.
+    let error = |r: &ConfigResult| match exact {
+        true => r.rel_rmse_vs_exact_corrected.or(r.vs_exact.map(|e| e.rel_rmse)),
+        false => r.vs_brute_force.map(|e| e.rel_rmse),
+    };
+    let curves: Vec<Vec<(f64, f64)>> = match exact {
+        true => results
+            .equal_error_curves
+            .iter()
+            .map(|c| c.points.iter().map(|p| (p.ms, p.rel_rmse)).filter(|p| p.0 > 0.0 && p.1.is_finite()).collect())
+            .collect(),
+        false => Vec::new(),
+    };
     let with_error: Vec<&ConfigResult> = results.configs.iter().filter(|r| error(r).is_some()).collect();
     let points: Vec<(f64, f64)> =
         with_error.iter().map(|r| (r.sparse_indirect_ms, error(r).unwrap_or_default())).collect();
     let front = pareto_front(&points);
     let y_max = points.iter().map(|p| p.1).filter(|y| y.is_finite()).fold(0.0f64, f64::max).max(1e-3) * 1.15;
+    let x_range = log_range(points.iter().chain(curves.iter().flatten()).map(|p| p.0));
     let reference = match (exact, results.exact_val_stride) {
         (true, Some(n)) if n > 1 => format!("exact visibility (every {n}th VAL)"),
         (true, _) => "exact visibility".to_owned(),
@@ -161,13 +175,13 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
         .margin(15)
         .x_label_area_size(45)
         .y_label_area_size(60)
-        .build_cartesian_2d(log_range(points.iter().map(|p| p.0)).log_scale(), 0.0..y_max)
+        .build_cartesian_2d(x_range.log_scale(), 0.0..y_max)
         .map_err(err)?;
     chart
         .configure_mesh()
         .x_labels(8)
         .x_label_formatter(&|x| format!("{x:.0}"))
-        .x_desc(format!("sparse indirect stages, ms ({}, log)", results.timing.as_str()))
+        .x_desc(format!("indirect stages, ms ({}, log)", results.timing.as_str()))
         .y_desc("relative RMSE of the indirect image")
         .label_style((FAMILY, 13))
         .draw()
@@ -191,6 +205,17 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
                 .map(|&i| Text::new(short_label(with_error[i]), points[i], (FAMILY, 12).into_font().color(&BLACK))),
         )
         .map_err(err)?;
+    let green = RGBColor(44, 160, 44);
+    for (i, curve) in curves.iter().enumerate() {
+        // Above the plot's error range the curve is clipped by the chart.
+        let series = chart.draw_series(LineSeries::new(curve.clone(), green.stroke_width(2))).map_err(err)?;
+        if i == 0 {
+            series
+                .label("converging estimator (exact, N importance-sampled VALs; CPU)")
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], green.stroke_width(2)));
+        }
+        chart.draw_series(curve.iter().map(|&p| Cross::new(p, 4, green.stroke_width(2)))).map_err(err)?;
+    }
     chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.8)).draw().map_err(err)?;
     Ok(())
 }

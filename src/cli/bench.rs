@@ -29,6 +29,11 @@ pub struct Args {
     val_stride: Option<u32>,
     #[command(flatten)]
     exact: ExactArgs,
+    /// With --reference exact: also measure the speed at equal error, the time relume's own
+    /// converging estimator (the CPU exact reference with N importance-sampled VALs per pixel)
+    /// needs for each configuration's error; the N to measure (default 2,4,...,256).
+    #[arg(long, value_name = "N1,N2,...", num_args = 0..=1, default_missing_value = "", requires = "reference")]
+    equal_error: Option<String>,
     /// Skip the plots (results.json and results.csv only).
     #[arg(long)]
     no_plots: bool,
@@ -58,12 +63,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(Reference::Exact) => Some(args.exact.options(args.val_stride.unwrap_or(1))?),
         None => None,
     };
+    let equal_error = match args.equal_error.as_deref() {
+        None => None,
+        Some("") => Some(relume::bench::equal_error::DEFAULT_SAMPLES.to_vec()),
+        Some(list) => Some(
+            list.split(',')
+                .map(|n| n.trim().parse::<u32>().map_err(|e| anyhow::anyhow!("--equal-error: {n:?}: {e}")))
+                .collect::<anyhow::Result<Vec<u32>>>()?,
+        ),
+    };
     let options = relume::bench::BenchOptions {
         scene: args.scene,
         sweep: relume::bench::Sweep::parse(&args.sweep)?,
         grid: args.grid,
         quick: args.quick,
         exact,
+        equal_error,
         references: !args.table1 && !args.no_references,
         table1: args.table1,
         out: args.out,
@@ -76,6 +91,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let results = relume::bench::run(&gpu, &options, &mut |what| {
         eprintln!("[{:7.1} s] {what}", start.elapsed().as_secs_f64());
     })?;
+    for curve in &results.equal_error_curves {
+        let points: Vec<String> =
+            curve.points.iter().map(|p| format!("N {}: {:.0} ms, {:.4}", p.samples, p.ms, p.rel_rmse)).collect();
+        eprintln!("converging estimator ({}): {}", curve.label, points.join("; "));
+    }
+    for r in results.configs.iter().filter(|r| r.at_equal_error.is_some()) {
+        let (Some(at), Some(error)) =
+            (r.at_equal_error, r.rel_rmse_vs_exact_corrected.or(r.vs_exact.map(|e| e.rel_rmse)))
+        else {
+            continue;
+        };
+        eprintln!(
+            "{}: error {error:.4} in {:.0} ms; the estimator needs {:.0} ms{}: {:.2}x at equal error",
+            relume::bench::describe(&r.config),
+            r.sparse_indirect_ms,
+            at.estimator_ms,
+            if at.extrapolated { " (extrapolated)" } else { "" },
+            at.speedup
+        );
+    }
     eprintln!(
         "{} configurations on {} ({} timing); wrote {}",
         results.configs.len(),

@@ -109,6 +109,9 @@ fn bench_flags_are_checked_and_named() {
         (vec!["--sweep", "fps=60"], "unknown axis"),
         (vec!["--val-stride", "4"], "--val-stride"),
         (vec!["--reference", "exact", "--val-stride", "0"], "--val-stride"),
+        (vec!["--equal-error"], "--reference"),
+        (vec!["--reference", "exact", "--equal-error", "1,8"], "--equal-error"),
+        (vec!["--reference", "exact", "--equal-error", "8,x"], "--equal-error"),
     ] {
         let mut all = vec!["bench", scene, "--quick", "--out", out];
         all.extend(&args);
@@ -139,4 +142,54 @@ fn table1_preset_builds_its_scenes_and_runs_quick() {
     assert_eq!(configs[1]["glossy_active"], true);
     let built = relume::scene::Scene::load(&dir.join("table1_200k.json")).expect("the built scene loads");
     assert_eq!(built.meshes.len(), 4, "the room and three bunnies");
+}
+
+/// `--equal-error`: the converging estimator's curve and each configuration's speed at equal
+/// error. The figures are timings, not asserted; what is asserted is what cannot depend on the
+/// machine: the estimator converges (16x the samples, about a quarter of the error: below half
+/// of it here, leaving room for one image's noise), casts rays in proportion to its samples, and
+/// every configuration gets a finite time and speed-up.
+#[test]
+fn equal_error_measures_the_converging_estimator() {
+    let dir = scratch("bench_equal_error");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let args = [
+        "bench",
+        scene.to_str().unwrap(),
+        "--quick",
+        "--sweep",
+        "occlusion=off,disks",
+        "--no-fma",
+        "--no-temporal",
+        "--reference",
+        "exact",
+        "--equal-error",
+        "2,32",
+        "--out",
+        dir.to_str().unwrap(),
+    ];
+    let o = relume(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("at equal error"), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let curves = json["equal_error_curves"].as_array().expect("curves");
+    assert_eq!(curves.len(), 1, "one renderer, one size: {json}");
+    let points = curves[0]["points"].as_array().unwrap();
+    let samples: Vec<u64> = points.iter().map(|p| p["samples"].as_u64().unwrap()).collect();
+    assert_eq!(samples, [2, 32]);
+    let error: Vec<f64> = points.iter().map(|p| finite_non_negative(p, "rel_rmse")).collect();
+    assert!(error[1] < 0.5 * error[0] && error[1] > 0.0, "{error:?}");
+    let rays: Vec<f64> = points.iter().map(|p| finite_non_negative(p, "shadow_rays")).collect();
+    assert!(rays[1] > 8.0 * rays[0], "{rays:?}");
+    let configs = json["configs"].as_array().unwrap();
+    assert_eq!(configs.len(), 2, "{json}");
+    for c in configs {
+        let at = &c["at_equal_error"];
+        assert!(finite_non_negative(at, "estimator_ms") > 0.0, "{c}");
+        assert!(finite_non_negative(at, "speedup") > 0.0, "{c}");
+        assert!(at["extrapolated"].is_boolean(), "{c}");
+    }
+    let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().contains("speedup_at_equal_error"));
 }
