@@ -94,7 +94,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for curve in &results.equal_error_curves {
         let points: Vec<String> =
             curve.points.iter().map(|p| format!("N {}: {:.0} ms, {:.4}", p.samples, p.ms, p.rel_rmse)).collect();
-        eprintln!("converging estimator ({}): {}", curve.label, points.join("; "));
+        eprintln!(
+            "converging estimator ({}): {}; fitted {:.0} ms + {:.2} ms per sample",
+            curve.label,
+            points.join("; "),
+            curve.fixed_ms,
+            curve.per_sample_ms
+        );
     }
     for r in results.configs.iter().filter(|r| r.at_equal_error.is_some()) {
         let (Some(at), Some(error)) =
@@ -103,9 +109,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             continue;
         };
         eprintln!(
-            "{}: error {error:.4} in {:.0} ms; the estimator needs {:.0} ms{}: {:.2}x at equal error",
+            "{}: error {error:.4} in {:.0} ms; the estimator needs {:.1} samples, {:.0} ms{}: {:.2}x at equal error",
             relume::bench::describe(&r.config),
             r.sparse_indirect_ms,
+            at.samples,
             at.estimator_ms,
             if at.extrapolated { " (extrapolated)" } else { "" },
             at.speedup
