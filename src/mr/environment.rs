@@ -237,7 +237,7 @@ impl DirectionGrid {
     }
 }
 
-/// The environment of a replay, ready to make VALs each frame.
+/// The environment of a replay or of a scene's stream frames, ready to make VALs each frame.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub enum Environment {
     #[default]

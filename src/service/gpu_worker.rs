@@ -1,5 +1,5 @@
 //! The one thread that owns the GPU. It holds a [`Backend`] (in the service the [`Gpu`] and
-//! one [`Renderer`] per scene: [`GpuBackend`]) and takes jobs from the [`FairQueue`]; every job
+//! one [`Renderer`] and [`MrPipeline`] per scene: [`GpuBackend`]) and takes jobs from the [`FairQueue`]; every job
 //! answers on its own oneshot channel. Handlers never touch the device and never block a
 //! tokio worker on it.
 //!
