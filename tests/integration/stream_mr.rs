@@ -3,7 +3,8 @@
 //! receivers), the differential relighting of the real surfaces, the composite. Frames of
 //! `fixtures/recordings/tum_fr1_xyz` at a quarter of their size (160x120), the bunny with 256
 //! sparse points, one VAL and one receiver per 4x4 pixels, the differential pass on the CPU twin
-//! (`settings.mr.device` `auto` on lavapipe): a few seconds a frame in the dev profile.
+//! (`settings.mr.device` `auto` on lavapipe): the three tests take about 3 s together on
+//! lavapipe (dev profile).
 
 use relume::mr::environment::Environment;
 use relume::mr::{MrFrame, MrOptions, MrRenderer};
