@@ -291,6 +291,12 @@ impl Renderer {
         self.placement_generation += 1;
     }
 
+    /// Model-to-world of each mesh as uploaded (the scene's local frame, as [`Renderer::place_meshes`]
+    /// takes it).
+    pub fn placement(&self) -> &[Mat4] {
+        &self.placement
+    }
+
     /// Stop lighting with an RGB-D frame's or uploaded VALs: the scene's spot light alone.
     pub fn clear_vals(&mut self) {
         self.rgbd_active = false;

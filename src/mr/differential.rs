@@ -22,7 +22,7 @@ use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use crate::twin::Val;
 use crate::twin::rgbd::{grid_size, srgb_to_linear};
-use glam::{Affine3A, UVec2, Vec3};
+use glam::{Affine3A, Mat4, UVec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
 
@@ -192,9 +192,16 @@ pub struct Emitter {
 /// The sparse points of `scene` as placed by its meshes' transforms, in the flattened order
 /// (`gpu::scene::FlatScene`).
 pub fn emitters(scene: &Scene) -> Vec<Emitter> {
+    let placement: Vec<Mat4> = scene.meshes.iter().map(|m| m.model_to_world).collect();
+    emitters_placed(scene, &placement)
+}
+
+/// [`emitters`] with mesh `i` placed by `model_to_world[i]` (as `Renderer::place_meshes`
+/// places it): positions, normals and areas follow the placement.
+pub fn emitters_placed(scene: &Scene, model_to_world: &[Mat4]) -> Vec<Emitter> {
     let mut out = Vec::new();
-    for mesh in &scene.meshes {
-        let placed = mesh.placed(mesh.model_to_world);
+    for (mesh, &transform) in scene.meshes.iter().zip(model_to_world) {
+        let placed = mesh.placed(transform);
         let positions = placed.positions();
         let area = crate::scene::surface_area(&positions, &mesh.triangles) as f32;
         let count = mesh.sparse.positions.len().max(1) as f32;

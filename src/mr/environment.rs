@@ -56,12 +56,15 @@ pub enum EnvironmentSource {
     Map,
 }
 
-/// `settings.environment` of a scene file (replay only); every field has a default.
+/// `settings.environment` of a scene file (replay and the service's streams); every field has
+/// a default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct EnvironmentSettings {
     pub source: EnvironmentSource,
-    /// Path of the equirectangular `.hdr` / `.exr` map, relative to the scene file (`map`).
+    /// Path of the equirectangular `.hdr` / `.exr` map (`map`), relative to the scene file; on
+    /// the service relative to and confined to its asset directory, at most `max_mesh_bytes`
+    /// on disk and `max_pixels` pixels.
     pub map: Option<String>,
     /// Radiance (W/(m² sr)) of a map value of 1; > 0, default 1.
     pub scale: f32,
@@ -87,6 +90,8 @@ pub enum EnvironmentError {
     Read { path: String, message: String },
     #[error("settings.environment.map: {path} is {width}x{height}; maps up to {MAX_MAP_SIDE} pixels a side are read")]
     TooLarge { path: String, width: u32, height: u32 },
+    #[error("settings.environment.map: {path} is {width}x{height}, over the limit of {max_pixels} pixels")]
+    TooManyPixels { path: String, width: u32, height: u32, max_pixels: u64 },
     #[error("settings.environment.map: source \"map\" needs a map path")]
     Missing,
 }
@@ -102,12 +107,22 @@ pub struct EquirectMap {
 impl EquirectMap {
     /// Read an `.hdr` or `.exr` file (any format the `image` crate decodes to float RGB).
     pub fn read(path: &Path) -> Result<Self, EnvironmentError> {
+        Self::read_within(path, u64::MAX)
+    }
+
+    /// [`EquirectMap::read`] of a map of at most `max_pixels` pixels (and [`MAX_MAP_SIDE`] a
+    /// side), checked on the file's header before anything is decoded.
+    pub fn read_within(path: &Path, max_pixels: u64) -> Result<Self, EnvironmentError> {
         let err = |message: String| EnvironmentError::Read { path: path.display().to_string(), message };
         let reader = ::image::ImageReader::open(path).map_err(|e| err(e.to_string()))?;
         let reader = reader.with_guessed_format().map_err(|e| err(e.to_string()))?;
         let (width, height) = reader.into_dimensions().map_err(|e| err(e.to_string()))?;
         if width > MAX_MAP_SIDE || height > MAX_MAP_SIDE || width == 0 || height == 0 {
             return Err(EnvironmentError::TooLarge { path: path.display().to_string(), width, height });
+        }
+        if u64::from(width) * u64::from(height) > max_pixels {
+            let path = path.display().to_string();
+            return Err(EnvironmentError::TooManyPixels { path, width, height, max_pixels });
         }
         let image = ::image::open(path).map_err(|e| err(e.to_string()))?.into_rgb32f();
         let pixels = image.pixels().map(|p| Vec3::new(p[0], p[1], p[2]).max(Vec3::ZERO)).collect();
@@ -222,7 +237,7 @@ impl DirectionGrid {
     }
 }
 
-/// The environment of a replay, ready to make VALs each frame.
+/// The environment of a replay or of a scene's stream frames, ready to make VALs each frame.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub enum Environment {
     #[default]
@@ -236,13 +251,23 @@ pub enum Environment {
 impl Environment {
     /// The environment `settings` ask for, its map read relative to `base_dir`.
     pub fn from_settings(settings: &EnvironmentSettings, base_dir: &Path) -> Result<Self, EnvironmentError> {
+        Self::from_settings_within(settings, base_dir, u64::MAX)
+    }
+
+    /// [`Environment::from_settings`] with a map of at most `max_pixels` pixels
+    /// ([`EquirectMap::read_within`]).
+    pub fn from_settings_within(
+        settings: &EnvironmentSettings,
+        base_dir: &Path,
+        max_pixels: u64,
+    ) -> Result<Self, EnvironmentError> {
         let grid = DirectionGrid::new(settings.rows, Vec3::from(settings.up));
         Ok(match settings.source {
             EnvironmentSource::None => Environment::None,
             EnvironmentSource::Auto => Environment::Auto(grid),
             EnvironmentSource::Map => {
                 let path = settings.map.as_ref().ok_or(EnvironmentError::Missing)?;
-                let map = EquirectMap::read(&base_dir.join(path))?;
+                let map = EquirectMap::read_within(&base_dir.join(path), max_pixels)?;
                 let radiance = grid.sample_map(&map, settings.scale, settings.rotation_deg.to_radians());
                 Environment::Map { grid, radiance }
             }

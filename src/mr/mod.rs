@@ -2,9 +2,10 @@
 //! from each frame's camera and composited over its colour image, the real depth hiding the
 //! virtual object where real surfaces are nearer.
 //!
-//! [`MrRenderer`] is the per-frame loop of `relume replay`: frame in, composited image +
-//! indirect image + timings out. The service's streams use [`virtual_depth`] and [`composite`]
-//! with the scene's shared renderer.
+//! [`MrPipeline`] is the per-frame pipeline (VALs, environment, render, differential
+//! relighting of the real surfaces, composite) on a renderer it is given; [`MrRenderer`] runs it
+//! for `relume replay` (frame in, composited image + indirect image + timings out), and the
+//! service's streams run it on the scene's shared renderer (`service::gpu_worker`).
 
 pub mod differential;
 pub mod environment;
@@ -15,13 +16,14 @@ use crate::gpu::differential::Differential;
 use crate::gpu::timing::StageTimings;
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, encode_srgb};
-use crate::renderer::{Method, Renderer};
+use crate::renderer::{Method, Rendered, Renderer};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
-use differential::{Emitter, LightField, MrSettings};
+use crate::twin::Val;
+use differential::{Emitter, LightField, MrSettings, ReceiverGrid};
 use environment::Environment;
-use glam::{DAffine3, Vec3};
+use glam::{DAffine3, Mat4, Vec3};
 use std::time::Instant;
 
 /// How replayed frames are lit and rendered.
@@ -73,30 +75,19 @@ pub struct MrFrame {
     pub sparse_irradiance: Vec<Vec3>,
 }
 
+/// `relume replay`'s renderer: one scene's [`Renderer`] and [`MrPipeline`], the replay's
+/// options and its VAL accumulator.
 pub struct MrRenderer {
     renderer: Renderer,
-    settings: RgbdSettings,
-    mr: MrSettings,
-    options: MrOptions,
+    pipeline: MrPipeline,
+    settings: FrameSettings,
     accumulator: Option<ValAccumulator>,
     frames: u64,
-    /// Only with `settings.mr.differential`.
-    differential: Option<DifferentialState>,
-    environment: Environment,
-    /// Centre of the virtual content's bounding sphere: the environment's VALs surround it.
-    centre: Vec3,
-}
-
-/// The differential pass (its BVH of the virtual meshes as placed) and the virtual content's
-/// re-emitters and bounds.
-struct DifferentialState {
-    pass: Differential,
-    emitters: Vec<Emitter>,
-    bounds: (Vec3, Vec3),
 }
 
 /// Stage name of the differential rendering in a replay's timings (wall time: receivers on the
-/// CPU, the GPU rounds, the composite's relighting).
+/// CPU, the GPU rounds, the composite's relighting, and a rebuild of the pass's BVH when the
+/// meshes moved since the last frame).
 pub const DIFFERENTIAL_STAGE: &str = "differential";
 
 /// Stage name of the environment's VALs (CPU: the `auto` estimate and the VALs' upload).
@@ -108,137 +99,335 @@ impl MrRenderer {
             Some(a) => Some(ValAccumulator::new(a.cell_size, a.max_vals, a.max_age_frames)?),
             None => None,
         };
-        let renderer = Renderer::new(gpu, scene)?;
-        let differential = match scene.settings.mr.differential {
-            false => None,
-            true => Some(DifferentialState {
-                pass: Differential::on(gpu, &renderer.scene, scene.settings.mr.device)?,
-                emitters: differential::emitters(scene),
-                bounds: differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position))),
-            }),
+        let mut renderer = Renderer::new(gpu, scene)?;
+        let mut pipeline = MrPipeline::new(scene.settings.mr, Environment::None);
+        let placement = renderer.placement().to_vec();
+        pipeline.place(gpu, &mut renderer, scene, &placement)?;
+        // Built before the first frame: not a frame's time.
+        pipeline.build_ms = 0.0;
+        let settings = FrameSettings {
+            width: options.width,
+            height: options.height,
+            exposure: options.exposure,
+            rgbd: scene.settings.rgbd,
+            method: Method::Sparse,
         };
-        let centre = renderer.scene.flat.bounding_sphere().0;
-        Ok(Self {
-            renderer,
-            settings: scene.settings.rgbd,
-            mr: scene.settings.mr,
-            options,
-            accumulator,
-            frames: 0,
-            differential,
-            environment: Environment::None,
-            centre,
-        })
+        Ok(Self { renderer, pipeline, settings, accumulator, frames: 0 })
     }
 
     /// Light the following frames with `environment` too (`settings.environment`, read by
     /// [`Environment::from_settings`]).
     pub fn set_environment(&mut self, environment: Environment) {
+        self.pipeline.set_environment(environment);
+    }
+
+    /// Relight `frame` ([`MrPipeline::render_frame`]): its VALs (or the accumulated set), the
+    /// environment, the scene's spot light if any, the virtual object seen from the frame's
+    /// camera and composited over its colour, relit by the differential pass.
+    pub fn render_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<MrFrame, GpuError> {
+        let accumulate = self.accumulator.as_mut().map(|a| (a, self.frames));
+        let relit = self.pipeline.render_frame(gpu, &mut self.renderer, frame, &self.settings, accumulate)?;
+        self.frames += 1;
+        Ok(MrFrame {
+            composited: relit.composited,
+            indirect: relit.rendered.indirect,
+            direct: relit.rendered.direct,
+            timings: relit.rendered.timings,
+            val_count: relit.rendered.val_count,
+            sparse_irradiance: relit.sparse_irradiance,
+        })
+    }
+}
+
+/// How one frame is rendered: what [`MrOptions`] gives a replay, and a stream's settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameSettings {
+    /// Output size; the frame's intrinsics are scaled to it.
+    pub width: u32,
+    pub height: u32,
+    /// Exposure of the virtual object in the composite ([`MrOptions::exposure`]).
+    pub exposure: f32,
+    /// How the frame's pixels become VALs and receivers, and its `radiance_scale`.
+    pub rgbd: RgbdSettings,
+    /// The indirect method. The differential pass's re-emitters take what the sparse method
+    /// gathered at the sparse points: with another method they add no light (the virtual
+    /// content's shadow alone).
+    pub method: Method,
+}
+
+/// The mixed-reality pipeline of one scene (DESIGN.md §6, issue 17), shared by `relume replay`
+/// ([`MrRenderer`]) and the service's streams (`service::gpu_worker`): a frame's VALs, the
+/// environment (`settings.environment`, the `auto` level raised by the differential pass's
+/// receivers), the render from the frame's camera, the differential relighting of the real
+/// surfaces (`settings.mr`) and the composite. It drives a [`Renderer`] it is given and holds
+/// what outlives a frame: the settings, the environment and, for the meshes' placement, the
+/// differential pass (its BVH of the virtual meshes) and the content's re-emitters, bounds and
+/// centre, rebuilt by [`MrPipeline::place`] only when the placement changes.
+pub struct MrPipeline {
+    mr: MrSettings,
+    environment: Environment,
+    placed: Option<Placed>,
+    /// Time (ms) of a rebuild of the differential pass not yet counted in a frame's stage.
+    build_ms: f64,
+}
+
+/// What depends on where the meshes are.
+struct Placed {
+    /// Model-to-world of each mesh it was built for ([`Renderer::placement`]).
+    placement: Vec<Mat4>,
+    /// Centre of the virtual content's bounding sphere: the environment's VALs surround it.
+    centre: Vec3,
+    /// Only with `settings.mr.differential`.
+    differential: Option<DifferentialState>,
+}
+
+/// The differential pass (its BVH of the virtual meshes as placed) and the virtual content's
+/// re-emitters and bounds.
+struct DifferentialState {
+    pass: Differential,
+    emitters: Vec<Emitter>,
+    bounds: (Vec3, Vec3),
+}
+
+/// A frame's light, set on the renderer by [`MrPipeline::light`]: what the rest of the frame
+/// needs of it, and its stages' times.
+pub struct Lighting {
+    /// The real VALs (the frame's, or the accumulated set), read back when the environment or
+    /// the differential pass need them on the CPU; `None` when they stayed on the GPU.
+    real_vals: Option<Vec<Val>>,
+    /// The differential pass's receivers.
+    grid: Option<ReceiverGrid>,
+    /// `rgbd_vals` with the VALs' readback (ms), when they were read back.
+    rgbd_ms: f64,
+    /// The receivers (ms), counted in the differential stage.
+    receivers_ms: f64,
+    /// The environment's VALs (ms), when the scene has an environment.
+    environment_ms: Option<f64>,
+}
+
+impl Lighting {
+    /// Put the lighting's stages at the front of a frame's `timings`: `rgbd_vals` (when the
+    /// VALs were made and read back here rather than in the frame) and `environment`.
+    pub fn add_stages(&self, timings: &mut StageTimings) {
+        if self.real_vals.is_some() {
+            timings.stages.insert(0, (crate::renderer::stage::RGBD_VALS.to_owned(), self.rgbd_ms));
+        }
+        if let Some(ms) = self.environment_ms {
+            timings.stages.insert(1.min(timings.stages.len()), (ENVIRONMENT_STAGE.to_owned(), ms));
+        }
+    }
+}
+
+/// One frame through the whole pipeline.
+pub struct Relit {
+    /// The virtual content from the frame's camera, with the lighting's and the differential
+    /// pass's stages in its timings.
+    pub rendered: Rendered,
+    /// The camera image (relit by the differential pass) with the virtual content composited
+    /// in (sRGB, row-major).
+    pub composited: Vec<[u8; 3]>,
+    /// Time of the virtual depth's readback and the composite (ms).
+    pub composite_ms: f64,
+    /// Diffuse irradiance (W/m²) at each sparse point ([`MrFrame::sparse_irradiance`]); empty
+    /// with a method other than the sparse one.
+    pub sparse_irradiance: Vec<Vec3>,
+}
+
+impl MrPipeline {
+    /// The pipeline of a scene with `mr` settings, lit by `environment` too. Call
+    /// [`MrPipeline::place`] before the first frame.
+    pub fn new(mr: MrSettings, environment: Environment) -> Self {
+        Self { mr, environment, placed: None, build_ms: 0.0 }
+    }
+
+    /// Light the following frames with `environment` too.
+    pub fn set_environment(&mut self, environment: Environment) {
         self.environment = environment;
     }
 
-    /// Relight `frame`: its VALs (or the accumulated set), the scene's spot light if any, the
-    /// virtual object seen from the frame's camera and composited over its colour.
-    pub fn render_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<MrFrame, GpuError> {
-        let (w, h) = (self.options.width, self.options.height);
-        let settings = self.settings;
+    /// Place the meshes of `scene` (the scene `renderer` was built from) by `model_to_world`
+    /// ([`Renderer::place_meshes`]) and, when that is not the placement the differential pass
+    /// was built for, rebuild the pass's BVH, the re-emitters, bounds and centre. Placing the
+    /// meshes as they already are costs a comparison.
+    pub fn place(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &mut Renderer,
+        scene: &Scene,
+        model_to_world: &[Mat4],
+    ) -> Result<(), GpuError> {
+        renderer.place_meshes(gpu, scene, model_to_world);
+        if self.placed.as_ref().is_some_and(|p| p.placement == model_to_world) {
+            return Ok(());
+        }
+        let start = Instant::now();
+        let differential = match self.mr.differential {
+            false => None,
+            true => Some(DifferentialState {
+                pass: Differential::on(gpu, &renderer.scene, self.mr.device)?,
+                emitters: differential::emitters_placed(scene, model_to_world),
+                bounds: differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position))),
+            }),
+        };
+        if differential.is_some() {
+            self.build_ms += start.elapsed().as_secs_f64() * 1e3;
+            tracing::debug!(ms = self.build_ms, "differential pass built for a new placement");
+        }
+        let centre = renderer.scene.flat.bounding_sphere().0;
+        self.placed = Some(Placed { placement: model_to_world.to_vec(), centre, differential });
+        Ok(())
+    }
+
+    /// Forget the placement's state (its GPU buffers belong to a device that was lost): the
+    /// next [`MrPipeline::place`] rebuilds it.
+    pub fn forget_placement(&mut self) {
+        self.placed = None;
+    }
+
+    /// The placement's state, when it is the renderer's (a renderer placed otherwise since the
+    /// last [`MrPipeline::place`] gets no differential pass and its own centre).
+    fn placed(&self, renderer: &Renderer) -> Option<&Placed> {
+        let placed = self.placed.as_ref().filter(|p| p.placement == renderer.placement());
+        if placed.is_none() && self.mr.differential {
+            tracing::warn!("the meshes moved without MrPipeline::place: no differential pass this frame");
+        }
+        placed
+    }
+
+    /// Set `frame`'s light on `renderer`: its VALs (made on the GPU; with `accumulate`, the
+    /// accumulator and this frame's index, inserted into it and the accumulated set used), the
+    /// environment's VALs around the content, and with the differential pass, its receivers
+    /// (which raise the `auto` environment's level). The spot light, occlusion and glossy
+    /// settings are the renderer's.
+    pub fn light(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &mut Renderer,
+        frame: &RgbdFrame,
+        settings: &FrameSettings,
+        accumulate: Option<(&mut ValAccumulator, u64)>,
+    ) -> Result<Lighting, GpuError> {
+        let rgbd = settings.rgbd;
+        let (centre, bounds) = match self.placed(renderer) {
+            Some(p) => (p.centre, p.differential.as_ref().map(|d| d.bounds)),
+            None => (renderer.scene.flat.bounding_sphere().0, None),
+        };
         // The differential pass and the environment need the real VALs on the CPU: they are
         // read back, and the readback is timed as the `rgbd_vals` stage; the environment's VALs
         // follow them.
         let start = Instant::now();
-        let on_cpu = self.differential.is_some() || self.environment != Environment::None;
-        let real_vals = match (&mut self.accumulator, on_cpu) {
+        let on_cpu = bounds.is_some() || self.environment != Environment::None;
+        let real_vals = match (accumulate, on_cpu) {
             (None, false) => {
-                self.renderer.set_rgbd_frame(gpu, frame, &settings)?;
+                renderer.set_rgbd_frame(gpu, frame, &rgbd)?;
                 None
             }
-            (None, true) => Some(self.renderer.rgbd_frame_vals(gpu, frame, &settings)?),
-            (Some(acc), _) => {
-                let vals = self.renderer.rgbd_frame_vals(gpu, frame, &settings)?;
-                acc.insert(self.frames, &vals);
+            (None, true) => Some(renderer.rgbd_frame_vals(gpu, frame, &rgbd)?),
+            (Some((acc, index)), _) => {
+                let vals = renderer.rgbd_frame_vals(gpu, frame, &rgbd)?;
+                acc.insert(index, &vals);
                 Some(acc.vals())
             }
         };
         let rgbd_ms = start.elapsed().as_secs_f64() * 1e3;
         // The differential pass's receivers: its stage, and the `auto` environment's level.
         let start = Instant::now();
-        let grid = self.differential.as_ref().map(|d| {
-            let pose = self.renderer.local_pose(&frame.camera_to_world);
-            differential::receivers(frame, &pose, &settings, &self.mr, d.bounds)
+        let grid = bounds.map(|bounds| {
+            let pose = renderer.local_pose(&frame.camera_to_world);
+            differential::receivers(frame, &pose, &rgbd, &self.mr, bounds)
         });
         let receivers_ms = start.elapsed().as_secs_f64() * 1e3;
         let start = Instant::now();
+        // The differential pass takes every VAL but the re-emitters as real light: the
+        // environment's too.
         let real_vals = real_vals.map(|mut vals| {
-            let environment = self.environment.vals(self.centre, frame, &settings, &vals, grid.as_ref());
+            let environment = self.environment.vals(centre, frame, &rgbd, &vals, grid.as_ref());
             vals.extend(environment);
             vals
         });
         if let Some(vals) = &real_vals {
-            self.renderer.set_vals(gpu, vals)?;
+            renderer.set_vals(gpu, vals)?;
         }
-        let environment_ms = start.elapsed().as_secs_f64() * 1e3;
-        self.frames += 1;
-        self.renderer.set_pinhole_view(frame.intrinsics, &frame.camera_to_world);
-        let mut rendered = self.renderer.render(gpu, Method::Sparse, w, h)?;
-        if real_vals.is_some() {
-            rendered.timings.stages.insert(0, (crate::renderer::stage::RGBD_VALS.to_owned(), rgbd_ms));
-        }
-        if self.environment != Environment::None {
-            rendered.timings.stages.insert(1, (ENVIRONMENT_STAGE.to_owned(), environment_ms));
-        }
-        let virtual_depth = virtual_depth(gpu, &self.renderer, &frame.camera_to_world)?;
-        let sparse_irradiance = self.renderer.read_gathered_irradiance(gpu)?;
-        let background = match (&mut self.differential, &real_vals, &grid) {
+        let environment_ms = (self.environment != Environment::None).then(|| start.elapsed().as_secs_f64() * 1e3);
+        Ok(Lighting { real_vals, grid, rgbd_ms, receivers_ms, environment_ms })
+    }
+
+    /// Relight `frame` on `renderer` (placed by [`MrPipeline::place`]): [`MrPipeline::light`],
+    /// the virtual content seen from the frame's camera at the settings' size, the differential
+    /// pass on the real surfaces near it, and the composite.
+    pub fn render_frame(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &mut Renderer,
+        frame: &RgbdFrame,
+        settings: &FrameSettings,
+        accumulate: Option<(&mut ValAccumulator, u64)>,
+    ) -> Result<Relit, GpuError> {
+        let lighting = self.light(gpu, renderer, frame, settings, accumulate)?;
+        let (w, h) = (settings.width, settings.height);
+        renderer.set_pinhole_view(frame.intrinsics, &frame.camera_to_world);
+        let mut rendered = renderer.render(gpu, settings.method, w, h)?;
+        lighting.add_stages(&mut rendered.timings);
+        let start = Instant::now();
+        let virtual_depth = virtual_depth(gpu, renderer, &frame.camera_to_world)?;
+        let depth_ms = start.elapsed().as_secs_f64() * 1e3;
+        let sparse_irradiance = match settings.method {
+            Method::Sparse => renderer.read_gathered_irradiance(gpu)?,
+            Method::BruteForce | Method::Exact => Vec::new(),
+        };
+        let build_ms = std::mem::take(&mut self.build_ms);
+        let differential =
+            self.placed.as_mut().filter(|p| p.placement == renderer.placement()).and_then(|p| p.differential.as_mut());
+        let background = match (differential, &lighting.real_vals, &lighting.grid) {
             (Some(d), Some(vals), Some(grid)) => {
                 let start = Instant::now();
                 let mut all = vals.clone();
                 all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
-                let (light, _) = d.pass.run(gpu, &self.renderer.scene, &grid.receivers, &all, vals.len())?;
-                if tracing::enabled!(tracing::Level::DEBUG) {
-                    let fraction = |l: &crate::gpu::differential::ReceiverLight| {
-                        l.blocked.max_element() / l.unoccluded.max_element().max(1e-12)
-                    };
-                    let net = |l: &crate::gpu::differential::ReceiverLight| {
-                        l.change().element_sum() / l.unoccluded.element_sum().max(1e-12)
-                    };
-                    let shadowed = light.iter().filter(|l| fraction(l) > 0.1).count();
-                    let darkened = light.iter().filter(|l| net(l) < -0.1).count();
-                    let most = light.iter().map(fraction).fold(0.0f32, f32::max);
-                    let darkest = light.iter().map(net).fold(0.0f32, f32::min);
-                    tracing::debug!(
-                        receivers = light.len(),
-                        shadowed,
-                        darkened,
-                        most,
-                        darkest,
-                        "differential: blocked fraction (over 10 %: shadowed) and net change (under -10 %: darkened)"
-                    );
-                }
+                let (light, _) = d.pass.run(gpu, &renderer.scene, &grid.receivers, &all, vals.len())?;
+                log_differential(&light);
                 let field = LightField { grid, light: &light };
-                let background = differential::relight_camera(frame, &field, w, h, settings.radiance_scale);
-                let ms = receivers_ms + start.elapsed().as_secs_f64() * 1e3;
+                let background = differential::relight_camera(frame, &field, w, h, settings.rgbd.radiance_scale);
+                let ms = build_ms + lighting.receivers_ms + start.elapsed().as_secs_f64() * 1e3;
                 rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), ms));
                 Some(background)
             }
             _ => None,
         };
+        let start = Instant::now();
         let virtual_rgb = rendered.direct.add(&rendered.indirect);
         let composited = composite_over(
             frame,
             background.as_deref(),
             &virtual_rgb,
             &virtual_depth,
-            display_scale(self.options.exposure, settings.radiance_scale),
+            display_scale(settings.exposure, settings.rgbd.radiance_scale),
         );
-        Ok(MrFrame {
-            composited,
-            indirect: rendered.indirect,
-            direct: rendered.direct,
-            timings: rendered.timings,
-            val_count: rendered.val_count,
-            sparse_irradiance,
-        })
+        let composite_ms = depth_ms + start.elapsed().as_secs_f64() * 1e3;
+        Ok(Relit { rendered, composited, composite_ms, sparse_irradiance })
     }
+}
+
+/// At debug level: how many receivers the virtual content shadows and darkens.
+fn log_differential(light: &[crate::gpu::differential::ReceiverLight]) {
+    if !tracing::enabled!(tracing::Level::DEBUG) {
+        return;
+    }
+    let fraction =
+        |l: &crate::gpu::differential::ReceiverLight| l.blocked.max_element() / l.unoccluded.max_element().max(1e-12);
+    let net =
+        |l: &crate::gpu::differential::ReceiverLight| l.change().element_sum() / l.unoccluded.element_sum().max(1e-12);
+    let shadowed = light.iter().filter(|l| fraction(l) > 0.1).count();
+    let darkened = light.iter().filter(|l| net(l) < -0.1).count();
+    let most = light.iter().map(fraction).fold(0.0f32, f32::max);
+    let darkest = light.iter().map(net).fold(0.0f32, f32::min);
+    tracing::debug!(
+        receivers = light.len(),
+        shadowed,
+        darkened,
+        most,
+        darkest,
+        "differential: blocked fraction (over 10 %: shadowed) and net change (under -10 %: darkened)"
+    );
 }
 
 /// Optical depth (m, along `camera_to_world`'s z) of the virtual content at each pixel of the

@@ -467,12 +467,12 @@ pub struct SettingsDescription {
     /// How RGB-D frames become VALs (replay and streams); every field has a default.
     #[serde(default)]
     pub rgbd: RgbdSettings,
-    /// Mixed-reality compositing (replay): differential rendering onto the real surfaces; every
-    /// field has a default.
+    /// Mixed-reality compositing (replay and streams): differential rendering onto the real
+    /// surfaces; every field has a default.
     #[serde(default)]
     pub mr: MrSettings,
-    /// Light from the directions no VAL covers (replay only): `source` `"none"` (default),
-    /// `"auto"` or `"map"` (`crate::mr::environment`).
+    /// Light from the directions no VAL covers (replay and streams): `source` `"none"`
+    /// (default), `"auto"` or `"map"` (`crate::mr::environment`).
     #[serde(default)]
     pub environment: EnvironmentSettings,
     /// The sparse method's interpolation, light bound and subdivision; every field has a

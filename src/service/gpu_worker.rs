@@ -1,5 +1,5 @@
 //! The one thread that owns the GPU. It holds a [`Backend`] (in the service the [`Gpu`] and
-//! one [`Renderer`] per scene: [`GpuBackend`]) and takes jobs from the [`FairQueue`]; every job
+//! one [`Renderer`] and [`MrPipeline`] per scene: [`GpuBackend`]) and takes jobs from the [`FairQueue`]; every job
 //! answers on its own oneshot channel. Handlers never touch the device and never block a
 //! tokio worker on it.
 //!
@@ -22,7 +22,7 @@ use glam::Mat4;
 use tokio::sync::oneshot;
 
 use crate::gpu::{Gpu, GpuError};
-use crate::mr;
+use crate::mr::{self, MrPipeline, environment::Environment};
 use crate::renderer::{Method, Rendered, Renderer};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::{Camera, Occlusion, Scene, SpotLight};
@@ -74,8 +74,9 @@ impl From<Refused> for WorkerError {
 pub trait Backend {
     /// The adapter's name and backend, for `/healthz`.
     fn adapter(&self) -> String;
-    /// Prepares the scene's resources (pipelines, buffers).
-    fn add_scene(&mut self, id: &str, scene: Scene) -> Result<(), WorkerError>;
+    /// Prepares the scene's resources (pipelines, buffers); its stream frames are lit by
+    /// `environment` too (`settings.environment`, read off the GPU thread).
+    fn add_scene(&mut self, id: &str, scene: Scene, environment: Environment) -> Result<(), WorkerError>;
     /// Drops the scene's resources; false when there were none.
     fn remove_scene(&mut self, id: &str) -> bool;
     /// One HTTP render ([`WorkerError::SceneNotFound`] for an unknown scene).
@@ -143,10 +144,26 @@ pub struct StreamFrameJob {
 }
 
 enum Job {
-    AddScene { id: String, scene: Box<Scene>, reply: oneshot::Sender<Result<(), WorkerError>> },
-    RemoveScene { id: String, reply: oneshot::Sender<bool> },
-    Render { id: String, job: RenderJob, reply: oneshot::Sender<Result<RenderOutput, WorkerError>> },
-    StreamFrame { id: String, job: Box<StreamFrameJob>, reply: oneshot::Sender<Result<RenderOutput, WorkerError>> },
+    AddScene {
+        id: String,
+        scene: Box<Scene>,
+        environment: Box<Environment>,
+        reply: oneshot::Sender<Result<(), WorkerError>>,
+    },
+    RemoveScene {
+        id: String,
+        reply: oneshot::Sender<bool>,
+    },
+    Render {
+        id: String,
+        job: RenderJob,
+        reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
+    },
+    StreamFrame {
+        id: String,
+        job: Box<StreamFrameJob>,
+        reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
+    },
     LoseDevice,
 }
 
@@ -206,10 +223,12 @@ impl GpuWorker {
         self.queue.capacity()
     }
 
-    /// Builds the scene's renderer (pipelines, buffers) on the GPU thread.
-    pub async fn add_scene(&self, id: &str, scene: Scene) -> Result<(), WorkerError> {
+    /// Builds the scene's renderer (pipelines, buffers) on the GPU thread; its stream frames
+    /// are lit by `environment` too.
+    pub async fn add_scene(&self, id: &str, scene: Scene, environment: Environment) -> Result<(), WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.queue.push_control(Job::AddScene { id: id.to_owned(), scene: Box::new(scene), reply })?;
+        let (scene, environment) = (Box::new(scene), Box::new(environment));
+        self.queue.push_control(Job::AddScene { id: id.to_owned(), scene, environment, reply })?;
         answer.await.map_err(|_| WorkerError::Stopped)?
     }
 
@@ -271,8 +290,8 @@ fn run(mut backend: impl Backend, queue: &FairQueue<Job>, metrics: &Metrics) {
         backend.recover();
         let queue_ms = taken.waited.unwrap_or_default().as_secs_f64() * 1e3;
         match taken.job {
-            Job::AddScene { id, scene, reply } => {
-                let result = guarded(|| backend.add_scene(&id, *scene));
+            Job::AddScene { id, scene, environment, reply } => {
+                let result = guarded(|| backend.add_scene(&id, *scene, *environment));
                 let _ = reply.send(lost_or(&mut backend, result));
             }
             Job::RemoveScene { id, reply } => {
@@ -353,9 +372,10 @@ impl Backend for GpuBackend {
         self.gpu.adapter_name()
     }
 
-    fn add_scene(&mut self, id: &str, scene: Scene) -> Result<(), WorkerError> {
+    fn add_scene(&mut self, id: &str, scene: Scene, environment: Environment) -> Result<(), WorkerError> {
         let renderer = Renderer::new(&self.gpu, &scene)?;
-        self.scenes.insert(id.to_owned(), Loaded { scene, renderer });
+        let mr = MrPipeline::new(scene.settings.mr, environment);
+        self.scenes.insert(id.to_owned(), Loaded { scene, renderer, mr });
         Ok(())
     }
 
@@ -395,6 +415,7 @@ impl Backend for GpuBackend {
         self.scenes.retain(|id, loaded| match guarded(|| Ok(Renderer::new(gpu, &loaded.scene)?)) {
             Ok(renderer) => {
                 loaded.renderer = renderer;
+                loaded.mr.forget_placement();
                 true
             }
             Err(error) => {
@@ -411,11 +432,14 @@ impl Backend for GpuBackend {
     }
 }
 
-/// A scene on the GPU thread: the loaded scene (to place its meshes) and its renderer, shared
-/// by the scene's HTTP renders and streams. Every job sets all the state it renders with.
+/// A scene on the GPU thread: the loaded scene (to place its meshes), its renderer, shared by
+/// the scene's HTTP renders and streams, and the mixed-reality pipeline of its stream frames
+/// (the differential pass built for the streams' last placement). Every job sets all the
+/// state it renders with.
 struct Loaded {
     scene: Scene,
     renderer: Renderer,
+    mr: MrPipeline,
 }
 
 /// Runs `f` (a render) behind [`guarded`], timing it and recording the frame's metrics.
@@ -433,7 +457,7 @@ fn timed(
 
 /// One HTTP render: the scene as loaded, lit by its spot light, from `job.camera`.
 fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, WorkerError> {
-    let Loaded { scene, renderer } = loaded;
+    let Loaded { scene, renderer, .. } = loaded;
     renderer.place_meshes(gpu, scene, &placement(scene, &[]));
     renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
     renderer.set_glossy(scene.settings.glossy);
@@ -456,35 +480,49 @@ fn placement(scene: &Scene, transforms: &[(u32, glam::DMat4)]) -> Vec<Mat4> {
         .collect()
 }
 
-/// Renders one RGB-D stream frame: the meshes placed by the stream's model transforms, lit
-/// by the frame's VALs (made on the GPU with `job.rgbd`) and the scene's spot light if it has
-/// one, with the stream's occlusion and glossy settings, seen from the frame's camera at the
-/// frame's size (composited over the frame's colour when `job.component` is full), or from
-/// the stream's virtual camera when it set one.
+/// Renders one RGB-D stream frame as `relume replay` renders a recording's
+/// ([`MrPipeline`]): the meshes placed by the stream's model transforms (the differential
+/// pass's BVH rebuilt only when that moves them), lit by the frame's VALs (made with
+/// `job.rgbd`), the scene's environment (`auto`: its level raised by the differential pass's
+/// receivers) and the stream's spot light if the scene has one, with the stream's occlusion
+/// and glossy settings; seen from the frame's camera at the frame's size and, when
+/// `job.component` is full, the real surfaces relit by the differential pass and the content
+/// composited over them. From the stream's virtual camera, or for another component, the same
+/// light without composite.
 fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> Result<Frame, WorkerError> {
-    let Loaded { scene, renderer } = loaded;
-    renderer.place_meshes(gpu, scene, &placement(scene, &job.model_transforms));
+    let Loaded { scene, renderer, mr } = loaded;
+    mr.place(gpu, renderer, scene, &placement(scene, &job.model_transforms))?;
     renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);
     renderer.set_glossy(job.glossy);
     if let Some(light) = job.light.as_ref().or(scene.light.as_ref()) {
         renderer.set_spot_light(light);
     }
-    renderer.set_rgbd_frame(gpu, &job.frame, &job.rgbd)?;
-    let Some(camera) = job.camera else {
-        let k = job.frame.intrinsics;
-        renderer.set_pinhole_view(k, &job.frame.camera_to_world);
-        let rendered = renderer.render(gpu, job.method, k.width, k.height)?;
-        if job.component != Component::Full {
-            return Ok((rendered, None));
-        }
-        let started = Instant::now();
-        let depth = mr::virtual_depth(gpu, renderer, &job.frame.camera_to_world)?;
-        let scale = mr::display_scale(job.exposure.unwrap_or(1.0), job.rgbd.radiance_scale);
-        let image = mr::composite(&job.frame, &rendered.direct.add(&rendered.indirect), &depth, scale);
-        return Ok((rendered, Some((image, started.elapsed().as_secs_f64() * 1e3))));
+    let k = job.frame.intrinsics;
+    let settings = mr::FrameSettings {
+        width: k.width,
+        height: k.height,
+        exposure: job.exposure.unwrap_or(1.0),
+        rgbd: job.rgbd,
+        method: job.method,
     };
-    renderer.set_camera(camera);
-    Ok((renderer.render(gpu, job.method, camera.width, camera.height)?, None))
+    if job.camera.is_none() && job.component == Component::Full {
+        let relit = mr.render_frame(gpu, renderer, &job.frame, &settings, None)?;
+        return Ok((relit.rendered, Some((relit.composited, relit.composite_ms))));
+    }
+    let lighting = mr.light(gpu, renderer, &job.frame, &settings, None)?;
+    let (width, height) = match job.camera {
+        Some(camera) => {
+            renderer.set_camera(camera);
+            (camera.width, camera.height)
+        }
+        None => {
+            renderer.set_pinhole_view(k, &job.frame.camera_to_world);
+            (k.width, k.height)
+        }
+    };
+    let mut rendered = renderer.render(gpu, job.method, width, height)?;
+    lighting.add_stages(&mut rendered.timings);
+    Ok((rendered, None))
 }
 
 /// Runs `f`, turning a panic into [`WorkerError::Panicked`] so one bad job cannot take the

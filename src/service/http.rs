@@ -20,7 +20,7 @@ use utoipa_axum::router::OpenApiRouter;
 use utoipa_axum::routes;
 
 use crate::gpu::timing::TimingSource;
-use crate::scene::{Scene, SceneDescription, parse_json};
+use crate::scene::parse_json;
 
 use super::AppState;
 use super::api::{Health, ImageFormat, RenderRequest, SceneInfo, SceneRequest};
@@ -337,12 +337,12 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
     let reservation = state.scenes.reserve()?;
     let id = reservation.id.clone();
     let loader = state.clone();
-    let loaded = tokio::task::spawn_blocking(move || -> Result<(SceneDescription, Scene), ApiError> {
+    let loaded = tokio::task::spawn_blocking(move || -> Result<scenes::Loaded, ApiError> {
         scenes::load(utf8(&bytes)?, &loader.assets, &loader.config.limits)
     })
     .await
     .map_err(ApiError::internal)?;
-    let (description, scene) = loaded?;
+    let (description, scene, environment) = loaded?;
     let info = SceneInfo::new(&id, &scene, description.camera.clone(), description.light.clone());
     let entry = SceneEntry {
         camera: description.camera,
@@ -353,7 +353,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
         origin: scene.origin,
         info: info.clone(),
     };
-    state.worker.add_scene(&id, scene).await?;
+    state.worker.add_scene(&id, scene, environment).await?;
     reservation.commit(entry);
     tracing::info!(scene = %id, triangles = info.triangles, sparse_points = info.sparse_points, "scene created");
     let location = HeaderValue::from_str(&format!("/v1/scenes/{id}")).map_err(ApiError::internal)?;

@@ -9,16 +9,21 @@ use std::sync::{Arc, Mutex};
 
 use axum::http::StatusCode;
 
+use crate::mr::environment::{Environment, EnvironmentError, EnvironmentSettings, MAX_MAP_SIDE};
 use crate::scene::{CameraDescription, GltfSceneDescription, LightDescription, Scene, SceneDescription};
 
 use super::api::SceneInfo;
 use super::config::{Limits, limit};
 use super::error::{ApiError, Code};
 
+/// A scene admitted and loaded: its description, the scene, and the environment its stream
+/// frames are lit by (`settings.environment`, its map read).
+pub type Loaded = (SceneDescription, Scene, Environment);
+
 /// Admits a scene description sent by a client ([`admit`]) and loads it within the limits:
-/// the description and its scene. Errors about a whole glTF scene name its fields
-/// ([`GltfSceneDescription::field_in_form`]).
-pub fn load(text: &str, assets: &Path, limits: &Limits) -> Result<(SceneDescription, Scene), ApiError> {
+/// the description, its scene and its environment. Errors about a whole glTF scene name its
+/// fields ([`GltfSceneDescription::field_in_form`]).
+pub fn load(text: &str, assets: &Path, limits: &Limits) -> Result<Loaded, ApiError> {
     if GltfSceneDescription::is_one(text) {
         let load = || {
             let whole = GltfSceneDescription::from_json_str(text).map_err(|e| ApiError::scene(&e, assets))?;
@@ -33,15 +38,45 @@ pub fn load(text: &str, assets: &Path, limits: &Limits) -> Result<(SceneDescript
     load_description(description, assets, limits)
 }
 
-fn load_description(
-    description: SceneDescription,
-    assets: &Path,
-    limits: &Limits,
-) -> Result<(SceneDescription, Scene), ApiError> {
+fn load_description(description: SceneDescription, assets: &Path, limits: &Limits) -> Result<Loaded, ApiError> {
     admit(&description, assets, limits)?;
     let scene = Scene::from_description_within(&description, assets, limits.max_triangles)
         .map_err(|e| ApiError::scene(&e, assets))?;
-    Ok((description, scene))
+    let environment = load_environment(&description.settings.environment, assets, limits)?;
+    Ok((description, scene, environment))
+}
+
+/// The field of `settings.environment` that names a file.
+const ENVIRONMENT_MAP_FIELD: &str = "settings.environment.map";
+
+/// The environment `settings` ask for, its map (confined to `assets` by [`admit`]) read with at
+/// most `max_pixels` pixels; a map that cannot be read is a 400 naming
+/// `settings.environment.map`, without the server's directory in the message.
+fn load_environment(settings: &EnvironmentSettings, assets: &Path, limits: &Limits) -> Result<Environment, ApiError> {
+    let relative = settings.map.as_deref().unwrap_or_default();
+    Environment::from_settings_within(settings, assets, limits.max_pixels).map_err(|error| match error {
+        EnvironmentError::TooManyPixels { width, height, max_pixels, .. } => ApiError::limit(
+            limit::MAX_PIXELS,
+            Some(ENVIRONMENT_MAP_FIELD.to_owned()),
+            format!("{ENVIRONMENT_MAP_FIELD}: `{relative}` is {width}x{height}, over the limit of {max_pixels} pixels"),
+        ),
+        EnvironmentError::TooLarge { width, height, .. } => ApiError::limit(
+            limit::MAX_PIXELS,
+            Some(ENVIRONMENT_MAP_FIELD.to_owned()),
+            format!(
+                "{ENVIRONMENT_MAP_FIELD}: `{relative}` is {width}x{height}; maps up to {MAX_MAP_SIDE} pixels a side \
+                 are read"
+            ),
+        ),
+        EnvironmentError::Read { .. } | EnvironmentError::Missing => ApiError {
+            field: Some(ENVIRONMENT_MAP_FIELD.to_owned()),
+            ..ApiError::new(
+                StatusCode::BAD_REQUEST,
+                Code::InvalidScene,
+                format!("{ENVIRONMENT_MAP_FIELD}: `{relative}` is not an equirectangular map the server can read"),
+            )
+        },
+    })
 }
 
 /// Validates a parsed scene description sent by a client, and checks what the scene module
@@ -97,6 +132,22 @@ pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> 
             if let Some(texture) = &material.diffuse_texture {
                 confine(assets, texture, &format!("{material_field}.diffuse_texture"))?;
             }
+        }
+    }
+    // An environment map: in the asset directory, and at most `max_mesh_bytes` on disk
+    // (its pixels are checked when it is read).
+    if let Some(map) = &description.settings.environment.map {
+        let file = confine(assets, map, ENVIRONMENT_MAP_FIELD)?;
+        let bytes = std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0);
+        if bytes > limits.max_mesh_bytes as u64 {
+            return Err(ApiError::limit(
+                limit::MAX_MESH_BYTES,
+                Some(ENVIRONMENT_MAP_FIELD.to_owned()),
+                format!(
+                    "{ENVIRONMENT_MAP_FIELD}: the map file is {bytes} bytes, over the limit of {}",
+                    limits.max_mesh_bytes
+                ),
+            ));
         }
     }
     Ok(())

@@ -1,9 +1,12 @@
 //! `GET /v1/scenes/{id}/stream`: the WebSocket stream of one scene.
 //!
 //! Frames are decoded and validated off the runtime, then rendered on the GPU thread
-//! ([`super::gpu_worker`]): the frame's pixels become VALs, the scene's virtual content is seen
-//! from the frame's camera and composited over its colour (or seen from a virtual camera the
-//! client set), and the answer is a `RenderedFrame` ([`rendered_frame`]). Control messages are
+//! ([`super::gpu_worker`]) through the mixed-reality pipeline of `relume replay`
+//! ([`crate::mr::MrPipeline`]): the frame's pixels become VALs, the scene's environment and
+//! differential pass (`settings.environment`, `settings.mr`) apply, the virtual content is seen
+//! from the frame's camera and composited over its colour, relit (or seen from a virtual camera
+//! the client set), and the answer is a `RenderedFrame` ([`rendered_frame`]) whose timings
+//! include the `environment` and `differential` stages when they ran. Control messages are
 //! validated, applied to the stream's settings and acknowledged; every malformed or invalid
 //! message gets an `Error` naming the field or limit and leaves the connection open. At most
 //! one frame per stream is on the GPU, and a newer frame replaces one still waiting (latest

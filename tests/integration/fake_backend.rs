@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use relume::gpu::timing::{StageTimings, TimingSource};
 use relume::image::LinearImage;
+use relume::mr::environment::Environment;
 use relume::renderer::Rendered;
 use relume::scene::Scene;
 use relume::service::gpu_worker::{Frame, RenderJob, StreamFrameJob};
@@ -52,7 +53,7 @@ impl Backend for FakeBackend {
         "fake backend (no GPU)".to_owned()
     }
 
-    fn add_scene(&mut self, id: &str, _: Scene) -> Result<(), WorkerError> {
+    fn add_scene(&mut self, id: &str, _: Scene, _: Environment) -> Result<(), WorkerError> {
         self.scenes.insert(id.to_owned());
         Ok(())
     }

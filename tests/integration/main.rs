@@ -22,6 +22,7 @@ mod rgbd;
 mod router;
 mod rsm;
 mod service;
+mod stream_mr;
 mod synthetic;
 mod textures;
 mod twins;

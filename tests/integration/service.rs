@@ -67,7 +67,7 @@ impl Reply {
 
 impl TestServer {
     /// Serves `fixtures/` as the asset directory, with the defaults changed by `edit`.
-    async fn start(edit: impl FnOnce(&mut Config)) -> TestServer {
+    pub(super) async fn start(edit: impl FnOnce(&mut Config)) -> TestServer {
         TestServer::start_with(edit, |config| Box::pin(Server::bind(config))).await
     }
 
@@ -124,7 +124,7 @@ impl TestServer {
         id
     }
 
-    async fn stream(&self, id: &str) -> Ws {
+    pub(super) async fn stream(&self, id: &str) -> Ws {
         let url = format!("ws://{}/v1/scenes/{id}/stream", self.addr);
         let (ws, response) = tokio_tungstenite::connect_async(url).await.expect("the stream opens");
         assert_eq!(response.status(), StatusCode::SWITCHING_PROTOCOLS);
@@ -139,7 +139,7 @@ impl TestServer {
     }
 }
 
-struct Ws(tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>);
+pub(super) struct Ws(tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>);
 
 impl Ws {
     async fn send(&mut self, message: tungstenite::Message) {
@@ -152,7 +152,7 @@ impl Ws {
     }
 
     /// Sends one binary message and decodes the envelope that answers it.
-    async fn exchange(&mut self, bytes: Vec<u8>) -> Body {
+    pub(super) async fn exchange(&mut self, bytes: Vec<u8>) -> Body {
         self.send(tungstenite::Message::Binary(bytes.into())).await;
         self.answer().await
     }
@@ -181,13 +181,13 @@ impl Ws {
     }
 }
 
-fn envelope(body: Body) -> Vec<u8> {
+pub(super) fn envelope(body: Body) -> Vec<u8> {
     proto::Envelope { version: PROTOCOL_VERSION, body: Some(body) }.encode_to_vec()
 }
 
 /// `fixtures/scenes/<name>.json` with its mesh paths made relative to `fixtures/` (the
 /// asset directory), at `size` x `size` pixels.
-fn fixture_scene(name: &str, size: u32) -> Value {
+pub(super) fn fixture_scene(name: &str, size: u32) -> Value {
     let text = std::fs::read_to_string(fixture(&format!("scenes/{name}.json"))).expect("fixture");
     let mut scene: Value = serde_json::from_str(&text.replace("\"../meshes/", "\"meshes/")).expect("JSON");
     scene["camera"]["width"] = size.into();
@@ -597,7 +597,7 @@ fn frame_behind_the_scene(frame_id: u64) -> proto::RgbdFrame {
 }
 
 /// Decodes a streamed frame's PNG.
-fn streamed_png(answer: Body, frame_id: u64) -> (proto::RenderedFrame, image::RgbImage) {
+pub(super) fn streamed_png(answer: Body, frame_id: u64) -> (proto::RenderedFrame, image::RgbImage) {
     let Body::RenderedFrame(f) = answer else { panic!("expected a RenderedFrame, got {answer:?}") };
     assert_eq!(f.frame_id, frame_id);
     let Some(proto::rendered_frame::Image::Png(png)) = &f.image else { panic!("expected a PNG") };
@@ -902,8 +902,9 @@ async fn a_recording_replays_through_the_server_as_offline() {
     scene["meshes"][0]["obj"] =
         fixture("meshes/stanford_bunny/stanford-bunny.obj").to_string_lossy().into_owned().into();
     scene["settings"]["rgbd"]["grid_step"] = 16.into();
-    // The stream path composites without differential rendering (issue 17 wires it into
-    // `relume replay` only so far): compare like with like.
+    // The stream runs the replay's pipeline, environment (`auto` here) and differential pass
+    // included (`stream_mr.rs` compares those at a small size); off at 640x480, where it costs
+    // seconds a frame on lavapipe.
     scene["settings"]["mr"] = serde_json::json!({ "differential": false });
     let scene_path = dir.join("mr_bunny_coarse.json");
     std::fs::write(&scene_path, scene.to_string()).expect("scene written");
@@ -937,6 +938,15 @@ async fn a_recording_replays_through_the_server_as_offline() {
         let recording = Recording::open(&fixture("recordings/tum_fr1_xyz"), &RecordingOptions::default()).expect("rec");
         let options = MrOptions { width: 640, height: 480, exposure: 1.0, accumulate: None };
         let mut mr = MrRenderer::new(&gpu, &scene, options).expect("renderer");
+        let text = std::fs::read_to_string(&scene_path).expect("scene");
+        let environment = relume::scene::SceneDescription::from_json_str(&text).expect("JSON").settings.environment;
+        let environment = relume::mr::environment::Environment::from_settings(
+            &environment,
+            scene_path.parent().expect("a directory"),
+        )
+        .expect("auto");
+        assert_ne!(environment, relume::mr::environment::Environment::None, "mr_bunny.json's `auto`");
+        mr.set_environment(environment);
         let frames: Vec<_> = (0..2)
             .map(|i| mr.render_frame(&gpu, &recording.frame(i).expect("frame")).expect("render").composited)
             .collect();
