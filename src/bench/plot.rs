@@ -207,7 +207,9 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
         .map_err(err)?;
     let green = RGBColor(44, 160, 44);
     for (i, curve) in curves.iter().enumerate() {
-        // Above the plot's error range the curve is clipped by the chart.
+        // The ladder's points within the configurations' error range (plotters draws points
+        // outside the range at its edge).
+        let curve: Vec<(f64, f64)> = curve.iter().copied().filter(|p| p.1 <= y_max).collect();
         let series = chart.draw_series(LineSeries::new(curve.clone(), green.stroke_width(2))).map_err(err)?;
         if i == 0 {
             series
