@@ -205,12 +205,21 @@ impl MrRenderer {
                     let darkened = light.iter().filter(|l| net(l) < -0.1).count();
                     let most = light.iter().map(fraction).fold(0.0f32, f32::max);
                     let darkest = light.iter().map(net).fold(0.0f32, f32::min);
+                    // The same, over the receivers the virtual object does not hide (the shadow
+                    // one can see).
+                    let shown = visible_receivers(grid, frame, &virtual_depth, w, h);
+                    let visible = light.iter().zip(&shown).filter(|(_, v)| **v).map(|(l, _)| l);
+                    let visible_darkened = visible.clone().filter(|l| net(l) < -0.1).count();
+                    let visible_darkest = visible.map(net).fold(0.0f32, f32::min);
                     tracing::debug!(
                         receivers = light.len(),
                         shadowed,
                         darkened,
                         most,
                         darkest,
+                        visible = shown.iter().filter(|v| **v).count(),
+                        visible_darkened,
+                        visible_darkest,
                         "differential: blocked fraction (over 10 %: shadowed) and net change (under -10 %: darkened)"
                     );
                 }
@@ -239,6 +248,32 @@ impl MrRenderer {
             sparse_irradiance,
         })
     }
+}
+
+/// Per receiver of `grid`, whether the composite shows it: the virtual content (its optical
+/// depth per output pixel, `width` x `height`) is absent or behind the real surface at the
+/// receiver's cell centre, as [`composite_over`] decides.
+fn visible_receivers(
+    grid: &differential::ReceiverGrid,
+    frame: &RgbdFrame,
+    virtual_depth: &[Option<f32>],
+    width: u32,
+    height: u32,
+) -> Vec<bool> {
+    let (fw, fh) = (frame.intrinsics.width, frame.intrinsics.height);
+    let step = grid.settings.grid_step.max(1);
+    let mut shown = vec![true; grid.receivers.len()];
+    for (cell, r) in grid.cells.iter().enumerate() {
+        let Some(r) = r else { continue };
+        let (cx, cy) = (cell as u32 % grid.size.x, cell as u32 / grid.size.x);
+        let (u, v) = ((cx * step + (step - 1) / 2).min(fw - 1), (cy * step + (step - 1) / 2).min(fh - 1));
+        let (x, y) = ((u * width / fw).min(width - 1), (v * height / fh).min(height - 1));
+        let real = frame.depth[(v * fw + u) as usize];
+        if let Some(Some(z)) = virtual_depth.get((y * width + x) as usize) {
+            shown[*r as usize] = real.is_finite() && real > 0.0 && *z >= real;
+        }
+    }
+    shown
 }
 
 /// Optical depth (m, along `camera_to_world`'s z) of the virtual content at each pixel of the
