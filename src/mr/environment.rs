@@ -24,10 +24,23 @@
 //!   reflects at most what it receives (albedo <= 1), so a desk brighter than the seen VALs can
 //!   light it is lit from where the camera did not look, by at least that much. Both are
 //!   estimates: the mean is the one figure the frame gives for the room as a whole; the
-//!   receivers' level is a lower bound that puts the missing light in every unseen direction
-//!   alike, where the real room has a few bright lamps.
+//!   receivers' level is a lower bound on the light the camera did not see.
+//!
+//! How `auto` spreads that level over the unseen cells (`settings.environment.distribution`):
+//! - `uniform`: alike in every unseen direction;
+//! - `overcast`: the CIE standard overcast sky (Moon and Spencer 1942; CIE S 011/E:2003 type
+//!   1), `L(theta) = L_z (1 + 2 cos theta) / 3` at `theta` from up above the horizon, and the
+//!   horizon's `L_z / 3` below it (a floor of albedo 0.3 under that sky would send `0.23 L_z`).
+//!   Rooms are lit from above (ceiling lamps and the bright ceiling the camera rarely looks
+//!   at); the CIE sky is the standard parameter-free model of light from above that is still
+//!   diffuse, where a cosine-power lobe would need an exponent this recording cannot tell. The
+//!   weights are scaled to a solid-angle mean of 1 over the sphere, so the level is still the
+//!   environment's mean radiance. Up is the frame's own ([`estimate_up`]): the normal of the
+//!   support plane among the differential receivers (the desk under the object), the
+//!   configured `up` when there are no receivers or no such plane.
 
 use super::differential::ReceiverGrid;
+use crate::gpu::differential::Receiver;
 use crate::twin::{Val, val_irradiance};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -56,6 +69,20 @@ pub enum EnvironmentSource {
     Map,
 }
 
+/// How `auto` spreads its level over the unseen directions (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum EnvironmentDistribution {
+    /// One radiance in every unseen direction.
+    Uniform,
+    /// The CIE standard overcast sky about the frame's up: `(1 + 2 cos theta) / 3` of the
+    /// zenith's radiance above the horizon, a third of it below (the default: nearer the
+    /// truth than `uniform` when the light comes from above, README "Mixed reality that
+    /// looks right").
+    #[default]
+    Overcast,
+}
+
 /// `settings.environment` of a scene file (replay and the service's streams); every field has
 /// a default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -75,11 +102,21 @@ pub struct EnvironmentSettings {
     /// Rows of the direction grid, 2..=64 and even (columns: twice as many); default 8, 128
     /// VALs.
     pub rows: u32,
+    /// `auto` only: how the level is spread over the unseen directions; default `overcast`.
+    pub distribution: EnvironmentDistribution,
 }
 
 impl Default for EnvironmentSettings {
     fn default() -> Self {
-        Self { source: EnvironmentSource::None, map: None, scale: 1.0, rotation_deg: 0.0, up: [0.0, 0.0, 1.0], rows: 8 }
+        Self {
+            source: EnvironmentSource::None,
+            map: None,
+            scale: 1.0,
+            rotation_deg: 0.0,
+            up: [0.0, 0.0, 1.0],
+            rows: 8,
+            distribution: EnvironmentDistribution::Overcast,
+        }
     }
 }
 
@@ -156,6 +193,11 @@ impl DirectionGrid {
         Self { rows: rows.max(1), up, east, north: up.cross(east) }
     }
 
+    /// The grid's pole (unit).
+    pub fn up(&self) -> Vec3 {
+        self.up
+    }
+
     pub fn columns(&self) -> u32 {
         2 * self.rows
     }
@@ -220,6 +262,26 @@ impl DirectionGrid {
         seen.iter().map(|&s| if s { Vec3::ZERO } else { radiance }).collect()
     }
 
+    /// Relative radiance of each cell under `distribution` about unit `up` (which need not be
+    /// the grid's pole), scaled so that its mean over the sphere, weighted by the cells' solid
+    /// angles, is 1: `uniform` gives 1 in every cell.
+    pub fn weights(&self, distribution: EnvironmentDistribution, up: Vec3) -> Vec<f32> {
+        match distribution {
+            EnvironmentDistribution::Uniform => vec![1.0; self.cells()],
+            EnvironmentDistribution::Overcast => {
+                let cells: Vec<(f32, f32)> = (0..self.cells())
+                    .map(|i| {
+                        let (w, solid_angle) = self.cell(i);
+                        (overcast_radiance(w.dot(up)), solid_angle)
+                    })
+                    .collect();
+                let sphere: f32 = cells.iter().map(|c| c.1).sum();
+                let mean = cells.iter().map(|(l, o)| l * o).sum::<f32>() / sphere;
+                cells.iter().map(|(l, _)| l / mean).collect()
+            }
+        }
+    }
+
     /// Distant VALs around `centre` for cell radiances `radiance` (module docs); cells without
     /// light make none.
     pub fn vals(&self, centre: Vec3, radiance: &[Vec3]) -> Vec<Val> {
@@ -242,8 +304,8 @@ impl DirectionGrid {
 pub enum Environment {
     #[default]
     None,
-    /// [`EnvironmentSource::Auto`] on this grid.
-    Auto(DirectionGrid),
+    /// [`EnvironmentSource::Auto`] on this grid, spread by `distribution`.
+    Auto { grid: DirectionGrid, distribution: EnvironmentDistribution },
     /// A map's radiance per cell of `grid`.
     Map { grid: DirectionGrid, radiance: Vec<Vec3> },
 }
@@ -264,7 +326,7 @@ impl Environment {
         let grid = DirectionGrid::new(settings.rows, Vec3::from(settings.up));
         Ok(match settings.source {
             EnvironmentSource::None => Environment::None,
-            EnvironmentSource::Auto => Environment::Auto(grid),
+            EnvironmentSource::Auto => Environment::Auto { grid, distribution: settings.distribution },
             EnvironmentSource::Map => {
                 let path = settings.map.as_ref().ok_or(EnvironmentError::Missing)?;
                 let map = EquirectMap::read_within(&base_dir.join(path), max_pixels)?;
@@ -287,19 +349,95 @@ impl Environment {
     ) -> Vec<Val> {
         match self {
             Environment::None => Vec::new(),
-            Environment::Auto(grid) => {
-                let unseen = grid.unseen(centre, real, Vec3::ONE);
+            Environment::Auto { grid, distribution } => {
                 let mean = mean_radiance(frame, settings);
-                let level = match receivers {
-                    Some(r) => mean.max(explaining_level(r, real, &grid.vals(centre, &unseen))),
-                    None => mean,
-                };
-                tracing::debug!(%mean, %level, "auto environment level");
-                grid.vals(centre, &unseen.iter().map(|u| *u * level).collect::<Vec<_>>())
+                let estimate = auto_estimate(grid, *distribution, centre, real, receivers, mean);
+                let (level, up) = (estimate.level, estimate.up);
+                tracing::debug!(%mean, %level, %up, ?distribution, "auto environment level");
+                grid.vals(centre, &estimate.radiance)
             }
             Environment::Map { grid, radiance } => grid.vals(centre, radiance),
         }
     }
+}
+
+/// The `auto` environment of one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AutoEstimate {
+    /// Radiance of each cell of the grid (W/(m² sr)): zero where a real VAL is seen.
+    pub radiance: Vec<Vec3>,
+    /// The level (W/(m² sr)): the environment's mean radiance over the whole sphere if no cell
+    /// were seen.
+    pub level: Vec3,
+    /// The up its distribution was laid about (unit).
+    pub up: Vec3,
+}
+
+/// The `auto` estimate (module docs): the unseen cells from `centre` given the `real` VALs,
+/// weighted by `distribution` about the receivers' up ([`estimate_up`]; the grid's own
+/// without receivers or a support plane), at the level `mean` raised to the
+/// [`explaining_level`] of the weighted unit environment when there are receivers.
+pub fn auto_estimate(
+    grid: &DirectionGrid,
+    distribution: EnvironmentDistribution,
+    centre: Vec3,
+    real: &[Val],
+    receivers: Option<&ReceiverGrid>,
+    mean: Vec3,
+) -> AutoEstimate {
+    let up = match (distribution, receivers) {
+        (EnvironmentDistribution::Uniform, _) | (_, None) => grid.up(),
+        (_, Some(r)) => estimate_up(&r.receivers, grid.up()).unwrap_or(grid.up()),
+    };
+    let weights = grid.weights(distribution, up);
+    let unit: Vec<Vec3> = grid.unseen(centre, real, Vec3::ONE).iter().zip(&weights).map(|(u, w)| *u * *w).collect();
+    let level = match receivers {
+        Some(r) => mean.max(explaining_level(r, real, &grid.vals(centre, &unit))),
+        None => mean,
+    };
+    AutoEstimate { radiance: unit.iter().map(|u| *u * level).collect(), level, up }
+}
+
+/// The CIE standard overcast sky's radiance at `cos_theta` from the zenith, relative to the
+/// zenith's: `(1 + 2 cos theta) / 3` above the horizon, the horizon's 1/3 below it.
+pub fn overcast_radiance(cos_theta: f32) -> f32 {
+    (1.0 + 2.0 * cos_theta.clamp(0.0, 1.0)) / 3.0
+}
+
+/// Receivers whose normals lie within this cosine of a candidate's support its plane (10°:
+/// the RGB-D normals of a desk scatter by a few degrees).
+pub const UP_INLIER_COSINE: f32 = 0.984_807_8;
+/// A support plane must face within this cosine of the configured up (45°): the frame refines
+/// which way is up, it does not overturn it.
+pub const UP_MAX_TILT_COSINE: f32 = std::f32::consts::FRAC_1_SQRT_2;
+/// ... and hold at least this share of the receivers.
+pub const UP_MIN_SUPPORT: f32 = 0.2;
+/// Receivers [`estimate_up`] tries as candidates, and counts support among, at most (evenly
+/// strided).
+pub const UP_CANDIDATES: usize = 256;
+pub const UP_SAMPLES: usize = 4096;
+
+/// The frame's up: the normal of the support plane among `receivers`, the near-horizontal
+/// surface (within 45° of `up`, the configured one) whose normal most receivers share
+/// (within 10°), as the mean of those receivers' normals. `None` when no candidate is
+/// shared by [`UP_MIN_SUPPORT`] of the receivers (a cluttered or wall-only view).
+pub fn estimate_up(receivers: &[Receiver], up: Vec3) -> Option<Vec3> {
+    let up = up.try_normalize()?;
+    let stride = |cap: usize| receivers.len().div_ceil(cap).max(1);
+    let samples: Vec<Vec3> = receivers.iter().step_by(stride(UP_SAMPLES)).map(|r| r.normal).collect();
+    let support = |c: Vec3| samples.iter().filter(|n| n.dot(c) >= UP_INLIER_COSINE).count();
+    let (best, count) = receivers
+        .iter()
+        .step_by(stride(UP_CANDIDATES))
+        .map(|r| r.normal)
+        .filter(|n| n.dot(up) >= UP_MAX_TILT_COSINE)
+        .map(|n| (n, support(n)))
+        .max_by_key(|c| c.1)?;
+    if (count as f32) < UP_MIN_SUPPORT * samples.len() as f32 {
+        return None;
+    }
+    let sum: Vec3 = samples.iter().filter(|n| n.dot(best) >= UP_INLIER_COSINE).sum();
+    sum.try_normalize().filter(|n| n.dot(up) >= UP_MAX_TILT_COSINE)
 }
 
 /// Receivers [`explaining_level`] looks at, at most (evenly strided): the median needs few, and
@@ -469,6 +607,119 @@ mod tests {
         // And the light did move: the patch faces `toward`, not its turned direction.
         let (here, turned_away) = (irradiance(&a, Vec3::ZERO, toward), irradiance(&a, Vec3::ZERO, turn * toward));
         assert!(here.x > 2.0 * turned_away.x, "{here} vs {turned_away}");
+    }
+
+    /// The overcast weights: above brighter than below, the zenith three times the horizon,
+    /// a solid-angle mean of 1 over the sphere (so `auto`'s level keeps its meaning), the
+    /// furnace property that `uniform` is 1 everywhere (the environment as before), and the
+    /// weights follow the `up` they are given, not the grid's pole.
+    #[test]
+    fn overcast_weights_light_from_above() {
+        let grid = DirectionGrid::new(8, Vec3::Z);
+        assert_eq!(grid.weights(EnvironmentDistribution::Uniform, Vec3::Z), vec![1.0; grid.cells()]);
+        let w = grid.weights(EnvironmentDistribution::Overcast, Vec3::Z);
+        let mean = (0..grid.cells()).map(|i| w[i] * grid.cell(i).1).sum::<f32>() / (4.0 * PI);
+        assert!((mean - 1.0).abs() < 1e-4, "solid-angle mean {mean}");
+        for i in 0..grid.cells() {
+            let (d, _) = grid.cell(i);
+            let want = overcast_radiance(d.z) / overcast_radiance(grid.cell(0).0.z);
+            assert!((w[i] / w[0] - want).abs() < 1e-5, "cell {i}: {} vs {want}", w[i] / w[0]);
+            // A cell above the horizon outshines its mirror image below it.
+            let below = grid.cell_of(Vec3::new(d.x, d.y, -d.z));
+            if d.z > 0.0 {
+                assert!(w[i] > w[below], "cell {i} ({d}) {} vs below {}", w[i], w[below]);
+            }
+        }
+        assert_eq!(overcast_radiance(1.0), 1.0);
+        assert_eq!(overcast_radiance(0.0), 1.0 / 3.0);
+        assert_eq!(overcast_radiance(-0.7), 1.0 / 3.0);
+        // About a tilted up: the brightest cell is the one nearest it.
+        let tilted = Vec3::new(0.6, 0.0, 0.8);
+        let w = grid.weights(EnvironmentDistribution::Overcast, tilted);
+        let brightest = (0..grid.cells()).max_by(|a, b| w[*a].total_cmp(&w[*b])).unwrap();
+        let nearest =
+            (0..grid.cells()).max_by(|a, b| grid.cell(*a).0.dot(tilted).total_cmp(&grid.cell(*b).0.dot(tilted)));
+        assert_eq!(Some(brightest), nearest);
+    }
+
+    /// Receivers on a desk tilted 12° (normals scattered by up to ~4°), beside a wall and a
+    /// mug's side that together outnumber it, give the desk's normal within 1°; a view of walls
+    /// alone, or a desk that holds too few receivers, gives none.
+    #[test]
+    fn estimate_up_finds_the_support_plane() {
+        let desk = Vec3::new(12f32.to_radians().sin(), 0.0, 12f32.to_radians().cos());
+        let jitter = |i: usize, n: Vec3| {
+            let (a, b) = ((i as f32 * 0.618).fract() - 0.5, (i as f32 * 0.414).fract() - 0.5);
+            (n + Vec3::new(a, b, 0.0) * 0.14).normalize()
+        };
+        let at = |n: Vec3, i: usize| Receiver { position: Vec3::new(i as f32 * 0.01, 0.0, 0.0), normal: jitter(i, n) };
+        let mut receivers: Vec<Receiver> = (0..400).map(|i| at(desk, i)).collect();
+        receivers.extend((0..300).map(|i| at(Vec3::Y, i)));
+        receivers.extend((0..300).map(|i| at(Vec3::new(-0.7, 0.7, 0.1).normalize(), i)));
+        let up = estimate_up(&receivers, Vec3::Z).expect("the desk");
+        let error = up.dot(desk).clamp(-1.0, 1.0).acos().to_degrees();
+        assert!(error < 1.0, "{up} vs {desk}: {error}°");
+        let walls: Vec<Receiver> = receivers[400..].to_vec();
+        assert_eq!(estimate_up(&walls, Vec3::Z), None);
+        let few: Vec<Receiver> = receivers[300..].to_vec(); // 100 desk receivers of 700
+        assert_eq!(estimate_up(&few, Vec3::Z), None);
+        assert_eq!(estimate_up(&[], Vec3::Z), None);
+    }
+
+    /// `explaining_level` with the overcast unit: the least level that keeps every channel's
+    /// albedo at most 1 (`pi L = E_seen + level E_unit` at the median receiver), for receivers
+    /// facing up and tilted ones; a level any lower leaves the receiver brighter than a white
+    /// surface could be. Overhead weights light an upward receiver more per unit level than
+    /// uniform ones do, so it needs a lower level.
+    #[test]
+    fn overcast_explaining_level_keeps_albedo_at_most_one() {
+        use crate::gpu::differential::Receiver;
+        let grid = DirectionGrid::new(8, Vec3::Z);
+        let lamp = Val { position: Vec3::new(0.3, 0.0, 2.0), normal: -Vec3::Z, area: 0.01, flux: Vec3::splat(20.0) };
+        let l = Vec3::new(2.0, 1.5, 1.0);
+        for normal in [Vec3::Z, Vec3::new(0.5, 0.0, 0.866)] {
+            let r = Receiver { position: Vec3::ZERO, normal };
+            let receivers = ReceiverGrid { receivers: vec![r], radiance: vec![l], ..Default::default() };
+            let levels = [EnvironmentDistribution::Uniform, EnvironmentDistribution::Overcast].map(|d| {
+                let w = grid.weights(d, Vec3::Z);
+                let unit: Vec<Vec3> =
+                    grid.unseen(Vec3::ZERO, &[lamp], Vec3::ONE).iter().zip(&w).map(|(u, w)| *u * *w).collect();
+                let unit = grid.vals(Vec3::ZERO, &unit);
+                let level = explaining_level(&receivers, &[lamp], &unit);
+                let e = |level: Vec3| {
+                    val_irradiance(r.position, r.normal, &lamp) + level * irradiance(&unit, r.position, r.normal)
+                };
+                let albedo = PI * l / e(level);
+                assert!(albedo.max_element() <= 1.0 + 1e-4, "{d:?} {normal}: albedo {albedo}");
+                assert!(albedo.min_element() >= 1.0 - 1e-4, "{d:?} {normal}: not the least level: {albedo}");
+                assert!((PI * l / e(level * 0.95)).max_element() > 1.0);
+                level
+            });
+            assert!(levels[1].x < levels[0].x, "{normal}: overcast {} vs uniform {}", levels[1], levels[0]);
+        }
+    }
+
+    /// `auto_estimate` lays the overcast sky about the receivers' own up and falls back to the
+    /// grid's without receivers; `uniform` ignores the receivers' up.
+    #[test]
+    fn auto_estimate_uses_the_receivers_up() {
+        use crate::gpu::differential::Receiver;
+        let grid = DirectionGrid::new(8, Vec3::Z);
+        let desk = Vec3::new(0.2, 0.0, 0.98).normalize();
+        let receivers = ReceiverGrid {
+            receivers: vec![Receiver { position: Vec3::ZERO, normal: desk }; 10],
+            radiance: vec![Vec3::ONE; 10],
+            ..Default::default()
+        };
+        let mean = Vec3::splat(0.1);
+        let e = auto_estimate(&grid, EnvironmentDistribution::Overcast, Vec3::ZERO, &[], Some(&receivers), mean);
+        assert!((e.up - desk).length() < 1e-5, "{}", e.up);
+        assert!(e.level.x > mean.x, "the receivers raise the level: {}", e.level);
+        let e = auto_estimate(&grid, EnvironmentDistribution::Overcast, Vec3::ZERO, &[], None, mean);
+        assert_eq!((e.up, e.level), (Vec3::Z, mean));
+        let e = auto_estimate(&grid, EnvironmentDistribution::Uniform, Vec3::ZERO, &[], Some(&receivers), mean);
+        assert_eq!(e.up, Vec3::Z);
+        assert!(e.radiance.iter().all(|r| *r == e.level));
     }
 
     /// `auto` fills exactly the cells no VAL direction falls in.

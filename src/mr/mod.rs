@@ -384,7 +384,7 @@ impl MrPipeline {
                 let mut all = vals.clone();
                 all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
                 let (light, _) = d.pass.run(gpu, &renderer.scene, &grid.receivers, &all, vals.len())?;
-                log_differential(&light);
+                log_differential(&light, || visible_receivers(grid, frame, &virtual_depth, w, h));
                 let field = LightField { grid, light: &light };
                 let background = differential::relight_camera(frame, &field, w, h, settings.rgbd.radiance_scale);
                 let ms = build_ms + lighting.receivers_ms + start.elapsed().as_secs_f64() * 1e3;
@@ -407,8 +407,9 @@ impl MrPipeline {
     }
 }
 
-/// At debug level: how many receivers the virtual content shadows and darkens.
-fn log_differential(light: &[crate::gpu::differential::ReceiverLight]) {
+/// At debug level: how many receivers the virtual content shadows and darkens, over all of them
+/// and over those the composite shows (`shown`, per receiver: the shadow one can see).
+fn log_differential(light: &[crate::gpu::differential::ReceiverLight], shown: impl FnOnce() -> Vec<bool>) {
     if !tracing::enabled!(tracing::Level::DEBUG) {
         return;
     }
@@ -420,14 +421,47 @@ fn log_differential(light: &[crate::gpu::differential::ReceiverLight]) {
     let darkened = light.iter().filter(|l| net(l) < -0.1).count();
     let most = light.iter().map(fraction).fold(0.0f32, f32::max);
     let darkest = light.iter().map(net).fold(0.0f32, f32::min);
+    let shown = shown();
+    let visible = light.iter().zip(&shown).filter(|(_, v)| **v).map(|(l, _)| l);
+    let visible_darkened = visible.clone().filter(|l| net(l) < -0.1).count();
+    let visible_darkest = visible.map(net).fold(0.0f32, f32::min);
     tracing::debug!(
         receivers = light.len(),
         shadowed,
         darkened,
         most,
         darkest,
+        visible = shown.iter().filter(|v| **v).count(),
+        visible_darkened,
+        visible_darkest,
         "differential: blocked fraction (over 10 %: shadowed) and net change (under -10 %: darkened)"
     );
+}
+
+/// Per receiver of `grid`, whether the composite shows it: the virtual content (its optical
+/// depth per output pixel, `width` x `height`) is absent or behind the real surface at the
+/// receiver's cell centre, as [`composite_over`] decides.
+fn visible_receivers(
+    grid: &differential::ReceiverGrid,
+    frame: &RgbdFrame,
+    virtual_depth: &[Option<f32>],
+    width: u32,
+    height: u32,
+) -> Vec<bool> {
+    let (fw, fh) = (frame.intrinsics.width, frame.intrinsics.height);
+    let step = grid.settings.grid_step.max(1);
+    let mut shown = vec![true; grid.receivers.len()];
+    for (cell, r) in grid.cells.iter().enumerate() {
+        let Some(r) = r else { continue };
+        let (cx, cy) = (cell as u32 % grid.size.x, cell as u32 / grid.size.x);
+        let (u, v) = ((cx * step + (step - 1) / 2).min(fw - 1), (cy * step + (step - 1) / 2).min(fh - 1));
+        let (x, y) = ((u * width / fw).min(width - 1), (v * height / fh).min(height - 1));
+        let real = frame.depth[(v * fw + u) as usize];
+        if let Some(Some(z)) = virtual_depth.get((y * width + x) as usize) {
+            shown[*r as usize] = real.is_finite() && real > 0.0 && *z >= real;
+        }
+    }
+    shown
 }
 
 /// Optical depth (m, along `camera_to_world`'s z) of the virtual content at each pixel of the

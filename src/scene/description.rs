@@ -472,7 +472,8 @@ pub struct SettingsDescription {
     #[serde(default)]
     pub mr: MrSettings,
     /// Light from the directions no VAL covers (replay and streams): `source` `"none"`
-    /// (default), `"auto"` or `"map"` (`crate::mr::environment`).
+    /// (default), `"auto"` or `"map"`; `auto`'s `distribution` `"uniform"` or `"overcast"`
+    /// (`crate::mr::environment`).
     #[serde(default)]
     pub environment: EnvironmentSettings,
     /// The sparse method's interpolation, light bound and subdivision; every field has a
@@ -1488,6 +1489,12 @@ mod tests {
             let message = error_of(&with_settings(&format!(r#"{{"ism": {ism}}}"#)));
             assert!(message.starts_with(want), "{ism}: {message}");
         }
+        let message = error_of(&with_settings(r#"{"environment": {"distribution": "sideways"}}"#));
+        assert!(message.starts_with("settings.environment.distribution: unknown variant `sideways`"), "{message}");
+        let text = with_settings(r#"{"environment": {"source": "auto", "distribution": "overcast"}}"#);
+        let d = SceneDescription::from_json_str(&text).expect("parses");
+        d.validate().expect("valid");
+        assert_eq!(d.settings.environment.distribution, crate::mr::environment::EnvironmentDistribution::Overcast);
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
         let message = error_of(&with_settings(r#"{"interpolation_neighbours": 17}"#));

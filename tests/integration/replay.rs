@@ -192,10 +192,16 @@ fn mr_differential_replay_shades_the_desk() {
     scene.settings.mr.differential = true;
     let frame = recording().frame(0).unwrap();
     let mut plain = MrRenderer::new(&gpu, &small_scene(), options()).unwrap();
-    plain.set_environment(Environment::Auto(DirectionGrid::new(8, glam::Vec3::Z)));
+    plain.set_environment(Environment::Auto {
+        grid: DirectionGrid::new(8, glam::Vec3::Z),
+        distribution: Default::default(),
+    });
     let before = plain.render_frame(&gpu, &frame).unwrap();
     let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
-    mr.set_environment(Environment::Auto(DirectionGrid::new(8, glam::Vec3::Z)));
+    mr.set_environment(Environment::Auto {
+        grid: DirectionGrid::new(8, glam::Vec3::Z),
+        distribution: Default::default(),
+    });
     let after = mr.render_frame(&gpu, &frame).unwrap();
     assert!(after.timings.stages.iter().any(|(n, _)| n == relume::mr::DIFFERENTIAL_STAGE));
     let luma = |c: [u8; 3]| u32::from(c[0]) + u32::from(c[1]) + u32::from(c[2]);
