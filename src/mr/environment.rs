@@ -104,6 +104,16 @@ pub struct EnvironmentSettings {
     pub rows: u32,
     /// `auto` only: how the level is spread over the unseen directions; default `overcast`.
     pub distribution: EnvironmentDistribution,
+    /// The albedo of the real surfaces around the virtual content, when it is known (a sheet of
+    /// white paper: about 0.8), in (0, 1]. With the differential pass's receivers it calibrates
+    /// the light from the frame ([`calibrated_level`]): `auto`'s level becomes the one at which
+    /// the receivers reflect with this albedo instead of the least at albedo <= 1, and
+    /// `calibrate_map` scales a map the same way. Default: unknown.
+    pub albedo: Option<f32>,
+    /// `map` only: scale the map each frame so that the receivers' brightness is what it
+    /// reflects (with `albedo`, or the least scale at albedo <= 1): a light probe in any units
+    /// brought to the camera's. Needs the differential pass (its receivers); default false.
+    pub calibrate_map: bool,
 }
 
 impl Default for EnvironmentSettings {
@@ -116,6 +126,8 @@ impl Default for EnvironmentSettings {
             up: [0.0, 0.0, 1.0],
             rows: 8,
             distribution: EnvironmentDistribution::Overcast,
+            albedo: None,
+            calibrate_map: false,
         }
     }
 }
@@ -282,6 +294,17 @@ impl DirectionGrid {
         }
     }
 
+    /// Mean luminance of `radiance` (one value per cell) over the sphere, each cell weighted
+    /// by its solid angle.
+    pub fn mean_luminance(&self, radiance: &[Vec3]) -> f32 {
+        let weights = Vec3::new(0.2126, 0.7152, 0.0722);
+        let (sum, solid) = radiance.iter().enumerate().fold((0.0, 0.0), |(sum, solid), (i, r)| {
+            let omega = self.cell(i).1;
+            (sum + r.dot(weights) * omega, solid + omega)
+        });
+        if solid > 0.0 { sum / solid } else { 0.0 }
+    }
+
     /// Distant VALs around `centre` for cell radiances `radiance` (module docs); cells without
     /// light make none.
     pub fn vals(&self, centre: Vec3, radiance: &[Vec3]) -> Vec<Val> {
@@ -304,10 +327,12 @@ impl DirectionGrid {
 pub enum Environment {
     #[default]
     None,
-    /// [`EnvironmentSource::Auto`] on this grid, spread by `distribution`.
-    Auto { grid: DirectionGrid, distribution: EnvironmentDistribution },
-    /// A map's radiance per cell of `grid`.
-    Map { grid: DirectionGrid, radiance: Vec<Vec3> },
+    /// [`EnvironmentSource::Auto`] on this grid, spread by `distribution`, its level calibrated
+    /// at the receivers' known `albedo` if given (else the least at albedo <= 1).
+    Auto { grid: DirectionGrid, distribution: EnvironmentDistribution, albedo: Option<f32> },
+    /// A map's radiance per cell of `grid`; with `calibrate`, scaled each frame to the receivers
+    /// at that albedo (1: the least scale at albedo <= 1).
+    Map { grid: DirectionGrid, radiance: Vec<Vec3>, calibrate: Option<f32> },
 }
 
 impl Environment {
@@ -326,12 +351,15 @@ impl Environment {
         let grid = DirectionGrid::new(settings.rows, Vec3::from(settings.up));
         Ok(match settings.source {
             EnvironmentSource::None => Environment::None,
-            EnvironmentSource::Auto => Environment::Auto { grid, distribution: settings.distribution },
+            EnvironmentSource::Auto => {
+                Environment::Auto { grid, distribution: settings.distribution, albedo: settings.albedo }
+            }
             EnvironmentSource::Map => {
                 let path = settings.map.as_ref().ok_or(EnvironmentError::Missing)?;
                 let map = EquirectMap::read_within(&base_dir.join(path), max_pixels)?;
                 let radiance = grid.sample_map(&map, settings.scale, settings.rotation_deg.to_radians());
-                Environment::Map { grid, radiance }
+                let calibrate = settings.calibrate_map.then_some(settings.albedo.unwrap_or(1.0));
+                Environment::Map { grid, radiance, calibrate }
             }
         })
     }
@@ -349,15 +377,43 @@ impl Environment {
     ) -> Vec<Val> {
         match self {
             Environment::None => Vec::new(),
-            Environment::Auto { grid, distribution } => {
+            Environment::Auto { grid, distribution, albedo } => {
                 let mean = mean_radiance(frame, settings);
-                let estimate = auto_estimate(grid, *distribution, centre, real, receivers, mean);
+                let estimate = auto_estimate_at(grid, *distribution, centre, real, receivers, mean, *albedo);
                 let (level, up) = (estimate.level, estimate.up);
                 tracing::debug!(%mean, %level, %up, ?distribution, "auto environment level");
                 grid.vals(centre, &estimate.radiance)
             }
-            Environment::Map { grid, radiance } => grid.vals(centre, radiance),
+            Environment::Map { grid, radiance, calibrate: None } => grid.vals(centre, radiance),
+            Environment::Map { grid, radiance, calibrate: Some(albedo) } => {
+                calibrated_map_vals(grid, radiance, centre, real, receivers, *albedo)
+            }
         }
+    }
+}
+
+/// A map's VALs around `centre`, calibrated to `receivers`: the map at a mean radiance of 1
+/// over the sphere (its own scale drops out), times the [`map_calibration`] level at which the
+/// receivers reflect with `albedo`. Without receivers that can tell, the map at its own scale.
+pub fn calibrated_map_vals(
+    grid: &DirectionGrid,
+    radiance: &[Vec3],
+    centre: Vec3,
+    real: &[Val],
+    receivers: Option<&ReceiverGrid>,
+    albedo: f32,
+) -> Vec<Val> {
+    let mean = grid.mean_luminance(radiance);
+    if mean <= 0.0 {
+        return grid.vals(centre, radiance);
+    }
+    let unit: Vec<Vec3> = radiance.iter().map(|r| *r / mean).collect();
+    match receivers.and_then(|r| map_calibration(r, real, &grid.vals(centre, &unit), albedo)) {
+        Some(level) => {
+            tracing::debug!(level, albedo, "environment map calibrated to the frame");
+            grid.vals(centre, &unit.iter().map(|r| *r * level).collect::<Vec<_>>())
+        }
+        None => grid.vals(centre, radiance),
     }
 }
 
@@ -385,15 +441,31 @@ pub fn auto_estimate(
     receivers: Option<&ReceiverGrid>,
     mean: Vec3,
 ) -> AutoEstimate {
+    auto_estimate_at(grid, distribution, centre, real, receivers, mean, None)
+}
+
+/// [`auto_estimate`] with the receivers' `albedo` when it is known: the level is then the
+/// [`calibrated_level`] at that albedo (a measurement, not a bound, so not raised to `mean`),
+/// or `mean` where no receiver can tell.
+pub fn auto_estimate_at(
+    grid: &DirectionGrid,
+    distribution: EnvironmentDistribution,
+    centre: Vec3,
+    real: &[Val],
+    receivers: Option<&ReceiverGrid>,
+    mean: Vec3,
+    albedo: Option<f32>,
+) -> AutoEstimate {
     let up = match (distribution, receivers) {
         (EnvironmentDistribution::Uniform, _) | (_, None) => grid.up(),
         (_, Some(r)) => estimate_up(&r.receivers, grid.up()).unwrap_or(grid.up()),
     };
     let weights = grid.weights(distribution, up);
     let unit: Vec<Vec3> = grid.unseen(centre, real, Vec3::ONE).iter().zip(&weights).map(|(u, w)| *u * *w).collect();
-    let level = match receivers {
-        Some(r) => mean.max(explaining_level(r, real, &grid.vals(centre, &unit))),
-        None => mean,
+    let level = match (receivers, albedo) {
+        (Some(r), Some(albedo)) => calibrated_level(r, real, &grid.vals(centre, &unit), albedo).unwrap_or(mean),
+        (Some(r), None) => mean.max(explaining_level(r, real, &grid.vals(centre, &unit))),
+        (None, _) => mean,
     };
     AutoEstimate { radiance: unit.iter().map(|u| *u * level).collect(), level, up }
 }
@@ -457,6 +529,14 @@ pub const MIN_UNSEEN_IRRADIANCE: f32 = 0.05 * PI;
 /// `E_unit >= MIN_UNSEEN_IRRADIANCE`), so that a few specular highlights or mis-placed
 /// receivers do not set it; zero without receivers.
 pub fn explaining_level(receivers: &ReceiverGrid, real: &[Val], unit: &[Val]) -> Vec3 {
+    calibrated_level(receivers, real, unit, 1.0).unwrap_or(Vec3::ZERO)
+}
+
+/// The environment level (per channel) at which the receivers reflect with `albedo`:
+/// `pi L = albedo (E_seen + level E_unit)`, so `level = (pi L / albedo - E_seen) / E_unit`
+/// (at least 0), the median over the receivers as in [`explaining_level`] (which is this at
+/// albedo 1: the least level any albedo allows). `None` when no receiver takes part.
+pub fn calibrated_level(receivers: &ReceiverGrid, real: &[Val], unit: &[Val], albedo: f32) -> Option<Vec3> {
     let n = receivers.receivers.len();
     let stride = n.div_ceil(CALIBRATION_RECEIVERS).max(1);
     let mut needed: [Vec<f32>; 3] = Default::default();
@@ -467,19 +547,29 @@ pub fn explaining_level(receivers: &ReceiverGrid, real: &[Val], unit: &[Val]) ->
         if e_unit.min_element() < MIN_UNSEEN_IRRADIANCE {
             continue;
         }
-        let level = ((PI * l - irradiance(real)) / e_unit).max(Vec3::ZERO);
+        let level = ((PI * l / albedo - irradiance(real)) / e_unit).max(Vec3::ZERO);
         for (c, values) in needed.iter_mut().enumerate() {
             values.push(level[c]);
         }
     }
+    if needed[0].is_empty() {
+        return None;
+    }
     let median = |values: &mut Vec<f32>| {
-        if values.is_empty() {
-            return 0.0;
-        }
         let mid = values.len() / 2;
         *values.select_nth_unstable_by(mid, f32::total_cmp).1
     };
-    Vec3::new(median(&mut needed[0]), median(&mut needed[1]), median(&mut needed[2]))
+    Some(Vec3::new(median(&mut needed[0]), median(&mut needed[1]), median(&mut needed[2])))
+}
+
+/// The factor a map's VALs (`map`, at the map's own scale) need for the receivers to reflect
+/// with `albedo`: [`calibrated_level`] with the map as the unit environment, one factor for
+/// all channels (their luminance-weighted mean) so the map keeps its colour. `None` when no
+/// receiver can tell or the factor is not positive.
+pub fn map_calibration(receivers: &ReceiverGrid, real: &[Val], map: &[Val], albedo: f32) -> Option<f32> {
+    let level = calibrated_level(receivers, real, map, albedo)?;
+    let factor = level.dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    (factor.is_finite() && factor > 0.0).then_some(factor)
 }
 
 /// Mean observed radiance of `frame` (W/(m² sr)): `radiance_scale * srgb_to_linear(rgb)` over
@@ -564,6 +654,47 @@ mod tests {
             (0..grid.cells()).map(|i| if grid.cell(i).0.z < 0.0 { Vec3::ONE } else { Vec3::ZERO }).collect();
         let level = explaining_level(&receivers(vec![l]), &[], &grid.vals(Vec3::ZERO, &below));
         assert_eq!(level, Vec3::ZERO);
+    }
+
+    /// A known albedo calibrates the level: receivers lit by a lamp and an unseen sky at level
+    /// 2, reflecting with albedo 0.5, give back 2 at albedo 0.5 (where the least level at albedo
+    /// <= 1 is lower), and the map calibration recovers the same sky from a map in other units.
+    #[test]
+    fn a_known_albedo_calibrates_the_level_and_the_map() {
+        use crate::gpu::differential::Receiver;
+        let grid = DirectionGrid::new(8, Vec3::Z);
+        let lamp = Val { position: Vec3::new(0.3, 0.0, 2.0), normal: -Vec3::Z, area: 0.01, flux: Vec3::splat(20.0) };
+        let unit = grid.vals(Vec3::ZERO, &grid.unseen(Vec3::ZERO, &[lamp], Vec3::ONE));
+        let (albedo, level) = (0.5, 2.0);
+        let normals = [Vec3::Z, Vec3::new(0.5, 0.0, 0.866), Vec3::new(0.0, -0.6, 0.8)];
+        let receivers: Vec<Receiver> =
+            normals.iter().map(|&normal| Receiver { position: Vec3::ZERO, normal }).collect();
+        let radiance: Vec<Vec3> = receivers
+            .iter()
+            .map(|r| {
+                let e = val_irradiance(r.position, r.normal, &lamp) + level * irradiance(&unit, r.position, r.normal);
+                albedo * e / PI
+            })
+            .collect();
+        let grid_of = ReceiverGrid { receivers, radiance, ..Default::default() };
+        let got = calibrated_level(&grid_of, &[lamp], &unit, albedo).unwrap();
+        assert!((got - Vec3::splat(level)).abs().max_element() < 1e-3, "{got}");
+        let least = explaining_level(&grid_of, &[lamp], &unit);
+        assert!(least.x < 0.5 * level, "albedo <= 1 allows a lower level: {least}");
+        assert_eq!(calibrated_level(&ReceiverGrid::default(), &[lamp], &unit, albedo), None);
+
+        // The same sky as a map of radiance 1000 (a probe in other units), calibrated in vals().
+        let map = grid.unseen(Vec3::ZERO, &[lamp], Vec3::splat(1000.0));
+        let vals = calibrated_map_vals(&grid, &map, Vec3::ZERO, &[lamp], Some(&grid_of), albedo);
+        for r in &grid_of.receivers {
+            let want = level * irradiance(&unit, r.position, r.normal);
+            let got = irradiance(&vals, r.position, r.normal);
+            assert!((got - want).abs().max_element() < 1e-3 * want.max_element(), "{got} vs {want}");
+        }
+        // Without receivers the map keeps its own scale.
+        let vals = calibrated_map_vals(&grid, &map, Vec3::ZERO, &[lamp], None, albedo);
+        let own = irradiance(&grid.vals(Vec3::ZERO, &map), Vec3::ZERO, Vec3::Z);
+        assert_eq!(irradiance(&vals, Vec3::ZERO, Vec3::Z), own);
     }
 
     /// A map whose columns are shifted by a quarter of its width is the map turned by 90

@@ -919,6 +919,17 @@ pub fn validate_environment(e: &EnvironmentSettings, field: &str) -> Result<(), 
     if !e.rows.is_multiple_of(2) {
         return Err(SceneError::field(format!("{field}.rows"), format!("must be even, got {}", e.rows)));
     }
+    if let Some(albedo) = e.albedo
+        && !(albedo > 0.0 && albedo <= 1.0)
+    {
+        return Err(SceneError::field(format!("{field}.albedo"), format!("must be in (0, 1], got {albedo}")));
+    }
+    if e.calibrate_map && e.source != EnvironmentSource::Map {
+        return Err(SceneError::field(
+            format!("{field}.calibrate_map"),
+            "calibrates a map: only with source \"map\"".to_owned(),
+        ));
+    }
     if e.source == EnvironmentSource::Map && e.map.is_none() {
         return Err(SceneError::field(format!("{field}.map"), "source \"map\" needs a map path".to_owned()));
     }
@@ -1488,6 +1499,14 @@ mod tests {
         ] {
             let message = error_of(&with_settings(&format!(r#"{{"ism": {ism}}}"#)));
             assert!(message.starts_with(want), "{ism}: {message}");
+        }
+        for (settings, field) in [
+            (r#"{"environment": {"albedo": 0}}"#, "settings.environment.albedo: must be in (0, 1]"),
+            (r#"{"environment": {"albedo": 1.5}}"#, "settings.environment.albedo: must be in (0, 1]"),
+            (r#"{"environment": {"source": "auto", "calibrate_map": true}}"#, "settings.environment.calibrate_map"),
+        ] {
+            let message = error_of(&with_settings(settings));
+            assert!(message.starts_with(field), "{settings}: {message}");
         }
         let message = error_of(&with_settings(r#"{"environment": {"distribution": "sideways"}}"#));
         assert!(message.starts_with("settings.environment.distribution: unknown variant `sideways`"), "{message}");

@@ -195,12 +195,14 @@ fn mr_differential_replay_shades_the_desk() {
     plain.set_environment(Environment::Auto {
         grid: DirectionGrid::new(8, glam::Vec3::Z),
         distribution: Default::default(),
+        albedo: None,
     });
     let before = plain.render_frame(&gpu, &frame).unwrap();
     let mut mr = MrRenderer::new(&gpu, &scene, options()).unwrap();
     mr.set_environment(Environment::Auto {
         grid: DirectionGrid::new(8, glam::Vec3::Z),
         distribution: Default::default(),
+        albedo: None,
     });
     let after = mr.render_frame(&gpu, &frame).unwrap();
     assert!(after.timings.stages.iter().any(|(n, _)| n == relume::mr::DIFFERENTIAL_STAGE));
