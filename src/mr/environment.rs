@@ -379,7 +379,7 @@ impl Environment {
             Environment::None => Vec::new(),
             Environment::Auto { grid, distribution, albedo } => {
                 let mean = mean_radiance(frame, settings);
-                let estimate = auto_estimate_at(grid, *distribution, centre, real, receivers, mean, *albedo);
+                let estimate = auto_estimate(grid, *distribution, centre, real, receivers, mean, *albedo);
                 let (level, up) = (estimate.level, estimate.up);
                 tracing::debug!(%mean, %level, %up, ?distribution, "auto environment level");
                 grid.vals(centre, &estimate.radiance)
@@ -432,22 +432,10 @@ pub struct AutoEstimate {
 /// The `auto` estimate (module docs): the unseen cells from `centre` given the `real` VALs,
 /// weighted by `distribution` about the receivers' up ([`estimate_up`]; the grid's own
 /// without receivers or a support plane), at the level `mean` raised to the
-/// [`explaining_level`] of the weighted unit environment when there are receivers.
+/// [`explaining_level`] of the weighted unit environment when there are receivers; or, with
+/// the receivers' `albedo` known, at the [`calibrated_level`] for it (a measurement, not a
+/// bound, so not raised to `mean`), `mean` where no receiver can tell.
 pub fn auto_estimate(
-    grid: &DirectionGrid,
-    distribution: EnvironmentDistribution,
-    centre: Vec3,
-    real: &[Val],
-    receivers: Option<&ReceiverGrid>,
-    mean: Vec3,
-) -> AutoEstimate {
-    auto_estimate_at(grid, distribution, centre, real, receivers, mean, None)
-}
-
-/// [`auto_estimate`] with the receivers' `albedo` when it is known: the level is then the
-/// [`calibrated_level`] at that albedo (a measurement, not a bound, so not raised to `mean`),
-/// or `mean` where no receiver can tell.
-pub fn auto_estimate_at(
     grid: &DirectionGrid,
     distribution: EnvironmentDistribution,
     centre: Vec3,
@@ -843,12 +831,12 @@ mod tests {
             ..Default::default()
         };
         let mean = Vec3::splat(0.1);
-        let e = auto_estimate(&grid, EnvironmentDistribution::Overcast, Vec3::ZERO, &[], Some(&receivers), mean);
+        let e = auto_estimate(&grid, EnvironmentDistribution::Overcast, Vec3::ZERO, &[], Some(&receivers), mean, None);
         assert!((e.up - desk).length() < 1e-5, "{}", e.up);
         assert!(e.level.x > mean.x, "the receivers raise the level: {}", e.level);
-        let e = auto_estimate(&grid, EnvironmentDistribution::Overcast, Vec3::ZERO, &[], None, mean);
+        let e = auto_estimate(&grid, EnvironmentDistribution::Overcast, Vec3::ZERO, &[], None, mean, None);
         assert_eq!((e.up, e.level), (Vec3::Z, mean));
-        let e = auto_estimate(&grid, EnvironmentDistribution::Uniform, Vec3::ZERO, &[], Some(&receivers), mean);
+        let e = auto_estimate(&grid, EnvironmentDistribution::Uniform, Vec3::ZERO, &[], Some(&receivers), mean, None);
         assert_eq!(e.up, Vec3::Z);
         assert!(e.radiance.iter().all(|r| *r == e.level));
     }

@@ -318,7 +318,7 @@ fn mr_auto_distribution_against_known_light() {
         let radiance_grid =
             ReceiverGrid { receivers: receivers.clone(), radiance: camera.clone(), ..Default::default() };
         let [uniform, overcast] = [EnvironmentDistribution::Uniform, EnvironmentDistribution::Overcast].map(|d| {
-            let estimate = auto_estimate(&grid, d, centre, &plate, Some(&radiance_grid), mean);
+            let estimate = auto_estimate(&grid, d, centre, &plate, Some(&radiance_grid), mean, None);
             let mut vals = plate.clone();
             vals.extend(grid.vals(centre, &estimate.radiance));
             let composite: Vec<Vec3> =
