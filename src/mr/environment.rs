@@ -297,10 +297,9 @@ impl DirectionGrid {
     /// Mean luminance of `radiance` (one value per cell) over the sphere, each cell weighted
     /// by its solid angle.
     pub fn mean_luminance(&self, radiance: &[Vec3]) -> f32 {
-        let weights = Vec3::new(0.2126, 0.7152, 0.0722);
         let (sum, solid) = radiance.iter().enumerate().fold((0.0, 0.0), |(sum, solid), (i, r)| {
             let omega = self.cell(i).1;
-            (sum + r.dot(weights) * omega, solid + omega)
+            (sum + crate::twin::luminance(*r) * omega, solid + omega)
         });
         if solid > 0.0 { sum / solid } else { 0.0 }
     }
@@ -408,10 +407,13 @@ pub fn calibrated_map_vals(
         return grid.vals(centre, radiance);
     }
     let unit: Vec<Vec3> = radiance.iter().map(|r| *r / mean).collect();
-    match receivers.and_then(|r| map_calibration(r, real, &grid.vals(centre, &unit), albedo)) {
+    let mut vals = grid.vals(centre, &unit);
+    match receivers.and_then(|r| map_calibration(r, real, &vals, albedo)) {
         Some(level) => {
             tracing::debug!(level, albedo, "environment map calibrated to the frame");
-            grid.vals(centre, &unit.iter().map(|r| *r * level).collect::<Vec<_>>())
+            // A cell's flux is linear in its radiance.
+            vals.iter_mut().for_each(|v| v.flux *= level);
+            vals
         }
         None => grid.vals(centre, radiance),
     }
@@ -556,7 +558,7 @@ pub fn calibrated_level(receivers: &ReceiverGrid, real: &[Val], unit: &[Val], al
 /// receiver can tell or the factor is not positive.
 pub fn map_calibration(receivers: &ReceiverGrid, real: &[Val], map: &[Val], albedo: f32) -> Option<f32> {
     let level = calibrated_level(receivers, real, map, albedo)?;
-    let factor = level.dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    let factor = crate::twin::luminance(level);
     (factor.is_finite() && factor > 0.0).then_some(factor)
 }
 

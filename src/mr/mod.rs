@@ -181,6 +181,13 @@ struct Placed {
     differential: Option<DifferentialState>,
 }
 
+impl Placed {
+    /// Whether `renderer`'s meshes are placed as this state was built for.
+    fn is_for(&self, renderer: &Renderer) -> bool {
+        self.placement == renderer.placement()
+    }
+}
+
 /// The differential pass (its BVH of the virtual meshes as placed) and the virtual content's
 /// re-emitters and bounds.
 struct DifferentialState {
@@ -287,7 +294,7 @@ impl MrPipeline {
     /// The placement's state, when it is the renderer's (a renderer placed otherwise since the
     /// last [`MrPipeline::place`] gets no differential pass and its own centre).
     fn placed(&self, renderer: &Renderer) -> Option<&Placed> {
-        let placed = self.placed.as_ref().filter(|p| p.placement == renderer.placement());
+        let placed = self.placed.as_ref().filter(|p| p.is_for(renderer));
         if placed.is_none() && self.mr.differential {
             tracing::warn!("the meshes moved without MrPipeline::place: no differential pass this frame");
         }
@@ -376,8 +383,7 @@ impl MrPipeline {
             Method::BruteForce | Method::Exact => Vec::new(),
         };
         let build_ms = std::mem::take(&mut self.build_ms);
-        let differential =
-            self.placed.as_mut().filter(|p| p.placement == renderer.placement()).and_then(|p| p.differential.as_mut());
+        let differential = self.placed.as_mut().filter(|p| p.is_for(renderer)).and_then(|p| p.differential.as_mut());
         let background = match (differential, &lighting.real_vals, &lighting.grid) {
             (Some(d), Some(vals), Some(grid)) => {
                 let start = Instant::now();
@@ -456,9 +462,8 @@ fn visible_receivers(
         let (cx, cy) = (cell as u32 % grid.size.x, cell as u32 / grid.size.x);
         let (u, v) = ((cx * step + (step - 1) / 2).min(fw - 1), (cy * step + (step - 1) / 2).min(fh - 1));
         let (x, y) = ((u * width / fw).min(width - 1), (v * height / fh).min(height - 1));
-        let real = frame.depth[(v * fw + u) as usize];
         if let Some(Some(z)) = virtual_depth.get((y * width + x) as usize) {
-            shown[*r as usize] = real.is_finite() && real > 0.0 && *z >= real;
+            shown[*r as usize] = !virtual_in_front(*z, frame.depth[(v * fw + u) as usize]);
         }
     }
     shown
@@ -517,10 +522,8 @@ pub fn composite_over(
         .map(|i| {
             let (x, y) = (i % w, i / w);
             let source = (y * fh / h) * fw + x * fw / w;
-            let real_depth = frame.depth[source];
-            let real_valid = real_depth.is_finite() && real_depth > 0.0;
             match virtual_depth[i] {
-                Some(z) if !real_valid || z < real_depth => {
+                Some(z) if virtual_in_front(z, frame.depth[source]) => {
                     let c = virtual_rgb.rgb(i) * exposure;
                     [encode_srgb(c.x), encode_srgb(c.y), encode_srgb(c.z)]
                 }
@@ -528,6 +531,13 @@ pub fn composite_over(
             }
         })
         .collect()
+}
+
+/// Whether virtual content at optical depth `virtual_z` hides the real surface at `real_depth`
+/// (no valid real depth: nothing to hide behind).
+fn virtual_in_front(virtual_z: f32, real_depth: f32) -> bool {
+    let real_valid = real_depth.is_finite() && real_depth > 0.0;
+    !real_valid || virtual_z < real_depth
 }
 
 /// Mean relative change between two frames' per-point irradiance:

@@ -28,7 +28,7 @@ pub fn load(text: &str, assets: &Path, limits: &Limits) -> Result<Loaded, ApiErr
         let load = || {
             let whole = GltfSceneDescription::from_json_str(text).map_err(|e| ApiError::scene(&e, assets))?;
             let file = confine(assets, &whole.gltf, "gltf")?;
-            check_mesh_bytes(std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0), "gltf", limits)?;
+            check_file_bytes(file_size(&file), "gltf", "mesh", limits)?;
             let description = whole.to_scene_description(assets).map_err(|e| ApiError::scene(&e, assets))?;
             load_description(description, assets, limits)
         };
@@ -111,16 +111,14 @@ pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> 
     for (i, mesh) in description.meshes.iter().enumerate() {
         let field = format!("meshes[{i}]");
         match &mesh.obj_text {
-            Some(text) => check_mesh_bytes(text.len() as u64, &format!("{field}.obj_text"), limits)?,
+            Some(text) => check_file_bytes(text.len() as u64, &format!("{field}.obj_text"), "mesh", limits)?,
             None => {
                 // A glTF's own buffers and images are confined to its directory by its reader.
                 let (file_field, relative) = match &mesh.gltf {
                     Some(gltf) => (format!("{field}.gltf"), gltf),
                     None => (format!("{field}.obj"), &mesh.obj),
                 };
-                let file = confine(assets, relative, &file_field)?;
-                let bytes = std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0);
-                check_mesh_bytes(bytes, &file_field, limits)?;
+                check_file_bytes(file_size(&confine(assets, relative, &file_field)?), &file_field, "mesh", limits)?;
             }
         }
         let materials = mesh
@@ -137,28 +135,24 @@ pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> 
     // An environment map: in the asset directory, and at most `max_mesh_bytes` on disk
     // (its pixels are checked when it is read).
     if let Some(map) = &description.settings.environment.map {
-        let file = confine(assets, map, ENVIRONMENT_MAP_FIELD)?;
-        let bytes = std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0);
-        if bytes > limits.max_mesh_bytes as u64 {
-            return Err(ApiError::limit(
-                limit::MAX_MESH_BYTES,
-                Some(ENVIRONMENT_MAP_FIELD.to_owned()),
-                format!(
-                    "{ENVIRONMENT_MAP_FIELD}: the map file is {bytes} bytes, over the limit of {}",
-                    limits.max_mesh_bytes
-                ),
-            ));
-        }
+        let bytes = file_size(&confine(assets, map, ENVIRONMENT_MAP_FIELD)?);
+        check_file_bytes(bytes, ENVIRONMENT_MAP_FIELD, "map", limits)?;
     }
     Ok(())
 }
 
-fn check_mesh_bytes(bytes: u64, field: &str, limits: &Limits) -> Result<(), ApiError> {
+/// Size of `file` on disk (0 when it cannot be read: reading it then names the error).
+fn file_size(file: &Path) -> u64 {
+    std::fs::metadata(file).map(|m| m.len()).unwrap_or(0)
+}
+
+/// A `what` file (`mesh`, `map`) of `bytes` at `field` within `max_mesh_bytes`.
+fn check_file_bytes(bytes: u64, field: &str, what: &str, limits: &Limits) -> Result<(), ApiError> {
     if bytes > limits.max_mesh_bytes as u64 {
         return Err(ApiError::limit(
             limit::MAX_MESH_BYTES,
             Some(field.to_owned()),
-            format!("{field}: the mesh file is {bytes} bytes, over the limit of {}", limits.max_mesh_bytes),
+            format!("{field}: the {what} file is {bytes} bytes, over the limit of {}", limits.max_mesh_bytes),
         ));
     }
     Ok(())
