@@ -99,7 +99,7 @@ pub fn measure(
 }
 
 /// `test`'s relative RMSE against `reference`, corrected for its noise where it is known.
-pub fn error_against(reference: &ExactReference, test: &crate::image::LinearImage) -> f64 {
+fn error_against(reference: &ExactReference, test: &crate::image::LinearImage) -> f64 {
     reference.corrected_rel_rmse(test).unwrap_or_else(|| compare::indirect_error(test, reference.indirect()).rel_rmse)
 }
 

@@ -452,6 +452,14 @@ pub struct ConfigResult {
     pub at_equal_error: Option<equal_error::AtEqualError>,
 }
 
+impl ConfigResult {
+    /// The error against exact visibility with the reference's noise taken out where it is
+    /// known (`rel_rmse_vs_exact_corrected`), else the raw one; `None` without the reference.
+    pub fn error_vs_exact(&self) -> Option<f64> {
+        self.rel_rmse_vs_exact_corrected.or(self.vs_exact.map(|e| e.rel_rmse))
+    }
+}
+
 /// A bench run's results (`results.json`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct BenchResults {
@@ -670,9 +678,8 @@ fn run_job(
                 (Some(samples), Some(reference)) => {
                     let label = format!("{}: R {rsm}, glossy {glossy}, {w}x{h}", job.variant);
                     progress(&format!("{label}: converging estimator, samples {samples:?}"));
-                    let curve = equal_error::measure(label, gpu, &mut renderer, w, h, reference, samples)?;
-                    curves.push(curve.clone());
-                    Some(curve)
+                    curves.push(equal_error::measure(label, gpu, &mut renderer, w, h, reference, samples)?);
+                    curves.last()
                 }
                 _ => None,
             };
@@ -682,7 +689,7 @@ fn run_job(
                 let brute_force_ms = brute.as_ref().map(Rendered::indirect_ms);
                 let gather_ms = frame.timings.total_of(&[stage::GATHER]);
                 let interactions = frame.val_count as f64 * scene.sparse_point_count() as f64;
-                results.push(ConfigResult {
+                let mut result = ConfigResult {
                     variant: job.variant.clone(),
                     config,
                     glossy_active: renderer.glossy(),
@@ -709,15 +716,12 @@ fn run_job(
                     exact_rel_stderr: exact.as_ref().and_then(|x| x.rel_stderr()),
                     rel_rmse_vs_exact_corrected: exact.as_ref().and_then(|x| x.corrected_rel_rmse(&frame.indirect)),
                     exact_rays_per_s: exact.as_ref().and_then(|x| x.rays_per_s()),
-                    at_equal_error: exact.as_ref().zip(curve.as_ref()).and_then(|(x, c)| {
-                        equal_error::at_error(
-                            &c.points,
-                            equal_error::error_against(x, &frame.indirect),
-                            sparse_indirect_ms,
-                        )
-                    }),
+                    at_equal_error: None,
                     paper_fps: table1::paper_fps(&job.variant, &config, scene.sparse_point_count()),
-                });
+                };
+                result.at_equal_error =
+                    curve.and_then(|c| equal_error::at_error(&c.points, result.error_vs_exact()?, sparse_indirect_ms));
+                results.push(result);
             }
         }
     }

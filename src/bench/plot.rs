@@ -148,7 +148,7 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
     // Against exact, the error with the reference's noise taken out where it is known, as the
     // converging estimator's curve is measured.
     let error = |r: &ConfigResult| match exact {
-        true => r.rel_rmse_vs_exact_corrected.or(r.vs_exact.map(|e| e.rel_rmse)),
+        true => r.error_vs_exact(),
         false => r.vs_brute_force.map(|e| e.rel_rmse),
     };
     let curves: Vec<Vec<(f64, f64)>> = match exact {

@@ -103,9 +103,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     for r in results.configs.iter().filter(|r| r.at_equal_error.is_some()) {
-        let (Some(at), Some(error)) =
-            (r.at_equal_error, r.rel_rmse_vs_exact_corrected.or(r.vs_exact.map(|e| e.rel_rmse)))
-        else {
+        let (Some(at), Some(error)) = (r.at_equal_error, r.error_vs_exact()) else {
             continue;
         };
         eprintln!(

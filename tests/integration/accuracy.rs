@@ -6,6 +6,17 @@ use relume::image::relative_rmse;
 use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
 
+/// The fixture scene `name` with `settings` (a JSON object) set over its own settings.
+fn fixture_with_settings(name: &str, settings: serde_json::Value) -> Scene {
+    let dir = fixture("scenes");
+    let text = std::fs::read_to_string(dir.join(name)).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for (key, value) in settings.as_object().expect("settings are an object") {
+        json["settings"][key] = value.clone();
+    }
+    Scene::from_json_str(&json.to_string(), &dir).unwrap()
+}
+
 fn rel_rmse_with_sparse_points(box_points: u32, bunny_points: u32, sparse: serde_json::Value) -> f64 {
     let dir = fixture("scenes");
     let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json"))
@@ -64,15 +75,11 @@ fn auto_occlusion_follows_the_scene() {
 /// is rendered beside it and its ratio printed: the issue measured 4.3x at 128².
 #[test]
 fn sparse_sponza_has_no_fireflies() {
-    let dir = fixture("scenes");
-    let text = std::fs::read_to_string(dir.join("sponza_bunny.json")).unwrap();
     let gpu = gpu();
     let mut ratios = Vec::new();
     for bound in ["gathered", "off"] {
-        let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
-        json["settings"]["rsm_resolution"] = 64.into();
-        json["settings"]["sparse"] = serde_json::json!({ "bound": bound });
-        let scene = Scene::from_json_str(&json.to_string(), &dir).unwrap();
+        let settings = serde_json::json!({ "rsm_resolution": 64, "sparse": { "bound": bound } });
+        let scene = fixture_with_settings("sponza_bunny.json", settings);
         let mut renderer = Renderer::new(&gpu, &scene).unwrap();
         let sparse = renderer.render(&gpu, Method::Sparse, 64, 36).unwrap();
         let brute = renderer.render(&gpu, Method::BruteForce, 64, 36).unwrap();
@@ -89,20 +96,18 @@ fn sparse_sponza_has_no_fireflies() {
 /// spheres, a glossy floor (k 30) and a glossy bunny (k 60)), small: a 32² RSM at 64x64. Its
 /// glossy stages run, the glossy lobe changes the image, and the sparse image stays near the
 /// brute force. Measured on lavapipe: 0.107 glossy, 0.102 all diffuse, the lobe 0.071 of the
-/// image. The bound is the measured error with room for
-/// other adapters' rounding; a broken glossy path gives errors of order 1.
+/// image. The bound is the measured error with room for other adapters' rounding; a broken
+/// glossy path gives errors of order 1.
 #[test]
 fn the_glossy_open_room_stays_near_the_brute_force() {
-    let dir = fixture("scenes");
-    let text = std::fs::read_to_string(dir.join("cornell_glossy_open.json")).unwrap();
     let gpu = gpu();
     let mut errors = Vec::new();
     let mut brutes = Vec::new();
     for glossy in [true, false] {
-        let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
-        json["settings"]["rsm_resolution"] = 32.into();
-        json["settings"]["glossy"] = glossy.into();
-        let scene = Scene::from_json_str(&json.to_string(), &dir).unwrap();
+        let scene = fixture_with_settings(
+            "cornell_glossy_open.json",
+            serde_json::json!({ "rsm_resolution": 32, "glossy": glossy }),
+        );
         let mut renderer = Renderer::new(&gpu, &scene).unwrap();
         assert_eq!(renderer.glossy(), glossy, "glossy stages run exactly when allowed");
         let sparse = renderer.render(&gpu, Method::Sparse, 64, 64).unwrap();
