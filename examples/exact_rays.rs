@@ -1,12 +1,18 @@
-//! Shadow-ray throughput of the CPU exact reference's traversal, before and after, in one run:
-//! obvhs's compressed 8-wide BVH with an exit at the first blocker (`TraceBvh::segment_blocked`,
-//! what `twin::exact_cpu` uses) against obvhs's binary BVH with its any-hit traversal (what it
-//! used before), on the same shadow rays: every pixel-VAL pair with a non-zero unoccluded term
-//! of a real frame, as the reference casts them. Both decide every ray with the same triangle
-//! test; a ray they decide differently is an error.
+//! Shadow-ray throughput of the CPU exact reference's traversal, before and after, in one run,
+//! on the same shadow rays: every pixel-VAL pair with a non-zero unoccluded term of a real frame,
+//! as the reference casts them (per receiver, in the reference's VAL order).
+//!
+//! - before: obvhs's CWBVH from its `medium_build` preset, one ray at a time, VALs in the RSM's
+//!   order (what `twin::exact_cpu` did before the packets);
+//! - single: [`TraceBvh`] (`very_slow_build`), [`TraceBvh::shadow_rays`] one ray at a time with
+//!   the last blocker tested first, VALs along the Morton curve;
+//! - packets: the same with [`ShadowTraversal::Packets`].
+//!
+//! Every path decides each ray with the same triangle test; a ray decided differently from
+//! `before` is reported (and makes the run fail).
 //!
 //! ```sh
-//! cargo run --example exact_rays -- fixtures/scenes/cornell_bunny.json 16
+//! cargo run --release --example exact_rays -- fixtures/scenes/cornell_bunny.json 32
 //! ```
 
 use glam::{Vec3, Vec3A};
@@ -15,13 +21,16 @@ use relume::gpu::Gpu;
 use relume::gpu::shader::RAY_OFFSET;
 use relume::renderer::{Components, Method, Renderer};
 use relume::scene::Scene;
-use relume::twin::bvh::{TraceBvh, ray_triangle};
-use relume::twin::exact_cpu::Receiver;
+use relume::twin::bvh::{EdgeTriangle, ShadowTraversal, TraceBvh};
+use relume::twin::exact_cpu::{Receiver, sort_along_curve};
 use relume::twin::val_radiance;
 use std::time::Instant;
 
+/// One receiver's shadow rays: the ray origin and the targets.
+type Rays = (Vec3, Vec<Vec3>);
+
 /// Image side at most: the rays are stored (24 bytes each), ~10 k per pixel on cornell_bunny.
-const MAX_SIDE: u32 = 32;
+const MAX_SIDE: u32 = 48;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -33,24 +42,34 @@ fn main() -> anyhow::Result<()> {
     let mut renderer = Renderer::new(&gpu, &scene)?;
     renderer.render_components(&gpu, Method::Sparse, side, side, Components::DIRECT)?;
     let vals = renderer.read_vals(&gpu)?;
+    let mut curve = vals.clone();
+    sort_along_curve(&mut curve);
     let hits = renderer.camera_view().ok_or_else(|| anyhow::anyhow!("no camera view"))?.read(&gpu)?;
     let flat = &renderer.scene.flat;
     let eye = renderer.view().eye();
-    let rays: Vec<(Vec3, Vec3)> = hits
+    // One receiver's shadow rays: its ray origin and the targets of the VALs it sees unoccluded.
+    let receivers: Vec<Receiver> = hits
         .iter()
         .flatten()
-        .flat_map(|h| {
+        .map(|h| {
             let (p, n, s) = flat.surface_at(h.triangle, h.barycentrics);
-            let r = Receiver::new(p, n, s, eye);
-            vals.iter()
-                .filter(move |v| val_radiance(r.position, r.normal, &r.surface, r.view, v, true) != Vec3::ZERO)
-                .map(move |v| (r.position + r.normal * RAY_OFFSET, v.position + v.normal * RAY_OFFSET))
+            Receiver::new(p, n, s, eye)
         })
         .collect();
+    let rays_of = |r: &Receiver, vals: &[relume::twin::Val]| -> Rays {
+        let targets = vals
+            .iter()
+            .filter(|v| val_radiance(r.position, r.normal, &r.surface, r.view, v, true) != Vec3::ZERO)
+            .map(|v| v.position + v.normal * RAY_OFFSET)
+            .collect();
+        (r.position + r.normal * RAY_OFFSET, targets)
+    };
+    let in_rsm_order: Vec<Rays> = receivers.iter().map(|r| rays_of(r, &vals)).collect();
+    let along_curve: Vec<Rays> = receivers.iter().map(|r| rays_of(r, &curve)).collect();
     let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
     let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
 
-    // Before: obvhs's BVH2 (medium_build, leaves collapsed) and its any-hit traversal.
+    // Before: obvhs's CWBVH (medium_build), one ray at a time.
     let start = Instant::now();
     let tris: Vec<obvhs::triangle::Triangle> = triangles
         .iter()
@@ -59,50 +78,83 @@ fn main() -> anyhow::Result<()> {
             obvhs::triangle::Triangle { v0, v1, v2 }
         })
         .collect();
-    let bvh2 = obvhs::bvh2::builder::build_bvh2_from_tris(
+    let medium = obvhs::cwbvh::builder::build_cwbvh_from_tris(
         &tris,
         obvhs::BvhBuildParams::medium_build(),
         &mut Default::default(),
     );
-    let corners: Vec<[Vec3; 3]> =
-        bvh2.primitive_indices.iter().map(|&i| triangles[i as usize].map(|v| positions[v as usize])).collect();
-    let bvh2_build_ms = start.elapsed().as_secs_f64() * 1e3;
-    let bvh2_blocked = |o: Vec3, t: Vec3| {
+    let edges: Vec<EdgeTriangle> = medium
+        .primitive_indices
+        .iter()
+        .map(|&i| {
+            let [a, b, c] = triangles[i as usize].map(|v| positions[v as usize]);
+            EdgeTriangle::new(a, b, c)
+        })
+        .collect();
+    let medium_build_ms = start.elapsed().as_secs_f64() * 1e3;
+    let before_blocked = |o: Vec3, t: Vec3| {
         let d = t - o;
+        let dl = d.length();
         let ray = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, 1.0);
-        !bvh2.ray_traverse_miss(ray, |_, k| {
-            let [a, b, c] = corners[k];
-            match ray_triangle(o, d, a, b, c) {
-                Some(t) if t > 0.0 && t < 1.0 => t,
-                _ => f32::INFINITY,
-            }
+        !medium.ray_traverse_miss(ray, |_, k| match edges[k].hit(o, d, dl) {
+            Some((t, _)) if t > 0.0 && t < 1.0 => t,
+            _ => f32::INFINITY,
         })
     };
-    // After: the CWBVH.
     let start = Instant::now();
-    let wide = TraceBvh::build(&positions, &triangles);
-    let cwbvh_build_ms = start.elapsed().as_secs_f64() * 1e3;
+    let wide = &TraceBvh::build(&positions, &triangles);
+    let build_ms = start.elapsed().as_secs_f64() * 1e3;
 
-    let time = |f: &(dyn Fn(Vec3, Vec3) -> bool + Sync)| {
+    // Per receiver, how many of its rays are blocked: the rays' order differs between the two
+    // VAL orders, the count per receiver does not.
+    let time = |f: &(dyn Fn(&Rays) -> Vec<bool> + Sync), rays: &[Rays]| {
         let start = Instant::now();
-        let blocked: Vec<bool> = rays.par_iter().map(|&(o, t)| f(o, t)).collect();
+        let blocked: Vec<Vec<bool>> = rays.par_iter().map(f).collect();
         (blocked, start.elapsed().as_secs_f64())
     };
-    let (before, before_s) = time(&bvh2_blocked);
-    let (after, after_s) = time(&|o, t| wide.segment_blocked(o, t));
-    let differ = before.iter().zip(&after).filter(|(a, b)| a != b).count();
-    let n = rays.len() as f64;
+    let (before, before_s) = time(&|(o, ts)| ts.iter().map(|t| before_blocked(*o, *t)).collect(), &in_rsm_order);
+    let traced = |traversal| {
+        move |(o, ts): &Rays| {
+            let mut blocked = Vec::new();
+            wide.shadow_rays(*o, ts, traversal, &mut blocked);
+            blocked
+        }
+    };
+    let (single, single_s) = time(&traced(ShadowTraversal::Single), &along_curve);
+    let (packets, packets_s) = time(&traced(ShadowTraversal::Packets), &along_curve);
+    // Ray by ray against `before` on the curve order (same rays, same order).
+    let (curve_before, _) = time(&|(o, ts)| ts.iter().map(|t| before_blocked(*o, *t)).collect(), &along_curve);
+    let differ = |a: &[Vec<bool>], b: &[Vec<bool>]| {
+        a.iter().zip(b).map(|(x, y)| x.iter().zip(y).filter(|(p, q)| p != q).count()).sum::<usize>()
+    };
+    let count = |v: &[Vec<bool>]| v.iter().map(|r| r.iter().filter(|b| **b).count()).collect::<Vec<_>>();
+    anyhow::ensure!(count(&before) == count(&curve_before), "the VAL order changed which rays are blocked");
+    let (single_differ, packets_differ) = (differ(&curve_before, &single), differ(&curve_before, &packets));
+    let n = in_rsm_order.iter().map(|(_, t)| t.len()).sum::<usize>() as f64;
+    let blocked = count(&before).iter().sum::<usize>() as f64;
     println!(
         "{path} at {side}x{side}: {} VALs, {} triangles, {} shadow rays ({:.1} % blocked), {} rayon threads",
         vals.len(),
         triangles.len(),
-        rays.len(),
-        100.0 * after.iter().filter(|b| **b).count() as f64 / n,
+        n,
+        100.0 * blocked / n,
         rayon::current_num_threads()
     );
-    println!("before (obvhs BVH2, any-hit):    {:8.3} M rays/s (build {bvh2_build_ms:.0} ms)", n / before_s * 1e-6);
-    println!("after  (obvhs CWBVH, first hit): {:8.3} M rays/s (build {cwbvh_build_ms:.0} ms)", n / after_s * 1e-6);
-    println!("speed-up {:.2}x; rays decided differently: {differ}", before_s / after_s);
-    anyhow::ensure!(differ == 0, "{differ} rays decided differently");
+    let rate = |s: f64| n / s * 1e-6;
+    println!(
+        "before  (CWBVH medium_build, one ray, RSM order): {:8.3} M rays/s (build {medium_build_ms:.0} ms)",
+        rate(before_s)
+    );
+    println!(
+        "single  (very_slow_build, last blocker, curve):    {:8.3} M rays/s (build {build_ms:.0} ms), {:.2}x, {single_differ} rays decided differently",
+        rate(single_s),
+        before_s / single_s
+    );
+    println!(
+        "packets (very_slow_build, packets, curve):        {:8.3} M rays/s, {:.2}x, {packets_differ} rays decided differently",
+        rate(packets_s),
+        before_s / packets_s
+    );
+    anyhow::ensure!(single_differ == 0 && packets_differ == 0, "rays decided differently");
     Ok(())
 }

@@ -153,6 +153,8 @@ pub struct ExactReference {
     pub device: ReferenceDevice,
     /// CPU: shadow rays cast.
     pub shadow_rays: Option<u64>,
+    /// CPU: how they were traced (the pilot's choice; the image does not depend on it).
+    pub traversal: Option<crate::twin::bvh::ShadowTraversal>,
 }
 
 impl ExactReference {
@@ -222,6 +224,7 @@ pub fn exact_reference_seeded(
             frame,
             device,
             shadow_rays: None,
+            traversal: None,
         });
     }
     let mut frame = renderer.render_components(gpu, Method::Sparse, width, height, Components::DIRECT)?;
@@ -257,7 +260,13 @@ pub fn exact_reference_seeded(
     frame.indirect = out.image;
     frame.timings.stages.push((cpu::STAGE.to_owned(), start.elapsed().as_secs_f64() * 1e3));
     frame.indirect_stages = vec![cpu::STAGE];
-    Ok(ExactReference { frame, variance: out.variance, device, shadow_rays: Some(out.shadow_rays) })
+    Ok(ExactReference {
+        frame,
+        variance: out.variance,
+        device,
+        shadow_rays: Some(out.shadow_rays),
+        traversal: Some(out.traversal),
+    })
 }
 
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and
@@ -338,6 +347,8 @@ pub struct ExactComparison {
     pub exact_rounds: u32,
     pub exact_shadow_rays: Option<u64>,
     pub exact_rays_per_s: Option<f64>,
+    /// CPU: the shadow-ray traversal the pilot chose (`single` or `packets`).
+    pub exact_traversal: Option<crate::twin::bvh::ShadowTraversal>,
     /// `sqrt(sum s² / sum |g|²)`: the reference's own relative noise.
     pub exact_rel_stderr: Option<f64>,
     /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
@@ -458,6 +469,7 @@ fn exact_comparison(
         exact_rounds: exact.frame.exact_rounds,
         exact_shadow_rays: exact.shadow_rays,
         exact_rays_per_s: exact.rays_per_s(),
+        exact_traversal: exact.traversal,
         exact_rel_stderr: exact.rel_stderr(),
         modes_vs_exact: modes,
     })

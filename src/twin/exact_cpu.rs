@@ -15,7 +15,7 @@
 //! sample per pixel; at uniformly random positions inside the pixel (a jittered box filter)
 //! otherwise.
 
-use super::bvh::TraceBvh;
+use super::bvh::{ShadowTraversal, TraceBvh};
 use super::{Material, Val, luminance, val_radiance, view_direction};
 use crate::image::LinearImage;
 use glam::{Mat4, Vec3, Vec4};
@@ -124,6 +124,8 @@ pub struct ExactImage {
     pub variance: Option<Vec<Vec3>>,
     /// Shadow rays cast (receiver-VAL pairs with a non-zero unoccluded contribution).
     pub shadow_rays: u64,
+    /// How the shadow rays were traced (the image does not depend on it).
+    pub traversal: ShadowTraversal,
 }
 
 /// Everything one reference frame needs besides the receivers.
@@ -133,27 +135,192 @@ pub struct ExactScene<'a> {
     pub glossy: bool,
 }
 
+/// Frames of at least this many pixels choose their shadow-ray traversal by timing both on
+/// [`PILOT_PIXELS`] of their pixels first (smaller ones take packets): which is faster depends
+/// on the scene (see [`ShadowTraversal`]), and both give the same image.
+pub const PILOT_MIN_PIXELS: usize = 4096;
+/// Pixels, spread evenly over the frame, that the pilot traces once with each traversal.
+pub const PILOT_PIXELS: usize = 64;
+
 /// Render the exact-visibility reference: `width` x `height` pixels from `receivers`, each
-/// summing (or estimating, per `vals`) the visible VALs' [`val_radiance`].
+/// summing (or estimating, per `vals`) the visible VALs' [`val_radiance`], with the faster
+/// shadow-ray traversal for the scene (a pilot on a few pixels times both).
 pub fn render(scene: &ExactScene, receivers: &Receivers, width: u32, height: u32, sampling: ValSampling) -> ExactImage {
+    render_with(scene, receivers, width, height, sampling, None)
+}
+
+/// [`render`] with the shadow-ray traversal given (`None`: chosen by the pilot).
+pub fn render_with(
+    scene: &ExactScene,
+    receivers: &Receivers,
+    width: u32,
+    height: u32,
+    sampling: ValSampling,
+    traversal: Option<ShadowTraversal>,
+) -> ExactImage {
     let pixels = (width as usize) * (height as usize);
-    let results: Vec<(Pixel, u64)> = (0..pixels)
-        .into_par_iter()
-        .map_init(Workspace::default, |ws, i| {
-            let mut rays = 0;
-            let samples = pixel_receivers(receivers, scene.bvh, i, width);
-            let estimates: Vec<Option<Halves>> = samples
-                .iter()
-                .enumerate()
-                .map(|(k, r)| r.map(|r| scene.estimate(&r, sampling, i, k, ws, &mut rays)))
-                .collect();
-            (combine(&estimates), rays)
-        })
-        .collect();
+    let (vals, scale) = summed_vals(scene.vals, sampling);
+    let frame = Frame { bvh: scene.bvh, vals: &vals, scale, glossy: scene.glossy, receivers, width, sampling };
+    let traversal = traversal.unwrap_or_else(|| frame.pilot(pixels));
+    let results: Vec<(Pixel, u64)> =
+        (0..pixels).into_par_iter().map_init(Workspace::default, |ws, i| frame.pixel(i, traversal, ws)).collect();
     let deterministic = matches!(sampling, ValSampling::Stride(_));
     let image = LinearImage { width, height, pixels: results.iter().map(|(p, _)| p.rgba).collect() };
     let variance = (!deterministic).then(|| results.iter().map(|(p, _)| p.variance).collect());
-    ExactImage { image, variance, shadow_rays: results.iter().map(|(_, r)| r).sum() }
+    ExactImage { image, variance, shadow_rays: results.iter().map(|(_, r)| r).sum(), traversal }
+}
+
+/// The VALs a receiver sums (a stride's subsample, taken in list order as the GPU pass takes
+/// it) sorted along a Morton curve over their bounding box, so that a receiver's consecutive
+/// shadow rays go to neighbouring VALs (what [`TraceBvh::shadow_rays`] gains from), and the
+/// flux scale of each (the stride).
+fn summed_vals(vals: &[Val], sampling: ValSampling) -> (Vec<Val>, f32) {
+    let (mut selected, scale): (Vec<Val>, f32) = match sampling {
+        ValSampling::Stride(s) => {
+            let s = s.max(1) as usize;
+            (vals.iter().step_by(s).take(vals.len() / s).copied().collect(), s as f32)
+        }
+        ValSampling::All | ValSampling::Importance { .. } => (vals.to_vec(), 1.0),
+    };
+    sort_along_curve(&mut selected);
+    (selected, scale)
+}
+
+/// Sort `vals` along a Morton curve over their bounding box (the order the reference traces a
+/// receiver's shadow rays in).
+pub fn sort_along_curve(vals: &mut [Val]) {
+    let (lo, hi) =
+        vals.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v.position), hi.max(v.position)));
+    vals.sort_by_cached_key(|v| morton_code(v.position, lo, hi));
+}
+
+/// The 30-bit Morton code of `p` on a 1024³ grid over the box `lo`..`hi`.
+fn morton_code(p: Vec3, lo: Vec3, hi: Vec3) -> u32 {
+    let cell = ((p - lo) / (hi - lo).max(Vec3::splat(1e-12)) * 1023.0).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+    let spread = |x: u32| {
+        let mut x = x & 0x3ff;
+        x = (x | x << 16) & 0x0300_00ff;
+        x = (x | x << 8) & 0x0300_f00f;
+        x = (x | x << 4) & 0x030c_30c3;
+        (x | x << 2) & 0x0924_9249
+    };
+    spread(cell.x as u32) | spread(cell.y as u32) << 1 | spread(cell.z as u32) << 2
+}
+
+/// One reference frame as its pixels are shaded: the VALs in curve order with their flux scale.
+struct Frame<'a> {
+    bvh: &'a TraceBvh,
+    vals: &'a [Val],
+    scale: f32,
+    glossy: bool,
+    receivers: &'a Receivers<'a>,
+    width: u32,
+    sampling: ValSampling,
+}
+
+impl Frame<'_> {
+    /// Pixel `i`: its estimate and the shadow rays it cast.
+    fn pixel(&self, i: usize, traversal: ShadowTraversal, ws: &mut Workspace) -> (Pixel, u64) {
+        let mut rays = 0;
+        let samples = pixel_receivers(self.receivers, self.bvh, i, self.width);
+        let estimates: Vec<Option<Halves>> = samples
+            .iter()
+            .enumerate()
+            .map(|(k, r)| r.map(|r| self.estimate(&r, i, k, traversal, ws, &mut rays)))
+            .collect();
+        (combine(&estimates), rays)
+    }
+
+    /// The faster traversal for this frame, timed on [`PILOT_PIXELS`] pixels each (the pilot's
+    /// results are thrown away).
+    fn pilot(&self, pixels: usize) -> ShadowTraversal {
+        if pixels < PILOT_MIN_PIXELS {
+            return ShadowTraversal::Packets;
+        }
+        let time = |traversal| {
+            let start = std::time::Instant::now();
+            (0..PILOT_PIXELS).into_par_iter().for_each_init(Workspace::default, |ws, k| {
+                self.pixel((2 * k + 1) * pixels / (2 * PILOT_PIXELS), traversal, ws);
+            });
+            start.elapsed()
+        };
+        let single = time(ShadowTraversal::Single);
+        let packets = time(ShadowTraversal::Packets);
+        tracing::debug!(?single, ?packets, "exact reference: shadow-ray traversal pilot");
+        if packets <= single { ShadowTraversal::Packets } else { ShadowTraversal::Single }
+    }
+
+    /// Receiver `r`'s sum or estimate (sample `k` of pixel `pixel`, for the random streams).
+    fn estimate(
+        &self,
+        r: &Receiver,
+        pixel: usize,
+        k: usize,
+        traversal: ShadowTraversal,
+        ws: &mut Workspace,
+        rays: &mut u64,
+    ) -> Halves {
+        let term = |val: &Val| val_radiance(r.position, r.normal, &r.surface, r.view, val, self.glossy);
+        let origin = r.position + r.normal * RAY_OFFSET;
+        let target = |val: &Val| val.position + val.normal * RAY_OFFSET;
+        match self.sampling {
+            ValSampling::All | ValSampling::Stride(_) => {
+                ws.terms.clear();
+                ws.targets.clear();
+                for val in self.vals {
+                    let f = term(val);
+                    if f != Vec3::ZERO {
+                        ws.terms.push(f * self.scale);
+                        ws.targets.push(target(val));
+                    }
+                }
+                let l = ws.visible_sum(self.bvh, origin, traversal, rays);
+                Halves { a: l, b: l, n: (1, 0) }
+            }
+            ValSampling::Importance { samples, seed } => {
+                ws.contributions.clear();
+                ws.cdf.clear();
+                let mut total = 0.0f64;
+                for val in self.vals {
+                    let f = term(val);
+                    total += luminance(f) as f64;
+                    ws.contributions.push(f);
+                    ws.cdf.push(total);
+                }
+                let n = samples.max(2);
+                let (na, nb) = (n / 2, n - n / 2);
+                if total <= 0.0 {
+                    return Halves { a: Vec3::ZERO, b: Vec3::ZERO, n: (na, nb) };
+                }
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
+                rng.set_stream(((pixel as u64) << 16) ^ k as u64);
+                let mut half = |draws: u32, ws: &mut Workspace| {
+                    // The draws in VAL (curve) order, each weighted by 1 / its probability.
+                    ws.draws.clear();
+                    for _ in 0..draws {
+                        let u = rng.random::<f64>() * total;
+                        let j = ws.cdf.partition_point(|&c| c <= u).min(self.vals.len() - 1);
+                        let f = ws.contributions[j];
+                        let p = luminance(f) as f64 / total;
+                        if p > 0.0 {
+                            ws.draws.push((j as u32, f / p as f32));
+                        }
+                    }
+                    ws.draws.sort_unstable_by_key(|&(j, _)| j);
+                    ws.terms.clear();
+                    ws.targets.clear();
+                    for &(j, f) in &ws.draws {
+                        ws.terms.push(f);
+                        ws.targets.push(target(&self.vals[j as usize]));
+                    }
+                    ws.visible_sum(self.bvh, origin, traversal, rays) / draws as f32
+                };
+                let a = half(na, ws);
+                let b = half(nb, ws);
+                Halves { a, b, n: (na, nb) }
+            }
+        }
+    }
 }
 
 /// Pixel `i`'s receivers (one per sample; `None` where the sample sees background).
@@ -191,87 +358,24 @@ struct Pixel {
     variance: Vec3,
 }
 
-/// Per-thread scratch: the cumulative distribution of the VALs' contributions.
+/// Per-thread scratch: the cumulative distribution of the VALs' contributions, and one
+/// receiver's shadow rays (their targets, the terms they carry, the draws behind them).
 #[derive(Default)]
 struct Workspace {
     contributions: Vec<Vec3>,
     cdf: Vec<f64>,
+    draws: Vec<(u32, Vec3)>,
+    terms: Vec<Vec3>,
+    targets: Vec<Vec3>,
+    blocked: Vec<bool>,
 }
 
-impl ExactScene<'_> {
-    fn visible(&self, r: &Receiver, val: &Val, rays: &mut u64) -> bool {
-        *rays += 1;
-        let origin = r.position + r.normal * RAY_OFFSET;
-        !self.bvh.segment_blocked(origin, val.position + val.normal * RAY_OFFSET)
-    }
-
-    /// Receiver `r`'s sum or estimate (sample `k` of pixel `pixel`, for the random streams).
-    fn estimate(
-        &self,
-        r: &Receiver,
-        sampling: ValSampling,
-        pixel: usize,
-        k: usize,
-        ws: &mut Workspace,
-        rays: &mut u64,
-    ) -> Halves {
-        let term = |val: &Val| val_radiance(r.position, r.normal, &r.surface, r.view, val, self.glossy);
-        let mut sum_visible = |vals: &mut dyn Iterator<Item = &Val>, scale: f32| {
-            let mut l = Vec3::ZERO;
-            for val in vals {
-                let f = term(val);
-                if f != Vec3::ZERO && self.visible(r, val, rays) {
-                    l += f * scale;
-                }
-            }
-            l
-        };
-        match sampling {
-            ValSampling::All => {
-                let l = sum_visible(&mut self.vals.iter(), 1.0);
-                Halves { a: l, b: l, n: (1, 0) }
-            }
-            ValSampling::Stride(s) => {
-                let s = s.max(1) as usize;
-                let used = self.vals.len() / s;
-                let l = sum_visible(&mut self.vals.iter().step_by(s).take(used), s as f32);
-                Halves { a: l, b: l, n: (1, 0) }
-            }
-            ValSampling::Importance { samples, seed } => {
-                ws.contributions.clear();
-                ws.cdf.clear();
-                let mut total = 0.0f64;
-                for val in self.vals {
-                    let f = term(val);
-                    total += luminance(f) as f64;
-                    ws.contributions.push(f);
-                    ws.cdf.push(total);
-                }
-                let n = samples.max(2);
-                let (na, nb) = (n / 2, n - n / 2);
-                if total <= 0.0 {
-                    return Halves { a: Vec3::ZERO, b: Vec3::ZERO, n: (na, nb) };
-                }
-                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
-                rng.set_stream(((pixel as u64) << 16) ^ k as u64);
-                let mut half = |draws: u32| {
-                    let mut l = Vec3::ZERO;
-                    for _ in 0..draws {
-                        let u = rng.random::<f64>() * total;
-                        let j = ws.cdf.partition_point(|&c| c <= u).min(self.vals.len() - 1);
-                        let f = ws.contributions[j];
-                        let p = luminance(f) as f64 / total;
-                        if p > 0.0 && self.visible(r, &self.vals[j], rays) {
-                            l += f / p as f32;
-                        }
-                    }
-                    l / draws as f32
-                };
-                let a = half(na);
-                let b = half(nb);
-                Halves { a, b, n: (na, nb) }
-            }
-        }
+impl Workspace {
+    /// The sum of `terms` whose shadow ray from `origin` to the matching `targets` is clear.
+    fn visible_sum(&mut self, bvh: &TraceBvh, origin: Vec3, traversal: ShadowTraversal, rays: &mut u64) -> Vec3 {
+        *rays += self.targets.len() as u64;
+        bvh.shadow_rays(origin, &self.targets, traversal, &mut self.blocked);
+        self.terms.iter().zip(&self.blocked).filter(|(_, b)| !**b).map(|(f, _)| *f).sum()
     }
 }
 
@@ -399,6 +503,42 @@ mod tests {
         assert!(shadowed >= 2, "the occluder must shadow some receivers, shadowed {shadowed}");
         assert!(out.variance.unwrap().iter().all(|v| *v == Vec3::ZERO), "the full sum has no noise");
         assert!(out.shadow_rays > 0 && out.shadow_rays <= (hits.len() * room.vals.len()) as u64);
+    }
+
+    /// The shadow-ray traversal changes the cost, never the image: with 4,000 VALs packed over
+    /// the occluder (so a floor receiver's neighbouring VALs are ~0.01 rad apart and full packets
+    /// form) the packets and the single rays give the same pixels, bit for bit, and cast the
+    /// same rays, for the full sum, a stride and the importance estimate.
+    #[test]
+    fn packets_and_single_rays_give_the_same_image() {
+        let mut room = room();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        room.vals = (0..4000)
+            .map(|_| Val {
+                position: Vec3::new(
+                    rng.random_range(-0.6..0.6),
+                    rng.random_range(1.0..1.1),
+                    rng.random_range(-0.6..0.6),
+                ),
+                normal: Vec3::NEG_Y,
+                area: 1e-4,
+                flux: Vec3::new(rng.random_range(0.0..1.0), 0.5, 0.25),
+            })
+            .collect();
+        let hits = floor_receivers();
+        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true };
+        let n = hits.len() as u32;
+        for sampling in [ValSampling::All, ValSampling::Stride(3), ValSampling::Importance { samples: 64, seed: 2 }] {
+            let render = |t| render_with(&scene, &Receivers::Hits(&hits), n, 1, sampling, Some(t));
+            let (single, packets) = (render(ShadowTraversal::Single), render(ShadowTraversal::Packets));
+            assert_eq!(single.image.pixels, packets.image.pixels, "{sampling:?}");
+            assert_eq!(single.shadow_rays, packets.shadow_rays, "{sampling:?}");
+            assert_eq!(packets.traversal, ShadowTraversal::Packets);
+        }
+        let lit = render(&scene, &Receivers::Hits(&hits), n, 1, ValSampling::All).image;
+        let darkest = (0..hits.len()).map(|i| lit.rgb(i).x).fold(f32::INFINITY, f32::min);
+        let brightest = (0..hits.len()).map(|i| lit.rgb(i).x).fold(0.0, f32::max);
+        assert!(darkest < 0.5 * brightest, "the occluder must shadow part of the line: {darkest} vs {brightest}");
     }
 
     /// Importance sampling is unbiased and its noise estimate is right: over 200 independent
