@@ -21,7 +21,10 @@ use crate::gpu::timing::TimingSource;
 use crate::gpu::visibility::VisibilitySettings;
 use crate::gpu::{Gpu, GpuError, MemoryInUse};
 use crate::renderer::{Rendered, Renderer, stage};
-use crate::scene::{MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError};
+use crate::scene::{
+    ClusterSettings, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene, SceneDescription,
+    SceneError, ShadowMapSource, SoftShadows,
+};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -68,6 +71,55 @@ pub struct Config {
     pub ism_resolution: Option<u32>,
     pub ism_points: Option<u32>,
     pub ism_pull_push_levels: Option<u32>,
+    /// The `clusters` mode's settings where they differ from the scene's `settings.clusters`
+    /// (set only when `occlusion` is `clusters`).
+    pub clusters: ClusterOverrides,
+}
+
+/// Overrides of `settings.clusters` (`None`: the scene's).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ClusterOverrides {
+    pub count: Option<u32>,
+    pub shadow_map_resolution: Option<u32>,
+    pub soft: Option<SoftShadows>,
+    pub shadow_maps: Option<ShadowMapSource>,
+}
+
+impl ClusterOverrides {
+    /// No override.
+    pub const NONE: Self = Self { count: None, shadow_map_resolution: None, soft: None, shadow_maps: None };
+
+    /// `base` with these overrides.
+    pub fn apply(&self, base: &ClusterSettings) -> ClusterSettings {
+        ClusterSettings {
+            count: self.count.unwrap_or(base.count),
+            shadow_map_resolution: self.shadow_map_resolution.unwrap_or(base.shadow_map_resolution),
+            soft: self.soft.unwrap_or(base.soft),
+            shadow_maps: self.shadow_maps.unwrap_or(base.shadow_maps),
+            ..*base
+        }
+    }
+
+    fn is_none(&self) -> bool {
+        *self == Self::NONE
+    }
+}
+
+/// `soft`'s name in settings, CSV and labels.
+fn soft_name(s: SoftShadows) -> &'static str {
+    match s {
+        SoftShadows::Pcss => "pcss",
+        SoftShadows::Pcf => "pcf",
+        SoftShadows::Hard => "hard",
+    }
+}
+
+/// `shadow_maps`' name in settings, CSV and labels.
+fn maps_name(m: ShadowMapSource) -> &'static str {
+    match m {
+        ShadowMapSource::Raster => "raster",
+        ShadowMapSource::Ism => "ism",
+    }
 }
 
 impl Config {
@@ -105,6 +157,11 @@ pub struct Sweep {
     pub ism_resolution: Option<Vec<u32>>,
     pub ism_points: Option<Vec<u32>>,
     pub ism_pull_push_levels: Option<Vec<u32>>,
+    /// The `clusters` mode's axes: each value is measured with `occlusion` `clusters`.
+    pub cluster_count: Option<Vec<u32>>,
+    pub cluster_resolution: Option<Vec<u32>>,
+    pub cluster_soft: Option<Vec<SoftShadows>>,
+    pub cluster_maps: Option<Vec<ShadowMapSource>>,
 }
 
 /// The axis names `--sweep` accepts.
@@ -119,6 +176,10 @@ pub const AXES: &[&str] = &[
     "ism_resolution",
     "ism_points",
     "ism_pull_push_levels",
+    "cluster_count",
+    "cluster_resolution",
+    "cluster_soft",
+    "cluster_maps",
 ];
 
 impl Sweep {
@@ -190,6 +251,32 @@ impl Sweep {
                     duplicate(sweep.ism_pull_push_levels.is_some())?;
                     sweep.ism_pull_push_levels = Some(parse_each(&flag, &values, |v| int_in(v, 0, 4))?);
                 }
+                "cluster_count" => {
+                    duplicate(sweep.cluster_count.is_some())?;
+                    sweep.cluster_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_CLUSTERS))?);
+                }
+                "cluster_resolution" => {
+                    duplicate(sweep.cluster_resolution.is_some())?;
+                    sweep.cluster_resolution = Some(parse_each(&flag, &values, |v| int_in(v, 16, 1024))?);
+                }
+                "cluster_soft" => {
+                    duplicate(sweep.cluster_soft.is_some())?;
+                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| {
+                        [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard]
+                            .into_iter()
+                            .find(|s| soft_name(*s) == v)
+                            .ok_or_else(|| "expected `pcss`, `pcf` or `hard`".to_owned())
+                    })?);
+                }
+                "cluster_maps" => {
+                    duplicate(sweep.cluster_maps.is_some())?;
+                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| {
+                        [ShadowMapSource::Raster, ShadowMapSource::Ism]
+                            .into_iter()
+                            .find(|m| maps_name(*m) == v)
+                            .ok_or_else(|| "expected `raster` or `ism`".to_owned())
+                    })?);
+                }
                 "neighbours" | "neighbors" => {
                     duplicate(sweep.neighbours.is_some())?;
                     let max = crate::scene::MAX_NEIGHBOURS;
@@ -225,7 +312,7 @@ impl Sweep {
                         for &glossy in &one(&self.glossy, base.glossy) {
                             for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
                                 for &occlusion in &one(&self.occlusion, base.occlusion) {
-                                    for ism in self.ism_variants(base) {
+                                    for ism in self.mode_variants(base) {
                                         let c = Config {
                                             sparse_points_per_mesh: sparse,
                                             neighbours,
@@ -236,8 +323,13 @@ impl Sweep {
                                             height,
                                             ..ism
                                         };
-                                        // ISM values only mean something in the ism mode.
-                                        push(if occlusion == Occlusion::Ism { c } else { c.without_ism() });
+                                        // A mode's values only mean something in that mode.
+                                        let c = if occlusion == Occlusion::Ism { c } else { c.without_ism() };
+                                        push(if occlusion == Occlusion::Clusters {
+                                            c
+                                        } else {
+                                            Config { clusters: ClusterOverrides::NONE, ..c }
+                                        });
                                     }
                                 }
                             }
@@ -279,19 +371,55 @@ impl Sweep {
         for &v in self.ism_pull_push_levels.iter().flatten() {
             push(Config { ism_pull_push_levels: Some(v), ..ism });
         }
+        let clusters = Config { occlusion: Occlusion::Clusters, ..*base };
+        let with = |o: ClusterOverrides| Config { clusters: o, ..clusters };
+        for &v in self.cluster_count.iter().flatten() {
+            push(with(ClusterOverrides { count: Some(v), ..base.clusters }));
+        }
+        for &v in self.cluster_resolution.iter().flatten() {
+            push(with(ClusterOverrides { shadow_map_resolution: Some(v), ..base.clusters }));
+        }
+        for &v in self.cluster_soft.iter().flatten() {
+            push(with(ClusterOverrides { soft: Some(v), ..base.clusters }));
+        }
+        for &v in self.cluster_maps.iter().flatten() {
+            push(with(ClusterOverrides { shadow_maps: Some(v), ..base.clusters }));
+        }
         out
     }
 
-    /// Every combination of the ISM axes' values as overrides on `base` (the grid).
-    fn ism_variants(&self, base: &Config) -> Vec<Config> {
+    /// Every combination of the ISM and cluster axes' values as overrides on `base` (the grid).
+    fn mode_variants(&self, base: &Config) -> Vec<Config> {
         let mut out = Vec::new();
-        let opts =
-            |v: &Option<Vec<u32>>, b: Option<u32>| v.clone().map_or(vec![b], |v| v.into_iter().map(Some).collect());
         for ism_count in opts(&self.ism_count, base.ism_count) {
             for ism_resolution in opts(&self.ism_resolution, base.ism_resolution) {
                 for ism_points in opts(&self.ism_points, base.ism_points) {
                     for ism_pull_push_levels in opts(&self.ism_pull_push_levels, base.ism_pull_push_levels) {
-                        out.push(Config { ism_count, ism_resolution, ism_points, ism_pull_push_levels, ..*base });
+                        for clusters in self.cluster_variants(&base.clusters) {
+                            out.push(Config {
+                                ism_count,
+                                ism_resolution,
+                                ism_points,
+                                ism_pull_push_levels,
+                                clusters,
+                                ..*base
+                            });
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Every combination of the cluster axes' values as overrides on `base`.
+    fn cluster_variants(&self, base: &ClusterOverrides) -> Vec<ClusterOverrides> {
+        let mut out = Vec::new();
+        for count in opts(&self.cluster_count, base.count) {
+            for shadow_map_resolution in opts(&self.cluster_resolution, base.shadow_map_resolution) {
+                for soft in opts(&self.cluster_soft, base.soft) {
+                    for shadow_maps in opts(&self.cluster_maps, base.shadow_maps) {
+                        out.push(ClusterOverrides { count, shadow_map_resolution, soft, shadow_maps });
                     }
                 }
             }
@@ -304,6 +432,11 @@ impl Config {
     fn without_ism(self) -> Config {
         Config { ism_count: None, ism_resolution: None, ism_points: None, ism_pull_push_levels: None, ..self }
     }
+}
+
+/// The values of an override axis as overrides, or the base override alone when it is not swept.
+fn opts<T: Copy>(values: &Option<Vec<T>>, base: Option<T>) -> Vec<Option<T>> {
+    values.as_ref().map_or(vec![base], |v| v.iter().copied().map(Some).collect())
 }
 
 /// The values of an axis, or the base value alone when it is not swept.
@@ -379,6 +512,7 @@ impl BenchOptions {
             ism_resolution: None,
             ism_points: None,
             ism_pull_push_levels: None,
+            clusters: ClusterOverrides::NONE,
         };
         let mut sweep = self.sweep.clone();
         if self.quick {
@@ -657,10 +791,14 @@ fn run_job(
                 progress(&format!("{}: {}", job.variant, describe(c)));
                 let ism = c.ism_settings(&scene.settings.ism);
                 ism.validate("settings.ism").map_err(|e| flag_error("--sweep", format!("{}: {e}", describe(c))))?;
+                let clusters = c.clusters.apply(&scene.settings.clusters);
+                clusters
+                    .validate("settings.clusters")
+                    .map_err(|e| flag_error("--sweep", format!("{}: {e}", describe(c))))?;
                 renderer.set_visibility(VisibilitySettings {
                     mode: c.occlusion,
                     rule: scene.settings.occlusion_rule,
-                    clusters: scene.settings.clusters,
+                    clusters,
                     ism,
                 });
                 let frame = compare::sparse_frame(gpu, &mut renderer, w, h)?;
@@ -755,6 +893,18 @@ pub fn describe(c: &Config) -> String {
         )
     } else {
         String::new()
+    } + &if c.clusters.is_none() {
+        String::new()
+    } else {
+        let o = &c.clusters;
+        let v = |o: Option<String>| o.unwrap_or_else(|| "scene".to_owned());
+        format!(
+            ", clusters {} maps of {}, soft {}, {} maps",
+            v(o.count.map(|n| n.to_string())),
+            v(o.shadow_map_resolution.map(|n| n.to_string())),
+            v(o.soft.map(|s| soft_name(s).to_owned())),
+            v(o.shadow_maps.map(|m| maps_name(m).to_owned()))
+        )
     }
 }
 
@@ -818,6 +968,10 @@ pub fn csv(results: &BenchResults) -> String {
         "ism_resolution",
         "ism_points",
         "ism_pull_push_levels",
+        "cluster_count",
+        "cluster_resolution",
+        "cluster_soft",
+        "cluster_maps",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -865,6 +1019,13 @@ pub fn csv(results: &BenchResults) -> String {
         ];
         let ism = |o: Option<u32>| o.map_or(String::new(), |n| n.to_string());
         row.extend([ism(c.ism_count), ism(c.ism_resolution), ism(c.ism_points), ism(c.ism_pull_push_levels)]);
+        let o = &c.clusters;
+        row.extend([
+            ism(o.count),
+            ism(o.shadow_map_resolution),
+            o.soft.map_or(String::new(), |s| soft_name(s).to_owned()),
+            o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
+        ]);
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
     }
@@ -891,6 +1052,7 @@ mod tests {
         ism_resolution: None,
         ism_points: None,
         ism_pull_push_levels: None,
+        clusters: ClusterOverrides::NONE,
     };
 
     #[test]
@@ -927,6 +1089,10 @@ mod tests {
             ("ism_count=0", "--sweep ism_count: `0`: must be in 1..=4096"),
             ("ism_points=8", "--sweep ism_points: `8`: must be in 16..=65536"),
             ("ism_pull_push_levels=5", "--sweep ism_pull_push_levels: `5`: must be in 0..=4"),
+            ("cluster_count=257", "--sweep cluster_count: `257`: must be in 1..=256"),
+            ("cluster_resolution=8", "--sweep cluster_resolution: `8`: must be in 16..=1024"),
+            ("cluster_soft=soft", "--sweep cluster_soft: `soft`: expected `pcss`, `pcf` or `hard`"),
+            ("cluster_maps=voxels", "--sweep cluster_maps: `voxels`: expected `raster` or `ism`"),
         ] {
             let e = Sweep::parse(&args(&[arg])).unwrap_err().to_string();
             assert!(e.starts_with(wanted), "{arg}: {e}");
@@ -969,6 +1135,33 @@ mod tests {
         let s = Sweep::parse(&args(&["occlusion=off,ism", "ism_resolution=32,64"])).unwrap();
         let c = s.configs(&BASE, true);
         assert_eq!(c.len(), 3, "off once, ism at two resolutions: {c:?}");
+    }
+
+    #[test]
+    fn cluster_axes_measure_the_clusters_mode() {
+        let s = Sweep::parse(&args(&["cluster_count=8,256", "cluster_soft=hard", "cluster_maps=ism"])).unwrap();
+        let c = s.configs(&BASE, false);
+        assert_eq!(c.len(), 5, "the base and one per value: {c:?}");
+        assert!(c[1..].iter().all(|c| c.occlusion == Occlusion::Clusters));
+        let scene = ClusterSettings::default();
+        let eight = c[1].clusters.apply(&scene);
+        assert_eq!(
+            (eight.count, eight.shadow_map_resolution, eight.soft),
+            (8, scene.shadow_map_resolution, scene.soft)
+        );
+        assert_eq!(c[2].clusters.apply(&scene).count, 256);
+        assert_eq!(c[3].clusters.apply(&scene).soft, SoftShadows::Hard);
+        assert_eq!(c[4].clusters.apply(&scene).shadow_maps, ShadowMapSource::Ism);
+        assert!(
+            describe(&c[3]).ends_with("clusters scene maps of scene, soft hard, scene maps"),
+            "{}",
+            describe(&c[3])
+        );
+        let s = Sweep::parse(&args(&["occlusion=off,clusters", "cluster_resolution=64,512", "cluster_soft=pcss,pcf"]))
+            .unwrap();
+        let c = s.configs(&BASE, true);
+        assert_eq!(c.len(), 5, "off once, clusters at two resolutions and two filters: {c:?}");
+        assert!(c.iter().filter(|c| c.occlusion == Occlusion::Off).all(|c| c.clusters.is_none()));
     }
 
     #[test]

@@ -76,6 +76,7 @@ pub fn jobs(description: &SceneDescription, scene: &Scene, quick: bool) -> Vec<J
                             ism_resolution: None,
                             ism_points: None,
                             ism_pull_push_levels: None,
+                            clusters: crate::bench::ClusterOverrides::NONE,
                         });
                     }
                 }
@@ -173,6 +174,7 @@ mod tests {
             ism_resolution: None,
             ism_points: None,
             ism_pull_push_levels: None,
+            clusters: crate::bench::ClusterOverrides::NONE,
         };
         assert_eq!(paper_fps("table1_730k", &config, 4092), Some(23));
         assert_eq!(

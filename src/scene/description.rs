@@ -726,7 +726,8 @@ impl ClusterSettings {
         (self.count as f64).sqrt().ceil() as u32
     }
 
-    fn validate(&self, field: &str) -> Result<(), SceneError> {
+    /// Check every field and the bounds on memory, naming the first bad field under `field`.
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
         int_in(self.count, 1, MAX_CLUSTERS, &format!("{field}.count"))?;
         int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
         in_closed(self.normal_weight, 0.0, 100.0, &format!("{field}.normal_weight"))?;
