@@ -15,13 +15,13 @@
 //! cargo run --release --example exact_rays -- fixtures/scenes/cornell_bunny.json 32
 //! ```
 
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 use rayon::prelude::*;
 use relume::gpu::Gpu;
 use relume::gpu::shader::RAY_OFFSET;
 use relume::renderer::{Components, Method, Renderer};
 use relume::scene::Scene;
-use relume::twin::bvh::{EdgeTriangle, ShadowTraversal, TraceBvh};
+use relume::twin::bvh::{ShadowTraversal, TraceBvh};
 use relume::twin::exact_cpu::{Receiver, sort_along_curve};
 use relume::twin::val_radiance;
 use std::time::Instant;
@@ -71,36 +71,9 @@ fn main() -> anyhow::Result<()> {
 
     // Before: obvhs's CWBVH (medium_build), one ray at a time.
     let start = Instant::now();
-    let tris: Vec<obvhs::triangle::Triangle> = triangles
-        .iter()
-        .map(|t| {
-            let [v0, v1, v2] = t.map(|i| Vec3A::from(positions[i as usize]));
-            obvhs::triangle::Triangle { v0, v1, v2 }
-        })
-        .collect();
-    let medium = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-        &tris,
-        obvhs::BvhBuildParams::medium_build(),
-        &mut Default::default(),
-    );
-    let edges: Vec<EdgeTriangle> = medium
-        .primitive_indices
-        .iter()
-        .map(|&i| {
-            let [a, b, c] = triangles[i as usize].map(|v| positions[v as usize]);
-            EdgeTriangle::new(a, b, c)
-        })
-        .collect();
+    let medium = TraceBvh::build_with(&positions, &triangles, obvhs::BvhBuildParams::medium_build());
     let medium_build_ms = start.elapsed().as_secs_f64() * 1e3;
-    let before_blocked = |o: Vec3, t: Vec3| {
-        let d = t - o;
-        let dl = d.length();
-        let ray = obvhs::ray::Ray::new(o.into(), d.into(), 0.0, 1.0);
-        !medium.ray_traverse_miss(ray, |_, k| match edges[k].hit(o, d, dl) {
-            Some((t, _)) if t > 0.0 && t < 1.0 => t,
-            _ => f32::INFINITY,
-        })
-    };
+    let before_blocked = |o: Vec3, t: Vec3| medium.segment_blocked(o, t);
     let start = Instant::now();
     let wide = &TraceBvh::build(&positions, &triangles);
     let build_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -203,11 +203,16 @@ impl TraceBvh {
     /// pre-split, PLOC, reinsertion, then the BVH2-to-CWBVH conversion with at most 3 triangles
     /// per leaf (its limit).
     pub fn build(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
+        Self::build_with(positions, triangles, obvhs::BvhBuildParams::very_slow_build())
+    }
+
+    /// [`TraceBvh::build`] with another of obvhs's build presets (`examples/exact_rays.rs`
+    /// times the trees against each other).
+    pub fn build_with(positions: &[Vec3], triangles: &[[u32; 3]], params: obvhs::BvhBuildParams) -> Self {
         if triangles.is_empty() {
             return Self::default();
         }
         let tris = obvhs_triangles(positions, triangles);
-        let params = obvhs::BvhBuildParams::very_slow_build();
         let tree = obvhs::cwbvh::builder::build_cwbvh_from_tris(&tris, params, &mut Default::default());
         let triangles = tree
             .primitive_indices
