@@ -1,8 +1,10 @@
 //! The exact-visibility reference on the CPU (DESIGN.md §5): the same physics as
 //! `shaders/exact.wgsl` (every VAL at every receiver, the disc form factor and Phong of
 //! [`val_radiance`], one shadow ray per receiver-VAL pair from `p + n RAY_OFFSET` to
-//! `l + n_l RAY_OFFSET`), over rayon's threads, with obvhs's any-hit traversal of
-//! [`TraceBvh`] (obvhs's CWBVH) for the shadow rays. For CPU adapters and CI, where the GPU pass runs on lavapipe.
+//! `l + n_l RAY_OFFSET`), over rayon's threads, through [`TraceBvh`] (obvhs's CWBVH): each
+//! receiver's shadow rays go to the VALs in Morton order, as packets or one by one
+//! ([`ShadowTraversal`], chosen per frame by timing both on a few pixels: the image is the same
+//! either way). For CPU adapters and CI, where the GPU pass runs on lavapipe.
 //!
 //! Beyond the GPU pass it can estimate instead of sum ([`ValSampling::Importance`]: VALs drawn
 //! per receiver in proportion to their unoccluded contribution, an unbiased estimate) and
