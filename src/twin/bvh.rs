@@ -229,16 +229,7 @@ impl TraceBvh {
     /// question as [`Bvh::occluded`]): obvhs's CWBVH traversal, stopped at the first blocker.
     #[inline]
     pub fn segment_blocked(&self, origin: Vec3, target: Vec3) -> bool {
-        if self.triangles.is_empty() {
-            return false;
-        }
-        let d = target - origin;
-        let d_length = d.length();
-        let ray = Ray::new(origin.into(), d.into(), 0.0, 1.0);
-        !self.tree.ray_traverse_miss(ray, |_, k| match self.triangles[k].hit(origin, d, d_length) {
-            Some((t, _)) if t > 0.0 && t < 1.0 => t,
-            _ => f32::INFINITY,
-        })
+        !self.triangles.is_empty() && self.segment_blocker(origin, target, None).is_some()
     }
 
     /// The first blocker found on the open segment from `origin` to `target` (its leaf-order

@@ -162,7 +162,17 @@ pub fn render_with(
 ) -> ExactImage {
     let pixels = (width as usize) * (height as usize);
     let (vals, scale) = summed_vals(scene.vals, sampling);
-    let frame = Frame { bvh: scene.bvh, vals: &vals, scale, glossy: scene.glossy, receivers, width, sampling };
+    let targets: Vec<Vec3> = vals.iter().map(|v| v.position + v.normal * RAY_OFFSET).collect();
+    let frame = Frame {
+        bvh: scene.bvh,
+        vals: &vals,
+        targets: &targets,
+        scale,
+        glossy: scene.glossy,
+        receivers,
+        width,
+        sampling,
+    };
     let traversal = traversal.unwrap_or_else(|| frame.pilot(pixels));
     let results: Vec<(Pixel, u64)> =
         (0..pixels).into_par_iter().map_init(Workspace::default, |ws, i| frame.pixel(i, traversal, ws)).collect();
@@ -196,23 +206,18 @@ pub fn sort_along_curve(vals: &mut [Val]) {
     vals.sort_by_cached_key(|v| morton_code(v.position, lo, hi));
 }
 
-/// The 30-bit Morton code of `p` on a 1024³ grid over the box `lo`..`hi`.
+/// The 30-bit Morton code (obvhs's) of `p` on a 1024³ grid over the box `lo`..`hi`.
 fn morton_code(p: Vec3, lo: Vec3, hi: Vec3) -> u32 {
     let cell = ((p - lo) / (hi - lo).max(Vec3::splat(1e-12)) * 1023.0).clamp(Vec3::ZERO, Vec3::splat(1023.0));
-    let spread = |x: u32| {
-        let mut x = x & 0x3ff;
-        x = (x | x << 16) & 0x0300_00ff;
-        x = (x | x << 8) & 0x0300_f00f;
-        x = (x | x << 4) & 0x030c_30c3;
-        (x | x << 2) & 0x0924_9249
-    };
-    spread(cell.x as u32) | spread(cell.y as u32) << 1 | spread(cell.z as u32) << 2
+    obvhs::ploc::morton::morton_encode_u32(cell.x as u16, cell.y as u16, cell.z as u16)
 }
 
 /// One reference frame as its pixels are shaded: the VALs in curve order with their flux scale.
 struct Frame<'a> {
     bvh: &'a TraceBvh,
     vals: &'a [Val],
+    /// Where each VAL's shadow rays end: `l + n_l RAY_OFFSET`, the same for every receiver.
+    targets: &'a [Vec3],
     scale: f32,
     glossy: bool,
     receivers: &'a Receivers<'a>,
@@ -264,16 +269,15 @@ impl Frame<'_> {
     ) -> Halves {
         let term = |val: &Val| val_radiance(r.position, r.normal, &r.surface, r.view, val, self.glossy);
         let origin = r.position + r.normal * RAY_OFFSET;
-        let target = |val: &Val| val.position + val.normal * RAY_OFFSET;
         match self.sampling {
             ValSampling::All | ValSampling::Stride(_) => {
                 ws.terms.clear();
                 ws.targets.clear();
-                for val in self.vals {
+                for (val, &target) in self.vals.iter().zip(self.targets) {
                     let f = term(val);
                     if f != Vec3::ZERO {
                         ws.terms.push(f * self.scale);
-                        ws.targets.push(target(val));
+                        ws.targets.push(target);
                     }
                 }
                 let l = ws.visible_sum(self.bvh, origin, traversal, rays);
@@ -313,7 +317,7 @@ impl Frame<'_> {
                     ws.targets.clear();
                     for &(j, f) in &ws.draws {
                         ws.terms.push(f);
-                        ws.targets.push(target(&self.vals[j as usize]));
+                        ws.targets.push(self.targets[j as usize]);
                     }
                     ws.visible_sum(self.bvh, origin, traversal, rays) / draws as f32
                 };
