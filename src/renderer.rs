@@ -206,8 +206,9 @@ pub struct Renderer {
     view: View,
     /// The sparse method's visibility mode and every mode's settings.
     visibility: VisibilitySettings,
-    /// The sparse method's interpolation kernel and light bound (`settings.sparse`).
-    sparse_shading: (scene::InterpolationKernel, scene::LightBound),
+    /// The sparse method's interpolation kernel, light bound and near-field radius (m)
+    /// (`settings.sparse`).
+    sparse_shading: (scene::InterpolationKernel, scene::LightBound, f32),
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The spot light's VALs (R² at most) after the uploaded ones.
@@ -258,7 +259,11 @@ impl Renderer {
             glossy,
             view: View::Scene(scene.camera),
             visibility: VisibilitySettings::of(&scene.settings),
-            sparse_shading: (scene.settings.sparse.kernel, scene.settings.sparse.bound),
+            sparse_shading: (
+                scene.settings.sparse.kernel,
+                scene.settings.sparse.bound,
+                scene.settings.sparse.near_field * scene.sparse_spacing(),
+            ),
             exact_val_stride: 1,
             scene: scene_gpu,
             indirect: Indirect::default(),
@@ -558,8 +563,8 @@ impl Renderer {
         if components.indirect {
             match method {
                 Method::Sparse => {
-                    let (kernel, bound) = self.sparse_shading;
-                    let settings = SparseSettings { glossy, visibility: self.visibility, kernel, bound };
+                    let (kernel, bound, near_radius) = self.sparse_shading;
+                    let settings = SparseSettings { glossy, visibility: self.visibility, kernel, bound, near_radius };
                     built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
                         .fit(gpu, scene, capacity)?;
                 }

@@ -479,12 +479,19 @@ fn write_png(image: &LinearImage, path: &Path, exposure: f32) -> Result<(), Benc
     image.write_png(path, exposure).map_err(|e| BenchError::Write { path: path.to_owned(), message: e.to_string() })
 }
 
-/// The sparse and brute-force indirect images and their difference (at 4x the exposure).
+fn write_exr(image: &LinearImage, path: &Path) -> Result<(), BenchError> {
+    image.write_exr(path).map_err(|e| BenchError::Write { path: path.to_owned(), message: e.to_string() })
+}
+
+/// The sparse and brute-force indirect images (tone-mapped PNG, and linear EXR for measurement)
+/// and their difference (at 4x the exposure).
 fn write_comparison(dir: &Path, sparse: &LinearImage, brute: &LinearImage, exposure: f32) -> Result<(), BenchError> {
     std::fs::create_dir_all(dir)
         .map_err(|e| BenchError::Write { path: dir.to_owned(), message: format!("creating the directory: {e}") })?;
     write_png(sparse, &dir.join("indirect_sparse.png"), exposure)?;
     write_png(brute, &dir.join("indirect_brute_force.png"), exposure)?;
+    write_exr(sparse, &dir.join("indirect_sparse.exr"))?;
+    write_exr(brute, &dir.join("indirect_brute_force.exr"))?;
     let diff = LinearImage {
         width: sparse.width,
         height: sparse.height,

@@ -67,7 +67,7 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
     let tiles: &[u32] = if quick { &[32, 64] } else { &[32, 64, 128, 256] };
     let mut gather_variants = Vec::new();
     for &tile_size in tiles.iter().filter(|&&t| t <= max_size) {
-        let mut pass = Gather::with_tile_size(gpu, &renderer.scene, glossy, None, tile_size)?;
+        let mut pass = Gather::with_tile_size(gpu, &renderer.scene, glossy, None, 0.0, tile_size)?;
         pass.fit(gpu, &renderer.scene, renderer.val_capacity())?;
         let mut best = f64::INFINITY;
         // One warm-up dispatch, then the timed ones.

@@ -43,6 +43,8 @@ pub const PASSES: &[&pass::PassDesc] = &[
     &sparse::renormalise::PASS,
     &sparse::interpolate::PASS,
     &sparse::shade::PASS,
+    &sparse::near_field::GRID,
+    &sparse::near_field::SHADE,
     &references::brute_force::PASS,
     &references::exact::PASS,
     &lights::direct::PASS,

@@ -503,6 +503,21 @@ pub struct SparseShading {
     /// at load, in [1, 16]; default [`DEFAULT_SUBDIVISION`]. 1 is the paper's.
     #[serde(default = "default_subdivision")]
     pub subdivision: f32,
+    /// Radius, in sparse point spacings (the largest over the meshes, in world space), within
+    /// which a VAL lights a receiver per pixel (the `near_field` stage) instead of through the
+    /// sparse points, in [0, 8]; default [`DEFAULT_NEAR_FIELD`]. 0 is off (the paper's).
+    #[serde(default = "default_near_field")]
+    pub near_field: f32,
+}
+
+/// Near-field radius in sparse point spacings unless a scene says otherwise.
+pub const DEFAULT_NEAR_FIELD: f32 = 0.0;
+
+/// Range of [`SparseShading::near_field`].
+pub const NEAR_FIELD_RANGE: (f32, f32) = (0.0, 8.0);
+
+fn default_near_field() -> f32 {
+    DEFAULT_NEAR_FIELD
 }
 
 /// Subdivision edge length in sparse point spacings unless a scene says otherwise.
@@ -521,6 +536,7 @@ impl Default for SparseShading {
             kernel: InterpolationKernel::default(),
             bound: LightBound::default(),
             subdivision: DEFAULT_SUBDIVISION,
+            near_field: DEFAULT_NEAR_FIELD,
         }
     }
 }
@@ -894,6 +910,12 @@ impl SettingsDescription {
         if !(lo..=hi).contains(&subdivision) {
             let message = format!("must be in [{lo}, {hi}], got {subdivision}");
             return Err(SceneError::field(format!("{field}.sparse.subdivision"), message));
+        }
+        let (lo, hi) = NEAR_FIELD_RANGE;
+        let near_field = self.sparse.near_field;
+        if !(lo..=hi).contains(&near_field) {
+            let message = format!("must be in [{lo}, {hi}], got {near_field}");
+            return Err(SceneError::field(format!("{field}.sparse.near_field"), message));
         }
         validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))?;
         validate_mr(&self.mr, &format!("{field}.mr"))?;
@@ -1437,6 +1459,10 @@ mod tests {
         );
         let message = error_of(&with_settings(r#"{"sparse": {"subdivision": 0.5}}"#));
         assert_eq!(message, "settings.sparse.subdivision: must be in [1, 16], got 0.5");
+        let message = error_of(&with_settings(r#"{"sparse": {"near_field": 9}}"#));
+        assert_eq!(message, "settings.sparse.near_field: must be in [0, 8], got 9");
+        let message = error_of(&with_settings(r#"{"sparse": {"near_field": -0.5}}"#));
+        assert_eq!(message, "settings.sparse.near_field: must be in [0, 8], got -0.5");
         let message = error_of(&with_settings(r#"{"sparse": {"kernel": "cubic"}}"#));
         assert!(message.starts_with("settings.sparse.kernel: unknown variant `cubic`"), "{message}");
         let paper = r#"{"sparse": {"kernel": "paper", "bound": "off", "subdivision": 1}}"#;
@@ -1445,7 +1471,12 @@ mod tests {
         let sparse = description.settings.to_settings(false).sparse;
         assert_eq!(
             sparse,
-            SparseShading { kernel: InterpolationKernel::Paper, bound: LightBound::Off, subdivision: 1.0 }
+            SparseShading {
+                kernel: InterpolationKernel::Paper,
+                bound: LightBound::Off,
+                subdivision: 1.0,
+                near_field: 0.0
+            }
         );
         let message = error_of(&with_settings(r#"{"rgbd": {"min_depth": 2, "max_depth": 1}}"#));
         assert_eq!(message, "settings.rgbd.max_depth: must be > min_depth (2), got 1");

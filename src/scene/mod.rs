@@ -525,6 +525,27 @@ impl Scene {
         self.meshes.iter().map(|m| m.sparse.len()).sum()
     }
 
+    /// The largest world-space sparse point spacing over the meshes (m): `sqrt(area / points)`
+    /// of each mesh as placed (its transform applied), the length the near-field radius
+    /// (`settings.sparse.near_field`) is measured in. 0 for a scene without meshes.
+    pub fn sparse_spacing(&self) -> f32 {
+        self.meshes
+            .iter()
+            .filter(|m| !m.sparse.is_empty())
+            .map(|m| {
+                let area: f64 = m
+                    .triangles
+                    .iter()
+                    .map(|t| {
+                        let [a, b, c] = t.map(|v| m.model_to_world.transform_point3(m.positions[v as usize]));
+                        f64::from((b - a).cross(c - a).length()) / 2.0
+                    })
+                    .sum();
+                (area / m.sparse.len() as f64).sqrt() as f32
+            })
+            .fold(0.0, f32::max)
+    }
+
     /// Triangles over all meshes (after subdivision).
     pub fn triangle_count(&self) -> usize {
         self.meshes.iter().map(|m| m.triangles.len()).sum()

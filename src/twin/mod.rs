@@ -12,6 +12,7 @@ use std::f32::consts::PI;
 
 pub mod bvh;
 pub mod exact_cpu;
+pub mod near_field;
 pub mod rgbd;
 pub mod rsm;
 
@@ -30,6 +31,21 @@ pub const MIN_RENORMALISE_COSINE: f32 = 0.02;
 /// Smallest `cos * lobe^k` a renormalised glossy light may divide by; below it the intensity is
 /// capped, which bounds the energy error to views within a few degrees of grazing.
 pub const MIN_GLOSSY_RESPONSE: f32 = 0.02;
+/// Where the near-field window starts to fall, as a fraction of its radius
+/// ([`near_field_weight`]).
+pub const NEAR_FIELD_INNER: f32 = 0.5;
+
+/// The share of a VAL at distance `d` (m) from a receiver that the sparse method's near-field
+/// pass applies per pixel instead of through the sparse points: 1 up to [`NEAR_FIELD_INNER`]
+/// times `radius`, a smoothstep down to 0 at `radius`, 0 everywhere when `radius` is 0 (off).
+/// The gather takes the rest, `1 - near_field_weight`, so every VAL counts once in all.
+pub fn near_field_weight(d: f32, radius: f32) -> f32 {
+    if radius <= 0.0 {
+        return 0.0;
+    }
+    let t = ((d - NEAR_FIELD_INNER * radius) / ((1.0 - NEAR_FIELD_INNER) * radius)).clamp(0.0, 1.0);
+    1.0 - t * t * (3.0 - 2.0 * t)
+}
 
 /// Luminance of a linear RGB triple (Rec. 709 weights).
 pub fn luminance(c: Vec3) -> f32 {
@@ -123,15 +139,24 @@ pub struct Gathered {
 
 /// Gather every VAL at sparse point (`x`, `n_x`) with Phong exponent `k`, seen from `eye`.
 pub fn gather_point(x: Vec3, n_x: Vec3, k: f32, eye: Vec3, vals: &[Val]) -> Gathered {
+    gather_far_field(x, n_x, k, eye, vals, 0.0)
+}
+
+/// [`gather_point`] of the far field: every VAL's share scaled by
+/// `1 - near_field_weight(distance, near_radius)`, the part the near-field pass does not apply
+/// per pixel ([`shade_near_field`]); `near_radius` 0 is [`gather_point`].
+pub fn gather_far_field(x: Vec3, n_x: Vec3, k: f32, eye: Vec3, vals: &[Val], near_radius: f32) -> Gathered {
     let w_o = view_direction(x, n_x, eye);
     let (mut e, mut g) = (Vec3::ZERO, Vec3::ZERO);
     let (mut ld, mut ld2, mut ls) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     let (mut wd, mut ws) = (0.0f32, 0.0f32);
     for val in vals {
         let geo = val_geometry(x, n_x, val.position, val.normal, val.area);
-        let e_j = val.flux * (geo.weight * geo.cos_receiver);
+        let far = 1.0 - near_field_weight(val.position.distance(x), near_radius);
+        let f = geo.weight * geo.cos_receiver * far;
+        let e_j = val.flux * f;
         let lobe = phong_lobe(mirror(geo.direction, n_x).dot(w_o), k);
-        let y = luminance(val.flux) * geo.weight * geo.cos_receiver;
+        let y = luminance(val.flux) * f;
         e += e_j;
         g += e_j * lobe;
         let gd = y + GATHER_EPSILON;
@@ -377,6 +402,25 @@ pub fn shade_sparse(
 pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: &[Val], glossy: bool) -> Vec3 {
     let w_o = view_direction(p, n, eye);
     vals.iter().map(|val| val_radiance(p, n, surface, w_o, val, glossy)).sum()
+}
+
+/// The sparse method's near-field radiance at a pixel: every VAL through §3 scaled by
+/// `near_field_weight(distance, near_radius)` (the part [`gather_far_field`] leaves out).
+pub fn shade_near_field(
+    p: Vec3,
+    n: Vec3,
+    surface: &Material,
+    eye: Vec3,
+    vals: &[Val],
+    glossy: bool,
+    near_radius: f32,
+) -> Vec3 {
+    let w_o = view_direction(p, n, eye);
+    vals.iter()
+        .map(|val| {
+            val_radiance(p, n, surface, w_o, val, glossy) * near_field_weight(val.position.distance(p), near_radius)
+        })
+        .sum()
 }
 
 /// Radiance (W/(m² sr)) toward `w_o` (unit, toward the eye) that one unoccluded VAL reflects

@@ -73,10 +73,42 @@ fn sparse_pipeline_matches_cpu_twins() {
 
     // Step 5: per-pixel shading, from the GPU's visibility buffer and vertex lights.
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let expected = sparse_shading_twin(flat, &hits, &mid, eye);
+    let scale = max_of(expected.iter().flatten().copied());
+    assert!(scale > 0.0, "some pixel must receive indirect light");
+    for (i, e) in expected.iter().enumerate() {
+        assert_eq!(e.is_some(), frame.indirect.covered(i), "coverage of pixel {i}");
+        if let Some(e) = e {
+            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("indirect pixel {i}"));
+        }
+    }
+
+    // Direct light: wherever the shadow test passes, the GPU equals the twin.
+    let spot = renderer.spot().unwrap();
+    let direct = super::per_hit(flat, &hits, |p, n, surface| twin::rsm::direct_radiance(p, n, surface, eye, &spot));
+    let scale = max_of(direct.iter().flatten().copied());
+    let mut lit = 0;
+    for (i, want) in direct.iter().enumerate() {
+        let got = frame.direct.rgb(i);
+        if let (Some(want), true) = (want, got.max_element() > 0.0) {
+            lit += 1;
+            assert_close(got, *want, REL, scale, 1e-9, &format!("direct pixel {i}"));
+        }
+    }
+    assert!(lit > 20, "the spot must light some visible pixels directly, lit {lit}");
+}
+
+/// `twin::shade_sparse` at every pixel of `hits`, from the GPU's vertex lights in `mid`.
+fn sparse_shading_twin(
+    flat: &relume::gpu::scene::FlatScene,
+    hits: &[Option<relume::gpu::raster::Hit>],
+    mid: &relume::renderer::SparseIntermediates,
+    eye: Vec3,
+) -> Vec<Option<Vec3>> {
     let vd: Vec<PointLight> = mid.vertex_diffuse.iter().map(light).collect();
     let vs: Vec<PointLight> = mid.vertex_glossy.iter().map(light).collect();
     let mut expected = Vec::new();
-    for hit in &hits {
+    for hit in hits {
         expected.push(hit.map(|h| {
             let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
             let t = 3 * h.triangle as usize;
@@ -105,28 +137,7 @@ fn sparse_pipeline_matches_cpu_twins() {
             twin::shade_sparse(p, n, &surface, eye, &lerp(&vd), Some(&lerp(&vs)))
         }));
     }
-    let scale = max_of(expected.iter().flatten().copied());
-    assert!(scale > 0.0, "some pixel must receive indirect light");
-    for (i, e) in expected.iter().enumerate() {
-        assert_eq!(e.is_some(), frame.indirect.covered(i), "coverage of pixel {i}");
-        if let Some(e) = e {
-            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("indirect pixel {i}"));
-        }
-    }
-
-    // Direct light: wherever the shadow test passes, the GPU equals the twin.
-    let spot = renderer.spot().unwrap();
-    let direct = super::per_hit(flat, &hits, |p, n, surface| twin::rsm::direct_radiance(p, n, surface, eye, &spot));
-    let scale = max_of(direct.iter().flatten().copied());
-    let mut lit = 0;
-    for (i, want) in direct.iter().enumerate() {
-        let got = frame.direct.rgb(i);
-        if let (Some(want), true) = (want, got.max_element() > 0.0) {
-            lit += 1;
-            assert_close(got, *want, REL, scale, 1e-9, &format!("direct pixel {i}"));
-        }
-    }
-    assert!(lit > 20, "the spot must light some visible pixels directly, lit {lit}");
+    expected
 }
 
 /// Past llvmpipe's loop limit the gather runs in VAL ranges, one dispatch each, merged: with
@@ -157,10 +168,22 @@ fn assert_gather_matches_twin(
     eye: Vec3,
     vals: &[Val],
 ) {
+    assert_far_field_gather_matches_twin(flat, mid, eye, vals, 0.0);
+}
+
+/// [`assert_gather_matches_twin`] with the near field at `near_radius` left out
+/// (`twin::gather_far_field`).
+fn assert_far_field_gather_matches_twin(
+    flat: &relume::gpu::scene::FlatScene,
+    mid: &relume::renderer::SparseIntermediates,
+    eye: Vec3,
+    vals: &[Val],
+    near_radius: f32,
+) {
     let cpu: Vec<twin::Gathered> = flat
         .sparse_points
         .iter()
-        .map(|p| twin::gather_point(p.position.into(), p.normal.into(), p.exponent, eye, vals))
+        .map(|p| twin::gather_far_field(p.position.into(), p.normal.into(), p.exponent, eye, vals, near_radius))
         .collect();
     let scale_e = max_of(cpu.iter().map(|g| g.irradiance));
     let scale_g = max_of(cpu.iter().map(|g| g.glossy_irradiance));
@@ -171,6 +194,64 @@ fn assert_gather_matches_twin(
         assert_close(gg.irradiance.into(), c.glossy_irradiance, REL, scale_g, 1e-9, &format!("G at sparse point {i}"));
         if c.irradiance.max_element() > 1e-3 * scale_e {
             assert_close(gd.position.into(), c.diffuse_position, 1e-3, 1.0, 1e-4, &format!("l'_d at {i}"));
+        }
+    }
+}
+
+/// The near field (`settings.sparse.near_field`): the gather leaves each VAL's near-field share
+/// out (`twin::gather_far_field`), and every pixel gets the sparse shading of its vertex lights
+/// plus the near VALs' light found through the hashed grid, which must equal
+/// `twin::shade_near_field` over every VAL (the grid may only skip VALs beyond the radius).
+/// Same tolerances as the rest of this file.
+#[test]
+fn near_field_matches_cpu_twins() {
+    near_field_matches_twins(None, 1.5, (40, 32));
+}
+
+/// As [`near_field_matches_cpu_twins`] with ~70k VALs and a radius of 8 spacings, so that many
+/// pixels have more near VALs than one invocation may loop over on a CPU adapter (the VAL
+/// ranges of the per-pixel pass).
+#[test]
+fn near_field_takes_every_near_val_past_the_cpu_loop_limit() {
+    near_field_matches_twins(Some(300), 8.0, (10, 8));
+}
+
+fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h): (u32, u32)) {
+    let gpu = gpu();
+    let mut scene = load_scene("cornell_bunny_small");
+    scene.settings.sparse.near_field = near_field;
+    if let Some(r) = rsm_resolution {
+        scene.settings.rsm_resolution = r;
+    }
+    let radius = near_field * scene.sparse_spacing();
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(s, _)| s.as_str()).collect();
+    assert!(stages.contains(&"near_field_grid") && stages.contains(&"near_field"), "{stages:?}");
+    let vals: Vec<Val> = renderer.read_vals(&gpu).unwrap();
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let (flat, eye) = (&renderer.scene.flat, renderer.view().eye());
+    assert_far_field_gather_matches_twin(flat, &mid, eye, &vals, radius);
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let sparse = sparse_shading_twin(flat, &hits, &mid, eye);
+    let near =
+        super::per_hit(flat, &hits, |p, n, surface| twin::shade_near_field(p, n, surface, eye, &vals, true, radius));
+    let mut most_near = 0;
+    if rsm_resolution.is_some() {
+        for hit in hits.iter().flatten() {
+            let (p, _, _) = flat.surface_at(hit.triangle, hit.barycentrics);
+            most_near = most_near.max(vals.iter().filter(|v| v.position.distance(p) < radius).count());
+        }
+        assert!(most_near as u32 > relume::gpu::LLVMPIPE_LOOP_LIMIT / 3, "{most_near} near VALs at most");
+    }
+    let expected: Vec<Option<Vec3>> = sparse.iter().zip(&near).map(|(s, n)| s.zip(*n).map(|(s, n)| s + n)).collect();
+    let scale = max_of(near.iter().flatten().copied());
+    assert!(scale > 0.0, "some pixel must have a VAL within the radius");
+    let scale = max_of(expected.iter().flatten().copied());
+    for (i, e) in expected.iter().enumerate() {
+        assert_eq!(e.is_some(), frame.indirect.covered(i), "coverage of pixel {i}");
+        if let Some(e) = e {
+            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("sparse + near-field pixel {i}"));
         }
     }
 }

@@ -15,6 +15,18 @@ struct Val {
     _pad1: f32,
 }
 
+// `twin::near_field_weight`: the share of a VAL at distance `d` (m) from a receiver that the
+// sparse method's near-field pass applies per pixel rather than through the sparse points: 1 up
+// to NEAR_FIELD_INNER * `radius`, falling smoothly to 0 at `radius`; 0 everywhere when `radius`
+// is 0 (the near field off, the paper's form).
+fn near_field_weight(d: f32, radius: f32) -> f32 {
+    if radius <= 0.0 {
+        return 0.0;
+    }
+    let t = clamp((d - NEAR_FIELD_INNER * radius) / ((1.0 - NEAR_FIELD_INNER) * radius), 0.0, 1.0);
+    return 1.0 - t * t * (3.0 - 2.0 * t);
+}
+
 // A mesh vertex in world space, with its texture coordinates (t from the top row).
 struct Vertex {
     position: vec3<f32>,

@@ -39,13 +39,15 @@ fn header(tile_size: u32) -> String {
          const GATHER_EPSILON: f32 = {:e};\n\
          const MIN_LIGHT_DISTANCE: f32 = {:e};\n\
          const MIN_RENORMALISE_COSINE: f32 = {:e};\n\
-         const MIN_GLOSSY_RESPONSE: f32 = {:e};\n",
+         const MIN_GLOSSY_RESPONSE: f32 = {:e};\n\
+         const NEAR_FIELD_INNER: f32 = {:e};\n",
         twin::bvh::RAY_PARALLEL_EPSILON,
         twin::COINCIDENT_DISTANCE_SQ,
         twin::GATHER_EPSILON,
         twin::MIN_LIGHT_DISTANCE,
         twin::MIN_RENORMALISE_COSINE,
         twin::MIN_GLOSSY_RESPONSE,
+        twin::NEAR_FIELD_INNER,
     )
 }
 

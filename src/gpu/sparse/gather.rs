@@ -24,9 +24,10 @@ const NO_GROUPS: &str = "fn val_visibility(point: u32, val: u32) -> f32 {\n    r
 
 /// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none), then
 /// `gather.wgsl`.
-pub fn body(groups: Option<u32>) -> String {
+/// `near_radius` (m): the near-field radius whose share the gather leaves out (0: none).
+pub fn body(groups: Option<u32>, near_radius: f32) -> String {
     let visibility = groups.map_or_else(|| NO_GROUPS.to_owned(), group_wgsl);
-    format!("{VAL_TILES}\n{visibility}\n{WGSL}")
+    format!("{VAL_TILES}\n{visibility}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n{WGSL}")
 }
 
 /// The bindings of [`GROUPED_PASS`]; [`PASS`] has the first five (no group table).
@@ -46,14 +47,14 @@ pub const PASS: PassDesc = PassDesc {
     bindings: BINDINGS.split_at(5).0,
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 5)],
     workgroup: [TILE_SIZE, 1, 1],
-    default_source: |textured| PASS.source(&body(None), textured),
+    default_source: |textured| PASS.source(&body(None, 0.0), textured),
 };
 
 /// The gather of a group visibility mode: [`PASS`] plus the group table.
 pub const GROUPED_PASS: PassDesc = PassDesc {
     bindings: BINDINGS,
     entries: &[Entry { name: "main", bindings: 7, except: &["gathered_glossy"] }, Entry::first("main_glossy", 7)],
-    default_source: |textured| GROUPED_PASS.source(&body(Some(64)), textured),
+    default_source: |textured| GROUPED_PASS.source(&body(Some(64), 0.0), textured),
     ..PASS
 };
 
@@ -64,8 +65,15 @@ pub struct Gather {
 impl Gather {
     /// `glossy` builds the entry point that also gathers the Phong lobe; `groups`, the
     /// group count of a group visibility mode, the one that reads its table.
-    pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool, groups: Option<u32>) -> Result<Self, GpuError> {
-        Self::with_tile_size(gpu, scene, glossy, groups, TILE_SIZE)
+    /// `near_radius` (m): leave out each VAL's near-field share at that radius (0: none).
+    pub fn new(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        glossy: bool,
+        groups: Option<u32>,
+        near_radius: f32,
+    ) -> Result<Self, GpuError> {
+        Self::with_tile_size(gpu, scene, glossy, groups, near_radius, TILE_SIZE)
     }
 
     /// The pass with `tile_size` VALs per tile and threads per workgroup instead of
@@ -75,11 +83,12 @@ impl Gather {
         scene: &GpuScene,
         glossy: bool,
         groups: Option<u32>,
+        near_radius: f32,
         tile_size: u32,
     ) -> Result<Self, GpuError> {
         let workgroup = [tile_size, 1, 1];
         let desc = if groups.is_some() { &GROUPED_PASS } else { &PASS };
-        let source = desc.source_with(&body(groups), scene.textured(), workgroup, tile_size);
+        let source = desc.source_with(&body(groups, near_radius), scene.textured(), workgroup, tile_size);
         let entry = desc.lobe_entry(glossy);
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, workgroup, tile_size)?;
         Ok(Self { kernels })

@@ -10,6 +10,9 @@
 // range after the first merges its sums into what the earlier ones wrote (`Gathered.weight`
 // carries the weight sum the means need).
 //
+// With the near field on (NEAR_FIELD_RADIUS > 0, prepended), each VAL counts here only with its
+// far-field share `1 - near_field_weight(d)`: the near-field pass applies the rest per pixel.
+//
 // `val_visibility(point, val)` is the fraction of a VAL's light that reaches the point: 1
 // without a group visibility mode (prepended by `gather.rs`), else its group's entry of the
 // table (`gpu/visibility/group.wgsl`).
@@ -43,7 +46,8 @@ fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(p.position, p.normal, val.position, val.normal, val.area);
-            let f = geo.weight * geo.cos_receiver * val_visibility(index, base + j);
+            let far = 1.0 - near_field_weight(distance(val.position, p.position), NEAR_FIELD_RADIUS);
+            let f = geo.weight * geo.cos_receiver * val_visibility(index, base + j) * far;
             let e_j = val.flux * f;
             let y = luminance(val.flux) * f;
             s.e += e_j;

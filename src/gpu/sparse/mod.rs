@@ -4,6 +4,7 @@
 
 pub mod gather;
 pub mod interpolate;
+pub mod near_field;
 pub mod renormalise;
 pub mod shade;
 
@@ -16,6 +17,7 @@ use crate::gpu::visibility::{self, Mode, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::scene::{InterpolationKernel, LightBound};
 use gather::Gather;
+use near_field::NearField;
 
 /// What the sparse technique is built for: a change rebuilds it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -24,6 +26,9 @@ pub struct SparseSettings {
     pub visibility: VisibilitySettings,
     pub kernel: InterpolationKernel,
     pub bound: LightBound,
+    /// The near-field radius (m): VALs closer than it to a receiver are applied per pixel
+    /// (`near_field` stage) rather than through the sparse points; 0 is off.
+    pub near_radius: f32,
 }
 
 /// The sparse method's passes and the buffers between them.
@@ -34,6 +39,8 @@ pub struct SparseMethod {
     renormalise: Kernels,
     interpolate: Kernels,
     shade: Kernels,
+    /// The per-pixel near field; `None` when `near_radius` is 0.
+    near_field: Option<NearField>,
     /// Per sparse point: the gathered sums (after visibility).
     pub gathered: Lobes,
     /// Per sparse point: the renormalised point lights.
@@ -53,7 +60,7 @@ impl SparseMethod {
             _ => None,
         };
         Ok(Self {
-            gather: Gather::new(gpu, scene, glossy, groups)?,
+            gather: Gather::new(gpu, scene, glossy, groups, settings.near_radius)?,
             visibility,
             renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy)?,
             interpolate: Kernels::lobes(
@@ -64,6 +71,9 @@ impl SparseMethod {
                 glossy,
             )?,
             shade: Kernels::lobes(gpu, scene, &shade::PASS, shade::WGSL, glossy)?,
+            near_field: (settings.near_radius > 0.0)
+                .then(|| NearField::new(gpu, scene, glossy, settings.near_radius))
+                .transpose()?,
             gathered: Lobes::new::<RawGathered>(gpu, "gather.gathered", n, glossy)?,
             sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy)?,
             vertex_lights: Lobes::new::<RawPointLight>(gpu, "interpolate.vertex_lights", v, glossy)?,
@@ -74,6 +84,9 @@ impl SparseMethod {
     pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
         if let Some(Mode::Groups(g)) = &mut self.visibility {
             g.fit(gpu, max_vals)?;
+        }
+        if let Some(n) = &mut self.near_field {
+            n.fit(gpu, scene, max_vals)?;
         }
         self.gather.fit(gpu, scene, max_vals)
     }
@@ -90,6 +103,9 @@ impl Technique for SparseMethod {
             stages.push(v.stage());
         }
         stages.extend([renormalise::PASS.label, interpolate::PASS.label, shade::PASS.label]);
+        if let Some(n) = &self.near_field {
+            stages.extend(n.stages());
+        }
         stages
     }
 
@@ -133,6 +149,10 @@ impl Technique for SparseMethod {
             &[(&self.vertex_lights, "vertex_diffuse", "vertex_glossy")],
         );
         let pixels = [camera.view.width, camera.view.height, 1];
-        rec.stage(shade::PASS.label, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))
+        rec.stage(shade::PASS.label, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))?;
+        match &self.near_field {
+            Some(n) => n.record(gpu, frame, rec),
+            None => Ok(()),
+        }
     }
 }

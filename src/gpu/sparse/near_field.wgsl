@@ -1,0 +1,30 @@
+// The sparse method's near field (README "Sparse method on real scenes"): a VAL closer to a
+// receiver than NEAR_FIELD_RADIUS lights it per pixel, with the pixel's own position, normal
+// and material, instead of through the sparse points (the gather leaves that share out:
+// `gather.wgsl`). The pixel finds those VALs in a uniform grid of cells NEAR_FIELD_CELL = 2 x
+// the radius wide, hashed into the buckets of `grid_counts` / `grid_starts`, which the grid
+// entry points rebuild every frame by a counting sort: `grid_count` (each VAL's bucket and its
+// slot in it), `grid_scan` (the buckets' starts, one workgroup), `grid_scatter` (the VALs in
+// bucket order). A sphere of the radius around a pixel lies in the 2 x 2 x 2 cells around the
+// cell corner nearest to it; buckets shared by two of those cells are visited once, and VALs of
+// other cells in a visited bucket are farther than the radius (weight 0).
+// Rust twins: `twin::near_field::ValGrid` (the grid), `twin::shade_near_field` (the sum).
+//
+// CPU adapters end a shader's loops after a fixed iteration count (llvmpipe), so there one
+// dispatch takes the pixel's near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) in visiting order and
+// the next adds the following ones; GPUs take them all at once.
+// This file holds what both share; NEAR_FIELD_RADIUS and NEAR_FIELD_CELL are prepended
+// (`near_field::head`), the grid passes (`near_field_grid.wgsl`) or the per-pixel pass
+// (`near_field_shade.wgsl`) follow.
+
+// `twin::near_field::cell_of`: the grid cell holding `p`.
+fn cell_of(p: vec3<f32>) -> vec3<i32> {
+    return vec3<i32>(floor(p / NEAR_FIELD_CELL));
+}
+
+// `twin::near_field::bucket_of`: a cell's bucket among `buckets` (a power of two).
+fn bucket_of(cell: vec3<i32>, buckets: u32) -> u32 {
+    let u = bitcast<vec3<u32>>(cell);
+    return ((u.x * 73856093u) ^ (u.y * 19349663u) ^ (u.z * 83492791u)) & (buckets - 1u);
+}
+

@@ -1,0 +1,80 @@
+// The near field per pixel (`near_field.wgsl`): every VAL of the grid's buckets around the
+// pixel, scaled by its near-field share, added to the sparse shading in `indirect`.
+// Rust twin: `twin::near_field::ValGrid::shade`.
+
+override VAL_BEGIN: u32 = 0u;
+override VAL_SPAN: u32 = 0xffffffffu;
+
+@group(0) @binding(0) var visibility: texture_2d<u32>;
+@group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> grid_counts: array<u32>;
+@group(0) @binding(3) var<storage, read> grid_starts: array<u32>;
+@group(0) @binding(4) var<storage, read> grid_vals: array<Val>;
+
+// The radiance the near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order reflect at
+// `s` toward the eye.
+fn near_field(s: Surface, glossy: bool) -> vec3<f32> {
+    let buckets = arrayLength(&grid_starts);
+    let w_o = view_direction(s.position, s.normal, frame.eye);
+    let spec = s.material.specular * phong_normalisation(s.material.exponent);
+    // The 2 x 2 x 2 cells from the one holding `position - radius` on every axis.
+    let corner = cell_of(s.position - vec3<f32>(NEAR_FIELD_RADIUS));
+    var visited: array<u32, 8>;
+    var seen = 0u;
+    var l = vec3<f32>(0.0);
+    let end = VAL_BEGIN + min(VAL_SPAN, 0xffffffffu - VAL_BEGIN);
+    for (var c = 0u; c < 8u; c++) {
+        let bucket = bucket_of(corner + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u)), buckets);
+        var repeated = false;
+        for (var i = 0u; i < c; i++) {
+            repeated = repeated || visited[i] == bucket;
+        }
+        visited[c] = bucket;
+        if repeated {
+            continue;
+        }
+        // This bucket's VALs are [seen, seen + count) of the visiting order.
+        let count = grid_counts[bucket];
+        let first = max(seen, VAL_BEGIN) - seen;
+        let last = max(min(seen + count, end), seen) - seen;
+        seen += count;
+        let start = grid_starts[bucket];
+        for (var k = first; k < last; k++) {
+            let val = grid_vals[start + k];
+            let weight = near_field_weight(distance(val.position, s.position), NEAR_FIELD_RADIUS);
+            if weight <= 0.0 {
+                continue;
+            }
+            let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
+            let e = val.flux * (geo.weight * geo.cos_receiver * weight);
+            l += s.material.diffuse / PI * e;
+            if glossy {
+                l += spec * phong_lobe(dot(mirror(geo.direction, s.normal), w_o), s.material.exponent) * e;
+            }
+        }
+    }
+    return l;
+}
+
+fn shade(id: vec2<u32>, glossy: bool) {
+    if id.x >= frame.width || id.y >= frame.height {
+        return;
+    }
+    let hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
+    if !hit.covered {
+        return;
+    }
+    let i = id.y * frame.width + id.x;
+    let before = indirect[i];
+    indirect[i] = vec4<f32>(before.rgb + near_field(surface_at(hit.triangle, hit.barycentrics), glossy), before.a);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    shade(id.xy, false);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
+    shade(id.xy, true);
+}
