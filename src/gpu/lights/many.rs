@@ -30,21 +30,19 @@ pub const WGSL: &str = include_str!("many_lights.wgsl");
 pub const SHADOW_MAPS_STAGE: &str = "lights_shadow_maps";
 pub const SHADE_STAGE: &str = "lights_direct";
 
-/// The shading pass: the clusters' visibility pass's bindings (its lookups are reused; the
-/// sparse points and the visibility table are not bound), then its own.
+/// The shading pass: the clusters' lookup (`clusters::lookup_body`: binding 1 the maps'
+/// centres, binding 2 the atlas) around its own bindings.
 pub const PASS: PassDesc = PassDesc {
     label: SHADE_STAGE,
     bindings: &[
-        read("sparse_points"),
+        texture("visibility"),
         read("clusters"),
         depth_texture("shadow_atlas"),
-        read_write("group_visibility"),
-        texture("visibility"),
         read_write("direct"),
         read("lights"),
         read("group_lights"),
     ],
-    entries: &[Entry { name: "shade_lights", bindings: 8, except: &["sparse_points", "group_visibility"] }],
+    entries: &[Entry::first("shade_lights", 6)],
     workgroup: IMAGE_TILE,
     default_source: |textured| {
         let maps = maps_settings(1, 128, SoftShadows::Pcss);
@@ -93,7 +91,7 @@ fn body(maps: &ClusterSettings, scale: SceneScale, groups: u32, add: bool) -> St
     let [x, y, z] = AXIS.to_array();
     format!(
         "{}\nconst GROUP_COUNT: u32 = {groups}u;\nconst AXIS: vec3<f32> = vec3<f32>({x:?}, {y:?}, {z:?});\nconst ADD_TO_DIRECT: bool = {add};\n{WGSL}",
-        clusters::visibility_body(&head)
+        clusters::lookup_body(&head)
     )
 }
 
@@ -224,9 +222,9 @@ impl Technique for ManyLights {
         let group = self.kernel.bind(
             gpu,
             &[
+                view("visibility", &camera.view.view),
                 buffer("clusters", &self.clusters),
                 view("shadow_atlas", &self.maps.atlas_view),
-                view("visibility", &camera.view.view),
                 buffer("direct", &camera.direct),
                 buffer("lights", &self.lights),
                 buffer("group_lights", &self.group_lights),

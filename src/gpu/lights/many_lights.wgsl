@@ -1,6 +1,6 @@
 // Direct light from the scene's `lights` (README "Many direct lights"), after the clusters
-// module's header, `paraboloid.wgsl`, `raster_depth.wgsl` and `cluster_visibility.wgsl`, whose
-// lookups it reuses: the lights come sorted by group, and every group (one light in the
+// module's header, `paraboloid.wgsl`, `raster_depth.wgsl` (binding 2) and `cluster_visibility.wgsl`
+// (binding 1 `clusters`), whose lookups it reuses: the lights come sorted by group, and every group (one light in the
 // `per_light` mode, a LightCluster group of paper 003 otherwise) has two paraboloid maps at its
 // centre, `clusters[2g]` looking along +AXIS and `clusters[2g + 1]` along -AXIS. Per pixel, each
 // group's visibility is looked up once (one texel in the `per_light` mode, PCSS with the
@@ -8,11 +8,11 @@
 // radiance, each with its own position and intensity (paper 003 §3.2.1). Writes, or with
 // ADD_TO_DIRECT adds to, `direct`. Rust twin: `twin::many_lights::direct_shadow_mapped`.
 
-@group(0) @binding(4) var visibility: texture_2d<u32>;
-@group(0) @binding(5) var<storage, read_write> direct: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read> lights: array<ManyLight>;
+@group(0) @binding(0) var visibility: texture_2d<u32>;
+@group(0) @binding(3) var<storage, read_write> direct: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read> lights: array<ManyLight>;
 // Per group: (first light, light count) in `lights`.
-@group(0) @binding(7) var<storage, read> group_lights: array<vec2<u32>>;
+@group(0) @binding(5) var<storage, read> group_lights: array<vec2<u32>>;
 
 struct ManyLight {
     position: vec3<f32>,

@@ -23,7 +23,11 @@ use glam::Vec3;
 const PARABOLOID: &str = include_str!("paraboloid.wgsl");
 pub const CLUSTERING_WGSL: &str = include_str!("clustering.wgsl");
 pub const SHADOW_MAPS_WGSL: &str = include_str!("shadow_maps.wgsl");
-pub const VISIBILITY_WGSL: &str = include_str!("cluster_visibility.wgsl");
+/// The visibility pass: the lookup (`cluster_visibility.wgsl`), then its entry point.
+pub const VISIBILITY_WGSL: &str =
+    concat!(include_str!("cluster_visibility.wgsl"), include_str!("cluster_visibility_main.wgsl"));
+/// The soft-shadow lookup alone (binding 1 `clusters`, binding 2 the maps), for other passes.
+pub const VISIBILITY_LOOKUP_WGSL: &str = include_str!("cluster_visibility.wgsl");
 /// The rasterised atlas as the visibility pass reads it (`map_depth`).
 pub const RASTER_DEPTH_WGSL: &str = include_str!("raster_depth.wgsl");
 
@@ -174,6 +178,11 @@ pub const VISIBILITY: PassDesc = PassDesc {
 /// The visibility pass's WGSL after `head`, reading the rasterised atlas.
 pub fn visibility_body(head: &str) -> String {
     format!("{head}\n{RASTER_DEPTH_WGSL}\n{VISIBILITY_WGSL}")
+}
+
+/// The lookup's WGSL after `head`, reading the rasterised atlas, without the pass's entry point.
+pub fn lookup_body(head: &str) -> String {
+    format!("{head}\n{RASTER_DEPTH_WGSL}\n{VISIBILITY_LOOKUP_WGSL}")
 }
 
 /// The shadow-map raster's complete WGSL (vertex and fragment stages).
