@@ -9,9 +9,11 @@
 //! camera:      CameraView (visibility)
 //! indirect:    SparseMethod (gather, [visibility mode], renormalise, interpolate, shade)
 //!              | BruteForce (brute_force) | Exact (exact)
-//! direct:      DirectLight (direct)
+//! direct:      DirectLight (direct), then for the scene's `lights`
+//!              ManyLights (lights_shadow_maps, lights_direct)
 //! ```
 
+use crate::gpu::lights::many::ManyLights;
 use crate::gpu::lights::rgbd::RgbdVals;
 use crate::gpu::lights::spot::{DirectLight, SpotVals};
 use crate::gpu::raster::{CameraView, Visibility, VisibilityTarget};
@@ -211,6 +213,11 @@ pub struct Renderer {
     sparse_shading: (scene::InterpolationKernel, scene::LightBound, f32),
     exact_val_stride: u32,
     spot: Option<Spot>,
+    /// The scene's `lights` and their direct light (`gpu::lights::many`), when it has any.
+    lights: Vec<scene::Light>,
+    many: Option<ManyLights>,
+    /// The eye LightCluster's view scaling measures from (the scene's camera).
+    lights_eye: Vec3,
     /// The spot light's VALs (R² at most) after the uploaded ones.
     pub vals: Vals,
     /// How many VALs [`Renderer::set_vals`] put at the front of `vals`, kept every frame.
@@ -244,7 +251,21 @@ impl Renderer {
             }
         };
         let capacity = spot.as_ref().map_or(1, |s| s.vals.resolution * s.vals.resolution);
+        let many = match scene.lights.is_empty() {
+            true => None,
+            false => Some(ManyLights::new(
+                gpu,
+                &scene_gpu,
+                &scene.lights,
+                &scene.settings.direct,
+                scene.camera.position,
+                spot.is_some(),
+            )?),
+        };
         Ok(Self {
+            lights: scene.lights.clone(),
+            many,
+            lights_eye: scene.camera.position,
             vals: Vals {
                 buffer: gpu.storage_buffer_sized::<RawVal>("vals", capacity as usize)?,
                 count: gpu.storage_buffer_sized::<u32>("val_count", 1)?,
@@ -451,6 +472,22 @@ impl Renderer {
         }
     }
 
+    /// Shadow the scene's `lights` as `settings` says from the next frame on (rebuilds their
+    /// groups, maps and pass); nothing for a scene without `lights`.
+    pub fn set_direct_settings(&mut self, gpu: &Gpu, settings: &scene::DirectSettings) -> Result<(), GpuError> {
+        if self.lights.is_empty() {
+            return Ok(());
+        }
+        let add = self.spot.is_some();
+        self.many = Some(ManyLights::new(gpu, &self.scene, &self.lights, settings, self.lights_eye, add)?);
+        Ok(())
+    }
+
+    /// The many-light direct technique of the scene's `lights`, if it has any.
+    pub fn many_lights(&self) -> Option<&ManyLights> {
+        self.many.as_ref()
+    }
+
     /// Render both components at `width` x `height`.
     pub fn render(&mut self, gpu: &Gpu, method: Method, width: u32, height: u32) -> Result<Rendered, GpuError> {
         self.render_components(gpu, method, width, height, Components::ALL)
@@ -490,7 +527,8 @@ impl Renderer {
 
         let pixels = (width * height) as usize;
         let coverage_only = |image: &[[f32; 4]]| image.iter().map(|p| [0.0, 0.0, 0.0, p[3]]).collect::<Vec<_>>();
-        let (indirect, direct) = match (components.indirect, components.direct && self.spot.is_some()) {
+        let has_direct = self.spot.is_some() || self.many.is_some();
+        let (indirect, direct) = match (components.indirect, components.direct && has_direct) {
             (true, true) => {
                 (gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?, gpu.read_buffer(&target.direct, pixels)?)
             }
@@ -544,6 +582,8 @@ impl Renderer {
         list.extend(indirect);
         if components.direct {
             list.extend(self.spot.as_ref().map(|s| &s.direct as &dyn Technique));
+            // After the spot's direct pass, which it adds to.
+            list.extend(self.many.as_ref().map(|m| m as &dyn Technique));
         }
         (list, indirect)
     }

@@ -152,3 +152,15 @@ pub fn load_lit(path: &Path) -> anyhow::Result<Scene> {
     );
     Ok(scene)
 }
+
+/// A scene for `render`: lit by its spot `light` or by its `lights` (direct light only: without
+/// `light` there are no VALs, so the indirect image is black).
+pub fn load_renderable(path: &Path) -> anyhow::Result<Scene> {
+    let scene = load(path)?;
+    anyhow::ensure!(
+        scene.light.is_some() || !scene.lights.is_empty(),
+        "{}: light: required by this command unless the scene has `lights` (a scene with neither is lit by RGB-D frames: use `replay`)",
+        path.display()
+    );
+    Ok(scene)
+}

@@ -1,6 +1,6 @@
 //! `relume render`: a scene to PNG (and EXR), one component or all three.
 
-use super::{Size, checked_val_stride, load_lit};
+use super::{Size, checked_val_stride, load_renderable};
 use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
 use relume::gpu::Gpu;
 use relume::image::LinearImage;
@@ -50,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(e) = args.exposure {
         anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure: must be a positive number, got {e}");
     }
-    let scene = load_lit(&args.scene)?;
+    let scene = load_renderable(&args.scene)?;
     let (w, h) = args.size.resolve(&scene)?;
     let gpu = Gpu::new()?;
     let mut renderer = Renderer::new(&gpu, &scene)?;

@@ -48,6 +48,7 @@ pub const PASSES: &[&pass::PassDesc] = &[
     &references::brute_force::PASS,
     &references::exact::PASS,
     &lights::direct::PASS,
+    &lights::many::PASS,
     &differential::PASS,
 ];
 

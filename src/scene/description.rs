@@ -64,6 +64,12 @@ pub struct SceneDescription {
     /// provides them instead (a scene with neither renders no indirect light).
     #[serde(default)]
     pub light: Option<LightDescription>,
+    /// Direct lights beside `light` (README "Many direct lights"): spot lights (`{"type":
+    /// "spot"}` and the fields of `light`) and point lights (`{"type": "point"}`,
+    /// [`PointLightDescription`]). They add direct light only (their shadows as
+    /// `settings.direct.shadows` says) and no VALs. At most `settings.direct.max_lights`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lights: Vec<LightEntry>,
     /// Where the virtual content sits in the world, applied after every mesh's own transform:
     /// in mixed reality, the placement in the recorded room's world frame. Default: identity.
     #[serde(default)]
@@ -360,6 +366,71 @@ impl LightDescription {
     }
 }
 
+/// One entry of the scene's `lights`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum LightEntry {
+    /// A spot light: the fields of `light`.
+    Spot(LightDescription),
+    /// An omnidirectional point light.
+    Point(PointLightDescription),
+}
+
+/// An omnidirectional point light of `lights`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PointLightDescription {
+    /// World-space position, m (f64, see [`MAX_COORDINATE_M`]).
+    pub position: [f64; 3],
+    /// Radiant intensity, W/sr, linear RGB, each >= 0.
+    pub intensity: [f32; 3],
+    /// Range, m, > 0: beyond it the light adds nothing; the inverse-square falloff is windowed
+    /// by `(1 - (d / range)^4)^2` (`twin::many_lights::range_window`). Default: none (no window).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub range: Option<f32>,
+}
+
+impl PointLightDescription {
+    /// Checks ranges; `field` is this value's path (`lights[3]`).
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        coordinates(self.position, &format!("{field}.position"))?;
+        for (i, &value) in self.intensity.iter().enumerate() {
+            at_least(value, 0.0, &format!("{field}.intensity[{i}]"))?;
+        }
+        if let Some(range) = self.range {
+            positive(range, &format!("{field}.range"))?;
+        }
+        Ok(())
+    }
+
+    /// The light, its position relative to `origin` (assumes [`Self::validate`] passed).
+    pub fn to_point_light(&self, origin: DVec3) -> super::PointLight {
+        super::PointLight {
+            position: (DVec3::from_array(self.position) - origin).as_vec3(),
+            intensity: Vec3::from_array(self.intensity),
+            range: self.range,
+        }
+    }
+}
+
+impl LightEntry {
+    /// The light, its position relative to `origin` (assumes validation passed).
+    pub fn to_light(&self, origin: DVec3) -> super::Light {
+        match self {
+            LightEntry::Spot(spot) => super::Light::Spot(spot.to_spot_light(origin)),
+            LightEntry::Point(point) => super::Light::Point(point.to_point_light(origin)),
+        }
+    }
+
+    /// Checks ranges; `field` is this value's path (`lights[3]`).
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        match self {
+            LightEntry::Spot(spot) => spot.validate(field),
+            LightEntry::Point(point) => point.validate(field),
+        }
+    }
+}
+
 /// The camera.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -486,6 +557,90 @@ pub struct SettingsDescription {
     /// The `"ism"` visibility mode (imperfect shadow maps); every field has a default.
     #[serde(default)]
     pub ism: IsmSettings,
+    /// Direct light from the scene's `lights`: how their shadows are computed and the limit
+    /// on their count; every field has a default.
+    #[serde(default)]
+    pub direct: DirectSettings,
+}
+
+/// Shadows of the direct light from the scene's `lights` (README "Many direct lights").
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct DirectSettings {
+    /// `"per_light"` (default: two paraboloid shadow maps per light, one hard-shadow test per
+    /// pixel and light) or `"light_cluster"` (paper 003: lights grouped by minimum distance,
+    /// two maps per group at a representative light, PCSS). Exact shadow rays are the CPU
+    /// reference (`twin::many_lights::direct_exact`), not a GPU mode yet.
+    pub shadows: DirectShadows,
+    /// LightCluster's initial minimum distance between cluster centres `d_init`, m, in
+    /// (0, 1e4]; default 1.
+    pub d_init: f32,
+    /// LightCluster's maximum view distance `z_far`, m (> 0): the minimum distance shrinks
+    /// with a centre's distance `d` from the camera as `d_init (1 - d / z_far)` (paper 003 §3.1.2),
+    /// so groups are finer near the camera. Default `null`: `d_init` everywhere (the paper's
+    /// advice against flicker).
+    pub z_far: Option<f32>,
+    /// Side of each of a light's (or group's) two paraboloid shadow maps, texels, in 16..=1024;
+    /// default 128. All maps share one atlas of at most [`MAX_CLUSTER_ATLAS_SIDE`] texels per
+    /// side, which with `max_lights` bounds this.
+    pub shadow_map_resolution: u32,
+    /// Most entries `lights` may hold, in 1..=[`MAX_DIRECT_LIGHTS`]; default 128.
+    pub max_lights: u32,
+}
+
+/// How the shadows of the scene's `lights` are computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum DirectShadows {
+    /// One dual-paraboloid shadow map per light, one hard-shadow test per pixel and light.
+    #[default]
+    PerLight,
+    /// LightCluster (paper 003): one dual-paraboloid map per group, PCSS with the group's
+    /// extent as the light's radius; each light keeps its own position and intensity.
+    LightCluster,
+}
+
+/// Largest `settings.direct.max_lights`.
+pub const MAX_DIRECT_LIGHTS: u32 = 1024;
+
+impl Default for DirectSettings {
+    fn default() -> Self {
+        Self { shadows: DirectShadows::PerLight, d_init: 1.0, z_far: None, shadow_map_resolution: 128, max_lights: 128 }
+    }
+}
+
+impl DirectSettings {
+    /// Shadow maps per atlas side when every light has its own two maps (the most there can be).
+    pub fn atlas_columns(&self) -> u32 {
+        (2.0 * self.max_lights as f64).sqrt().ceil() as u32
+    }
+
+    /// Check every field and the bound on the atlas, naming the first bad field under `field`.
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        let d_field = format!("{field}.d_init");
+        positive(self.d_init, &d_field)?;
+        if self.d_init > 1.0e4 {
+            return Err(SceneError::field(d_field, format!("must be in (0, 1e4], got {}", self.d_init)));
+        }
+        if let Some(z_far) = self.z_far {
+            positive(z_far, &format!("{field}.z_far"))?;
+        }
+        int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
+        int_in(self.max_lights, 1, MAX_DIRECT_LIGHTS, &format!("{field}.max_lights"))?;
+        let side = self.atlas_columns() * self.shadow_map_resolution;
+        if side > MAX_CLUSTER_ATLAS_SIDE {
+            return Err(SceneError::field(
+                format!("{field}.shadow_map_resolution"),
+                format!(
+                    "{} maps of {} texels (two per light of max_lights = {}) need an atlas of {side} texels per side, over {MAX_CLUSTER_ATLAS_SIDE}",
+                    2 * self.max_lights,
+                    self.shadow_map_resolution,
+                    self.max_lights
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// How the sparse method turns gathered light into pixels (DESIGN.md §4 steps 0, 2, 4). The
@@ -867,6 +1022,7 @@ impl Default for SettingsDescription {
             sparse: SparseShading::default(),
             clusters: ClusterSettings::default(),
             ism: IsmSettings::default(),
+            direct: DirectSettings::default(),
         }
     }
 }
@@ -895,6 +1051,7 @@ impl SettingsDescription {
             sparse: self.sparse,
             clusters: self.clusters,
             ism: self.ism,
+            direct: self.direct,
         }
     }
 
@@ -921,7 +1078,8 @@ impl SettingsDescription {
         validate_mr(&self.mr, &format!("{field}.mr"))?;
         validate_environment(&self.environment, &format!("{field}.environment"))?;
         self.clusters.validate(&format!("{field}.clusters"))?;
-        self.ism.validate(&format!("{field}.ism"))
+        self.ism.validate(&format!("{field}.ism"))?;
+        self.direct.validate(&format!("{field}.direct"))
     }
 }
 
@@ -1071,7 +1229,18 @@ impl SceneDescription {
             anchor.validate("anchor")?;
         }
         self.camera.validate("camera")?;
-        self.settings.validate("settings")
+        self.settings.validate("settings")?;
+        let max = self.settings.direct.max_lights;
+        if self.lights.len() > max as usize {
+            return Err(SceneError::field(
+                "lights",
+                format!("holds {} lights, over settings.direct.max_lights = {max}", self.lights.len()),
+            ));
+        }
+        for (i, light) in self.lights.iter().enumerate() {
+            light.validate(&format!("lights[{i}]"))?;
+        }
+        Ok(())
     }
 }
 
@@ -1274,6 +1443,85 @@ mod tests {
         MINIMAL.replacen(from, to, 1)
     }
 
+    /// `MINIMAL` with `lights` and `settings.direct` as given.
+    fn with_lights(lights: &str, direct: &str) -> String {
+        edit(r#""meshes""#, &format!(r#""lights": [{lights}], "settings": {{"direct": {{{direct}}}}}, "meshes""#))
+    }
+
+    #[test]
+    fn lights_parse_spot_and_point_lights() {
+        let text = with_lights(
+            r#"{"type": "point", "position": [1, 2, 3], "intensity": [4, 5, 6], "range": 7},
+               {"type": "point", "position": [0, 1, 0], "intensity": [1, 1, 1]},
+               {"type": "spot", "position": [0, 2, 0], "direction": [0, -1, 0], "inner_angle_deg": 10,
+                "outer_angle_deg": 20, "intensity": [2, 2, 2]}"#,
+            r#""shadows": "light_cluster", "d_init": 0.5, "z_far": 30"#,
+        );
+        let description = SceneDescription::from_json_str(&text).expect("parses");
+        description.validate().expect("valid");
+        let lights: Vec<super::super::Light> = description.lights.iter().map(|l| l.to_light(DVec3::ZERO)).collect();
+        assert_eq!(
+            lights[0],
+            super::super::Light::Point(super::super::PointLight {
+                position: Vec3::new(1.0, 2.0, 3.0),
+                intensity: Vec3::new(4.0, 5.0, 6.0),
+                range: Some(7.0)
+            })
+        );
+        assert!(matches!(lights[1], super::super::Light::Point(p) if p.range.is_none()));
+        assert!(matches!(lights[2], super::super::Light::Spot(s) if (s.outer_angle - 20f32.to_radians()).abs() < 1e-6));
+        let direct = description.settings.direct;
+        assert_eq!((direct.shadows, direct.d_init, direct.z_far), (DirectShadows::LightCluster, 0.5, Some(30.0)));
+        assert_eq!(SceneDescription::from_json_str(MINIMAL).unwrap().settings.direct, DirectSettings::default());
+    }
+
+    #[test]
+    fn lights_errors_name_the_field() {
+        let point = r#"{"type": "point", "position": [0, 1, 0], "intensity": [1, 1, 1]}"#;
+        for (lights, direct, expected) in [
+            (
+                r#"{"type": "point", "position": [0, 1, 0], "intensity": [1, -1, 1]}"#.to_owned(),
+                "",
+                "lights[0].intensity[1]: must be >= 0, got -1",
+            ),
+            (
+                format!(r#"{point}, {{"type": "point", "position": [0, 1, 0], "intensity": [1, 1, 1], "range": 0}}"#),
+                "",
+                "lights[1].range: must be > 0, got 0",
+            ),
+            (
+                format!(
+                    r#"{point}, {{"type": "spot", "position": [0, 1, 0], "direction": [0, 0, 0], "inner_angle_deg": 1, "outer_angle_deg": 2, "intensity": [1, 1, 1]}}"#
+                ),
+                "",
+                "lights[1].direction: must be nonzero, got [0, 0, 0]",
+            ),
+            (
+                format!("{point}, {point}, {point}"),
+                r#""max_lights": 2"#,
+                "lights: holds 3 lights, over settings.direct.max_lights = 2",
+            ),
+            (point.to_owned(), r#""d_init": 0"#, "settings.direct.d_init: must be > 0, got 0"),
+            (point.to_owned(), r#""z_far": -1"#, "settings.direct.z_far: must be > 0, got -1"),
+            (point.to_owned(), r#""max_lights": 0"#, "settings.direct.max_lights: must be in 1..=1024, got 0"),
+            (
+                point.to_owned(),
+                r#""shadow_map_resolution": 8"#,
+                "settings.direct.shadow_map_resolution: must be in 16..=1024, got 8",
+            ),
+        ] {
+            let message = error_of(&with_lights(&lights, direct));
+            assert_eq!(message, expected);
+        }
+        // 2 x 1024 maps of 1024 texels: over the atlas.
+        let message = error_of(&with_lights(point, r#""max_lights": 1024, "shadow_map_resolution": 1024"#));
+        assert!(message.starts_with("settings.direct.shadow_map_resolution: 2048 maps of 1024 texels"), "{message}");
+        let message = error_of(&with_lights(r#"{"type": "area", "position": [0, 1, 0]}"#, ""));
+        assert!(message.starts_with("lights[0]"), "{message}");
+        let message = error_of(&with_lights(point, r#""shadows": "exact""#));
+        assert!(message.starts_with("settings.direct.shadows"), "{message}");
+    }
+
     #[test]
     fn minimal_scene_gets_defaults() {
         let description = SceneDescription::from_json_str(MINIMAL).expect("parses");
@@ -1455,6 +1703,7 @@ mod tests {
                 sparse: SparseShading::default(),
                 clusters: ClusterSettings::default(),
                 ism: IsmSettings::default(),
+                direct: DirectSettings::default(),
             }
         );
         let message = error_of(&with_settings(r#"{"sparse": {"subdivision": 0.5}}"#));

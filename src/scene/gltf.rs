@@ -161,6 +161,7 @@ impl GltfSceneDescription {
                 skip_groups: self.skip_groups.clone(),
             }],
             light: light.map(|(_, l)| l),
+            lights: Vec::new(),
             anchor: None,
             camera,
             settings: self.settings.clone(),

@@ -48,12 +48,12 @@ use glam::{Affine3A, DAffine3, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use self::gltf::{GltfSceneDescription, LUMENS_PER_WATT, MAX_GLTF_BYTES, phong_from_pbr};
 pub use description::{
-    CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, InterpolationKernel, IsmSettings,
-    LightBound, LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_ISM_POINTS,
-    MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription,
-    MeshDescription, Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription,
-    SceneDescription, SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription,
-    parse_json,
+    CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, DirectSettings, DirectShadows,
+    InterpolationKernel, IsmSettings, LightBound, LightDescription, LightEntry, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS,
+    MAX_COORDINATE_M, MAX_DIRECT_LIGHTS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
+    MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion, OcclusionRule,
+    OcclusionSetting, PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription,
+    SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
@@ -84,6 +84,8 @@ pub struct Scene {
     pub textures: Vec<Texture>,
     /// The spot light whose RSM provides VALs, if any (RGB-D frames may provide them instead).
     pub light: Option<SpotLight>,
+    /// The description's `lights`: direct lights beside `light` (no VALs).
+    pub lights: Vec<Light>,
     /// The camera the final image is rendered from.
     pub camera: Camera,
     /// Render settings.
@@ -196,6 +198,33 @@ impl SpotLight {
     }
 }
 
+/// An omnidirectional point light of [`Scene::lights`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointLight {
+    /// World-space position, m.
+    pub position: Vec3,
+    /// Radiant intensity, W/sr, linear RGB, each channel >= 0.
+    pub intensity: Vec3,
+    /// Beyond this distance (m) the light adds nothing (`twin::many_lights::range_window`).
+    pub range: Option<f32>,
+}
+
+/// One of [`Scene::lights`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Light {
+    Spot(SpotLight),
+    Point(PointLight),
+}
+
+impl Light {
+    pub fn position(&self) -> Vec3 {
+        match self {
+            Light::Spot(s) => s.position,
+            Light::Point(p) => p.position,
+        }
+    }
+}
+
 /// A perspective camera (right-handed, looking from `position` toward `target`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
@@ -251,6 +280,8 @@ pub struct Settings {
     pub clusters: ClusterSettings,
     /// The `Ism` visibility mode's settings.
     pub ism: IsmSettings,
+    /// Shadows of the direct light from [`Scene::lights`].
+    pub direct: DirectSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its
@@ -488,6 +519,7 @@ impl Scene {
             materials,
             textures: textures.textures,
             light: description.light.as_ref().map(|l| l.to_spot_light(origin)),
+            lights: description.lights.iter().map(|l| l.to_light(origin)).collect(),
             camera: description.camera.to_camera(origin),
             settings,
             anchor,

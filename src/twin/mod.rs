@@ -12,6 +12,7 @@ use std::f32::consts::PI;
 
 pub mod bvh;
 pub mod exact_cpu;
+pub mod many_lights;
 pub mod near_field;
 pub mod rgbd;
 pub mod rsm;

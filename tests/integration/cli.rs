@@ -212,3 +212,33 @@ fn client_commands_name_bad_flags_and_unreachable_servers() {
         assert!(stderr(&o).contains(needle) && !stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
     }
 }
+
+/// A scene lit by `lights` alone renders its direct light (no `light`: no VALs, a black indirect
+/// image); a scene with neither is refused, naming `light`.
+#[test]
+fn render_takes_a_scene_lit_by_lights_alone() {
+    let dir = scratch("cli_render_lights");
+    let base = std::fs::read_to_string(fixture("scenes/cornell_bunny_small.json")).unwrap();
+    let mut scene: serde_json::Value = serde_json::from_str(&base).unwrap();
+    for mesh in scene["meshes"].as_array_mut().unwrap() {
+        let obj = fixture("scenes").join(mesh["obj"].as_str().unwrap());
+        mesh["obj"] = serde_json::Value::String(obj.to_str().unwrap().to_owned());
+    }
+    scene.as_object_mut().unwrap().remove("light");
+    let neither = dir.join("neither.json");
+    std::fs::write(&neither, scene.to_string()).unwrap();
+    scene["lights"] = serde_json::json!([{"type": "point", "position": [0, 1.8, 0], "intensity": [2, 2, 2]}]);
+    let lit = dir.join("lights.json");
+    std::fs::write(&lit, scene.to_string()).unwrap();
+    let exr = dir.join("direct.exr");
+    let png = dir.join("direct.png");
+    let args = ["--component", "direct", "--width", "24", "--height", "24", "--hdr", exr.to_str().unwrap()];
+    let o = relume(&[&["render", lit.to_str().unwrap(), "--out", png.to_str().unwrap()], &args[..]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("lights_direct"), "{}", stderr(&o));
+    let hdr = image::open(&exr).unwrap().into_rgba32f();
+    assert!(hdr.pixels().any(|p| p.0[0] > 0.0), "the point light reaches the image");
+    let o = relume(&[&["render", neither.to_str().unwrap(), "--out", png.to_str().unwrap()], &args[..]].concat());
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("light: required by this command unless the scene has `lights`"), "{}", stderr(&o));
+}

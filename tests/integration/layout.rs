@@ -49,6 +49,9 @@ fn rust_structs_match_wgsl() {
     use relume::gpu::visibility::clusters::{RawCluster, RawClusterSums};
     check!(clustering, "Cluster", RawCluster, [position, count, normal, radius]);
     check!(clustering, "ClusterSums", RawClusterSums, [offset, count, normal, offset_sq]);
+    let many = module_of("lights_direct");
+    use relume::gpu::lights::many::RawManyLight;
+    check!(many, "ManyLight", RawManyLight, [position, range, direction, inner_angle, intensity, outer_angle]);
     check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
     check!(m, "Gathered", RawGathered, [irradiance, weight, position, _pad1, second_moment, _pad2]);
     check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, bound]);

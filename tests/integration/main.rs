@@ -13,6 +13,7 @@ mod hardening;
 mod hardening_origin;
 mod ism;
 mod layout;
+mod many_lights;
 mod mcap;
 mod mr_differential;
 mod recording;

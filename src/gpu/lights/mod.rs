@@ -2,6 +2,7 @@
 //! light; an RGB-D frame becomes VALs.
 
 pub mod direct;
+pub mod many;
 pub mod rgbd;
 pub mod rsm;
 pub mod spot;

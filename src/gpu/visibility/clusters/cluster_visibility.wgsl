@@ -4,14 +4,13 @@
 // SHADOW_TAPS² grid. Receiver-plane depths: each tap compares the map's distance with the
 // distance along the tap's own ray to the receiver's tangent plane, so a planar receiver never
 // shadows itself. Writes `group_visibility[point * CLUSTER_COUNT + k]`. Rust twin:
-// `twin::cluster_visibility` (same names).
+// `twin::cluster_visibility` (same names). The pass's entry point and its own bindings are in
+// `cluster_visibility_main.wgsl`; the lookup alone also serves `gpu/lights/many_lights.wgsl`.
 
 // The maps are binding 2, read by `map_depth(k, texel)`: the rasterised atlas
 // (`raster_depth.wgsl`) or the imperfect shadow maps (`../ism/ism_lookup.wgsl`), prepended.
 
-@group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> clusters: array<Cluster>;
-@group(0) @binding(3) var<storage, read_write> group_visibility: array<f32>;
 
 fn receiver_plane_depth(offset: vec3<f32>, normal: vec3<f32>, v: vec3<f32>) -> f32 {
     let den = dot(v, normal);
@@ -123,17 +122,4 @@ fn cluster_visibility(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>) 
     }
     let w = min(penumbra_angle(c.radius, zb, zr) * per_radian, max_texels);
     return pcf(k, c, offset, normal, centre, w);
-}
-
-// One invocation per (sparse point, cluster).
-@compute @workgroup_size(WORKGROUP_X)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    let k = id.y;
-    if i >= frame.sparse_count || k >= CLUSTER_COUNT {
-        return;
-    }
-    let p = sparse_points[i];
-    let c = clusters[k];
-    group_visibility[i * CLUSTER_COUNT + k] = cluster_visibility(k, c, p.position - c.position, p.normal);
 }

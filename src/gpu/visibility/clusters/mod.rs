@@ -23,7 +23,11 @@ use glam::Vec3;
 const PARABOLOID: &str = include_str!("paraboloid.wgsl");
 pub const CLUSTERING_WGSL: &str = include_str!("clustering.wgsl");
 pub const SHADOW_MAPS_WGSL: &str = include_str!("shadow_maps.wgsl");
-pub const VISIBILITY_WGSL: &str = include_str!("cluster_visibility.wgsl");
+/// The visibility pass: the lookup (`cluster_visibility.wgsl`), then its entry point.
+pub const VISIBILITY_WGSL: &str =
+    concat!(include_str!("cluster_visibility.wgsl"), include_str!("cluster_visibility_main.wgsl"));
+/// The soft-shadow lookup alone (binding 1 `clusters`, binding 2 the maps), for other passes.
+pub const VISIBILITY_LOOKUP_WGSL: &str = include_str!("cluster_visibility.wgsl");
 /// The rasterised atlas as the visibility pass reads it (`map_depth`).
 pub const RASTER_DEPTH_WGSL: &str = include_str!("raster_depth.wgsl");
 
@@ -176,6 +180,11 @@ pub fn visibility_body(head: &str) -> String {
     format!("{head}\n{RASTER_DEPTH_WGSL}\n{VISIBILITY_WGSL}")
 }
 
+/// The lookup's WGSL after `head`, reading the rasterised atlas, without the pass's entry point.
+pub fn lookup_body(head: &str) -> String {
+    format!("{head}\n{RASTER_DEPTH_WGSL}\n{VISIBILITY_LOOKUP_WGSL}")
+}
+
 /// The shadow-map raster's complete WGSL (vertex and fragment stages).
 pub fn shadow_maps_source(settings: &ClusterSettings, scale: SceneScale, textured: bool) -> String {
     crate::gpu::shader::source(&format!("{}\n{SHADOW_MAPS_WGSL}", header(settings, scale)), textured)
@@ -186,15 +195,22 @@ pub fn default_shadow_maps_source(textured: bool) -> String {
     shadow_maps_source(&ClusterSettings::default(), SceneScale { diagonal: 1.0 }, textured)
 }
 
-struct ShadowMaps {
+/// Paraboloid depth maps of a buffer of [`RawCluster`]s, in one atlas (also the many-light
+/// direct pass's, `gpu::lights::many`).
+pub(crate) struct ShadowMaps {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     atlas: wgpu::Texture,
-    atlas_view: wgpu::TextureView,
+    pub(crate) atlas_view: wgpu::TextureView,
 }
 
 impl ShadowMaps {
-    fn new(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings, scale: SceneScale) -> Result<Self, GpuError> {
+    pub(crate) fn new(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        settings: &ClusterSettings,
+        scale: SceneScale,
+    ) -> Result<Self, GpuError> {
         let label = SHADOW_MAPS_STAGE;
         let module = module_from_source(gpu, label, shadow_maps_source(settings, scale, scene.textured()))?;
         let side = settings.atlas_columns() * settings.shadow_map_resolution;
@@ -402,7 +418,12 @@ impl Clusters {
 
 impl ShadowMaps {
     /// Every cluster's map: distances (m), `f32::INFINITY` where nothing was drawn.
-    fn read(&self, gpu: &Gpu, settings: &ClusterSettings, scale: SceneScale) -> Result<Vec<Vec<f32>>, GpuError> {
+    pub(crate) fn read(
+        &self,
+        gpu: &Gpu,
+        settings: &ClusterSettings,
+        scale: SceneScale,
+    ) -> Result<Vec<Vec<f32>>, GpuError> {
         let m = settings.count as usize;
         let res = settings.shadow_map_resolution;
         let side = settings.atlas_columns() * res;
@@ -441,13 +462,14 @@ impl ShadowMaps {
             .collect())
     }
 
-    /// Draw every cluster's map.
-    fn record(
+    /// Draw every cluster's map, in the stage `stage`.
+    pub(crate) fn record(
         &self,
         gpu: &Gpu,
         scene: &GpuScene,
         clusters: &wgpu::Buffer,
         settings: &ClusterSettings,
+        stage: &'static str,
         rec: &mut Recorder<'_>,
     ) -> Result<(), GpuError> {
         let m = settings.count;
@@ -456,9 +478,9 @@ impl ShadowMaps {
             layout: &self.layout,
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: clusters.as_entire_binding() }],
         });
-        rec.stage(SHADOW_MAPS_STAGE, |e, s| {
+        rec.stage(stage, |e, s| {
             let mut pass = e.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some(SHADOW_MAPS_STAGE),
+                label: Some(stage),
                 color_attachments: &[],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &self.atlas_view,
@@ -573,7 +595,7 @@ impl GroupVisibility for Clusters {
         })?;
         let atlas = match &self.maps {
             Maps::Raster(maps) => {
-                maps.record(gpu, scene, &self.clusters, &self.settings, rec)?;
+                maps.record(gpu, scene, &self.clusters, &self.settings, SHADOW_MAPS_STAGE, rec)?;
                 view("shadow_atlas", &maps.atlas_view)
             }
             Maps::Ism(maps) => {

@@ -1,0 +1,236 @@
+//! Direct light from the scene's `lights` (README "Many direct lights", `many_lights.wgsl`):
+//! the lights are grouped on the CPU (each alone in the `"per_light"` mode; LightCluster's
+//! minimum-distance groups, paper 003 §3.1, in the `"light_cluster"` mode), every group gets
+//! two paraboloid shadow maps at its centre light (the clusters module's raster, one atlas),
+//! and every pixel adds each light's direct radiance times its group's visibility there (one
+//! texel per light, or PCSS with the group's extent as the disc light's radius). Rust twins:
+//! `twin::many_lights` (the grouping is itself CPU code, as in the paper).
+//!
+//! On a CPU adapter a shader's loops end after [`crate::gpu::LLVMPIPE_LOOP_LIMIT`] iterations;
+//! a pixel runs at most `groups x (1 + 2 SHADOW_TAPS²) + lights` of them, 53,248 at the most
+//! lights ([`crate::scene::MAX_DIRECT_LIGHTS`]).
+
+use crate::gpu::pass::{
+    Entry, Kernel, PassDesc, buffer, depth_texture, module_from_source, read, read_write, texture, view,
+};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::IMAGE_TILE;
+use crate::gpu::technique::{Frame, Technique};
+use crate::gpu::timing::Recorder;
+use crate::gpu::visibility::clusters::{self, RawCluster, SceneScale, ShadowMaps};
+use crate::gpu::{Gpu, GpuError};
+use crate::scene::{ClusterSettings, DirectSettings, DirectShadows, Light, SoftShadows};
+use crate::twin::many_lights::{AXIS, LightGroups, light_range, min_distance_clusters};
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+pub const WGSL: &str = include_str!("many_lights.wgsl");
+
+/// Stage names.
+pub const SHADOW_MAPS_STAGE: &str = "lights_shadow_maps";
+pub const SHADE_STAGE: &str = "lights_direct";
+
+/// The shading pass: the clusters' lookup (`clusters::lookup_body`: binding 1 the maps'
+/// centres, binding 2 the atlas) around its own bindings.
+pub const PASS: PassDesc = PassDesc {
+    label: SHADE_STAGE,
+    bindings: &[
+        texture("visibility"),
+        read("clusters"),
+        depth_texture("shadow_atlas"),
+        read_write("direct"),
+        read("lights"),
+        read("group_lights"),
+    ],
+    entries: &[Entry::first("shade_lights", 6)],
+    workgroup: IMAGE_TILE,
+    default_source: |textured| {
+        let maps = maps_settings(1, 128, SoftShadows::Pcss);
+        PASS.source(&body(&maps, SceneScale { diagonal: 1.0 }, 1, false), textured)
+    },
+};
+
+/// WGSL `ManyLight`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawManyLight {
+    pub position: [f32; 3],
+    pub range: f32,
+    pub direction: [f32; 3],
+    pub inner_angle: f32,
+    pub intensity: [f32; 3],
+    pub outer_angle: f32,
+}
+
+impl From<&Light> for RawManyLight {
+    fn from(light: &Light) -> Self {
+        let spot = crate::twin::many_lights::as_spot(light);
+        let range = match light {
+            Light::Point(p) => p.range.unwrap_or(0.0),
+            Light::Spot(_) => 0.0,
+        };
+        Self {
+            position: spot.position.into(),
+            range,
+            direction: spot.direction.into(),
+            inner_angle: spot.inner_angle,
+            intensity: spot.intensity.into(),
+            outer_angle: spot.outer_angle,
+        }
+    }
+}
+
+/// The clusters module's settings for `groups` groups' maps (two each).
+fn maps_settings(groups: u32, resolution: u32, soft: SoftShadows) -> ClusterSettings {
+    ClusterSettings { count: 2 * groups, shadow_map_resolution: resolution, soft, ..ClusterSettings::default() }
+}
+
+/// The pass's WGSL after the shader prelude.
+fn body(maps: &ClusterSettings, scale: SceneScale, groups: u32, add: bool) -> String {
+    let head = clusters::header(maps, scale);
+    let [x, y, z] = AXIS.to_array();
+    format!(
+        "{}\nconst GROUP_COUNT: u32 = {groups}u;\nconst AXIS: vec3<f32> = vec3<f32>({x:?}, {y:?}, {z:?});\nconst ADD_TO_DIRECT: bool = {add};\n{WGSL}",
+        clusters::lookup_body(&head)
+    )
+}
+
+/// The groups `settings` asks for: every light alone, or LightCluster's (with the view
+/// scaling from `camera` when `settings.z_far` is given).
+pub fn groups_of(lights: &[Light], settings: &DirectSettings, camera: Vec3) -> LightGroups {
+    match settings.shadows {
+        DirectShadows::PerLight => LightGroups::singletons(lights.len()),
+        DirectShadows::LightCluster => {
+            let positions: Vec<Vec3> = lights.iter().map(Light::position).collect();
+            let ranges: Vec<f32> = lights.iter().map(light_range).collect();
+            min_distance_clusters(&positions, &ranges, settings.d_init, settings.z_far.map(|z| (camera, z)))
+        }
+    }
+}
+
+/// The many-light direct technique for fixed lights and groups.
+pub struct ManyLights {
+    pub groups: LightGroups,
+    maps_settings: ClusterSettings,
+    scale: SceneScale,
+    maps: ShadowMaps,
+    kernel: Kernel,
+    /// `array<Cluster>`: two per group.
+    clusters: wgpu::Buffer,
+    /// `array<ManyLight>`, sorted by group.
+    lights: wgpu::Buffer,
+    /// `array<vec2<u32>>`: per group, its first light and count.
+    group_lights: wgpu::Buffer,
+}
+
+impl ManyLights {
+    /// `lights` (at least one) grouped as `settings` says; `add` when the pass adds to a
+    /// direct image another pass wrote first (the spot light's).
+    pub fn new(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        lights: &[Light],
+        settings: &DirectSettings,
+        camera: Vec3,
+        add: bool,
+    ) -> Result<Self, GpuError> {
+        let groups = groups_of(lights, settings, camera);
+        let soft = match settings.shadows {
+            DirectShadows::PerLight => SoftShadows::Hard,
+            DirectShadows::LightCluster => SoftShadows::Pcss,
+        };
+        Self::with_groups(gpu, scene, lights, groups, settings.shadow_map_resolution, soft, add)
+    }
+
+    /// `lights` in the given groups, their maps `resolution` texels a side, filtered by `soft`
+    /// ([`SoftShadows::Hard`]: one texel).
+    pub fn with_groups(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        lights: &[Light],
+        groups: LightGroups,
+        resolution: u32,
+        soft: SoftShadows,
+        add: bool,
+    ) -> Result<Self, GpuError> {
+        let m = groups.len() as u32;
+        let maps_settings = maps_settings(m, resolution, soft);
+        let scale = SceneScale::of(scene);
+        let maps = ShadowMaps::new(gpu, scene, &maps_settings, scale)?;
+        let source = PASS.source(&body(&maps_settings, scale, m, add), scene.textured());
+        let module = module_from_source(gpu, PASS.label, source)?;
+        let kernel = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("shade_lights"), &[], PASS.workgroup)?;
+        let positions: Vec<Vec3> = lights.iter().map(Light::position).collect();
+        let raw_clusters: Vec<RawCluster> = groups
+            .maps(&positions)
+            .iter()
+            .map(|c| RawCluster {
+                position: c.position.into(),
+                count: c.count,
+                normal: c.normal.into(),
+                radius: c.radius,
+            })
+            .collect();
+        let mut sorted = Vec::with_capacity(lights.len());
+        let mut ranges = Vec::with_capacity(groups.len());
+        for g in 0..m {
+            let first = sorted.len() as u32;
+            sorted.extend(
+                lights.iter().zip(&groups.group_of_light).filter(|(_, k)| **k == g).map(|(l, _)| RawManyLight::from(l)),
+            );
+            ranges.push([first, sorted.len() as u32 - first]);
+        }
+        let none = wgpu::BufferUsages::empty();
+        Ok(Self {
+            clusters: gpu.storage_buffer("many_lights.clusters", &raw_clusters, none)?,
+            lights: gpu.storage_buffer("many_lights.lights", &sorted, none)?,
+            group_lights: gpu.storage_buffer("many_lights.group_lights", &ranges, none)?,
+            groups,
+            maps_settings,
+            scale,
+            maps,
+            kernel,
+        })
+    }
+
+    /// Every map, two per group (`2g`: +AXIS, `2g + 1`: -AXIS): distances (m), infinite where
+    /// nothing was drawn.
+    pub fn read_maps(&self, gpu: &Gpu) -> Result<Vec<Vec<f32>>, GpuError> {
+        self.maps.read(gpu, &self.maps_settings, self.scale)
+    }
+
+    /// Texels per map side.
+    pub fn map_resolution(&self) -> u32 {
+        self.maps_settings.shadow_map_resolution
+    }
+
+    /// The maps' filter.
+    pub fn soft(&self) -> SoftShadows {
+        self.maps_settings.soft
+    }
+}
+
+impl Technique for ManyLights {
+    fn stages(&self) -> Vec<&'static str> {
+        vec![SHADOW_MAPS_STAGE, SHADE_STAGE]
+    }
+
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
+        let scene = frame.scene;
+        self.maps.record(gpu, scene, &self.clusters, &self.maps_settings, SHADOW_MAPS_STAGE, rec)?;
+        let camera = frame.camera;
+        let group = self.kernel.bind(
+            gpu,
+            &[
+                view("visibility", &camera.view.view),
+                buffer("clusters", &self.clusters),
+                view("shadow_atlas", &self.maps.atlas_view),
+                buffer("direct", &camera.direct),
+                buffer("lights", &self.lights),
+                buffer("group_lights", &self.group_lights),
+            ],
+        );
+        let pixels = [camera.view.width, camera.view.height, 1];
+        rec.stage(SHADE_STAGE, |e, s| self.kernel.dispatch(e, &group, scene, pixels, s.as_ref().map(|s| s.compute())))
+    }
+}

@@ -1,0 +1,120 @@
+//! Direct light from many lights (`gpu::lights::many`, README "Many direct lights") against its
+//! CPU twins (`twin::many_lights`) on the GPU's own shadow maps and visibility buffer, in both
+//! modes, and against the exact shadow-ray reference.
+//!
+//! Tolerances: the lookup rounds continuous texel positions down, and lavapipe's projections
+//! differ from the CPU's by a few ulp, so a texel exactly on an edge may go either way and flip
+//! one light's (or one tap's) visibility at a pixel: 2 % of covered pixels may differ; the
+//! others must agree to 1e-3 relative (the other twins' tolerance, `twins.rs`) plus 1e-6 of
+//! the image's peak.
+
+use super::{gpu, load_scene};
+use glam::Vec3;
+use relume::gpu::lights::many::{SHADE_STAGE, SHADOW_MAPS_STAGE};
+use relume::image::{LinearImage, relative_rmse};
+use relume::renderer::{Components, Method, Renderer};
+use relume::scene::{DirectSettings, DirectShadows, Light, PointLight, Scene};
+use relume::twin::many_lights::{direct_shadow_mapped, exact_image, image_of};
+
+const SIDE: u32 = 64;
+
+/// Eight point lights in the Cornell box of `cornell_bunny_small`: two tight pairs and a
+/// triple (grouped at d_init = 0.3) and a lone one low beside the bunny.
+fn lights() -> Vec<Light> {
+    let at = |x: f32, y: f32, z: f32| {
+        Light::Point(PointLight { position: Vec3::new(x, y, z), intensity: Vec3::splat(0.6), range: Some(4.0) })
+    };
+    vec![
+        at(-0.5, 1.5, 0.2),
+        at(-0.4, 1.55, 0.25),
+        at(0.45, 1.3, -0.3),
+        at(0.5, 1.25, -0.2),
+        at(0.0, 1.8, 0.0),
+        at(0.1, 1.75, 0.05),
+        at(0.05, 1.7, -0.1),
+        at(-0.1, 0.35, 0.8),
+    ]
+}
+
+fn scene_with(shadows: DirectShadows, spot: bool) -> Scene {
+    let mut scene = load_scene("cornell_bunny_small");
+    if !spot {
+        scene.light = None;
+    }
+    scene.lights = lights();
+    scene.settings.direct = DirectSettings { shadows, d_init: 0.3, ..DirectSettings::default() };
+    scene
+}
+
+fn direct(gpu: &relume::gpu::Gpu, renderer: &mut Renderer) -> (LinearImage, Vec<String>) {
+    let frame = renderer.render_components(gpu, Method::Sparse, SIDE, SIDE, Components::DIRECT).unwrap();
+    (frame.direct, frame.timings.stages.iter().map(|(n, _)| n.clone()).collect())
+}
+
+#[test]
+fn many_lights_match_cpu_twins_in_both_modes() {
+    let gpu = gpu();
+    for shadows in [DirectShadows::PerLight, DirectShadows::LightCluster] {
+        let scene = scene_with(shadows, false);
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let (image, stages) = direct(&gpu, &mut renderer);
+        assert!(stages.iter().any(|s| s == SHADOW_MAPS_STAGE) && stages.iter().any(|s| s == SHADE_STAGE), "{stages:?}");
+        let many = renderer.many_lights().unwrap();
+        let expected_groups = if shadows == DirectShadows::PerLight { 8 } else { 4 };
+        assert_eq!(many.groups.len(), expected_groups, "{shadows:?}: {:?}", many.groups);
+        let maps = many.read_maps(&gpu).unwrap();
+        let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+        let eye = renderer.view().eye();
+        let (groups, resolution, soft) = (&many.groups, many.map_resolution(), many.soft());
+        let twin = image_of(&renderer.scene.flat, &hits, SIDE, SIDE, |p, n, m| {
+            direct_shadow_mapped(p, n, m, eye, &scene.lights, groups, &maps, resolution, soft)
+        });
+        let peak = (0..twin.pixels.len()).map(|i| twin.rgb(i).max_element()).fold(0.0f32, f32::max);
+        assert!(peak > 0.0, "the lights reach the image");
+        let (mut covered, mut off) = (0, 0);
+        for i in 0..twin.pixels.len() {
+            assert_eq!(image.pixels[i][3], twin.pixels[i][3], "coverage at pixel {i}");
+            if twin.pixels[i][3] == 0.0 {
+                continue;
+            }
+            covered += 1;
+            let (a, b) = (image.rgb(i), twin.rgb(i));
+            if (a - b).abs().max_element() > 1e-3 * a.max(b).max_element() + 1e-6 * peak {
+                off += 1;
+            }
+        }
+        assert!(off * 50 <= covered, "{shadows:?}: {off} of {covered} pixels differ from the twin");
+        // The shadows are there: the exact reference is darker than no shadows at all, and
+        // the shadow maps are nearer the reference than no shadows.
+        let exact = exact_image(&renderer.scene.flat, &hits, SIDE, SIDE, eye, &scene.lights);
+        let unshadowed = image_of(&renderer.scene.flat, &hits, SIDE, SIDE, |p, n, m| {
+            scene.lights.iter().map(|l| relume::twin::many_lights::light_radiance(p, n, m, eye, l)).sum()
+        });
+        let (e_maps, e_none) = (relative_rmse(&image, &exact), relative_rmse(&unshadowed, &exact));
+        assert!(e_none > 0.05, "the lights cast shadows in this scene: {e_none}");
+        assert!(e_maps < 0.5 * e_none, "{shadows:?}: rel RMSE vs exact {e_maps}, without shadows {e_none}");
+    }
+}
+
+/// With a spot `light` too, the pass adds the lights' direct light to the spot's: the sum of
+/// the two rendered alone (within float rounding of one addition per pixel).
+#[test]
+fn lights_add_to_the_spot_lights_direct_light() {
+    let gpu = gpu();
+    let both = scene_with(DirectShadows::LightCluster, true);
+    let mut spot_only = both.clone();
+    spot_only.lights.clear();
+    let lights_only = scene_with(DirectShadows::LightCluster, false);
+    let (sum, _) = direct(&gpu, &mut Renderer::new(&gpu, &both).unwrap());
+    let (a, stages) = direct(&gpu, &mut Renderer::new(&gpu, &spot_only).unwrap());
+    assert!(!stages.iter().any(|s| s == SHADE_STAGE), "no lights, no many-light stage: {stages:?}");
+    let (b, _) = direct(&gpu, &mut Renderer::new(&gpu, &lights_only).unwrap());
+    for i in 0..sum.pixels.len() {
+        let expected = a.rgb(i) + b.rgb(i);
+        assert!(
+            (sum.rgb(i) - expected).abs().max_element() <= 1e-5 * expected.max_element() + 1e-12,
+            "pixel {i}: {} vs {expected}",
+            sum.rgb(i)
+        );
+    }
+}
