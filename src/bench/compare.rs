@@ -228,7 +228,7 @@ pub fn exact_reference_seeded(
         });
     }
     let mut frame = renderer.render_components(gpu, Method::Sparse, width, height, Components::DIRECT)?;
-    let vals = renderer.read_vals(gpu)?;
+    let mut vals = renderer.read_vals(gpu)?;
     let hits = match renderer.camera_view() {
         Some(view) if options.spp == 1 => view.read(gpu)?,
         _ => Vec::new(),
@@ -255,6 +255,11 @@ pub fn exact_reference_seeded(
         (None, 1) => ValSampling::All,
         (None, s) => ValSampling::Stride(s),
     };
+    // The second bounce, its points lit through shadow rays (the GPU frame above, direct only,
+    // made the first bounce's VALs alone).
+    if let Some(bounce) = renderer.second_bounce() {
+        vals.extend(second_bounce_exact(flat, bounce, &vals, &bvh));
+    }
     let scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy() };
     let out = cpu::render(&scene, &receivers, width, height, sampling);
     frame.indirect = out.image;
@@ -267,6 +272,28 @@ pub fn exact_reference_seeded(
         shadow_rays: Some(out.shadow_rays),
         traversal: Some(out.traversal),
     })
+}
+
+/// The exact reference's second bounce (`settings.bounces: 2`): `bounce`'s points on `flat`
+/// lit by `vals` through shadow rays in `bvh`, then drawn as the GPU's are
+/// (`twin::bounce`).
+pub fn second_bounce_exact(
+    flat: &crate::gpu::scene::FlatScene,
+    bounce: &crate::gpu::lights::bounce::SecondBounce,
+    vals: &[crate::twin::Val],
+    bvh: &crate::twin::bvh::TraceBvh,
+) -> Vec<crate::twin::Val> {
+    use crate::twin::bounce as twin;
+    let surfaces: Vec<twin::BounceSurface> = bounce
+        .points
+        .iter()
+        .map(|p| {
+            let (position, normal, m) = flat.surface_at(p.triangle, p.barycentrics);
+            twin::BounceSurface { position, normal, albedo: m.diffuse, area: p.area }
+        })
+        .collect();
+    let candidates = twin::candidate_vals(&surfaces, vals, Some(bvh));
+    twin::draw_vals(&candidates, bounce.settings.vals, bounce.drawn_area)
 }
 
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and

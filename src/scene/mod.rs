@@ -52,8 +52,8 @@ pub use description::{
     LightBound, LightDescription, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_ISM_POINTS,
     MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription,
     MeshDescription, Occlusion, OcclusionRule, OcclusionSetting, RSM_RESOLUTION_RANGE, ScaleDescription,
-    SceneDescription, SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription,
-    parse_json,
+    SceneDescription, SecondBounceSettings, SettingsDescription, ShadowMapSource, SoftShadows, SparseShading,
+    TransformDescription, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
@@ -251,6 +251,9 @@ pub struct Settings {
     pub clusters: ClusterSettings,
     /// The `Ism` visibility mode's settings.
     pub ism: IsmSettings,
+    /// Bounces of indirect light: 1, or 2 with a second bounce as `second_bounce` says.
+    pub bounces: u32,
+    pub second_bounce: SecondBounceSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its
