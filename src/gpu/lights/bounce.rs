@@ -114,7 +114,7 @@ impl SecondBounce {
         let flat = &scene.flat;
         let positions: Vec<Vec3> = flat.vertices.iter().map(|v| Vec3::from(v.position)).collect();
         let points = twin::bounce_points(&positions, &flat.indices, settings.points, seed);
-        let drawn_area = twin::drawn_area(&points, settings.vals);
+        let drawn_area = twin::drawn_area(&points);
         let raw: Vec<RawBouncePoint> = points.iter().map(RawBouncePoint::from).collect();
         let n = raw.len().max(1);
         let empty = [RawBouncePoint::default()];

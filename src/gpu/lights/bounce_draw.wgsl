@@ -4,7 +4,8 @@
 // each appended to the frame's VALs with its flux divided by its probability,
 // `flux * total / (count * luminance)`, so that the drawn VALs' flux adds up to the
 // candidates' (exactly so for grey flux) and the estimate stays unbiased. Its disc area is
-// the mean patch a drawn VAL stands for (SECOND_BOUNCE_AREA, m²). VAL k lands at the frame's
+// the patch one point stands for (SECOND_BOUNCE_AREA, m²; `twin::bounce::drawn_area` says
+// why). VAL k lands at the frame's
 // count before the draw plus k (`bounce_count` then adds them), so the order is the twin's.
 // Rust twin: `twin::bounce::draw_vals`.
 
