@@ -334,6 +334,11 @@ pub struct CompareReport {
     pub setup_ms: f64,
     pub sparse_stages_ms: Vec<(String, f64)>,
     pub brute_force_stages_ms: Vec<(String, f64)>,
+    /// `settings.bounces`.
+    pub bounces: u32,
+    /// With two bounces, the second bounce's stages of the sparse frame (`bounce2_points` +
+    /// `bounce2_vals`, ms; the brute force runs the same); 0 with one.
+    pub second_bounce_ms: f64,
     #[serde(flatten)]
     pub exact: Option<ExactComparison>,
 }
@@ -378,6 +383,9 @@ pub struct ExactComparison {
     pub exact_traversal: Option<crate::twin::bvh::ShadowTraversal>,
     /// `sqrt(sum s² / sum |g|²)`: the reference's own relative noise.
     pub exact_rel_stderr: Option<f64>,
+    /// The brute force (no visibility) against the reference (`mode` `brute_force`; its
+    /// `visibility_ms` and `gather_ms` 0): what visibility changes, the sparse method aside.
+    pub brute_force_vs_exact: ModeVsExact,
     /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
     /// with the `sum` and the `product` rule, `clusters` (the scene's `settings.clusters`) and
     /// `ism` (its `settings.ism`).
@@ -410,9 +418,11 @@ pub fn compare(
     let ((sparse_sum, sparse_peak), (brute_sum, brute_peak)) =
         (sparse.indirect.luminance_sum_and_peak(), brute.indirect.luminance_sum_and_peak());
     let exact = match exact {
-        Some(options) => Some(exact_comparison(gpu, &mut renderer, (w, h), options, images)?),
+        Some(options) => Some(exact_comparison(gpu, &mut renderer, (w, h), options, images, &brute)?),
         None => None,
     };
+    let bounce_stages = renderer.bounce_stages();
+    let second_bounce_ms = if bounce_stages.is_empty() { 0.0 } else { sparse.timings.total_of(&bounce_stages) };
     Ok(CompareReport {
         scene: scene.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
         adapter: gpu.adapter_name(),
@@ -440,6 +450,8 @@ pub fn compare(
         setup_ms,
         sparse_stages_ms: sparse.timings.stages,
         brute_force_stages_ms: brute.timings.stages,
+        bounces: scene.settings.bounces,
+        second_bounce_ms,
         exact,
     })
 }
@@ -451,10 +463,22 @@ fn exact_comparison(
     (w, h): (u32, u32),
     options: &ExactOptions,
     images: Option<&Path>,
+    brute: &Rendered,
 ) -> Result<ExactComparison, BenchError> {
     let exact = exact_reference(gpu, renderer, w, h, options)?;
     let exposure = exact.indirect().auto_exposure();
     let exact_sum = exact.indirect().luminance_sum_and_peak().0;
+    let error = indirect_error(&brute.indirect, exact.indirect());
+    let brute_force_vs_exact = ModeVsExact {
+        mode: "brute_force",
+        rel_rmse: error.rel_rmse,
+        rel_rmse_corrected: exact.corrected_rel_rmse(&brute.indirect),
+        flip_mean: error.flip_mean,
+        energy_ratio: brute.indirect.luminance_sum_and_peak().0 / exact_sum,
+        visibility_ms: 0.0,
+        gather_ms: 0.0,
+        stages_ms: brute.timings.stages.clone(),
+    };
     if let Some(dir) = images {
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
     }
@@ -498,6 +522,7 @@ fn exact_comparison(
         exact_rays_per_s: exact.rays_per_s(),
         exact_traversal: exact.traversal,
         exact_rel_stderr: exact.rel_stderr(),
+        brute_force_vs_exact,
         modes_vs_exact: modes,
     })
 }

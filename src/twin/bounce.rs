@@ -43,7 +43,7 @@ pub fn bounce_points(positions: &[Vec3], indices: &[u32], count: u32, seed: u64)
             sum
         })
         .collect();
-    if !(sum > 0.0) || count == 0 {
+    if sum <= 0.0 || count == 0 {
         return Vec::new();
     }
     let area = (sum / f64::from(count)) as f32;
