@@ -179,12 +179,12 @@ mod tests {
             flux: Vec3::splat(flux),
         };
         let candidates: Vec<Val> =
-            (0..600).map(|i| val(i as f32, if i % 3 == 0 { 0.0 } else { 1.0 + (i % 7) as f32 })).collect();
+            (0..600u32).map(|i| val(i as f32, if i.is_multiple_of(3) { 0.0 } else { 1.0 + (i % 7) as f32 })).collect();
         let drawn = draw_vals(&candidates, 100, 0.25);
         let total: Vec3 = candidates.iter().map(|c| c.flux).sum();
         let sum: Vec3 = drawn.iter().map(|v| v.flux).sum();
         assert!((sum - total).abs().max_element() < 1e-3 * total.x, "{sum} vs {total}");
-        assert!(drawn.iter().all(|v| v.area == 0.25 && (v.position.x as usize) % 3 != 0));
+        assert!(drawn.iter().all(|v| v.area == 0.25 && !(v.position.x as usize).is_multiple_of(3)));
         let dark = draw_vals(&[val(0.0, 0.0); 4], 3, 0.25);
         assert!(dark.iter().all(|v| v.flux == Vec3::ZERO));
     }
