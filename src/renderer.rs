@@ -6,6 +6,7 @@
 //! ```text
 //! spot light:  SpotVals (rsm_raster, rsm_vals)  ─┐
 //! RGB-D frame: RgbdVals (rgbd_vals)             ─┴─ VALs
+//! bounces 2:   SecondBounce (bounce2_points, bounce2_vals): appends the second bounce's VALs
 //! camera:      CameraView (visibility)
 //! indirect:    SparseMethod (gather, [visibility mode], renormalise, interpolate, shade)
 //!              | BruteForce (brute_force) | Exact (exact)
@@ -14,6 +15,7 @@
 //! ```
 
 use crate::gpu::lights::many::ManyLights;
+use crate::gpu::lights::bounce::SecondBounce;
 use crate::gpu::lights::rgbd::RgbdVals;
 use crate::gpu::lights::spot::{DirectLight, SpotVals};
 use crate::gpu::raster::{CameraView, Visibility, VisibilityTarget};
@@ -100,6 +102,9 @@ pub mod stage {
     pub const RSM_RASTER: &str = spot::RSM_RASTER;
     pub const RSM_VALS: &str = spot::RSM_VALS;
     pub const RGBD_VALS: &str = RgbdVals::STAGE;
+    /// The second bounce's stages (`settings.bounces: 2`).
+    pub const BOUNCE2_POINTS: &str = crate::gpu::lights::bounce::POINTS_STAGE;
+    pub const BOUNCE2_VALS: &str = crate::gpu::lights::bounce::DRAW_STAGE;
     pub const VISIBILITY: &str = CameraView::STAGE;
     pub const GATHER: &str = sparse::gather::PASS.label;
     pub const OCCLUSION: &str = visibility::disks::PASS.label;
@@ -226,6 +231,9 @@ pub struct Renderer {
     /// given; it runs while `rgbd_active`.
     rgbd: Option<Built<(Intrinsics, RgbdSettings), RgbdVals>>,
     rgbd_active: bool,
+    /// The second bounce (`settings.bounces: 2`), run before every indirect technique; `None`
+    /// with one bounce (no stage, no buffer).
+    bounce: Option<SecondBounce>,
     indirect: Indirect,
     /// The camera's images at the size of the last frame.
     target: Option<CameraTarget>,
@@ -250,7 +258,12 @@ impl Renderer {
                 Some(Spot { vals, direct })
             }
         };
-        let capacity = spot.as_ref().map_or(1, |s| s.vals.resolution * s.vals.resolution);
+        let bounce = match scene.settings.bounces {
+            2 => Some(SecondBounce::new(gpu, &scene_gpu, scene.settings.second_bounce, scene.settings.seed)?),
+            _ => None,
+        };
+        let rsm = spot.as_ref().map_or(0, |s| s.vals.resolution * s.vals.resolution);
+        let capacity = (rsm + bounce.as_ref().map_or(0, |b| b.settings.vals)).max(1);
         let many = match scene.lights.is_empty() {
             true => None,
             false => Some(ManyLights::new(
@@ -263,6 +276,7 @@ impl Renderer {
             )?),
         };
         Ok(Self {
+            bounce,
             lights: scene.lights.clone(),
             many,
             lights_eye: scene.camera.position,
@@ -449,7 +463,8 @@ impl Renderer {
             (Some(b), true) => b.technique.max_vals(),
             _ => 0,
         };
-        let needed = self.uploaded_vals + rgbd + rsm;
+        let second = self.bounce.as_ref().map_or(0, |b| b.settings.vals);
+        let needed = self.uploaded_vals + rgbd + rsm + second;
         if needed > self.vals.capacity {
             self.vals.capacity = needed.next_power_of_two();
             self.vals.buffer = gpu.storage_buffer_sized::<RawVal>("vals", self.vals.capacity as usize)?;
@@ -578,6 +593,10 @@ impl Renderer {
         if components.indirect && self.rgbd_active {
             list.extend(self.rgbd.as_ref().map(|b| &b.technique as &dyn Technique));
         }
+        // After every first-bounce source: it lights its points with their VALs.
+        if components.indirect {
+            list.extend(self.bounce.as_ref().map(|b| b as &dyn Technique));
+        }
         list.push(&self.camera);
         list.extend(indirect);
         if components.direct {
@@ -601,6 +620,16 @@ impl Renderer {
         let (scene, glossy, capacity) = (&self.scene, self.glossy, self.vals.capacity);
         let pixels = (width * height) as usize;
         if components.indirect {
+            if let Some(b) = &mut self.bounce {
+                if method == Method::Exact {
+                    return Err(GpuError::Unsupported(
+                        "settings.bounces: 2 has no GPU exact reference (its second bounce needs shadow rays from \
+                         the bounce points); use the CPU one (--reference-device cpu)"
+                            .into(),
+                    ));
+                }
+                b.fit(gpu, scene, capacity)?;
+            }
             match method {
                 Method::Sparse => {
                     let (kernel, bound, near_radius) = self.sparse_shading;
@@ -706,6 +735,16 @@ impl Renderer {
     pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::twin::Val>, GpuError> {
         let n = self.live_val_count(gpu)? as usize;
         Ok(gpu.read_buffer::<RawVal>(&self.vals.buffer, n)?.iter().map(Into::into).collect())
+    }
+
+    /// The second bounce (`settings.bounces: 2`), when the scene has one.
+    pub fn second_bounce(&self) -> Option<&SecondBounce> {
+        self.bounce.as_ref()
+    }
+
+    /// The second bounce's stages (none with one bounce).
+    pub fn bounce_stages(&self) -> Vec<&'static str> {
+        self.bounce.as_ref().map_or_else(Vec::new, |b| b.stages())
     }
 
     /// The stages of the sparse method's visibility mode, as last built (none when off).

@@ -228,7 +228,7 @@ pub fn exact_reference_seeded(
         });
     }
     let mut frame = renderer.render_components(gpu, Method::Sparse, width, height, Components::DIRECT)?;
-    let vals = renderer.read_vals(gpu)?;
+    let mut vals = renderer.read_vals(gpu)?;
     let hits = match renderer.camera_view() {
         Some(view) if options.spp == 1 => view.read(gpu)?,
         _ => Vec::new(),
@@ -255,6 +255,11 @@ pub fn exact_reference_seeded(
         (None, 1) => ValSampling::All,
         (None, s) => ValSampling::Stride(s),
     };
+    // The second bounce, its points lit through shadow rays (the GPU frame above, direct only,
+    // made the first bounce's VALs alone).
+    if let Some(bounce) = renderer.second_bounce() {
+        vals.extend(second_bounce_exact(flat, bounce, &vals, &bvh));
+    }
     let scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy() };
     let out = cpu::render(&scene, &receivers, width, height, sampling);
     frame.indirect = out.image;
@@ -267,6 +272,28 @@ pub fn exact_reference_seeded(
         shadow_rays: Some(out.shadow_rays),
         traversal: Some(out.traversal),
     })
+}
+
+/// The exact reference's second bounce (`settings.bounces: 2`): `bounce`'s points on `flat`
+/// lit by `vals` through shadow rays in `bvh`, then drawn as the GPU's are
+/// (`twin::bounce`).
+pub fn second_bounce_exact(
+    flat: &crate::gpu::scene::FlatScene,
+    bounce: &crate::gpu::lights::bounce::SecondBounce,
+    vals: &[crate::twin::Val],
+    bvh: &crate::twin::bvh::TraceBvh,
+) -> Vec<crate::twin::Val> {
+    use crate::twin::bounce as twin;
+    let surfaces: Vec<twin::BounceSurface> = bounce
+        .points
+        .iter()
+        .map(|p| {
+            let (position, normal, m) = flat.surface_at(p.triangle, p.barycentrics);
+            twin::BounceSurface { position, normal, albedo: m.diffuse, area: p.area }
+        })
+        .collect();
+    let candidates = twin::candidate_vals(&surfaces, vals, Some(bvh));
+    twin::draw_vals(&candidates, bounce.settings.vals, bounce.drawn_area)
 }
 
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and
@@ -307,6 +334,11 @@ pub struct CompareReport {
     pub setup_ms: f64,
     pub sparse_stages_ms: Vec<(String, f64)>,
     pub brute_force_stages_ms: Vec<(String, f64)>,
+    /// `settings.bounces`.
+    pub bounces: u32,
+    /// With two bounces, the second bounce's stages of the sparse frame (`bounce2_points` +
+    /// `bounce2_vals`, ms; the brute force runs the same); 0 with one.
+    pub second_bounce_ms: f64,
     #[serde(flatten)]
     pub exact: Option<ExactComparison>,
 }
@@ -351,6 +383,9 @@ pub struct ExactComparison {
     pub exact_traversal: Option<crate::twin::bvh::ShadowTraversal>,
     /// `sqrt(sum s² / sum |g|²)`: the reference's own relative noise.
     pub exact_rel_stderr: Option<f64>,
+    /// The brute force (no visibility) against the reference (`mode` `brute_force`; its
+    /// `visibility_ms` and `gather_ms` 0): what visibility changes, the sparse method aside.
+    pub brute_force_vs_exact: ModeVsExact,
     /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
     /// with the `sum` and the `product` rule, `clusters` (the scene's `settings.clusters`) and
     /// `ism` (its `settings.ism`).
@@ -383,9 +418,11 @@ pub fn compare(
     let ((sparse_sum, sparse_peak), (brute_sum, brute_peak)) =
         (sparse.indirect.luminance_sum_and_peak(), brute.indirect.luminance_sum_and_peak());
     let exact = match exact {
-        Some(options) => Some(exact_comparison(gpu, &mut renderer, (w, h), options, images)?),
+        Some(options) => Some(exact_comparison(gpu, &mut renderer, (w, h), options, images, &brute)?),
         None => None,
     };
+    let bounce_stages = renderer.bounce_stages();
+    let second_bounce_ms = if bounce_stages.is_empty() { 0.0 } else { sparse.timings.total_of(&bounce_stages) };
     Ok(CompareReport {
         scene: scene.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
         adapter: gpu.adapter_name(),
@@ -413,6 +450,8 @@ pub fn compare(
         setup_ms,
         sparse_stages_ms: sparse.timings.stages,
         brute_force_stages_ms: brute.timings.stages,
+        bounces: scene.settings.bounces,
+        second_bounce_ms,
         exact,
     })
 }
@@ -424,10 +463,22 @@ fn exact_comparison(
     (w, h): (u32, u32),
     options: &ExactOptions,
     images: Option<&Path>,
+    brute: &Rendered,
 ) -> Result<ExactComparison, BenchError> {
     let exact = exact_reference(gpu, renderer, w, h, options)?;
     let exposure = exact.indirect().auto_exposure();
     let exact_sum = exact.indirect().luminance_sum_and_peak().0;
+    let error = indirect_error(&brute.indirect, exact.indirect());
+    let brute_force_vs_exact = ModeVsExact {
+        mode: "brute_force",
+        rel_rmse: error.rel_rmse,
+        rel_rmse_corrected: exact.corrected_rel_rmse(&brute.indirect),
+        flip_mean: error.flip_mean,
+        energy_ratio: brute.indirect.luminance_sum_and_peak().0 / exact_sum,
+        visibility_ms: 0.0,
+        gather_ms: 0.0,
+        stages_ms: brute.timings.stages.clone(),
+    };
     if let Some(dir) = images {
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
     }
@@ -471,6 +522,7 @@ fn exact_comparison(
         exact_rays_per_s: exact.rays_per_s(),
         exact_traversal: exact.traversal,
         exact_rel_stderr: exact.rel_stderr(),
+        brute_force_vs_exact,
         modes_vs_exact: modes,
     })
 }

@@ -31,6 +31,8 @@ use bytemuck::Pod;
 pub const PASSES: &[&pass::PassDesc] = &[
     &lights::rsm::PASS,
     &lights::rgbd::PASS,
+    &lights::bounce::POINTS,
+    &lights::bounce::DRAW,
     &visibility::clusters::CLUSTERING,
     &visibility::clusters::VISIBILITY,
     &visibility::ism::SAMPLING,
@@ -73,6 +75,8 @@ pub enum GpuError {
     FrameMismatch(String),
     #[error("GPU work did not finish: {0}")]
     Incomplete(String),
+    #[error("not supported: {0}")]
+    Unsupported(String),
 }
 
 /// Loop iterations after which llvmpipe (lavapipe) ends every loop of a shader invocation,

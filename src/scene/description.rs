@@ -561,6 +561,14 @@ pub struct SettingsDescription {
     /// on their count; every field has a default.
     #[serde(default)]
     pub direct: DirectSettings,
+    /// Bounces of indirect light, 1 or 2; default 1. With 2, points on the meshes lit by the
+    /// first bounce's VALs become second-bounce VALs (paper 004 §4.1, `second_bounce`).
+    #[serde(default = "default_bounces")]
+    pub bounces: u32,
+    /// The second bounce's points and VAL budget (used when `bounces` is 2); every field has a
+    /// default.
+    #[serde(default)]
+    pub second_bounce: SecondBounceSettings,
 }
 
 /// Shadows of the direct light from the scene's `lights` (README "Many direct lights").
@@ -640,6 +648,43 @@ impl DirectSettings {
             ));
         }
         Ok(())
+    }
+}
+
+fn default_bounces() -> u32 {
+    1
+}
+
+/// The second bounce of indirect light (paper 004 §4.1, imperfect reflective shadow maps):
+/// `points` points spread over the meshes by area are lit by the first bounce's VALs, and
+/// `vals` of them, drawn by the flux they reflect, become the second bounce's VALs.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct SecondBounceSettings {
+    /// Points lit by the first bounce (the candidates), in 16..=[`MAX_SECOND_BOUNCE_POINTS`];
+    /// default 4096. Each costs one gather of every first-bounce VAL.
+    pub points: u32,
+    /// Second-bounce VALs drawn from them by flux, in 1..=[`MAX_SECOND_BOUNCE_VALS`]; default
+    /// 1024 (the paper's VPL count).
+    pub vals: u32,
+}
+
+/// Most points the first bounce lights for the second.
+pub const MAX_SECOND_BOUNCE_POINTS: u32 = 1 << 18;
+/// Most second-bounce VALs per frame.
+pub const MAX_SECOND_BOUNCE_VALS: u32 = 1 << 16;
+
+impl Default for SecondBounceSettings {
+    fn default() -> Self {
+        Self { points: 4096, vals: 1024 }
+    }
+}
+
+impl SecondBounceSettings {
+    /// Check every field, naming the first bad one under `field`.
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        int_in(self.points, 16, MAX_SECOND_BOUNCE_POINTS, &format!("{field}.points"))?;
+        int_in(self.vals, 1, MAX_SECOND_BOUNCE_VALS, &format!("{field}.vals"))
     }
 }
 
@@ -1023,6 +1068,8 @@ impl Default for SettingsDescription {
             clusters: ClusterSettings::default(),
             ism: IsmSettings::default(),
             direct: DirectSettings::default(),
+            bounces: default_bounces(),
+            second_bounce: SecondBounceSettings::default(),
         }
     }
 }
@@ -1052,6 +1099,8 @@ impl SettingsDescription {
             clusters: self.clusters,
             ism: self.ism,
             direct: self.direct,
+            bounces: self.bounces,
+            second_bounce: self.second_bounce,
         }
     }
 
@@ -1079,7 +1128,9 @@ impl SettingsDescription {
         validate_environment(&self.environment, &format!("{field}.environment"))?;
         self.clusters.validate(&format!("{field}.clusters"))?;
         self.ism.validate(&format!("{field}.ism"))?;
-        self.direct.validate(&format!("{field}.direct"))
+        self.direct.validate(&format!("{field}.direct"))?;
+        int_in(self.bounces, 1, 2, &format!("{field}.bounces"))?;
+        self.second_bounce.validate(&format!("{field}.second_bounce"))
     }
 }
 
@@ -1704,8 +1755,24 @@ mod tests {
                 clusters: ClusterSettings::default(),
                 ism: IsmSettings::default(),
                 direct: DirectSettings::default(),
+                bounces: 1,
+                second_bounce: SecondBounceSettings::default(),
             }
         );
+        let s = SceneDescription::from_json_str(&with_settings(r#"{"bounces": 2, "second_bounce": {"vals": 64}}"#))
+            .expect("parses");
+        s.validate().expect("valid");
+        let settings = s.settings.to_settings(false);
+        assert_eq!(settings.bounces, 2);
+        assert_eq!(settings.second_bounce, SecondBounceSettings { points: 4096, vals: 64 });
+        for (text, want) in [
+            (r#"{"bounces": 3}"#, "settings.bounces: must be in 1..=2, got 3"),
+            (r#"{"bounces": 0}"#, "settings.bounces: must be in 1..=2, got 0"),
+            (r#"{"second_bounce": {"vals": 0}}"#, "settings.second_bounce.vals: must be in 1..=65536, got 0"),
+            (r#"{"second_bounce": {"points": 8}}"#, "settings.second_bounce.points: must be in 16..=262144, got 8"),
+        ] {
+            assert_eq!(error_of(&with_settings(text)), want, "{text}");
+        }
         let message = error_of(&with_settings(r#"{"sparse": {"subdivision": 0.5}}"#));
         assert_eq!(message, "settings.sparse.subdivision: must be in [1, 16], got 0.5");
         let message = error_of(&with_settings(r#"{"sparse": {"near_field": 9}}"#));

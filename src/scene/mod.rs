@@ -52,7 +52,7 @@ pub use description::{
     InterpolationKernel, IsmSettings, LightBound, LightDescription, LightEntry, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS,
     MAX_COORDINATE_M, MAX_DIRECT_LIGHTS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
     MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion, OcclusionRule,
-    OcclusionSetting, PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription,
+    OcclusionSetting, PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SecondBounceSettings,
     SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription, parse_json,
 };
 pub use error::SceneError;
@@ -282,6 +282,9 @@ pub struct Settings {
     pub ism: IsmSettings,
     /// Shadows of the direct light from [`Scene::lights`].
     pub direct: DirectSettings,
+    /// Bounces of indirect light: 1, or 2 with a second bounce as `second_bounce` says.
+    pub bounces: u32,
+    pub second_bounce: SecondBounceSettings,
 }
 
 /// One mesh: an OBJ file after subdivision and crease splitting, in model space, with its

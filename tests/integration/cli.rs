@@ -116,6 +116,50 @@ fn compare_reports_the_cpu_reference_and_its_noise() {
         let visibility_ms = m["visibility_ms"].as_f64().unwrap();
         assert_eq!(visibility_ms == 0.0, key == "off", "{key}: its own stages took {visibility_ms} ms");
     }
+    let brute = &v["brute_force_vs_exact"];
+    assert_eq!(brute["mode"].as_str(), Some("brute_force"));
+    let (raw, corrected) = (brute["rel_rmse"].as_f64().unwrap(), brute["rel_rmse_corrected"].as_f64().unwrap());
+    assert!(raw.is_finite() && corrected >= 0.0 && corrected <= raw, "brute force: {corrected} vs {raw}");
+    assert_eq!((v["bounces"].as_u64(), v["second_bounce_ms"].as_f64()), (Some(1), Some(0.0)));
+}
+
+/// With `"bounces": 2` the second bounce runs in every method `compare` renders (the CPU exact
+/// reference making its own through shadow rays) and its cost is reported; the GPU exact
+/// reference refuses it, naming the setting.
+#[test]
+fn two_bounces_are_compared_and_the_gpu_reference_refuses_them() {
+    let dir = scratch("cli_two_bounces");
+    let text = std::fs::read_to_string(fixture("scenes/cornell_bunny_small.json")).unwrap().replace(
+        "\"occlusion\": \"off\"",
+        "\"occlusion\": \"off\", \"bounces\": 2, \"second_bounce\": {\"points\": 256, \"vals\": 32}",
+    );
+    // In the scratch directory, its meshes named by absolute path.
+    let meshes = fixture("meshes");
+    let text = text.replace("../meshes/", &format!("{}/", meshes.to_str().unwrap()));
+    let scene = dir.join("two_bounces.json");
+    std::fs::write(&scene, &text).unwrap();
+    let scene_arg = scene.to_str().unwrap();
+    let size = ["--width", "8", "--height", "8"];
+    let o =
+        relume(&[&["compare", scene_arg][..], &size, &["--reference", "exact", "--reference-device", "cpu"]].concat());
+    let gpu = relume(
+        &[
+            &["render", scene_arg, "--method", "exact", "--reference-device", "gpu"][..],
+            &size,
+            &["--out", dir.join("x.png").to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(v["bounces"].as_u64(), Some(2));
+    assert!(v["second_bounce_ms"].as_f64().unwrap() > 0.0);
+    let stages: Vec<&str> =
+        v["brute_force_stages_ms"].as_array().unwrap().iter().map(|s| s[0].as_str().unwrap()).collect();
+    assert!(stages.contains(&"bounce2_points") && stages.contains(&"bounce2_vals"), "{stages:?}");
+    assert!(v["brute_force_vs_exact"]["rel_rmse"].as_f64().unwrap().is_finite());
+    assert!(!gpu.status.success());
+    assert!(stderr(&gpu).contains("settings.bounces"), "{}", stderr(&gpu));
 }
 
 /// The exact reference's options: bad values and combinations are named, not panics.

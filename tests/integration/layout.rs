@@ -55,6 +55,8 @@ fn rust_structs_match_wgsl() {
     check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
     check!(m, "Gathered", RawGathered, [irradiance, weight, position, _pad1, second_moment, _pad2]);
     check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, bound]);
+    use relume::gpu::lights::bounce::{POINTS_STAGE, RawBouncePoint};
+    check!(module_of(POINTS_STAGE), "BouncePoint", RawBouncePoint, [triangle, u, v, area]);
     check!(
         m,
         "Frame",

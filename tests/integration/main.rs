@@ -3,6 +3,7 @@
 
 mod accuracy;
 mod bench;
+mod bounce;
 mod cli;
 mod clusters;
 mod fake_backend;

@@ -1,6 +1,7 @@
 //! Light sources: the spot light's reflective shadow map (RSM) becomes VALs and its direct
 //! light; an RGB-D frame becomes VALs.
 
+pub mod bounce;
 pub mod direct;
 pub mod many;
 pub mod rgbd;

@@ -26,6 +26,8 @@ use crate::scene::{ClusterMethod, ClusterSettings, IsmSettings};
 use glam::Vec3;
 
 pub const ISM_WGSL: &str = include_str!("ism.wgsl");
+/// The stratified draw by flux (`flux_draw.wgsl`), shared with the second bounce's VALs.
+pub const FLUX_DRAW_WGSL: &str = include_str!("flux_draw.wgsl");
 pub const SAMPLING_WGSL: &str = include_str!("sampling.wgsl");
 pub const SPLAT_WGSL: &str = include_str!("splat.wgsl");
 pub const PULL_PUSH_WGSL: &str = include_str!("pull_push.wgsl");
@@ -121,7 +123,9 @@ pub const SAMPLING: PassDesc = PassDesc {
     bindings: &[read("vals"), read("val_count"), read_write("flux_prefix"), read_write("clusters")],
     entries: &[Entry::first("flux_blocks", 3), Entry::first("flux_scan", 3), Entry::first("flux_sample", 4)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
-    default_source: |textured| SAMPLING.source(&format!("{}\n{SAMPLING_WGSL}", default_header()), textured),
+    default_source: |textured| {
+        SAMPLING.source(&format!("{}\n{FLUX_DRAW_WGSL}\n{SAMPLING_WGSL}", default_header()), textured)
+    },
 };
 
 /// Splatting every map's points.
@@ -177,7 +181,7 @@ impl FluxSampling {
         let module = module_from_source(
             gpu,
             SAMPLING.label,
-            SAMPLING.source(&format!("{head}\n{SAMPLING_WGSL}"), scene.textured()),
+            SAMPLING.source(&format!("{head}\n{FLUX_DRAW_WGSL}\n{SAMPLING_WGSL}"), scene.textured()),
         )?;
         let kernel =
             |name: &str| Kernel::build(gpu, scene, &SAMPLING, &module, SAMPLING.entry(name), &[], SAMPLING.workgroup);

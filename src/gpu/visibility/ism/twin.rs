@@ -25,14 +25,15 @@ pub fn decode_depth(e: u32) -> f32 {
     if e == 0 { f32::INFINITY } else { f32::from_bits(u32::MAX - e) }
 }
 
-fn val_weight(v: &Val) -> f32 {
+/// What the flux draw weighs an item by: its flux luminance, at least 0 (WGSL `val_weight`).
+pub fn val_weight(v: &Val) -> f32 {
     luminance(v.flux).max(0.0)
 }
 
-/// `count` groups seeded by flux (WGSL `flux_blocks`, `flux_scan`, `flux_sample`): the VAL
-/// holding `(k + 0.5) / count` of the running flux, as an empty cluster at its position and
-/// normal; all empty (count 0) without lit VALs.
-pub fn flux_seeds(vals: &[Val], count: u32) -> Vec<Cluster> {
+/// The stratified draw by flux (WGSL `flux_blocks`, `flux_scan`, `flux_pick`, same order of
+/// sums): for each k of `count` the item holding `(k + 0.5) / count` of the running sum of flux
+/// luminance (`None` without lit items), and that sum's total.
+pub fn flux_picks(vals: &[Val], count: u32) -> (Vec<Option<usize>>, f32) {
     let block = SAMPLE_BLOCK as usize;
     let blocks = vals.len().div_ceil(block);
     let mut prefix = vec![0.0f32; blocks + 1];
@@ -44,13 +45,13 @@ pub fn flux_seeds(vals: &[Val], count: u32) -> Vec<Cluster> {
         sum += *p;
         *p = sum;
     }
-    let empty = Cluster { position: Vec3::ZERO, count: 0.0, normal: Vec3::Z, radius: 0.0 };
-    (0..count)
+    let total = prefix[blocks];
+    let picks = (0..count)
         .map(|k| {
-            if blocks == 0 || prefix[blocks].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-                return empty;
+            if blocks == 0 || total.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                return None;
             }
-            let goal = (k as f32 + 0.5) / count as f32 * prefix[blocks];
+            let goal = (k as f32 + 0.5) / count as f32 * total;
             let (mut lo, mut hi) = (0, blocks - 1);
             while lo < hi {
                 let mid = (lo + hi).div_ceil(2);
@@ -68,10 +69,22 @@ pub fn flux_seeds(vals: &[Val], count: u32) -> Vec<Cluster> {
                     }
                 }
             }
-            match pick.or(last_lit) {
-                Some(i) => Cluster { position: vals[i].position, count: 0.0, normal: vals[i].normal, radius: 0.0 },
-                None => empty,
-            }
+            pick.or(last_lit)
+        })
+        .collect();
+    (picks, total)
+}
+
+/// `count` groups seeded by flux (WGSL `flux_sample`): the VAL [`flux_picks`] draws for each,
+/// as an empty cluster at its position and normal; all empty (count 0) without lit VALs.
+pub fn flux_seeds(vals: &[Val], count: u32) -> Vec<Cluster> {
+    let empty = Cluster { position: Vec3::ZERO, count: 0.0, normal: Vec3::Z, radius: 0.0 };
+    flux_picks(vals, count)
+        .0
+        .into_iter()
+        .map(|pick| match pick {
+            Some(i) => Cluster { position: vals[i].position, count: 0.0, normal: vals[i].normal, radius: 0.0 },
+            None => empty,
         })
         .collect()
 }

@@ -1,0 +1,60 @@
+// The second bounce, step 1 (paper 004 §4.1, imperfect reflective shadow maps: "shaded
+// points"): every bounce point (a triangle and barycentrics, spread over the meshes by area at
+// load, so it follows moving meshes) is lit by every first-bounce VAL (DESIGN.md §3, the disc
+// form factor, no visibility) and becomes a candidate VAL: a Lambertian disc re-emitting the
+// diffuse part of what it receives, flux `rho_d * E * area` (W), `area` the patch it stands
+// for. The first-bounce VALs stream through workgroup memory in tiles (`shader/val_tiles.wgsl`,
+// prepended), in ranges on CPU adapters, each range after the first adding its flux.
+// Rust twin: `twin::bounce::candidate_vals`.
+
+// A point on the meshes: triangle, barycentrics of corners 1 and 2, and the area (m²) it
+// stands for.
+struct BouncePoint {
+    triangle: u32,
+    u: f32,
+    v: f32,
+    area: f32,
+}
+
+@group(0) @binding(0) var<storage, read> bounce_points: array<BouncePoint>;
+@group(0) @binding(1) var<storage, read> vals: array<Val>;
+@group(0) @binding(2) var<storage, read> val_count: u32;
+@group(0) @binding(3) var<storage, read_write> candidates: array<Val>;
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let index = id.x;
+    let inside = index < arrayLength(&bounce_points);
+    var position = vec3<f32>(0.0);
+    var normal = vec3<f32>(0.0, 0.0, 1.0);
+    var albedo = vec3<f32>(0.0);
+    var area = 0.0;
+    if inside {
+        let p = bounce_points[index];
+        let s = surface_at(p.triangle, vec2<f32>(p.u, p.v));
+        position = s.position;
+        normal = s.normal;
+        albedo = s.material.diffuse;
+        area = p.area;
+    }
+    var e = vec3<f32>(0.0);
+    let end = val_range_end();
+    for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
+        let n = load_tile(base, local, end);
+        for (var j = 0u; j < n; j++) {
+            let val = tile[j];
+            let geo = val_geometry(position, normal, val.position, val.normal, val.area);
+            e += val.flux * (geo.weight * geo.cos_receiver);
+        }
+        workgroupBarrier();
+    }
+    if !inside {
+        return;
+    }
+    let flux = albedo * e * area;
+    if VAL_BEGIN == 0u {
+        candidates[index] = Val(position, area, normal, 0.0, flux, 0.0);
+    } else {
+        candidates[index].flux += flux;
+    }
+}
