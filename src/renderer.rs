@@ -14,8 +14,8 @@
 //!              ManyLights (lights_shadow_maps, lights_direct)
 //! ```
 
-use crate::gpu::lights::many::ManyLights;
 use crate::gpu::lights::bounce::SecondBounce;
+use crate::gpu::lights::many::ManyLights;
 use crate::gpu::lights::rgbd::RgbdVals;
 use crate::gpu::lights::spot::{DirectLight, SpotVals};
 use crate::gpu::raster::{CameraView, Visibility, VisibilityTarget};

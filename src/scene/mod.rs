@@ -52,8 +52,9 @@ pub use description::{
     InterpolationKernel, IsmSettings, LightBound, LightDescription, LightEntry, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS,
     MAX_COORDINATE_M, MAX_DIRECT_LIGHTS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
     MAX_KMEANS_ITERATIONS, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription, Occlusion, OcclusionRule,
-    OcclusionSetting, PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SecondBounceSettings,
-    SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription, parse_json,
+    OcclusionSetting, PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription,
+    SecondBounceSettings, SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription,
+    parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
