@@ -58,6 +58,9 @@ pub struct Config {
     /// Sparse points each vertex interpolates from; `None`: the scene's
     /// `settings.interpolation_neighbours`.
     pub neighbours: Option<u32>,
+    /// Near-field radius in whole sparse point spacings; `None`: the scene's
+    /// `settings.sparse.near_field`.
+    pub near_field: Option<u32>,
     /// RSM side R: at most R² VALs (only lit texels become VALs).
     pub rsm_resolution: u32,
     pub occlusion: Occlusion,
@@ -148,6 +151,7 @@ impl Config {
 pub struct Sweep {
     pub sparse_points: Option<Vec<u32>>,
     pub neighbours: Option<Vec<u32>>,
+    pub near_field: Option<Vec<u32>>,
     pub rsm_resolution: Option<Vec<u32>>,
     pub occlusion: Option<Vec<Occlusion>>,
     pub glossy: Option<Vec<bool>>,
@@ -168,6 +172,7 @@ pub struct Sweep {
 pub const AXES: &[&str] = &[
     "sparse_points",
     "neighbours",
+    "near_field",
     "rsm_resolution",
     "occlusion",
     "glossy",
@@ -251,6 +256,11 @@ impl Sweep {
                     duplicate(sweep.ism_pull_push_levels.is_some())?;
                     sweep.ism_pull_push_levels = Some(parse_each(&flag, &values, |v| int_in(v, 0, 4))?);
                 }
+                "near_field" => {
+                    duplicate(sweep.near_field.is_some())?;
+                    let max = crate::scene::NEAR_FIELD_RANGE.1 as u32;
+                    sweep.near_field = Some(parse_each(&flag, &values, |v| int_in(v, 0, max))?);
+                }
                 "cluster_count" => {
                     duplicate(sweep.cluster_count.is_some())?;
                     sweep.cluster_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_CLUSTERS))?);
@@ -307,7 +317,10 @@ impl Sweep {
                 .clone()
                 .map_or(vec![base.sparse_points_per_mesh], |v| v.into_iter().map(Some).collect())
             {
-                for &neighbours in &neighbours_values {
+                for (&neighbours, near_field) in neighbours_values
+                    .iter()
+                    .flat_map(|k| opts(&self.near_field, base.near_field).into_iter().map(move |n| (k, n)))
+                {
                     for &rsm in &one(&self.rsm_resolution, base.rsm_resolution) {
                         for &glossy in &one(&self.glossy, base.glossy) {
                             for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
@@ -316,6 +329,7 @@ impl Sweep {
                                         let c = Config {
                                             sparse_points_per_mesh: sparse,
                                             neighbours,
+                                            near_field,
                                             rsm_resolution: rsm,
                                             occlusion,
                                             glossy,
@@ -345,6 +359,9 @@ impl Sweep {
         }
         for &v in self.neighbours.iter().flatten() {
             push(Config { neighbours: Some(v), ..*base });
+        }
+        for &v in self.near_field.iter().flatten() {
+            push(Config { near_field: Some(v), ..*base });
         }
         for &v in self.rsm_resolution.iter().flatten() {
             push(Config { rsm_resolution: v, ..*base });
@@ -503,6 +520,7 @@ impl BenchOptions {
         let mut base = Config {
             sparse_points_per_mesh: None,
             neighbours: None,
+            near_field: None,
             rsm_resolution: scene.settings.rsm_resolution,
             occlusion: scene.settings.occlusion,
             glossy: scene.settings.glossy,
@@ -623,7 +641,7 @@ pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and textur
      overhead not counted); the reference passes' buffers are released before";
 
 /// What a renderer is built for: sparse points per mesh, RSM resolution, glossy.
-type RendererKey = (Option<u32>, Option<u32>, u32, bool);
+type RendererKey = (Option<u32>, Option<u32>, Option<u32>, u32, bool);
 
 /// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
 /// `options.out`. `progress` is told each configuration as it starts.
@@ -754,7 +772,7 @@ fn run_job(
     // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
     let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
     for c in &job.configs {
-        let key = (c.sparse_points_per_mesh, c.neighbours, c.rsm_resolution, c.glossy);
+        let key = (c.sparse_points_per_mesh, c.neighbours, c.near_field, c.rsm_resolution, c.glossy);
         match groups.iter_mut().find(|(k, _)| *k == key) {
             Some((_, g)) => g.push(*c),
             None => groups.push((key, vec![*c])),
@@ -762,7 +780,7 @@ fn run_job(
     }
     let mut scenes: HashMap<(Option<u32>, Option<u32>), Scene> = HashMap::new();
     let mut base_scene = None;
-    for ((sparse, neighbours, rsm, glossy), group) in groups {
+    for ((sparse, neighbours, near_field, rsm, glossy), group) in groups {
         let mut scene = match scenes.get(&(sparse, neighbours)) {
             Some(s) => s.clone(),
             None => {
@@ -780,6 +798,9 @@ fn run_job(
         };
         scene.settings.rsm_resolution = rsm;
         scene.settings.glossy = glossy;
+        if let Some(n) = near_field {
+            scene.settings.sparse.near_field = n as f32;
+        }
         scene.settings.occlusion = group[0].occlusion;
         base_scene.get_or_insert_with(|| scene.clone());
         let mut renderer = Renderer::new(gpu, &scene)?;
@@ -870,8 +891,9 @@ fn run_job(
 pub fn describe(c: &Config) -> String {
     let sparse = c.sparse_points_per_mesh.map_or("scene".to_owned(), |n| n.to_string());
     let neighbours = c.neighbours.map_or(String::new(), |k| format!(", {k} neighbours"));
+    let near = c.near_field.map_or(String::new(), |n| format!(", near field {n}"));
     format!(
-        "sparse/mesh {sparse}{neighbours}, R {}, occlusion {}, glossy {}, {}x{}",
+        "sparse/mesh {sparse}{neighbours}{near}, R {}, occlusion {}, glossy {}, {}x{}",
         c.rsm_resolution,
         match c.occlusion {
             Occlusion::Off => "off",
@@ -972,6 +994,7 @@ pub fn csv(results: &BenchResults) -> String {
         "cluster_resolution",
         "cluster_soft",
         "cluster_maps",
+        "near_field",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -1025,6 +1048,7 @@ pub fn csv(results: &BenchResults) -> String {
             ism(o.shadow_map_resolution),
             o.soft.map_or(String::new(), |s| soft_name(s).to_owned()),
             o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
+            ism(c.near_field),
         ]);
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
@@ -1043,6 +1067,7 @@ mod tests {
     const BASE: Config = Config {
         sparse_points_per_mesh: None,
         neighbours: None,
+        near_field: None,
         rsm_resolution: 64,
         occlusion: Occlusion::Off,
         glossy: true,
@@ -1084,6 +1109,7 @@ mod tests {
             ("resolution=64,", "--sweep resolution: empty value"),
             ("speed=1", "--sweep speed: unknown axis"),
             ("neighbours=4,17", "--sweep neighbours: `17`: must be in 1..=16"),
+            ("near_field=0,9", "--sweep near_field: `9`: must be in 0..=8"),
             ("sparse_points", "--sweep: expected AXIS=V1,V2"),
             ("ism_resolution=48", "--sweep ism_resolution: `48`: must be a power of two in 16..=512"),
             ("ism_count=0", "--sweep ism_count: `0`: must be in 1..=4096"),
@@ -1114,6 +1140,19 @@ mod tests {
         let k: Vec<Option<u32>> = c.iter().map(|c| c.neighbours).collect();
         assert_eq!(k, [None, Some(4), Some(8), Some(16)]);
         assert_eq!(s.configs(&BASE, true).len(), 3, "the grid replaces the base's count");
+    }
+
+    /// The near-field axis: one configuration per radius, and in the grid one per radius for
+    /// every other combination.
+    #[test]
+    fn near_field_axis_measures_each_radius() {
+        let s = Sweep::parse(&args(&["near_field=0,4"])).unwrap();
+        let n: Vec<Option<u32>> = s.configs(&BASE, false).iter().map(|c| c.near_field).collect();
+        assert_eq!(n, [None, Some(0), Some(4)]);
+        let s = Sweep::parse(&args(&["near_field=0,4", "neighbours=4,8"])).unwrap();
+        let grid = s.configs(&BASE, true);
+        assert_eq!(grid.len(), 4);
+        assert!(grid.iter().any(|c| c.near_field == Some(4) && c.neighbours == Some(8)));
     }
 
     /// An ISM axis measures the `ism` mode at each value; in the grid, ISM values apply only to

@@ -67,6 +67,7 @@ pub fn jobs(description: &SceneDescription, scene: &Scene, quick: bool) -> Vec<J
                         configs.push(Config {
                             sparse_points_per_mesh: Some((total / meshes).max(1)),
                             neighbours: None,
+                            near_field: None,
                             rsm_resolution,
                             occlusion,
                             glossy,
@@ -165,6 +166,7 @@ mod tests {
         let config = Config {
             sparse_points_per_mesh: Some(341),
             neighbours: None,
+            near_field: None,
             rsm_resolution: 256,
             occlusion: Occlusion::Disks,
             glossy: true,
