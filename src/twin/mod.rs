@@ -408,17 +408,17 @@ pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: 
 
 /// The sparse method's near-field radiance at a pixel: every VAL through §3 scaled by
 /// `near_field_weight(distance, near_radius)` (the part [`gather_far_field`] leaves out).
-pub fn shade_near_field(
+pub fn shade_near_field<'a>(
     p: Vec3,
     n: Vec3,
     surface: &Material,
     eye: Vec3,
-    vals: &[Val],
+    vals: impl IntoIterator<Item = &'a Val>,
     glossy: bool,
     near_radius: f32,
 ) -> Vec3 {
     let w_o = view_direction(p, n, eye);
-    vals.iter()
+    vals.into_iter()
         .map(|val| {
             val_radiance(p, n, surface, w_o, val, glossy) * near_field_weight(val.position.distance(p), near_radius)
         })
@@ -430,11 +430,16 @@ pub fn shade_near_field(
 /// term every brute-force and exact-visibility pixel sums over its (visible) VALs.
 pub fn val_radiance(p: Vec3, n: Vec3, surface: &Material, w_o: Vec3, val: &Val, glossy: bool) -> Vec3 {
     let geo = val_geometry(p, n, val.position, val.normal, val.area);
-    let e = val.flux * (geo.weight * geo.cos_receiver);
+    reflected_radiance(n, surface, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver), glossy)
+}
+
+/// Radiance toward `w_o` that irradiance `e` (W/m², RGB) arriving from unit `direction`
+/// reflects at a receiver of normal `n`: §3's diffuse term plus, when `glossy`, the Phong term.
+pub fn reflected_radiance(n: Vec3, surface: &Material, w_o: Vec3, direction: Vec3, e: Vec3, glossy: bool) -> Vec3 {
     let mut l = surface.diffuse / PI * e;
     if glossy {
         let spec = surface.specular * phong_normalisation(surface.exponent);
-        l += spec * phong_lobe(mirror(geo.direction, n).dot(w_o), surface.exponent) * e;
+        l += spec * phong_lobe(mirror(direction, n).dot(w_o), surface.exponent) * e;
     }
     l
 }

@@ -27,11 +27,7 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
-            let e = val.flux * (geo.weight * geo.cos_receiver);
-            l += s.material.diffuse / PI * e;
-            if glossy {
-                l += spec * phong_lobe(dot(mirror(geo.direction, s.normal), w_o), s.material.exponent) * e;
-            }
+            l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver), glossy);
         }
         workgroupBarrier();
     }

@@ -65,11 +65,7 @@ fn exact(id: vec2<u32>, glossy: bool) {
                 break;
             }
             if !ray.hit {
-                let e = val.flux * (f * f32(VAL_STRIDE));
-                l += s.material.diffuse / PI * e;
-                if glossy {
-                    l += spec * phong_lobe(dot(mirror(geo.direction, s.normal), w_o), s.material.exponent) * e;
-                }
+                l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * (f * f32(VAL_STRIDE)), glossy);
             }
         }
         j += 1u;

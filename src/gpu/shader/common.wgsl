@@ -129,6 +129,17 @@ fn phong_normalisation(k: f32) -> f32 {
     return (k + 2.0) / (2.0 * PI);
 }
 
+// `twin::reflected_radiance`: what irradiance `e` arriving from unit `direction` reflects at `s`
+// toward `w_o`, diffuse plus, when `glossy`, the Phong lobe. `spec` is the material's
+// `specular * phong_normalisation(exponent)`, computed once per receiver by the caller.
+fn reflected_radiance(s: Surface, spec: vec3<f32>, w_o: vec3<f32>, direction: vec3<f32>, e: vec3<f32>, glossy: bool) -> vec3<f32> {
+    var l = s.material.diffuse / PI * e;
+    if glossy {
+        l += spec * phong_lobe(dot(mirror(direction, s.normal), w_o), s.material.exponent) * e;
+    }
+    return l;
+}
+
 fn val_geometry(x: vec3<f32>, n_x: vec3<f32>, val_position: vec3<f32>, val_normal: vec3<f32>, val_area: f32) -> ValGeometry {
     let v = val_position - x;
     let d2 = dot(v, v);

@@ -46,11 +46,7 @@ fn near_field(s: Surface, glossy: bool) -> vec3<f32> {
                 continue;
             }
             let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
-            let e = val.flux * (geo.weight * geo.cos_receiver * weight);
-            l += s.material.diffuse / PI * e;
-            if glossy {
-                l += spec * phong_lobe(dot(mirror(geo.direction, s.normal), w_o), s.material.exponent) * e;
-            }
+            l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver * weight), glossy);
         }
     }
     return l;
