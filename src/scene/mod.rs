@@ -569,14 +569,7 @@ impl Scene {
             .iter()
             .filter(|m| !m.sparse.is_empty())
             .map(|m| {
-                let area: f64 = m
-                    .triangles
-                    .iter()
-                    .map(|t| {
-                        let [a, b, c] = t.map(|v| m.model_to_world.transform_point3(m.positions[v as usize]));
-                        f64::from((b - a).cross(c - a).length()) / 2.0
-                    })
-                    .sum();
+                let area = surface_area(&m.placed(m.model_to_world).positions(), &m.triangles);
                 (area / m.sparse.len() as f64).sqrt() as f32
             })
             .fold(0.0, f32::max)

@@ -6,7 +6,7 @@
 
 use glam::{IVec3, Vec3};
 
-use super::{Val, near_field_weight, val_radiance, view_direction};
+use super::Val;
 use crate::scene::Material;
 
 /// Fewest and most buckets: the scan's workgroup (64) splits them into runs, and the most keeps
@@ -100,12 +100,7 @@ impl ValGrid {
     /// The near field at a pixel (`near_field_shade.wgsl`): [`super::shade_near_field`] over
     /// the buckets around `p` only.
     pub fn shade(&self, p: Vec3, n: Vec3, surface: &Material, eye: Vec3, glossy: bool) -> Vec3 {
-        let w_o = view_direction(p, n, eye);
-        self.near_vals(p)
-            .map(|v| {
-                val_radiance(p, n, surface, w_o, v, glossy) * near_field_weight(v.position.distance(p), self.radius)
-            })
-            .sum()
+        super::shade_near_field(p, n, surface, eye, self.near_vals(p), glossy, self.radius)
     }
 }
 
