@@ -406,13 +406,16 @@ pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: 
     vals.iter().map(|val| val_radiance(p, n, surface, w_o, val, glossy)).sum()
 }
 
-/// The sparse method's near-field radiance at a pixel: every VAL through §3 scaled by
-/// `near_field_weight(distance, near_radius)` (the part [`gather_far_field`] leaves out).
+/// The sparse method's near-field radiance at a pixel (`p`, `n`): every VAL through §3 scaled
+/// by `near_field_weight(distance to centre, near_radius)`, the part [`gather_far_field`] left
+/// out at the sparse points the pixel interpolates, whose weighted mean position is `centre`
+/// ([`near_field::vertex_centre`] at the pixel's corners, interpolated).
 pub fn shade_near_field<'a>(
     p: Vec3,
     n: Vec3,
     surface: &Material,
     eye: Vec3,
+    centre: Vec3,
     vals: impl IntoIterator<Item = &'a Val>,
     glossy: bool,
     near_radius: f32,
@@ -420,7 +423,8 @@ pub fn shade_near_field<'a>(
     let w_o = view_direction(p, n, eye);
     vals.into_iter()
         .map(|val| {
-            val_radiance(p, n, surface, w_o, val, glossy) * near_field_weight(val.position.distance(p), near_radius)
+            val_radiance(p, n, surface, w_o, val, glossy)
+                * near_field_weight(val.position.distance(centre), near_radius)
         })
         .sum()
 }

@@ -7,7 +7,7 @@
 use glam::{IVec3, Vec3};
 
 use super::Val;
-use crate::scene::Material;
+use crate::scene::{InterpolationKernel, Material};
 
 /// Fewest and most buckets: the scan's workgroup (64) splits them into runs, and the most keeps
 /// each run (2^20 / 64 = 16,384 buckets, two loops) under llvmpipe's loop limit.
@@ -35,6 +35,23 @@ pub fn cell_of(p: Vec3, cell: f32) -> IVec3 {
 pub fn bucket_of(c: IVec3, buckets: u32) -> u32 {
     let u = c.as_uvec3();
     (u.x.wrapping_mul(73_856_093) ^ u.y.wrapping_mul(19_349_663) ^ u.z.wrapping_mul(83_492_791)) & (buckets - 1)
+}
+
+/// A vertex's near-field centre (`interpolate.wgsl`'s `centres`): the mean of its sparse
+/// points' positions with the weights its interpolation gives them
+/// ([`super::interpolation_weights`]); the vertex's own position when it has none. The near
+/// field splits a VAL's light at a pixel by the VAL's distance to this point (interpolated over
+/// the pixel's triangle), so that what a pixel adds is, to first order in the points' spread,
+/// what its sparse points left out.
+pub fn vertex_centre(kernel: InterpolationKernel, position: Vec3, normal: Vec3, neighbours: &[(Vec3, Vec3)]) -> Vec3 {
+    let offsets: Vec<Vec3> = neighbours.iter().map(|(p, _)| *p - position).collect();
+    let normals: Vec<Vec3> = neighbours.iter().map(|(_, n)| *n).collect();
+    let w = super::interpolation_weights(kernel, normal, &offsets, &normals);
+    let total: f32 = w.iter().sum();
+    if total <= 0.0 {
+        return position;
+    }
+    neighbours.iter().zip(&w).map(|((p, _), w)| *p * (w / total)).sum()
 }
 
 /// The VALs sorted into hashed buckets.
@@ -98,9 +115,9 @@ impl ValGrid {
     }
 
     /// The near field at a pixel (`near_field_shade.wgsl`): [`super::shade_near_field`] over
-    /// the buckets around `p` only.
-    pub fn shade(&self, p: Vec3, n: Vec3, surface: &Material, eye: Vec3, glossy: bool) -> Vec3 {
-        super::shade_near_field(p, n, surface, eye, self.near_vals(p), glossy, self.radius)
+    /// the buckets around its `centre` only.
+    pub fn shade(&self, p: Vec3, n: Vec3, surface: &Material, eye: Vec3, centre: Vec3, glossy: bool) -> Vec3 {
+        super::shade_near_field(p, n, surface, eye, centre, self.near_vals(centre), glossy, self.radius)
     }
 }
 
@@ -154,12 +171,37 @@ mod tests {
                 let p = Vec3::new(rng.random(), rng.random(), rng.random()) * 4.0 - 2.0;
                 let n = Vec3::new(rng.random::<f32>() - 0.5, -1.0, rng.random::<f32>() - 0.5).normalize();
                 let eye = Vec3::new(0.0, -3.0, 0.0);
-                let all = shade_near_field(p, n, &surface, eye, &vals, true, grid.radius);
-                let near = grid.shade(p, n, &surface, eye, true);
+                // The centre up to a third of the radius away from the pixel, as at a corner.
+                let centre = p + (Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5) * 0.2;
+                let all = shade_near_field(p, n, &surface, eye, centre, &vals, true, grid.radius);
+                let near = grid.shade(p, n, &surface, eye, centre, true);
                 assert!((all - near).abs().max_element() <= 1e-4 * all.max_element() + 1e-12, "{all} vs {near}");
                 lit += usize::from(all.max_element() > 0.0);
             }
             assert!(lit > 200, "only {lit} of 300 receivers had a VAL within the radius");
+        }
+    }
+
+    /// The centre is the interpolation's weighted mean of the neighbours: on a flat wall with
+    /// neighbours placed symmetrically about the vertex it is the vertex; with every neighbour on
+    /// one side (a corner) it moves to that side; facing-away neighbours weigh nothing; without
+    /// neighbours it is the vertex.
+    #[test]
+    fn vertex_centre_is_where_the_interpolation_takes_its_light() {
+        let (v, n) = (Vec3::new(1.0, 2.0, 0.0), Vec3::Z);
+        for kernel in [InterpolationKernel::Paper, InterpolationKernel::Smooth] {
+            // Two rings, so that the inner one weighs more than nothing (d_max is the outer's).
+            let ring = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y];
+            let symmetric: Vec<(Vec3, Vec3)> =
+                ring.iter().chain(&ring.map(|o| 2.0 * o)).map(|o| (v + 0.1 * *o, n)).collect();
+            assert!(vertex_centre(kernel, v, n, &symmetric).distance(v) < 1e-6);
+            let one_side = [(v + Vec3::new(0.1, 0.0, 0.0), n), (v + Vec3::new(0.2, 0.05, 0.0), n)];
+            let c = vertex_centre(kernel, v, n, &one_side);
+            assert!(c.x > v.x + 0.09 && c.x < v.x + 0.2, "{kernel:?}: {c}");
+            let mut away = symmetric.to_vec();
+            away.push((v + Vec3::new(0.0, 0.0, 0.05), -Vec3::Z));
+            assert!(vertex_centre(kernel, v, n, &away).distance(v) < 1e-6, "{kernel:?}");
+            assert_eq!(vertex_centre(kernel, v, n, &[]), v);
         }
     }
 

@@ -234,8 +234,18 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
     assert_far_field_gather_matches_twin(flat, &mid, eye, &vals, radius);
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let sparse = sparse_shading_twin(flat, &hits, &mid, eye);
-    let near =
-        super::per_hit(flat, &hits, |p, n, surface| twin::shade_near_field(p, n, surface, eye, &vals, true, radius));
+    let centres = vertex_centres(flat, scene.settings.sparse.kernel);
+    let near: Vec<Option<Vec3>> = hits
+        .iter()
+        .map(|hit| {
+            hit.map(|h| {
+                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+                let c = [0, 1, 2].map(|k| centres[flat.indices[3 * h.triangle as usize + k] as usize]);
+                let centre = twin::barycentric(h.barycentrics, c[0], c[1], c[2]);
+                twin::shade_near_field(p, n, &surface, eye, centre, &vals, true, radius)
+            })
+        })
+        .collect();
     let mut most_near = 0;
     if rsm_resolution.is_some() {
         for hit in hits.iter().flatten() {
@@ -254,6 +264,26 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
             assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("sparse + near-field pixel {i}"));
         }
     }
+}
+
+/// Every vertex's near-field centre (`twin::near_field::vertex_centre` over its sparse
+/// neighbours, as the GPU's `centres` takes them).
+fn vertex_centres(flat: &relume::gpu::scene::FlatScene, kernel: relume::scene::InterpolationKernel) -> Vec<Vec3> {
+    let k = flat.neighbours as usize;
+    flat.vertices
+        .iter()
+        .enumerate()
+        .map(|(v, vertex)| {
+            let neighbours: Vec<(Vec3, Vec3)> = flat.vertex_neighbours[v * k..(v + 1) * k]
+                .iter()
+                .take_while(|&&i| i != u32::MAX)
+                .map(|&i| {
+                    (flat.sparse_points[i as usize].position.into(), flat.sparse_points[i as usize].normal.into())
+                })
+                .collect();
+            twin::near_field::vertex_centre(kernel, vertex.position.into(), vertex.normal.into(), &neighbours)
+        })
+        .collect()
 }
 
 #[test]

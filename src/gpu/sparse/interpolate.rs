@@ -34,8 +34,17 @@ pub const PASS: PassDesc = PassDesc {
         read_write("vertex_diffuse"),
         read("sparse_glossy"),
         read_write("vertex_glossy"),
+        read_write("vertex_centres"),
     ],
-    entries: &[Entry::first("main", 4), Entry::first("main_glossy", 6)],
+    entries: &[
+        Entry::first("main", 4),
+        Entry::first("main_glossy", 6),
+        Entry {
+            name: "centres",
+            bindings: 7,
+            except: &["sparse_diffuse", "vertex_diffuse", "sparse_glossy", "vertex_glossy"],
+        },
+    ],
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
         let body = body(crate::scene::DEFAULT_NEIGHBOURS, InterpolationKernel::default(), LightBound::default());

@@ -4,7 +4,10 @@
 // (1 - (d / d_max)^2)^2 * facing(n_v, n_x) * plane factor (`facing` is the paper's
 // clamp(dot(n_v, n_x), 0, 1) with cosines up to FACING_EPSILON taken as 0). When BOUNDED, the
 // vertex's light carries the largest bound of its neighbours of positive weight, else 0
-// (unbounded). NEIGHBOURS, SMOOTH_KERNEL, BOUNDED, PLANE_FALLOFF and FACING_EPSILON are prepended
+// (unbounded). With the near field on, `centres` writes each vertex's near-field centre: the
+// mean of its neighbours' positions with the same weights (`twin::near_field::vertex_centre`),
+// so that the per-pixel near field leaves out of a pixel what its sparse points left in.
+// NEIGHBOURS, SMOOTH_KERNEL, BOUNDED, PLANE_FALLOFF and FACING_EPSILON are prepended
 // (`interpolate::body`). Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`.
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
@@ -13,6 +16,8 @@
 @group(0) @binding(3) var<storage, read_write> vertex_diffuse: array<PointLight>;
 @group(0) @binding(4) var<storage, read> sparse_glossy: array<PointLight>;
 @group(0) @binding(5) var<storage, read_write> vertex_glossy: array<PointLight>;
+// Only with the near field (`centres`): per vertex, the weighted mean of its neighbours' positions.
+@group(0) @binding(6) var<storage, read_write> vertex_centres: array<vec4<f32>>;
 
 // `twin::paper_weight` and `twin::smooth_weight`.
 fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
@@ -136,4 +141,22 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
     let nb = neighbourhood(id.x);
     vertex_diffuse[id.x] = interpolate_diffuse(nb);
     vertex_glossy[id.x] = interpolate_glossy(nb);
+}
+
+// The near field's centre of each vertex (`twin::near_field::vertex_centre`): where its
+// neighbours are, weighted as the interpolation weighs them; the vertex itself without any.
+@compute @workgroup_size(WORKGROUP_X)
+fn centres(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.vertex_count {
+        return;
+    }
+    let nb = neighbourhood(id.x);
+    var c = vertices[id.x].position;
+    if nb.total > 0.0 {
+        c = vec3<f32>(0.0);
+        for (var j = 0u; j < nb.count; j++) {
+            c += sparse_points[nb.ids[j]].position * (nb.weights[j] / nb.total);
+        }
+    }
+    vertex_centres[id.x] = vec4<f32>(c, 0.0);
 }

@@ -59,20 +59,15 @@ impl SparseMethod {
             Some(Mode::Groups(g)) => Some(g.table().groups),
             _ => None,
         };
+        let interpolate_body = interpolate::body(scene.flat.neighbours, settings.kernel, settings.bound);
         Ok(Self {
             gather: Gather::new(gpu, scene, glossy, groups, settings.near_radius)?,
             visibility,
             renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy)?,
-            interpolate: Kernels::lobes(
-                gpu,
-                scene,
-                &interpolate::PASS,
-                &interpolate::body(scene.flat.neighbours, settings.kernel, settings.bound),
-                glossy,
-            )?,
+            interpolate: Kernels::lobes(gpu, scene, &interpolate::PASS, &interpolate_body, glossy)?,
             shade: Kernels::lobes(gpu, scene, &shade::PASS, shade::WGSL, glossy)?,
             near_field: (settings.near_radius > 0.0)
-                .then(|| NearField::new(gpu, scene, glossy, settings.near_radius))
+                .then(|| NearField::new(gpu, scene, glossy, settings.near_radius, &interpolate_body))
                 .transpose()?,
             gathered: Lobes::new::<RawGathered>(gpu, "gather.gathered", n, glossy)?,
             sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy)?,

@@ -5,9 +5,18 @@
 //! Rust twins: `twin::near_field::ValGrid` (the grid and the per-pixel sum),
 //! `twin::shade_near_field` (the same sum over every VAL).
 //!
-//! Two stages: `near_field_grid` (count, scan, scatter) and `near_field` (per pixel, in VAL
-//! ranges on CPU adapters, like the brute force: [`Kernels::val_ranges`]).
+//! The share is split at each receiver's *near-field centre*, not at the receiver: a sparse
+//! point's centre is itself; a vertex's is the mean of its sparse points' positions weighted as
+//! its interpolation weighs them (`interpolate.wgsl`'s `centres`, twin
+//! `twin::near_field::vertex_centre`), and a pixel's is its triangle's corners' centres
+//! interpolated. A VAL the sparse points behind a pixel left out is then the VAL the pixel adds,
+//! also at corners, where all of a pixel's sparse points lie on one side of it.
+//!
+//! Two stages: `near_field_grid` (the vertices' centres, then count, scan, scatter) and
+//! `near_field` (per pixel, in VAL ranges on CPU adapters, like the brute force:
+//! [`Kernels::val_ranges`]).
 
+use super::interpolate;
 use crate::gpu::pass::{Entry, Kernel, Kernels, PassDesc, buffer, module_from_source, read, read_write, texture, view};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
@@ -62,8 +71,9 @@ pub const SHADE: PassDesc = PassDesc {
         read("grid_counts"),
         read("grid_starts"),
         read("grid_vals"),
+        read("vertex_centres"),
     ],
-    entries: &[Entry::first("main", 5), Entry::first("main_glossy", 5)],
+    entries: &[Entry::first("main", 6), Entry::first("main_glossy", 6)],
     workgroup: IMAGE_TILE,
     default_source: |textured| SHADE.source(&format!("{}\n{SHADE_WGSL}", head(0.25)), textured),
 };
@@ -97,6 +107,10 @@ impl GridBuffers {
 
 /// The near field's kernels and grid.
 pub struct NearField {
+    /// `interpolate.wgsl`'s `centres`.
+    centres: Kernel,
+    /// `array<vec4<f32>>`, one per vertex: its near-field centre.
+    vertex_centres: wgpu::Buffer,
     count: Kernel,
     scan: Kernel,
     scatter: Kernel,
@@ -105,9 +119,21 @@ pub struct NearField {
 }
 
 impl NearField {
-    /// The near field at `radius` (m, > 0) for a scene that is `glossy` or not.
-    pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool, radius: f32) -> Result<Self, GpuError> {
+    /// The near field at `radius` (m, > 0) for a scene that is `glossy` or not, whose
+    /// interpolation pass is `interpolate_body` ([`interpolate::body`]: the centres weigh the
+    /// sparse points as it does).
+    pub fn new(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        glossy: bool,
+        radius: f32,
+        interpolate_body: &str,
+    ) -> Result<Self, GpuError> {
         let textured = scene.textured();
+        let desc = &interpolate::PASS;
+        let module = module_from_source(gpu, desc.label, desc.source(interpolate_body, textured))?;
+        let centres = Kernel::build(gpu, scene, desc, &module, desc.entry("centres"), &[], desc.workgroup)?;
+        let vertices = scene.flat.vertices.len().max(1);
         let head = head(radius);
         let module = module_from_source(gpu, GRID.label, GRID.source(&format!("{head}\n{GRID_WGSL}"), textured))?;
         let kernel = |name: &str| Kernel::build(gpu, scene, &GRID, &module, GRID.entry(name), &[], GRID.workgroup);
@@ -115,6 +141,8 @@ impl NearField {
         // One loop iteration per near VAL (the weight and the bucket loops are a few more).
         let shade = Kernels::val_ranges(gpu, scene, &SHADE, source, SHADE.lobe_entry(glossy), SHADE.workgroup, 1)?;
         Ok(Self {
+            centres,
+            vertex_centres: gpu.storage_buffer_sized::<[f32; 4]>("near_field.vertex_centres", vertices)?,
             count: kernel("grid_count")?,
             scan: kernel("grid_scan")?,
             scatter: kernel("grid_scatter")?,
@@ -135,8 +163,8 @@ impl NearField {
         [GRID_STAGE, SHADE_STAGE]
     }
 
-    /// Sort the frame's VALs into the grid, then add the near field to every covered pixel of
-    /// the camera's `indirect`.
+    /// Place every vertex's centre and sort the frame's VALs into the grid, then add the near
+    /// field to every covered pixel of the camera's `indirect`.
     pub fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         let (scene, g) = (frame.scene, &self.grid);
         let (vals, val_count) = (|| buffer("vals", &frame.vals.buffer), || buffer("val_count", &frame.vals.count));
@@ -145,13 +173,22 @@ impl NearField {
         let count = self.count.bind(gpu, &[vals(), val_count(), counts(), starts(), slots()]);
         let scan = self.scan.bind(gpu, &[counts(), starts()]);
         let scatter = self.scatter.bind(gpu, &[vals(), val_count(), starts(), slots(), buffer("grid_vals", &g.vals)]);
+        let centres = self.centres.bind(
+            gpu,
+            &[
+                buffer("sparse_points", &scene.sparse_points),
+                buffer("vertex_neighbours", &scene.vertex_neighbours),
+                buffer("vertex_centres", &self.vertex_centres),
+            ],
+        );
         let n = frame.vals.capacity.min(g.capacity);
         rec.stage(GRID_STAGE, |e, s| {
             e.clear_buffer(&g.counts, 0, None);
-            let part = |i| s.as_ref().map(|s| s.compute_part(i, 3));
-            self.count.dispatch(e, &count, scene, [n, 1, 1], part(0));
-            self.scan.dispatch(e, &scan, scene, [WORKGROUP_SIZE, 1, 1], part(1));
-            self.scatter.dispatch(e, &scatter, scene, [n, 1, 1], part(2));
+            let part = |i| s.as_ref().map(|s| s.compute_part(i, 4));
+            self.centres.dispatch(e, &centres, scene, [scene.flat.vertex_count(), 1, 1], part(0));
+            self.count.dispatch(e, &count, scene, [n, 1, 1], part(1));
+            self.scan.dispatch(e, &scan, scene, [WORKGROUP_SIZE, 1, 1], part(2));
+            self.scatter.dispatch(e, &scatter, scene, [n, 1, 1], part(3));
         })?;
         let camera = frame.camera;
         let resources = [
@@ -160,6 +197,7 @@ impl NearField {
             buffer("grid_counts", &g.counts),
             buffer("grid_starts", &g.starts),
             buffer("grid_vals", &g.vals),
+            buffer("vertex_centres", &self.vertex_centres),
         ];
         let pixels = [camera.view.width, camera.view.height, 1];
         rec.stage(SHADE_STAGE, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))

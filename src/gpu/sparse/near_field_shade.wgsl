@@ -1,5 +1,10 @@
 // The near field per pixel (`near_field.wgsl`): every VAL of the grid's buckets around the
-// pixel, scaled by its near-field share, added to the sparse shading in `indirect`.
+// pixel's near-field centre, scaled by its near-field share, added to the sparse shading in
+// `indirect`. The share is taken at the centre (the pixel's interpolated `vertex_centres`: where
+// the sparse points it interpolates lie, weighted as it weighs them), not at the pixel, so that
+// a VAL the gather left out at those points is the one added here: at a corner, where all of a
+// pixel's sparse points lie on one side of it, the pixel's own distance would count some VALs
+// twice and others not at all. The light is the pixel's own: its position, normal, material.
 // Rust twin: `twin::near_field::ValGrid::shade`.
 
 override VAL_BEGIN: u32 = 0u;
@@ -10,15 +15,16 @@ override VAL_SPAN: u32 = 0xffffffffu;
 @group(0) @binding(2) var<storage, read> grid_counts: array<u32>;
 @group(0) @binding(3) var<storage, read> grid_starts: array<u32>;
 @group(0) @binding(4) var<storage, read> grid_vals: array<Val>;
+@group(0) @binding(5) var<storage, read> vertex_centres: array<vec4<f32>>;
 
-// The radiance the near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order reflect at
-// `s` toward the eye.
-fn near_field(s: Surface, glossy: bool) -> vec3<f32> {
+// The radiance the near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order around
+// `centre` reflect at `s` toward the eye.
+fn near_field(s: Surface, centre: vec3<f32>, glossy: bool) -> vec3<f32> {
     let buckets = arrayLength(&grid_starts);
     let w_o = view_direction(s.position, s.normal, frame.eye);
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
     // The 2 x 2 x 2 cells from the one holding `position - radius` on every axis.
-    let corner = cell_of(s.position - vec3<f32>(NEAR_FIELD_RADIUS));
+    let corner = cell_of(centre - vec3<f32>(NEAR_FIELD_RADIUS));
     var visited: array<u32, 8>;
     var seen = 0u;
     var l = vec3<f32>(0.0);
@@ -41,7 +47,7 @@ fn near_field(s: Surface, glossy: bool) -> vec3<f32> {
         let start = grid_starts[bucket];
         for (var k = first; k < last; k++) {
             let val = grid_vals[start + k];
-            let weight = near_field_weight(distance(val.position, s.position), NEAR_FIELD_RADIUS);
+            let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_RADIUS);
             if weight <= 0.0 {
                 continue;
             }
@@ -61,8 +67,11 @@ fn shade(id: vec2<u32>, glossy: bool) {
         return;
     }
     let i = id.y * frame.width + id.x;
+    let t = 3u * hit.triangle;
+    let c = vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]);
+    let centre = barycentric(hit.barycentrics, vertex_centres[c.x].xyz, vertex_centres[c.y].xyz, vertex_centres[c.z].xyz);
     let before = indirect[i];
-    indirect[i] = vec4<f32>(before.rgb + near_field(surface_at(hit.triangle, hit.barycentrics), glossy), before.a);
+    indirect[i] = vec4<f32>(before.rgb + near_field(surface_at(hit.triangle, hit.barycentrics), centre, glossy), before.a);
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
