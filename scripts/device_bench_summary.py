@@ -90,10 +90,15 @@ def main() -> int:
         shown.add("sweep")
         md += ["", "## Gather vs the FMA kernel (target: >= 50 % of the FMA kernel)", ""]
         md += [f"FMA kernel: {fmt(fma['fma_per_s'])} FMA/s; {fma['vals']} VALs, {fma['sparse_points']} sparse points.", ""]
-        md += ["| tile size | gather ms | pairs/s | pairs/s / FMA/s |", "|---|---|---|---|"]
+        md += [
+            "| lobes | tile size | points per invocation | gather ms | pairs/s | pairs/s / FMA/s |",
+            "|---|---|---|---|---|---|",
+        ]
         for v in fma.get("gather_variants", []):
+            lobes = "diffuse + glossy" if v.get("glossy") else "diffuse"
             md.append(
-                f"| {v['tile_size']} | {fmt(v['gather_ms'])} | {fmt(v['interactions_per_s'])} | {fmt(v['ratio_to_fma'])} |"
+                f"| {lobes} | {v['tile_size']} | {v.get('receivers', 1)} | {fmt(v['gather_ms'])} "
+                f"| {fmt(v['interactions_per_s'])} | {fmt(v['ratio_to_fma'])} |"
             )
 
     brute = by_name.get("sparse_vs_brute")

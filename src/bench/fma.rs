@@ -34,8 +34,12 @@ pub struct FmaReport {
 
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct GatherVariant {
+    /// The glossy gather (diffuse and Phong lobe) rather than the diffuse one.
+    pub glossy: bool,
     /// VALs per workgroup-memory tile and threads per workgroup (relume's default is 64).
     pub tile_size: u32,
+    /// Sparse points per invocation (relume's default: `gather::receivers_for` the adapter).
+    pub receivers: u32,
     /// Best of `repeats` timed dispatches.
     pub gather_ms: f64,
     /// VAL-receiver interactions per second: VALs x sparse points / time.
@@ -62,12 +66,23 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
     let frame = compare::sparse_frame(gpu, &mut renderer, 16, 16)?;
     let glossy = renderer.glossy();
     let n = renderer.scene.flat.sparse_points.len();
-    let gathered = Lobes::new::<RawGathered>(gpu, "bench.gathered", n, glossy)?;
     let max_size = gpu.device.limits().max_compute_invocations_per_workgroup;
-    let tiles: &[u32] = if quick { &[32, 64] } else { &[32, 64, 128, 256] };
+    // (tile size, points per invocation): the tile sizes with one point each, then the points
+    // per invocation at the default tile; each for the diffuse and (when the scene has glossy
+    // materials) the glossy gather, side by side in one run.
+    let shapes: &[(u32, u32)] = if quick {
+        &[(64, 1), (64, 4)]
+    } else {
+        &[(32, 1), (64, 1), (128, 1), (256, 1), (64, 2), (64, 4), (64, 8), (32, 4)]
+    };
     let mut gather_variants = Vec::new();
-    for &tile_size in tiles.iter().filter(|&&t| t <= max_size) {
-        let mut pass = Gather::with_tile_size(gpu, &renderer.scene, glossy, None, 0.0, tile_size)?;
+    let lobes: &[bool] = if glossy { &[false, true] } else { &[false] };
+    for (&lobe, &(tile_size, receivers)) in lobes.iter().flat_map(|l| shapes.iter().map(move |s| (l, s))) {
+        if tile_size > max_size {
+            continue;
+        }
+        let gathered = Lobes::new::<RawGathered>(gpu, "bench.gathered", n, lobe)?;
+        let mut pass = Gather::variant(gpu, &renderer.scene, lobe, None, 0.0, tile_size, receivers)?;
         pass.fit(gpu, &renderer.scene, renderer.val_capacity())?;
         let mut best = f64::INFINITY;
         // One warm-up dispatch, then the timed ones.
@@ -81,7 +96,9 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
         }
         let interactions_per_s = frame.val_count as f64 * n as f64 / (best * 1e-3);
         gather_variants.push(GatherVariant {
+            glossy: lobe,
             tile_size,
+            receivers,
             gather_ms: best,
             interactions_per_s,
             ratio_to_fma: interactions_per_s / fma_per_s,

@@ -160,6 +160,38 @@ fn gather_takes_every_val_past_the_cpu_loop_limit() {
     assert_gather_matches_twin(&renderer.scene.flat, &mid, renderer.view().eye(), &vals);
 }
 
+/// The gather with 1, 5 and 7 sparse points per invocation (CPU adapters take
+/// `gather::CPU_RECEIVERS`, 8, which every other gather test here runs; 5 and 7 leave the last
+/// invocation's slots partly past the last of the 768 points) against `twin::gather_point`,
+/// both lobes. Same tolerances as the rest of this file.
+#[test]
+fn gather_variants_match_cpu_twin() {
+    use relume::gpu::raw::RawGathered;
+    use relume::gpu::sparse::gather::Gather;
+    use relume::gpu::timing::Recorder;
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let n = renderer.scene.flat.sparse_points.len();
+    assert!(renderer.glossy() && !n.is_multiple_of(5) && !n.is_multiple_of(7), "{n} points");
+    for receivers in [1, 5, 7] {
+        let gathered = relume::gpu::Lobes::new::<RawGathered>(&gpu, "test.gathered", n, true).unwrap();
+        let mut pass = Gather::variant(&gpu, &renderer.scene, true, None, 0.0, 64, receivers).unwrap();
+        pass.fit(&gpu, &renderer.scene, renderer.val_capacity()).unwrap();
+        let mut rec = Recorder::new(&gpu, "test.gather", 1);
+        rec.stage("gather", |e, s| pass.record(&gpu, e, &renderer.scene, &renderer.vals, &gathered, None, s)).unwrap();
+        rec.finish().unwrap();
+        let mid = relume::renderer::SparseIntermediates {
+            gathered_diffuse: gpu.read_buffer(&gathered.diffuse, n).unwrap(),
+            gathered_glossy: gpu.read_buffer(gathered.glossy.as_ref().unwrap(), n).unwrap(),
+            ..Default::default()
+        };
+        assert_gather_matches_twin(&renderer.scene.flat, &mid, renderer.view().eye(), &vals);
+    }
+}
+
 /// The GPU's gathered light (diffuse and glossy irradiance, mean diffuse VAL position) at every
 /// sparse point against `twin::gather_point` over `vals`.
 fn assert_gather_matches_twin(

@@ -22,12 +22,43 @@ pub const WGSL: &str = include_str!("gather.wgsl");
 /// Every VAL reaches every point whole when no group visibility mode runs.
 const NO_GROUPS: &str = "fn val_visibility(point: u32, val: u32) -> f32 {\n    return 1.0;\n}\n";
 
-/// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none), then
-/// `gather.wgsl`.
+/// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none), the
+/// receivers per invocation, then `gather.wgsl`.
 /// `near_radius` (m): the near-field radius whose share the gather leaves out (0: none).
-pub fn body(groups: Option<u32>, near_radius: f32) -> String {
+pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32) -> String {
     let visibility = groups.map_or_else(|| NO_GROUPS.to_owned(), group_wgsl);
-    format!("{VAL_TILES}\n{visibility}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n{WGSL}")
+    let receivers = receivers_wgsl(receivers);
+    format!("{VAL_TILES}\n{visibility}\n{receivers}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n{WGSL}")
+}
+
+/// `RECEIVERS` and `add_to_receivers` (`gather.wgsl`): one VAL added to each of `receivers`
+/// sums, one statement per receiver.
+fn receivers_wgsl(receivers: u32) -> String {
+    let adds: String = (0..receivers)
+        .map(|r| {
+            format!(
+                "    (*sums)[{r}] = add_val((*sums)[{r}], (*receivers)[{r}], first + {r}u, val, val_index, glossy);\n"
+            )
+        })
+        .collect();
+    format!(
+        "const RECEIVERS: u32 = {receivers}u;\n\
+         fn add_to_receivers(sums: ptr<function, array<Sums, RECEIVERS>>, receivers: ptr<function, array<Receiver, RECEIVERS>>, \
+         first: u32, val: Val, val_index: u32, glossy: bool) {{\n{adds}}}\n"
+    )
+}
+
+/// Sparse points per invocation on CPU adapters, measured by the bench's gather variants
+/// (README "Gather variants"); GPUs take one, for parallelism (a frame has only thousands of
+/// points).
+pub const CPU_RECEIVERS: u32 = 8;
+
+/// The most sparse points one invocation may take (the bench's and the tests' range).
+pub const MAX_RECEIVERS: u32 = 8;
+
+/// Sparse points per invocation on `gpu`.
+pub fn receivers_for(gpu: &Gpu) -> u32 {
+    if gpu.is_cpu() { CPU_RECEIVERS } else { 1 }
 }
 
 /// The bindings of [`GROUPED_PASS`]; [`PASS`] has the first five (no group table).
@@ -47,19 +78,21 @@ pub const PASS: PassDesc = PassDesc {
     bindings: BINDINGS.split_at(5).0,
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 5)],
     workgroup: [TILE_SIZE, 1, 1],
-    default_source: |textured| PASS.source(&body(None, 0.0), textured),
+    default_source: |textured| PASS.source(&body(None, 0.0, CPU_RECEIVERS), textured),
 };
 
 /// The gather of a group visibility mode: [`PASS`] plus the group table.
 pub const GROUPED_PASS: PassDesc = PassDesc {
     bindings: BINDINGS,
     entries: &[Entry { name: "main", bindings: 7, except: &["gathered_glossy"] }, Entry::first("main_glossy", 7)],
-    default_source: |textured| GROUPED_PASS.source(&body(Some(64), 0.0), textured),
+    default_source: |textured| GROUPED_PASS.source(&body(Some(64), 0.0, CPU_RECEIVERS), textured),
     ..PASS
 };
 
 pub struct Gather {
     kernels: Kernels,
+    /// Sparse points per invocation.
+    receivers: u32,
 }
 
 impl Gather {
@@ -73,25 +106,29 @@ impl Gather {
         groups: Option<u32>,
         near_radius: f32,
     ) -> Result<Self, GpuError> {
-        Self::with_tile_size(gpu, scene, glossy, groups, near_radius, TILE_SIZE)
+        Self::variant(gpu, scene, glossy, groups, near_radius, TILE_SIZE, receivers_for(gpu))
     }
 
     /// The pass with `tile_size` VALs per tile and threads per workgroup instead of
-    /// [`TILE_SIZE`] (the bench compares them; the device must allow the workgroup size).
-    pub fn with_tile_size(
+    /// [`TILE_SIZE`], and `receivers` (1..=[`MAX_RECEIVERS`]) sparse points per invocation
+    /// instead of [`receivers_for`]'s (the bench compares them; the device must allow the
+    /// workgroup size).
+    pub fn variant(
         gpu: &Gpu,
         scene: &GpuScene,
         glossy: bool,
         groups: Option<u32>,
         near_radius: f32,
         tile_size: u32,
+        receivers: u32,
     ) -> Result<Self, GpuError> {
+        assert!((1..=MAX_RECEIVERS).contains(&receivers), "{receivers} receivers per invocation");
         let workgroup = [tile_size, 1, 1];
         let desc = if groups.is_some() { &GROUPED_PASS } else { &PASS };
-        let source = desc.source_with(&body(groups, near_radius), scene.textured(), workgroup, tile_size);
+        let source = desc.source_with(&body(groups, near_radius, receivers), scene.textured(), workgroup, tile_size);
         let entry = desc.lobe_entry(glossy);
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, workgroup, tile_size)?;
-        Ok(Self { kernels })
+        Ok(Self { kernels, receivers })
     }
 
     /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]).
@@ -122,7 +159,7 @@ impl Gather {
         if let Some(g) = groups {
             resources.extend([buffer("group_of_val", g.group_of_val), buffer("group_visibility", g.visibility)]);
         }
-        let n = scene.flat.sparse_count();
+        let n = scene.flat.sparse_count().div_ceil(self.receivers);
         self.kernels.run(gpu, e, scene, &resources, [n, 1, 1], span);
     }
 }

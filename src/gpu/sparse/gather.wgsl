@@ -13,6 +13,13 @@
 // With the near field on (NEAR_FIELD_RADIUS > 0, prepended), each VAL counts here only with its
 // far-field share `1 - near_field_weight(d)`: the near-field pass applies the rest per pixel.
 //
+// Each invocation gathers at RECEIVERS consecutive sparse points (prepended by `gather.rs`, with
+// `add_to_receivers`, which adds one VAL to each of them written out once per receiver: a loop
+// would count toward llvmpipe's loop limit, and constant indices keep the sums in registers):
+// every VAL it reads from the tile then serves that many points. CPU adapters, whose
+// invocations are SIMD lanes that each read the whole VAL from workgroup memory, run faster
+// with several (the bench's `gather_variants`); GPUs take one, for parallelism.
+//
 // `val_visibility(point, val)` is the fraction of a VAL's light that reaches the point: 1
 // without a group visibility mode (prepended by `gather.rs`), else its group's entry of the
 // table (`gpu/visibility/group.wgsl`).
@@ -33,39 +40,66 @@ struct Sums {
     ws: f32,
 }
 
-fn gather_tiles(index: u32, local: u32, glossy: bool) -> Sums {
-    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+// The point a receiver slot gathers at (a dummy past the last point), its eye direction and
+// that direction's cosine to the normal.
+struct Receiver {
+    point: SparsePoint,
+    w_o: vec3<f32>,
+    cos_o: f32,
+}
+
+fn receiver(index: u32) -> Receiver {
     var p = SparsePoint(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0);
     if index < frame.sparse_count {
         p = sparse_points[index];
     }
     let w_o = view_direction(p.position, p.normal, frame.eye);
+    return Receiver(p, w_o, dot(p.normal, w_o));
+}
+
+// `s` with VAL `val` (the `val_index`-th) added as seen from the receiver `r` (point `index`).
+fn add_val(s: Sums, r: Receiver, index: u32, val: Val, val_index: u32, glossy: bool) -> Sums {
+    var out = s;
+    let p = r.point;
+    let geo = val_geometry(p.position, p.normal, val.position, val.normal, val.area);
+    let far = 1.0 - near_field_weight(distance(val.position, p.position), NEAR_FIELD_RADIUS);
+    let f = geo.weight * geo.cos_receiver * val_visibility(index, val_index) * far;
+    let e_j = val.flux * f;
+    let y = luminance(val.flux) * f;
+    out.e += e_j;
+    let gd = y + GATHER_EPSILON;
+    out.ld += gd * val.position;
+    out.ld2 += gd * val.position * val.position;
+    out.wd += gd;
+    if glossy {
+        // dot(mirror(d, n), w_o) = 2 (n.d)(n.w_o) - d.w_o, with n.d the clamped
+        // `cos_receiver`: where it clamps, `f` is 0 and so is whatever the lobe multiplies.
+        let lobe = phong_lobe(2.0 * geo.cos_receiver * r.cos_o - dot(geo.direction, r.w_o), p.exponent);
+        out.g += e_j * lobe;
+        let gs = y * lobe + GATHER_EPSILON;
+        out.ls += gs * val.position;
+        out.ws += gs;
+    }
+    return out;
+}
+
+// The sums of this dispatch's VALs at points [first, first + RECEIVERS).
+fn gather_tiles(first: u32, local: u32, glossy: bool) -> array<Sums, RECEIVERS> {
+    var sums: array<Sums, RECEIVERS>;
+    var receivers: array<Receiver, RECEIVERS>;
+    for (var r = 0u; r < RECEIVERS; r++) {
+        sums[r] = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+        receivers[r] = receiver(first + r);
+    }
     let end = val_range_end();
     for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
         let n = load_tile(base, local, end);
         for (var j = 0u; j < n; j++) {
-            let val = tile[j];
-            let geo = val_geometry(p.position, p.normal, val.position, val.normal, val.area);
-            let far = 1.0 - near_field_weight(distance(val.position, p.position), NEAR_FIELD_RADIUS);
-            let f = geo.weight * geo.cos_receiver * val_visibility(index, base + j) * far;
-            let e_j = val.flux * f;
-            let y = luminance(val.flux) * f;
-            s.e += e_j;
-            let gd = y + GATHER_EPSILON;
-            s.ld += gd * val.position;
-            s.ld2 += gd * val.position * val.position;
-            s.wd += gd;
-            if glossy {
-                let lobe = phong_lobe(dot(mirror(geo.direction, p.normal), w_o), p.exponent);
-                s.g += e_j * lobe;
-                let gs = y * lobe + GATHER_EPSILON;
-                s.ls += gs * val.position;
-                s.ws += gs;
-            }
+            add_to_receivers(&sums, &receivers, first, tile[j], base + j, glossy);
         }
         workgroupBarrier();
     }
-    return s;
+    return sums;
 }
 
 // Irradiance `e` with the weight sum `w` of the weighted position sums `l` and `l2`, added to
@@ -100,17 +134,27 @@ fn earlier_glossy(i: u32) -> Gathered {
 
 @compute @workgroup_size(WORKGROUP_X)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
-    let s = gather_tiles(id.x, local, false);
-    if id.x < frame.sparse_count {
-        gathered_diffuse[id.x] = merged(earlier_diffuse(id.x), s.e, s.wd, s.ld, s.ld2);
+    let first = id.x * RECEIVERS;
+    let sums = gather_tiles(first, local, false);
+    for (var r = 0u; r < RECEIVERS; r++) {
+        let i = first + r;
+        if i < frame.sparse_count {
+            let s = sums[r];
+            gathered_diffuse[i] = merged(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
+        }
     }
 }
 
 @compute @workgroup_size(WORKGROUP_X)
 fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
-    let s = gather_tiles(id.x, local, true);
-    if id.x < frame.sparse_count {
-        gathered_diffuse[id.x] = merged(earlier_diffuse(id.x), s.e, s.wd, s.ld, s.ld2);
-        gathered_glossy[id.x] = merged(earlier_glossy(id.x), s.g, s.ws, s.ls, vec3<f32>(0.0));
+    let first = id.x * RECEIVERS;
+    let sums = gather_tiles(first, local, true);
+    for (var r = 0u; r < RECEIVERS; r++) {
+        let i = first + r;
+        if i < frame.sparse_count {
+            let s = sums[r];
+            gathered_diffuse[i] = merged(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
+            gathered_glossy[i] = merged(earlier_glossy(i), s.g, s.ws, s.ls, vec3<f32>(0.0));
+        }
     }
 }
