@@ -5,7 +5,9 @@
 //! Bounce points are spread over every mesh by area at load ([`bounce_points`]: triangle +
 //! barycentrics, so they follow moving meshes); each is lit by the first bounce's VALs and
 //! becomes a candidate VAL re-emitting the diffuse part of what it receives
-//! ([`candidate_vals`]: flux `rho_d * E * area`, DESIGN.md §1-3); `count` of them, drawn by flux
+//! ([`candidate_vals`]: flux `rho_d * E * area`, DESIGN.md §1-3; [`grouped_candidate_vals`]
+//! through the first bounce's groups with the sparse method's `clusters` or `ism` mode);
+//! `count` of them, drawn by flux
 //! ([`draw_vals`], the imperfect shadow maps' stratified draw), are the second bounce's VALs,
 //! appended to the frame's so that every later stage runs unchanged.
 
@@ -105,6 +107,36 @@ pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&Trace
                 Val { position: p.position, normal: p.normal, area: p.area, flux: p.albedo * e * p.area }
             },
         )
+        .collect()
+}
+
+/// Each point as a candidate VAL seen through the first bounce's groups (WGSL
+/// `bounce_groups.wgsl`, with the sparse method's `clusters` or `ism` mode): VAL j's
+/// irradiance at point i times its group's entry `visibility[i * groups + group_of_val[j]]`
+/// (the clusters' lookup of the first bounce's maps at the point, `bounce_visibility.wgsl`),
+/// re-emitted as in [`candidate_vals`].
+pub fn grouped_candidate_vals(
+    points: &[BounceSurface],
+    vals: &[Val],
+    group_of_val: &[u32],
+    visibility: &[f32],
+    groups: usize,
+) -> Vec<Val> {
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let row = &visibility[i * groups..(i + 1) * groups];
+            let e: Vec3 = vals
+                .iter()
+                .zip(group_of_val)
+                .map(|(v, &g)| {
+                    let geo = val_geometry(p.position, p.normal, v.position, v.normal, v.area);
+                    v.flux * (geo.weight * geo.cos_receiver * row[(g as usize).min(groups - 1)])
+                })
+                .sum();
+            Val { position: p.position, normal: p.normal, area: p.area, flux: p.albedo * e * p.area }
+        })
         .collect()
 }
 
