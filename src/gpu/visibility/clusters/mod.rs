@@ -5,6 +5,10 @@
 //! atlas), and every (sparse point, cluster) pair a soft-shadow visibility
 //! (`cluster_visibility.wgsl`: PCSS, PCF or hard), which the gather applies to each of the
 //! cluster's VALs. Rust twin: [`twin`].
+//!
+//! The lookup's receivers are the sparse points for the sparse method's mode, and for the
+//! instances other techniques build ([`Receivers`]) the second bounce's points or the camera's
+//! pixels; each instance names its stages ([`StageNames`]) so that two can run in one frame.
 
 pub mod twin;
 
