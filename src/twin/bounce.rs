@@ -221,6 +221,36 @@ mod tests {
         assert!(dark.iter().all(|v| v.flux == Vec3::ZERO));
     }
 
+    /// Through the groups' table: all ones is the unoccluded sum; a group's 0 at a point takes
+    /// exactly its VALs' light from that point and no other's; a fraction scales it.
+    #[test]
+    fn grouped_candidates_follow_the_table() {
+        let val =
+            |x: f32| Val { position: Vec3::new(x, 0.0, 2.0), normal: -Vec3::Z, area: 0.01, flux: Vec3::splat(4.0) };
+        let vals = [val(-0.5), val(0.0), val(0.5)];
+        let point = |x: f32| BounceSurface {
+            position: Vec3::new(x, 0.0, 0.0),
+            normal: Vec3::Z,
+            albedo: Vec3::splat(0.5),
+            area: 0.2,
+        };
+        let points = [point(-1.0), point(1.0)];
+        let groups = [0, 1, 1];
+        let open = candidate_vals(&points, &vals, None);
+        let all = grouped_candidate_vals(&points, &vals, &groups, &[1.0; 4], 2);
+        for (a, o) in all.iter().zip(&open) {
+            assert!((a.flux - o.flux).abs().max_element() < 1e-6 * o.flux.x, "{a:?} vs {o:?}");
+        }
+        // Point 0 sees group 1 at a quarter, point 1 loses group 0.
+        let seen = grouped_candidate_vals(&points, &vals, &groups, &[1.0, 0.25, 0.0, 1.0], 2);
+        let alone = |p: &BounceSurface, v: &[Val]| candidate_vals(std::slice::from_ref(p), v, None)[0].flux;
+        let want0 = alone(&points[0], &vals[..1]) + 0.25 * alone(&points[0], &vals[1..]);
+        let want1 = alone(&points[1], &vals[1..]);
+        assert!((seen[0].flux - want0).abs().max_element() < 1e-6 * want0.x);
+        assert!((seen[1].flux - want1).abs().max_element() < 1e-6 * want1.x);
+        assert!(seen[1].flux.x < open[1].flux.x);
+    }
+
     /// A point facing a VAL receives its irradiance; behind a plate it receives nothing
     /// through the shadow rays, and the same without them.
     #[test]
