@@ -6,10 +6,13 @@
 //! ```text
 //! spot light:  SpotVals (rsm_raster, rsm_vals)  ─┐
 //! RGB-D frame: RgbdVals (rgbd_vals)             ─┴─ VALs
-//! bounces 2:   SecondBounce (bounce2_points, bounce2_vals): appends the second bounce's VALs
+//! bounces 2:   SecondBounce ([bounce2_ism_sampling, bounce2_ism_splat, bounce2_ism_pull_push,
+//!              bounce2_visibility: the first bounce's maps at its points, sparse `ism` or
+//!              `clusters` only], bounce2_points, bounce2_vals): appends the second bounce's VALs
 //! camera:      CameraView (visibility)
 //! indirect:    SparseMethod (gather, [visibility mode], renormalise, interpolate, shade)
-//!              | BruteForce (brute_force) | Exact (exact)
+//!              | BruteForce (brute_force) | BruteForce for brute_force_ism
+//!              (brute_force_ism_sampling, _splat, _pull_push, _visibility, brute_force) | Exact (exact)
 //! direct:      DirectLight (direct), then for the scene's `lights`
 //!              ManyLights (lights_shadow_maps, lights_direct)
 //! ```
@@ -41,6 +44,10 @@ pub enum Method {
     Sparse,
     /// Every VAL at every visible pixel (DESIGN.md §5).
     BruteForce,
+    /// The brute force with each VAL weighted by its group's imperfect-shadow-map lookup at the
+    /// pixel (`settings.ism`): the ISMs' visibility without the sparse interpolation
+    /// (`gpu::references::brute_force`).
+    BruteForceIsm,
     /// Brute force with a shadow ray per pixel and VAL through a BVH (DESIGN.md §5); see
     /// [`Renderer::set_exact_val_stride`].
     Exact,
@@ -105,6 +112,9 @@ pub mod stage {
     /// The second bounce's stages (`settings.bounces: 2`).
     pub const BOUNCE2_POINTS: &str = crate::gpu::lights::bounce::POINTS_STAGE;
     pub const BOUNCE2_VALS: &str = crate::gpu::lights::bounce::DRAW_STAGE;
+    /// The lookup of the first bounce's groups at the bounce points (`visibility` `clusters` or
+    /// `ism`, sparse method), after that instance's grouping and maps (`bounce::STAGES`).
+    pub const BOUNCE2_VISIBILITY: &str = crate::gpu::lights::bounce::VISIBILITY_STAGE;
     pub const VISIBILITY: &str = CameraView::STAGE;
     pub const GATHER: &str = sparse::gather::PASS.label;
     pub const OCCLUSION: &str = visibility::disks::PASS.label;
@@ -121,6 +131,8 @@ pub mod stage {
     pub const INTERPOLATE: &str = sparse::interpolate::PASS.label;
     pub const SHADE: &str = sparse::shade::PASS.label;
     pub const BRUTE_FORCE: &str = references::brute_force::PASS.label;
+    /// `brute_force_ism`'s lookup at the pixels (after its groups and maps).
+    pub const BRUTE_FORCE_ISM_VISIBILITY: &str = references::brute_force::ISM_VISIBILITY_STAGE;
     pub const EXACT: &str = references::exact::PASS.label;
     pub const DIRECT: &str = spot::DIRECT;
 }
@@ -194,6 +206,8 @@ struct Indirect {
     sparse: Option<Built<SparseSettings, SparseMethod>>,
     /// Keyed by `glossy`.
     brute_force: Option<Built<bool, BruteForce>>,
+    /// Keyed by `glossy` and the ISM settings.
+    brute_force_ism: Option<Built<(bool, scene::IsmSettings), BruteForce>>,
     /// Keyed by (`glossy`, VAL stride, placement generation: the BVH is the placed geometry's).
     exact: Option<Built<(bool, u32, u64), Exact>>,
 }
@@ -374,6 +388,7 @@ impl Renderer {
     /// are built again when next asked for.
     pub fn release_reference_passes(&mut self) {
         self.indirect.brute_force = None;
+        self.indirect.brute_force_ism = None;
         self.indirect.exact = None;
     }
 
@@ -585,6 +600,9 @@ impl Renderer {
             (false, _) => None,
             (true, Method::Sparse) => self.indirect.sparse.as_ref().map(|b| &b.technique as &dyn Technique),
             (true, Method::BruteForce) => self.indirect.brute_force.as_ref().map(|b| &b.technique as &dyn Technique),
+            (true, Method::BruteForceIsm) => {
+                self.indirect.brute_force_ism.as_ref().map(|b| &b.technique as &dyn Technique)
+            }
             (true, Method::Exact) => self.indirect.exact.as_ref().map(|b| &b.technique as &dyn Technique),
         };
         let mut list: Vec<&dyn Technique> = Vec::new();
@@ -628,6 +646,20 @@ impl Renderer {
                             .into(),
                     ));
                 }
+                // The sparse method's group visibility mode lights the points through the first
+                // bounce's maps; the brute force (no visibility) and the other modes leave
+                // them unoccluded.
+                // `brute_force_ism` sees them through the imperfect shadow maps, as the sparse
+                // method's `ism` does.
+                let grouped = matches!(self.visibility.mode, scene::Occlusion::Clusters | scene::Occlusion::Ism);
+                let visibility = match method {
+                    Method::Sparse if grouped => Some(self.visibility),
+                    Method::BruteForceIsm => {
+                        Some(VisibilitySettings { mode: scene::Occlusion::Ism, ..self.visibility })
+                    }
+                    _ => None,
+                };
+                b.set_visibility(gpu, scene, visibility)?;
                 b.fit(gpu, scene, capacity)?;
             }
             match method {
@@ -638,8 +670,15 @@ impl Renderer {
                         .fit(gpu, scene, capacity)?;
                 }
                 Method::BruteForce => {
-                    built_for(&mut self.indirect.brute_force, glossy, || BruteForce::new(gpu, scene, glossy))?
-                        .fit(gpu, scene, capacity)?;
+                    built_for(&mut self.indirect.brute_force, glossy, || BruteForce::new(gpu, scene, glossy, None))?
+                        .fit(gpu, scene, capacity, width * height)?;
+                }
+                Method::BruteForceIsm => {
+                    let ism = self.visibility.ism;
+                    built_for(&mut self.indirect.brute_force_ism, (glossy, ism), || {
+                        BruteForce::new(gpu, scene, glossy, Some(&ism))
+                    })?
+                    .fit(gpu, scene, capacity, width * height)?;
                 }
                 Method::Exact => {
                     let (stride, generation) = (self.exact_val_stride, self.placement_generation);
@@ -758,6 +797,11 @@ impl Renderer {
             Some(crate::gpu::visibility::Mode::Groups(g)) => Some(g.as_ref()),
             _ => None,
         }
+    }
+
+    /// `brute_force_ism`'s groups and maps, once a frame of that method was rendered.
+    pub fn brute_force_ism_groups(&self) -> Option<&crate::gpu::visibility::clusters::Clusters> {
+        self.indirect.brute_force_ism.as_ref()?.technique.groups()
     }
 
     /// The sparse technique, once a sparse frame was rendered.

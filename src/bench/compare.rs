@@ -386,6 +386,11 @@ pub struct ExactComparison {
     /// The brute force (no visibility) against the reference (`mode` `brute_force`; its
     /// `visibility_ms` and `gather_ms` 0): what visibility changes, the sparse method aside.
     pub brute_force_vs_exact: ModeVsExact,
+    /// The brute force with every VAL weighted by its group's imperfect-shadow-map lookup at the
+    /// pixel (`brute_force_ism`, the scene's `settings.ism`; `visibility_ms` its ISM stages,
+    /// `gather_ms` its `brute_force` stage): the ISMs' error against exact without the sparse
+    /// interpolation's, beside `modes_vs_exact`'s `ism`.
+    pub brute_force_ism_vs_exact: ModeVsExact,
     /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
     /// with the `sum` and the `product` rule, `clusters` (the scene's `settings.clusters`) and
     /// `ism` (its `settings.ism`).
@@ -509,6 +514,22 @@ fn exact_comparison(
             stages_ms: sparse.timings.stages.clone(),
         });
     }
+    let ism = renderer.render(gpu, Method::BruteForceIsm, w, h)?;
+    if let Some(dir) = images {
+        write_png(&ism.indirect, &dir.join("indirect_brute_force_ism.png"), exposure)?;
+    }
+    let error = indirect_error(&ism.indirect, exact.indirect());
+    let ism_stages: Vec<&str> = ism.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
+    let brute_force_ism_vs_exact = ModeVsExact {
+        mode: "brute_force_ism",
+        rel_rmse: error.rel_rmse,
+        rel_rmse_corrected: exact.corrected_rel_rmse(&ism.indirect),
+        flip_mean: error.flip_mean,
+        energy_ratio: ism.indirect.luminance_sum_and_peak().0 / exact_sum,
+        visibility_ms: ism.timings.total_of(&ism_stages),
+        gather_ms: ism.timings.total_of(&[stage::BRUTE_FORCE]),
+        stages_ms: ism.timings.stages.clone(),
+    };
     Ok(ExactComparison {
         exact_ms: exact.ms(),
         exact_device: exact.device,
@@ -523,6 +544,7 @@ fn exact_comparison(
         exact_traversal: exact.traversal,
         exact_rel_stderr: exact.rel_stderr(),
         brute_force_vs_exact,
+        brute_force_ism_vs_exact,
         modes_vs_exact: modes,
     })
 }

@@ -5,7 +5,9 @@
 //! Bounce points are spread over every mesh by area at load ([`bounce_points`]: triangle +
 //! barycentrics, so they follow moving meshes); each is lit by the first bounce's VALs and
 //! becomes a candidate VAL re-emitting the diffuse part of what it receives
-//! ([`candidate_vals`]: flux `rho_d * E * area`, DESIGN.md §1-3); `count` of them, drawn by flux
+//! ([`candidate_vals`]: flux `rho_d * E * area`, DESIGN.md §1-3; [`grouped_candidate_vals`]
+//! through the first bounce's groups with the sparse method's `clusters` or `ism` mode);
+//! `count` of them, drawn by flux
 //! ([`draw_vals`], the imperfect shadow maps' stratified draw), are the second bounce's VALs,
 //! appended to the frame's so that every later stage runs unchanged.
 
@@ -108,6 +110,36 @@ pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&Trace
         .collect()
 }
 
+/// Each point as a candidate VAL seen through the first bounce's groups (WGSL
+/// `bounce_groups.wgsl`, with the sparse method's `clusters` or `ism` mode): VAL j's
+/// irradiance at point i times its group's entry `visibility[i * groups + group_of_val[j]]`
+/// (the clusters' lookup of the first bounce's maps at the point, `bounce_visibility.wgsl`),
+/// re-emitted as in [`candidate_vals`].
+pub fn grouped_candidate_vals(
+    points: &[BounceSurface],
+    vals: &[Val],
+    group_of_val: &[u32],
+    visibility: &[f32],
+    groups: usize,
+) -> Vec<Val> {
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let row = &visibility[i * groups..(i + 1) * groups];
+            let e: Vec3 = vals
+                .iter()
+                .zip(group_of_val)
+                .map(|(v, &g)| {
+                    let geo = val_geometry(p.position, p.normal, v.position, v.normal, v.area);
+                    v.flux * (geo.weight * geo.cos_receiver * row[(g as usize).min(groups - 1)])
+                })
+                .sum();
+            Val { position: p.position, normal: p.normal, area: p.area, flux: p.albedo * e * p.area }
+        })
+        .collect()
+}
+
 /// `count` second-bounce VALs drawn from `candidates` by flux (WGSL `bounce_sample`): draw k is
 /// [`flux_picks`]'s, its flux divided by its probability (`flux * total / (count * luminance)`),
 /// its area `area`; a dark VAL (zero flux) where nothing is lit.
@@ -187,6 +219,36 @@ mod tests {
         assert!(drawn.iter().all(|v| v.area == 0.25 && !(v.position.x as usize).is_multiple_of(3)));
         let dark = draw_vals(&[val(0.0, 0.0); 4], 3, 0.25);
         assert!(dark.iter().all(|v| v.flux == Vec3::ZERO));
+    }
+
+    /// Through the groups' table: all ones is the unoccluded sum; a group's 0 at a point takes
+    /// exactly its VALs' light from that point and no other's; a fraction scales it.
+    #[test]
+    fn grouped_candidates_follow_the_table() {
+        let val =
+            |x: f32| Val { position: Vec3::new(x, 0.0, 2.0), normal: -Vec3::Z, area: 0.01, flux: Vec3::splat(4.0) };
+        let vals = [val(-0.5), val(0.0), val(0.5)];
+        let point = |x: f32| BounceSurface {
+            position: Vec3::new(x, 0.0, 0.0),
+            normal: Vec3::Z,
+            albedo: Vec3::splat(0.5),
+            area: 0.2,
+        };
+        let points = [point(-1.0), point(1.0)];
+        let groups = [0, 1, 1];
+        let open = candidate_vals(&points, &vals, None);
+        let all = grouped_candidate_vals(&points, &vals, &groups, &[1.0; 4], 2);
+        for (a, o) in all.iter().zip(&open) {
+            assert!((a.flux - o.flux).abs().max_element() < 1e-6 * o.flux.x, "{a:?} vs {o:?}");
+        }
+        // Point 0 sees group 1 at a quarter, point 1 loses group 0.
+        let seen = grouped_candidate_vals(&points, &vals, &groups, &[1.0, 0.25, 0.0, 1.0], 2);
+        let alone = |p: &BounceSurface, v: &[Val]| candidate_vals(std::slice::from_ref(p), v, None)[0].flux;
+        let want0 = alone(&points[0], &vals[..1]) + 0.25 * alone(&points[0], &vals[1..]);
+        let want1 = alone(&points[1], &vals[1..]);
+        assert!((seen[0].flux - want0).abs().max_element() < 1e-6 * want0.x);
+        assert!((seen[1].flux - want1).abs().max_element() < 1e-6 * want1.x);
+        assert!(seen[1].flux.x < open[1].flux.x);
     }
 
     /// A point facing a VAL receives its irradiance; behind a plate it receives nothing

@@ -406,6 +406,29 @@ pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: 
     vals.iter().map(|val| val_radiance(p, n, surface, w_o, val, glossy)).sum()
 }
 
+/// [`shade_brute_force`] with per-pixel group visibility (WGSL `brute_force_groups.wgsl`, the
+/// method `brute_force_ism`): each VAL's term times its group's entry of the pixel's row
+/// `visibility` (`visibility[group_of_val[j]]`, the clusters' lookup of the imperfect shadow
+/// maps at the pixel).
+#[allow(clippy::too_many_arguments)]
+pub fn shade_brute_force_grouped(
+    p: Vec3,
+    n: Vec3,
+    surface: &Material,
+    eye: Vec3,
+    vals: &[Val],
+    group_of_val: &[u32],
+    visibility: &[f32],
+    glossy: bool,
+) -> Vec3 {
+    let w_o = view_direction(p, n, eye);
+    let last = visibility.len() - 1;
+    vals.iter()
+        .zip(group_of_val)
+        .map(|(val, &g)| val_radiance(p, n, surface, w_o, val, glossy) * visibility[(g as usize).min(last)])
+        .sum()
+}
+
 /// The sparse method's near-field radiance at a pixel (`p`, `n`): every VAL through §3 scaled
 /// by `near_field_weight(distance to centre, near_radius)`, the part [`gather_far_field`] left
 /// out at the sparse points the pixel interpolates, whose weighted mean position is `centre`

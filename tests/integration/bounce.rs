@@ -170,3 +170,188 @@ fn white_furnace_second_bounce_adds_albedo_times_first() {
         }
     }
 }
+
+/// The stages of a frame, by name.
+fn stage_names(frame: &relume::renderer::Rendered) -> Vec<&str> {
+    frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect()
+}
+
+/// With the sparse method's `ism` or `clusters` mode the bounce points see the first bounce
+/// through that mode's maps: the first bounce's groups and maps (stages of their own, before
+/// `bounce2_points`), their lookup at every (bounce point, group) against the clusters' lookup
+/// twin on the GPU's own maps, and the candidates against `twin::grouped_candidate_vals` on
+/// the GPU's own VALs, groups and table. The brute force keeps them unoccluded.
+///
+/// Tolerances: the lookup's, as in `clusters.rs` (a tap on a texel edge may round either way:
+/// 1 % of entries may differ, the mean difference under 1e-3); the ISM groups' assignment, as
+/// in `ism.rs` (0.5 % of VALs); the candidates' as in `second_bounce_matches_cpu_twin` (1e-4 of
+/// the largest: the same sums over ~800 VALs, each now times its group's entry).
+#[test]
+fn second_bounce_through_group_visibility_matches_cpu_twin() {
+    use relume::gpu::visibility::clusters::twin as ctwin;
+    use relume::gpu::visibility::ism::twin as ism_twin;
+    let gpu = gpu();
+    let cases: [(&str, &str, &[&str]); 2] = [
+        (
+            "ism",
+            r#""ism": {"count": 24, "resolution": 32, "points": 400}"#,
+            &["bounce2_ism_sampling", "bounce2_ism_splat", "bounce2_ism_pull_push"],
+        ),
+        (
+            "clusters",
+            r#""clusters": {"count": 12, "shadow_map_resolution": 64}"#,
+            &["bounce2_clustering", "bounce2_cluster_shadow_maps"],
+        ),
+    ];
+    for (mode, settings, grouping) in cases {
+        let bounce_settings = r#""bounces": 2, "second_bounce": {"points": 700, "vals": 48}"#;
+        let scene = small_scene_with(mode, &format!("{settings}, {bounce_settings}"));
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+        let stages = stage_names(&frame);
+        let at = stages.iter().position(|s| *s == grouping[0]).unwrap_or_else(|| panic!("{mode}: {stages:?}"));
+        let mut want = grouping.to_vec();
+        want.extend([stage::BOUNCE2_VISIBILITY, stage::BOUNCE2_POINTS, stage::BOUNCE2_VALS]);
+        assert_eq!(&stages[at..at + want.len()], &want[..], "{mode}");
+        assert!(at > stages.iter().position(|s| *s == stage::RSM_VALS).unwrap(), "{mode}: {stages:?}");
+        // The sparse method's own instance, over every VAL, comes after the draw.
+        let sparse_grouping = if mode == "ism" { stage::ISM_SAMPLING } else { stage::CLUSTERING };
+        assert!(stages.iter().position(|s| *s == sparse_grouping).unwrap() > at + want.len() - 1, "{stages:?}");
+
+        let all = renderer.read_vals(&gpu).unwrap();
+        let first = &all[..all.len() - 48];
+        let bounce = renderer.second_bounce().unwrap();
+        let groups = bounce.visibility().expect("the first bounce's groups");
+        let r = groups.read(&gpu, first.len(), 700).unwrap();
+        let m = r.clusters.len();
+        if mode == "ism" {
+            let (_, cpu_groups) = ism_twin::groups(first, m as u32, &r.kmeans);
+            let differ = cpu_groups.iter().zip(&r.group_of_val).filter(|(a, b)| a != b).count();
+            assert!(differ * 200 <= first.len(), "{differ} of {} first-bounce VALs in another group", first.len());
+        }
+
+        // The lookup at the bounce points, on the GPU's own maps.
+        let points = surfaces(&renderer);
+        let slope_bias_texels = r.ism.map_or(0.0, |p| p.slope_bias_texels);
+        let resolution = r.settings.shadow_map_resolution;
+        let (mut differ, mut sum_diff, mut shadowed) = (0, 0.0, 0);
+        for (i, p) in points.iter().enumerate() {
+            for (k, c) in r.clusters.iter().enumerate() {
+                let tile = ctwin::DepthTile { resolution, depths: &r.maps[k], slope_bias_texels };
+                let receiver = ctwin::ShadowReceiver { offset: p.position - c.position, normal: p.normal };
+                let cpu = ctwin::cluster_visibility(&tile, c, &receiver, r.settings.soft);
+                let d = (cpu - r.visibility[i * m + k]).abs();
+                sum_diff += d;
+                differ += usize::from(d > 1e-3);
+                shadowed += usize::from(r.visibility[i * m + k] < 0.5);
+            }
+        }
+        let n = points.len() * m;
+        assert!(differ * 100 <= n, "{mode}: {differ} of {n} visibilities differ");
+        assert!(sum_diff / (n as f32) < 1e-3, "{mode}: mean difference {}", sum_diff / n as f32);
+        assert!(shadowed > 0, "{mode}: the bunny and the box shadow some bounce points");
+
+        // The candidates through that table.
+        let gpu_candidates = bounce.read_candidates(&gpu).unwrap();
+        let cpu_candidates = twin::grouped_candidate_vals(&points, first, &r.group_of_val, &r.visibility, m);
+        let largest = cpu_candidates.iter().map(|c| c.flux.max_element()).fold(0.0, f32::max);
+        assert!(largest > 0.0, "{mode}: the first bounce lights some points");
+        for (k, (g, c)) in gpu_candidates.iter().zip(&cpu_candidates).enumerate() {
+            assert!((g.flux - c.flux).abs().max_element() <= 1e-4 * largest, "{mode} point {k}: GPU {g:?} CPU {c:?}");
+        }
+        let open = luminance_sum(&twin::candidate_vals(&points, first, None));
+        let seen = luminance_sum(&gpu_candidates);
+        eprintln!("{mode}: the candidates carry {:.4} of their unoccluded flux", seen / open);
+        assert!(seen < 0.99 * open, "{mode}: occluders take light from the bounce points: {seen} of {open}");
+
+        // The brute force is the no-visibility reference: unoccluded points, no lookup.
+        let frame = renderer.render(&gpu, Method::BruteForce, 16, 16).unwrap();
+        let stages = stage_names(&frame);
+        assert!(!stages.iter().any(|s| s.starts_with("bounce2_") && !s.ends_with("points") && !s.ends_with("vals")));
+        let bounce = renderer.second_bounce().unwrap();
+        assert!(bounce.visibility().is_none(), "{mode}: no groups for the brute force");
+        let all = renderer.read_vals(&gpu).unwrap();
+        let gpu_candidates = bounce.read_candidates(&gpu).unwrap();
+        let cpu_candidates = twin::candidate_vals(&points, &all[..all.len() - 48], None);
+        for (k, (g, c)) in gpu_candidates.iter().zip(&cpu_candidates).enumerate() {
+            assert!((g.flux - c.flux).abs().max_element() <= 1e-4 * largest, "{mode} point {k}: GPU {g:?} CPU {c:?}");
+        }
+    }
+}
+
+/// A wall lit by a spot light (the first bounce's VALs, at x = -1), a receiving wall facing it
+/// (x = 1) and a plate halfway between them covering the receiver's half z > 0: with
+/// `visibility: "ism"` the receiver's bounce points that the plate hides from every
+/// first-bounce VAL receive ~0 through the imperfect shadow maps, and those it hides from none
+/// receive what they receive with visibility off.
+///
+/// Geometry: the spot lights a disc of radius 0.5 tan 50° = 0.60 m on the wall around z = 0, so
+/// a receiver point at z sees VAL z' through the plate's plane at (z + z') / 2: hidden from
+/// every VAL for z > 0.60, from none for z < -0.60; points within 0.3 m beyond those are left
+/// out (the groups' spread and the lookup's texels). Tolerance: 2 % of the unoccluded flux
+/// either way: the maps (64 of 128², 30,000 points each, hard lookup) resolve a plate 1 m
+/// away to a few texels, and the slope bias is a fraction of that here. With visibility off
+/// the hidden points keep all their light, so the test fails.
+#[test]
+fn plate_hides_bounce_points_through_the_ism() {
+    let quad = |corners: [Vec3; 4], normal: Vec3| {
+        let [a, b, c, d] = corners;
+        let winding = (b - a).cross(c - a).dot(normal);
+        let (b, d) = if winding > 0.0 { (b, d) } else { (d, b) };
+        [a, b, c, d]
+    };
+    let v = Vec3::new;
+    let quads = [
+        quad([v(-1.0, 0.0, -2.0), v(-1.0, 0.0, 2.0), v(-1.0, 2.0, 2.0), v(-1.0, 2.0, -2.0)], Vec3::X),
+        quad([v(1.0, 0.0, -2.0), v(1.0, 0.0, 2.0), v(1.0, 2.0, 2.0), v(1.0, 2.0, -2.0)], -Vec3::X),
+        quad([v(0.0, -0.5, 0.0), v(0.0, -0.5, 2.5), v(0.0, 2.5, 2.5), v(0.0, 2.5, 0.0)], -Vec3::X),
+    ];
+    let mut obj = String::new();
+    for (q, corners) in quads.iter().enumerate() {
+        for p in corners {
+            obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
+        }
+        let base = 4 * q + 1;
+        obj += &format!("f {} {} {} {}\n", base, base + 1, base + 2, base + 3);
+    }
+    let scene = |visibility: &str| {
+        let json = serde_json::json!({
+            "meshes": [{ "obj": "plate.obj", "obj_text": obj, "sparse_points": 2000,
+                         "material": { "diffuse": [0.8, 0.8, 0.8] } }],
+            "light": { "position": [-0.5, 1.0, 0.0], "direction": [-1, 0, 0], "inner_angle_deg": 45,
+                       "outer_angle_deg": 50, "intensity": [5, 5, 5] },
+            "camera": { "position": [0, 1, -3], "target": [0, 1, 0], "fov_y_deg": 60, "width": 8, "height": 8 },
+            "settings": { "rsm_resolution": 32, "visibility": visibility, "bounces": 2,
+                          "ism": { "count": 64, "resolution": 128, "points": 30000, "soft": "hard" },
+                          "second_bounce": { "points": 4096, "vals": 64 } }
+        });
+        Scene::from_json_str(&json.to_string(), std::path::Path::new(".")).expect("plate scene")
+    };
+    let gpu = gpu();
+    let candidates = |visibility: &str| {
+        let mut renderer = Renderer::new(&gpu, &scene(visibility)).unwrap();
+        renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
+        let b = renderer.second_bounce().unwrap();
+        assert_eq!(b.visibility().is_some(), visibility == "ism");
+        b.read_candidates(&gpu).unwrap()
+    };
+    let (through, open) = (candidates("ism"), candidates("off"));
+    let (mut hidden, mut seen) = (0, 0);
+    for (t, o) in through.iter().zip(&open) {
+        assert!((t.position - o.position).length() < 1e-6, "the same points");
+        let on_receiver = (o.position.x - 1.0).abs() < 1e-3;
+        let (y, z) = (relume::twin::luminance(t.flux), relume::twin::luminance(o.flux));
+        if !on_receiver || z <= 0.0 {
+            continue;
+        }
+        if o.position.z > 0.9 {
+            hidden += 1;
+            assert!(y <= 0.02 * z, "hidden at {}: {y} of {z}", o.position);
+        } else if o.position.z < -0.9 {
+            seen += 1;
+            assert!((y - z).abs() <= 0.02 * z, "open at {}: {y} vs {z}", o.position);
+        }
+    }
+    eprintln!("{hidden} hidden and {seen} open receiver points");
+    assert!(hidden > 100 && seen > 100, "{hidden} hidden, {seen} open");
+}

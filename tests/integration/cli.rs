@@ -120,6 +120,9 @@ fn compare_reports_the_cpu_reference_and_its_noise() {
     assert_eq!(brute["mode"].as_str(), Some("brute_force"));
     let (raw, corrected) = (brute["rel_rmse"].as_f64().unwrap(), brute["rel_rmse_corrected"].as_f64().unwrap());
     assert!(raw.is_finite() && corrected >= 0.0 && corrected <= raw, "brute force: {corrected} vs {raw}");
+    let ism = &v["brute_force_ism_vs_exact"];
+    assert_eq!(ism["mode"].as_str(), Some("brute_force_ism"));
+    assert!(ism["rel_rmse"].as_f64().unwrap().is_finite() && ism["visibility_ms"].as_f64().unwrap() > 0.0);
     assert_eq!((v["bounces"].as_u64(), v["second_bounce_ms"].as_f64()), (Some(1), Some(0.0)));
 }
 

@@ -124,3 +124,97 @@ fn ism_without_pull_push_and_without_light() {
     assert!(r.visibility.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)), "{:?}", &r.visibility[..8]);
     assert!(frame.indirect.pixels.iter().all(|p| p.iter().all(|c| c.is_finite())));
 }
+
+/// `brute_force_ism` (the brute force with per-pixel ISM visibility) against its twins on the
+/// GPU's own VALs, groups and maps: its stages (the `ism` mode's, named `brute_force_ism_*`,
+/// then the lookup at the pixels and the brute force), the lookup at every (pixel, group)
+/// against the clusters' lookup twin (the sparse points' tolerances: 1 % of entries may differ
+/// by a tap, mean difference under 1e-3), and every covered pixel against
+/// `twin::shade_brute_force_grouped` with the GPU's table (1e-3 of the brightest pixel, the
+/// brute-force twin test's tolerance), darker than the plain brute force somewhere.
+#[test]
+fn brute_force_ism_matches_cpu_twins() {
+    use relume::gpu::visibility::clusters::twin as ctwin;
+    let count = 24;
+    let scene = ism_scene(&format!(r#"{{"count": {count}, "resolution": 32, "points": 400}}"#));
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let (w, h) = (16, 12);
+    let frame = renderer.render(&gpu, Method::BruteForceIsm, w, h).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    let at = stages.iter().position(|s| *s == "brute_force_ism_sampling").expect("its groups");
+    let want = [
+        "brute_force_ism_sampling",
+        "brute_force_ism_splat",
+        "brute_force_ism_pull_push",
+        "brute_force_ism_visibility",
+        "brute_force",
+    ];
+    assert_eq!(&stages[at..at + 5], &want[..], "{stages:?}");
+    assert!(!stages.contains(&"gather"), "{stages:?}");
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let groups = renderer.brute_force_ism_groups().expect("brute_force_ism's groups");
+    let pixels = (w * h) as usize;
+    let r = groups.read(&gpu, vals.len(), pixels).unwrap();
+    let m = r.clusters.len();
+    assert_eq!(m, count as usize);
+    let (clusters, cpu_groups) = ism_twin::groups(&vals, count, &r.kmeans);
+    let differ = cpu_groups.iter().zip(&r.group_of_val).filter(|(a, b)| a != b).count();
+    assert!(differ * 200 <= vals.len(), "{differ} of {} VALs in another group", vals.len());
+    assert!(clusters.iter().filter(|c| c.count > 0.0).count() > m / 2);
+    assert_maps_match(&renderer, &r);
+
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let flat = &renderer.scene.flat;
+    let params = r.ism.expect("imperfect maps");
+    let (mut differ, mut sum_diff, mut shadowed) = (0, 0.0, 0);
+    for (i, hit) in hits.iter().enumerate() {
+        let row = &r.visibility[i * m..(i + 1) * m];
+        let Some(hit) = hit else {
+            assert!(row.iter().all(|v| *v == 1.0), "uncovered pixel {i}: {row:?}");
+            continue;
+        };
+        let (p, n, _) = flat.surface_at(hit.triangle, hit.barycentrics);
+        for (k, c) in r.clusters.iter().enumerate() {
+            let tile = ctwin::DepthTile {
+                resolution: params.resolution,
+                depths: &r.maps[k],
+                slope_bias_texels: params.slope_bias_texels,
+            };
+            let receiver = ctwin::ShadowReceiver { offset: p - c.position, normal: n };
+            let d = (ctwin::cluster_visibility(&tile, c, &receiver, r.settings.soft) - row[k]).abs();
+            sum_diff += d;
+            differ += usize::from(d > 1e-3);
+            shadowed += usize::from(row[k] < 0.5);
+        }
+    }
+    let n = pixels * m;
+    assert!(differ * 100 <= n, "{differ} of {n} visibilities differ");
+    assert!(sum_diff / (n as f32) < 1e-3, "mean difference {}", sum_diff / n as f32);
+    assert!(shadowed > 0, "the bunny and the box shadow some pixels from some group");
+
+    let eye = renderer.view().eye();
+    let glossy = renderer.glossy();
+    let expected: Vec<Option<Vec3>> = hits
+        .iter()
+        .enumerate()
+        .map(|(i, hit)| {
+            hit.map(|h| {
+                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+                let row = &r.visibility[i * m..(i + 1) * m];
+                relume::twin::shade_brute_force_grouped(p, n, &surface, eye, &vals, &r.group_of_val, row, glossy)
+            })
+        })
+        .collect();
+    let scale = expected.iter().flatten().map(|e| e.max_element()).fold(0.0, f32::max);
+    assert!(scale > 0.0);
+    for (i, e) in expected.iter().enumerate() {
+        assert_eq!(e.is_some(), frame.indirect.covered(i));
+        if let Some(e) = e {
+            super::assert_close(frame.indirect.rgb(i), *e, 1e-3, scale, 1e-9, &format!("brute_force_ism pixel {i}"));
+        }
+    }
+    let plain = renderer.render(&gpu, Method::BruteForce, w, h).unwrap();
+    let (a, b) = (frame.indirect.luminance_sum_and_peak().0, plain.indirect.luminance_sum_and_peak().0);
+    assert!(a < 0.99 * b, "the maps take light from some pixels: {a} vs {b}");
+}

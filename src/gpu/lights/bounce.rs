@@ -7,30 +7,79 @@
 //! flux divided by their probability (`bounce2_vals`, `bounce_draw.wgsl`). Every later stage
 //! (the sparse method with its visibility mode, the brute force) lights with them unchanged.
 //!
-//! The candidates see the first bounce's VALs without visibility on the GPU (the sparse method
-//! and the brute force); the CPU exact reference makes its own second bounce through shadow
+//! **Visibility at the bounce points.** With the sparse method's visibility mode `ism` or
+//! `clusters` (a group visibility mode), the bounce points see the first bounce's VALs through
+//! that mode's maps, as paper 004's IRSMs light the second-bounce VPLs through the first-bounce
+//! VPLs' imperfect maps. The order of the stages:
+//!
+//! 1. the mode's grouping and maps over the first bounce's VALs alone (the VALs appended so far:
+//!    `bounce2_ism_sampling`, `bounce2_ism_splat`, `bounce2_ism_pull_push`, or
+//!    `bounce2_clustering`, `bounce2_cluster_shadow_maps`), an instance of its own
+//!    ([`Clusters`] with [`Receivers::BouncePoints`]);
+//! 2. `bounce2_visibility`: its lookup at every (bounce point, group), the sparse points' lookup
+//!    (`bounce_visibility.wgsl`);
+//! 3. `bounce2_points` scales each first-bounce VAL by its group's entry at the point
+//!    (`bounce_groups.wgsl`), then `bounce2_vals` draws as before;
+//! 4. the sparse method's own instance of the mode then groups *every* VAL of the frame, second
+//!    bounce included, draws their maps and looks them up at the sparse points for the gather,
+//!    as with one bounce.
+//!
+//! The maps cannot be built once for both: the sparse points' groups must cover the
+//! second-bounce VALs, which exist only once the bounce points are lit; and giving the
+//! second-bounce VALs the first bounce's groups instead would shadow a VAL on the ceiling from a
+//! map centred on the lit wall. The paper also renders two sets (IRSMs of the first-bounce VPLs,
+//! then ISMs of all VPLs); the cost is the mode's stages twice, minus the lookup's share for
+//! the fewer bounce points (measured in the README, "Two bounces").
+//!
+//! With visibility off or `disks` (a scaling mode: it has no per-VAL visibility to give a
+//! point), and for the brute force (the no-visibility reference), the candidates see the first
+//! bounce's VALs unoccluded. The CPU exact reference makes its own second bounce through shadow
 //! rays (`twin::bounce::candidate_vals` with its BVH). Built only when `settings.bounces` is 2.
 //! Rust twin: [`crate::twin::bounce`].
 
-use crate::gpu::pass::{Entry, Kernel, Kernels, PassDesc, buffer, module_from_source, read, read_write};
+use crate::gpu::pass::{
+    Binding, Entry, Kernel, Kernels, PassDesc, buffer, depth_texture, module_from_source, read, read_write,
+};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::{TILE_SIZE, VAL_TILES, WORKGROUP_SIZE};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
-use crate::gpu::visibility::ism::{FLUX_DRAW_WGSL, SAMPLE_BLOCK};
+use crate::gpu::visibility::clusters::{self, Clusters, Receivers, SceneScale, StageNames};
+use crate::gpu::visibility::ism::{self, FLUX_DRAW_WGSL, SAMPLE_BLOCK};
+use crate::gpu::visibility::{GroupVisibility, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError};
-use crate::scene::SecondBounceSettings;
+use crate::scene::{ClusterSettings, IsmSettings, SecondBounceSettings};
 use crate::twin::bounce::{self as twin, BouncePoint};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
+pub const POINT_WGSL: &str = include_str!("bounce_point.wgsl");
 pub const POINTS_WGSL: &str = include_str!("bounce_points.wgsl");
+pub const GROUPS_WGSL: &str = include_str!("bounce_groups.wgsl");
+pub const VISIBILITY_WGSL: &str = include_str!("bounce_visibility.wgsl");
 pub const DRAW_WGSL: &str = include_str!("bounce_draw.wgsl");
 
 /// Stage names in the frame's timings.
 pub const POINTS_STAGE: &str = "bounce2_points";
 pub const DRAW_STAGE: &str = "bounce2_vals";
+pub const VISIBILITY_STAGE: &str = "bounce2_visibility";
+
+/// The stages of the first bounce's groups and maps for the bounce points (the sparse method's
+/// own instance of the mode keeps the mode's names).
+pub const STAGES: StageNames = StageNames {
+    clustering: "bounce2_clustering",
+    shadow_maps: "bounce2_cluster_shadow_maps",
+    ism_sampling: "bounce2_ism_sampling",
+    ism_splat: "bounce2_ism_splat",
+    ism_pull_push: "bounce2_ism_pull_push",
+    cluster_visibility: VISIBILITY_STAGE,
+    ism_visibility: VISIBILITY_STAGE,
+};
+
+/// Every first-bounce VAL reaches every bounce point whole (visibility off, disks, the brute
+/// force).
+const NO_VISIBILITY: &str = "fn point_val_visibility(point: u32, val: u32) -> f32 {\n    return 1.0;\n}\n";
 
 /// WGSL `BouncePoint`.
 #[repr(C)]
@@ -48,15 +97,82 @@ impl From<&BouncePoint> for RawBouncePoint {
     }
 }
 
+/// The points pass's own WGSL: the VAL tiles, the point, `point_val_visibility` for `groups`
+/// groups (or none), then `bounce_points.wgsl`.
+pub fn points_body(groups: Option<u32>) -> String {
+    let visibility =
+        groups.map_or_else(|| NO_VISIBILITY.to_owned(), |g| format!("const GROUP_COUNT: u32 = {g}u;\n{GROUPS_WGSL}"));
+    format!("{VAL_TILES}\n{POINT_WGSL}\n{visibility}\n{POINTS_WGSL}")
+}
+
+/// The bindings of [`GROUPED_POINTS`]; [`POINTS`] has the first four (no group table).
+const POINTS_BINDINGS: &[Binding] = &[
+    read("bounce_points"),
+    read("vals"),
+    read("val_count"),
+    read_write("candidates"),
+    read("group_of_val"),
+    read("bounce_visibility"),
+];
+
 /// Every bounce point lit by every first-bounce VAL: one invocation per point, the VALs in
 /// tiles of `TILE_SIZE` (and in ranges on CPU adapters).
 pub const POINTS: PassDesc = PassDesc {
     label: POINTS_STAGE,
-    bindings: &[read("bounce_points"), read("vals"), read("val_count"), read_write("candidates")],
+    bindings: POINTS_BINDINGS.split_at(4).0,
     entries: &[Entry::first("main", 4)],
     workgroup: [TILE_SIZE, 1, 1],
-    default_source: |textured| POINTS.source(&format!("{VAL_TILES}\n{POINTS_WGSL}"), textured),
+    default_source: |textured| POINTS.source(&points_body(None), textured),
 };
+
+/// [`POINTS`] through the first bounce's groups (`clusters` or `ism`): plus the group table.
+pub const GROUPED_POINTS: PassDesc = PassDesc {
+    bindings: POINTS_BINDINGS,
+    entries: &[Entry::first("main", 6)],
+    default_source: |textured| GROUPED_POINTS.source(&points_body(Some(64)), textured),
+    ..POINTS
+};
+
+/// The lookup at the bounce points, reading rasterised maps (`clusters`).
+pub const VISIBILITY: PassDesc = PassDesc {
+    label: VISIBILITY_STAGE,
+    bindings: &[
+        read("bounce_points"),
+        read("clusters"),
+        depth_texture("shadow_atlas"),
+        read_write("bounce_visibility"),
+    ],
+    entries: &[Entry::first("main", 4)],
+    workgroup: [WORKGROUP_SIZE, 1, 1],
+    default_source: |textured| {
+        let head = clusters::header(&ClusterSettings::default(), SceneScale { diagonal: 1.0 });
+        VISIBILITY.source(&visibility_body(&head, false), textured)
+    },
+};
+
+/// The lookup at the bounce points, reading imperfect shadow maps (`ism`, or `clusters` with
+/// `shadow_maps: "ism"`).
+pub const ISM_VISIBILITY: PassDesc = PassDesc {
+    bindings: &[read("bounce_points"), read("clusters"), read("ism_atlas"), read_write("bounce_visibility")],
+    default_source: |textured| {
+        let head = ism::header(&IsmSettings::default(), SceneScale { diagonal: 1.0 });
+        ISM_VISIBILITY.source(&visibility_body(&head, true), textured)
+    },
+    ..VISIBILITY
+};
+
+/// The lookup pass's WGSL after `head` (the mode's header), reading `imperfect` maps or
+/// rasterised ones.
+fn visibility_body(head: &str, imperfect: bool) -> String {
+    let maps = if imperfect { ism::LOOKUP_WGSL } else { clusters::RASTER_DEPTH_WGSL };
+    format!("{head}\n{POINT_WGSL}\n{maps}\n{}\n{VISIBILITY_WGSL}", clusters::VISIBILITY_LOOKUP_WGSL)
+}
+
+/// The lookup pass at the bounce points and its WGSL after `head`, for `imperfect` maps or
+/// rasterised ones ([`Clusters`] with [`Receivers::BouncePoints`] builds it).
+pub fn visibility_pass(head: &str, imperfect: bool) -> (&'static PassDesc, String) {
+    (if imperfect { &ISM_VISIBILITY } else { &VISIBILITY }, visibility_body(head, imperfect))
+}
 
 /// The draw: the flux sums over the candidates (the draw's `vals`), the draw appending to the
 /// frame's VALs, and the count.
@@ -95,6 +211,11 @@ pub struct SecondBounce {
     pub points: Vec<BouncePoint>,
     /// Area (m²) of each drawn VAL.
     pub drawn_area: f32,
+    /// The visibility the points see the first bounce through: `Some` for the sparse method
+    /// with a group visibility mode (`clusters`, `ism`), else `None` (unoccluded).
+    visibility_key: Option<VisibilitySettings>,
+    /// The first bounce's groups and maps, looked up at the points (with `visibility_key`).
+    visibility: Option<Clusters>,
     light_points: Kernels,
     blocks: Kernel,
     scan: Kernel,
@@ -119,21 +240,15 @@ impl SecondBounce {
         let n = raw.len().max(1);
         let empty = [RawBouncePoint::default()];
         let textured = scene.textured();
-        let light_points = Kernels::val_ranges(
-            gpu,
-            scene,
-            &POINTS,
-            POINTS.source(&format!("{VAL_TILES}\n{POINTS_WGSL}"), textured),
-            POINTS.entry("main"),
-            POINTS.workgroup,
-            TILE_SIZE,
-        )?;
+        let light_points = points_kernels(gpu, scene, None)?;
         let module = module_from_source(gpu, DRAW.label, DRAW.source(&draw_body(&settings, drawn_area), textured))?;
         let kernel = |name: &str| Kernel::build(gpu, scene, &DRAW, &module, DRAW.entry(name), &[], DRAW.workgroup);
         let blocks = (raw.len() as u32).div_ceil(SAMPLE_BLOCK).max(1) as usize;
         Ok(Self {
             settings,
             drawn_area,
+            visibility_key: None,
+            visibility: None,
             light_points,
             blocks: kernel("flux_blocks")?,
             scan: kernel("flux_scan")?,
@@ -155,8 +270,42 @@ impl SecondBounce {
         })
     }
 
+    /// See the first bounce through `visibility` from the next frame on: `Some` (a `clusters`
+    /// or `ism` mode, for the sparse method) builds the first bounce's groups, maps and lookup
+    /// at the points; `None` lights the points unoccluded. Nothing is rebuilt when unchanged;
+    /// call [`SecondBounce::fit`] after.
+    pub fn set_visibility(
+        &mut self,
+        gpu: &Gpu,
+        scene: &GpuScene,
+        visibility: Option<VisibilitySettings>,
+    ) -> Result<(), GpuError> {
+        if visibility == self.visibility_key {
+            return Ok(());
+        }
+        let receivers = Receivers::BouncePoints { count: self.points.len() as u32 };
+        self.visibility = None;
+        self.visibility = match &visibility {
+            Some(v) => Clusters::for_receivers(gpu, scene, v, receivers, STAGES)?,
+            None => None,
+        };
+        let groups = self.visibility.as_ref().map(|v| v.table().groups);
+        self.light_points = points_kernels(gpu, scene, groups)?;
+        self.visibility_key = if self.visibility.is_some() { visibility } else { None };
+        Ok(())
+    }
+
+    /// The first bounce's groups the points see it through, when [`SecondBounce::set_visibility`]
+    /// gave a group visibility mode (tests and tools read them back).
+    pub fn visibility(&self) -> Option<&Clusters> {
+        self.visibility.as_ref()
+    }
+
     /// Cover frames of up to `max_vals` first-bounce VALs.
     pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
+        if let Some(v) = &mut self.visibility {
+            v.fit(gpu, max_vals)?;
+        }
         self.light_points.fit(gpu, scene, max_vals)
     }
 
@@ -166,20 +315,37 @@ impl SecondBounce {
     }
 }
 
+/// The points pass, unoccluded or (with `groups`) through the first bounce's groups.
+fn points_kernels(gpu: &Gpu, scene: &GpuScene, groups: Option<u32>) -> Result<Kernels, GpuError> {
+    let desc = if groups.is_some() { &GROUPED_POINTS } else { &POINTS };
+    let source = desc.source(&points_body(groups), scene.textured());
+    Kernels::val_ranges(gpu, scene, desc, source, desc.entry("main"), desc.workgroup, TILE_SIZE)
+}
+
 impl Technique for SecondBounce {
     fn stages(&self) -> Vec<&'static str> {
-        vec![POINTS_STAGE, DRAW_STAGE]
+        let mut stages = self.visibility.as_ref().map_or_else(Vec::new, |v| v.stage_names());
+        stages.extend([POINTS_STAGE, DRAW_STAGE]);
+        stages
     }
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         let (scene, vals) = (frame.scene, frame.vals);
-        let resources = [
+        let points = self.points.len() as u32;
+        // The first bounce's groups and maps (the VALs appended so far), looked up at the points.
+        if let Some(v) = &self.visibility {
+            v.record_at(gpu, frame, rec, buffer("bounce_points", &self.bounce_points), points)?;
+        }
+        let mut resources = vec![
             buffer("bounce_points", &self.bounce_points),
             buffer("vals", &vals.buffer),
             buffer("val_count", &vals.count),
             buffer("candidates", &self.candidates),
         ];
-        let points = self.points.len() as u32;
+        let table = self.visibility.as_ref().map(|v| v.table());
+        if let Some(t) = &table {
+            resources.extend([buffer("group_of_val", t.group_of_val), buffer("bounce_visibility", t.visibility)]);
+        }
         rec.stage(POINTS_STAGE, |e, s| self.light_points.run(gpu, e, scene, &resources, [points, 1, 1], s))?;
         let all = [
             buffer("vals", &self.candidates),

@@ -1,63 +1,177 @@
 //! Brute-force reference (`brute_force.wgsl`, DESIGN.md §5). Rust twin:
 //! `twin::shade_brute_force`. On CPU adapters the VALs go in ranges, one dispatch each,
 //! each adding to the radiance of the ones before ([`Kernels::val_ranges`]).
+//!
+//! **`brute_force_ism`** ([`crate::renderer::Method::BruteForceIsm`]): the same pass with every
+//! VAL weighted by its group's imperfect-shadow-map lookup at the pixel, so that the ISMs' own
+//! error against exact visibility can be told from the sparse interpolation's. The `ism`
+//! mode's machinery as the sparse method runs it (`settings.ism`: VALs drawn by flux, groups,
+//! splat, pull-push; [`Clusters`] with [`Receivers::Pixels`]), its stages named
+//! `brute_force_ism_*`, its lookup (`brute_force_ism_visibility`,
+//! `brute_force_visibility.wgsl`) at every (pixel, group) into a table of pixels x groups
+//! (`ism.count` floats per pixel: 64 MiB at 128² with 1,024 maps; larger than the device's
+//! largest storage binding is an error naming it), then the brute force reading it
+//! (`brute_force_groups.wgsl`). Rust twin: `twin::shade_brute_force_grouped`.
 
-use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
+use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
 use crate::gpu::scene::GpuScene;
-use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE, VAL_TILES};
+use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE, VAL_TILES, WORKGROUP_SIZE};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
+use crate::gpu::visibility::clusters::{Clusters, Receivers, SceneScale, StageNames};
+use crate::gpu::visibility::{GroupVisibility, VisibilitySettings, ism};
 use crate::gpu::{Gpu, GpuError};
+use crate::scene::{IsmSettings, Occlusion};
 
 pub const WGSL: &str = include_str!("brute_force.wgsl");
+pub const GROUPS_WGSL: &str = include_str!("brute_force_groups.wgsl");
+pub const VISIBILITY_WGSL: &str = include_str!("brute_force_visibility.wgsl");
 
-/// The pass's own WGSL: the VAL tiles, then `brute_force.wgsl`.
-pub fn body() -> String {
-    format!("{VAL_TILES}\n{WGSL}")
+/// Stage of the lookup at the pixels.
+pub const ISM_VISIBILITY_STAGE: &str = "brute_force_ism_visibility";
+
+/// The stages of `brute_force_ism`'s groups and maps (the sparse method's `ism` mode keeps its
+/// own names).
+pub const ISM_STAGES: StageNames = StageNames {
+    clustering: "brute_force_clustering",
+    shadow_maps: "brute_force_cluster_shadow_maps",
+    ism_sampling: "brute_force_ism_sampling",
+    ism_splat: "brute_force_ism_splat",
+    ism_pull_push: "brute_force_ism_pull_push",
+    cluster_visibility: ISM_VISIBILITY_STAGE,
+    ism_visibility: ISM_VISIBILITY_STAGE,
+};
+
+/// Every VAL reaches every pixel whole: the brute force.
+const NO_VISIBILITY: &str = "fn pixel_val_visibility(pixel: u32, val: u32) -> f32 {\n    return 1.0;\n}\n";
+
+/// The pass's own WGSL: the VAL tiles, `pixel_val_visibility` for `groups` groups (or none),
+/// then `brute_force.wgsl`.
+pub fn body(groups: Option<u32>) -> String {
+    let visibility =
+        groups.map_or_else(|| NO_VISIBILITY.to_owned(), |g| format!("const GROUP_COUNT: u32 = {g}u;\n{GROUPS_WGSL}"));
+    format!("{VAL_TILES}\n{visibility}\n{WGSL}")
 }
+
+/// The bindings of [`GROUPED_PASS`]; [`PASS`] has the first four.
+const BINDINGS: &[Binding] = &[
+    texture("visibility"),
+    read_write("indirect"),
+    read("vals"),
+    read("val_count"),
+    read("group_of_val"),
+    read("pixel_visibility"),
+];
 
 /// One invocation per pixel; a workgroup (`IMAGE_TILE[0]` pixels wide, `TILE_SIZE` in all)
 /// streams VALs through workgroup memory in tiles of `TILE_SIZE`.
 pub const PASS: PassDesc = PassDesc {
     label: "brute_force",
-    bindings: &[texture("visibility"), read_write("indirect"), read("vals"), read("val_count")],
+    bindings: BINDINGS.split_at(4).0,
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 4)],
     workgroup: [IMAGE_TILE[0], TILE_SIZE / IMAGE_TILE[0], 1],
-    default_source: |textured| PASS.source(&body(), textured),
+    default_source: |textured| PASS.source(&body(None), textured),
 };
+
+/// `brute_force_ism`'s pass: [`PASS`] plus the group table at the pixels.
+pub const GROUPED_PASS: PassDesc = PassDesc {
+    bindings: BINDINGS,
+    entries: &[Entry::first("main", 6), Entry::first("main_glossy", 6)],
+    default_source: |textured| GROUPED_PASS.source(&body(Some(64)), textured),
+    ..PASS
+};
+
+/// The lookup at the pixels, reading imperfect shadow maps.
+pub const ISM_VISIBILITY: PassDesc = PassDesc {
+    label: ISM_VISIBILITY_STAGE,
+    bindings: &[texture("visibility"), read("clusters"), read("ism_atlas"), read_write("pixel_visibility")],
+    entries: &[Entry::first("main", 4)],
+    workgroup: [WORKGROUP_SIZE, 1, 1],
+    default_source: |textured| {
+        let head = ism::header(&IsmSettings::default(), SceneScale { diagonal: 1.0 });
+        ISM_VISIBILITY.source(&visibility_body(&head), textured)
+    },
+};
+
+fn visibility_body(head: &str) -> String {
+    use crate::gpu::visibility::clusters::VISIBILITY_LOOKUP_WGSL;
+    format!("{head}\n{}\n{VISIBILITY_LOOKUP_WGSL}\n{VISIBILITY_WGSL}", ism::LOOKUP_WGSL)
+}
+
+/// The lookup pass at the pixels and its WGSL after `head` ([`Clusters`] with
+/// [`Receivers::Pixels`] builds it); imperfect maps only.
+pub fn visibility_pass(head: &str, imperfect: bool) -> (&'static PassDesc, String) {
+    assert!(imperfect, "brute_force_ism looks up imperfect shadow maps");
+    (&ISM_VISIBILITY, visibility_body(head))
+}
 
 pub struct BruteForce {
     kernels: Kernels,
+    /// `brute_force_ism`: the imperfect shadow maps' groups, looked up at the pixels.
+    groups: Option<Clusters>,
 }
 
 impl BruteForce {
-    pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool) -> Result<Self, GpuError> {
-        let source = PASS.source(&body(), scene.textured());
-        let entry = PASS.lobe_entry(glossy);
-        let kernels = Kernels::val_ranges(gpu, scene, &PASS, source, entry, PASS.workgroup, TILE_SIZE)?;
-        Ok(Self { kernels })
+    /// The brute force; with `ism`, `brute_force_ism` with those settings.
+    pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool, ism: Option<&IsmSettings>) -> Result<Self, GpuError> {
+        let groups = match ism {
+            Some(ism) => {
+                let settings = VisibilitySettings {
+                    mode: Occlusion::Ism,
+                    rule: Default::default(),
+                    clusters: Default::default(),
+                    ism: *ism,
+                };
+                Clusters::for_receivers(gpu, scene, &settings, Receivers::Pixels, ISM_STAGES)?
+            }
+            None => None,
+        };
+        let count = groups.as_ref().map(|g| g.table().groups);
+        let desc = if count.is_some() { &GROUPED_PASS } else { &PASS };
+        let source = desc.source(&body(count), scene.textured());
+        let entry = desc.lobe_entry(glossy);
+        let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, desc.workgroup, TILE_SIZE)?;
+        Ok(Self { kernels, groups })
     }
 
-    /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]).
-    pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32) -> Result<(), GpuError> {
+    /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]) and `pixels` pixels.
+    pub fn fit(&mut self, gpu: &Gpu, scene: &GpuScene, max_vals: u32, pixels: u32) -> Result<(), GpuError> {
+        if let Some(g) = &mut self.groups {
+            g.fit(gpu, max_vals)?;
+            g.fit_receivers(gpu, pixels)?;
+        }
         self.kernels.fit(gpu, scene, max_vals)
+    }
+
+    /// `brute_force_ism`'s groups and maps (tests read them back).
+    pub fn groups(&self) -> Option<&Clusters> {
+        self.groups.as_ref()
     }
 }
 
 impl Technique for BruteForce {
     fn stages(&self) -> Vec<&'static str> {
-        vec![PASS.label]
+        let mut stages = self.groups.as_ref().map_or_else(Vec::new, |g| g.stage_names());
+        stages.push(PASS.label);
+        stages
     }
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         let camera = &frame.camera;
-        let resources = [
+        let pixels = [camera.view.width, camera.view.height, 1];
+        if let Some(g) = &self.groups {
+            g.record_at(gpu, frame, rec, view("visibility", &camera.view.view), pixels[0] * pixels[1])?;
+        }
+        let mut resources = vec![
             view("visibility", &camera.view.view),
             buffer("indirect", &camera.indirect),
             buffer("vals", &frame.vals.buffer),
             buffer("val_count", &frame.vals.count),
         ];
-        let pixels = [camera.view.width, camera.view.height, 1];
+        let table = self.groups.as_ref().map(|g| g.table());
+        if let Some(t) = &table {
+            resources.extend([buffer("group_of_val", t.group_of_val), buffer("pixel_visibility", t.visibility)]);
+        }
         rec.stage(PASS.label, |e, s| self.kernels.run(gpu, e, frame.scene, &resources, pixels, s))
     }
 }

@@ -1,7 +1,9 @@
 // Brute-force reference (DESIGN.md §5): every VAL applied to every visible pixel through §3,
 // no sparse points, no interpolation. VALs stream through workgroup memory as in the gather, in
 // tiles and per-dispatch ranges (`shader/val_tiles.wgsl`, prepended), each range after the first
-// adding to the radiance the earlier ones wrote. Rust twin: `twin::shade_brute_force`.
+// adding to the radiance the earlier ones wrote. `pixel_val_visibility(pixel, val)` (prepended)
+// is 1 for the brute force (no visibility) and the group's lookup at the pixel for
+// `brute_force_ism` (`brute_force_groups.wgsl`). Rust twin: `twin::shade_brute_force`.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
@@ -21,18 +23,20 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
     let w_o = view_direction(s.position, s.normal, frame.eye);
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
     var l = vec3<f32>(0.0);
+    let pixel = id.y * frame.width + id.x;
     let end = val_range_end();
     for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
         let n = load_tile(base, local, end);
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
-            l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver), glossy);
+            let f = geo.weight * geo.cos_receiver * pixel_val_visibility(pixel, base + j);
+            l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * f, glossy);
         }
         workgroupBarrier();
     }
     if inside {
-        let i = id.y * frame.width + id.x;
+        let i = pixel;
         var before = vec4<f32>(0.0);
         if VAL_BEGIN > 0u {
             before = indirect[i];

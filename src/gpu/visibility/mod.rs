@@ -11,6 +11,12 @@
 //!   000 produce it, and the imperfect shadow maps of paper 004 (`ism/`: VALs drawn by flux
 //!   instead of k-means, maps splatted from points instead of rasterised, the same lookup).
 //!
+//! The group modes' machinery ([`clusters::Clusters`]) also serves two other sets of receivers
+//! with instances of its own ([`clusters::Receivers`]): the second bounce's points
+//! (`gpu::lights::bounce`: the first bounce's groups, so that the bounce points see the first
+//! bounce through the sparse method's `ism` or `clusters` maps) and the camera's pixels
+//! (`gpu::references::brute_force`'s `brute_force_ism`: ISM visibility per pixel).
+//!
 //! A mode is a folder here holding its Rust, its WGSL and its CPU twin (`disks/`: `mod.rs`,
 //! `disks.wgsl`, `twin.rs`), a type that implements one of the traits, its settings as a field
 //! of [`VisibilitySettings`], and one line in [`for_settings`], where the scene's setting picks it. Its stages appear in the timings under

@@ -5,12 +5,18 @@
 //! atlas), and every (sparse point, cluster) pair a soft-shadow visibility
 //! (`cluster_visibility.wgsl`: PCSS, PCF or hard), which the gather applies to each of the
 //! cluster's VALs. Rust twin: [`twin`].
+//!
+//! The lookup's receivers are the sparse points for the sparse method's mode, and for the
+//! instances other techniques build ([`Receivers`]) the second bounce's points or the camera's
+//! pixels; each instance names its stages ([`StageNames`]) so that two can run in one frame.
 
 pub mod twin;
 
 use super::ism;
 use super::{GroupTable, GroupVisibility};
+use crate::gpu::lights::bounce;
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, depth_texture, module_from_source, read, read_write, view};
+use crate::gpu::references::brute_force;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::WORKGROUP_SIZE;
 use crate::gpu::technique::Frame;
@@ -256,6 +262,47 @@ impl ShadowMaps {
     }
 }
 
+/// Where a group visibility instance looks its maps up: the sparse points (the sparse method's
+/// mode, its table read by the gather) or the second bounce's points (`gpu::lights::bounce`: the
+/// first bounce's groups seen from the bounce points, its table read by `bounce2_points`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Receivers {
+    SparsePoints,
+    /// `count` bounce points (`array<BouncePoint>`, bound as `bounce_points`).
+    BouncePoints {
+        count: u32,
+    },
+    /// The camera's pixels (its visibility buffer, bound as `visibility`): the brute force with
+    /// per-pixel visibility (`gpu::references::brute_force`); the table grows with the image
+    /// ([`Clusters::fit_receivers`]).
+    Pixels,
+}
+
+/// The names of an instance's stages in the frame's timings: the sparse method's mode has the
+/// mode's own, the second bounce's instance its `bounce2_*` ones (both can run in one frame).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StageNames {
+    pub clustering: &'static str,
+    pub shadow_maps: &'static str,
+    pub ism_sampling: &'static str,
+    pub ism_splat: &'static str,
+    pub ism_pull_push: &'static str,
+    /// The lookup, with rasterised maps and with imperfect ones.
+    pub cluster_visibility: &'static str,
+    pub ism_visibility: &'static str,
+}
+
+/// The sparse method's mode's stages.
+pub const SPARSE_STAGES: StageNames = StageNames {
+    clustering: CLUSTERING_STAGE,
+    shadow_maps: SHADOW_MAPS_STAGE,
+    ism_sampling: ism::SAMPLING_STAGE,
+    ism_splat: ism::SPLAT_STAGE,
+    ism_pull_push: ism::PULL_PUSH_STAGE,
+    cluster_visibility: VISIBILITY.label,
+    ism_visibility: ism::VISIBILITY.label,
+};
+
 /// How the groups are seeded each frame.
 enum Seeding {
     /// k-means from the last frame's centres, empty clusters reseeded (`kmeans_seed`).
@@ -278,6 +325,8 @@ enum Maps {
 pub struct Clusters {
     settings: ClusterSettings,
     scale: SceneScale,
+    receivers: Receivers,
+    names: StageNames,
     seeding: Seeding,
     assign: Kernel,
     partial: Kernel,
@@ -292,7 +341,7 @@ pub struct Clusters {
     partials: wgpu::Buffer,
     /// VALs the per-VAL buffers hold.
     capacity: u32,
-    /// `array<f32>`, sparse points x clusters.
+    /// `array<f32>`, receivers (sparse or bounce points) x clusters.
     group_visibility: wgpu::Buffer,
 }
 
@@ -301,12 +350,36 @@ impl Clusters {
     /// ones as `ism` says for points, pull-push and bias.
     pub fn new(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings, ism: &IsmSettings) -> Result<Self, GpuError> {
         let maps = (settings.shadow_maps == ShadowMapSource::Ism).then(|| ism::for_clusters(settings, ism));
-        Self::build(gpu, scene, settings, false, maps.as_ref())
+        Self::build(gpu, scene, settings, false, maps.as_ref(), Receivers::SparsePoints, SPARSE_STAGES)
     }
 
     /// The `"ism"` mode: VALs drawn by flux, one assignment and update, imperfect shadow maps.
     pub fn imperfect(gpu: &Gpu, scene: &GpuScene, ism: &IsmSettings) -> Result<Self, GpuError> {
-        Self::build(gpu, scene, &ism::cluster_settings(ism), true, Some(ism))
+        Self::build(gpu, scene, &ism::cluster_settings(ism), true, Some(ism), Receivers::SparsePoints, SPARSE_STAGES)
+    }
+
+    /// The group visibility mode `settings` asks for (`"clusters"` or `"ism"`; `None` for the
+    /// others), looked up at `receivers`, its stages named `names`.
+    pub fn for_receivers(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        settings: &super::VisibilitySettings,
+        receivers: Receivers,
+        names: StageNames,
+    ) -> Result<Option<Self>, GpuError> {
+        use crate::scene::Occlusion;
+        Ok(match settings.mode {
+            Occlusion::Clusters => {
+                let c = &settings.clusters;
+                let maps = (c.shadow_maps == ShadowMapSource::Ism).then(|| ism::for_clusters(c, &settings.ism));
+                Some(Self::build(gpu, scene, c, false, maps.as_ref(), receivers, names)?)
+            }
+            Occlusion::Ism => {
+                let c = ism::cluster_settings(&settings.ism);
+                Some(Self::build(gpu, scene, &c, true, Some(&settings.ism), receivers, names)?)
+            }
+            Occlusion::Off | Occlusion::Disks => None,
+        })
     }
 
     /// Groups seeded by flux (else by k-means), with imperfect maps when `ism` is given.
@@ -316,6 +389,8 @@ impl Clusters {
         settings: &ClusterSettings,
         flux: bool,
         ism: Option<&IsmSettings>,
+        receivers: Receivers,
+        names: StageNames,
     ) -> Result<Self, GpuError> {
         let scale = SceneScale::of(scene);
         let head = match ism {
@@ -335,21 +410,31 @@ impl Clusters {
             true => Seeding::Flux(ism::FluxSampling::new(gpu, scene, &head)?),
             false => Seeding::Kmeans { seed: kernel("kmeans_seed")? },
         };
-        let (maps, visibility_desc, visibility_body) = match ism {
-            Some(ism) => (
-                Maps::Ism(ism::Maps::new(gpu, scene, &head, settings.count, ism::IsmParams::of(ism, scale))?),
-                &ism::VISIBILITY,
-                ism::visibility_body(&head),
-            ),
-            None => (Maps::Raster(ShadowMaps::new(gpu, scene, settings, scale)?), &VISIBILITY, visibility_body(&head)),
+        let maps = match ism {
+            Some(ism) => Maps::Ism(ism::Maps::new(gpu, scene, &head, settings.count, ism::IsmParams::of(ism, scale))?),
+            None => Maps::Raster(ShadowMaps::new(gpu, scene, settings, scale)?),
+        };
+        let imperfect = ism.is_some();
+        let (visibility_desc, visibility_body) = match (receivers, imperfect) {
+            (Receivers::SparsePoints, true) => (&ism::VISIBILITY, ism::visibility_body(&head)),
+            (Receivers::SparsePoints, false) => (&VISIBILITY, visibility_body(&head)),
+            (Receivers::BouncePoints { .. }, _) => bounce::visibility_pass(&head, imperfect),
+            (Receivers::Pixels, _) => brute_force::visibility_pass(&head, imperfect),
         };
         let vis_module =
             module_from_source(gpu, visibility_desc.label, visibility_desc.source(&visibility_body, textured))?;
         let m = settings.count as usize;
-        let points = scene.flat.sparse_count() as usize;
+        let points = match receivers {
+            Receivers::SparsePoints => scene.flat.sparse_count(),
+            Receivers::BouncePoints { count } => count,
+            Receivers::Pixels => 1,
+        } as usize;
+        let table = table_label(receivers);
         Ok(Self {
             settings: *settings,
             scale,
+            receivers,
+            names,
             seeding,
             assign: kernel("kmeans_assign")?,
             partial: kernel("kmeans_partial")?,
@@ -368,24 +453,128 @@ impl Clusters {
             group_of_val: gpu.storage_buffer_sized::<u32>("clustering.group_of_val", 1)?,
             partials: gpu.storage_buffer_sized::<RawClusterSums>("clustering.cluster_partials", m)?,
             capacity: 1,
-            group_visibility: gpu.storage_buffer_sized::<f32>("group_visibility", points * m)?,
+            group_visibility: gpu.storage_buffer_sized::<f32>(table, points.max(1) * m)?,
         })
     }
 
     /// The stage that seeds and updates the groups.
     fn grouping_stage(&self) -> &'static str {
         match self.seeding {
-            Seeding::Kmeans { .. } => CLUSTERING_STAGE,
-            Seeding::Flux(_) => ism::SAMPLING_STAGE,
+            Seeding::Kmeans { .. } => self.names.clustering,
+            Seeding::Flux(_) => self.names.ism_sampling,
         }
     }
 
     /// The lookup's stage: its pass's label.
     fn visibility_stage(&self) -> &'static str {
         match self.maps {
-            Maps::Raster(_) => VISIBILITY.label,
-            Maps::Ism(_) => ism::VISIBILITY.label,
+            Maps::Raster(_) => self.names.cluster_visibility,
+            Maps::Ism(_) => self.names.ism_visibility,
         }
+    }
+
+    /// Its stages, in order.
+    pub fn stage_names(&self) -> Vec<&'static str> {
+        let mut stages = vec![self.grouping_stage()];
+        match &self.maps {
+            Maps::Raster(_) => stages.push(self.names.shadow_maps),
+            Maps::Ism(maps) => stages.extend(maps.stages(&self.names)),
+        }
+        stages.push(self.visibility_stage());
+        stages
+    }
+
+    /// Record its stages for the frame's VALs (those appended so far): seed and update the
+    /// groups, draw their maps, and look them up at `receivers` (bound as `sparse_points` or
+    /// `bounce_points`, `count` of them) into its table.
+    pub fn record_at(
+        &self,
+        gpu: &Gpu,
+        frame: &Frame<'_>,
+        rec: &mut Recorder<'_>,
+        receivers: crate::gpu::pass::Res<'_>,
+        count: u32,
+    ) -> Result<(), GpuError> {
+        let scene = frame.scene;
+        let m = self.settings.count;
+        let resources = [
+            buffer("vals", &frame.vals.buffer),
+            buffer("val_count", &frame.vals.count),
+            buffer("clusters", &self.clusters),
+            buffer("group_of_val", &self.group_of_val),
+            buffer("cluster_partials", &self.partials),
+        ];
+        let bind = |k: &Kernel, names: usize, except: &str| {
+            let r: Vec<_> = resources[..names]
+                .iter()
+                .filter(|r| r.name != except)
+                .map(|r| crate::gpu::pass::Res { name: r.name, resource: r.resource.clone() })
+                .collect();
+            k.bind(gpu, &r)
+        };
+        let update = [
+            (&self.assign, bind(&self.assign, 4, ""), [self.capacity, 1, 1]),
+            (&self.partial, bind(&self.partial, 5, ""), [m, self.blocks(), 1]),
+            (&self.reduce, bind(&self.reduce, 5, "group_of_val"), [m, 1, 1]),
+        ];
+        // Seed and update: k-means `iterations` times, or the flux draw and one update.
+        let (steps, rounds) = match &self.seeding {
+            Seeding::Kmeans { seed } => {
+                let mut steps = vec![(seed, bind(seed, 3, ""), [m, 1, 1])];
+                steps.extend(update);
+                (steps, self.settings.iterations as usize)
+            }
+            Seeding::Flux(flux) => {
+                let mut steps: Vec<_> = flux.steps(gpu, frame.vals, &self.clusters, m).into();
+                steps.extend(update);
+                (steps, 1)
+            }
+        };
+        rec.stage(self.grouping_stage(), |e, s| {
+            let parts = rounds * steps.len();
+            for i in 0..rounds {
+                for (j, (kernel, group, invocations)) in steps.iter().enumerate() {
+                    let timestamps = s.as_ref().map(|s| s.compute_part(i * steps.len() + j, parts));
+                    kernel.dispatch(e, group, scene, *invocations, timestamps);
+                }
+            }
+        })?;
+        let atlas = match &self.maps {
+            Maps::Raster(maps) => {
+                maps.record(gpu, scene, &self.clusters, &self.settings, self.names.shadow_maps, rec)?;
+                view("shadow_atlas", &maps.atlas_view)
+            }
+            Maps::Ism(maps) => {
+                maps.record(gpu, scene, &self.clusters, &self.names, rec)?;
+                buffer("ism_atlas", &maps.levels[0])
+            }
+        };
+        let group = self.visibility.bind(
+            gpu,
+            &[receivers, buffer("clusters", &self.clusters), atlas, buffer(self.table_name(), &self.group_visibility)],
+        );
+        rec.stage(self.visibility_stage(), |e, s| {
+            self.visibility.dispatch(e, &group, scene, [count, m, 1], s.as_ref().map(|s| s.compute()))
+        })
+    }
+
+    /// The table's binding name in its lookup pass.
+    fn table_name(&self) -> &'static str {
+        match self.receivers {
+            Receivers::SparsePoints => "group_visibility",
+            Receivers::BouncePoints { .. } => "bounce_visibility",
+            Receivers::Pixels => "pixel_visibility",
+        }
+    }
+
+    /// Make the table hold `count` receivers (the pixels of a frame) x groups.
+    pub fn fit_receivers(&mut self, gpu: &Gpu, count: u32) -> Result<(), GpuError> {
+        let needed = count as u64 * u64::from(self.settings.count) * 4;
+        if needed > self.group_visibility.size() {
+            let n = count as usize * self.settings.count as usize;
+            self.group_visibility = gpu.storage_buffer_sized::<f32>(table_label(self.receivers), n)?;
+        }
+        Ok(())
     }
 
     fn blocks(&self) -> u32 {
@@ -506,6 +695,15 @@ impl ShadowMaps {
     }
 }
 
+/// The label of the table of `receivers`.
+fn table_label(receivers: Receivers) -> &'static str {
+    match receivers {
+        Receivers::SparsePoints => "group_visibility",
+        Receivers::BouncePoints { .. } => "bounce2_visibility.bounce_visibility",
+        Receivers::Pixels => "brute_force_ism_visibility.pixel_visibility",
+    }
+}
+
 /// What [`Clusters::read`] returns.
 pub struct ClusterReadback {
     pub clusters: Vec<twin::Cluster>,
@@ -522,13 +720,7 @@ pub struct ClusterReadback {
 
 impl GroupVisibility for Clusters {
     fn stages(&self) -> Vec<&'static str> {
-        let mut stages = vec![self.grouping_stage()];
-        match &self.maps {
-            Maps::Raster(_) => stages.push(SHADOW_MAPS_STAGE),
-            Maps::Ism(maps) => stages.extend(maps.stages()),
-        }
-        stages.push(self.visibility_stage());
-        stages
+        self.stage_names()
     }
 
     fn table(&self) -> GroupTable<'_> {
@@ -549,73 +741,9 @@ impl GroupVisibility for Clusters {
     }
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
-        let scene = frame.scene;
-        let m = self.settings.count;
-        let resources = [
-            buffer("vals", &frame.vals.buffer),
-            buffer("val_count", &frame.vals.count),
-            buffer("clusters", &self.clusters),
-            buffer("group_of_val", &self.group_of_val),
-            buffer("cluster_partials", &self.partials),
-        ];
-        let bind = |k: &Kernel, names: usize, except: &str| {
-            let r: Vec<_> = resources[..names]
-                .iter()
-                .filter(|r| r.name != except)
-                .map(|r| crate::gpu::pass::Res { name: r.name, resource: r.resource.clone() })
-                .collect();
-            k.bind(gpu, &r)
-        };
-        let update = [
-            (&self.assign, bind(&self.assign, 4, ""), [self.capacity, 1, 1]),
-            (&self.partial, bind(&self.partial, 5, ""), [m, self.blocks(), 1]),
-            (&self.reduce, bind(&self.reduce, 5, "group_of_val"), [m, 1, 1]),
-        ];
-        // Seed and update: k-means `iterations` times, or the flux draw and one update.
-        let (steps, rounds) = match &self.seeding {
-            Seeding::Kmeans { seed } => {
-                let mut steps = vec![(seed, bind(seed, 3, ""), [m, 1, 1])];
-                steps.extend(update);
-                (steps, self.settings.iterations as usize)
-            }
-            Seeding::Flux(flux) => {
-                let mut steps: Vec<_> = flux.steps(gpu, frame.vals, &self.clusters, m).into();
-                steps.extend(update);
-                (steps, 1)
-            }
-        };
-        rec.stage(self.grouping_stage(), |e, s| {
-            let parts = rounds * steps.len();
-            for i in 0..rounds {
-                for (j, (kernel, group, invocations)) in steps.iter().enumerate() {
-                    let timestamps = s.as_ref().map(|s| s.compute_part(i * steps.len() + j, parts));
-                    kernel.dispatch(e, group, scene, *invocations, timestamps);
-                }
-            }
-        })?;
-        let atlas = match &self.maps {
-            Maps::Raster(maps) => {
-                maps.record(gpu, scene, &self.clusters, &self.settings, SHADOW_MAPS_STAGE, rec)?;
-                view("shadow_atlas", &maps.atlas_view)
-            }
-            Maps::Ism(maps) => {
-                maps.record(gpu, scene, &self.clusters, rec)?;
-                buffer("ism_atlas", &maps.levels[0])
-            }
-        };
-        let group = self.visibility.bind(
-            gpu,
-            &[
-                buffer("sparse_points", &scene.sparse_points),
-                buffer("clusters", &self.clusters),
-                atlas,
-                buffer("group_visibility", &self.group_visibility),
-            ],
-        );
-        let points = scene.flat.sparse_count();
-        rec.stage(self.visibility_stage(), |e, s| {
-            self.visibility.dispatch(e, &group, scene, [points, m, 1], s.as_ref().map(|s| s.compute()))
-        })
+        debug_assert_eq!(self.receivers, Receivers::SparsePoints);
+        let points = frame.scene.flat.sparse_count();
+        self.record_at(gpu, frame, rec, buffer("sparse_points", &frame.scene.sparse_points), points)
     }
 
     fn as_any(&self) -> &dyn std::any::Any {

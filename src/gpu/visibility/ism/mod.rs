@@ -15,7 +15,7 @@
 
 pub mod twin;
 
-use super::clusters::{self, Clusters, SceneScale};
+use super::clusters::{self, Clusters, SceneScale, StageNames};
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::WORKGROUP_SIZE;
@@ -281,17 +281,19 @@ impl Maps {
         self.params
     }
 
-    /// The stages it records.
-    pub fn stages(&self) -> Vec<&'static str> {
-        if self.params.levels == 0 { vec![SPLAT_STAGE] } else { vec![SPLAT_STAGE, PULL_PUSH_STAGE] }
+    /// The stages it records, named as `names` says.
+    pub fn stages(&self, names: &StageNames) -> Vec<&'static str> {
+        if self.params.levels == 0 { vec![names.ism_splat] } else { vec![names.ism_splat, names.ism_pull_push] }
     }
 
-    /// Splat every map around `clusters`' centres, then pull and push.
+    /// Splat every map around `clusters`' centres, then pull and push, in the stages `names`
+    /// says.
     pub fn record(
         &self,
         gpu: &Gpu,
         scene: &GpuScene,
         clusters: &wgpu::Buffer,
+        names: &StageNames,
         rec: &mut Recorder<'_>,
     ) -> Result<(), GpuError> {
         let group = self.splat.bind(
@@ -303,7 +305,7 @@ impl Maps {
             ],
         );
         let (count, points) = (self.count, self.params.points);
-        rec.stage(SPLAT_STAGE, |e, s| {
+        rec.stage(names.ism_splat, |e, s| {
             e.clear_buffer(&self.levels[0], 0, None);
             self.splat.dispatch(e, &group, scene, [points, count, 1], s.as_ref().map(|s| s.compute()));
         })?;
@@ -317,7 +319,7 @@ impl Maps {
         let pull_groups: Vec<_> = self.pulls.iter().enumerate().map(|(l, k)| pairs(k, l)).collect();
         let push_groups: Vec<_> = self.pushes.iter().enumerate().map(|(l, k)| pairs(k, l)).collect();
         let levels = self.params.levels as usize;
-        rec.stage(PULL_PUSH_STAGE, |e, s| {
+        rec.stage(names.ism_pull_push, |e, s| {
             let parts = 2 * levels;
             for (l, (pull, group)) in self.pulls.iter().zip(&pull_groups).enumerate() {
                 let texels = side(l as u32 + 1).pow(2);
