@@ -5,7 +5,9 @@
 //!
 //! ```text
 //! spot light:  SpotVals (rsm_raster, rsm_vals)  ─┐
-//! RGB-D frame: RgbdVals (rgbd_vals)             ─┴─ VALs
+//! `lights`:    LightRsms (lights_rsm_raster,     │
+//!              lights_rsm_vals)                  ├─ VALs
+//! RGB-D frame: RgbdVals (rgbd_vals)             ─┘
 //! bounces 2:   SecondBounce ([bounce2_ism_sampling, bounce2_ism_splat, bounce2_ism_pull_push,
 //!              bounce2_visibility: the first bounce's maps at its points, sparse `ism` or
 //!              `clusters` only], bounce2_points, bounce2_vals): appends the second bounce's VALs
@@ -18,6 +20,7 @@
 //! ```
 
 use crate::gpu::lights::bounce::SecondBounce;
+use crate::gpu::lights::light_rsms::LightRsms;
 use crate::gpu::lights::many::ManyLights;
 use crate::gpu::lights::rgbd::RgbdVals;
 use crate::gpu::lights::spot::{DirectLight, SpotVals};
@@ -108,6 +111,9 @@ pub mod stage {
 
     pub const RSM_RASTER: &str = spot::RSM_RASTER;
     pub const RSM_VALS: &str = spot::RSM_VALS;
+    /// The RSMs of the scene's `lights` (only with `lights`).
+    pub const LIGHTS_RSM_RASTER: &str = crate::gpu::lights::light_rsms::RASTER_STAGE;
+    pub const LIGHTS_RSM_VALS: &str = crate::gpu::lights::light_rsms::VALS_STAGE;
     pub const RGBD_VALS: &str = RgbdVals::STAGE;
     /// The second bounce's stages (`settings.bounces: 2`).
     pub const BOUNCE2_POINTS: &str = crate::gpu::lights::bounce::POINTS_STAGE;
@@ -235,6 +241,11 @@ pub struct Renderer {
     /// The scene's `lights` and their direct light (`gpu::lights::many`), when it has any.
     lights: Vec<scene::Light>,
     many: Option<ManyLights>,
+    /// The VALs of the `lights`' RSMs (`settings.direct.val_budget`), when the scene has lights
+    /// that emit anything.
+    light_rsms: Option<LightRsms>,
+    /// The budget `light_rsms` was split for.
+    lights_val_budget: u32,
     /// The eye LightCluster's view scaling measures from (the scene's camera).
     lights_eye: Vec3,
     /// The spot light's VALs (R² at most) after the uploaded ones.
@@ -277,7 +288,12 @@ impl Renderer {
             _ => None,
         };
         let rsm = spot.as_ref().map_or(0, |s| s.vals.resolution * s.vals.resolution);
-        let capacity = (rsm + bounce.as_ref().map_or(0, |b| b.settings.vals)).max(1);
+        let light_rsms = match scene.lights.is_empty() {
+            true => None,
+            false => LightRsms::new(gpu, &scene_gpu, &scene.lights, scene.settings.direct.val_budget)?,
+        };
+        let lights_vals = light_rsms.as_ref().map_or(0, |l| l.texels);
+        let capacity = (rsm + lights_vals + bounce.as_ref().map_or(0, |b| b.settings.vals)).max(1);
         let many = match scene.lights.is_empty() {
             true => None,
             false => Some(ManyLights::new(
@@ -293,6 +309,8 @@ impl Renderer {
             bounce,
             lights: scene.lights.clone(),
             many,
+            light_rsms,
+            lights_val_budget: scene.settings.direct.val_budget,
             lights_eye: scene.camera.position,
             vals: Vals {
                 buffer: gpu.storage_buffer_sized::<RawVal>("vals", capacity as usize)?,
@@ -470,10 +488,12 @@ impl Renderer {
         self.read_vals(gpu)
     }
 
-    /// Grow the VAL buffer to hold the uploaded VALs, the RGB-D frame's and the spot light's. A
-    /// new buffer starts empty: callers write the uploaded VALs after this.
+    /// Grow the VAL buffer to hold the uploaded VALs, the RGB-D frame's, the spot light's and
+    /// the `lights`' RSMs'. A new buffer starts empty: callers write the uploaded VALs after
+    /// this.
     fn ensure_val_capacity(&mut self, gpu: &Gpu) -> Result<(), GpuError> {
-        let rsm = self.spot.as_ref().map_or(0, |s| s.vals.resolution * s.vals.resolution);
+        let rsm = self.spot.as_ref().map_or(0, |s| s.vals.resolution * s.vals.resolution)
+            + self.light_rsms.as_ref().map_or(0, |l| l.texels);
         let rgbd = match (&self.rgbd, self.rgbd_active) {
             (Some(b), true) => b.technique.max_vals(),
             _ => 0,
@@ -503,14 +523,33 @@ impl Renderer {
     }
 
     /// Shadow the scene's `lights` as `settings` says from the next frame on (rebuilds their
-    /// groups, maps and pass); nothing for a scene without `lights`.
+    /// groups, maps and pass), and split `settings.val_budget` among their RSMs (rebuilt when
+    /// it changed; the VAL buffer grows, keeping the uploaded VALs, when it must); nothing for
+    /// a scene without `lights`.
     pub fn set_direct_settings(&mut self, gpu: &Gpu, settings: &scene::DirectSettings) -> Result<(), GpuError> {
         if self.lights.is_empty() {
             return Ok(());
         }
         let add = self.spot.is_some();
         self.many = Some(ManyLights::new(gpu, &self.scene, &self.lights, settings, self.lights_eye, add)?);
+        if self.lights_val_budget != settings.val_budget {
+            self.light_rsms = LightRsms::new(gpu, &self.scene, &self.lights, settings.val_budget)?;
+            self.lights_val_budget = settings.val_budget;
+            let old = (self.vals.buffer.clone(), self.vals.capacity);
+            self.ensure_val_capacity(gpu)?;
+            if self.vals.capacity != old.1 && self.uploaded_vals > 0 {
+                let mut encoder = gpu.device.create_command_encoder(&Default::default());
+                let bytes = u64::from(self.uploaded_vals) * std::mem::size_of::<RawVal>() as u64;
+                encoder.copy_buffer_to_buffer(&old.0, 0, &self.vals.buffer, 0, bytes);
+                gpu.submit_and_wait(encoder)?;
+            }
+        }
         Ok(())
+    }
+
+    /// The RSMs of the scene's `lights`, when it has lights that emit anything.
+    pub fn light_rsms(&self) -> Option<&LightRsms> {
+        self.light_rsms.as_ref()
     }
 
     /// The many-light direct technique of the scene's `lights`, if it has any.
@@ -537,7 +576,7 @@ impl Renderer {
         let camera_to_clip = self.camera_to_clip(width, height);
         let uniforms = self.frame_uniforms(camera_to_clip, width, height);
         gpu.queue.write_buffer(&self.scene.frame, 0, bytemuck::bytes_of(&uniforms));
-        // Uploaded VALs stay at the front; the RGB-D frame's and the spot light's are appended.
+        // Uploaded VALs stay at the front; the RGB-D frame's, the spot light's and the `lights`' RSMs' are appended.
         gpu.queue.write_buffer(&self.vals.count, 0, bytemuck::bytes_of(&self.uploaded_vals));
 
         let target = self.target.as_ref().expect("prepare sizes the camera target");
@@ -608,6 +647,9 @@ impl Renderer {
         let mut list: Vec<&dyn Technique> = Vec::new();
         // The spot light's RSM also makes the direct light's shadow map.
         list.extend(self.spot.as_ref().map(|s| &s.vals as &dyn Technique));
+        // Every frame, as the spot's: a direct-only frame makes the first bounce's VALs that
+        // the CPU exact reference reads (`bench::compare`).
+        list.extend(self.light_rsms.as_ref().map(|l| l as &dyn Technique));
         if components.indirect && self.rgbd_active {
             list.extend(self.rgbd.as_ref().map(|b| &b.technique as &dyn Technique));
         }

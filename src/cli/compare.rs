@@ -1,7 +1,7 @@
 //! `relume compare`: the sparse method against the brute force (and exact visibility), as
 //! one JSON object ([`relume::bench::compare::CompareReport`]).
 
-use super::{ExactArgs, Reference, Size, load_lit};
+use super::{ExactArgs, Reference, Size, load_renderable};
 use relume::gpu::Gpu;
 use std::path::PathBuf;
 
@@ -26,7 +26,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let options = args.exact.options(args.val_stride)?;
-    let scene = load_lit(&args.scene)?;
+    let scene = load_renderable(&args.scene)?;
     let size = args.size.resolve(&scene)?;
     let gpu = Gpu::new()?;
     let exact = args.reference.map(|Reference::Exact| &options);

@@ -142,7 +142,7 @@ pub fn load(path: &Path) -> anyhow::Result<Scene> {
     Scene::load(path).with_context(|| format!("loading scene {}", path.display()))
 }
 
-/// A scene for `render` and `compare`, which are lit by the scene's own spot light.
+/// A scene for `record-synthetic`, which is lit by the scene's own spot light.
 pub fn load_lit(path: &Path) -> anyhow::Result<Scene> {
     let scene = load(path)?;
     anyhow::ensure!(
@@ -153,8 +153,8 @@ pub fn load_lit(path: &Path) -> anyhow::Result<Scene> {
     Ok(scene)
 }
 
-/// A scene for `render`: lit by its spot `light` or by its `lights` (direct light only: without
-/// `light` there are no VALs, so the indirect image is black).
+/// A scene for `render` and `compare`: lit by its spot `light` or by its `lights` (each makes
+/// direct light and VALs from its RSM).
 pub fn load_renderable(path: &Path) -> anyhow::Result<Scene> {
     let scene = load(path)?;
     anyhow::ensure!(

@@ -30,6 +30,7 @@ use bytemuck::Pod;
 /// the WGSL (`tests/integration/layout.rs`) and the shaders the compilation test builds.
 pub const PASSES: &[&pass::PassDesc] = &[
     &lights::rsm::PASS,
+    &lights::light_rsms::PASS,
     &lights::rgbd::PASS,
     &lights::bounce::POINTS,
     &lights::bounce::GROUPED_POINTS,

@@ -66,8 +66,10 @@ pub struct SceneDescription {
     pub light: Option<LightDescription>,
     /// Direct lights beside `light` (README "Many direct lights"): spot lights (`{"type":
     /// "spot"}` and the fields of `light`) and point lights (`{"type": "point"}`,
-    /// [`PointLightDescription`]). They add direct light only (their shadows as
-    /// `settings.direct.shadows` says) and no VALs. At most `settings.direct.max_lights`.
+    /// [`PointLightDescription`]). Each adds direct light (its shadows as
+    /// `settings.direct.shadows` says) and VALs from its own RSM, the VAL budget
+    /// `settings.direct.val_budget` split among them by emitted flux. At most
+    /// `settings.direct.max_lights`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lights: Vec<LightEntry>,
     /// Where the virtual content sits in the world, applied after every mesh's own transform:
@@ -594,7 +596,16 @@ pub struct DirectSettings {
     pub shadow_map_resolution: u32,
     /// Most entries `lights` may hold, in 1..=[`MAX_DIRECT_LIGHTS`]; default 128.
     pub max_lights: u32,
+    /// VALs the RSMs of `lights` make per frame at most, in 1..=[`MAX_LIGHTS_VAL_BUDGET`];
+    /// default 16384 (as many as the scene's `light` makes at its default `rsm_resolution`).
+    /// Split among the lights by emitted flux (a spot: one RSM view, a point light: six cube
+    /// faces, each light at least one texel per view, so at least 6 per point light and 1 per
+    /// spot); the scene's `light` keeps its own `rsm_resolution`².
+    pub val_budget: u32,
 }
+
+/// Largest `settings.direct.val_budget`.
+pub const MAX_LIGHTS_VAL_BUDGET: u32 = 1 << 20;
 
 /// How the shadows of the scene's `lights` are computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
@@ -613,7 +624,14 @@ pub const MAX_DIRECT_LIGHTS: u32 = 1024;
 
 impl Default for DirectSettings {
     fn default() -> Self {
-        Self { shadows: DirectShadows::PerLight, d_init: 1.0, z_far: None, shadow_map_resolution: 128, max_lights: 128 }
+        Self {
+            shadows: DirectShadows::PerLight,
+            d_init: 1.0,
+            z_far: None,
+            shadow_map_resolution: 128,
+            max_lights: 128,
+            val_budget: 16384,
+        }
     }
 }
 
@@ -635,6 +653,7 @@ impl DirectSettings {
         }
         int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
         int_in(self.max_lights, 1, MAX_DIRECT_LIGHTS, &format!("{field}.max_lights"))?;
+        int_in(self.val_budget, 1, MAX_LIGHTS_VAL_BUDGET, &format!("{field}.val_budget"))?;
         let side = self.atlas_columns() * self.shadow_map_resolution;
         if side > MAX_CLUSTER_ATLAS_SIDE {
             return Err(SceneError::field(
@@ -1291,6 +1310,24 @@ impl SceneDescription {
         for (i, light) in self.lights.iter().enumerate() {
             light.validate(&format!("lights[{i}]"))?;
         }
+        // A texel per RSM view of every light (`twin::light_rsms::split_val_budget`).
+        let minimum: u32 = self
+            .lights
+            .iter()
+            .map(|l| match l {
+                LightEntry::Spot(_) => crate::twin::light_rsms::SPOT_VIEWS,
+                LightEntry::Point(_) => crate::twin::light_rsms::POINT_VIEWS,
+            })
+            .sum();
+        let budget = self.settings.direct.val_budget;
+        if budget < minimum {
+            return Err(SceneError::field(
+                "settings.direct.val_budget",
+                format!(
+                    "must be at least {minimum} for these lights (one VAL per RSM view: 6 per point light, 1 per spot), got {budget}"
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -1555,6 +1592,12 @@ mod tests {
             (point.to_owned(), r#""d_init": 0"#, "settings.direct.d_init: must be > 0, got 0"),
             (point.to_owned(), r#""z_far": -1"#, "settings.direct.z_far: must be > 0, got -1"),
             (point.to_owned(), r#""max_lights": 0"#, "settings.direct.max_lights: must be in 1..=1024, got 0"),
+            (point.to_owned(), r#""val_budget": 0"#, "settings.direct.val_budget: must be in 1..=1048576, got 0"),
+            (
+                format!("{point}, {point}"),
+                r#""val_budget": 11"#,
+                "settings.direct.val_budget: must be at least 12 for these lights (one VAL per RSM view: 6 per point light, 1 per spot), got 11",
+            ),
             (
                 point.to_owned(),
                 r#""shadow_map_resolution": 8"#,

@@ -13,6 +13,7 @@ use std::f32::consts::PI;
 pub mod bounce;
 pub mod bvh;
 pub mod exact_cpu;
+pub mod light_rsms;
 pub mod many_lights;
 pub mod near_field;
 pub mod rgbd;

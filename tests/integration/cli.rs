@@ -260,8 +260,8 @@ fn client_commands_name_bad_flags_and_unreachable_servers() {
     }
 }
 
-/// A scene lit by `lights` alone renders its direct light (no `light`: no VALs, a black indirect
-/// image); a scene with neither is refused, naming `light`.
+/// A scene lit by `lights` alone renders its direct light, and `compare` takes it (its lights'
+/// RSMs make VALs); a scene with neither is refused, naming `light`.
 #[test]
 fn render_takes_a_scene_lit_by_lights_alone() {
     let dir = scratch("cli_render_lights");
@@ -285,6 +285,10 @@ fn render_takes_a_scene_lit_by_lights_alone() {
     assert!(stderr(&o).contains("lights_direct"), "{}", stderr(&o));
     let hdr = image::open(&exr).unwrap().into_rgba32f();
     assert!(hdr.pixels().any(|p| p.0[0] > 0.0), "the point light reaches the image");
+    let o = relume(&["compare", lit.to_str().unwrap(), "--width", "24", "--height", "24"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(report["vals"].as_u64().unwrap() > 0, "the point light's RSM makes VALs: {report}");
     let o = relume(&[&["render", neither.to_str().unwrap(), "--out", png.to_str().unwrap()], &args[..]].concat());
     assert!(!o.status.success());
     assert!(stderr(&o).contains("light: required by this command unless the scene has `lights`"), "{}", stderr(&o));

@@ -52,6 +52,30 @@ fn rust_structs_match_wgsl() {
     let many = module_of("lights_direct");
     use relume::gpu::lights::many::RawManyLight;
     check!(many, "ManyLight", RawManyLight, [position, range, direction, inner_angle, intensity, outer_angle]);
+    use relume::gpu::lights::light_rsms::{RASTER_STAGE, RawRsmView, VALS_STAGE};
+    for module in [module_of(VALS_STAGE), module_of(RASTER_STAGE)] {
+        check!(
+            module,
+            "RsmView",
+            RawRsmView,
+            [
+                world_to_clip,
+                position,
+                resolution,
+                direction,
+                tan_half,
+                intensity,
+                inner_angle,
+                origin,
+                first_texel,
+                outer_angle,
+                omega_scale,
+                range,
+                _pad0,
+                _pad1
+            ]
+        );
+    }
     check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
     check!(m, "Gathered", RawGathered, [irradiance, weight, position, _pad1, second_moment, _pad2]);
     check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, bound]);

@@ -14,6 +14,7 @@ mod hardening;
 mod hardening_origin;
 mod ism;
 mod layout;
+mod light_rsms;
 mod many_lights;
 mod mcap;
 mod mr_differential;

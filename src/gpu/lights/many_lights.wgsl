@@ -24,16 +24,6 @@ struct ManyLight {
     outer_angle: f32,
 }
 
-// `twin::many_lights::range_window`.
-fn range_window(d: f32, range: f32) -> f32 {
-    if range <= 0.0 {
-        return 1.0;
-    }
-    let x = d / range;
-    let w = clamp(1.0 - x * x * x * x, 0.0, 1.0);
-    return w * w;
-}
-
 // `twin::many_lights::light_radiance`: a point light is a spot of half-angle pi.
 fn light_radiance(p: vec3<f32>, n: vec3<f32>, material: Material, eye: vec3<f32>, light: ManyLight) -> vec3<f32> {
     let w = range_window(distance(p, light.position), light.range);

@@ -9,7 +9,7 @@ use crate::gpu::{Gpu, GpuError};
 use glam::Mat4;
 
 pub const WGSL: &str = include_str!("visibility.wgsl");
-const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
+pub(crate) const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
 pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The pass's complete WGSL (a render pipeline: vertex and fragment stages).
@@ -61,22 +61,7 @@ impl Visibility {
 
     /// Textures and uniform for a `width` x `height` viewpoint named `label`.
     pub fn target(&self, gpu: &Gpu, label: &str, width: u32, height: u32) -> VisibilityTarget {
-        let texture = |name: &str, format, usage| {
-            gpu.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(&format!("{label}.{name}")),
-                size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
-            | wgpu::TextureUsages::TEXTURE_BINDING
-            | wgpu::TextureUsages::COPY_SRC;
-        let visibility = texture("visibility", FORMAT, usage);
+        let (visibility, depth) = visibility_textures(gpu, label, width, height);
         let world_to_clip = gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(&format!("{label}.world_to_clip")),
             size: 64,
@@ -94,8 +79,7 @@ impl Visibility {
             height,
             view: visibility.create_view(&Default::default()),
             texture: visibility,
-            depth: texture("depth", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT)
-                .create_view(&Default::default()),
+            depth,
             world_to_clip,
             bind_group,
         }
@@ -139,6 +123,33 @@ impl Visibility {
     }
 }
 
+/// A `width` x `height` visibility texture named `label.visibility` (a render target that passes
+/// read and copy from) and the view of its depth buffer `label.depth`.
+pub(crate) fn visibility_textures(
+    gpu: &Gpu,
+    label: &str,
+    width: u32,
+    height: u32,
+) -> (wgpu::Texture, wgpu::TextureView) {
+    let texture = |name: &str, format, usage| {
+        gpu.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(&format!("{label}.{name}")),
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let usage =
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC;
+    let visibility = texture("visibility", FORMAT, usage);
+    let depth = texture("depth", DEPTH_FORMAT, wgpu::TextureUsages::RENDER_ATTACHMENT).create_view(&Default::default());
+    (visibility, depth)
+}
+
 /// The camera's visibility buffer, the first technique of every camera image.
 pub struct CameraView {
     raster: Visibility,
@@ -175,32 +186,42 @@ pub struct Hit {
 impl VisibilityTarget {
     /// Read the visibility buffer back, row-major from the top (for the CPU twins and tests).
     pub fn read(&self, gpu: &Gpu) -> Result<Vec<Option<Hit>>, GpuError> {
-        let row = (self.width * 16).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
-        let buffer = gpu.storage_buffer_sized::<u8>("visibility.readback", (row * self.height) as usize)?;
-        let mut encoder =
-            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("visibility.readback") });
-        encoder.copy_texture_to_buffer(
-            self.texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo {
-                buffer: &buffer,
-                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: None },
-            },
-            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
-        );
-        gpu.submit_and_wait(encoder)?;
-        let words: Vec<u32> = gpu.read_buffer(&buffer, (row / 4 * self.height) as usize)?;
-        let mut out = Vec::with_capacity((self.width * self.height) as usize);
-        for y in 0..self.height {
-            for x in 0..self.width {
-                let t = ((y * row / 4) + 4 * x) as usize;
-                out.push((words[t] != 0).then(|| Hit {
-                    triangle: words[t] - 1,
-                    barycentrics: glam::Vec2::new(f32::from_bits(words[t + 1]), f32::from_bits(words[t + 2])),
-                }));
-            }
-        }
-        Ok(out)
+        read_visibility(gpu, &self.texture, self.width, self.height)
     }
+}
+
+/// Read a `width` x `height` visibility texture back, row-major from the top.
+pub(crate) fn read_visibility(
+    gpu: &Gpu,
+    texture: &wgpu::Texture,
+    width: u32,
+    height: u32,
+) -> Result<Vec<Option<Hit>>, GpuError> {
+    let row = (width * 16).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+    let buffer = gpu.storage_buffer_sized::<u8>("visibility.readback", (row * height) as usize)?;
+    let mut encoder =
+        gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("visibility.readback") });
+    encoder.copy_texture_to_buffer(
+        texture.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: None },
+        },
+        wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+    );
+    gpu.submit_and_wait(encoder)?;
+    let words: Vec<u32> = gpu.read_buffer(&buffer, (row / 4 * height) as usize)?;
+    let mut out = Vec::with_capacity((width * height) as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let t = ((y * row / 4) + 4 * x) as usize;
+            out.push((words[t] != 0).then(|| Hit {
+                triangle: words[t] - 1,
+                barycentrics: glam::Vec2::new(f32::from_bits(words[t + 1]), f32::from_bits(words[t + 2])),
+            }));
+        }
+    }
+    Ok(out)
 }
 
 /// A render pipeline that rasterises the flattened scene (`vs_main` over its triangles, no

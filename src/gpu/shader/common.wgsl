@@ -261,6 +261,17 @@ fn frame_spot(f: Frame) -> Spot {
     return Spot(f.light_position, f.light_direction, f.light_inner_angle, f.light_outer_angle, f.light_intensity);
 }
 
+// `twin::many_lights::range_window`: a point light's window on the inverse-square falloff
+// (range 0: none). Used by the many-light direct pass and the lights' RSMs.
+fn range_window(d: f32, range: f32) -> f32 {
+    if range <= 0.0 {
+        return 1.0;
+    }
+    let x = d / range;
+    let w = clamp(1.0 - x * x * x * x, 0.0, 1.0);
+    return w * w;
+}
+
 fn rsm_texel_ndc(ix: u32, iy: u32, resolution: u32) -> vec2<f32> {
     let r = f32(resolution);
     return vec2<f32>((f32(ix) + 0.5) / r * 2.0 - 1.0, 1.0 - (f32(iy) + 0.5) / r * 2.0);

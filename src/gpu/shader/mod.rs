@@ -72,6 +72,7 @@ pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
         .map(|p| (p.label, (p.default_source)(textured)))
         .chain([
             ("visibility", crate::gpu::raster::source(textured)),
+            (crate::gpu::lights::light_rsms::RASTER_STAGE, crate::gpu::lights::light_rsms::raster_source(textured)),
             (
                 crate::gpu::visibility::clusters::SHADOW_MAPS_STAGE,
                 crate::gpu::visibility::clusters::default_shadow_maps_source(textured),

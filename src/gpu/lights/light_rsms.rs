@@ -1,0 +1,293 @@
+//! VALs from the RSMs of the scene's `lights` (README "Many direct lights"; DESIGN.md §2): one
+//! VAL budget (`settings.direct.val_budget`) split among the lights by emitted flux
+//! ([`split_val_budget`]), each light's RSM at the resolution its share allows (a spot: one
+//! perspective view over its cone, as the scene's `light`; a point light: six cube faces), all
+//! views rasterised into one visibility atlas (`light_rsms_raster.wgsl`), then every texel that
+//! sees a surface appended as a VAL (`light_rsms.wgsl`). Rust twins: `twin::light_rsms`.
+//!
+//! Exists only for a scene with `lights`; its VALs join the frame's VAL buffer after the spot
+//! light's, so every VAL consumer takes them as it takes the spot's.
+
+use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
+use crate::gpu::raster::{self, Hit};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::gpu::technique::{Frame, Technique};
+use crate::gpu::timing::Recorder;
+use crate::gpu::{Gpu, GpuError};
+use crate::scene::Light;
+use crate::twin::light_rsms::{RsmView, emitted_flux, light_views, split_val_budget, view_to_clip, views_of};
+use bytemuck::{Pod, Zeroable};
+
+pub const WGSL: &str = include_str!("light_rsms.wgsl");
+const RASTER_WGSL: &str = include_str!("light_rsms_raster.wgsl");
+/// WGSL `RsmView`, shared by the raster and the VAL pass.
+pub const VIEW_WGSL: &str = include_str!("light_rsms_view.wgsl");
+
+/// Stage names.
+pub const RASTER_STAGE: &str = "lights_rsm_raster";
+pub const VALS_STAGE: &str = "lights_rsm_vals";
+
+/// One invocation per texel of every view; `vals` appends stop at its capacity.
+pub const PASS: PassDesc = PassDesc {
+    label: VALS_STAGE,
+    bindings: &[texture("atlas"), read("rsm_views"), read_write("vals"), read_write("val_count")],
+    entries: &[Entry::first("main", 4)],
+    workgroup: [WORKGROUP_SIZE, 1, 1],
+    default_source: |textured| PASS.source(&body(), textured),
+};
+
+/// The VAL pass's WGSL after the shader prelude.
+fn body() -> String {
+    format!("{VIEW_WGSL}\n{WGSL}")
+}
+
+/// The raster's complete WGSL (a render pipeline: vertex and fragment stages).
+pub fn raster_source(textured: bool) -> String {
+    crate::gpu::shader::source(&format!("{VIEW_WGSL}\n{RASTER_WGSL}"), textured)
+}
+
+/// WGSL `RsmView`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawRsmView {
+    pub world_to_clip: [[f32; 4]; 4],
+    pub position: [f32; 3],
+    pub resolution: u32,
+    pub direction: [f32; 3],
+    pub tan_half: f32,
+    pub intensity: [f32; 3],
+    pub inner_angle: f32,
+    pub origin: [u32; 2],
+    pub first_texel: u32,
+    pub outer_angle: f32,
+    pub omega_scale: f32,
+    pub range: f32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// One view placed in the atlas.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlacedView {
+    /// Index of its light in the scene's `lights`.
+    pub light: u32,
+    pub view: RsmView,
+    /// Top-left texel in the atlas.
+    pub origin: [u32; 2],
+    /// Its first texel in the VAL pass's flat numbering.
+    pub first_texel: u32,
+}
+
+/// Shelf-pack square tiles of sides `sides` into a `width`-wide atlas, largest first: each
+/// tile's top-left corner, and the atlas height.
+fn pack(sides: &[u32], width: u32) -> (Vec<[u32; 2]>, u32) {
+    let mut order: Vec<usize> = (0..sides.len()).collect();
+    order.sort_by(|&a, &b| sides[b].cmp(&sides[a]).then(a.cmp(&b)));
+    let mut origins = vec![[0u32; 2]; sides.len()];
+    let (mut x, mut y, mut shelf) = (0u32, 0u32, 0u32);
+    for i in order {
+        let s = sides[i];
+        if x + s > width {
+            (x, y, shelf) = (0, y + shelf, 0);
+        }
+        origins[i] = [x, y];
+        x += s;
+        shelf = shelf.max(s);
+    }
+    (origins, y + shelf)
+}
+
+/// The RSMs of the scene's `lights` and the VALs they make.
+pub struct LightRsms {
+    /// Per light of `lights`: its RSM's texels per view side (0: it makes no VAL).
+    pub resolutions: Vec<u32>,
+    /// Every view of every light with a resolution, in the VAL pass's order.
+    pub views: Vec<PlacedView>,
+    /// Texels of all views (the most VALs a frame can get from them).
+    pub texels: u32,
+    /// Atlas size, texels.
+    pub atlas_size: [u32; 2],
+    atlas: wgpu::Texture,
+    atlas_view: wgpu::TextureView,
+    depth: wgpu::TextureView,
+    /// `array<RsmView>`, rewritten every frame (the near and far planes follow the scene).
+    rsm_views: wgpu::Buffer,
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::RenderPipeline,
+    vals: Kernels,
+}
+
+impl LightRsms {
+    /// The RSMs of `lights` for a budget of `budget` VALs; `None` when no light emits anything.
+    pub fn new(gpu: &Gpu, scene: &GpuScene, lights: &[Light], budget: u32) -> Result<Option<Self>, GpuError> {
+        let flux: Vec<f32> = lights.iter().map(emitted_flux).collect();
+        let views_per_light: Vec<u32> = lights.iter().map(views_of).collect();
+        let resolutions = split_val_budget(&flux, &views_per_light, budget);
+        let mut views = Vec::new();
+        let mut texels = 0u32;
+        for (i, (light, &r)) in lights.iter().zip(&resolutions).enumerate() {
+            if r == 0 {
+                continue;
+            }
+            for view in light_views(light, r) {
+                views.push(PlacedView { light: i as u32, view, origin: [0, 0], first_texel: texels });
+                texels += r * r;
+            }
+        }
+        if views.is_empty() {
+            return Ok(None);
+        }
+        let sides: Vec<u32> = views.iter().map(|v| v.view.resolution).collect();
+        let widest = *sides.iter().max().expect("views is not empty");
+        let width = widest.max((texels as f64).sqrt().ceil() as u32);
+        let (origins, height) = pack(&sides, width);
+        for (v, o) in views.iter_mut().zip(origins) {
+            v.origin = o;
+        }
+        let limit = gpu.device.limits().max_texture_dimension_2d;
+        if width.max(height) > limit {
+            return Err(GpuError::Unsupported(format!(
+                "the lights' RSM atlas needs {width} x {height} texels, over the device's {limit}: lower settings.direct.val_budget"
+            )));
+        }
+        let (atlas, depth) = raster::visibility_textures(gpu, "lights_rsm", width, height);
+        let atlas_view = atlas.create_view(&Default::default());
+        let rsm_views = gpu.storage_buffer_sized::<RawRsmView>("lights_rsm.rsm_views", views.len())?;
+        let module = crate::gpu::pass::module_from_source(gpu, RASTER_STAGE, raster_source(scene.textured()))?;
+        let (layout, pipeline) = gpu.build_checked(RASTER_STAGE, || {
+            let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("lights_rsm_raster.layout"),
+                entries: &[wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: true },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                }],
+            });
+            let target =
+                wgpu::ColorTargetState { format: raster::FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL };
+            let pipeline =
+                raster::scene_raster_pipeline(gpu, RASTER_STAGE, &module, &layout, &scene.layout, &[Some(target)]);
+            (layout, pipeline)
+        })?;
+        Ok(Some(Self {
+            resolutions,
+            views,
+            texels,
+            atlas_size: [width, height],
+            atlas,
+            atlas_view,
+            depth,
+            rsm_views,
+            layout,
+            pipeline,
+            vals: Kernels::lobes(gpu, scene, &PASS, &body(), false)?,
+        }))
+    }
+
+    /// The views as the GPU takes them, near and far fitted to the scene from each light.
+    pub fn raw_views(&self, scene: &GpuScene) -> Vec<RawRsmView> {
+        self.views
+            .iter()
+            .map(|p| {
+                let v = &p.view;
+                let s = &v.frame;
+                RawRsmView {
+                    world_to_clip: view_to_clip(v, scene.flat.depth_range(s.position)).to_cols_array_2d(),
+                    position: s.position.into(),
+                    resolution: v.resolution,
+                    direction: s.direction.into(),
+                    tan_half: v.tan_half,
+                    intensity: s.intensity.into(),
+                    inner_angle: s.inner_angle,
+                    origin: p.origin,
+                    first_texel: p.first_texel,
+                    outer_angle: s.outer_angle,
+                    omega_scale: v.omega_scale,
+                    range: v.range.unwrap_or(0.0),
+                    _pad0: 0,
+                    _pad1: 0,
+                }
+            })
+            .collect()
+    }
+
+    /// The atlas of the last frame, row-major from the top (for the twins and tests).
+    pub fn read_atlas(&self, gpu: &Gpu) -> Result<Vec<Option<Hit>>, GpuError> {
+        raster::read_visibility(gpu, &self.atlas, self.atlas_size[0], self.atlas_size[1])
+    }
+}
+
+impl Technique for LightRsms {
+    fn stages(&self) -> Vec<&'static str> {
+        vec![RASTER_STAGE, VALS_STAGE]
+    }
+
+    fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
+        let scene = frame.scene;
+        gpu.queue.write_buffer(&self.rsm_views, 0, bytemuck::cast_slice(&self.raw_views(scene)));
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("lights_rsm_raster.bind_group"),
+            layout: &self.layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: self.rsm_views.as_entire_binding() }],
+        });
+        rec.stage(RASTER_STAGE, |e, s| {
+            let mut pass = e.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some(RASTER_STAGE),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &self.atlas_view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.depth,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: s.as_ref().map(|s| s.render()),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.set_bind_group(1, &scene.bind_group, &[]);
+            let corners = scene.flat.indices.len() as u32;
+            for (k, v) in self.views.iter().enumerate() {
+                let ([x, y], r) = (v.origin, v.view.resolution);
+                pass.set_viewport(x as f32, y as f32, r as f32, r as f32, 0.0, 1.0);
+                pass.set_scissor_rect(x, y, r, r);
+                pass.draw(0..corners, k as u32..k as u32 + 1);
+            }
+        })?;
+        let resources = [
+            view("atlas", &self.atlas_view),
+            buffer("rsm_views", &self.rsm_views),
+            buffer("vals", &frame.vals.buffer),
+            buffer("val_count", &frame.vals.count),
+        ];
+        rec.stage(VALS_STAGE, |e, s| self.vals.run(gpu, e, scene, &resources, [self.texels, 1, 1], s))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Largest first along shelves: 4 and 3 on the first shelf of a 7-wide atlas, 2, 2 and 1 on
+    /// the next (4 high), so the atlas is 4 + 2 = 6 high.
+    #[test]
+    fn shelf_packing_known_answer() {
+        let (origins, height) = pack(&[2, 4, 1, 3, 2], 7);
+        assert_eq!(origins, vec![[0, 4], [0, 0], [4, 4], [4, 0], [2, 4]]);
+        assert_eq!(height, 6);
+    }
+}
