@@ -288,10 +288,15 @@ fn second_bounce_through_group_visibility_matches_cpu_twin() {
 /// Geometry: the spot lights a disc of radius 0.5 tan 50° = 0.60 m on the wall around z = 0, so
 /// a receiver point at z sees VAL z' through the plate's plane at (z + z') / 2: hidden from
 /// every VAL for z > 0.60, from none for z < -0.60; points within 0.3 m beyond those are left
-/// out (the groups' spread and the lookup's texels). Tolerance: 2 % of the unoccluded flux
-/// either way: the maps (64 of 128², 30,000 points each, hard lookup) resolve a plate 1 m
-/// away to a few texels, and the slope bias is a fraction of that here. With visibility off
-/// the hidden points keep all their light, so the test fails.
+/// out (the groups' spread and the lookup's texels). Tolerance: a hidden point keeps at most
+/// 2 % of its unoccluded flux (measured: 0 in 8 runs); the maps (64 of 128², 30,000 points
+/// each, hard lookup) resolve a plate 1 m away to a few texels. An open point keeps 94-102 %
+/// and 99.5 % on average (measured 99.95-99.99 %): it lies on a wall that is itself splatted into every map, and for one
+/// to three of the 64 groups its hard lookup finds one of its own wall's points nearer than
+/// itself (the slope bias is a fraction of a texel here), which groups depends on the VALs the
+/// flux draw picks, and the RSM appends them in no fixed order (8 runs: the worst open point
+/// kept 0.957-0.989). With visibility off the hidden points keep all their light, so the test
+/// fails.
 #[test]
 fn plate_hides_bounce_points_through_the_ism() {
     let quad = |corners: [Vec3; 4], normal: Vec3| {
@@ -336,7 +341,7 @@ fn plate_hides_bounce_points_through_the_ism() {
         b.read_candidates(&gpu).unwrap()
     };
     let (through, open) = (candidates("ism"), candidates("off"));
-    let (mut hidden, mut seen) = (0, 0);
+    let (mut hidden, mut seen, mut open_kept) = (0, 0, 0.0f64);
     for (t, o) in through.iter().zip(&open) {
         assert!((t.position - o.position).length() < 1e-6, "the same points");
         let on_receiver = (o.position.x - 1.0).abs() < 1e-3;
@@ -349,9 +354,12 @@ fn plate_hides_bounce_points_through_the_ism() {
             assert!(y <= 0.02 * z, "hidden at {}: {y} of {z}", o.position);
         } else if o.position.z < -0.9 {
             seen += 1;
-            assert!((y - z).abs() <= 0.02 * z, "open at {}: {y} vs {z}", o.position);
+            open_kept += f64::from(y / z);
+            assert!(y <= 1.02 * z && y >= 0.94 * z, "open at {}: {y} vs {z}", o.position);
         }
     }
-    eprintln!("{hidden} hidden and {seen} open receiver points");
+    let open_kept = open_kept / f64::from(seen.max(1));
+    eprintln!("{hidden} hidden and {seen} open receiver points; the open ones keep {open_kept:.4} on average");
     assert!(hidden > 100 && seen > 100, "{hidden} hidden, {seen} open");
+    assert!(open_kept >= 0.995, "open points keep {open_kept} of their light on average");
 }

