@@ -36,16 +36,7 @@ fn lights() -> Vec<Light> {
 fn scene_with_lights(budget: u32) -> Scene {
     let mut scene = load_scene("cornell_bunny_small");
     scene.light = None;
-    // A scene's lights live relative to its floating origin (the box's centre), as the loader
-    // puts them.
-    let origin = scene.origin.as_vec3();
-    scene.lights = lights()
-        .into_iter()
-        .map(|l| match l {
-            Light::Point(p) => Light::Point(PointLight { position: p.position - origin, ..p }),
-            Light::Spot(s) => Light::Spot(SpotLight { position: s.position - origin, ..s }),
-        })
-        .collect();
+    scene.lights = super::local_lights(&scene, lights());
     scene.settings.direct = DirectSettings { val_budget: budget, ..DirectSettings::default() };
     scene
 }

@@ -61,6 +61,19 @@ pub fn assert_close(a: glam::Vec3, b: glam::Vec3, rel: f32, scale: f32, abs: f32
     let tol = rel * scale + abs;
     assert!((a - b).abs().max_element() <= tol, "{what}: GPU {a} vs CPU {b} (tolerance {tol})");
 }
+/// `lights` written in a scene's own coordinates (its meshes' world space), moved to its
+/// floating origin (the meshes' centre), where the loader puts a scene's lights.
+pub fn local_lights(scene: &relume::scene::Scene, lights: Vec<relume::scene::Light>) -> Vec<relume::scene::Light> {
+    use relume::scene::{Light, PointLight, SpotLight};
+    let origin = scene.origin.as_vec3();
+    lights
+        .into_iter()
+        .map(|l| match l {
+            Light::Point(p) => Light::Point(PointLight { position: p.position - origin, ..p }),
+            Light::Spot(s) => Light::Spot(SpotLight { position: s.position - origin, ..s }),
+        })
+        .collect()
+}
 
 /// CPU twin values at every visibility texel that hit geometry: `f(position, normal, surface)`.
 pub fn per_hit(

@@ -41,16 +41,7 @@ fn scene_with(shadows: DirectShadows, spot: bool) -> Scene {
     if !spot {
         scene.light = None;
     }
-    // The scene's lights live relative to its floating origin (the box's centre), as the loader
-    // puts them; these are written in the box's own coordinates.
-    let origin = scene.origin.as_vec3();
-    scene.lights = lights()
-        .into_iter()
-        .map(|l| match l {
-            Light::Point(p) => Light::Point(PointLight { position: p.position - origin, ..p }),
-            other => other,
-        })
-        .collect();
+    scene.lights = super::local_lights(&scene, lights());
     scene.settings.direct = DirectSettings { shadows, d_init: 0.3, ..DirectSettings::default() };
     scene
 }

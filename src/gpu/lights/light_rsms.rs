@@ -9,7 +9,7 @@
 //! light's, so every VAL consumer takes them as it takes the spot's.
 
 use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
-use crate::gpu::raster::{self, Hit};
+use crate::gpu::raster::{self, Hit, begin_visibility_pass};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::WORKGROUP_SIZE;
 use crate::gpu::technique::{Frame, Technique};
@@ -237,26 +237,7 @@ impl Technique for LightRsms {
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: self.rsm_views.as_entire_binding() }],
         });
         rec.stage(RASTER_STAGE, |e, s| {
-            let mut pass = e.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some(RASTER_STAGE),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.atlas_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: s.as_ref().map(|s| s.render()),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = begin_visibility_pass(e, RASTER_STAGE, &self.atlas_view, &self.depth, s);
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.set_bind_group(1, &scene.bind_group, &[]);

@@ -96,31 +96,41 @@ impl Visibility {
         span: Option<Span<'_>>,
     ) {
         gpu.queue.write_buffer(&target.world_to_clip, 0, bytemuck::bytes_of(&world_to_clip.to_cols_array_2d()));
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some(&target.label),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &target.view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &target.depth,
-                depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: span.as_ref().map(Span::render),
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = begin_visibility_pass(encoder, &target.label, &target.view, &target.depth, span);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &target.bind_group, &[]);
         pass.set_bind_group(1, &scene.bind_group, &[]);
         pass.draw(0..scene.flat.indices.len() as u32, 0..1);
     }
+}
+
+/// A render pass that clears the visibility texture `view` (nothing covered) and its depth
+/// buffer `depth`, keeps the texture and discards the depths: every visibility raster's pass
+/// (the camera's, the RSMs').
+pub(crate) fn begin_visibility_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    view: &wgpu::TextureView,
+    depth: &wgpu::TextureView,
+    span: Option<Span<'_>>,
+) -> wgpu::RenderPass<'e> {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations { load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT), store: wgpu::StoreOp::Store },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(1.0), store: wgpu::StoreOp::Discard }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: span.as_ref().map(Span::render),
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
 }
 
 /// A `width` x `height` visibility texture named `label.visibility` (a render target that passes
