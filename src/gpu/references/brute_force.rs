@@ -47,10 +47,26 @@ const NO_VISIBILITY: &str = "fn pixel_val_visibility(pixel: u32, val: u32) -> f3
 
 /// The pass's own WGSL: the VAL tiles, `pixel_val_visibility` for `groups` groups (or none),
 /// then `brute_force.wgsl`.
-pub fn body(groups: Option<u32>) -> String {
+pub fn body(groups: Option<u32>, pixels: u32) -> String {
     let visibility =
         groups.map_or_else(|| NO_VISIBILITY.to_owned(), |g| format!("const GROUP_COUNT: u32 = {g}u;\n{GROUPS_WGSL}"));
-    format!("{VAL_TILES}\n{visibility}\n{WGSL}")
+    let adds: String = (0..pixels)
+        .map(|r| format!("    (*ls)[{r}] = add_val((*ls)[{r}], (*receivers)[{r}], val, val_index, glossy);\n"))
+        .collect();
+    format!(
+        "{VAL_TILES}\n{visibility}\nconst PIXELS: u32 = {pixels}u;\n\
+         fn add_to_pixels(ls: ptr<function, array<vec3<f32>, PIXELS>>, receivers: ptr<function, array<Receiver, PIXELS>>, \
+         val: Val, val_index: u32, glossy: bool) {{\n{adds}}}\n{WGSL}"
+    )
+}
+
+/// Pixels per invocation on CPU adapters (a row's consecutive pixels share each VAL read from
+/// workgroup memory, as the gather's points do: `gather::CPU_RECEIVERS`); GPUs take one.
+pub const CPU_PIXELS: u32 = 4;
+
+/// Pixels per invocation on `gpu`.
+pub fn pixels_for(gpu: &Gpu) -> u32 {
+    if gpu.is_cpu() { CPU_PIXELS } else { 1 }
 }
 
 /// The bindings of [`GROUPED_PASS`]; [`PASS`] has the first four.
@@ -70,14 +86,14 @@ pub const PASS: PassDesc = PassDesc {
     bindings: BINDINGS.split_at(4).0,
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 4)],
     workgroup: [IMAGE_TILE[0], TILE_SIZE / IMAGE_TILE[0], 1],
-    default_source: |textured| PASS.source(&body(None), textured),
+    default_source: |textured| PASS.source(&body(None, CPU_PIXELS), textured),
 };
 
 /// `brute_force_ism`'s pass: [`PASS`] plus the group table at the pixels.
 pub const GROUPED_PASS: PassDesc = PassDesc {
     bindings: BINDINGS,
     entries: &[Entry::first("main", 6), Entry::first("main_glossy", 6)],
-    default_source: |textured| GROUPED_PASS.source(&body(Some(64)), textured),
+    default_source: |textured| GROUPED_PASS.source(&body(Some(64), CPU_PIXELS), textured),
     ..PASS
 };
 
@@ -109,6 +125,8 @@ pub struct BruteForce {
     kernels: Kernels,
     /// `brute_force_ism`: the imperfect shadow maps' groups, looked up at the pixels.
     groups: Option<Clusters>,
+    /// Pixels of a row per invocation.
+    pixels: u32,
 }
 
 impl BruteForce {
@@ -128,10 +146,11 @@ impl BruteForce {
         };
         let count = groups.as_ref().map(|g| g.table().groups);
         let desc = if count.is_some() { &GROUPED_PASS } else { &PASS };
-        let source = desc.source(&body(count), scene.textured());
+        let pixels = pixels_for(gpu);
+        let source = desc.source(&body(count, pixels), scene.textured());
         let entry = desc.lobe_entry(glossy);
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, desc.workgroup, TILE_SIZE)?;
-        Ok(Self { kernels, groups })
+        Ok(Self { kernels, groups, pixels })
     }
 
     /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]) and `pixels` pixels.
@@ -172,6 +191,7 @@ impl Technique for BruteForce {
         if let Some(t) = &table {
             resources.extend([buffer("group_of_val", t.group_of_val), buffer("pixel_visibility", t.visibility)]);
         }
-        rec.stage(PASS.label, |e, s| self.kernels.run(gpu, e, frame.scene, &resources, pixels, s))
+        let invocations = [pixels[0].div_ceil(self.pixels), pixels[1], 1];
+        rec.stage(PASS.label, |e, s| self.kernels.run(gpu, e, frame.scene, &resources, invocations, s))
     }
 }

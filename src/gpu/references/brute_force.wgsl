@@ -3,18 +3,31 @@
 // tiles and per-dispatch ranges (`shader/val_tiles.wgsl`, prepended), each range after the first
 // adding to the radiance the earlier ones wrote. `pixel_val_visibility(pixel, val)` (prepended)
 // is 1 for the brute force (no visibility) and the group's lookup at the pixel for
-// `brute_force_ism` (`brute_force_groups.wgsl`). Rust twin: `twin::shade_brute_force`.
+// `brute_force_ism` (`brute_force_groups.wgsl`). Each invocation shades PIXELS consecutive
+// pixels of a row (prepended by `brute_force.rs` with `add_to_pixels`, the per-VAL statement
+// written out once per pixel, as the gather's `add_to_receivers`): every VAL read from the tile
+// serves that many pixels. Rust twin: `twin::shade_brute_force`.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> vals: array<Val>;
 @group(0) @binding(3) var<storage, read> val_count: u32;
 
-fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
-    let inside = id.x < frame.width && id.y < frame.height;
+// A pixel an invocation shades: its surface (a dummy outside the image or where nothing is).
+struct Receiver {
+    surface: Surface,
+    w_o: vec3<f32>,
+    spec: vec3<f32>,
+    pixel: u32,
+    inside: bool,
+    covered: bool,
+}
+
+fn receiver(x: u32, y: u32) -> Receiver {
+    let inside = x < frame.width && y < frame.height;
     var hit = Hit(false, 0u, vec2<f32>(0.0));
     if inside {
-        hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
+        hit = decode_visibility(textureLoad(visibility, vec2<i32>(vec2<u32>(x, y)), 0));
     }
     var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1));
     if hit.covered {
@@ -22,26 +35,41 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
     }
     let w_o = view_direction(s.position, s.normal, frame.eye);
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
-    var l = vec3<f32>(0.0);
-    let pixel = id.y * frame.width + id.x;
+    return Receiver(s, w_o, spec, y * frame.width + x, inside, hit.covered);
+}
+
+// `l` plus the radiance VAL `val` (the `val_index`-th) reflects at pixel `r`.
+fn add_val(l: vec3<f32>, r: Receiver, val: Val, val_index: u32, glossy: bool) -> vec3<f32> {
+    let s = r.surface;
+    let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
+    let f = geo.weight * geo.cos_receiver * pixel_val_visibility(r.pixel, val_index);
+    return l + reflected_radiance(s, r.spec, r.w_o, geo.direction, val.flux * f, glossy);
+}
+
+fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
+    var receivers: array<Receiver, PIXELS>;
+    var ls: array<vec3<f32>, PIXELS>;
+    for (var r = 0u; r < PIXELS; r++) {
+        receivers[r] = receiver(id.x * PIXELS + r, id.y);
+        ls[r] = vec3<f32>(0.0);
+    }
     let end = val_range_end();
     for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
         let n = load_tile(base, local, end);
         for (var j = 0u; j < n; j++) {
-            let val = tile[j];
-            let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
-            let f = geo.weight * geo.cos_receiver * pixel_val_visibility(pixel, base + j);
-            l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * f, glossy);
+            add_to_pixels(&ls, &receivers, tile[j], base + j, glossy);
         }
         workgroupBarrier();
     }
-    if inside {
-        let i = pixel;
-        var before = vec4<f32>(0.0);
-        if VAL_BEGIN > 0u {
-            before = indirect[i];
+    for (var r = 0u; r < PIXELS; r++) {
+        let p = receivers[r];
+        if p.inside {
+            var before = vec4<f32>(0.0);
+            if VAL_BEGIN > 0u {
+                before = indirect[p.pixel];
+            }
+            indirect[p.pixel] = select(vec4<f32>(0.0), vec4<f32>(before.rgb + ls[r], 1.0), p.covered);
         }
-        indirect[i] = select(vec4<f32>(0.0), vec4<f32>(before.rgb + l, 1.0), hit.covered);
     }
 }
 
