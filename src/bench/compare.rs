@@ -365,6 +365,32 @@ pub struct ModeVsExact {
     pub stages_ms: Vec<(String, f64)>,
 }
 
+impl ModeVsExact {
+    /// `rendered`'s indirect image, from the method or mode named `mode`, against `exact`'s
+    /// (whose luminance sums to `exact_sum`), with its visibility and gather (or brute-force)
+    /// times.
+    fn against(
+        exact: &ExactReference,
+        exact_sum: f64,
+        mode: &'static str,
+        rendered: &Rendered,
+        visibility_ms: f64,
+        gather_ms: f64,
+    ) -> Self {
+        let error = indirect_error(&rendered.indirect, exact.indirect());
+        Self {
+            mode,
+            rel_rmse: error.rel_rmse,
+            rel_rmse_corrected: exact.corrected_rel_rmse(&rendered.indirect),
+            flip_mean: error.flip_mean,
+            energy_ratio: rendered.indirect.luminance_sum_and_peak().0 / exact_sum,
+            visibility_ms,
+            gather_ms,
+            stages_ms: rendered.timings.stages.clone(),
+        }
+    }
+}
+
 /// The sparse method's visibility modes against the exact-visibility reference.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ExactComparison {
@@ -473,17 +499,7 @@ fn exact_comparison(
     let exact = exact_reference(gpu, renderer, w, h, options)?;
     let exposure = exact.indirect().auto_exposure();
     let exact_sum = exact.indirect().luminance_sum_and_peak().0;
-    let error = indirect_error(&brute.indirect, exact.indirect());
-    let brute_force_vs_exact = ModeVsExact {
-        mode: "brute_force",
-        rel_rmse: error.rel_rmse,
-        rel_rmse_corrected: exact.corrected_rel_rmse(&brute.indirect),
-        flip_mean: error.flip_mean,
-        energy_ratio: brute.indirect.luminance_sum_and_peak().0 / exact_sum,
-        visibility_ms: 0.0,
-        gather_ms: 0.0,
-        stages_ms: brute.timings.stages.clone(),
-    };
+    let brute_force_vs_exact = ModeVsExact::against(&exact, exact_sum, "brute_force", brute, 0.0, 0.0);
     if let Some(dir) = images {
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
     }
@@ -500,36 +516,21 @@ fn exact_comparison(
         if let Some(dir) = images {
             write_png(&sparse.indirect, &dir.join(format!("indirect_sparse_occlusion_{key}.png")), exposure)?;
         }
-        let error = indirect_error(&sparse.indirect, exact.indirect());
         let visibility_stages = renderer.visibility_stages();
-        modes.push(ModeVsExact {
-            mode: key,
-            rel_rmse: error.rel_rmse,
-            rel_rmse_corrected: exact.corrected_rel_rmse(&sparse.indirect),
-            flip_mean: error.flip_mean,
-            energy_ratio: sparse.indirect.luminance_sum_and_peak().0 / exact_sum,
-            // `off` has no stage of its own: 0, not the empty sum's -0.
-            visibility_ms: if visibility_stages.is_empty() { 0.0 } else { sparse.timings.total_of(&visibility_stages) },
-            gather_ms: sparse.timings.total_of(&[stage::GATHER]),
-            stages_ms: sparse.timings.stages.clone(),
-        });
+        // `off` has no stage of its own: 0, not the empty sum's -0.
+        let visibility_ms =
+            if visibility_stages.is_empty() { 0.0 } else { sparse.timings.total_of(&visibility_stages) };
+        let gather_ms = sparse.timings.total_of(&[stage::GATHER]);
+        modes.push(ModeVsExact::against(&exact, exact_sum, key, &sparse, visibility_ms, gather_ms));
     }
     let ism = renderer.render(gpu, Method::BruteForceIsm, w, h)?;
     if let Some(dir) = images {
         write_png(&ism.indirect, &dir.join("indirect_brute_force_ism.png"), exposure)?;
     }
-    let error = indirect_error(&ism.indirect, exact.indirect());
     let ism_stages: Vec<&str> = ism.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
-    let brute_force_ism_vs_exact = ModeVsExact {
-        mode: "brute_force_ism",
-        rel_rmse: error.rel_rmse,
-        rel_rmse_corrected: exact.corrected_rel_rmse(&ism.indirect),
-        flip_mean: error.flip_mean,
-        energy_ratio: ism.indirect.luminance_sum_and_peak().0 / exact_sum,
-        visibility_ms: ism.timings.total_of(&ism_stages),
-        gather_ms: ism.timings.total_of(&[stage::BRUTE_FORCE]),
-        stages_ms: ism.timings.stages.clone(),
-    };
+    let (visibility_ms, brute_ms) = (ism.timings.total_of(&ism_stages), ism.timings.total_of(&[stage::BRUTE_FORCE]));
+    let brute_force_ism_vs_exact =
+        ModeVsExact::against(&exact, exact_sum, "brute_force_ism", &ism, visibility_ms, brute_ms);
     Ok(ExactComparison {
         exact_ms: exact.ms(),
         exact_device: exact.device,
