@@ -111,7 +111,7 @@ pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&Trace
 }
 
 /// Each point as a candidate VAL seen through the first bounce's groups (WGSL
-/// `bounce_groups.wgsl`, with the sparse method's `clusters` or `ism` mode): VAL j's
+/// `visibility/group.wgsl`, with the sparse method's `clusters` or `ism` mode): VAL j's
 /// irradiance at point i times its group's entry `visibility[i * groups + group_of_val[j]]`
 /// (the clusters' lookup of the first bounce's maps at the point, `bounce_visibility.wgsl`),
 /// re-emitted as in [`candidate_vals`].

@@ -407,7 +407,7 @@ pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: 
     vals.iter().map(|val| val_radiance(p, n, surface, w_o, val, glossy)).sum()
 }
 
-/// [`shade_brute_force`] with per-pixel group visibility (WGSL `brute_force_groups.wgsl`, the
+/// [`shade_brute_force`] with per-pixel group visibility (WGSL `visibility/group.wgsl`, the
 /// method `brute_force_ism`): each VAL's term times its group's entry of the pixel's row
 /// `visibility` (`visibility[group_of_val[j]]`, the clusters' lookup of the imperfect shadow
 /// maps at the pixel).

@@ -19,7 +19,7 @@
 //! 2. `bounce2_visibility`: its lookup at every (bounce point, group), the sparse points' lookup
 //!    (`bounce_visibility.wgsl`);
 //! 3. `bounce2_points` scales each first-bounce VAL by its group's entry at the point
-//!    (`bounce_groups.wgsl`), then `bounce2_vals` draws as before;
+//!    (`visibility/group.wgsl`), then `bounce2_vals` draws as before;
 //! 4. the sparse method's own instance of the mode then groups *every* VAL of the frame, second
 //!    bounce included, draws their maps and looks them up at the sparse points for the gather,
 //!    as with one bounce.
@@ -47,7 +47,7 @@ use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::clusters::{self, Clusters, Receivers, SceneScale, StageNames};
 use crate::gpu::visibility::ism::{self, FLUX_DRAW_WGSL, SAMPLE_BLOCK};
-use crate::gpu::visibility::{GroupVisibility, VisibilitySettings};
+use crate::gpu::visibility::{GroupVisibility, VisibilitySettings, group_wgsl};
 use crate::gpu::{Gpu, GpuError};
 use crate::scene::{ClusterSettings, IsmSettings, SecondBounceSettings};
 use crate::twin::bounce::{self as twin, BouncePoint};
@@ -56,7 +56,6 @@ use glam::Vec3;
 
 pub const POINT_WGSL: &str = include_str!("bounce_point.wgsl");
 pub const POINTS_WGSL: &str = include_str!("bounce_points.wgsl");
-pub const GROUPS_WGSL: &str = include_str!("bounce_groups.wgsl");
 pub const VISIBILITY_WGSL: &str = include_str!("bounce_visibility.wgsl");
 pub const DRAW_WGSL: &str = include_str!("bounce_draw.wgsl");
 
@@ -77,10 +76,6 @@ pub const STAGES: StageNames = StageNames {
     ism_visibility: VISIBILITY_STAGE,
 };
 
-/// Every first-bounce VAL reaches every bounce point whole (visibility off, disks, the brute
-/// force).
-const NO_VISIBILITY: &str = "fn point_val_visibility(point: u32, val: u32) -> f32 {\n    return 1.0;\n}\n";
-
 /// WGSL `BouncePoint`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -97,12 +92,10 @@ impl From<&BouncePoint> for RawBouncePoint {
     }
 }
 
-/// The points pass's own WGSL: the VAL tiles, the point, `point_val_visibility` for `groups`
+/// The points pass's own WGSL: the VAL tiles, the point, `val_visibility` for `groups`
 /// groups (or none), then `bounce_points.wgsl`.
 pub fn points_body(groups: Option<u32>) -> String {
-    let visibility =
-        groups.map_or_else(|| NO_VISIBILITY.to_owned(), |g| format!("const GROUP_COUNT: u32 = {g}u;\n{GROUPS_WGSL}"));
-    format!("{VAL_TILES}\n{POINT_WGSL}\n{visibility}\n{POINTS_WGSL}")
+    format!("{VAL_TILES}\n{POINT_WGSL}\n{}\n{POINTS_WGSL}", group_wgsl(groups, 4))
 }
 
 /// The bindings of [`GROUPED_POINTS`]; [`POINTS`] has the first four (no group table).
@@ -112,7 +105,7 @@ const POINTS_BINDINGS: &[Binding] = &[
     read("val_count"),
     read_write("candidates"),
     read("group_of_val"),
-    read("bounce_visibility"),
+    read("group_visibility"),
 ];
 
 /// Every bounce point lit by every first-bounce VAL: one invocation per point, the VALs in
@@ -136,12 +129,7 @@ pub const GROUPED_POINTS: PassDesc = PassDesc {
 /// The lookup at the bounce points, reading rasterised maps (`clusters`).
 pub const VISIBILITY: PassDesc = PassDesc {
     label: VISIBILITY_STAGE,
-    bindings: &[
-        read("bounce_points"),
-        read("clusters"),
-        depth_texture("shadow_atlas"),
-        read_write("bounce_visibility"),
-    ],
+    bindings: &[read("bounce_points"), read("clusters"), depth_texture("shadow_atlas"), read_write("group_visibility")],
     entries: &[Entry::first("main", 4)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
@@ -153,7 +141,7 @@ pub const VISIBILITY: PassDesc = PassDesc {
 /// The lookup at the bounce points, reading imperfect shadow maps (`ism`, or `clusters` with
 /// `shadow_maps: "ism"`).
 pub const ISM_VISIBILITY: PassDesc = PassDesc {
-    bindings: &[read("bounce_points"), read("clusters"), read("ism_atlas"), read_write("bounce_visibility")],
+    bindings: &[read("bounce_points"), read("clusters"), read("ism_atlas"), read_write("group_visibility")],
     default_source: |textured| {
         let head = ism::header(&IsmSettings::default(), SceneScale { diagonal: 1.0 });
         ISM_VISIBILITY.source(&visibility_body(&head, true), textured)
@@ -344,7 +332,7 @@ impl Technique for SecondBounce {
         ];
         let table = self.visibility.as_ref().map(|v| v.table());
         if let Some(t) = &table {
-            resources.extend([buffer("group_of_val", t.group_of_val), buffer("bounce_visibility", t.visibility)]);
+            resources.extend([buffer("group_of_val", t.group_of_val), buffer("group_visibility", t.visibility)]);
         }
         rec.stage(POINTS_STAGE, |e, s| self.light_points.run(gpu, e, scene, &resources, [points, 1, 1], s))?;
         let all = [

@@ -1,9 +1,9 @@
 // The second bounce, step 1 (paper 004 §4.1, imperfect reflective shadow maps: "shaded
 // points"): every bounce point (a triangle and barycentrics, spread over the meshes by area at
 // load, so it follows moving meshes) is lit by every first-bounce VAL (DESIGN.md §3, the disc
-// form factor) seen through `point_val_visibility(point, val)` (prepended: 1 without visibility,
+// form factor) seen through `val_visibility(point, val)` (prepended: 1 without visibility,
 // the first bounce's groups' lookup at the point with the sparse method's `clusters` or `ism`
-// mode, `bounce_groups.wgsl`) and becomes a candidate VAL: a Lambertian disc re-emitting the
+// mode, `visibility/group.wgsl`) and becomes a candidate VAL: a Lambertian disc re-emitting the
 // diffuse part of what it receives, flux `rho_d * E * area` (W), `area` the patch it stands
 // for. The first-bounce VALs stream through workgroup memory in tiles (`shader/val_tiles.wgsl`,
 // prepended), in ranges on CPU adapters, each range after the first adding its flux.
@@ -37,7 +37,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(position, normal, val.position, val.normal, val.area);
-            e += val.flux * (geo.weight * geo.cos_receiver * point_val_visibility(index, base + j));
+            e += val.flux * (geo.weight * geo.cos_receiver * val_visibility(index, base + j));
         }
         workgroupBarrier();
     }

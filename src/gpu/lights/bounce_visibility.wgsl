@@ -2,11 +2,11 @@
 // clusters' filtered lookup (`../visibility/clusters/cluster_visibility.wgsl`, prepended with
 // the maps it reads: rasterised, or the imperfect shadow maps) at every (bounce point, group),
 // the point placed on this frame's surface. The lookup is the one the sparse points get; only
-// the receivers differ. Writes `bounce_visibility[point * CLUSTER_COUNT + k]`. Rust twin:
+// the receivers differ. Writes `group_visibility[point * CLUSTER_COUNT + k]`. Rust twin:
 // `clusters::twin::cluster_visibility` at `twin::bounce`'s surfaces.
 
 @group(0) @binding(0) var<storage, read> bounce_points: array<BouncePoint>;
-@group(0) @binding(3) var<storage, read_write> bounce_visibility: array<f32>;
+@group(0) @binding(3) var<storage, read_write> group_visibility: array<f32>;
 
 // One invocation per (bounce point, group).
 @compute @workgroup_size(WORKGROUP_X)
@@ -19,5 +19,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let p = bounce_points[i];
     let s = surface_at(p.triangle, vec2<f32>(p.u, p.v));
     let c = clusters[k];
-    bounce_visibility[i * CLUSTER_COUNT + k] = cluster_visibility(k, c, s.position - c.position, s.normal);
+    group_visibility[i * CLUSTER_COUNT + k] = cluster_visibility(k, c, s.position - c.position, s.normal);
 }

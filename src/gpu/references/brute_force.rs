@@ -11,7 +11,7 @@
 //! `brute_force_visibility.wgsl`) at every (pixel, group) into a table of pixels x groups
 //! (`ism.count` floats per pixel: 64 MiB at 128² with 1,024 maps; larger than the device's
 //! largest storage binding is an error naming it), then the brute force reading it
-//! (`brute_force_groups.wgsl`). Rust twin: `twin::shade_brute_force_grouped`.
+//! (`visibility/group.wgsl`). Rust twin: `twin::shade_brute_force_grouped`.
 
 use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
 use crate::gpu::scene::GpuScene;
@@ -19,12 +19,11 @@ use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE, VAL_TILES, WORKGROUP_SIZE};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::clusters::{Clusters, Receivers, SceneScale, StageNames};
-use crate::gpu::visibility::{GroupVisibility, VisibilitySettings, ism};
+use crate::gpu::visibility::{GroupVisibility, VisibilitySettings, group_wgsl, ism};
 use crate::gpu::{Gpu, GpuError};
 use crate::scene::{IsmSettings, Occlusion};
 
 pub const WGSL: &str = include_str!("brute_force.wgsl");
-pub const GROUPS_WGSL: &str = include_str!("brute_force_groups.wgsl");
 pub const VISIBILITY_WGSL: &str = include_str!("brute_force_visibility.wgsl");
 
 /// Stage of the lookup at the pixels.
@@ -42,14 +41,10 @@ pub const ISM_STAGES: StageNames = StageNames {
     ism_visibility: ISM_VISIBILITY_STAGE,
 };
 
-/// Every VAL reaches every pixel whole: the brute force.
-const NO_VISIBILITY: &str = "fn pixel_val_visibility(pixel: u32, val: u32) -> f32 {\n    return 1.0;\n}\n";
-
-/// The pass's own WGSL: the VAL tiles, `pixel_val_visibility` for `groups` groups (or none),
+/// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none),
 /// then `brute_force.wgsl`.
 pub fn body(groups: Option<u32>, pixels: u32) -> String {
-    let visibility =
-        groups.map_or_else(|| NO_VISIBILITY.to_owned(), |g| format!("const GROUP_COUNT: u32 = {g}u;\n{GROUPS_WGSL}"));
+    let visibility = group_wgsl(groups, 4);
     let adds: String = (0..pixels)
         .map(|r| format!("    (*ls)[{r}] = add_val((*ls)[{r}], (*receivers)[{r}], val, val_index, glossy);\n"))
         .collect();
@@ -76,7 +71,7 @@ const BINDINGS: &[Binding] = &[
     read("vals"),
     read("val_count"),
     read("group_of_val"),
-    read("pixel_visibility"),
+    read("group_visibility"),
 ];
 
 /// One invocation per pixel; a workgroup (`IMAGE_TILE[0]` pixels wide, `TILE_SIZE` in all)
@@ -100,7 +95,7 @@ pub const GROUPED_PASS: PassDesc = PassDesc {
 /// The lookup at the pixels, reading imperfect shadow maps.
 pub const ISM_VISIBILITY: PassDesc = PassDesc {
     label: ISM_VISIBILITY_STAGE,
-    bindings: &[texture("visibility"), read("clusters"), read("ism_atlas"), read_write("pixel_visibility")],
+    bindings: &[texture("visibility"), read("clusters"), read("ism_atlas"), read_write("group_visibility")],
     entries: &[Entry::first("main", 4)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
@@ -189,7 +184,7 @@ impl Technique for BruteForce {
         ];
         let table = self.groups.as_ref().map(|g| g.table());
         if let Some(t) = &table {
-            resources.extend([buffer("group_of_val", t.group_of_val), buffer("pixel_visibility", t.visibility)]);
+            resources.extend([buffer("group_of_val", t.group_of_val), buffer("group_visibility", t.visibility)]);
         }
         let invocations = [pixels[0].div_ceil(self.pixels), pixels[1], 1];
         rec.stage(PASS.label, |e, s| self.kernels.run(gpu, e, frame.scene, &resources, invocations, s))

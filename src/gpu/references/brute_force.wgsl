@@ -1,9 +1,9 @@
 // Brute-force reference (DESIGN.md §5): every VAL applied to every visible pixel through §3,
 // no sparse points, no interpolation. VALs stream through workgroup memory as in the gather, in
 // tiles and per-dispatch ranges (`shader/val_tiles.wgsl`, prepended), each range after the first
-// adding to the radiance the earlier ones wrote. `pixel_val_visibility(pixel, val)` (prepended)
+// adding to the radiance the earlier ones wrote. `val_visibility(pixel, val)` (prepended)
 // is 1 for the brute force (no visibility) and the group's lookup at the pixel for
-// `brute_force_ism` (`brute_force_groups.wgsl`). Each invocation shades PIXELS consecutive
+// `brute_force_ism` (`visibility/group.wgsl`). Each invocation shades PIXELS consecutive
 // pixels of a row (prepended by `brute_force.rs` with `add_to_pixels`, the per-VAL statement
 // written out once per pixel, as the gather's `add_to_receivers`): every VAL read from the tile
 // serves that many pixels. Rust twin: `twin::shade_brute_force`.
@@ -42,7 +42,7 @@ fn receiver(x: u32, y: u32) -> Receiver {
 fn add_val(l: vec3<f32>, r: Receiver, val: Val, val_index: u32, glossy: bool) -> vec3<f32> {
     let s = r.surface;
     let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
-    let f = geo.weight * geo.cos_receiver * pixel_val_visibility(r.pixel, val_index);
+    let f = geo.weight * geo.cos_receiver * val_visibility(r.pixel, val_index);
     return l + reflected_radiance(s, r.spec, r.w_o, geo.direction, val.flux * f, glossy);
 }
 

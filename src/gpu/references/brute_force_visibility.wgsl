@@ -2,11 +2,11 @@
 // clusters' filtered lookup (`../visibility/clusters/cluster_visibility.wgsl`, prepended with
 // the maps it reads) at every (pixel, group), the pixel's surface from the camera's visibility
 // buffer: the lookup the sparse points get, at every pixel instead. Uncovered pixels get 1.
-// Writes `pixel_visibility[pixel * CLUSTER_COUNT + k]`. Rust twin:
+// Writes `group_visibility[pixel * CLUSTER_COUNT + k]`. Rust twin:
 // `clusters::twin::cluster_visibility` at the pixels' surfaces.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
-@group(0) @binding(3) var<storage, read_write> pixel_visibility: array<f32>;
+@group(0) @binding(3) var<storage, read_write> group_visibility: array<f32>;
 
 // One invocation per (pixel, group).
 @compute @workgroup_size(WORKGROUP_X)
@@ -23,5 +23,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         let c = clusters[k];
         v = cluster_visibility(k, c, s.position - c.position, s.normal);
     }
-    pixel_visibility[i * CLUSTER_COUNT + k] = v;
+    group_visibility[i * CLUSTER_COUNT + k] = v;
 }

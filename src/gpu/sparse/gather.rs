@@ -19,14 +19,11 @@ use crate::gpu::{Gpu, GpuError, Lobes};
 
 pub const WGSL: &str = include_str!("gather.wgsl");
 
-/// Every VAL reaches every point whole when no group visibility mode runs.
-const NO_GROUPS: &str = "fn val_visibility(point: u32, val: u32) -> f32 {\n    return 1.0;\n}\n";
-
 /// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none), the
 /// receivers per invocation, then `gather.wgsl`.
 /// `near_radius` (m): the near-field radius whose share the gather leaves out (0: none).
 pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32) -> String {
-    let visibility = groups.map_or_else(|| NO_GROUPS.to_owned(), group_wgsl);
+    let visibility = group_wgsl(groups, 5);
     let receivers = receivers_wgsl(receivers);
     format!("{VAL_TILES}\n{visibility}\n{receivers}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n{WGSL}")
 }

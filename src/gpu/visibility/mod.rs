@@ -49,13 +49,18 @@ pub trait SparseVisibility {
     );
 }
 
-/// The WGSL the gather includes for a group visibility mode: the two bindings and
-/// `val_visibility(point, val)`; `GROUP_COUNT` is prepended by [`group_wgsl`].
+/// The WGSL a pass lighting receivers through a group visibility mode includes (the gather,
+/// `bounce2_points`, `brute_force_ism`): the two bindings and `val_visibility(receiver, val)`;
+/// `GROUP_COUNT` and `GROUP_BINDING` are prepended by [`group_wgsl`].
 pub const GROUP_WGSL: &str = include_str!("group.wgsl");
 
-/// [`GROUP_WGSL`] for `groups` groups.
-pub fn group_wgsl(groups: u32) -> String {
-    format!("const GROUP_COUNT: u32 = {groups}u;\n{GROUP_WGSL}")
+/// `val_visibility(receiver, val)` for a pass whose `group_of_val` is at `binding` (the table
+/// at the next): [`GROUP_WGSL`] for `groups` groups, or 1 for every VAL without a group mode.
+pub fn group_wgsl(groups: Option<u32>, binding: u32) -> String {
+    match groups {
+        Some(g) => format!("const GROUP_COUNT: u32 = {g}u;\nconst GROUP_BINDING: u32 = {binding}u;\n{GROUP_WGSL}"),
+        None => "fn val_visibility(receiver: u32, val: u32) -> f32 {\n    return 1.0;\n}\n".to_owned(),
+    }
 }
 
 /// The buffers a group visibility mode hands to the gather.

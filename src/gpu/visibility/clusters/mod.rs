@@ -551,20 +551,11 @@ impl Clusters {
         };
         let group = self.visibility.bind(
             gpu,
-            &[receivers, buffer("clusters", &self.clusters), atlas, buffer(self.table_name(), &self.group_visibility)],
+            &[receivers, buffer("clusters", &self.clusters), atlas, buffer("group_visibility", &self.group_visibility)],
         );
         rec.stage(self.visibility_stage(), |e, s| {
             self.visibility.dispatch(e, &group, scene, [count, m, 1], s.as_ref().map(|s| s.compute()))
         })
-    }
-
-    /// The table's binding name in its lookup pass.
-    fn table_name(&self) -> &'static str {
-        match self.receivers {
-            Receivers::SparsePoints => "group_visibility",
-            Receivers::BouncePoints { .. } => "bounce_visibility",
-            Receivers::Pixels => "pixel_visibility",
-        }
     }
 
     /// Make the table hold `count` receivers (the pixels of a frame) x groups.
