@@ -552,6 +552,11 @@ impl Renderer {
         self.light_rsms.as_ref()
     }
 
+    /// The same, to change how it draws ([`LightRsms::set_culling`]).
+    pub fn light_rsms_mut(&mut self) -> Option<&mut LightRsms> {
+        self.light_rsms.as_mut()
+    }
+
     /// The many-light direct technique of the scene's `lights`, if it has any.
     pub fn many_lights(&self) -> Option<&ManyLights> {
         self.many.as_ref()

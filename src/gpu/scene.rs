@@ -160,10 +160,16 @@ impl FlatScene {
     /// Near and far planes (m) that hold the whole scene for a viewpoint at `eye`: far just past
     /// the bounding sphere, near 1e-4 of it.
     pub fn depth_range(&self, eye: Vec3) -> (f32, f32) {
-        let (centre, radius) = self.bounding_sphere();
-        let far = (eye.distance(centre) + radius).max(1e-3) * 1.01;
-        (far * 1e-4, far)
+        depth_range_around(self.bounding_sphere(), eye)
     }
+}
+
+/// [`FlatScene::depth_range`] for the scene's bounding sphere `sphere` (centre, radius), computed
+/// once for many viewpoints.
+pub fn depth_range_around(sphere: (Vec3, f32), eye: Vec3) -> (f32, f32) {
+    let (centre, radius) = sphere;
+    let far = (eye.distance(centre) + radius).max(1e-3) * 1.01;
+    (far * 1e-4, far)
 }
 
 /// The uploaded scene.

@@ -188,3 +188,74 @@ fn scene_without_lights_has_no_light_rsms() {
     assert!(frame.val_count <= 32 * 32, "the spot's RSM alone: {}", frame.val_count);
     assert_eq!(renderer.val_capacity(), 32 * 32, "the VAL buffer holds the spot's RSM alone");
 }
+
+/// The VALs as sortable bit patterns (the GPU appends them in any order).
+fn sorted_bits(vals: &[Val]) -> Vec<[u32; 10]> {
+    let mut bits: Vec<[u32; 10]> = vals
+        .iter()
+        .map(|v| {
+            let [p, n, f] = [v.position, v.normal, v.flux].map(|x| x.to_array().map(f32::to_bits));
+            [p[0], p[1], p[2], n[0], n[1], n[2], v.area.to_bits(), f[0], f[1], f[2]]
+        })
+        .collect();
+    bits.sort_unstable();
+    bits
+}
+
+/// The cull of the RSM views (`raster::cull`, README "VALs from every light's RSM") changes the
+/// raster's work, not its VALs: with the lights above plus a point light of range 0.4 m near the
+/// floor, the culled frame draws far fewer triangles (the range drops some that the frustum
+/// keeps), the atlas of every view without a range is the same texel for texel, and the VALs
+/// are the same bit for bit. Exact equality: the drawn triangles keep their order, and a dropped
+/// one made no fragment in its view (or, beyond the range, only texels without flux).
+#[test]
+fn culled_rsm_views_make_the_same_vals() {
+    use relume::gpu::raster::cull::TriangleChunks;
+    let gpu = gpu();
+    let mut scene = load_scene("cornell_bunny_small");
+    scene.light = None;
+    let mut all = lights();
+    let short =
+        Light::Point(PointLight { position: Vec3::new(-0.2, 0.25, 0.2), intensity: Vec3::ONE, range: Some(0.4) });
+    all.push(short);
+    scene.lights = super::local_lights(&scene, all);
+    scene.settings.direct = DirectSettings { val_budget: 3000, ..DirectSettings::default() };
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let mut runs = Vec::new();
+    for culling in [false, true] {
+        renderer.light_rsms_mut().unwrap().set_culling(culling);
+        renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+        let rsms = renderer.light_rsms().unwrap();
+        let draws = rsms.draws(&renderer.scene, &rsms.raw_views(&renderer.scene));
+        let drawn: u32 = draws.iter().flatten().map(|r| r.end - r.start).sum();
+        runs.push((sorted_bits(&renderer.read_vals(&gpu).unwrap()), rsms.read_atlas(&gpu).unwrap(), drawn, draws));
+    }
+    let rsms = renderer.light_rsms().unwrap();
+    let triangles = renderer.scene.flat.triangle_count();
+    assert_eq!(runs[0].2, triangles * rsms.views.len() as u32, "without the cull every view draws everything");
+    assert!(runs[1].2 * 2 < runs[0].2, "the cull drops most: {} of {}", runs[1].2, runs[0].2);
+    // The short light's views: the range drops what the frustum alone keeps.
+    let chunks = TriangleChunks::new(&renderer.scene.flat);
+    let raw = rsms.raw_views(&renderer.scene);
+    let short_light = (scene.lights.len() - 1) as u32;
+    let (mut frustum_only, mut with_range) = (0, 0);
+    for (k, placed) in rsms.views.iter().enumerate().filter(|(_, p)| p.light == short_light) {
+        let m = glam::Mat4::from_cols_array_2d(&raw[k].world_to_clip);
+        frustum_only += chunks.visible(m, None).iter().map(|r| r.end - r.start).sum::<u32>();
+        with_range += runs[1].3[k].iter().map(|r| r.end - r.start).sum::<u32>();
+        assert_eq!(placed.view.range, Some(0.4));
+    }
+    assert!(with_range < frustum_only, "range 0.4 m: {with_range} vs {frustum_only} triangles");
+    let width = rsms.atlas_size[0];
+    for placed in rsms.views.iter().filter(|p| p.view.range.is_none()) {
+        let r = placed.view.resolution;
+        for iy in 0..r {
+            for ix in 0..r {
+                let texel = ((placed.origin[1] + iy) * width + placed.origin[0] + ix) as usize;
+                assert_eq!(runs[0].1[texel], runs[1].1[texel], "light {} texel ({ix}, {iy})", placed.light);
+            }
+        }
+    }
+    assert!(runs[0].0.len() > 1000, "{} VALs", runs[0].0.len());
+    assert!(runs[0].0 == runs[1].0, "VALs differ: {} unculled, {} culled", runs[0].0.len(), runs[1].0.len());
+}

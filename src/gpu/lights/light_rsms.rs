@@ -7,10 +7,16 @@
 //!
 //! Exists only for a scene with `lights`; its VALs join the frame's VAL buffer after the spot
 //! light's, so every VAL consumer takes them as it takes the spot's.
+//!
+//! Each view draws only the scene's triangle chunks that may meet its frustum and, for a point
+//! light with a `range`, lie partly within it (`raster::cull`); a view with none draws nothing.
+//! The VALs are the same as without the cull: what it drops makes no fragment in the view, or
+//! (beyond the range) only texels whose VAL has no flux, and those are never appended.
 
 use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
+use crate::gpu::raster::cull::TriangleChunks;
 use crate::gpu::raster::{self, Hit, begin_visibility_pass};
-use crate::gpu::scene::GpuScene;
+use crate::gpu::scene::{GpuScene, depth_range_around};
 use crate::gpu::shader::WORKGROUP_SIZE;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
@@ -18,6 +24,7 @@ use crate::gpu::{Gpu, GpuError};
 use crate::scene::Light;
 use crate::twin::light_rsms::{RsmView, emitted_flux, light_views, split_val_budget, view_to_clip, views_of};
 use bytemuck::{Pod, Zeroable};
+use std::ops::Range;
 
 pub const WGSL: &str = include_str!("light_rsms.wgsl");
 const RASTER_WGSL: &str = include_str!("light_rsms_raster.wgsl");
@@ -116,6 +123,9 @@ pub struct LightRsms {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     vals: Kernels,
+    /// Whether each view draws only what its cull keeps (on unless a test or benchmark turns it
+    /// off to compare).
+    culling: bool,
 }
 
 impl LightRsms {
@@ -187,18 +197,20 @@ impl LightRsms {
             layout,
             pipeline,
             vals: Kernels::lobes(gpu, scene, &PASS, &body(), false)?,
+            culling: true,
         }))
     }
 
     /// The views as the GPU takes them, near and far fitted to the scene from each light.
     pub fn raw_views(&self, scene: &GpuScene) -> Vec<RawRsmView> {
+        let sphere = scene.flat.bounding_sphere();
         self.views
             .iter()
             .map(|p| {
                 let v = &p.view;
                 let s = &v.frame;
                 RawRsmView {
-                    world_to_clip: view_to_clip(v, scene.flat.depth_range(s.position)).to_cols_array_2d(),
+                    world_to_clip: view_to_clip(v, depth_range_around(sphere, s.position)).to_cols_array_2d(),
                     position: s.position.into(),
                     resolution: v.resolution,
                     direction: s.direction.into(),
@@ -217,6 +229,31 @@ impl LightRsms {
             .collect()
     }
 
+    /// Draw every triangle into every view (`false`) or only what each view's cull keeps (the
+    /// default); the VALs are the same either way, only the raster's cost differs.
+    pub fn set_culling(&mut self, on: bool) {
+        self.culling = on;
+    }
+
+    /// Per view, in order, the triangle ranges its draw covers for the scene as placed now:
+    /// everything without the cull; with it, the chunks that may meet the view's frustum (near
+    /// and far as in `raw`) and a point light's `range` sphere.
+    pub fn draws(&self, scene: &GpuScene, raw: &[RawRsmView]) -> Vec<Vec<Range<u32>>> {
+        let triangles = scene.flat.triangle_count();
+        if !self.culling {
+            return vec![vec![0..triangles]; self.views.len()];
+        }
+        let chunks = TriangleChunks::new(&scene.flat);
+        self.views
+            .iter()
+            .zip(raw)
+            .map(|(p, r)| {
+                let sphere = p.view.range.map(|range| (p.view.frame.position, range));
+                chunks.visible(glam::Mat4::from_cols_array_2d(&r.world_to_clip), sphere)
+            })
+            .collect()
+    }
+
     /// The atlas of the last frame, row-major from the top (for the twins and tests).
     pub fn read_atlas(&self, gpu: &Gpu) -> Result<Vec<Option<Hit>>, GpuError> {
         raster::read_visibility(gpu, &self.atlas, self.atlas_size[0], self.atlas_size[1])
@@ -230,7 +267,9 @@ impl Technique for LightRsms {
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         let scene = frame.scene;
-        gpu.queue.write_buffer(&self.rsm_views, 0, bytemuck::cast_slice(&self.raw_views(scene)));
+        let raw = self.raw_views(scene);
+        gpu.queue.write_buffer(&self.rsm_views, 0, bytemuck::cast_slice(&raw));
+        let draws = self.draws(scene, &raw);
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("lights_rsm_raster.bind_group"),
             layout: &self.layout,
@@ -241,12 +280,17 @@ impl Technique for LightRsms {
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.set_bind_group(1, &scene.bind_group, &[]);
-            let corners = scene.flat.indices.len() as u32;
-            for (k, v) in self.views.iter().enumerate() {
+            for (k, (v, ranges)) in self.views.iter().zip(&draws).enumerate() {
+                if ranges.is_empty() {
+                    continue;
+                }
                 let ([x, y], r) = (v.origin, v.view.resolution);
                 pass.set_viewport(x as f32, y as f32, r as f32, r as f32, 0.0, 1.0);
                 pass.set_scissor_rect(x, y, r, r);
-                pass.draw(0..corners, k as u32..k as u32 + 1);
+                for t in ranges {
+                    // Vertex i is corner i % 3 of triangle i / 3 (`light_rsms_raster.wgsl`).
+                    pass.draw(3 * t.start..3 * t.end, k as u32..k as u32 + 1);
+                }
             }
         })?;
         let resources = [

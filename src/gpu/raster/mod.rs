@@ -2,6 +2,8 @@
 //! into an `Rgba32Uint` target holding, per texel, the nearest triangle and its barycentrics.
 //! Used from the camera and from the spot light (the RSM).
 
+pub mod cull;
+
 use crate::gpu::scene::GpuScene;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::{Recorder, Span};
