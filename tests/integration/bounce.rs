@@ -199,7 +199,7 @@ fn second_bounce_through_group_visibility_matches_cpu_twin() {
         ),
         (
             "clusters",
-            r#""clusters": {"count": 12, "shadow_map_resolution": 64}"#,
+            r#""clusters": {"count": 12, "shadow_map_resolution": 64, "soft": "pcss"}"#,
             &["bounce2_clustering", "bounce2_cluster_shadow_maps"],
         ),
     ];

@@ -64,7 +64,7 @@ fn assert_kmeans_matches(start: &[twin::Cluster], vals: &[relume::twin::Val], r:
 
 #[test]
 fn clusters_match_cpu_twins() {
-    let scene = clusters_scene(r#"{"count": 12, "shadow_map_resolution": 64, "iterations": 3}"#);
+    let scene = clusters_scene(r#"{"count": 12, "shadow_map_resolution": 64, "iterations": 3, "soft": "pcss"}"#);
     let gpu = gpu();
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();

@@ -97,7 +97,7 @@ fn assert_maps_match(renderer: &Renderer, r: &ClusterReadback) {
 fn clusters_with_imperfect_maps_match_cpu_twins() {
     let scene = small_scene_with(
         "clusters",
-        r#""clusters": {"count": 12, "shadow_map_resolution": 32, "shadow_maps": "ism"}, "ism": {"points": 500}"#,
+        r#""clusters": {"count": 12, "shadow_map_resolution": 32, "shadow_maps": "ism", "soft": "pcss"}, "ism": {"points": 500}"#,
     );
     let (gpu, renderer, vals, r) = render_group_mode(&scene, "clustering");
     assert_eq!((r.clusters.len(), r.ism.map(|p| (p.resolution, p.points))), (12, Some((32, 500))));
