@@ -604,6 +604,29 @@ pub struct DirectSettings {
     pub val_budget: u32,
 }
 
+/// [`SceneDescription::frame_vals`] from its parts: whether the scene has a `light` and
+/// `lights`, its `rsm_resolution`, `direct.val_budget`, and `second_bounce.vals` when it has two
+/// bounces.
+pub fn frame_val_parts(
+    light: bool,
+    lights: bool,
+    rsm_resolution: u32,
+    val_budget: u32,
+    second_bounce_vals: Option<u32>,
+) -> Vec<(&'static str, u64)> {
+    let mut parts = Vec::new();
+    if light {
+        parts.push(("settings.rsm_resolution", u64::from(rsm_resolution).pow(2)));
+    }
+    if lights {
+        parts.push(("settings.direct.val_budget", u64::from(val_budget)));
+    }
+    if let Some(vals) = second_bounce_vals {
+        parts.push(("settings.second_bounce.vals", u64::from(vals)));
+    }
+    parts
+}
+
 /// Largest `settings.direct.val_budget`.
 pub const MAX_LIGHTS_VAL_BUDGET: u32 = 1 << 20;
 
@@ -1282,6 +1305,19 @@ impl SceneDescription {
     /// field path and the line and column. Does not [validate](Self::validate) ranges.
     pub fn from_json_str(text: &str) -> Result<SceneDescription, SceneError> {
         parse_json(text)
+    }
+
+    /// The VALs a frame of this scene can make from its own lights, by the setting that
+    /// bounds each part, in the order the frame appends them: the `light`'s RSM
+    /// (`rsm_resolution`², only with a `light`), the RSMs of `lights` (their shared
+    /// `direct.val_budget`, only with `lights`: `light` is not part of that budget, since its
+    /// RSM is also its direct shadow map, README "VALs from every light's RSM"), and the second
+    /// bounce's (`second_bounce.vals`, only with `bounces: 2`). VALs uploaded or from an RGB-D
+    /// frame come on top.
+    pub fn frame_vals(&self) -> Vec<(&'static str, u64)> {
+        let s = &self.settings;
+        let second = (s.bounces == 2).then_some(s.second_bounce.vals);
+        frame_val_parts(self.light.is_some(), !self.lights.is_empty(), s.rsm_resolution, s.direct.val_budget, second)
     }
 
     /// Checks every value's range and the consistency between values, naming the field path

@@ -54,7 +54,7 @@ pub use description::{
     MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MAX_SPARSE_POINTS, MaterialDescription, MeshDescription,
     NEAR_FIELD_RANGE, Occlusion, OcclusionRule, OcclusionSetting, PointLightDescription, RSM_RESOLUTION_RANGE,
     ScaleDescription, SceneDescription, SecondBounceSettings, SettingsDescription, ShadowMapSource, SoftShadows,
-    SparseShading, TransformDescription, parse_json,
+    SparseShading, TransformDescription, frame_val_parts, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;

@@ -30,7 +30,9 @@ pub struct SceneInfo {
     pub triangles: usize,
     /// Sparse shading points over all meshes.
     pub sparse_points: usize,
-    /// Most VALs a frame can have: `settings.rsm_resolution²`.
+    /// Most VALs a frame makes from the scene's own lights: `settings.rsm_resolution²` (with a
+    /// `light`) + `settings.direct.val_budget` (with `lights`) + `settings.second_bounce.vals`
+    /// (with two bounces).
     pub max_vals: u32,
     /// Whether frames run the glossy gather.
     pub glossy: bool,
@@ -68,7 +70,18 @@ impl SceneInfo {
                 .collect(),
             triangles: scene.triangle_count(),
             sparse_points: scene.sparse_point_count(),
-            max_vals: scene.settings.rsm_resolution * scene.settings.rsm_resolution,
+            max_vals: {
+                let s = &scene.settings;
+                let second = (s.bounces == 2).then_some(s.second_bounce.vals);
+                let parts = crate::scene::frame_val_parts(
+                    scene.light.is_some(),
+                    !scene.lights.is_empty(),
+                    s.rsm_resolution,
+                    s.direct.val_budget,
+                    second,
+                );
+                parts.iter().map(|(_, n)| *n).sum::<u64>().min(u64::from(u32::MAX)) as u32
+            },
             glossy: scene.needs_glossy(),
             occlusion: scene.settings.occlusion,
             camera,

@@ -84,17 +84,28 @@ fn load_environment(settings: &EnvironmentSettings, assets: &Path, limits: &Limi
 /// (canonical). Reads no mesh; touches the file system only to resolve paths.
 pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> Result<(), ApiError> {
     description.validate().map_err(|e| ApiError::scene(&e, assets))?;
-    let r = description.settings.rsm_resolution;
-    if r as u64 * r as u64 > limits.max_vals as u64 {
-        return Err(ApiError::limit(
-            limit::MAX_VALS,
-            Some("settings.rsm_resolution".to_owned()),
-            format!(
-                "settings.rsm_resolution: {r}² = {} VALs per frame is over the limit of {}",
-                r as u64 * r as u64,
-                limits.max_vals
-            ),
-        ));
+    // The frame's VALs from the scene's own lights, part by part: the first part that takes
+    // the sum over the limit is the field named.
+    let mut sum = 0u64;
+    let mut terms = Vec::new();
+    for (field, vals) in description.frame_vals() {
+        sum += vals;
+        terms.push(format!("{field} {vals}"));
+        if sum > limits.max_vals as u64 {
+            let what = match terms.len() {
+                1 if field == "settings.rsm_resolution" => {
+                    let r = description.settings.rsm_resolution;
+                    format!("{r}² = {vals} VALs per frame")
+                }
+                1 => format!("{vals} VALs per frame"),
+                _ => format!("{} = {sum} VALs per frame", terms.join(" + ")),
+            };
+            return Err(ApiError::limit(
+                limit::MAX_VALS,
+                Some(field.to_owned()),
+                format!("{field}: {what} is over the limit of {}", limits.max_vals),
+            ));
+        }
     }
     limits.check_image(description.camera.width, description.camera.height, "camera")?;
     let sparse_points: u64 = description.meshes.iter().map(|m| m.sparse_points as u64).sum();
@@ -327,6 +338,52 @@ mod tests {
         assert_eq!(error.code, Code::InvalidScene);
         let error = confine(&root, "meshes", "f").expect_err("a directory");
         assert_eq!(error.code, Code::InvalidScene);
+    }
+
+    /// A frame's VALs are the `light`'s RSM plus the `lights`' budget (outside each other) plus
+    /// the second bounce's: within the limit the scene is admitted; over it, the part that
+    /// crosses the limit is named.
+    #[test]
+    fn admission_bounds_the_frames_vals_by_every_part() {
+        let scene = |settings: &str, lights: bool| {
+            let lights = if lights {
+                r#", "lights": [{"type": "point", "position": [0, 1, 0], "intensity": [1, 1, 1]}]"#
+            } else {
+                ""
+            };
+            let json = format!(
+                r#"{{"meshes": [{{"obj": "meshes/cornell_box/CornellBox-Original.obj", "sparse_points": 64}}],
+                "light": {{"position": [0, 1.9, 0], "direction": [0, -1, 0], "inner_angle_deg": 30,
+                          "outer_angle_deg": 40, "intensity": [1, 1, 1]}}{lights},
+                "camera": {{"position": [0, 1, 3], "target": [0, 1, 0], "fov_y_deg": 40, "width": 8, "height": 8}},
+                "settings": {settings}}}"#
+            );
+            SceneDescription::from_json_str(&json).expect("parses")
+        };
+        let limits = Limits { max_vals: 5000, ..Limits::default() };
+        let admit = |d: &SceneDescription| admit(d, &assets(), &limits);
+        // 64² = 4096 alone, and 4096 + 900 with lights: admitted.
+        let ok = scene(r#"{"rsm_resolution": 64, "direct": {"val_budget": 900}}"#, true);
+        assert_eq!(ok.frame_vals(), vec![("settings.rsm_resolution", 4096), ("settings.direct.val_budget", 900)]);
+        admit(&ok).expect("4996 VALs");
+        // 4096 + 1000: the budget crosses the limit.
+        let e = admit(&scene(r#"{"rsm_resolution": 64, "direct": {"val_budget": 1000}}"#, true)).expect_err("5096");
+        assert_eq!((e.limit, e.field.as_deref()), (Some(limit::MAX_VALS), Some("settings.direct.val_budget")));
+        assert!(
+            e.message.contains("settings.rsm_resolution 4096 + settings.direct.val_budget 1000 = 5096"),
+            "{}",
+            e.message
+        );
+        // The same budget without `lights` makes no VALs: admitted.
+        admit(&scene(r#"{"rsm_resolution": 64, "direct": {"val_budget": 1000}}"#, false)).expect("4096 VALs");
+        // The RSM alone over the limit names it.
+        let e = admit(&scene(r#"{"rsm_resolution": 72}"#, false)).expect_err("72²");
+        assert_eq!(e.field.as_deref(), Some("settings.rsm_resolution"));
+        assert!(e.message.contains("72² = 5184 VALs per frame"), "{}", e.message);
+        // A second bounce's VALs count too.
+        let e = admit(&scene(r#"{"rsm_resolution": 64, "bounces": 2, "second_bounce": {"vals": 1024}}"#, false))
+            .expect_err("4096 + 1024");
+        assert_eq!(e.field.as_deref(), Some("settings.second_bounce.vals"));
     }
 
     #[test]

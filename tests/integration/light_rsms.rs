@@ -259,3 +259,27 @@ fn culled_rsm_views_make_the_same_vals() {
     assert!(runs[0].0.len() > 1000, "{} VALs", runs[0].0.len());
     assert!(runs[0].0 == runs[1].0, "VALs differ: {} unculled, {} culled", runs[0].0.len(), runs[1].0.len());
 }
+
+/// The scene's `light` stays outside `settings.direct.val_budget` (its RSM is also its direct
+/// shadow map): with `lights` beside it, its RSM keeps `rsm_resolution`² texels, the lights
+/// share the budget alone, and the frame's VALs stay within the bound the service admits
+/// (`frame_val_parts`: the RSM's texels plus the budget), which the VAL buffer holds exactly.
+#[test]
+fn the_scenes_light_keeps_its_rsm_beside_the_budget() {
+    let gpu = gpu();
+    let mut scene = load_scene("cornell_bunny_small");
+    assert!(scene.light.is_some());
+    scene.lights = super::local_lights(&scene, lights());
+    scene.settings.direct = DirectSettings { val_budget: 600, ..DirectSettings::default() };
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    let texels = renderer.light_rsms().unwrap().texels;
+    assert!(texels <= 600 && texels > 300, "the lights' texels: {texels}");
+    let rsm = scene.settings.rsm_resolution;
+    assert_eq!(renderer.val_capacity(), rsm * rsm + texels, "the spot's RSM at rsm_resolution² beside the lights'");
+    let bound: u64 = relume::scene::frame_val_parts(true, true, rsm, 600, None).iter().map(|(_, n)| n).sum();
+    assert_eq!(bound, u64::from(rsm * rsm) + 600);
+    assert!(u64::from(frame.val_count) <= bound, "{} VALs over the bound {bound}", frame.val_count);
+    // More than the lights alone could make: the spot's VALs are there too.
+    assert!(frame.val_count > texels, "{} VALs, the lights' texels {texels}", frame.val_count);
+}
