@@ -2,7 +2,10 @@
 //! one run: indirect-only sparse frames with the cull off and on, alternated (off, on, off, on,
 //! ...) so the shared machine's load falls on both alike; per setting the median wall time of
 //! `lights_rsm_raster` and of the gather, the triangles drawn over all views and the views
-//! drawn; and whether both gave the same VALs (sorted, compared bit for bit).
+//! drawn; and whether both gave the same VALs (sorted, compared bit for bit). Then the same
+//! for the direct light's shadow maps (`ManyLights::draws`): direct-only frames with their cull
+//! off and on, alternated, the median `lights_shadow_maps` time, the triangles drawn, and
+//! whether the direct images are the same bit for bit.
 //!
 //! ```sh
 //! cargo run --release --example light_rsms_cull -- fixtures/scenes/sponza_lights.json 128 72 3
@@ -110,5 +113,44 @@ fn main() -> anyhow::Result<()> {
     let ratio = median(raster[1].clone()) / median(raster[0].clone());
     println!("\nraster on / off: {ratio:.3}; triangles on / off: {:.3}", drawn[1].0 as f64 / drawn[0].0 as f64);
     println!("VALs: {} off, {} on, identical bit for bit: {}", vals[0].len(), vals[1].len(), vals[0] == vals[1]);
+
+    let mut maps_ms = [Vec::new(), Vec::new()];
+    let mut images = [Vec::new(), Vec::new()];
+    let mut map_draws = [0u64; 2];
+    for _ in 0..frames {
+        for (s, culling) in [false, true].into_iter().enumerate() {
+            renderer.many_lights_mut().ok_or_else(|| anyhow::anyhow!("no many-light direct"))?.set_culling(culling);
+            let frame = renderer.render_components(&gpu, Method::Sparse, width, height, Components::DIRECT)?;
+            maps_ms[s].push(stage_ms(&frame, relume::gpu::lights::many::SHADOW_MAPS_STAGE));
+            images[s] = frame.direct.pixels.clone();
+            let many = renderer.many_lights().expect("checked above");
+            map_draws[s] = many.draws(&renderer.scene).iter().flatten().map(|r| (r.end - r.start) as u64).sum();
+        }
+    }
+    let groups = renderer.many_lights().expect("checked above").groups.len();
+    println!("\n| maps' cull | triangles drawn ({} maps) | `lights_shadow_maps` ms (median) |", 2 * groups);
+    println!("|---|---|---|");
+    for (s, name) in ["off", "on"].iter().enumerate() {
+        println!("| {name} | {} | {:.0} |", map_draws[s], median(maps_ms[s].clone()));
+    }
+    let peak = images[0].iter().map(|p| p[0].max(p[1]).max(p[2])).fold(0.0f32, f32::max);
+    let differ: Vec<f32> = images[0]
+        .iter()
+        .zip(&images[1])
+        .filter(|(a, b)| a != b)
+        .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0f32, f32::max) / peak)
+        .collect();
+    println!(
+        "direct pixels that differ: {} of {}, largest difference {:.2e} of the peak",
+        differ.len(),
+        images[0].len(),
+        differ.iter().copied().fold(0.0f32, f32::max)
+    );
+    println!(
+        "\nmaps on / off: {:.3}; triangles on / off: {:.3}; direct images identical bit for bit: {}",
+        median(maps_ms[1].clone()) / median(maps_ms[0].clone()),
+        map_draws[1] as f64 / map_draws[0] as f64,
+        images[0] == images[1]
+    );
     Ok(())
 }

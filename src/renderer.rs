@@ -562,6 +562,11 @@ impl Renderer {
         self.many.as_ref()
     }
 
+    /// The same, to change how it draws ([`ManyLights::set_culling`]).
+    pub fn many_lights_mut(&mut self) -> Option<&mut ManyLights> {
+        self.many.as_mut()
+    }
+
     /// Render both components at `width` x `height`.
     pub fn render(&mut self, gpu: &Gpu, method: Method, width: u32, height: u32) -> Result<Rendered, GpuError> {
         self.render_components(gpu, method, width, height, Components::ALL)

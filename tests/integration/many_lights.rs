@@ -120,3 +120,32 @@ fn lights_add_to_the_spot_lights_direct_light() {
         );
     }
 }
+
+/// The cull of the lights' shadow maps (`ManyLights::draws`: each map draws the chunks that
+/// reach the front of its hemisphere) changes the raster's work, not the light: in both modes
+/// the culled frame draws fewer triangles, every map is the same texel for texel (a dropped
+/// chunk lies wholly behind the map's plane, past the raster's slack, where no texel's ray
+/// goes), and the direct image is the same bit for bit.
+#[test]
+fn culled_light_maps_give_the_same_direct_light() {
+    let gpu = gpu();
+    for shadows in [DirectShadows::PerLight, DirectShadows::LightCluster] {
+        let scene = scene_with(shadows, false);
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let mut runs = Vec::new();
+        for culling in [false, true] {
+            renderer.many_lights_mut().unwrap().set_culling(culling);
+            let (image, _) = direct(&gpu, &mut renderer);
+            let many = renderer.many_lights().unwrap();
+            let drawn: u32 = many.draws(&renderer.scene).iter().flatten().map(|r| r.end - r.start).sum();
+            runs.push((image, many.read_maps(&gpu).unwrap(), drawn));
+        }
+        let maps = 2 * renderer.many_lights().unwrap().groups.len() as u32;
+        assert_eq!(runs[0].2, maps * renderer.scene.flat.triangle_count(), "{shadows:?}: unculled draws everything");
+        assert!(runs[1].2 * 10 < runs[0].2 * 9, "{shadows:?}: the cull drops some: {} of {}", runs[1].2, runs[0].2);
+        assert!(runs[0].1 == runs[1].1, "{shadows:?}: the maps differ");
+        let (a, b) = (&runs[0].0, &runs[1].0);
+        assert!(a.pixels.iter().any(|p| p[0] > 0.0), "{shadows:?}: the lights light something");
+        assert!(a.pixels == b.pixels, "{shadows:?}: the direct images differ");
+    }
+}

@@ -13,6 +13,7 @@
 use crate::gpu::pass::{
     Entry, Kernel, PassDesc, buffer, depth_texture, module_from_source, read, read_write, texture, view,
 };
+use crate::gpu::raster::cull::{TriangleChunks, box_reaches_front};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::IMAGE_TILE;
 use crate::gpu::technique::{Frame, Technique};
@@ -121,6 +122,11 @@ pub struct ManyLights {
     lights: wgpu::Buffer,
     /// `array<vec2<u32>>`: per group, its first light and count.
     group_lights: wgpu::Buffer,
+    /// Per map: its centre and its axis.
+    map_bounds: Vec<(Vec3, Vec3)>,
+    /// Whether each map draws only what its cull keeps ([`ManyLights::draws`]; on unless a
+    /// test or benchmark turns it off to compare).
+    culling: bool,
 }
 
 impl ManyLights {
@@ -171,6 +177,7 @@ impl ManyLights {
                 radius: c.radius,
             })
             .collect();
+        let map_bounds = groups.maps(&positions).iter().map(|c| (c.position, c.normal)).collect();
         let mut sorted = Vec::with_capacity(lights.len());
         let mut ranges = Vec::with_capacity(groups.len());
         for g in 0..m {
@@ -190,7 +197,34 @@ impl ManyLights {
             scale,
             maps,
             kernel,
+            map_bounds,
+            culling: true,
         })
+    }
+
+    /// Draw every triangle into every map (`false`) or only what each map's cull keeps (the
+    /// default).
+    pub fn set_culling(&mut self, on: bool) {
+        self.culling = on;
+    }
+
+    /// Per map, the triangle ranges it draws for the scene as placed now: everything without
+    /// the cull; with it, the chunks (`raster::cull`) that reach the front of the map's
+    /// hemisphere (a triangle wholly behind it makes no fragment: every texel's ray leaves the
+    /// centre into the hemisphere, and the raster's barycentric slack is allowed for), so the
+    /// maps are the same texel for texel. Not culled against the lights' `range`: a lookup's
+    /// receiver-plane depth at a grazed receiver reaches past it, so far surfaces still count
+    /// (README "Many direct lights").
+    pub fn draws(&self, scene: &GpuScene) -> Vec<Vec<std::ops::Range<u32>>> {
+        if !self.culling {
+            return vec![vec![0..scene.flat.triangle_count()]; self.map_bounds.len()];
+        }
+        let chunks = TriangleChunks::new(&scene.flat);
+        let slack = 3.0 * crate::gpu::visibility::clusters::twin::SHADOW_RASTER_SLACK;
+        self.map_bounds
+            .iter()
+            .map(|&(centre, axis)| chunks.kept(|(lo, hi)| box_reaches_front(lo, hi, centre, axis, slack)))
+            .collect()
     }
 
     /// Every map, two per group (`2g`: +AXIS, `2g + 1`: -AXIS): distances (m), infinite where
@@ -217,7 +251,8 @@ impl Technique for ManyLights {
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         let scene = frame.scene;
-        self.maps.record(gpu, scene, &self.clusters, &self.maps_settings, SHADOW_MAPS_STAGE, rec)?;
+        let draws = self.draws(scene);
+        self.maps.record(gpu, scene, &self.clusters, &self.maps_settings, Some(&draws), SHADOW_MAPS_STAGE, rec)?;
         let camera = frame.camera;
         let group = self.kernel.bind(
             gpu,

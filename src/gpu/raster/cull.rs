@@ -68,10 +68,15 @@ impl TriangleChunks {
     /// with `sphere` (a light's position and range), comes within it. Empty when nothing can.
     pub fn visible(&self, world_to_clip: Mat4, sphere: Option<(Vec3, f32)>) -> Vec<Range<u32>> {
         let planes = clip_planes(world_to_clip);
-        let keep = |(lo, hi): (Vec3, Vec3)| {
+        self.kept(|(lo, hi)| {
             !planes.iter().any(|&p| box_outside_plane(p, lo, hi))
                 && sphere.is_none_or(|(c, r)| box_meets_sphere(lo, hi, c, r))
-        };
+        })
+    }
+
+    /// The triangle ranges of the chunks (in blocks first) that `keep` keeps, in order and
+    /// merged where they touch.
+    pub fn kept(&self, keep: impl Fn((Vec3, Vec3)) -> bool) -> Vec<Range<u32>> {
         let mut ranges: Vec<Range<u32>> = Vec::new();
         for (b, &block) in self.blocks.iter().enumerate() {
             if !keep(block) {
@@ -113,6 +118,17 @@ pub fn box_outside_plane(plane: DVec4, lo: Vec3, hi: Vec3) -> bool {
     let value = n.dot(far) + plane.w;
     let magnitude = n.abs().dot(far.abs()) + plane.w.abs();
     value < -MARGIN * magnitude
+}
+
+/// Whether some point of the box `[lo, hi]` lies in front of the plane through `point` with unit
+/// normal `normal`, or behind it by at most `slack` times the box's diagonal (a raster that
+/// accepts fragments a little outside a triangle, as the paraboloid maps' does, can reach that
+/// far past it).
+pub fn box_reaches_front(lo: Vec3, hi: Vec3, point: Vec3, normal: Vec3, slack: f32) -> bool {
+    let (lo, hi, n, p) = (DVec3::from(lo), DVec3::from(hi), DVec3::from(normal), DVec3::from(point));
+    let far = DVec3::select(n.cmpge(DVec3::ZERO), hi, lo);
+    let reach = slack as f64 * (hi - lo).length();
+    (far - p).dot(n) >= -reach - MARGIN * (far.abs() + p.abs()).dot(n.abs())
 }
 
 /// Whether some point of the box `[lo, hi]` lies within `radius` of `centre` (up to the margin).
@@ -161,6 +177,17 @@ mod tests {
         // Nearest point (2, 1, 1) from (3, 2, 2): sqrt(3) = 1.73205.
         assert!(box_meets_sphere(lo, hi, Vec3::new(3.0, 2.0, 2.0), 1.7321));
         assert!(!box_meets_sphere(lo, hi, Vec3::new(3.0, 2.0, 2.0), 1.73));
+    }
+
+    #[test]
+    fn boxes_against_a_plane_known_answers() {
+        let (lo, hi) = (Vec3::new(-1.0, -2.0, -1.0), Vec3::new(1.0, -1.0, 1.0));
+        // Wholly below y = 0 by 1 m; the diagonal is sqrt(9) = 3 m.
+        assert!(!box_reaches_front(lo, hi, Vec3::ZERO, Vec3::Y, 0.0));
+        assert!(!box_reaches_front(lo, hi, Vec3::ZERO, Vec3::Y, 0.33), "0.99 m of slack");
+        assert!(box_reaches_front(lo, hi, Vec3::ZERO, Vec3::Y, 0.34), "1.02 m of slack");
+        assert!(box_reaches_front(lo, hi, Vec3::ZERO, -Vec3::Y, 0.0), "in front of the flipped plane");
+        assert!(box_reaches_front(lo, hi, Vec3::new(0.0, -1.5, 0.0), Vec3::Y, 0.0), "straddling");
     }
 
     /// Thin triangles along the -Z axis, triangle t over z in [-(t + 1) s, -t s] (s = 5 m per

@@ -541,7 +541,7 @@ impl Clusters {
         })?;
         let atlas = match &self.maps {
             Maps::Raster(maps) => {
-                maps.record(gpu, scene, &self.clusters, &self.settings, self.names.shadow_maps, rec)?;
+                maps.record(gpu, scene, &self.clusters, &self.settings, None, self.names.shadow_maps, rec)?;
                 view("shadow_atlas", &maps.atlas_view)
             }
             Maps::Ism(maps) => {
@@ -642,13 +642,17 @@ impl ShadowMaps {
             .collect())
     }
 
-    /// Draw every cluster's map, in the stage `stage`.
+    /// Draw every cluster's map, in the stage `stage`: every triangle, or with `draws` only
+    /// map k's triangle ranges `draws[k]` (a depth-only map keeps the nearest depth whatever
+    /// the order).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn record(
         &self,
         gpu: &Gpu,
         scene: &GpuScene,
         clusters: &wgpu::Buffer,
         settings: &ClusterSettings,
+        draws: Option<&[Vec<std::ops::Range<u32>>]>,
         stage: &'static str,
         rec: &mut Recorder<'_>,
     ) -> Result<(), GpuError> {
@@ -675,12 +679,19 @@ impl ShadowMaps {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.set_bind_group(1, &scene.bind_group, &[]);
             let (res, columns) = (settings.shadow_map_resolution, settings.atlas_columns());
-            let corners = scene.flat.indices.len() as u32;
+            let everything = 0..scene.flat.triangle_count();
+            let all = std::slice::from_ref(&everything);
             for k in 0..m {
+                let ranges = draws.map_or(all, |d| &d[k as usize][..]);
+                if ranges.is_empty() {
+                    continue;
+                }
                 let (x, y) = ((k % columns) * res, (k / columns) * res);
                 pass.set_viewport(x as f32, y as f32, res as f32, res as f32, 0.0, 1.0);
                 pass.set_scissor_rect(x, y, res, res);
-                pass.draw(0..corners, k..k + 1);
+                for t in ranges {
+                    pass.draw(3 * t.start..3 * t.end, k..k + 1);
+                }
             }
         })
     }
