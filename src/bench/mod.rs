@@ -275,12 +275,9 @@ impl Sweep {
                 }
                 "glossy_interpolation" => {
                     duplicate(sweep.glossy_interpolation.is_some())?;
-                    sweep.glossy_interpolation = Some(parse_each(&flag, &values, |v| {
-                        [GlossyInterpolation::Lights, GlossyInterpolation::Radiance]
-                            .into_iter()
-                            .find(|g| glossy_interpolation_name(*g) == v)
-                            .ok_or_else(|| "expected `lights` or `radiance`".to_owned())
-                    })?);
+                    let all = [GlossyInterpolation::Lights, GlossyInterpolation::Radiance];
+                    sweep.glossy_interpolation =
+                        Some(parse_each(&flag, &values, |v| named(v, &all, glossy_interpolation_name))?);
                 }
                 "cluster_count" => {
                     duplicate(sweep.cluster_count.is_some())?;
@@ -292,21 +289,13 @@ impl Sweep {
                 }
                 "cluster_soft" => {
                     duplicate(sweep.cluster_soft.is_some())?;
-                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| {
-                        [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard]
-                            .into_iter()
-                            .find(|s| soft_name(*s) == v)
-                            .ok_or_else(|| "expected `pcss`, `pcf` or `hard`".to_owned())
-                    })?);
+                    let all = [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard];
+                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| named(v, &all, soft_name))?);
                 }
                 "cluster_maps" => {
                     duplicate(sweep.cluster_maps.is_some())?;
-                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| {
-                        [ShadowMapSource::Raster, ShadowMapSource::Ism]
-                            .into_iter()
-                            .find(|m| maps_name(*m) == v)
-                            .ok_or_else(|| "expected `raster` or `ism`".to_owned())
-                    })?);
+                    let all = [ShadowMapSource::Raster, ShadowMapSource::Ism];
+                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| named(v, &all, maps_name))?);
                 }
                 "neighbours" | "neighbors" => {
                     duplicate(sweep.neighbours.is_some())?;
@@ -492,6 +481,18 @@ fn one<T: Clone>(values: &Option<Vec<T>>, base: T) -> Vec<T> {
 
 fn parse_each<T>(flag: &str, values: &[&str], f: impl Fn(&str) -> Result<T, String>) -> Result<Vec<T>, BenchError> {
     values.iter().map(|v| f(v).map_err(|m| flag_error(flag, format!("`{v}`: {m}")))).collect()
+}
+
+/// The one of `all` whose `name` is `v`; the error lists the names (`expected `a`, `b` or `c``).
+fn named<T: Copy>(v: &str, all: &[T], name: fn(T) -> &'static str) -> Result<T, String> {
+    all.iter().copied().find(|x| name(*x) == v).ok_or_else(|| {
+        let names: Vec<String> = all.iter().map(|x| format!("`{}`", name(*x))).collect();
+        match names.split_last() {
+            Some((last, [])) => format!("expected {last}"),
+            Some((last, rest)) => format!("expected {} or {last}", rest.join(", ")),
+            None => "no value is accepted".to_owned(),
+        }
+    })
 }
 
 fn int_in(v: &str, lo: u32, hi: u32) -> Result<u32, String> {
