@@ -121,6 +121,9 @@ fn glossy_radiance_interpolation_matches_cpu_twins() {
     let flat = &renderer.scene.flat;
     let eye = renderer.view().eye();
     assert!(mid.sparse_glossy.is_empty() && mid.vertex_glossy.is_empty(), "no glossy point lights");
+    // The gather sums the lobe without its mean position (`GatherLobes::GlossyRadiance`).
+    assert_gather_matches_twin(flat, &mid, eye, &renderer.read_vals(&gpu).unwrap());
+    assert!(mid.gathered_glossy.iter().all(|g| g.weight == 0.0), "no glossy mean position is summed");
     assert_eq!(mid.vertex_glossy_radiance.len(), flat.vertices.len());
     assert!(mid.vertex_glossy_radiance.iter().any(|g| g[0] > 0.0), "some vertex must see glossy light");
     assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse, eye);
@@ -215,7 +218,7 @@ fn gather_takes_every_val_past_the_cpu_loop_limit() {
 #[test]
 fn gather_variants_match_cpu_twin() {
     use relume::gpu::raw::RawGathered;
-    use relume::gpu::sparse::gather::Gather;
+    use relume::gpu::sparse::gather::{Gather, GatherLobes};
     use relume::gpu::timing::Recorder;
     let gpu = gpu();
     let scene = load_scene("cornell_bunny_small");
@@ -226,7 +229,8 @@ fn gather_variants_match_cpu_twin() {
     assert!(renderer.glossy() && !n.is_multiple_of(5) && !n.is_multiple_of(7), "{n} points");
     for receivers in [1, 5, 7] {
         let gathered = relume::gpu::Lobes::new::<RawGathered>(&gpu, "test.gathered", n, true).unwrap();
-        let mut pass = Gather::variant(&gpu, &renderer.scene, true, None, 0.0, 64, receivers).unwrap();
+        let mut pass =
+            Gather::variant(&gpu, &renderer.scene, GatherLobes::GlossyLights, None, 0.0, 64, receivers).unwrap();
         pass.fit(&gpu, &renderer.scene, renderer.val_capacity()).unwrap();
         let mut rec = Recorder::new(&gpu, "test.gather", 1);
         rec.stage("gather", |e, s| pass.record(&gpu, e, &renderer.scene, &renderer.vals, &gathered, None, s)).unwrap();

@@ -16,7 +16,7 @@ use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::{self, Mode, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::scene::{GlossyInterpolation, InterpolationKernel, LightBound};
-use gather::Gather;
+use gather::{Gather, GatherLobes};
 use near_field::NearField;
 
 /// What the sparse technique is built for: a change rebuilds it.
@@ -68,6 +68,11 @@ impl SparseMethod {
         // With the glossy radiance interpolated, only the diffuse lobe has point lights.
         let radiance = glossy && settings.glossy_interpolation == GlossyInterpolation::Radiance;
         let glossy_lights = glossy && !radiance;
+        let lobes = match (glossy_lights, radiance) {
+            (true, _) => GatherLobes::GlossyLights,
+            (false, true) => GatherLobes::GlossyRadiance,
+            (false, false) => GatherLobes::Diffuse,
+        };
         let (interpolate, shade) = if radiance {
             let entry = "main_glossy_radiance";
             (
@@ -81,7 +86,7 @@ impl SparseMethod {
             )
         };
         Ok(Self {
-            gather: Gather::new(gpu, scene, glossy, groups, settings.near_radius)?,
+            gather: Gather::new(gpu, scene, lobes, groups, settings.near_radius)?,
             visibility,
             renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy_lights)?,
             interpolate,
