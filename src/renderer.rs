@@ -679,6 +679,17 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         let (scene, glossy, capacity) = (&self.scene, self.glossy, self.vals.capacity);
         let pixels = (width * height) as usize;
+        if components.indirect && method == Method::BruteForceIsm {
+            // Refused before anything is built for it: its table of (pixel, group) lookups
+            // must fit one storage binding.
+            let count = self.visibility.ism.count;
+            gpu.check_size(
+                &format!(
+                    "brute_force_ism's visibility table ({width}x{height} pixels x settings.ism.count {count} floats)"
+                ),
+                pixels as u64 * u64::from(count) * 4,
+            )?;
+        }
         if components.indirect {
             if let Some(b) = &mut self.bounce {
                 if method == Method::Exact {

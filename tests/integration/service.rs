@@ -429,6 +429,56 @@ async fn a_full_queue_answers_503_with_retry_after() {
     server.stop().await;
 }
 
+/// `brute-force-ism` renders through the scene's imperfect shadow maps, darker than the plain
+/// brute force (the maps occlude, never add light), and a size whose pixels x groups table
+/// cannot fit one storage binding is a 400 naming the table, before any GPU work; the scene
+/// renders normally after it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn brute_force_ism_renders_and_is_refused_over_the_device_limit() {
+    let server = TestServer::start(|_| {}).await;
+    let mut scene = fixture_scene("cornell_bunny_small", 16);
+    // Few small maps: the lookup at 256 pixels x 16 groups is fast on lavapipe.
+    scene["settings"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
+    let id = server.create(&scene).await;
+    let path = format!("/v1/scenes/{id}/render");
+    let indirect = |method: &str| json!({"quality": {"method": method, "component": "indirect", "format": "f32"}});
+    let floats = |reply: &Reply| -> Vec<f32> {
+        assert_eq!(reply.status, StatusCode::OK, "{}", String::from_utf8_lossy(&reply.body));
+        reply.body.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes"))).collect()
+    };
+    let ism = server.post(&path, &indirect("brute-force-ism")).await;
+    let timing = ism.header("server-timing").to_owned();
+    for stage in ["brute_force_ism_sampling;", "brute_force_ism_splat;", "brute_force_ism_visibility;", "brute_force;"]
+    {
+        assert!(timing.contains(stage), "{stage} missing from {timing}");
+    }
+    let ism = floats(&ism);
+    let plain = floats(&server.post(&path, &indirect("brute-force")).await);
+    assert_eq!(ism.len(), 16 * 16 * 4);
+    assert!(ism.iter().all(|v| v.is_finite() && *v >= 0.0));
+    let sum = |f: &[f32]| f.chunks_exact(4).map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
+    // Visibility only removes light: the box and the bunny hide some VALs from some pixels.
+    // 1e-4 relative: the two passes add the same VALs in the same order except for the weights.
+    let (lit, unoccluded) = (sum(&ism), sum(&plain));
+    assert!(lit > 0.0 && lit < unoccluded * (1.0 + 1e-4), "{lit} vs {unoccluded}");
+    assert!(lit < unoccluded * 0.99, "the maps occlude nothing: {lit} vs {unoccluded}");
+
+    // 2048x2048 pixels x 1,024 groups x 4 bytes = 16 GiB, over any device's storage binding.
+    scene["settings"]["ism"] = json!({"count": 1024});
+    let big = server.create(&scene).await;
+    let request = json!({
+        "camera": {"position": [0, 1, 3.3], "target": [0, 0.9, 0], "fov_y_deg": 45, "width": 2048, "height": 2048},
+        "quality": {"method": "brute-force-ism", "component": "indirect"}
+    });
+    let reply = server.post(&format!("/v1/scenes/{big}/render"), &request).await;
+    let error = reply.error(400, "limit_exceeded");
+    let message = error["message"].as_str().expect("a message");
+    assert!(message.contains("brute_force_ism") && message.contains("settings.ism.count 1024"), "{message}");
+    let after = server.post(&format!("/v1/scenes/{big}/render"), &indirect("sparse")).await;
+    assert_eq!(after.status, StatusCode::OK, "{}", String::from_utf8_lossy(&after.body));
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
     let server = TestServer::start(|c| {
