@@ -34,6 +34,8 @@ pub const PASSES: &[&pass::PassDesc] = &[
     &lights::rgbd::PASS,
     &lights::bounce::POINTS,
     &lights::bounce::GROUPED_POINTS,
+    &lights::bounce::DISK_POINTS,
+    &lights::bounce::OCCLUSION,
     &lights::bounce::VISIBILITY,
     &lights::bounce::ISM_VISIBILITY,
     &lights::bounce::DRAW,
