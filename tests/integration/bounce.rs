@@ -307,7 +307,7 @@ fn second_bounce_through_disks_matches_cpu_twin() {
         let stages = stage_names(&frame);
         let at = stages.iter().position(|s| *s == stage::BOUNCE2_POINTS).expect("the bounce stages");
         assert_eq!(&stages[at..at + 3], &[stage::BOUNCE2_POINTS, stage::BOUNCE2_OCCLUSION, stage::BOUNCE2_VALS]);
-        assert!(!stages.iter().any(|s| *s == stage::BOUNCE2_VISIBILITY), "{rule}: no group table: {stages:?}");
+        assert!(!stages.contains(&stage::BOUNCE2_VISIBILITY), "{rule}: no group table: {stages:?}");
 
         let all = renderer.read_vals(&gpu).unwrap();
         let first = &all[..all.len() - 48];

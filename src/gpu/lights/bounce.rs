@@ -262,7 +262,7 @@ pub struct SecondBounce {
     /// Area (m²) of each drawn VAL.
     pub drawn_area: f32,
     /// The visibility the points see the first bounce through: `Some` for the sparse method
-    /// with a group visibility mode (`clusters`, `ism`), else `None` (unoccluded).
+    /// with `clusters`, `ism` or `disks`, else `None` (unoccluded).
     visibility_key: Option<VisibilitySettings>,
     /// The first bounce's groups and maps, looked up at the points (with `visibility_key`).
     visibility: Option<Clusters>,
