@@ -747,6 +747,64 @@ async fn a_stream_relights_frames_and_follows_its_controls() {
     server.stop().await;
 }
 
+/// A stream may ask for `brute-force-ism`: its frames run the ISM stages per pixel; a view
+/// whose pixels x `settings.ism.count` table passes the device's storage binding is answered
+/// with an `Error` of code LIMIT_EXCEEDED naming the table, and the stream goes on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_renders_brute_force_ism_and_refuses_it_over_the_device_limit() {
+    let server = TestServer::start(|_| {}).await;
+    let mut scene = inline_scene();
+    scene["settings"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
+    let id = server.create(&scene).await;
+    let mut ws = server.stream(&id).await;
+    let quality = |request_id| proto::Control {
+        request_id,
+        quality: Some(proto::Quality {
+            method: proto::Method::BruteForceIsm as i32,
+            component: proto::Component::Indirect as i32,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert!(matches!(ws.exchange(envelope(Body::Control(quality(1)))).await, Body::SettingsAck(_)));
+    let (f, _) = streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(1)))).await, 1);
+    let stages: Vec<&str> = f.timings.iter().map(|t| t.stage.as_str()).collect();
+    for stage in ["brute_force_ism_splat", "brute_force_ism_visibility", "brute_force"] {
+        assert!(stages.contains(&stage), "{stage} missing from {stages:?}");
+    }
+
+    // A 2048x2048 virtual view with 1,024 maps: 16 GiB of table.
+    let mut scene = inline_scene();
+    scene["settings"]["ism"] = json!({"count": 1024});
+    let big = server.create(&scene).await;
+    let mut ws = server.stream(&big).await;
+    let camera = proto::Camera {
+        position: v3(0.0, 1.0, 3.0),
+        target: v3(0.0, 0.5, 0.0),
+        up: None,
+        fov_y_deg: 50.0,
+        width: 2048,
+        height: 2048,
+    };
+    let control = proto::Control { camera: Some(camera), ..quality(2) };
+    assert!(matches!(ws.exchange(envelope(Body::Control(control))).await, Body::SettingsAck(_)));
+    match ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(2)))).await {
+        Body::Error(e) => {
+            assert_eq!(e.code(), ErrorCode::LimitExceeded, "{e:?}");
+            assert!(e.message.contains("brute_force_ism") && e.message.contains("1024"), "{e:?}");
+            assert_eq!(e.frame_id, Some(2), "{e:?}");
+        }
+        other => panic!("expected an Error, got {other:?}"),
+    }
+    // The stream goes on: the same view at 32x32 fits (4 MiB of table) and renders.
+    let control = proto::Control { camera: Some(proto::Camera { width: 32, height: 32, ..camera }), ..quality(3) };
+    assert!(matches!(ws.exchange(envelope(Body::Control(control))).await, Body::SettingsAck(_)));
+    let (f, _) = streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(3)))).await, 3);
+    assert_eq!((f.width, f.height), (32, 32));
+    drop(ws);
+    server.stop().await;
+}
+
 /// The viewer's files, and the recordings it plays: the fixture recording listed, a frame
 /// answered as the stream message that a stream then renders unchanged, and JSON errors for
 /// bad names, indices and queries.
