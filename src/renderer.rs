@@ -238,7 +238,9 @@ pub struct Renderer {
     visibility: VisibilitySettings,
     /// The sparse method's interpolation kernel, light bound and near-field radius (m)
     /// (`settings.sparse`).
-    sparse_shading: (scene::InterpolationKernel, scene::LightBound, f32),
+    /// The sparse method's shading settings (`settings.sparse`), the near field as a radius in
+    /// metres.
+    sparse_shading: (scene::InterpolationKernel, scene::LightBound, f32, scene::GlossyInterpolation),
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The scene's `lights` and their direct light (`gpu::lights::many`), when it has any.
@@ -333,6 +335,7 @@ impl Renderer {
                 scene.settings.sparse.kernel,
                 scene.settings.sparse.bound,
                 scene.settings.sparse.near_field * scene.sparse_spacing(),
+                scene.settings.sparse.glossy_interpolation,
             ),
             exact_val_stride: 1,
             scene: scene_gpu,
@@ -720,8 +723,15 @@ impl Renderer {
             }
             match method {
                 Method::Sparse => {
-                    let (kernel, bound, near_radius) = self.sparse_shading;
-                    let settings = SparseSettings { glossy, visibility: self.visibility, kernel, bound, near_radius };
+                    let (kernel, bound, near_radius, glossy_interpolation) = self.sparse_shading;
+                    let settings = SparseSettings {
+                        glossy,
+                        visibility: self.visibility,
+                        kernel,
+                        bound,
+                        near_radius,
+                        glossy_interpolation,
+                    };
                     built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
                         .fit(gpu, scene, capacity)?;
                 }
@@ -886,6 +896,10 @@ impl Renderer {
         let (gathered_diffuse, gathered_glossy) = read_lobes::<RawGathered>(gpu, &p.gathered, n)?;
         let (sparse_diffuse, sparse_glossy) = read_lobes::<RawPointLight>(gpu, &p.sparse_lights, n)?;
         let (vertex_diffuse, vertex_glossy) = read_lobes::<RawPointLight>(gpu, &p.vertex_lights, v)?;
+        let vertex_glossy_radiance = match &p.vertex_glossy_radiance {
+            Some(b) => gpu.read_buffer::<[f32; 4]>(b, v)?,
+            None => Vec::new(),
+        };
         Ok(SparseIntermediates {
             gathered_diffuse,
             gathered_glossy,
@@ -893,6 +907,7 @@ impl Renderer {
             sparse_glossy,
             vertex_diffuse,
             vertex_glossy,
+            vertex_glossy_radiance,
         })
     }
 }
@@ -914,7 +929,11 @@ pub struct SparseIntermediates {
     pub sparse_diffuse: Vec<RawPointLight>,
     pub sparse_glossy: Vec<RawPointLight>,
     pub vertex_diffuse: Vec<RawPointLight>,
+    /// Empty with `glossy_interpolation: "radiance"`.
     pub vertex_glossy: Vec<RawPointLight>,
+    /// Per vertex, the interpolated glossy radiance factor (xyz; `w` 0): with
+    /// `glossy_interpolation: "radiance"` only.
+    pub vertex_glossy_radiance: Vec<[f32; 4]>,
 }
 
 /// Optical camera coordinates (x right, y down, z forward) to wgpu clip space for a pinhole

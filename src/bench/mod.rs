@@ -22,8 +22,8 @@ use crate::gpu::visibility::VisibilitySettings;
 use crate::gpu::{Gpu, GpuError, MemoryInUse};
 use crate::renderer::{Method, Rendered, Renderer, stage};
 use crate::scene::{
-    ClusterSettings, IsmSettings, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene,
-    SceneDescription, SceneError, ShadowMapSource, SoftShadows,
+    ClusterSettings, GlossyInterpolation, IsmSettings, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion,
+    RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError, ShadowMapSource, SoftShadows,
 };
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -61,6 +61,8 @@ pub struct Config {
     /// Near-field radius in whole sparse point spacings; `None`: the scene's
     /// `settings.sparse.near_field`.
     pub near_field: Option<u32>,
+    /// `settings.sparse.glossy_interpolation`; `None`: the scene's.
+    pub glossy_interpolation: Option<GlossyInterpolation>,
     /// RSM side R: at most R² VALs (only lit texels become VALs).
     pub rsm_resolution: u32,
     pub occlusion: Occlusion,
@@ -117,6 +119,14 @@ fn soft_name(s: SoftShadows) -> &'static str {
     }
 }
 
+/// `glossy_interpolation`'s name in settings, CSV and labels.
+fn glossy_interpolation_name(g: GlossyInterpolation) -> &'static str {
+    match g {
+        GlossyInterpolation::Lights => "lights",
+        GlossyInterpolation::Radiance => "radiance",
+    }
+}
+
 /// `shadow_maps`' name in settings, CSV and labels.
 fn maps_name(m: ShadowMapSource) -> &'static str {
     match m {
@@ -152,6 +162,7 @@ pub struct Sweep {
     pub sparse_points: Option<Vec<u32>>,
     pub neighbours: Option<Vec<u32>>,
     pub near_field: Option<Vec<u32>>,
+    pub glossy_interpolation: Option<Vec<GlossyInterpolation>>,
     pub rsm_resolution: Option<Vec<u32>>,
     pub occlusion: Option<Vec<Occlusion>>,
     pub glossy: Option<Vec<bool>>,
@@ -173,6 +184,7 @@ pub const AXES: &[&str] = &[
     "sparse_points",
     "neighbours",
     "near_field",
+    "glossy_interpolation",
     "rsm_resolution",
     "occlusion",
     "glossy",
@@ -261,6 +273,12 @@ impl Sweep {
                     let max = crate::scene::NEAR_FIELD_RANGE.1 as u32;
                     sweep.near_field = Some(parse_each(&flag, &values, |v| int_in(v, 0, max))?);
                 }
+                "glossy_interpolation" => {
+                    duplicate(sweep.glossy_interpolation.is_some())?;
+                    let all = [GlossyInterpolation::Lights, GlossyInterpolation::Radiance];
+                    sweep.glossy_interpolation =
+                        Some(parse_each(&flag, &values, |v| named(v, &all, glossy_interpolation_name))?);
+                }
                 "cluster_count" => {
                     duplicate(sweep.cluster_count.is_some())?;
                     sweep.cluster_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_CLUSTERS))?);
@@ -271,21 +289,13 @@ impl Sweep {
                 }
                 "cluster_soft" => {
                     duplicate(sweep.cluster_soft.is_some())?;
-                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| {
-                        [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard]
-                            .into_iter()
-                            .find(|s| soft_name(*s) == v)
-                            .ok_or_else(|| "expected `pcss`, `pcf` or `hard`".to_owned())
-                    })?);
+                    let all = [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard];
+                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| named(v, &all, soft_name))?);
                 }
                 "cluster_maps" => {
                     duplicate(sweep.cluster_maps.is_some())?;
-                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| {
-                        [ShadowMapSource::Raster, ShadowMapSource::Ism]
-                            .into_iter()
-                            .find(|m| maps_name(*m) == v)
-                            .ok_or_else(|| "expected `raster` or `ism`".to_owned())
-                    })?);
+                    let all = [ShadowMapSource::Raster, ShadowMapSource::Ism];
+                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| named(v, &all, maps_name))?);
                 }
                 "neighbours" | "neighbors" => {
                     duplicate(sweep.neighbours.is_some())?;
@@ -321,7 +331,11 @@ impl Sweep {
                     .iter()
                     .flat_map(|k| opts(&self.near_field, base.near_field).into_iter().map(move |n| (k, n)))
                 {
-                    for &rsm in &one(&self.rsm_resolution, base.rsm_resolution) {
+                    for (&rsm, glossy_interpolation) in
+                        one(&self.rsm_resolution, base.rsm_resolution).iter().flat_map(|r| {
+                            opts(&self.glossy_interpolation, base.glossy_interpolation).into_iter().map(move |g| (r, g))
+                        })
+                    {
                         for &glossy in &one(&self.glossy, base.glossy) {
                             for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
                                 for &occlusion in &one(&self.occlusion, base.occlusion) {
@@ -330,6 +344,7 @@ impl Sweep {
                                             sparse_points_per_mesh: sparse,
                                             neighbours,
                                             near_field,
+                                            glossy_interpolation,
                                             rsm_resolution: rsm,
                                             occlusion,
                                             glossy,
@@ -362,6 +377,9 @@ impl Sweep {
         }
         for &v in self.near_field.iter().flatten() {
             push(Config { near_field: Some(v), ..*base });
+        }
+        for &v in self.glossy_interpolation.iter().flatten() {
+            push(Config { glossy_interpolation: Some(v), ..*base });
         }
         for &v in self.rsm_resolution.iter().flatten() {
             push(Config { rsm_resolution: v, ..*base });
@@ -465,6 +483,18 @@ fn parse_each<T>(flag: &str, values: &[&str], f: impl Fn(&str) -> Result<T, Stri
     values.iter().map(|v| f(v).map_err(|m| flag_error(flag, format!("`{v}`: {m}")))).collect()
 }
 
+/// The one of `all` whose `name` is `v`; the error lists the names (`expected `a`, `b` or `c``).
+fn named<T: Copy>(v: &str, all: &[T], name: fn(T) -> &'static str) -> Result<T, String> {
+    all.iter().copied().find(|x| name(*x) == v).ok_or_else(|| {
+        let names: Vec<String> = all.iter().map(|x| format!("`{}`", name(*x))).collect();
+        match names.split_last() {
+            Some((last, [])) => format!("expected {last}"),
+            Some((last, rest)) => format!("expected {} or {last}", rest.join(", ")),
+            None => "no value is accepted".to_owned(),
+        }
+    })
+}
+
 fn int_in(v: &str, lo: u32, hi: u32) -> Result<u32, String> {
     let n: u32 = v.parse().map_err(|_| format!("not a whole number in {lo}..={hi}"))?;
     if (lo..=hi).contains(&n) { Ok(n) } else { Err(format!("must be in {lo}..={hi}")) }
@@ -521,6 +551,7 @@ impl BenchOptions {
             sparse_points_per_mesh: None,
             neighbours: None,
             near_field: None,
+            glossy_interpolation: None,
             rsm_resolution: scene.settings.rsm_resolution,
             occlusion: scene.settings.occlusion,
             glossy: scene.settings.glossy,
@@ -680,7 +711,7 @@ pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and textur
      overhead not counted); the reference passes' buffers are released before";
 
 /// What a renderer is built for: sparse points per mesh, RSM resolution, glossy.
-type RendererKey = (Option<u32>, Option<u32>, Option<u32>, u32, bool);
+type RendererKey = (Option<u32>, Option<u32>, Option<u32>, Option<GlossyInterpolation>, u32, bool);
 
 /// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
 /// `options.out`. `progress` is told each configuration as it starts.
@@ -821,7 +852,8 @@ fn run_job(
     // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
     let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
     for c in &job.configs {
-        let key = (c.sparse_points_per_mesh, c.neighbours, c.near_field, c.rsm_resolution, c.glossy);
+        let key =
+            (c.sparse_points_per_mesh, c.neighbours, c.near_field, c.glossy_interpolation, c.rsm_resolution, c.glossy);
         match groups.iter_mut().find(|(k, _)| *k == key) {
             Some((_, g)) => g.push(*c),
             None => groups.push((key, vec![*c])),
@@ -829,7 +861,7 @@ fn run_job(
     }
     let mut scenes: HashMap<(Option<u32>, Option<u32>), Scene> = HashMap::new();
     let mut base_scene = None;
-    for ((sparse, neighbours, near_field, rsm, glossy), group) in groups {
+    for ((sparse, neighbours, near_field, glossy_interpolation, rsm, glossy), group) in groups {
         let mut scene = match scenes.get(&(sparse, neighbours)) {
             Some(s) => s.clone(),
             None => {
@@ -849,6 +881,9 @@ fn run_job(
         scene.settings.glossy = glossy;
         if let Some(n) = near_field {
             scene.settings.sparse.near_field = n as f32;
+        }
+        if let Some(g) = glossy_interpolation {
+            scene.settings.sparse.glossy_interpolation = g;
         }
         scene.settings.occlusion = group[0].occlusion;
         base_scene.get_or_insert_with(|| scene.clone());
@@ -970,8 +1005,10 @@ pub fn describe(c: &Config) -> String {
     let sparse = c.sparse_points_per_mesh.map_or("scene".to_owned(), |n| n.to_string());
     let neighbours = c.neighbours.map_or(String::new(), |k| format!(", {k} neighbours"));
     let near = c.near_field.map_or(String::new(), |n| format!(", near field {n}"));
+    let glossy_interpolation =
+        c.glossy_interpolation.map_or(String::new(), |g| format!(", glossy {}", glossy_interpolation_name(g)));
     format!(
-        "sparse/mesh {sparse}{neighbours}{near}, R {}, occlusion {}, glossy {}, {}x{}",
+        "sparse/mesh {sparse}{neighbours}{near}{glossy_interpolation}, R {}, occlusion {}, glossy {}, {}x{}",
         c.rsm_resolution,
         match c.occlusion {
             Occlusion::Off => "off",
@@ -1109,6 +1146,7 @@ pub fn csv(results: &BenchResults) -> String {
         "cluster_soft",
         "cluster_maps",
         "near_field",
+        "glossy_interpolation",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -1163,6 +1201,7 @@ pub fn csv(results: &BenchResults) -> String {
             o.soft.map_or(String::new(), |s| soft_name(s).to_owned()),
             o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
             ism(c.near_field),
+            c.glossy_interpolation.map_or(String::new(), |g| glossy_interpolation_name(g).to_owned()),
         ]);
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
@@ -1182,6 +1221,7 @@ mod tests {
         sparse_points_per_mesh: None,
         neighbours: None,
         near_field: None,
+        glossy_interpolation: None,
         rsm_resolution: 64,
         occlusion: Occlusion::Off,
         glossy: true,
@@ -1258,6 +1298,20 @@ mod tests {
 
     /// The near-field axis: one configuration per radius, and in the grid one per radius for
     /// every other combination.
+    #[test]
+    fn glossy_interpolation_axis_measures_each_form() {
+        let s = Sweep::parse(&args(&["glossy_interpolation=lights,radiance"])).unwrap();
+        let g: Vec<Option<GlossyInterpolation>> =
+            s.configs(&BASE, false).iter().map(|c| c.glossy_interpolation).collect();
+        assert_eq!(g, [None, Some(GlossyInterpolation::Lights), Some(GlossyInterpolation::Radiance)]);
+        let s = Sweep::parse(&args(&["glossy_interpolation=radiance", "near_field=0,4"])).unwrap();
+        let grid = s.configs(&BASE, true);
+        assert_eq!(grid.len(), 2);
+        assert!(grid.iter().all(|c| c.glossy_interpolation == Some(GlossyInterpolation::Radiance)));
+        let e = Sweep::parse(&args(&["glossy_interpolation=pixel"])).unwrap_err().to_string();
+        assert!(e.contains("glossy_interpolation") && e.contains("`lights` or `radiance`"), "{e}");
+    }
+
     #[test]
     fn near_field_axis_measures_each_radius() {
         let s = Sweep::parse(&args(&["near_field=0,4"])).unwrap();
