@@ -10,7 +10,8 @@
 //! RGB-D frame: RgbdVals (rgbd_vals)             ─┘
 //! bounces 2:   SecondBounce ([bounce2_ism_sampling, bounce2_ism_splat, bounce2_ism_pull_push,
 //!              bounce2_visibility: the first bounce's maps at its points, sparse `ism` or
-//!              `clusters` only], bounce2_points, bounce2_vals): appends the second bounce's VALs
+//!              `clusters` only], bounce2_points, [bounce2_occlusion: sparse `disks` only],
+//!              bounce2_vals): appends the second bounce's VALs
 //! camera:      CameraView (visibility)
 //! indirect:    SparseMethod (gather, [visibility mode], renormalise, interpolate, shade)
 //!              | BruteForce (brute_force) | BruteForce for brute_force_ism
@@ -118,6 +119,8 @@ pub mod stage {
     /// The second bounce's stages (`settings.bounces: 2`).
     pub const BOUNCE2_POINTS: &str = crate::gpu::lights::bounce::POINTS_STAGE;
     pub const BOUNCE2_VALS: &str = crate::gpu::lights::bounce::DRAW_STAGE;
+    /// The disks' occlusion of the bounce points (the sparse method with `disks` only).
+    pub const BOUNCE2_OCCLUSION: &str = crate::gpu::lights::bounce::OCCLUSION_STAGE;
     /// The lookup of the first bounce's groups at the bounce points (`visibility` `clusters` or
     /// `ism`, sparse method), after that instance's grouping and maps (`bounce::STAGES`).
     pub const BOUNCE2_VISIBILITY: &str = crate::gpu::lights::bounce::VISIBILITY_STAGE;
@@ -682,6 +685,17 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         let (scene, glossy, capacity) = (&self.scene, self.glossy, self.vals.capacity);
         let pixels = (width * height) as usize;
+        if components.indirect && method == Method::BruteForceIsm {
+            // Refused before anything is built for it: its table of (pixel, group) lookups
+            // must fit one storage binding.
+            let count = self.visibility.ism.count;
+            gpu.check_size(
+                &format!(
+                    "brute_force_ism's visibility table ({width}x{height} pixels x settings.ism.count {count} floats)"
+                ),
+                pixels as u64 * u64::from(count) * 4,
+            )?;
+        }
         if components.indirect {
             if let Some(b) = &mut self.bounce {
                 if method == Method::Exact {
@@ -692,13 +706,13 @@ impl Renderer {
                     ));
                 }
                 // The sparse method's group visibility mode lights the points through the first
-                // bounce's maps; the brute force (no visibility) and the other modes leave
-                // them unoccluded.
+                // bounce's maps, and its disks occlude their light spheres as the sparse
+                // points'; the brute force (no visibility) and `off` leave them unoccluded.
                 // `brute_force_ism` sees them through the imperfect shadow maps, as the sparse
                 // method's `ism` does.
-                let grouped = matches!(self.visibility.mode, scene::Occlusion::Clusters | scene::Occlusion::Ism);
+                let occluding = self.visibility.mode != scene::Occlusion::Off;
                 let visibility = match method {
-                    Method::Sparse if grouped => Some(self.visibility),
+                    Method::Sparse if occluding => Some(self.visibility),
                     Method::BruteForceIsm => {
                         Some(VisibilitySettings { mode: scene::Occlusion::Ism, ..self.visibility })
                     }

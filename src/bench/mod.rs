@@ -20,10 +20,10 @@ use self::compare::IndirectError;
 use crate::gpu::timing::TimingSource;
 use crate::gpu::visibility::VisibilitySettings;
 use crate::gpu::{Gpu, GpuError, MemoryInUse};
-use crate::renderer::{Rendered, Renderer, stage};
+use crate::renderer::{Method, Rendered, Renderer, stage};
 use crate::scene::{
-    ClusterSettings, GlossyInterpolation, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene,
-    SceneDescription, SceneError, ShadowMapSource, SoftShadows,
+    ClusterSettings, GlossyInterpolation, IsmSettings, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion,
+    RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError, ShadowMapSource, SoftShadows,
 };
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -635,6 +635,42 @@ pub struct ConfigResult {
     pub at_equal_error: Option<equal_error::AtEqualError>,
 }
 
+/// `brute_force_ism` ([`Method::BruteForceIsm`]: the brute force with every VAL weighted by
+/// its group's imperfect-shadow-map lookup at the pixel) at one size with one set of `ism`
+/// settings: the ISMs' own error without the sparse interpolation, the per-pixel ISM point
+/// beside the sparse `ism` configurations. Rendered once per (renderer, size, `ism` settings)
+/// that the sweep's `ism` configurations use, with the references (one frame, as the brute
+/// force).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BruteForceIsmResult {
+    pub variant: String,
+    /// The first `ism` configuration measured with these settings (its label names them).
+    pub config: Config,
+    /// The settings the maps were built with (the scene's with the configuration's overrides).
+    pub ism: IsmSettings,
+    pub timing: TimingSource,
+    /// Every stage of its frame, ms.
+    pub stages_ms: Vec<(String, f64)>,
+    /// Its groups', maps' and lookup's stages (`brute_force_ism_sampling`, `_splat`,
+    /// `_pull_push`, `_visibility`), ms.
+    pub ism_ms: f64,
+    /// Its indirect stages: the ISM stages and `brute_force`, ms.
+    pub indirect_ms: f64,
+    /// Against the brute force (no visibility): the darkening the maps add.
+    pub vs_brute_force: Option<IndirectError>,
+    /// Against exact visibility, with `--reference exact`.
+    pub vs_exact: Option<IndirectError>,
+    /// `vs_exact`'s relative RMSE corrected for the reference's noise.
+    pub rel_rmse_vs_exact_corrected: Option<f64>,
+}
+
+impl BruteForceIsmResult {
+    /// As [`ConfigResult::error_vs_exact`].
+    pub fn error_vs_exact(&self) -> Option<f64> {
+        self.rel_rmse_vs_exact_corrected.or(self.vs_exact.map(|e| e.rel_rmse))
+    }
+}
+
 impl ConfigResult {
     /// The error against exact visibility with the reference's noise taken out where it is
     /// known (`rel_rmse_vs_exact_corrected`), else the raw one; `None` without the reference.
@@ -659,6 +695,9 @@ pub struct BenchResults {
     /// With `--reference exact`: "all", "stride" or "importance".
     pub exact_estimator: Option<&'static str>,
     pub configs: Vec<ConfigResult>,
+    /// `brute_force_ism` at each size and `ism` settings the configurations used (with the
+    /// references; `brute_force_ism.csv`).
+    pub brute_force_ism: Vec<BruteForceIsmResult>,
     /// With `--equal-error`: the converging estimator's error against time, per image size.
     pub equal_error_curves: Vec<equal_error::EqualErrorCurve>,
     /// The gather's throughput against an FMA-bound kernel, on the base configuration.
@@ -723,11 +762,13 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         vec![Job { variant: "scene".to_owned(), configs: options.configs(&description, &scene), description }]
     };
     let mut results = Vec::new();
+    let mut per_pixel_ism = Vec::new();
     let mut curves = Vec::new();
     let mut timing = None;
     let mut base_scene = None;
     for job in &jobs {
-        let base = run_job(gpu, options, job, &base_dir, &mut results, &mut curves, progress).map_err(|e| match e {
+        let mut out = JobOutputs { results: &mut results, brute_force_ism: &mut per_pixel_ism, curves: &mut curves };
+        let base = run_job(gpu, options, job, &base_dir, &mut out, progress).map_err(|e| match e {
             BenchError::Scene { source, .. } => BenchError::Scene { path: path.clone(), source },
             e => e,
         })?;
@@ -767,6 +808,7 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         exact_val_stride: options.exact.map(|e| e.val_stride),
         exact_estimator: options.exact.map(|e| e.estimator()),
         configs: results,
+        brute_force_ism: per_pixel_ism,
         equal_error_curves: curves,
         fma,
         temporal,
@@ -788,17 +830,24 @@ pub struct Job {
     pub configs: Vec<Config>,
 }
 
-/// Run `job`'s configurations, appending to `results`; returns the scene of its first
+/// What [`run_job`] appends to.
+struct JobOutputs<'a> {
+    results: &'a mut Vec<ConfigResult>,
+    brute_force_ism: &'a mut Vec<BruteForceIsmResult>,
+    curves: &'a mut Vec<equal_error::EqualErrorCurve>,
+}
+
+/// Run `job`'s configurations, appending to `out`; returns the scene of its first
 /// configuration (the base of the extra measurements).
 fn run_job(
     gpu: &Gpu,
     options: &BenchOptions,
     job: &Job,
     base_dir: &Path,
-    results: &mut Vec<ConfigResult>,
-    curves: &mut Vec<equal_error::EqualErrorCurve>,
+    out: &mut JobOutputs<'_>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Scene, BenchError> {
+    let JobOutputs { results, brute_force_ism, curves } = out;
     let scene_error = |source| BenchError::Scene { path: PathBuf::new(), source };
     // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
     let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
@@ -868,6 +917,35 @@ fn run_job(
                 Some(exact) => Some(compare::exact_reference(gpu, &mut renderer, w, h, exact)?),
                 None => None,
             };
+            // The per-pixel ISM point: once per `ism` settings the sparse `ism` configurations
+            // of this size used.
+            if options.references {
+                let mut seen: Vec<IsmSettings> = Vec::new();
+                for c in group.iter().filter(|c| (c.width, c.height) == (w, h) && c.occlusion == Occlusion::Ism) {
+                    let ism = c.ism_settings(&scene.settings.ism);
+                    if seen.contains(&ism) {
+                        continue;
+                    }
+                    seen.push(ism);
+                    progress(&format!("{}: brute_force_ism for {}", job.variant, describe(c)));
+                    renderer.set_visibility(VisibilitySettings { mode: Occlusion::Ism, ism, ..renderer.visibility() });
+                    let frame = renderer.render(gpu, Method::BruteForceIsm, w, h)?;
+                    let ism_stages: Vec<&str> =
+                        frame.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
+                    brute_force_ism.push(BruteForceIsmResult {
+                        variant: job.variant.clone(),
+                        config: *c,
+                        ism,
+                        timing: frame.timings.source,
+                        stages_ms: frame.timings.stages.clone(),
+                        ism_ms: frame.timings.total_of(&ism_stages),
+                        indirect_ms: frame.indirect_ms(),
+                        vs_brute_force: brute.as_ref().map(|b| compare::indirect_error(&frame.indirect, &b.indirect)),
+                        vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, x.indirect())),
+                        rel_rmse_vs_exact_corrected: exact.as_ref().and_then(|x| x.corrected_rel_rmse(&frame.indirect)),
+                    });
+                }
+            }
             let curve = match (&options.equal_error, &exact) {
                 (Some(samples), Some(reference)) => {
                     let label = format!("{}: R {rsm}, glossy {glossy}, {w}x{h}", job.variant);
@@ -971,11 +1049,47 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), BenchError> {
     std::fs::write(path, bytes).map_err(|e| BenchError::Write { path: path.to_path_buf(), message: e.to_string() })
 }
 
-/// `results.json` and `results.csv` (one row per configuration, a column per stage).
+/// `results.json`, `results.csv` (one row per configuration, a column per stage) and, when
+/// `brute_force_ism` ran, `brute_force_ism.csv` (one row per size and `ism` settings).
 pub fn write_results(dir: &Path, results: &BenchResults) -> Result<(), BenchError> {
     let json = serde_json::to_string_pretty(results).expect("results serialise");
     write_file(&dir.join("results.json"), json.as_bytes())?;
-    write_file(&dir.join("results.csv"), csv(results).as_bytes())
+    write_file(&dir.join("results.csv"), csv(results).as_bytes())?;
+    if !results.brute_force_ism.is_empty() {
+        write_file(&dir.join("brute_force_ism.csv"), brute_force_ism_csv(results).as_bytes())?;
+    }
+    Ok(())
+}
+
+/// `brute_force_ism.csv`: per size and `ism` settings, the ISM settings, the stages' times and
+/// the errors (empty where a reference did not run).
+pub fn brute_force_ism_csv(results: &BenchResults) -> String {
+    let mut out = "variant,width,height,ism_count,ism_resolution,ism_points,ism_pull_push_levels,timing,ism_ms,\
+                   indirect_ms,rel_rmse_vs_brute_force,flip_mean_vs_brute_force,rel_rmse_vs_exact,\
+                   rel_rmse_vs_exact_corrected,flip_mean_vs_exact\n"
+        .to_owned();
+    let opt = |v: Option<f64>| v.map_or(String::new(), |x| x.to_string());
+    for r in &results.brute_force_ism {
+        let row = [
+            r.variant.clone(),
+            r.config.width.to_string(),
+            r.config.height.to_string(),
+            r.ism.count.to_string(),
+            r.ism.resolution.to_string(),
+            r.ism.points.map_or_else(|| "auto".to_owned(), |n| n.to_string()),
+            r.ism.pull_push_levels.to_string(),
+            r.timing.as_str().to_owned(),
+            r.ism_ms.to_string(),
+            r.indirect_ms.to_string(),
+            opt(r.vs_brute_force.map(|e| e.rel_rmse)),
+            opt(r.vs_brute_force.map(|e| e.flip_mean)),
+            opt(r.vs_exact.map(|e| e.rel_rmse)),
+            opt(r.rel_rmse_vs_exact_corrected),
+            opt(r.vs_exact.map(|e| e.flip_mean)),
+        ];
+        out += &(row.join(",") + "\n");
+    }
+    out
 }
 
 /// The CSV table: fixed columns, then `<stage>_ms` for every stage any configuration ran.
