@@ -10,7 +10,8 @@
 //! RGB-D frame: RgbdVals (rgbd_vals)             ─┘
 //! bounces 2:   SecondBounce ([bounce2_ism_sampling, bounce2_ism_splat, bounce2_ism_pull_push,
 //!              bounce2_visibility: the first bounce's maps at its points, sparse `ism` or
-//!              `clusters` only], bounce2_points, bounce2_vals): appends the second bounce's VALs
+//!              `clusters` only], bounce2_points, [bounce2_occlusion: sparse `disks` only],
+//!              bounce2_vals): appends the second bounce's VALs
 //! camera:      CameraView (visibility)
 //! indirect:    SparseMethod (gather, [visibility mode], renormalise, interpolate, shade)
 //!              | BruteForce (brute_force) | BruteForce for brute_force_ism
@@ -118,6 +119,8 @@ pub mod stage {
     /// The second bounce's stages (`settings.bounces: 2`).
     pub const BOUNCE2_POINTS: &str = crate::gpu::lights::bounce::POINTS_STAGE;
     pub const BOUNCE2_VALS: &str = crate::gpu::lights::bounce::DRAW_STAGE;
+    /// The disks' occlusion of the bounce points (the sparse method with `disks` only).
+    pub const BOUNCE2_OCCLUSION: &str = crate::gpu::lights::bounce::OCCLUSION_STAGE;
     /// The lookup of the first bounce's groups at the bounce points (`visibility` `clusters` or
     /// `ism`, sparse method), after that instance's grouping and maps (`bounce::STAGES`).
     pub const BOUNCE2_VISIBILITY: &str = crate::gpu::lights::bounce::VISIBILITY_STAGE;
@@ -235,7 +238,9 @@ pub struct Renderer {
     visibility: VisibilitySettings,
     /// The sparse method's interpolation kernel, light bound and near-field radius (m)
     /// (`settings.sparse`).
-    sparse_shading: (scene::InterpolationKernel, scene::LightBound, f32),
+    /// The sparse method's shading settings (`settings.sparse`), the near field as a radius in
+    /// metres.
+    sparse_shading: (scene::InterpolationKernel, scene::LightBound, f32, scene::GlossyInterpolation),
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The scene's `lights` and their direct light (`gpu::lights::many`), when it has any.
@@ -330,6 +335,7 @@ impl Renderer {
                 scene.settings.sparse.kernel,
                 scene.settings.sparse.bound,
                 scene.settings.sparse.near_field * scene.sparse_spacing(),
+                scene.settings.sparse.glossy_interpolation,
             ),
             exact_val_stride: 1,
             scene: scene_gpu,
@@ -689,6 +695,17 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         let (scene, glossy, capacity) = (&self.scene, self.glossy, self.vals.capacity);
         let pixels = (width * height) as usize;
+        if components.indirect && method == Method::BruteForceIsm {
+            // Refused before anything is built for it: its table of (pixel, group) lookups
+            // must fit one storage binding.
+            let count = self.visibility.ism.count;
+            gpu.check_size(
+                &format!(
+                    "brute_force_ism's visibility table ({width}x{height} pixels x settings.ism.count {count} floats)"
+                ),
+                pixels as u64 * u64::from(count) * 4,
+            )?;
+        }
         if components.indirect {
             if let Some(b) = &mut self.bounce {
                 if method == Method::Exact {
@@ -699,13 +716,13 @@ impl Renderer {
                     ));
                 }
                 // The sparse method's group visibility mode lights the points through the first
-                // bounce's maps; the brute force (no visibility) and the other modes leave
-                // them unoccluded.
+                // bounce's maps, and its disks occlude their light spheres as the sparse
+                // points'; the brute force (no visibility) and `off` leave them unoccluded.
                 // `brute_force_ism` sees them through the imperfect shadow maps, as the sparse
                 // method's `ism` does.
-                let grouped = matches!(self.visibility.mode, scene::Occlusion::Clusters | scene::Occlusion::Ism);
+                let occluding = self.visibility.mode != scene::Occlusion::Off;
                 let visibility = match method {
-                    Method::Sparse if grouped => Some(self.visibility),
+                    Method::Sparse if occluding => Some(self.visibility),
                     Method::BruteForceIsm => {
                         Some(VisibilitySettings { mode: scene::Occlusion::Ism, ..self.visibility })
                     }
@@ -716,8 +733,15 @@ impl Renderer {
             }
             match method {
                 Method::Sparse => {
-                    let (kernel, bound, near_radius) = self.sparse_shading;
-                    let settings = SparseSettings { glossy, visibility: self.visibility, kernel, bound, near_radius };
+                    let (kernel, bound, near_radius, glossy_interpolation) = self.sparse_shading;
+                    let settings = SparseSettings {
+                        glossy,
+                        visibility: self.visibility,
+                        kernel,
+                        bound,
+                        near_radius,
+                        glossy_interpolation,
+                    };
                     built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
                         .fit(gpu, scene, capacity)?;
                 }
@@ -882,6 +906,10 @@ impl Renderer {
         let (gathered_diffuse, gathered_glossy) = read_lobes::<RawGathered>(gpu, &p.gathered, n)?;
         let (sparse_diffuse, sparse_glossy) = read_lobes::<RawPointLight>(gpu, &p.sparse_lights, n)?;
         let (vertex_diffuse, vertex_glossy) = read_lobes::<RawPointLight>(gpu, &p.vertex_lights, v)?;
+        let vertex_glossy_radiance = match &p.vertex_glossy_radiance {
+            Some(b) => gpu.read_buffer::<[f32; 4]>(b, v)?,
+            None => Vec::new(),
+        };
         Ok(SparseIntermediates {
             gathered_diffuse,
             gathered_glossy,
@@ -889,6 +917,7 @@ impl Renderer {
             sparse_glossy,
             vertex_diffuse,
             vertex_glossy,
+            vertex_glossy_radiance,
         })
     }
 }
@@ -910,7 +939,11 @@ pub struct SparseIntermediates {
     pub sparse_diffuse: Vec<RawPointLight>,
     pub sparse_glossy: Vec<RawPointLight>,
     pub vertex_diffuse: Vec<RawPointLight>,
+    /// Empty with `glossy_interpolation: "radiance"`.
     pub vertex_glossy: Vec<RawPointLight>,
+    /// Per vertex, the interpolated glossy radiance factor (xyz; `w` 0): with
+    /// `glossy_interpolation: "radiance"` only.
+    pub vertex_glossy_radiance: Vec<[f32; 4]>,
 }
 
 /// Optical camera coordinates (x right, y down, z forward) to wgpu clip space for a pinhole

@@ -6,7 +6,7 @@ use super::BenchError;
 use crate::bench::compare;
 use crate::gpu::pass::module_from_source;
 use crate::gpu::raw::RawGathered;
-use crate::gpu::sparse::gather::Gather;
+use crate::gpu::sparse::gather::{Gather, GatherLobes};
 use crate::gpu::timing::{Recorder, TimingSource};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::renderer::Renderer;
@@ -36,6 +36,9 @@ pub struct FmaReport {
 pub struct GatherVariant {
     /// The glossy gather (diffuse and Phong lobe) rather than the diffuse one.
     pub glossy: bool,
+    /// What it sums: `diffuse`, `glossy_lights` (the lobe and its mean position, the paper's
+    /// glossy lights) or `glossy_radiance` (the lobe alone, the default interpolation).
+    pub lobes: GatherLobes,
     /// VALs per workgroup-memory tile and threads per workgroup (relume's default is 64).
     pub tile_size: u32,
     /// Sparse points per invocation (relume's default: `gather::receivers_for` the adapter).
@@ -76,12 +79,16 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
         &[(32, 1), (64, 1), (128, 1), (256, 1), (64, 2), (64, 4), (64, 8), (32, 4)]
     };
     let mut gather_variants = Vec::new();
-    let lobes: &[bool] = if glossy { &[false, true] } else { &[false] };
+    let lobes: &[GatherLobes] = if glossy {
+        &[GatherLobes::Diffuse, GatherLobes::GlossyLights, GatherLobes::GlossyRadiance]
+    } else {
+        &[GatherLobes::Diffuse]
+    };
     for (&lobe, &(tile_size, receivers)) in lobes.iter().flat_map(|l| shapes.iter().map(move |s| (l, s))) {
         if tile_size > max_size {
             continue;
         }
-        let gathered = Lobes::new::<RawGathered>(gpu, "bench.gathered", n, lobe)?;
+        let gathered = Lobes::new::<RawGathered>(gpu, "bench.gathered", n, lobe.glossy())?;
         let mut pass = Gather::variant(gpu, &renderer.scene, lobe, None, 0.0, tile_size, receivers)?;
         pass.fit(gpu, &renderer.scene, renderer.val_capacity())?;
         let mut best = f64::INFINITY;
@@ -96,7 +103,8 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
         }
         let interactions_per_s = frame.val_count as f64 * n as f64 / (best * 1e-3);
         gather_variants.push(GatherVariant {
-            glossy: lobe,
+            glossy: lobe.glossy(),
+            lobes: lobe,
             tile_size,
             receivers,
             gather_ms: best,

@@ -20,10 +20,10 @@ use self::compare::IndirectError;
 use crate::gpu::timing::TimingSource;
 use crate::gpu::visibility::VisibilitySettings;
 use crate::gpu::{Gpu, GpuError, MemoryInUse};
-use crate::renderer::{Rendered, Renderer, stage};
+use crate::renderer::{Method, Rendered, Renderer, stage};
 use crate::scene::{
-    ClusterSettings, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene, SceneDescription,
-    SceneError, ShadowMapSource, SoftShadows,
+    ClusterSettings, GlossyInterpolation, IsmSettings, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion,
+    RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError, ShadowMapSource, SoftShadows,
 };
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -61,6 +61,8 @@ pub struct Config {
     /// Near-field radius in whole sparse point spacings; `None`: the scene's
     /// `settings.sparse.near_field`.
     pub near_field: Option<u32>,
+    /// `settings.sparse.glossy_interpolation`; `None`: the scene's.
+    pub glossy_interpolation: Option<GlossyInterpolation>,
     /// RSM side R: at most R² VALs (only lit texels become VALs).
     pub rsm_resolution: u32,
     pub occlusion: Occlusion,
@@ -117,6 +119,14 @@ fn soft_name(s: SoftShadows) -> &'static str {
     }
 }
 
+/// `glossy_interpolation`'s name in settings, CSV and labels.
+fn glossy_interpolation_name(g: GlossyInterpolation) -> &'static str {
+    match g {
+        GlossyInterpolation::Lights => "lights",
+        GlossyInterpolation::Radiance => "radiance",
+    }
+}
+
 /// `shadow_maps`' name in settings, CSV and labels.
 fn maps_name(m: ShadowMapSource) -> &'static str {
     match m {
@@ -152,6 +162,7 @@ pub struct Sweep {
     pub sparse_points: Option<Vec<u32>>,
     pub neighbours: Option<Vec<u32>>,
     pub near_field: Option<Vec<u32>>,
+    pub glossy_interpolation: Option<Vec<GlossyInterpolation>>,
     pub rsm_resolution: Option<Vec<u32>>,
     pub occlusion: Option<Vec<Occlusion>>,
     pub glossy: Option<Vec<bool>>,
@@ -173,6 +184,7 @@ pub const AXES: &[&str] = &[
     "sparse_points",
     "neighbours",
     "near_field",
+    "glossy_interpolation",
     "rsm_resolution",
     "occlusion",
     "glossy",
@@ -261,6 +273,12 @@ impl Sweep {
                     let max = crate::scene::NEAR_FIELD_RANGE.1 as u32;
                     sweep.near_field = Some(parse_each(&flag, &values, |v| int_in(v, 0, max))?);
                 }
+                "glossy_interpolation" => {
+                    duplicate(sweep.glossy_interpolation.is_some())?;
+                    let all = [GlossyInterpolation::Lights, GlossyInterpolation::Radiance];
+                    sweep.glossy_interpolation =
+                        Some(parse_each(&flag, &values, |v| named(v, &all, glossy_interpolation_name))?);
+                }
                 "cluster_count" => {
                     duplicate(sweep.cluster_count.is_some())?;
                     sweep.cluster_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_CLUSTERS))?);
@@ -271,21 +289,13 @@ impl Sweep {
                 }
                 "cluster_soft" => {
                     duplicate(sweep.cluster_soft.is_some())?;
-                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| {
-                        [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard]
-                            .into_iter()
-                            .find(|s| soft_name(*s) == v)
-                            .ok_or_else(|| "expected `pcss`, `pcf` or `hard`".to_owned())
-                    })?);
+                    let all = [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard];
+                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| named(v, &all, soft_name))?);
                 }
                 "cluster_maps" => {
                     duplicate(sweep.cluster_maps.is_some())?;
-                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| {
-                        [ShadowMapSource::Raster, ShadowMapSource::Ism]
-                            .into_iter()
-                            .find(|m| maps_name(*m) == v)
-                            .ok_or_else(|| "expected `raster` or `ism`".to_owned())
-                    })?);
+                    let all = [ShadowMapSource::Raster, ShadowMapSource::Ism];
+                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| named(v, &all, maps_name))?);
                 }
                 "neighbours" | "neighbors" => {
                     duplicate(sweep.neighbours.is_some())?;
@@ -321,7 +331,11 @@ impl Sweep {
                     .iter()
                     .flat_map(|k| opts(&self.near_field, base.near_field).into_iter().map(move |n| (k, n)))
                 {
-                    for &rsm in &one(&self.rsm_resolution, base.rsm_resolution) {
+                    for (&rsm, glossy_interpolation) in
+                        one(&self.rsm_resolution, base.rsm_resolution).iter().flat_map(|r| {
+                            opts(&self.glossy_interpolation, base.glossy_interpolation).into_iter().map(move |g| (r, g))
+                        })
+                    {
                         for &glossy in &one(&self.glossy, base.glossy) {
                             for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
                                 for &occlusion in &one(&self.occlusion, base.occlusion) {
@@ -330,6 +344,7 @@ impl Sweep {
                                             sparse_points_per_mesh: sparse,
                                             neighbours,
                                             near_field,
+                                            glossy_interpolation,
                                             rsm_resolution: rsm,
                                             occlusion,
                                             glossy,
@@ -362,6 +377,9 @@ impl Sweep {
         }
         for &v in self.near_field.iter().flatten() {
             push(Config { near_field: Some(v), ..*base });
+        }
+        for &v in self.glossy_interpolation.iter().flatten() {
+            push(Config { glossy_interpolation: Some(v), ..*base });
         }
         for &v in self.rsm_resolution.iter().flatten() {
             push(Config { rsm_resolution: v, ..*base });
@@ -465,6 +483,18 @@ fn parse_each<T>(flag: &str, values: &[&str], f: impl Fn(&str) -> Result<T, Stri
     values.iter().map(|v| f(v).map_err(|m| flag_error(flag, format!("`{v}`: {m}")))).collect()
 }
 
+/// The one of `all` whose `name` is `v`; the error lists the names (`expected `a`, `b` or `c``).
+fn named<T: Copy>(v: &str, all: &[T], name: fn(T) -> &'static str) -> Result<T, String> {
+    all.iter().copied().find(|x| name(*x) == v).ok_or_else(|| {
+        let names: Vec<String> = all.iter().map(|x| format!("`{}`", name(*x))).collect();
+        match names.split_last() {
+            Some((last, [])) => format!("expected {last}"),
+            Some((last, rest)) => format!("expected {} or {last}", rest.join(", ")),
+            None => "no value is accepted".to_owned(),
+        }
+    })
+}
+
 fn int_in(v: &str, lo: u32, hi: u32) -> Result<u32, String> {
     let n: u32 = v.parse().map_err(|_| format!("not a whole number in {lo}..={hi}"))?;
     if (lo..=hi).contains(&n) { Ok(n) } else { Err(format!("must be in {lo}..={hi}")) }
@@ -521,6 +551,7 @@ impl BenchOptions {
             sparse_points_per_mesh: None,
             neighbours: None,
             near_field: None,
+            glossy_interpolation: None,
             rsm_resolution: scene.settings.rsm_resolution,
             occlusion: scene.settings.occlusion,
             glossy: scene.settings.glossy,
@@ -604,6 +635,42 @@ pub struct ConfigResult {
     pub at_equal_error: Option<equal_error::AtEqualError>,
 }
 
+/// `brute_force_ism` ([`Method::BruteForceIsm`]: the brute force with every VAL weighted by
+/// its group's imperfect-shadow-map lookup at the pixel) at one size with one set of `ism`
+/// settings: the ISMs' own error without the sparse interpolation, the per-pixel ISM point
+/// beside the sparse `ism` configurations. Rendered once per (renderer, size, `ism` settings)
+/// that the sweep's `ism` configurations use, with the references (one frame, as the brute
+/// force).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BruteForceIsmResult {
+    pub variant: String,
+    /// The first `ism` configuration measured with these settings (its label names them).
+    pub config: Config,
+    /// The settings the maps were built with (the scene's with the configuration's overrides).
+    pub ism: IsmSettings,
+    pub timing: TimingSource,
+    /// Every stage of its frame, ms.
+    pub stages_ms: Vec<(String, f64)>,
+    /// Its groups', maps' and lookup's stages (`brute_force_ism_sampling`, `_splat`,
+    /// `_pull_push`, `_visibility`), ms.
+    pub ism_ms: f64,
+    /// Its indirect stages: the ISM stages and `brute_force`, ms.
+    pub indirect_ms: f64,
+    /// Against the brute force (no visibility): the darkening the maps add.
+    pub vs_brute_force: Option<IndirectError>,
+    /// Against exact visibility, with `--reference exact`.
+    pub vs_exact: Option<IndirectError>,
+    /// `vs_exact`'s relative RMSE corrected for the reference's noise.
+    pub rel_rmse_vs_exact_corrected: Option<f64>,
+}
+
+impl BruteForceIsmResult {
+    /// As [`ConfigResult::error_vs_exact`].
+    pub fn error_vs_exact(&self) -> Option<f64> {
+        self.rel_rmse_vs_exact_corrected.or(self.vs_exact.map(|e| e.rel_rmse))
+    }
+}
+
 impl ConfigResult {
     /// The error against exact visibility with the reference's noise taken out where it is
     /// known (`rel_rmse_vs_exact_corrected`), else the raw one; `None` without the reference.
@@ -628,6 +695,9 @@ pub struct BenchResults {
     /// With `--reference exact`: "all", "stride" or "importance".
     pub exact_estimator: Option<&'static str>,
     pub configs: Vec<ConfigResult>,
+    /// `brute_force_ism` at each size and `ism` settings the configurations used (with the
+    /// references; `brute_force_ism.csv`).
+    pub brute_force_ism: Vec<BruteForceIsmResult>,
     /// With `--equal-error`: the converging estimator's error against time, per image size.
     pub equal_error_curves: Vec<equal_error::EqualErrorCurve>,
     /// The gather's throughput against an FMA-bound kernel, on the base configuration.
@@ -641,7 +711,7 @@ pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and textur
      overhead not counted); the reference passes' buffers are released before";
 
 /// What a renderer is built for: sparse points per mesh, RSM resolution, glossy.
-type RendererKey = (Option<u32>, Option<u32>, Option<u32>, u32, bool);
+type RendererKey = (Option<u32>, Option<u32>, Option<u32>, Option<GlossyInterpolation>, u32, bool);
 
 /// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
 /// `options.out`. `progress` is told each configuration as it starts.
@@ -692,11 +762,13 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         vec![Job { variant: "scene".to_owned(), configs: options.configs(&description, &scene), description }]
     };
     let mut results = Vec::new();
+    let mut per_pixel_ism = Vec::new();
     let mut curves = Vec::new();
     let mut timing = None;
     let mut base_scene = None;
     for job in &jobs {
-        let base = run_job(gpu, options, job, &base_dir, &mut results, &mut curves, progress).map_err(|e| match e {
+        let mut out = JobOutputs { results: &mut results, brute_force_ism: &mut per_pixel_ism, curves: &mut curves };
+        let base = run_job(gpu, options, job, &base_dir, &mut out, progress).map_err(|e| match e {
             BenchError::Scene { source, .. } => BenchError::Scene { path: path.clone(), source },
             e => e,
         })?;
@@ -736,6 +808,7 @@ pub fn run(gpu: &Gpu, options: &BenchOptions, progress: &mut dyn FnMut(&str)) ->
         exact_val_stride: options.exact.map(|e| e.val_stride),
         exact_estimator: options.exact.map(|e| e.estimator()),
         configs: results,
+        brute_force_ism: per_pixel_ism,
         equal_error_curves: curves,
         fma,
         temporal,
@@ -757,22 +830,30 @@ pub struct Job {
     pub configs: Vec<Config>,
 }
 
-/// Run `job`'s configurations, appending to `results`; returns the scene of its first
+/// What [`run_job`] appends to.
+struct JobOutputs<'a> {
+    results: &'a mut Vec<ConfigResult>,
+    brute_force_ism: &'a mut Vec<BruteForceIsmResult>,
+    curves: &'a mut Vec<equal_error::EqualErrorCurve>,
+}
+
+/// Run `job`'s configurations, appending to `out`; returns the scene of its first
 /// configuration (the base of the extra measurements).
 fn run_job(
     gpu: &Gpu,
     options: &BenchOptions,
     job: &Job,
     base_dir: &Path,
-    results: &mut Vec<ConfigResult>,
-    curves: &mut Vec<equal_error::EqualErrorCurve>,
+    out: &mut JobOutputs<'_>,
     progress: &mut dyn FnMut(&str),
 ) -> Result<Scene, BenchError> {
+    let JobOutputs { results, brute_force_ism, curves } = out;
     let scene_error = |source| BenchError::Scene { path: PathBuf::new(), source };
     // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
     let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
     for c in &job.configs {
-        let key = (c.sparse_points_per_mesh, c.neighbours, c.near_field, c.rsm_resolution, c.glossy);
+        let key =
+            (c.sparse_points_per_mesh, c.neighbours, c.near_field, c.glossy_interpolation, c.rsm_resolution, c.glossy);
         match groups.iter_mut().find(|(k, _)| *k == key) {
             Some((_, g)) => g.push(*c),
             None => groups.push((key, vec![*c])),
@@ -780,7 +861,7 @@ fn run_job(
     }
     let mut scenes: HashMap<(Option<u32>, Option<u32>), Scene> = HashMap::new();
     let mut base_scene = None;
-    for ((sparse, neighbours, near_field, rsm, glossy), group) in groups {
+    for ((sparse, neighbours, near_field, glossy_interpolation, rsm, glossy), group) in groups {
         let mut scene = match scenes.get(&(sparse, neighbours)) {
             Some(s) => s.clone(),
             None => {
@@ -800,6 +881,9 @@ fn run_job(
         scene.settings.glossy = glossy;
         if let Some(n) = near_field {
             scene.settings.sparse.near_field = n as f32;
+        }
+        if let Some(g) = glossy_interpolation {
+            scene.settings.sparse.glossy_interpolation = g;
         }
         scene.settings.occlusion = group[0].occlusion;
         base_scene.get_or_insert_with(|| scene.clone());
@@ -833,6 +917,35 @@ fn run_job(
                 Some(exact) => Some(compare::exact_reference(gpu, &mut renderer, w, h, exact)?),
                 None => None,
             };
+            // The per-pixel ISM point: once per `ism` settings the sparse `ism` configurations
+            // of this size used.
+            if options.references {
+                let mut seen: Vec<IsmSettings> = Vec::new();
+                for c in group.iter().filter(|c| (c.width, c.height) == (w, h) && c.occlusion == Occlusion::Ism) {
+                    let ism = c.ism_settings(&scene.settings.ism);
+                    if seen.contains(&ism) {
+                        continue;
+                    }
+                    seen.push(ism);
+                    progress(&format!("{}: brute_force_ism for {}", job.variant, describe(c)));
+                    renderer.set_visibility(VisibilitySettings { mode: Occlusion::Ism, ism, ..renderer.visibility() });
+                    let frame = renderer.render(gpu, Method::BruteForceIsm, w, h)?;
+                    let ism_stages: Vec<&str> =
+                        frame.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
+                    brute_force_ism.push(BruteForceIsmResult {
+                        variant: job.variant.clone(),
+                        config: *c,
+                        ism,
+                        timing: frame.timings.source,
+                        stages_ms: frame.timings.stages.clone(),
+                        ism_ms: frame.timings.total_of(&ism_stages),
+                        indirect_ms: frame.indirect_ms(),
+                        vs_brute_force: brute.as_ref().map(|b| compare::indirect_error(&frame.indirect, &b.indirect)),
+                        vs_exact: exact.as_ref().map(|x| compare::indirect_error(&frame.indirect, x.indirect())),
+                        rel_rmse_vs_exact_corrected: exact.as_ref().and_then(|x| x.corrected_rel_rmse(&frame.indirect)),
+                    });
+                }
+            }
             let curve = match (&options.equal_error, &exact) {
                 (Some(samples), Some(reference)) => {
                     let label = format!("{}: R {rsm}, glossy {glossy}, {w}x{h}", job.variant);
@@ -892,8 +1005,10 @@ pub fn describe(c: &Config) -> String {
     let sparse = c.sparse_points_per_mesh.map_or("scene".to_owned(), |n| n.to_string());
     let neighbours = c.neighbours.map_or(String::new(), |k| format!(", {k} neighbours"));
     let near = c.near_field.map_or(String::new(), |n| format!(", near field {n}"));
+    let glossy_interpolation =
+        c.glossy_interpolation.map_or(String::new(), |g| format!(", glossy {}", glossy_interpolation_name(g)));
     format!(
-        "sparse/mesh {sparse}{neighbours}{near}, R {}, occlusion {}, glossy {}, {}x{}",
+        "sparse/mesh {sparse}{neighbours}{near}{glossy_interpolation}, R {}, occlusion {}, glossy {}, {}x{}",
         c.rsm_resolution,
         match c.occlusion {
             Occlusion::Off => "off",
@@ -934,11 +1049,47 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), BenchError> {
     std::fs::write(path, bytes).map_err(|e| BenchError::Write { path: path.to_path_buf(), message: e.to_string() })
 }
 
-/// `results.json` and `results.csv` (one row per configuration, a column per stage).
+/// `results.json`, `results.csv` (one row per configuration, a column per stage) and, when
+/// `brute_force_ism` ran, `brute_force_ism.csv` (one row per size and `ism` settings).
 pub fn write_results(dir: &Path, results: &BenchResults) -> Result<(), BenchError> {
     let json = serde_json::to_string_pretty(results).expect("results serialise");
     write_file(&dir.join("results.json"), json.as_bytes())?;
-    write_file(&dir.join("results.csv"), csv(results).as_bytes())
+    write_file(&dir.join("results.csv"), csv(results).as_bytes())?;
+    if !results.brute_force_ism.is_empty() {
+        write_file(&dir.join("brute_force_ism.csv"), brute_force_ism_csv(results).as_bytes())?;
+    }
+    Ok(())
+}
+
+/// `brute_force_ism.csv`: per size and `ism` settings, the ISM settings, the stages' times and
+/// the errors (empty where a reference did not run).
+pub fn brute_force_ism_csv(results: &BenchResults) -> String {
+    let mut out = "variant,width,height,ism_count,ism_resolution,ism_points,ism_pull_push_levels,timing,ism_ms,\
+                   indirect_ms,rel_rmse_vs_brute_force,flip_mean_vs_brute_force,rel_rmse_vs_exact,\
+                   rel_rmse_vs_exact_corrected,flip_mean_vs_exact\n"
+        .to_owned();
+    let opt = |v: Option<f64>| v.map_or(String::new(), |x| x.to_string());
+    for r in &results.brute_force_ism {
+        let row = [
+            r.variant.clone(),
+            r.config.width.to_string(),
+            r.config.height.to_string(),
+            r.ism.count.to_string(),
+            r.ism.resolution.to_string(),
+            r.ism.points.map_or_else(|| "auto".to_owned(), |n| n.to_string()),
+            r.ism.pull_push_levels.to_string(),
+            r.timing.as_str().to_owned(),
+            r.ism_ms.to_string(),
+            r.indirect_ms.to_string(),
+            opt(r.vs_brute_force.map(|e| e.rel_rmse)),
+            opt(r.vs_brute_force.map(|e| e.flip_mean)),
+            opt(r.vs_exact.map(|e| e.rel_rmse)),
+            opt(r.rel_rmse_vs_exact_corrected),
+            opt(r.vs_exact.map(|e| e.flip_mean)),
+        ];
+        out += &(row.join(",") + "\n");
+    }
+    out
 }
 
 /// The CSV table: fixed columns, then `<stage>_ms` for every stage any configuration ran.
@@ -995,6 +1146,7 @@ pub fn csv(results: &BenchResults) -> String {
         "cluster_soft",
         "cluster_maps",
         "near_field",
+        "glossy_interpolation",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -1049,6 +1201,7 @@ pub fn csv(results: &BenchResults) -> String {
             o.soft.map_or(String::new(), |s| soft_name(s).to_owned()),
             o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
             ism(c.near_field),
+            c.glossy_interpolation.map_or(String::new(), |g| glossy_interpolation_name(g).to_owned()),
         ]);
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
@@ -1068,6 +1221,7 @@ mod tests {
         sparse_points_per_mesh: None,
         neighbours: None,
         near_field: None,
+        glossy_interpolation: None,
         rsm_resolution: 64,
         occlusion: Occlusion::Off,
         glossy: true,
@@ -1144,6 +1298,20 @@ mod tests {
 
     /// The near-field axis: one configuration per radius, and in the grid one per radius for
     /// every other combination.
+    #[test]
+    fn glossy_interpolation_axis_measures_each_form() {
+        let s = Sweep::parse(&args(&["glossy_interpolation=lights,radiance"])).unwrap();
+        let g: Vec<Option<GlossyInterpolation>> =
+            s.configs(&BASE, false).iter().map(|c| c.glossy_interpolation).collect();
+        assert_eq!(g, [None, Some(GlossyInterpolation::Lights), Some(GlossyInterpolation::Radiance)]);
+        let s = Sweep::parse(&args(&["glossy_interpolation=radiance", "near_field=0,4"])).unwrap();
+        let grid = s.configs(&BASE, true);
+        assert_eq!(grid.len(), 2);
+        assert!(grid.iter().all(|c| c.glossy_interpolation == Some(GlossyInterpolation::Radiance)));
+        let e = Sweep::parse(&args(&["glossy_interpolation=pixel"])).unwrap_err().to_string();
+        assert!(e.contains("glossy_interpolation") && e.contains("`lights` or `radiance`"), "{e}");
+    }
+
     #[test]
     fn near_field_axis_measures_each_radius() {
         let s = Sweep::parse(&args(&["near_field=0,4"])).unwrap();

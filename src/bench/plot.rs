@@ -162,9 +162,35 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
     let with_error: Vec<&ConfigResult> = results.configs.iter().filter(|r| error(r).is_some()).collect();
     let points: Vec<(f64, f64)> =
         with_error.iter().map(|r| (r.sparse_indirect_ms, error(r).unwrap_or_default())).collect();
+    // The per-pixel ISM points (`brute_force_ism`), beside the sparse configurations: not on
+    // the sparse method's front.
+    let per_pixel: Vec<(f64, f64, String)> = results
+        .brute_force_ism
+        .iter()
+        .filter_map(|r| {
+            let e = match exact {
+                true => r.error_vs_exact(),
+                false => r.vs_brute_force.map(|e| e.rel_rmse),
+            }?;
+            let c = &r.config;
+            let label = format!(
+                "per-pixel ism m{} r{} pp{} {}x{}",
+                r.ism.count, r.ism.resolution, r.ism.pull_push_levels, c.width, c.height
+            );
+            Some((r.indirect_ms, e, label))
+        })
+        .collect();
     let front = pareto_front(&points);
-    let y_max = points.iter().map(|p| p.1).filter(|y| y.is_finite()).fold(0.0f64, f64::max).max(1e-3) * 1.15;
-    let x_range = log_range(points.iter().chain(curves.iter().flatten()).map(|p| p.0));
+    let y_max = points
+        .iter()
+        .map(|p| p.1)
+        .chain(per_pixel.iter().map(|p| p.1))
+        .filter(|y| y.is_finite())
+        .fold(0.0f64, f64::max)
+        .max(1e-3)
+        * 1.15;
+    let x_range =
+        log_range(points.iter().chain(curves.iter().flatten()).map(|p| p.0).chain(per_pixel.iter().map(|p| p.0)));
     let reference = match (exact, results.exact_val_stride) {
         (true, Some(n)) if n > 1 => format!("exact visibility (every {n}th VAL)"),
         (true, _) => "exact visibility".to_owned(),
@@ -205,6 +231,19 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
                 .map(|&i| Text::new(short_label(with_error[i]), points[i], (FAMILY, 12).into_font().color(&BLACK))),
         )
         .map_err(err)?;
+    if !per_pixel.is_empty() {
+        let orange = RGBColor(255, 127, 14);
+        chart
+            .draw_series(per_pixel.iter().map(|p| TriangleMarker::new((p.0, p.1), 6, orange.filled())))
+            .map_err(err)?
+            .label("brute_force_ism (ISM lookup per pixel, no interpolation)")
+            .legend(move |(x, y)| TriangleMarker::new((x + 5, y), 6, orange.filled()));
+        chart
+            .draw_series(
+                per_pixel.iter().map(|p| Text::new(p.2.clone(), (p.0, p.1), (FAMILY, 12).into_font().color(&BLACK))),
+            )
+            .map_err(err)?;
+    }
     let green = RGBColor(44, 160, 44);
     for (i, curve) in curves.iter().enumerate() {
         // The ladder's points within the configurations' error range (plotters draws points

@@ -116,6 +116,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             at.speedup
         );
     }
+    for r in &results.brute_force_ism {
+        let error = |name: &str, e: Option<relume::bench::compare::IndirectError>| {
+            e.map_or(String::new(), |e| format!(", {:.4} / FLIP {:.4} vs {name}", e.rel_rmse, e.flip_mean))
+        };
+        eprintln!(
+            "brute_force_ism ({} maps of {}², pull-push {}, {}x{}): {:.0} ms (ISM stages {:.0}){}{}",
+            r.ism.count,
+            r.ism.resolution,
+            r.ism.pull_push_levels,
+            r.config.width,
+            r.config.height,
+            r.indirect_ms,
+            r.ism_ms,
+            error("brute force", r.vs_brute_force),
+            error("exact", r.vs_exact)
+        );
+    }
     eprintln!(
         "{} configurations on {} ({} timing); wrote {}",
         results.configs.len(),

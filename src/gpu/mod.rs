@@ -34,6 +34,8 @@ pub const PASSES: &[&pass::PassDesc] = &[
     &lights::rgbd::PASS,
     &lights::bounce::POINTS,
     &lights::bounce::GROUPED_POINTS,
+    &lights::bounce::DISK_POINTS,
+    &lights::bounce::OCCLUSION,
     &lights::bounce::VISIBILITY,
     &lights::bounce::ISM_VISIBILITY,
     &lights::bounce::DRAW,
@@ -259,7 +261,9 @@ impl Gpu {
         }))
     }
 
-    fn check_size(&self, what: &str, needed: u64) -> Result<(), GpuError> {
+    /// Whether a storage binding of `needed` bytes fits the device: else
+    /// [`GpuError::TooLarge`] naming `what`.
+    pub fn check_size(&self, what: &str, needed: u64) -> Result<(), GpuError> {
         let limits = self.device.limits();
         let limit = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if needed > limit {

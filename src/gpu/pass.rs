@@ -304,8 +304,13 @@ impl Kernels {
     /// Compile `body` for `desc` and build its entry for the scene's lobes: `main_glossy` when
     /// `glossy`, else `main`. The common case of a pass with one kernel.
     pub fn lobes(gpu: &Gpu, scene: &GpuScene, desc: &PassDesc, body: &str, glossy: bool) -> Result<Self, GpuError> {
+        Self::entry(gpu, scene, desc, body, desc.lobe_entry(glossy))
+    }
+
+    /// Compile `body` for `desc` and build its `entry`, one kernel.
+    pub fn entry(gpu: &Gpu, scene: &GpuScene, desc: &PassDesc, body: &str, entry: Entry) -> Result<Self, GpuError> {
         let module = module_from_source(gpu, desc.label, desc.source(body, scene.textured()))?;
-        let kernel = Kernel::build(gpu, scene, desc, &module, desc.lobe_entry(glossy), &[], desc.workgroup)?;
+        let kernel = Kernel::build(gpu, scene, desc, &module, entry, &[], desc.workgroup)?;
         Ok(Self { kernels: vec![kernel], ranges: None })
     }
 

@@ -174,6 +174,11 @@ pub enum RenderMethod {
     Sparse,
     /// Every VAL at every visible pixel (the reference; slow).
     BruteForce,
+    /// The brute force with every VAL weighted by its group's imperfect-shadow-map lookup at
+    /// the pixel (the scene's `settings.ism`): the ISMs' visibility without the sparse
+    /// interpolation. Its table of pixels x `settings.ism.count` floats must fit the device's
+    /// largest storage buffer binding, else 400 `limit_exceeded`.
+    BruteForceIsm,
 }
 
 impl From<RenderMethod> for Method {
@@ -181,6 +186,7 @@ impl From<RenderMethod> for Method {
         match method {
             RenderMethod::Sparse => Method::Sparse,
             RenderMethod::BruteForce => Method::BruteForce,
+            RenderMethod::BruteForceIsm => Method::BruteForceIsm,
         }
     }
 }

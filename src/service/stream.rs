@@ -22,6 +22,7 @@ use axum::response::Response;
 use tokio::sync::oneshot;
 use tokio_tungstenite::tungstenite;
 
+use crate::gpu::GpuError;
 use crate::rgbd::RgbdSettings;
 use crate::scene::{CameraDescription, LightDescription, Occlusion, TransformDescription};
 
@@ -478,6 +479,13 @@ impl From<WorkerError> for WireError {
             error @ WorkerError::DeviceLost => {
                 WireError::new(ErrorCode::Internal, None, format!("frame dropped: {error}; send the next"))
             }
+            // A frame over the device's buffer limits (`brute-force-ism`'s table, named in
+            // `what`): the client can ask for less, as the HTTP route's 400 says.
+            WorkerError::Gpu(GpuError::TooLarge { what, needed, limit }) => WireError::new(
+                ErrorCode::LimitExceeded,
+                None,
+                format!("{what} needs {needed} bytes of GPU memory, over the device's limit of {limit}"),
+            ),
             error @ (WorkerError::Gpu(_) | WorkerError::Panicked(_)) => {
                 tracing::error!("stream frame failed: {error}");
                 WireError::new(ErrorCode::Internal, None, "internal error (logged on the server)")

@@ -588,6 +588,7 @@ fn decode_quality(q: proto::Quality) -> Result<StreamQuality, WireError> {
     let method = match proto::Method::try_from(q.method).map_err(|_| unknown("method", q.method))? {
         proto::Method::Unspecified | proto::Method::Sparse => Method::Sparse,
         proto::Method::BruteForce => Method::BruteForce,
+        proto::Method::BruteForceIsm => Method::BruteForceIsm,
     };
     let component = match proto::Component::try_from(q.component).map_err(|_| unknown("component", q.component))? {
         proto::Component::Unspecified | proto::Component::Full => Component::Full,
@@ -1071,6 +1072,9 @@ mod tests {
         })
         .unwrap_err();
         assert_eq!(e.field.as_deref(), Some("control.model_transforms[0].scale[1]"));
+        let ism = control(&|c| c.quality = Some(proto::Quality { method: 3, ..Default::default() })).expect("valid");
+        let ClientMessage::Control(ism) = ism else { panic!("not a control") };
+        assert_eq!(ism.quality.expect("quality").method, Method::BruteForceIsm);
         let e = control(&|c| c.quality = Some(proto::Quality { method: 9, ..Default::default() })).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("control.quality.method"));
         let e = RgbdSettingsPatch { min_depth: Some(20.0), ..Default::default() }

@@ -6,7 +6,8 @@
 //! barycentrics, so they follow moving meshes); each is lit by the first bounce's VALs and
 //! becomes a candidate VAL re-emitting the diffuse part of what it receives
 //! ([`candidate_vals`]: flux `rho_d * E * area`, DESIGN.md §1-3; [`grouped_candidate_vals`]
-//! through the first bounce's groups with the sparse method's `clusters` or `ism` mode);
+//! through the first bounce's groups with the sparse method's `clusters` or `ism` mode;
+//! [`disk_occluded_candidate_vals`] scaled by the sparse points' discs with `disks`);
 //! `count` of them, drawn by flux
 //! ([`draw_vals`], the imperfect shadow maps' stratified draw), are the second bounce's VALs,
 //! appended to the frame's so that every later stage runs unchanged.
@@ -14,6 +15,7 @@
 use super::bvh::{ShadowTraversal, TraceBvh};
 use super::exact_cpu::RAY_OFFSET;
 use super::{Val, val_geometry};
+use crate::gpu::visibility::disks::twin::{Combine, Disc, light_sphere, visibility};
 use crate::gpu::visibility::ism::twin::{flux_picks, pcg_hash, val_weight};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -107,6 +109,35 @@ pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&Trace
                 Val { position: p.position, normal: p.normal, area: p.area, flux: p.albedo * e * p.area }
             },
         )
+        .collect()
+}
+
+/// Each point's gathered light (`twin::gather_point`: irradiance and the luminance-weighted
+/// moments of the VAL positions, as the gather weighs them) from every VAL of `vals`.
+pub fn point_gathered(p: &BounceSurface, vals: &[Val]) -> super::Gathered {
+    // The glossy lobe (exponent, eye) does not enter the diffuse sums.
+    super::gather_point(p.position, p.normal, 1.0, p.position + p.normal, vals)
+}
+
+/// Each point as a candidate VAL with `disks` visibility (WGSL `bounce_points.wgsl` with
+/// `bounce_moments.wgsl`, then `bounce_occlusion.wgsl`): [`candidate_vals`]' unoccluded
+/// candidate scaled by the visibility of the point's light sphere (from [`point_gathered`]'s
+/// moments) through `discs` (the sparse points) combined by `rule`, as the sparse points'
+/// gathered irradiance is (`disks::twin::visibility`).
+pub fn disk_occluded_candidate_vals(points: &[BounceSurface], vals: &[Val], discs: &[Disc], rule: Combine) -> Vec<Val> {
+    points
+        .par_iter()
+        .map(|p| {
+            let g = point_gathered(p, vals);
+            let sphere = light_sphere(g.diffuse_position, g.diffuse_second_moment);
+            let visible = visibility(p.position, p.normal, &sphere, discs, rule);
+            Val {
+                position: p.position,
+                normal: p.normal,
+                area: p.area,
+                flux: p.albedo * g.irradiance * p.area * visible,
+            }
+        })
         .collect()
 }
 

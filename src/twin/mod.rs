@@ -401,6 +401,32 @@ pub fn shade_sparse(
     l
 }
 
+/// What a sparse point's gathered glossy sum `g` (the lobe-weighted irradiance toward `eye`)
+/// contributes to `glossy_interpolation: "radiance"`: `g`, or 0 where the point faces away
+/// from the eye (where [`renormalise_glossy`] makes no light either).
+pub fn glossy_toward_eye(x: Vec3, n: Vec3, eye: Vec3, g: Vec3) -> Vec3 {
+    if n.dot(view_direction(x, n, eye)) > 0.0 { g.max(Vec3::ZERO) } else { Vec3::ZERO }
+}
+
+/// `glossy_interpolation: "radiance"` at a vertex (WGSL `interpolate.wgsl`'s
+/// `main_glossy_radiance`): the neighbours' [`glossy_toward_eye`] values averaged with the
+/// interpolation `weights` (0 when they sum to 0 or less).
+pub fn interpolate_radiance(weights: &[f32], values: &[Vec3]) -> Vec3 {
+    let total: f32 = weights.iter().sum();
+    if total <= 0.0 {
+        return Vec3::ZERO;
+    }
+    weights.iter().zip(values).map(|(w, v)| *v * (w / total)).sum()
+}
+
+/// The glossy radiance at a pixel of `glossy_interpolation: "radiance"` (WGSL `shade.wgsl`'s
+/// `main_glossy_radiance`): the interpolated gathered sum `g` through the pixel's specular
+/// albedo and Phong normalisation. At a sparse point itself this is exactly the glossy
+/// radiance its renormalised light gives there.
+pub fn glossy_from_radiance(surface: &Material, g: Vec3) -> Vec3 {
+    surface.specular * phong_normalisation(surface.exponent) * g
+}
+
 /// Brute-force indirect radiance at a pixel: every VAL through §3, no interpolation.
 pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: &[Val], glossy: bool) -> Vec3 {
     let w_o = view_direction(p, n, eye);

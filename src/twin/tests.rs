@@ -115,6 +115,32 @@ fn renormalisation_reproduces_gathered_light_at_the_point() {
     }
 }
 
+/// `glossy_interpolation: "radiance"` at a sparse point gives what its (unbounded) renormalised
+/// glossy light gives there (both are the gathered glossy radiance), and the brute force's glossy
+/// lobe; averaging equal sums returns them; a point facing away from the eye adds nothing.
+#[test]
+fn glossy_radiance_interpolation_reproduces_the_gathered_lobe() {
+    let vals = random_vals(11, 300);
+    let (x, n, eye) = (Vec3::new(-0.2, 0.0, 0.1), Vec3::Y, Vec3::new(0.4, 1.2, 2.5));
+    for k in [1.0f32, 10.0, 100.0, 1000.0] {
+        let s = Material { diffuse: Vec3::ZERO, specular: Vec3::splat(0.4), exponent: k, diffuse_texture: None };
+        let g = gather_point(x, n, k, eye, &vals);
+        let toward = glossy_toward_eye(x, n, eye, g.glossy_irradiance);
+        let interpolated = interpolate_radiance(&[0.2, 0.5, 0.3], &[toward; 3]);
+        let got = glossy_from_radiance(&s, interpolated);
+        let brute = shade_brute_force(x, n, &s, eye, &vals, true);
+        assert!((got - brute).abs().max_element() <= 1e-4 * brute.max_element().max(1e-12), "k={k}: {got} vs {brute}");
+        let light = renormalise_glossy(x, n, k, eye, g.glossy_irradiance, g.glossy_position);
+        let via_light = point_light_radiance(x, n, &s, eye, &light, true);
+        assert!(
+            (got - via_light).abs().max_element() <= 1e-3 * got.max_element().max(1e-12),
+            "k={k}: {got} vs {via_light}"
+        );
+    }
+    assert_eq!(glossy_toward_eye(Vec3::ZERO, Vec3::Y, Vec3::new(0.0, -1.0, 2.0), Vec3::ONE), Vec3::ZERO);
+    assert_eq!(interpolate_radiance(&[0.0, 0.0], &[Vec3::ONE, Vec3::ONE]), Vec3::ZERO);
+}
+
 /// Brute force and the sparse chain agree exactly when the receiver is the sparse point.
 #[test]
 fn brute_force_equals_gather_at_the_point() {

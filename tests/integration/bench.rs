@@ -193,3 +193,56 @@ fn equal_error_measures_the_converging_estimator() {
     let csv = std::fs::read_to_string(dir.join("results.csv")).unwrap();
     assert!(csv.lines().next().unwrap().contains("speedup_at_equal_error"));
 }
+
+/// With `ism` configurations and the references, the bench renders `brute_force_ism` (the ISM
+/// lookup per pixel) once per size and `ism` settings the configurations used, beside them:
+/// its error against the brute force and exact, its stages, `brute_force_ism.csv` and the
+/// plots. Timings are not asserted; what is: one entry per distinct settings (two counts, the
+/// plain base adds none), each with its own settings, its ISM stages in its frame, and an
+/// image that differs from the brute force's (the maps occlude: a per-pixel ISM that saw
+/// nothing would be 0 from it).
+#[test]
+fn bench_measures_brute_force_ism_beside_the_ism_configurations() {
+    let dir = scratch("bench_brute_force_ism");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let args = [
+        "bench",
+        scene.to_str().unwrap(),
+        "--quick",
+        "--sweep",
+        "ism_count=8,16",
+        "--no-fma",
+        "--no-temporal",
+        "--reference",
+        "exact",
+        "--out",
+        dir.to_str().unwrap(),
+    ];
+    let o = relume(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("brute_force_ism (8 maps"), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let configs = json["configs"].as_array().expect("configs");
+    assert_eq!(configs.len(), 3, "the base and two ISM counts: {json}");
+    let per_pixel = json["brute_force_ism"].as_array().expect("brute_force_ism");
+    let counts: Vec<u64> = per_pixel.iter().map(|r| r["ism"]["count"].as_u64().unwrap()).collect();
+    assert_eq!(counts, [8, 16], "{json}");
+    for r in per_pixel {
+        assert_eq!(r["config"]["occlusion"], "ism");
+        assert!(finite_non_negative(r, "indirect_ms") > 0.0, "{r}");
+        assert!(finite_non_negative(r, "ism_ms") > 0.0, "{r}");
+        let stages: Vec<&str> = r["stages_ms"].as_array().unwrap().iter().map(|s| s[0].as_str().unwrap()).collect();
+        for name in ["brute_force_ism_sampling", "brute_force_ism_splat", "brute_force_ism_visibility", "brute_force"] {
+            assert!(stages.contains(&name), "{name}: {stages:?}");
+        }
+        assert!(finite_non_negative(&r["vs_brute_force"], "rel_rmse") > 0.0, "the maps occlude: {r}");
+        finite_non_negative(&r["vs_exact"], "rel_rmse");
+    }
+    let csv = std::fs::read_to_string(dir.join("brute_force_ism.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 3, "{csv}");
+    let columns = lines[0].split(',').count();
+    assert!(lines[1..].iter().all(|l| l.split(',').count() == columns), "{csv}");
+    assert!(dir.join("error_vs_time_exact.png").exists());
+}

@@ -279,6 +279,94 @@ fn second_bounce_through_group_visibility_matches_cpu_twin() {
     }
 }
 
+/// With the sparse method's `disks` the bounce points get the sparse points' occlusion
+/// (`bounce2_occlusion`, after `bounce2_points`, before the draw): each point's light sphere
+/// from its VALs' moments, occluded by the sparse points' discs with the scene's rule. For both
+/// rules: the GPU's moments against `twin::bounce::point_gathered` on the GPU's own first-bounce
+/// VALs, each candidate against the unoccluded twin candidate times `disks::twin::visibility`
+/// of the GPU's own light sphere (as `twins::occlusion_matches_cpu_twin` checks the sparse
+/// points), and the whole twin (`twin::disk_occluded_candidate_vals`, its own spheres) in
+/// total. Visibility off keeps them unoccluded (no stage), and so does the brute force.
+///
+/// Tolerances: the moments are luminance-weighted means over ~800 VALs in f32 (a few ulp per
+/// term on lavapipe): 1e-3 m (m² for the second moment) relative to 1 + their size; the
+/// candidates 1e-3 of the largest, the occlusion twin test's tolerance (a disc's square edge
+/// can move an overlap by an ulp's worth of the sphere's square); the totals 1 % (the twin's
+/// own spheres differ from the GPU's by those ulps, and a disc at a square's edge or a depth
+/// cut may flip for a few of the 700 points).
+#[test]
+fn second_bounce_through_disks_matches_cpu_twin() {
+    use relume::gpu::visibility::disks::twin::{Combine, Disc, light_sphere, visibility};
+    let gpu = gpu();
+    for (rule, combine) in [("sum", Combine::Sum), ("product", Combine::Product)] {
+        let settings =
+            format!(r#""occlusion_rule": "{rule}", "bounces": 2, "second_bounce": {{"points": 700, "vals": 48}}"#);
+        let scene = small_scene_with("disks", &settings);
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+        let stages = stage_names(&frame);
+        let at = stages.iter().position(|s| *s == stage::BOUNCE2_POINTS).expect("the bounce stages");
+        assert_eq!(&stages[at..at + 3], &[stage::BOUNCE2_POINTS, stage::BOUNCE2_OCCLUSION, stage::BOUNCE2_VALS]);
+        assert!(!stages.contains(&stage::BOUNCE2_VISIBILITY), "{rule}: no group table: {stages:?}");
+
+        let all = renderer.read_vals(&gpu).unwrap();
+        let first = &all[..all.len() - 48];
+        let bounce = renderer.second_bounce().unwrap();
+        let points = surfaces(&renderer);
+        let moments = bounce.read_moments(&gpu).unwrap().expect("disks keep the points' moments");
+        let discs: Vec<Disc> = renderer
+            .scene
+            .flat
+            .sparse_points
+            .iter()
+            .map(|p| Disc { position: p.position.into(), normal: p.normal.into(), radius: p.occluder_radius })
+            .collect();
+        let open = twin::candidate_vals(&points, first, None);
+        let gpu_candidates = bounce.read_candidates(&gpu).unwrap();
+        let largest = open.iter().map(|c| c.flux.max_element()).fold(0.0, f32::max);
+        assert!(largest > 0.0, "{rule}: the first bounce lights some points");
+        let mut occluded = 0;
+        for (i, p) in points.iter().enumerate() {
+            let m = &moments[i];
+            let cpu = twin::point_gathered(p, first);
+            if cpu.irradiance.max_element() > 0.0 {
+                for (g, c) in [(m.position, cpu.diffuse_position), (m.second_moment, cpu.diffuse_second_moment)] {
+                    let g = Vec3::from(g);
+                    assert!((g - c).length() <= 1e-3 * (1.0 + c.length()), "{rule} point {i}: GPU {g} CPU {c}");
+                }
+            }
+            let sphere = light_sphere(m.position.into(), m.second_moment.into());
+            let v = visibility(p.position, p.normal, &sphere, &discs, combine);
+            occluded += usize::from(v < 0.9 && open[i].flux.max_element() > 0.0);
+            let want = open[i].flux * v;
+            let got = gpu_candidates[i].flux;
+            assert!((got - want).abs().max_element() <= 1e-3 * largest, "{rule} point {i}: GPU {got} CPU {want}");
+        }
+        assert!(occluded > 10, "{rule}: the bunny and the boxes occlude some bounce points ({occluded})");
+        let full = luminance_sum(&twin::disk_occluded_candidate_vals(&points, first, &discs, combine));
+        let (seen, unoccluded) = (luminance_sum(&gpu_candidates), luminance_sum(&open));
+        assert!((seen / full - 1.0).abs() < 0.01, "{rule}: GPU {seen} vs twin {full}");
+        eprintln!("{rule}: the candidates carry {:.4} of their unoccluded flux", seen / unoccluded);
+        assert!(seen < 0.99 * unoccluded, "{rule}: the discs take light from the bounce points");
+
+        // The brute force is the no-visibility reference: unoccluded points, no occlusion pass.
+        let frame = renderer.render(&gpu, Method::BruteForce, 16, 16).unwrap();
+        assert!(!stage_names(&frame).contains(&stage::BOUNCE2_OCCLUSION), "{rule}");
+        let bounce = renderer.second_bounce().unwrap();
+        assert!(bounce.read_moments(&gpu).unwrap().is_none(), "{rule}: no moments for the brute force");
+        let all = renderer.read_vals(&gpu).unwrap();
+        let cpu_candidates = twin::candidate_vals(&points, &all[..all.len() - 48], None);
+        for (k, (g, c)) in bounce.read_candidates(&gpu).unwrap().iter().zip(&cpu_candidates).enumerate() {
+            assert!((g.flux - c.flux).abs().max_element() <= 1e-4 * largest, "{rule} point {k}: GPU {g:?} CPU {c:?}");
+        }
+    }
+    // Visibility off: no occlusion stage.
+    let scene = small_scene_with("off", r#""bounces": 2, "second_bounce": {"points": 700, "vals": 48}"#);
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    assert!(!stage_names(&frame).contains(&stage::BOUNCE2_OCCLUSION));
+}
+
 /// A wall lit by a spot light (the first bounce's VALs, at x = -1), a receiving wall facing it
 /// (x = 1) and a plate halfway between them covering the receiver's half z > 0: with
 /// `visibility: "ism"` the receiver's bounce points that the plate hides from every

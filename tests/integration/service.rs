@@ -429,6 +429,56 @@ async fn a_full_queue_answers_503_with_retry_after() {
     server.stop().await;
 }
 
+/// `brute-force-ism` renders through the scene's imperfect shadow maps, darker than the plain
+/// brute force (the maps occlude, never add light), and a size whose pixels x groups table
+/// cannot fit one storage binding is a 400 naming the table, before any GPU work; the scene
+/// renders normally after it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn brute_force_ism_renders_and_is_refused_over_the_device_limit() {
+    let server = TestServer::start(|_| {}).await;
+    let mut scene = fixture_scene("cornell_bunny_small", 16);
+    // Few small maps: the lookup at 256 pixels x 16 groups is fast on lavapipe.
+    scene["settings"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
+    let id = server.create(&scene).await;
+    let path = format!("/v1/scenes/{id}/render");
+    let indirect = |method: &str| json!({"quality": {"method": method, "component": "indirect", "format": "f32"}});
+    let floats = |reply: &Reply| -> Vec<f32> {
+        assert_eq!(reply.status, StatusCode::OK, "{}", String::from_utf8_lossy(&reply.body));
+        reply.body.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes"))).collect()
+    };
+    let ism = server.post(&path, &indirect("brute-force-ism")).await;
+    let timing = ism.header("server-timing").to_owned();
+    for stage in ["brute_force_ism_sampling;", "brute_force_ism_splat;", "brute_force_ism_visibility;", "brute_force;"]
+    {
+        assert!(timing.contains(stage), "{stage} missing from {timing}");
+    }
+    let ism = floats(&ism);
+    let plain = floats(&server.post(&path, &indirect("brute-force")).await);
+    assert_eq!(ism.len(), 16 * 16 * 4);
+    assert!(ism.iter().all(|v| v.is_finite() && *v >= 0.0));
+    let sum = |f: &[f32]| f.chunks_exact(4).map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
+    // Visibility only removes light: the box and the bunny hide some VALs from some pixels.
+    // 1e-4 relative: the two passes add the same VALs in the same order except for the weights.
+    let (lit, unoccluded) = (sum(&ism), sum(&plain));
+    assert!(lit > 0.0 && lit < unoccluded * (1.0 + 1e-4), "{lit} vs {unoccluded}");
+    assert!(lit < unoccluded * 0.99, "the maps occlude nothing: {lit} vs {unoccluded}");
+
+    // 2048x2048 pixels x 1,024 groups x 4 bytes = 16 GiB, over any device's storage binding.
+    scene["settings"]["ism"] = json!({"count": 1024});
+    let big = server.create(&scene).await;
+    let request = json!({
+        "camera": {"position": [0, 1, 3.3], "target": [0, 0.9, 0], "fov_y_deg": 45, "width": 2048, "height": 2048},
+        "quality": {"method": "brute-force-ism", "component": "indirect"}
+    });
+    let reply = server.post(&format!("/v1/scenes/{big}/render"), &request).await;
+    let error = reply.error(400, "limit_exceeded");
+    let message = error["message"].as_str().expect("a message");
+    assert!(message.contains("brute_force_ism") && message.contains("settings.ism.count 1024"), "{message}");
+    let after = server.post(&format!("/v1/scenes/{big}/render"), &indirect("sparse")).await;
+    assert_eq!(after.status, StatusCode::OK, "{}", String::from_utf8_lossy(&after.body));
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_stream_decoder_answers_every_bad_message_with_an_error() {
     let server = TestServer::start(|c| {
@@ -693,6 +743,64 @@ async fn a_stream_relights_frames_and_follows_its_controls() {
     let peak = before.iter().fold(0.0f32, |m, v| m.max(v.abs()));
     let worst = before.iter().zip(&after).fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
     assert!(peak > 0.0 && worst <= 1e-4 * peak, "the stream's state leaked into an HTTP render: {worst} of {peak}");
+    drop(ws);
+    server.stop().await;
+}
+
+/// A stream may ask for `brute-force-ism`: its frames run the ISM stages per pixel; a view
+/// whose pixels x `settings.ism.count` table passes the device's storage binding is answered
+/// with an `Error` of code LIMIT_EXCEEDED naming the table, and the stream goes on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_renders_brute_force_ism_and_refuses_it_over_the_device_limit() {
+    let server = TestServer::start(|_| {}).await;
+    let mut scene = inline_scene();
+    scene["settings"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
+    let id = server.create(&scene).await;
+    let mut ws = server.stream(&id).await;
+    let quality = |request_id| proto::Control {
+        request_id,
+        quality: Some(proto::Quality {
+            method: proto::Method::BruteForceIsm as i32,
+            component: proto::Component::Indirect as i32,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert!(matches!(ws.exchange(envelope(Body::Control(quality(1)))).await, Body::SettingsAck(_)));
+    let (f, _) = streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(1)))).await, 1);
+    let stages: Vec<&str> = f.timings.iter().map(|t| t.stage.as_str()).collect();
+    for stage in ["brute_force_ism_splat", "brute_force_ism_visibility", "brute_force"] {
+        assert!(stages.contains(&stage), "{stage} missing from {stages:?}");
+    }
+
+    // A 2048x2048 virtual view with 1,024 maps: 16 GiB of table.
+    let mut scene = inline_scene();
+    scene["settings"]["ism"] = json!({"count": 1024});
+    let big = server.create(&scene).await;
+    let mut ws = server.stream(&big).await;
+    let camera = proto::Camera {
+        position: v3(0.0, 1.0, 3.0),
+        target: v3(0.0, 0.5, 0.0),
+        up: None,
+        fov_y_deg: 50.0,
+        width: 2048,
+        height: 2048,
+    };
+    let control = proto::Control { camera: Some(camera), ..quality(2) };
+    assert!(matches!(ws.exchange(envelope(Body::Control(control))).await, Body::SettingsAck(_)));
+    match ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(2)))).await {
+        Body::Error(e) => {
+            assert_eq!(e.code(), ErrorCode::LimitExceeded, "{e:?}");
+            assert!(e.message.contains("brute_force_ism") && e.message.contains("1024"), "{e:?}");
+            assert_eq!(e.frame_id, Some(2), "{e:?}");
+        }
+        other => panic!("expected an Error, got {other:?}"),
+    }
+    // The stream goes on: the same view at 32x32 fits (4 MiB of table) and renders.
+    let control = proto::Control { camera: Some(proto::Camera { width: 32, height: 32, ..camera }), ..quality(3) };
+    assert!(matches!(ws.exchange(envelope(Body::Control(control))).await, Body::SettingsAck(_)));
+    let (f, _) = streamed_png(ws.exchange(envelope(Body::RgbdFrame(frame_behind_the_scene(3)))).await, 3);
+    assert_eq!((f.width, f.height), (32, 32));
     drop(ws);
     server.stop().await;
 }

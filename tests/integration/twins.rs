@@ -25,7 +25,10 @@ fn light(r: &RawPointLight) -> PointLight {
 #[test]
 fn sparse_pipeline_matches_cpu_twins() {
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let mut scene = load_scene("cornell_bunny_small");
+    // The paper's glossy chain (renormalised glossy lights, interpolated per vertex); the
+    // default, the interpolated glossy radiance, is `glossy_radiance_interpolation_matches_cpu_twins`.
+    scene.settings.sparse.glossy_interpolation = relume::scene::GlossyInterpolation::Lights;
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     assert!(renderer.glossy(), "the small fixture has glossy materials");
     let (w, h) = (48, 40);
@@ -69,7 +72,7 @@ fn sparse_pipeline_matches_cpu_twins() {
     }
 
     // Step 4: interpolation, from the GPU's own sparse lights.
-    assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse);
+    assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse, eye);
 
     // Step 5: per-pixel shading, from the GPU's visibility buffer and vertex lights.
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
@@ -98,6 +101,46 @@ fn sparse_pipeline_matches_cpu_twins() {
     assert!(lit > 20, "the spot must light some visible pixels directly, lit {lit}");
 }
 
+/// `glossy_interpolation: "radiance"`: the interpolation averages the GPU's gathered glossy
+/// sums (`twin::interpolate_radiance`) and the pixels apply them through their own lobe factor
+/// (`twin::glossy_from_radiance`), with no glossy point light anywhere (the glossy light
+/// buffers do not exist); the image differs from the paper's glossy lights only where the
+/// glossy lobe is. Same tolerances as the rest of this file.
+#[test]
+fn glossy_radiance_interpolation_matches_cpu_twins() {
+    use relume::scene::GlossyInterpolation;
+    let gpu = gpu();
+    let mut scene = load_scene("cornell_bunny_small");
+    let (w, h) = (48, 40);
+    scene.settings.sparse.glossy_interpolation = GlossyInterpolation::Lights;
+    let lights = Renderer::new(&gpu, &scene).unwrap().render(&gpu, Method::Sparse, w, h).unwrap();
+    scene.settings.sparse.glossy_interpolation = GlossyInterpolation::Radiance;
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let flat = &renderer.scene.flat;
+    let eye = renderer.view().eye();
+    assert!(mid.sparse_glossy.is_empty() && mid.vertex_glossy.is_empty(), "no glossy point lights");
+    // The gather sums the lobe without its mean position (`GatherLobes::GlossyRadiance`).
+    assert_gather_matches_twin(flat, &mid, eye, &renderer.read_vals(&gpu).unwrap());
+    assert!(mid.gathered_glossy.iter().all(|g| g.weight == 0.0), "no glossy mean position is summed");
+    assert_eq!(mid.vertex_glossy_radiance.len(), flat.vertices.len());
+    assert!(mid.vertex_glossy_radiance.iter().any(|g| g[0] > 0.0), "some vertex must see glossy light");
+    assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse, eye);
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let expected = sparse_shading_twin(flat, &hits, &mid, eye);
+    let scale = max_of(expected.iter().flatten().copied());
+    for (i, e) in expected.iter().enumerate() {
+        if let Some(e) = e {
+            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("indirect pixel {i}"));
+        }
+    }
+    let changed = (0..lights.indirect.pixels.len())
+        .filter(|&i| (lights.indirect.rgb(i) - frame.indirect.rgb(i)).abs().max_element() > REL * scale)
+        .count();
+    assert!(changed > 0, "the glossy lobe must be carried differently");
+}
+
 /// `twin::shade_sparse` at every pixel of `hits`, from the GPU's vertex lights in `mid`.
 fn sparse_shading_twin(
     flat: &relume::gpu::scene::FlatScene,
@@ -107,6 +150,7 @@ fn sparse_shading_twin(
 ) -> Vec<Option<Vec3>> {
     let vd: Vec<PointLight> = mid.vertex_diffuse.iter().map(light).collect();
     let vs: Vec<PointLight> = mid.vertex_glossy.iter().map(light).collect();
+    let vg: Vec<Vec3> = mid.vertex_glossy_radiance.iter().map(|g| Vec3::from_slice(&g[..3])).collect();
     let mut expected = Vec::new();
     for hit in hits {
         expected.push(hit.map(|h| {
@@ -134,7 +178,14 @@ fn sparse_shading_twin(
                 )
                 .x,
             };
-            twin::shade_sparse(p, n, &surface, eye, &lerp(&vd), Some(&lerp(&vs)))
+            if vg.is_empty() {
+                twin::shade_sparse(p, n, &surface, eye, &lerp(&vd), Some(&lerp(&vs)))
+            } else {
+                // `glossy_interpolation: "radiance"`: the diffuse light, and the corners'
+                // glossy sums interpolated through the pixel's lobe factor.
+                let g = twin::barycentric(h.barycentrics, vg[corners[0]], vg[corners[1]], vg[corners[2]]);
+                twin::shade_sparse(p, n, &surface, eye, &lerp(&vd), None) + twin::glossy_from_radiance(&surface, g)
+            }
         }));
     }
     expected
@@ -167,7 +218,7 @@ fn gather_takes_every_val_past_the_cpu_loop_limit() {
 #[test]
 fn gather_variants_match_cpu_twin() {
     use relume::gpu::raw::RawGathered;
-    use relume::gpu::sparse::gather::Gather;
+    use relume::gpu::sparse::gather::{Gather, GatherLobes};
     use relume::gpu::timing::Recorder;
     let gpu = gpu();
     let scene = load_scene("cornell_bunny_small");
@@ -178,7 +229,8 @@ fn gather_variants_match_cpu_twin() {
     assert!(renderer.glossy() && !n.is_multiple_of(5) && !n.is_multiple_of(7), "{n} points");
     for receivers in [1, 5, 7] {
         let gathered = relume::gpu::Lobes::new::<RawGathered>(&gpu, "test.gathered", n, true).unwrap();
-        let mut pass = Gather::variant(&gpu, &renderer.scene, true, None, 0.0, 64, receivers).unwrap();
+        let mut pass =
+            Gather::variant(&gpu, &renderer.scene, GatherLobes::GlossyLights, None, 0.0, 64, receivers).unwrap();
         pass.fit(&gpu, &renderer.scene, renderer.val_capacity()).unwrap();
         let mut rec = Recorder::new(&gpu, "test.gather", 1);
         rec.stage("gather", |e, s| pass.record(&gpu, e, &renderer.scene, &renderer.vals, &gathered, None, s)).unwrap();
@@ -406,21 +458,29 @@ fn extreme_materials_render_finite_and_non_negative() {
         .replace("\"exponent\": 20", "\"exponent\": 0")
         .replace("[10, 10, 10]", "[1e6, 1e6, 1e6]")
         .replace("[0.6, 1.6, 0.6]", "[-0.999, 1.0, 0.0]");
-    let scene = relume::scene::Scene::from_json_str(&json, &scene_dir).unwrap();
+    let mut scene = relume::scene::Scene::from_json_str(&json, &scene_dir).unwrap();
     let gpu = gpu();
-    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-    for method in [Method::Sparse, Method::BruteForce] {
-        let f = renderer.render(&gpu, method, 24, 24).unwrap();
-        for img in [&f.indirect, &f.direct] {
-            for (i, p) in img.pixels.iter().enumerate() {
-                assert!(p.iter().all(|c| c.is_finite() && *c >= 0.0), "{method:?} pixel {i}: {p:?}");
+    // Both ways of carrying the glossy lobe: the paper's lights, and the interpolated radiance.
+    for glossy in [relume::scene::GlossyInterpolation::Lights, relume::scene::GlossyInterpolation::Radiance] {
+        scene.settings.sparse.glossy_interpolation = glossy;
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        for method in [Method::Sparse, Method::BruteForce] {
+            let f = renderer.render(&gpu, method, 24, 24).unwrap();
+            for img in [&f.indirect, &f.direct] {
+                for (i, p) in img.pixels.iter().enumerate() {
+                    assert!(p.iter().all(|c| c.is_finite() && *c >= 0.0), "{glossy:?} {method:?} pixel {i}: {p:?}");
+                }
             }
         }
-    }
-    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
-    for l in mid.sparse_diffuse.iter().chain(&mid.sparse_glossy).chain(&mid.vertex_diffuse).chain(&mid.vertex_glossy) {
-        let l = light(l);
-        assert!(l.position.is_finite() && l.intensity.is_finite() && l.intensity.min_element() >= 0.0, "{l:?}");
+        let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+        let lights = mid.sparse_diffuse.iter().chain(&mid.sparse_glossy).chain(&mid.vertex_diffuse);
+        for l in lights.chain(&mid.vertex_glossy) {
+            let l = light(l);
+            assert!(l.position.is_finite() && l.intensity.is_finite() && l.intensity.min_element() >= 0.0, "{l:?}");
+        }
+        for g in &mid.vertex_glossy_radiance {
+            assert!(g.iter().all(|c| c.is_finite() && *c >= 0.0), "glossy radiance {g:?}");
+        }
     }
 }
 
@@ -644,10 +704,12 @@ fn assert_interpolation_matches_twin(
     flat: &relume::gpu::scene::FlatScene,
     mid: &relume::renderer::SparseIntermediates,
     shading: relume::scene::SparseShading,
+    eye: Vec3,
 ) {
     let sparse_d: Vec<PointLight> = mid.sparse_diffuse.iter().map(light).collect();
     let sparse_s: Vec<PointLight> = mid.sparse_glossy.iter().map(light).collect();
     let scale = max_of(sparse_d.iter().map(|l| l.intensity));
+    let radiance_scale = max_of(mid.gathered_glossy.iter().map(|g| Vec3::from(g.irradiance)));
     for (v, ids) in flat.vertex_neighbours.chunks_exact(flat.neighbours as usize).enumerate() {
         let vertex = flat.vertices[v];
         let ids: Vec<usize> = ids.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
@@ -657,7 +719,6 @@ fn assert_interpolation_matches_twin(
         let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
         let w = twin::interpolation_weights(shading.kernel, vertex.normal.into(), &offsets, &normals);
         let d = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>(), shading.bound);
-        let s = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>(), shading.bound);
         assert_close(
             light(&mid.vertex_diffuse[v]).intensity,
             d.intensity,
@@ -666,7 +727,34 @@ fn assert_interpolation_matches_twin(
             1e-9,
             &format!("vertex {v} I_d"),
         );
-        assert_close(light(&mid.vertex_glossy[v]).position, s.position, 1e-3, 1.0, 1e-4, &format!("vertex {v} l_s"));
+        if mid.vertex_glossy_radiance.is_empty() {
+            let s = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_s[i]).collect::<Vec<_>>(), shading.bound);
+            assert_close(
+                light(&mid.vertex_glossy[v]).position,
+                s.position,
+                1e-3,
+                1.0,
+                1e-4,
+                &format!("vertex {v} l_s"),
+            );
+        } else {
+            // `glossy_interpolation: "radiance"`: the GPU's gathered glossy sums averaged.
+            let g: Vec<Vec3> = ids
+                .iter()
+                .map(|&i| {
+                    let p = sp(i);
+                    twin::glossy_toward_eye(
+                        p.position.into(),
+                        p.normal.into(),
+                        eye,
+                        mid.gathered_glossy[i].irradiance.into(),
+                    )
+                })
+                .collect();
+            let want = twin::interpolate_radiance(&w, &g);
+            let got = Vec3::from_slice(&mid.vertex_glossy_radiance[v][..3]);
+            assert_close(got, want, REL, radiance_scale, 1e-9, &format!("vertex {v} glossy radiance"));
+        }
         let gpu_bound = light(&mid.vertex_diffuse[v]).bound;
         assert!((gpu_bound - d.bound).abs() <= 1e-5 * d.bound.max(1.0), "vertex {v} bound: {gpu_bound} vs {}", d.bound);
     }
@@ -692,6 +780,7 @@ fn interpolation_takes_the_scene_neighbour_count() {
             flat,
             &renderer.read_sparse_intermediates(&gpu).unwrap(),
             scene.settings.sparse,
+            renderer.view().eye(),
         );
         images.push(frame.indirect.pixels);
     }

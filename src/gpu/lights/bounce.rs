@@ -31,25 +31,31 @@
 //! then ISMs of all VPLs); the cost is the mode's stages twice, minus the lookup's share for
 //! the fewer bounce points (measured in the README, "Two bounces").
 //!
-//! With visibility off or `disks` (a scaling mode: it has no per-VAL visibility to give a
-//! point), and for the brute force (the no-visibility reference), the candidates see the first
-//! bounce's VALs unoccluded. The CPU exact reference makes its own second bounce through shadow
+//! **With `disks`** (a scaling mode: no per-VAL visibility to give a point), each point gets
+//! what a sparse point gets: `bounce2_points` also keeps its light sphere's moments (the
+//! gather's luminance-weighted first and second moments of the VAL positions,
+//! `bounce_moments.wgsl`), and `bounce2_occlusion` (`bounce_occlusion.wgsl`) scales its
+//! candidate by the sparse points' discs' visibility of that sphere (the sparse points'
+//! `occlusion` lookup, `visibility/disks/disk_lookup.wgsl`, with the scene's rule).
+//!
+//! With visibility off, and for the brute force (the no-visibility reference), the candidates
+//! see the first bounce's VALs unoccluded. The CPU exact reference makes its own second bounce through shadow
 //! rays (`twin::bounce::candidate_vals` with its BVH). Built only when `settings.bounces` is 2.
 //! Rust twin: [`crate::twin::bounce`].
 
 use crate::gpu::pass::{
     Binding, Entry, Kernel, Kernels, PassDesc, buffer, depth_texture, module_from_source, read, read_write,
 };
-use crate::gpu::raw::RawVal;
+use crate::gpu::raw::{RawGathered, RawVal};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::{TILE_SIZE, VAL_TILES, WORKGROUP_SIZE};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::clusters::{self, Clusters, Receivers, SceneScale, StageNames};
 use crate::gpu::visibility::ism::{self, FLUX_DRAW_WGSL, SAMPLE_BLOCK};
-use crate::gpu::visibility::{GroupVisibility, VisibilitySettings, group_wgsl};
+use crate::gpu::visibility::{GroupVisibility, VisibilitySettings, disks, group_wgsl};
 use crate::gpu::{Gpu, GpuError};
-use crate::scene::{ClusterSettings, IsmSettings, SecondBounceSettings};
+use crate::scene::{ClusterSettings, IsmSettings, Occlusion, OcclusionRule, SecondBounceSettings};
 use crate::twin::bounce::{self as twin, BouncePoint};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -58,11 +64,15 @@ pub const POINT_WGSL: &str = include_str!("bounce_point.wgsl");
 pub const POINTS_WGSL: &str = include_str!("bounce_points.wgsl");
 pub const VISIBILITY_WGSL: &str = include_str!("bounce_visibility.wgsl");
 pub const DRAW_WGSL: &str = include_str!("bounce_draw.wgsl");
+pub const MOMENTS_WGSL: &str = include_str!("bounce_moments.wgsl");
+pub const OCCLUSION_WGSL: &str = include_str!("bounce_occlusion.wgsl");
 
 /// Stage names in the frame's timings.
 pub const POINTS_STAGE: &str = "bounce2_points";
 pub const DRAW_STAGE: &str = "bounce2_vals";
 pub const VISIBILITY_STAGE: &str = "bounce2_visibility";
+/// The disks' occlusion of the candidates (`disks` only).
+pub const OCCLUSION_STAGE: &str = "bounce2_occlusion";
 
 /// The stages of the first bounce's groups and maps for the bounce points (the sparse method's
 /// own instance of the mode keeps the mode's names).
@@ -93,9 +103,14 @@ impl From<&BouncePoint> for RawBouncePoint {
 }
 
 /// The points pass's own WGSL: the VAL tiles, the point, `val_visibility` for `groups`
-/// groups (or none), then `bounce_points.wgsl`.
-pub fn points_body(groups: Option<u32>) -> String {
-    format!("{VAL_TILES}\n{POINT_WGSL}\n{}\n{POINTS_WGSL}", group_wgsl(groups, 4))
+/// groups (or none), `store_moments` (keeping the light spheres' moments with `moments`, for
+/// `disks`; else dropping them), then `bounce_points.wgsl`.
+pub fn points_body(groups: Option<u32>, moments: bool) -> String {
+    let store = match moments {
+        true => MOMENTS_WGSL,
+        false => "fn store_moments(index: u32, e: vec3<f32>, w: f32, l: vec3<f32>, l2: vec3<f32>) {}\n",
+    };
+    format!("{VAL_TILES}\n{POINT_WGSL}\n{}\n{store}\n{POINTS_WGSL}", group_wgsl(groups, 4))
 }
 
 /// The bindings of [`GROUPED_POINTS`]; [`POINTS`] has the first four (no group table).
@@ -115,16 +130,63 @@ pub const POINTS: PassDesc = PassDesc {
     bindings: POINTS_BINDINGS.split_at(4).0,
     entries: &[Entry::first("main", 4)],
     workgroup: [TILE_SIZE, 1, 1],
-    default_source: |textured| POINTS.source(&points_body(None), textured),
+    default_source: |textured| POINTS.source(&points_body(None, false), textured),
 };
 
 /// [`POINTS`] through the first bounce's groups (`clusters` or `ism`): plus the group table.
 pub const GROUPED_POINTS: PassDesc = PassDesc {
     bindings: POINTS_BINDINGS,
     entries: &[Entry::first("main", 6)],
-    default_source: |textured| GROUPED_POINTS.source(&points_body(Some(64)), textured),
+    default_source: |textured| GROUPED_POINTS.source(&points_body(Some(64), false), textured),
     ..POINTS
 };
+
+/// [`POINTS`] with `disks`: plus the points' irradiance and light-sphere moments.
+pub const DISK_POINTS: PassDesc = PassDesc {
+    bindings: &[
+        read("bounce_points"),
+        read("vals"),
+        read("val_count"),
+        read_write("candidates"),
+        read_write("bounce_moments"),
+    ],
+    entries: &[Entry::first("main", 5)],
+    default_source: |textured| DISK_POINTS.source(&points_body(None, true), textured),
+    ..POINTS
+};
+
+/// With `disks`: each candidate scaled by the sparse points' discs' visibility of its point's
+/// light sphere. One invocation per point; the discs stream through workgroup memory in tiles.
+pub const OCCLUSION: PassDesc = PassDesc {
+    label: OCCLUSION_STAGE,
+    bindings: &[read("bounce_points"), read("sparse_points"), read("bounce_moments"), read_write("candidates")],
+    entries: &[Entry::first("main", 4)],
+    workgroup: [TILE_SIZE, 1, 1],
+    default_source: |textured| OCCLUSION.source(&occlusion_body(true), textured),
+};
+
+/// The occlusion pass's WGSL: the point, the discs' lookup with the combination rule
+/// (`product`, else `sum`), then `bounce_occlusion.wgsl`.
+fn occlusion_body(product: bool) -> String {
+    format!("{POINT_WGSL}\n{}\n{OCCLUSION_WGSL}", disks::lookup(product))
+}
+
+/// The second bounce's disks: the points' moments and the occlusion pass.
+struct BounceDisks {
+    kernel: Kernel,
+    /// `array<Gathered>`, one per point: irradiance and light-sphere moments.
+    moments: wgpu::Buffer,
+}
+
+impl BounceDisks {
+    fn new(gpu: &Gpu, scene: &GpuScene, product: bool, points: usize) -> Result<Self, GpuError> {
+        let source = OCCLUSION.source(&occlusion_body(product), scene.textured());
+        let module = module_from_source(gpu, OCCLUSION.label, source)?;
+        let kernel = Kernel::build(gpu, scene, &OCCLUSION, &module, OCCLUSION.entry("main"), &[], OCCLUSION.workgroup)?;
+        let moments = gpu.storage_buffer_sized::<RawGathered>("bounce2_points.bounce_moments", points.max(1))?;
+        Ok(Self { kernel, moments })
+    }
+}
 
 /// The lookup at the bounce points, reading rasterised maps (`clusters`).
 pub const VISIBILITY: PassDesc = PassDesc {
@@ -200,10 +262,12 @@ pub struct SecondBounce {
     /// Area (m²) of each drawn VAL.
     pub drawn_area: f32,
     /// The visibility the points see the first bounce through: `Some` for the sparse method
-    /// with a group visibility mode (`clusters`, `ism`), else `None` (unoccluded).
+    /// with `clusters`, `ism` or `disks`, else `None` (unoccluded).
     visibility_key: Option<VisibilitySettings>,
     /// The first bounce's groups and maps, looked up at the points (with `visibility_key`).
     visibility: Option<Clusters>,
+    /// With `disks` (`visibility_key`): the points' light spheres and their occlusion.
+    disks: Option<BounceDisks>,
     light_points: Kernels,
     blocks: Kernel,
     scan: Kernel,
@@ -228,7 +292,7 @@ impl SecondBounce {
         let n = raw.len().max(1);
         let empty = [RawBouncePoint::default()];
         let textured = scene.textured();
-        let light_points = points_kernels(gpu, scene, None)?;
+        let light_points = points_kernels(gpu, scene, None, false)?;
         let module = module_from_source(gpu, DRAW.label, DRAW.source(&draw_body(&settings, drawn_area), textured))?;
         let kernel = |name: &str| Kernel::build(gpu, scene, &DRAW, &module, DRAW.entry(name), &[], DRAW.workgroup);
         let blocks = (raw.len() as u32).div_ceil(SAMPLE_BLOCK).max(1) as usize;
@@ -237,6 +301,7 @@ impl SecondBounce {
             drawn_area,
             visibility_key: None,
             visibility: None,
+            disks: None,
             light_points,
             blocks: kernel("flux_blocks")?,
             scan: kernel("flux_scan")?,
@@ -260,8 +325,9 @@ impl SecondBounce {
 
     /// See the first bounce through `visibility` from the next frame on: `Some` (a `clusters`
     /// or `ism` mode, for the sparse method) builds the first bounce's groups, maps and lookup
-    /// at the points; `None` lights the points unoccluded. Nothing is rebuilt when unchanged;
-    /// call [`SecondBounce::fit`] after.
+    /// at the points; `Some` with `disks` keeps the points' light spheres and occludes them by
+    /// the sparse points' discs; `None` (or `off`) lights the points unoccluded. Nothing is
+    /// rebuilt when unchanged; call [`SecondBounce::fit`] after.
     pub fn set_visibility(
         &mut self,
         gpu: &Gpu,
@@ -272,14 +338,19 @@ impl SecondBounce {
             return Ok(());
         }
         let receivers = Receivers::BouncePoints { count: self.points.len() as u32 };
-        self.visibility = None;
-        self.visibility = match &visibility {
-            Some(v) => Clusters::for_receivers(gpu, scene, v, receivers, STAGES)?,
-            None => None,
-        };
+        (self.visibility, self.disks) = (None, None);
+        match &visibility {
+            Some(v) if v.mode == Occlusion::Disks => {
+                let product = v.rule == OcclusionRule::Product;
+                self.disks = Some(BounceDisks::new(gpu, scene, product, self.points.len())?);
+            }
+            Some(v) => self.visibility = Clusters::for_receivers(gpu, scene, v, receivers, STAGES)?,
+            None => {}
+        }
         let groups = self.visibility.as_ref().map(|v| v.table().groups);
-        self.light_points = points_kernels(gpu, scene, groups)?;
-        self.visibility_key = if self.visibility.is_some() { visibility } else { None };
+        self.light_points = points_kernels(gpu, scene, groups, self.disks.is_some())?;
+        let built = self.visibility.is_some() || self.disks.is_some();
+        self.visibility_key = if built { visibility } else { None };
         Ok(())
     }
 
@@ -297,23 +368,41 @@ impl SecondBounce {
         self.light_points.fit(gpu, scene, max_vals)
     }
 
+    /// With `disks`: each point's irradiance and light-sphere moments of the last frame (for
+    /// the twins); `None` otherwise.
+    pub fn read_moments(&self, gpu: &Gpu) -> Result<Option<Vec<RawGathered>>, GpuError> {
+        let Some(d) = &self.disks else {
+            return Ok(None);
+        };
+        Ok(Some(gpu.read_buffer::<RawGathered>(&d.moments, self.points.len())?))
+    }
+
     /// The candidates of the last frame (for the twins).
     pub fn read_candidates(&self, gpu: &Gpu) -> Result<Vec<crate::twin::Val>, GpuError> {
         Ok(gpu.read_buffer::<RawVal>(&self.candidates, self.points.len())?.iter().map(Into::into).collect())
     }
 }
 
-/// The points pass, unoccluded or (with `groups`) through the first bounce's groups.
-fn points_kernels(gpu: &Gpu, scene: &GpuScene, groups: Option<u32>) -> Result<Kernels, GpuError> {
-    let desc = if groups.is_some() { &GROUPED_POINTS } else { &POINTS };
-    let source = desc.source(&points_body(groups), scene.textured());
+/// The points pass, unoccluded, (with `groups`) through the first bounce's groups, or (with
+/// `moments`, for `disks`) keeping the points' light spheres.
+fn points_kernels(gpu: &Gpu, scene: &GpuScene, groups: Option<u32>, moments: bool) -> Result<Kernels, GpuError> {
+    let desc = match (groups, moments) {
+        (Some(_), _) => &GROUPED_POINTS,
+        (None, true) => &DISK_POINTS,
+        (None, false) => &POINTS,
+    };
+    let source = desc.source(&points_body(groups, moments), scene.textured());
     Kernels::val_ranges(gpu, scene, desc, source, desc.entry("main"), desc.workgroup, TILE_SIZE)
 }
 
 impl Technique for SecondBounce {
     fn stages(&self) -> Vec<&'static str> {
         let mut stages = self.visibility.as_ref().map_or_else(Vec::new, |v| v.stage_names());
-        stages.extend([POINTS_STAGE, DRAW_STAGE]);
+        stages.push(POINTS_STAGE);
+        if self.disks.is_some() {
+            stages.push(OCCLUSION_STAGE);
+        }
+        stages.push(DRAW_STAGE);
         stages
     }
 
@@ -334,7 +423,25 @@ impl Technique for SecondBounce {
         if let Some(t) = &table {
             resources.extend([buffer("group_of_val", t.group_of_val), buffer("group_visibility", t.visibility)]);
         }
+        if let Some(d) = &self.disks {
+            resources.push(buffer("bounce_moments", &d.moments));
+        }
         rec.stage(POINTS_STAGE, |e, s| self.light_points.run(gpu, e, scene, &resources, [points, 1, 1], s))?;
+        if let Some(d) = &self.disks {
+            let group = d.kernel.bind(
+                gpu,
+                &[
+                    buffer("bounce_points", &self.bounce_points),
+                    buffer("sparse_points", &scene.sparse_points),
+                    buffer("bounce_moments", &d.moments),
+                    buffer("candidates", &self.candidates),
+                ],
+            );
+            rec.stage(OCCLUSION_STAGE, |e, s| {
+                let timestamps = s.as_ref().map(|s| s.compute_part(0, 1));
+                d.kernel.dispatch(e, &group, scene, [points, 1, 1], timestamps);
+            })?;
+        }
         let all = [
             buffer("vals", &self.candidates),
             buffer("val_count", &self.candidate_count),

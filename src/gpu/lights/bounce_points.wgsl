@@ -3,7 +3,9 @@
 // load, so it follows moving meshes) is lit by every first-bounce VAL (DESIGN.md §3, the disc
 // form factor) seen through `val_visibility(point, val)` (prepended: 1 without visibility,
 // the first bounce's groups' lookup at the point with the sparse method's `clusters` or `ism`
-// mode, `visibility/group.wgsl`) and becomes a candidate VAL: a Lambertian disc re-emitting the
+// mode, `visibility/group.wgsl`) and becomes a candidate VAL (with `disks`, `store_moments`
+// also keeps the point's irradiance and light-sphere moments for `bounce2_occlusion`, which
+// scales the candidate after every VAL range): a Lambertian disc re-emitting the
 // diffuse part of what it receives, flux `rho_d * E * area` (W), `area` the patch it stands
 // for. The first-bounce VALs stream through workgroup memory in tiles (`shader/val_tiles.wgsl`,
 // prepended), in ranges on CPU adapters, each range after the first adding its flux.
@@ -31,19 +33,30 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         area = p.area;
     }
     var e = vec3<f32>(0.0);
+    // The light sphere's moments, weighted as the gather weighs them (`store_moments` keeps
+    // them with `disks` visibility; else they are dropped).
+    var l = vec3<f32>(0.0);
+    var l2 = vec3<f32>(0.0);
+    var w = 0.0;
     let end = val_range_end();
     for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
         let n = load_tile(base, local, end);
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
             let geo = val_geometry(position, normal, val.position, val.normal, val.area);
-            e += val.flux * (geo.weight * geo.cos_receiver * val_visibility(index, base + j));
+            let f = geo.weight * geo.cos_receiver * val_visibility(index, base + j);
+            e += val.flux * f;
+            let g = luminance(val.flux) * f + GATHER_EPSILON;
+            l += g * val.position;
+            l2 += g * val.position * val.position;
+            w += g;
         }
         workgroupBarrier();
     }
     if !inside {
         return;
     }
+    store_moments(index, e, w, l, l2);
     let flux = albedo * e * area;
     if VAL_BEGIN == 0u {
         candidates[index] = Val(position, area, normal, 0.0, flux, 0.0);

@@ -19,13 +19,37 @@ use crate::gpu::{Gpu, GpuError, Lobes};
 
 pub const WGSL: &str = include_str!("gather.wgsl");
 
+/// What the gather sums at each sparse point.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GatherLobes {
+    /// The diffuse irradiance and its mean VAL position.
+    Diffuse,
+    /// Also the glossy lobe's sum and its lobe-weighted mean VAL position (what the paper's
+    /// glossy point lights are renormalised from: `glossy_interpolation: "lights"`).
+    GlossyLights,
+    /// Also the glossy lobe's sum, without its mean position (`glossy_interpolation:
+    /// "radiance"` interpolates the sum itself): four fewer sums per VAL and point.
+    GlossyRadiance,
+}
+
+impl GatherLobes {
+    pub fn glossy(self) -> bool {
+        self != GatherLobes::Diffuse
+    }
+}
+
 /// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none), the
-/// receivers per invocation, then `gather.wgsl`.
+/// receivers per invocation, whether the glossy mean position is summed, then `gather.wgsl`.
 /// `near_radius` (m): the near-field radius whose share the gather leaves out (0: none).
-pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32) -> String {
+pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32, lobes: GatherLobes) -> String {
     let visibility = group_wgsl(groups, 5);
     let receivers = receivers_wgsl(receivers);
-    format!("{VAL_TILES}\n{visibility}\n{receivers}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n{WGSL}")
+    let glossy_mean = lobes == GatherLobes::GlossyLights;
+    format!(
+        "{VAL_TILES}\n{visibility}\n{receivers}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n\
+         const GLOSSY_MEAN: bool = {glossy_mean};\n{WGSL}"
+    )
 }
 
 /// `RECEIVERS` and `add_to_receivers` (`gather.wgsl`): one VAL added to each of `receivers`
@@ -75,14 +99,16 @@ pub const PASS: PassDesc = PassDesc {
     bindings: BINDINGS.split_at(5).0,
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 5)],
     workgroup: [TILE_SIZE, 1, 1],
-    default_source: |textured| PASS.source(&body(None, 0.0, CPU_RECEIVERS), textured),
+    default_source: |textured| PASS.source(&body(None, 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights), textured),
 };
 
 /// The gather of a group visibility mode: [`PASS`] plus the group table.
 pub const GROUPED_PASS: PassDesc = PassDesc {
     bindings: BINDINGS,
     entries: &[Entry { name: "main", bindings: 7, except: &["gathered_glossy"] }, Entry::first("main_glossy", 7)],
-    default_source: |textured| GROUPED_PASS.source(&body(Some(64), 0.0, CPU_RECEIVERS), textured),
+    default_source: |textured| {
+        GROUPED_PASS.source(&body(Some(64), 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights), textured)
+    },
     ..PASS
 };
 
@@ -93,17 +119,18 @@ pub struct Gather {
 }
 
 impl Gather {
-    /// `glossy` builds the entry point that also gathers the Phong lobe; `groups`, the
-    /// group count of a group visibility mode, the one that reads its table.
-    /// `near_radius` (m): leave out each VAL's near-field share at that radius (0: none).
+    /// `lobes` says what to sum (a glossy one builds the entry point that also gathers the
+    /// Phong lobe); `groups`, the group count of a group visibility mode, the one that reads
+    /// its table. `near_radius` (m): leave out each VAL's near-field share at that radius (0:
+    /// none).
     pub fn new(
         gpu: &Gpu,
         scene: &GpuScene,
-        glossy: bool,
+        lobes: GatherLobes,
         groups: Option<u32>,
         near_radius: f32,
     ) -> Result<Self, GpuError> {
-        Self::variant(gpu, scene, glossy, groups, near_radius, TILE_SIZE, receivers_for(gpu))
+        Self::variant(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu))
     }
 
     /// The pass with `tile_size` VALs per tile and threads per workgroup instead of
@@ -113,7 +140,7 @@ impl Gather {
     pub fn variant(
         gpu: &Gpu,
         scene: &GpuScene,
-        glossy: bool,
+        lobes: GatherLobes,
         groups: Option<u32>,
         near_radius: f32,
         tile_size: u32,
@@ -122,8 +149,9 @@ impl Gather {
         assert!((1..=MAX_RECEIVERS).contains(&receivers), "{receivers} receivers per invocation");
         let workgroup = [tile_size, 1, 1];
         let desc = if groups.is_some() { &GROUPED_PASS } else { &PASS };
-        let source = desc.source_with(&body(groups, near_radius, receivers), scene.textured(), workgroup, tile_size);
-        let entry = desc.lobe_entry(glossy);
+        let source =
+            desc.source_with(&body(groups, near_radius, receivers, lobes), scene.textured(), workgroup, tile_size);
+        let entry = desc.lobe_entry(lobes.glossy());
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, workgroup, tile_size)?;
         Ok(Self { kernels, receivers })
     }

@@ -1,6 +1,6 @@
 // Gather at sparse points (DESIGN.md §4 step 1): every VAL's irradiance summed at every sparse
 // point, with the luminance-weighted mean VAL position; the glossy entry point also sums the
-// Phong-lobe-weighted irradiance toward the eye and its mean position. VALs stream through
+// Phong-lobe-weighted irradiance toward the eye and, when GLOSSY_MEAN, its mean position. VALs stream through
 // workgroup memory in tiles of TILE_SIZE (`shader/val_tiles.wgsl`, prepended). Rust twin:
 // `twin::gather_point`.
 //
@@ -76,9 +76,13 @@ fn add_val(s: Sums, r: Receiver, index: u32, val: Val, val_index: u32, glossy: b
         // `cos_receiver`: where it clamps, `f` is 0 and so is whatever the lobe multiplies.
         let lobe = phong_lobe(2.0 * geo.cos_receiver * r.cos_o - dot(geo.direction, r.w_o), p.exponent);
         out.g += e_j * lobe;
-        let gs = y * lobe + GATHER_EPSILON;
-        out.ls += gs * val.position;
-        out.ws += gs;
+        // The lobe-weighted mean position only renormalises the paper's glossy lights
+        // (GLOSSY_MEAN, prepended); the interpolated glossy radiance needs the sum alone.
+        if GLOSSY_MEAN {
+            let gs = y * lobe + GATHER_EPSILON;
+            out.ls += gs * val.position;
+            out.ws += gs;
+        }
     }
     return out;
 }

@@ -35,6 +35,8 @@ pub const PASS: PassDesc = PassDesc {
         read("sparse_glossy"),
         read_write("vertex_glossy"),
         read_write("vertex_centres"),
+        read("gathered_glossy"),
+        read_write("vertex_glossy_radiance"),
     ],
     entries: &[
         Entry::first("main", 4),
@@ -43,6 +45,11 @@ pub const PASS: PassDesc = PassDesc {
             name: "centres",
             bindings: 7,
             except: &["sparse_diffuse", "vertex_diffuse", "sparse_glossy", "vertex_glossy"],
+        },
+        Entry {
+            name: "main_glossy_radiance",
+            bindings: 9,
+            except: &["sparse_glossy", "vertex_glossy", "vertex_centres"],
         },
     ],
     workgroup: [WORKGROUP_SIZE, 1, 1],

@@ -4,7 +4,8 @@
 // (1 - (d / d_max)^2)^2 * facing(n_v, n_x) * plane factor (`facing` is the paper's
 // clamp(dot(n_v, n_x), 0, 1) with cosines up to FACING_EPSILON taken as 0). When BOUNDED, the
 // vertex's light carries the largest bound of its neighbours of positive weight, else 0
-// (unbounded). With the near field on, `centres` writes each vertex's near-field centre: the
+// (unbounded). With `glossy_interpolation: "radiance"`, `main_glossy_radiance` writes the
+// diffuse light and the interpolated glossy sums instead of a glossy light. With the near field on, `centres` writes each vertex's near-field centre: the
 // mean of its neighbours' positions with the same weights (`twin::near_field::vertex_centre`),
 // so that the per-pixel near field leaves out of a pixel what its sparse points left in.
 // NEIGHBOURS, SMOOTH_KERNEL, BOUNDED, PLANE_FALLOFF and FACING_EPSILON are prepended
@@ -18,6 +19,10 @@
 @group(0) @binding(5) var<storage, read_write> vertex_glossy: array<PointLight>;
 // Only with the near field (`centres`): per vertex, the weighted mean of its neighbours' positions.
 @group(0) @binding(6) var<storage, read_write> vertex_centres: array<vec4<f32>>;
+// Only with `glossy_interpolation: "radiance"` (`main_glossy_radiance`): the gathered glossy
+// sums in, and per vertex their weighted mean out.
+@group(0) @binding(7) var<storage, read> gathered_glossy: array<Gathered>;
+@group(0) @binding(8) var<storage, read_write> vertex_glossy_radiance: array<vec4<f32>>;
 
 // `twin::paper_weight` and `twin::smooth_weight`.
 fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
@@ -141,6 +146,28 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
     let nb = neighbourhood(id.x);
     vertex_diffuse[id.x] = interpolate_diffuse(nb);
     vertex_glossy[id.x] = interpolate_glossy(nb);
+}
+
+// `glossy_interpolation: "radiance"`: the diffuse light as `main` does, and the weighted mean
+// of the glossy sums the neighbours gathered toward the eye (`twin::interpolate_radiance`,
+// `twin::glossy_toward_eye`), which the shade pass multiplies by the pixel's lobe factor.
+@compute @workgroup_size(WORKGROUP_X)
+fn main_glossy_radiance(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.vertex_count {
+        return;
+    }
+    let nb = neighbourhood(id.x);
+    vertex_diffuse[id.x] = interpolate_diffuse(nb);
+    var g = vec3<f32>(0.0);
+    if nb.total > 0.0 {
+        for (var j = 0u; j < nb.count; j++) {
+            let p = sparse_points[nb.ids[j]];
+            if dot(p.normal, view_direction(p.position, p.normal, frame.eye)) > 0.0 {
+                g += max(gathered_glossy[nb.ids[j]].irradiance, vec3<f32>(0.0)) * (nb.weights[j] / nb.total);
+            }
+        }
+    }
+    vertex_glossy_radiance[id.x] = vec4<f32>(g, 0.0);
 }
 
 // The near field's centre of each vertex (`twin::near_field::vertex_centre`): where its

@@ -15,8 +15,8 @@ use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::{self, Mode, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError, Lobes};
-use crate::scene::{InterpolationKernel, LightBound};
-use gather::Gather;
+use crate::scene::{GlossyInterpolation, InterpolationKernel, LightBound};
+use gather::{Gather, GatherLobes};
 use near_field::NearField;
 
 /// What the sparse technique is built for: a change rebuilds it.
@@ -29,6 +29,8 @@ pub struct SparseSettings {
     /// The near-field radius (m): VALs closer than it to a receiver are applied per pixel
     /// (`near_field` stage) rather than through the sparse points; 0 is off.
     pub near_radius: f32,
+    /// How pixels take the sparse points' glossy light (with `glossy` only).
+    pub glossy_interpolation: GlossyInterpolation,
 }
 
 /// The sparse method's passes and the buffers between them.
@@ -47,6 +49,9 @@ pub struct SparseMethod {
     pub sparse_lights: Lobes,
     /// Per vertex: the interpolated point lights.
     pub vertex_lights: Lobes,
+    /// Per vertex, with `glossy_interpolation: "radiance"` only: the interpolated glossy sums
+    /// (`vec4`, `w` unused). The sparse and vertex lights then have no glossy lobe.
+    pub vertex_glossy_radiance: Option<wgpu::Buffer>,
 }
 
 impl SparseMethod {
@@ -60,18 +65,41 @@ impl SparseMethod {
             _ => None,
         };
         let interpolate_body = interpolate::body(scene.flat.neighbours, settings.kernel, settings.bound);
+        // With the glossy radiance interpolated, only the diffuse lobe has point lights.
+        let radiance = glossy && settings.glossy_interpolation == GlossyInterpolation::Radiance;
+        let glossy_lights = glossy && !radiance;
+        let lobes = match (glossy_lights, radiance) {
+            (true, _) => GatherLobes::GlossyLights,
+            (false, true) => GatherLobes::GlossyRadiance,
+            (false, false) => GatherLobes::Diffuse,
+        };
+        let (interpolate, shade) = if radiance {
+            let entry = "main_glossy_radiance";
+            (
+                Kernels::entry(gpu, scene, &interpolate::PASS, &interpolate_body, interpolate::PASS.entry(entry))?,
+                Kernels::entry(gpu, scene, &shade::PASS, shade::WGSL, shade::PASS.entry(entry))?,
+            )
+        } else {
+            (
+                Kernels::lobes(gpu, scene, &interpolate::PASS, &interpolate_body, glossy)?,
+                Kernels::lobes(gpu, scene, &shade::PASS, shade::WGSL, glossy)?,
+            )
+        };
         Ok(Self {
-            gather: Gather::new(gpu, scene, glossy, groups, settings.near_radius)?,
+            gather: Gather::new(gpu, scene, lobes, groups, settings.near_radius)?,
             visibility,
-            renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy)?,
-            interpolate: Kernels::lobes(gpu, scene, &interpolate::PASS, &interpolate_body, glossy)?,
-            shade: Kernels::lobes(gpu, scene, &shade::PASS, shade::WGSL, glossy)?,
+            renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy_lights)?,
+            interpolate,
+            shade,
             near_field: (settings.near_radius > 0.0)
                 .then(|| NearField::new(gpu, scene, glossy, settings.near_radius, &interpolate_body))
                 .transpose()?,
             gathered: Lobes::new::<RawGathered>(gpu, "gather.gathered", n, glossy)?,
-            sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy)?,
-            vertex_lights: Lobes::new::<RawPointLight>(gpu, "interpolate.vertex_lights", v, glossy)?,
+            sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy_lights)?,
+            vertex_lights: Lobes::new::<RawPointLight>(gpu, "interpolate.vertex_lights", v, glossy_lights)?,
+            vertex_glossy_radiance: radiance
+                .then(|| gpu.storage_buffer_sized::<[f32; 4]>("interpolate.vertex_glossy_radiance", v))
+                .transpose()?,
         })
     }
 
@@ -120,6 +148,9 @@ impl Technique for SparseMethod {
             rec.stage(v.stage(), |e, s| v.record(gpu, e, scene, &self.gathered, s))?;
         }
         let (points, vertices) = (scene.flat.sparse_count(), scene.flat.vertex_count());
+        // With the glossy radiance interpolated, the point lights have no glossy lobe, so
+        // `with_lobes` binds the diffuse buffers alone (the gathered glossy sums go to the
+        // interpolation instead).
         let resources = with_lobes(
             vec![buffer("sparse_points", &scene.sparse_points)],
             &[
@@ -128,21 +159,26 @@ impl Technique for SparseMethod {
             ],
         );
         rec.stage(renormalise::PASS.label, |e, s| self.renormalise.run(gpu, e, scene, &resources, [points, 1, 1], s))?;
-        let resources = with_lobes(
+        let mut resources = with_lobes(
             vec![buffer("sparse_points", &scene.sparse_points), buffer("vertex_neighbours", &scene.vertex_neighbours)],
             &[
                 (&self.sparse_lights, "sparse_diffuse", "sparse_glossy"),
                 (&self.vertex_lights, "vertex_diffuse", "vertex_glossy"),
             ],
         );
+        let radiance = self.gathered.glossy.as_ref().zip(self.vertex_glossy_radiance.as_ref());
+        if let Some((gathered, out)) = radiance {
+            resources.extend([buffer("gathered_glossy", gathered), buffer("vertex_glossy_radiance", out)]);
+        }
         rec.stage(interpolate::PASS.label, |e, s| {
             self.interpolate.run(gpu, e, scene, &resources, [vertices, 1, 1], s)
         })?;
         let camera = frame.camera;
-        let resources = with_lobes(
+        let mut resources = with_lobes(
             vec![view("visibility", &camera.view.view), buffer("indirect", &camera.indirect)],
             &[(&self.vertex_lights, "vertex_diffuse", "vertex_glossy")],
         );
+        resources.extend(radiance.map(|(_, g)| buffer("vertex_glossy_radiance", g)));
         let pixels = [camera.view.width, camera.view.height, 1];
         rec.stage(shade::PASS.label, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))?;
         match &self.near_field {

@@ -1,11 +1,16 @@
 // Per-pixel sparse shading (DESIGN.md §4 step 5): the per-vertex point lights are interpolated
 // across the visible triangle, bounded (`bound_light`) and applied with the pixel's own
-// position, normal and material. Rust twins: `twin::shade_sparse`, `twin::bound_light`.
+// position, normal and material. With `glossy_interpolation: "radiance"`
+// (`main_glossy_radiance`) the glossy lobe is the vertices' interpolated gathered sums through
+// the pixel's specular albedo and normalisation instead. Rust twins: `twin::shade_sparse`,
+// `twin::bound_light`, `twin::glossy_from_radiance`.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> vertex_diffuse: array<PointLight>;
 @group(0) @binding(3) var<storage, read> vertex_glossy: array<PointLight>;
+// Only with `glossy_interpolation: "radiance"`.
+@group(0) @binding(4) var<storage, read> vertex_glossy_radiance: array<vec4<f32>>;
 
 fn lerp_light(a: PointLight, b: PointLight, c: PointLight, bary: vec2<f32>) -> PointLight {
     let bound = dot(vec3<f32>(1.0 - bary.x - bary.y, bary.x, bary.y), vec3<f32>(a.bound, b.bound, c.bound));
@@ -74,4 +79,20 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let p = pixel_at(id.xy);
     indirect[p.index] = select(vec4<f32>(0.0), vec4<f32>(diffuse_radiance(p) + glossy_radiance(p), 1.0), p.covered);
+}
+
+// `twin::glossy_from_radiance` of the corners' interpolated glossy sums.
+fn glossy_from_radiance(p: Pixel) -> vec3<f32> {
+    let c = p.corners;
+    let g = barycentric(p.barycentrics, vertex_glossy_radiance[c.x].xyz, vertex_glossy_radiance[c.y].xyz, vertex_glossy_radiance[c.z].xyz);
+    return p.surface.material.specular * phong_normalisation(p.surface.material.exponent) * g;
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main_glossy_radiance(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= frame.width || id.y >= frame.height {
+        return;
+    }
+    let p = pixel_at(id.xy);
+    indirect[p.index] = select(vec4<f32>(0.0), vec4<f32>(diffuse_radiance(p) + glossy_from_radiance(p), 1.0), p.covered);
 }

@@ -12,10 +12,17 @@ use crate::gpu::timing::Span;
 use crate::gpu::{Gpu, GpuError, Lobes};
 
 pub const WGSL: &str = include_str!("disks.wgsl");
+/// The discs' lookup of a light sphere, shared with the second bounce's `bounce2_occlusion`.
+pub const LOOKUP_WGSL: &str = include_str!("disk_lookup.wgsl");
+
+/// The combination rule and the discs' lookup, for a pass that binds `sparse_points`.
+pub fn lookup(product: bool) -> String {
+    format!("const OCCLUSION_PRODUCT: bool = {product};\n{LOOKUP_WGSL}")
+}
 
 /// The pass's own WGSL with its combination rule.
 pub fn body(product: bool) -> String {
-    format!("const OCCLUSION_PRODUCT: bool = {product};\n{WGSL}")
+    format!("{}\n{WGSL}", lookup(product))
 }
 
 /// One invocation per sparse point; occluders stream through workgroup memory in tiles.
