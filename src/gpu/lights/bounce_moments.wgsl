@@ -14,14 +14,5 @@ fn store_moments(index: u32, e: vec3<f32>, w: f32, l: vec3<f32>, l2: vec3<f32>) 
     if VAL_BEGIN != 0u {
         before = bounce_moments[index];
     }
-    let total = before.weight + w;
-    let norm = max(total, GATHER_EPSILON);
-    bounce_moments[index] = Gathered(
-        before.irradiance + e,
-        total,
-        (before.position * before.weight + l) / norm,
-        0.0,
-        (before.second_moment * before.weight + l2) / norm,
-        0.0,
-    );
+    bounce_moments[index] = merge_gathered(before, e, w, l, l2);
 }

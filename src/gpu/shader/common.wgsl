@@ -195,6 +195,22 @@ fn renormalise_direction(x: vec3<f32>, n: vec3<f32>, target_position: vec3<f32>)
     return Direction(t * s + n * MIN_RENORMALISE_COSINE, max(d, MIN_LIGHT_DISTANCE));
 }
 
+// Irradiance `e` with the weight sum `w` of the weighted position sums `l` and `l2`, added to
+// `before` (the earlier VAL ranges' result; zero for the first range): how a VAL range after
+// the first merges into what the earlier ones gathered (`gather.wgsl`, `bounce_moments.wgsl`).
+fn merge_gathered(before: Gathered, e: vec3<f32>, w: f32, l: vec3<f32>, l2: vec3<f32>) -> Gathered {
+    let total = before.weight + w;
+    let norm = max(total, GATHER_EPSILON);
+    return Gathered(
+        before.irradiance + e,
+        total,
+        (before.position * before.weight + l) / norm,
+        0.0,
+        (before.second_moment * before.weight + l2) / norm,
+        0.0,
+    );
+}
+
 fn renormalise_diffuse(x: vec3<f32>, n: vec3<f32>, e: vec3<f32>, averaged_position: vec3<f32>) -> PointLight {
     let r = renormalise_direction(x, n, averaged_position);
     let cos = dot(n, r.direction);

@@ -106,21 +106,6 @@ fn gather_tiles(first: u32, local: u32, glossy: bool) -> array<Sums, RECEIVERS> 
     return sums;
 }
 
-// Irradiance `e` with the weight sum `w` of the weighted position sums `l` and `l2`, added to
-// `before` (the earlier VAL ranges' result; zero for the first range).
-fn merged(before: Gathered, e: vec3<f32>, w: f32, l: vec3<f32>, l2: vec3<f32>) -> Gathered {
-    let total = before.weight + w;
-    let norm = max(total, GATHER_EPSILON);
-    return Gathered(
-        before.irradiance + e,
-        total,
-        (before.position * before.weight + l) / norm,
-        0.0,
-        (before.second_moment * before.weight + l2) / norm,
-        0.0,
-    );
-}
-
 // What the earlier VAL ranges gathered at point `i` (nothing for the first range).
 fn earlier_diffuse(i: u32) -> Gathered {
     if VAL_BEGIN == 0u {
@@ -144,7 +129,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         let i = first + r;
         if i < frame.sparse_count {
             let s = sums[r];
-            gathered_diffuse[i] = merged(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
+            gathered_diffuse[i] = merge_gathered(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
         }
     }
 }
@@ -157,8 +142,8 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invo
         let i = first + r;
         if i < frame.sparse_count {
             let s = sums[r];
-            gathered_diffuse[i] = merged(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
-            gathered_glossy[i] = merged(earlier_glossy(i), s.g, s.ws, s.ls, vec3<f32>(0.0));
+            gathered_diffuse[i] = merge_gathered(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
+            gathered_glossy[i] = merge_gathered(earlier_glossy(i), s.g, s.ws, s.ls, vec3<f32>(0.0));
         }
     }
 }
