@@ -4,8 +4,9 @@
 //! `lights_rsm_raster` and of the gather, the triangles drawn over all views and the views
 //! drawn; and whether both gave the same VALs (sorted, compared bit for bit). Then the same
 //! for the direct light's shadow maps (`ManyLights::draws`): direct-only frames with their cull
-//! off and on, alternated, the median `lights_shadow_maps` time, the triangles drawn, and
-//! whether the direct images are the same bit for bit.
+//! off, the hemisphere cull on, and with it the groups whose lights are all out of the camera's
+//! view skipped (`ManyLights::groups_in_view`), alternated, the median `lights_shadow_maps`
+//! time, the triangles drawn, and whether the direct images are the same bit for bit.
 //!
 //! ```sh
 //! cargo run --release --example light_rsms_cull -- fixtures/scenes/sponza_lights.json 128 72 3
@@ -114,43 +115,63 @@ fn main() -> anyhow::Result<()> {
     println!("\nraster on / off: {ratio:.3}; triangles on / off: {:.3}", drawn[1].0 as f64 / drawn[0].0 as f64);
     println!("VALs: {} off, {} on, identical bit for bit: {}", vals[0].len(), vals[1].len(), vals[0] == vals[1]);
 
-    let mut maps_ms = [Vec::new(), Vec::new()];
-    let mut images = [Vec::new(), Vec::new()];
-    let mut map_draws = [0u64; 2];
+    // The maps' cull off, the hemisphere cull alone, and with it the lights out of view
+    // (`ManyLights::groups_in_view`).
+    let states = [(false, false, "off"), (true, false, "hemisphere"), (true, true, "hemisphere + lights out of view")];
+    let mut maps_ms = vec![Vec::new(); states.len()];
+    let mut images = vec![Vec::new(); states.len()];
+    let mut map_draws = vec![0u64; states.len()];
     for _ in 0..frames {
-        for (s, culling) in [false, true].into_iter().enumerate() {
-            renderer.many_lights_mut().ok_or_else(|| anyhow::anyhow!("no many-light direct"))?.set_culling(culling);
+        for (s, &(culling, light_culling, _)) in states.iter().enumerate() {
+            let many = renderer.many_lights_mut().ok_or_else(|| anyhow::anyhow!("no many-light direct"))?;
+            many.set_culling(culling);
+            many.set_light_culling(light_culling);
             let frame = renderer.render_components(&gpu, Method::Sparse, width, height, Components::DIRECT)?;
             maps_ms[s].push(stage_ms(&frame, relume::gpu::lights::many::SHADOW_MAPS_STAGE));
             images[s] = frame.direct.pixels.clone();
             let many = renderer.many_lights().expect("checked above");
-            map_draws[s] = many.draws(&renderer.scene).iter().flatten().map(|r| (r.end - r.start) as u64).sum();
+            let seen = many.groups_in_view(renderer.camera_to_clip(width, height));
+            map_draws[s] = many
+                .draws(&renderer.scene)
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| !light_culling || seen[k / 2])
+                .flat_map(|(_, r)| r)
+                .map(|r| (r.end - r.start) as u64)
+                .sum();
         }
     }
-    let groups = renderer.many_lights().expect("checked above").groups.len();
+    let many = renderer.many_lights().expect("checked above");
+    let groups = many.groups.len();
+    let in_view = many.groups_in_view(renderer.camera_to_clip(width, height)).iter().filter(|s| **s).count();
+    println!("\n{in_view} of {groups} groups have a light in view");
     println!("\n| maps' cull | triangles drawn ({} maps) | `lights_shadow_maps` ms (median) |", 2 * groups);
     println!("|---|---|---|");
-    for (s, name) in ["off", "on"].iter().enumerate() {
+    for (s, (_, _, name)) in states.iter().enumerate() {
         println!("| {name} | {} | {:.0} |", map_draws[s], median(maps_ms[s].clone()));
     }
     let peak = images[0].iter().map(|p| p[0].max(p[1]).max(p[2])).fold(0.0f32, f32::max);
-    let differ: Vec<f32> = images[0]
-        .iter()
-        .zip(&images[1])
-        .filter(|(a, b)| a != b)
-        .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0f32, f32::max) / peak)
-        .collect();
-    println!(
-        "direct pixels that differ: {} of {}, largest difference {:.2e} of the peak",
-        differ.len(),
-        images[0].len(),
-        differ.iter().copied().fold(0.0f32, f32::max)
-    );
-    println!(
-        "\nmaps on / off: {:.3}; triangles on / off: {:.3}; direct images identical bit for bit: {}",
-        median(maps_ms[1].clone()) / median(maps_ms[0].clone()),
-        map_draws[1] as f64 / map_draws[0] as f64,
-        images[0] == images[1]
-    );
+    for s in 1..states.len() {
+        let differ: Vec<f32> = images[0]
+            .iter()
+            .zip(&images[s])
+            .filter(|(a, b)| a != b)
+            .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).abs()).fold(0.0f32, f32::max) / peak)
+            .collect();
+        println!(
+            "{}: direct pixels that differ from off: {} of {}, largest difference {:.2e} of the peak",
+            states[s].2,
+            differ.len(),
+            images[0].len(),
+            differ.iter().copied().fold(0.0f32, f32::max)
+        );
+        println!(
+            "{}: maps / off: {:.3}; triangles / off: {:.3}; direct image identical bit for bit: {}",
+            states[s].2,
+            median(maps_ms[s].clone()) / median(maps_ms[0].clone()),
+            map_draws[s] as f64 / map_draws[0] as f64,
+            images[0] == images[s]
+        );
+    }
     Ok(())
 }

@@ -149,3 +149,53 @@ fn culled_light_maps_give_the_same_direct_light() {
         assert!(a.pixels == b.pixels, "{shadows:?}: the direct images differ");
     }
 }
+
+/// Paper 003's view-frustum culling of lights, on the shadow maps: two lights whose `range`
+/// spheres lie out of the camera's view (one behind the camera, one beside the frustum) are
+/// out of view and their groups draw no map, in both modes; every other group is in view and
+/// draws the same maps as without the cull; the direct image is the same bit for bit (an out
+/// of view light adds nothing to a visible pixel, so its maps are never looked up).
+#[test]
+fn lights_out_of_view_draw_no_maps() {
+    let gpu = gpu();
+    let point = |x: f32, y: f32, z: f32, range: f32| {
+        Light::Point(PointLight { position: Vec3::new(x, y, z), intensity: Vec3::splat(0.6), range: Some(range) })
+    };
+    for shadows in [DirectShadows::PerLight, DirectShadows::LightCluster] {
+        let mut scene = scene_with(shadows, false);
+        // The camera stands at (0, 1, 3.3) looking down -z with a 38° field of view.
+        let mut all = lights();
+        all.extend([point(0.0, 1.0, 5.0, 1.0), point(3.0, 1.0, 0.0, 0.5)]);
+        scene.lights = super::local_lights(&scene, all);
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let mut runs = Vec::new();
+        for culling in [false, true] {
+            renderer.many_lights_mut().unwrap().set_light_culling(culling);
+            let (image, _) = direct(&gpu, &mut renderer);
+            runs.push((image, renderer.many_lights().unwrap().read_maps(&gpu).unwrap()));
+        }
+        let many = renderer.many_lights().unwrap();
+        let seen = many.groups_in_view(renderer.camera_to_clip(SIDE, SIDE));
+        let out: Vec<usize> = (0..seen.len()).filter(|&g| !seen[g]).collect();
+        let groups_of = |lights: &[usize]| -> Vec<usize> {
+            let mut g: Vec<usize> = lights.iter().map(|&l| many.groups.group_of_light[l] as usize).collect();
+            g.sort();
+            g.dedup();
+            g
+        };
+        assert_eq!(out, groups_of(&[8, 9]), "{shadows:?}: the two lights out of view, alone in their groups");
+        let ((unculled, maps_all), (culled, maps_culled)) = (&runs[0], &runs[1]);
+        for (g, &in_view) in seen.iter().enumerate() {
+            for k in [2 * g, 2 * g + 1] {
+                if in_view {
+                    assert!(maps_all[k] == maps_culled[k], "{shadows:?}: map {k} of a group in view changed");
+                } else {
+                    assert!(maps_culled[k].iter().all(|d| d.is_infinite()), "{shadows:?}: map {k} was drawn");
+                    assert!(maps_all[k].iter().any(|d| d.is_finite()), "{shadows:?}: map {k} sees the box unculled");
+                }
+            }
+        }
+        assert!(unculled.pixels.iter().any(|p| p[0] > 0.0), "{shadows:?}: the lights light something");
+        assert!(unculled.pixels == culled.pixels, "{shadows:?}: the direct images differ");
+    }
+}

@@ -13,7 +13,7 @@
 use crate::gpu::pass::{
     Entry, Kernel, PassDesc, buffer, depth_texture, module_from_source, read, read_write, texture, view,
 };
-use crate::gpu::raster::cull::{TriangleChunks, box_reaches_front};
+use crate::gpu::raster::cull::{TriangleChunks, box_outside_plane, box_reaches_front, clip_planes};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::IMAGE_TILE;
 use crate::gpu::technique::{Frame, Technique};
@@ -23,7 +23,7 @@ use crate::gpu::{Gpu, GpuError};
 use crate::scene::{ClusterSettings, DirectSettings, DirectShadows, Light, SoftShadows};
 use crate::twin::many_lights::{AXIS, LightGroups, light_range, min_distance_clusters};
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 
 pub const WGSL: &str = include_str!("many_lights.wgsl");
 
@@ -127,6 +127,11 @@ pub struct ManyLights {
     /// Whether each map draws only what its cull keeps ([`ManyLights::draws`]; on unless a
     /// test or benchmark turns it off to compare).
     culling: bool,
+    /// Per light, its position and its `range` (infinite for none and for spots).
+    reach: Vec<(Vec3, f32)>,
+    /// Whether a frame skips the maps of groups whose lights all lie out of the camera's view
+    /// ([`ManyLights::groups_in_view`]; on unless a test or benchmark turns it off to compare).
+    light_culling: bool,
 }
 
 impl ManyLights {
@@ -199,7 +204,34 @@ impl ManyLights {
             kernel,
             map_bounds,
             culling: true,
+            reach: lights.iter().map(|l| (l.position(), light_range(l))).collect(),
+            light_culling: true,
         })
+    }
+
+    /// Skip the maps of groups out of the camera's view (`true`, the default) or draw every
+    /// group's maps every frame (`false`).
+    pub fn set_light_culling(&mut self, on: bool) {
+        self.light_culling = on;
+    }
+
+    /// Per group, whether any of its lights can light what the camera sees (paper 003's
+    /// view-frustum culling of lights, applied to the shadow maps): a light with a `range`
+    /// whose sphere (taken as its bounding box) lies wholly outside a plane of the camera's clip
+    /// volume `world_to_clip` adds nothing to any visible pixel (its window is 0 from `range`
+    /// on), so its group's maps are never looked up there; lights without a range, and spots,
+    /// are always in view. The groups stay as they were built: the lights' RSMs (their
+    /// indirect light) do not depend on the view.
+    pub fn groups_in_view(&self, world_to_clip: Mat4) -> Vec<bool> {
+        let planes = clip_planes(world_to_clip);
+        let mut seen = vec![false; self.groups.len()];
+        for (&(position, range), &g) in self.reach.iter().zip(&self.groups.group_of_light) {
+            let r = Vec3::splat(range);
+            let in_view =
+                !range.is_finite() || !planes.iter().any(|&p| box_outside_plane(p, position - r, position + r));
+            seen[g as usize] |= in_view;
+        }
+        seen
     }
 
     /// Draw every triangle into every map (`false`) or only what each map's cull keeps (the
@@ -251,7 +283,15 @@ impl Technique for ManyLights {
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         let scene = frame.scene;
-        let draws = self.draws(scene);
+        let mut draws = self.draws(scene);
+        if self.light_culling {
+            // A group out of view draws nothing: its maps stay empty, and no visible pixel
+            // looks them up (its lights add no radiance there).
+            for (g, _) in self.groups_in_view(frame.camera_to_clip).iter().enumerate().filter(|(_, seen)| !**seen) {
+                draws[2 * g].clear();
+                draws[2 * g + 1].clear();
+            }
+        }
         self.maps.record(gpu, scene, &self.clusters, &self.maps_settings, Some(&draws), SHADOW_MAPS_STAGE, rec)?;
         let camera = frame.camera;
         let group = self.kernel.bind(
