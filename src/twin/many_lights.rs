@@ -75,8 +75,9 @@ pub fn min_distance(d_init: f32, centre: Vec3, view: Option<(Vec3, f32)>) -> f32
 /// LightCluster's minimum-distance clustering (paper 003 §3.1): the lights in order of
 /// decreasing range (`ranges`, infinite for none; ties in index order) each become a new centre
 /// when they are farther than [`min_distance`] from every centre so far; then every other light
-/// joins its nearest centre (ties: the earlier centre). The paper's view-frustum culling is not
-/// done: every light is clustered.
+/// joins its nearest centre (ties: the earlier centre). Every light is clustered: the paper's
+/// view-frustum culling is applied later, per frame, to the groups' shadow maps
+/// (`gpu::lights::many::ManyLights::groups_in_view`), so the groups do not change with the view.
 pub fn min_distance_clusters(
     positions: &[Vec3],
     ranges: &[f32],
