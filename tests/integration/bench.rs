@@ -12,6 +12,11 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// The `results.json` a bench run wrote into `dir`.
+fn results(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap()
+}
+
 fn finite_non_negative(v: &serde_json::Value, key: &str) -> f64 {
     let x = v[key].as_f64().unwrap_or_else(|| panic!("{key} missing or not a number: {v}"));
     assert!(x.is_finite() && x >= 0.0, "{key} = {x}");
@@ -25,8 +30,7 @@ fn quick_bench_writes_a_finite_table_and_plots() {
     let o = relume(&["bench", scene.to_str().unwrap(), "--quick", "--out", dir.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
 
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let json = results(&dir);
     assert!(json["timing"].as_str().is_some_and(|t| t == "gpu_timestamps" || t == "wall_clock"), "{json}");
     assert!(json["adapter"].as_str().is_some_and(|a| !a.is_empty()));
     let configs = json["configs"].as_array().expect("configs");
@@ -129,8 +133,7 @@ fn table1_preset_builds_its_scenes_and_runs_quick() {
     let args = ["bench", scene.to_str().unwrap(), "--table1", "--quick", "--no-fma", "--no-temporal"];
     let o = relume(&[&args[..], &["--no-plots", "--out", dir.to_str().unwrap()]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let json = results(&dir);
     let configs = json["configs"].as_array().expect("configs");
     assert_eq!(configs.len(), 3, "diffuse, + glossy, + occlusion");
     for c in configs {
@@ -171,8 +174,7 @@ fn equal_error_measures_the_converging_estimator() {
     let o = relume(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("at equal error"), "{}", stderr(&o));
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let json = results(&dir);
     let curves = json["equal_error_curves"].as_array().expect("curves");
     assert_eq!(curves.len(), 1, "one renderer, one size: {json}");
     let points = curves[0]["points"].as_array().unwrap();
@@ -221,8 +223,7 @@ fn bench_measures_brute_force_ism_beside_the_ism_configurations() {
     let o = relume(&args);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("brute_force_ism (8 maps"), "{}", stderr(&o));
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let json = results(&dir);
     let configs = json["configs"].as_array().expect("configs");
     assert_eq!(configs.len(), 3, "the base and two ISM counts: {json}");
     let per_pixel = json["brute_force_ism"].as_array().expect("brute_force_ism");
