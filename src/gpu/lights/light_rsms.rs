@@ -51,7 +51,8 @@ fn body() -> String {
 
 /// The raster's complete WGSL (a render pipeline: vertex and fragment stages).
 pub fn raster_source(textured: bool) -> String {
-    crate::gpu::shader::source(&format!("{VIEW_WGSL}\n{RASTER_WGSL}"), textured)
+    let stages = crate::gpu::raster::STAGES_WGSL;
+    crate::gpu::shader::source(&format!("{VIEW_WGSL}\n{stages}\n{RASTER_WGSL}"), textured)
 }
 
 /// WGSL `RsmView`.

@@ -11,12 +11,15 @@ use crate::gpu::{Gpu, GpuError};
 use glam::Mat4;
 
 pub const WGSL: &str = include_str!("visibility.wgsl");
+/// The visibility buffer's vertex output, vertex function and fragment stage, which every
+/// visibility raster prepends to its own vertex entry.
+pub const STAGES_WGSL: &str = include_str!("visibility_stages.wgsl");
 pub(crate) const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
 pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The pass's complete WGSL (a render pipeline: vertex and fragment stages).
 pub fn source(textured: bool) -> String {
-    crate::gpu::shader::source(WGSL, textured)
+    crate::gpu::shader::source(&format!("{STAGES_WGSL}\n{WGSL}"), textured)
 }
 
 #[derive(Clone)]

@@ -1,29 +1,10 @@
 // Visibility buffer: rasterise every triangle (vertex pulling, no culling) and store, per
-// texel, which triangle is nearest and where on it. Used from the camera and from the spot
-// light (the RSM and its shadow map).
+// texel, which triangle is nearest and where on it (`visibility_stages.wgsl`, prepended). Used
+// from the camera and from the spot light (the RSM and its shadow map).
 
 @group(0) @binding(0) var<uniform> world_to_clip: mat4x4<f32>;
 
-struct VertexOutput {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) barycentrics: vec2<f32>,
-    @location(1) @interpolate(flat) triangle: u32,
-}
-
 @vertex
 fn vs_main(@builtin(vertex_index) vertex_index: u32) -> VertexOutput {
-    let corner = vertex_index % 3u;
-    let position = vertices[indices[vertex_index]].position;
-    var b = vec2<f32>(0.0, 0.0);
-    if corner == 1u {
-        b = vec2<f32>(1.0, 0.0);
-    } else if corner == 2u {
-        b = vec2<f32>(0.0, 1.0);
-    }
-    return VertexOutput(world_to_clip * vec4<f32>(position, 1.0), b, vertex_index / 3u);
-}
-
-@fragment
-fn fs_main(in: VertexOutput) -> @location(0) vec4<u32> {
-    return vec4<u32>(in.triangle + 1u, bitcast<u32>(in.barycentrics.x), bitcast<u32>(in.barycentrics.y), 0u);
+    return visibility_vertex(vertex_index, world_to_clip);
 }
