@@ -99,7 +99,7 @@ def main() -> int:
                 "diffuse": "diffuse",
                 "glossy_lights": "diffuse + glossy (mean position)",
                 "glossy_radiance": "diffuse + glossy (sum only)",
-            }.get(v.get("lobes"), "diffuse + glossy" if v.get("glossy") else "diffuse")
+            }[v["lobes"]]
             md.append(
                 f"| {lobes} | {v['tile_size']} | {v.get('receivers', 1)} | {fmt(v['gather_ms'])} "
                 f"| {fmt(v['interactions_per_s'])} | {fmt(v['ratio_to_fma'])} |"

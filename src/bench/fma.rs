@@ -34,8 +34,6 @@ pub struct FmaReport {
 
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct GatherVariant {
-    /// The glossy gather (diffuse and Phong lobe) rather than the diffuse one.
-    pub glossy: bool,
     /// What it sums: `diffuse`, `glossy_lights` (the lobe and its mean position, the paper's
     /// glossy lights) or `glossy_radiance` (the lobe alone, the default interpolation).
     pub lobes: GatherLobes,
@@ -103,7 +101,6 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
         }
         let interactions_per_s = frame.val_count as f64 * n as f64 / (best * 1e-3);
         gather_variants.push(GatherVariant {
-            glossy: lobe.glossy(),
             lobes: lobe,
             tile_size,
             receivers,

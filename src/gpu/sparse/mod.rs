@@ -65,14 +65,14 @@ impl SparseMethod {
             _ => None,
         };
         let interpolate_body = interpolate::body(scene.flat.neighbours, settings.kernel, settings.bound);
-        // With the glossy radiance interpolated, only the diffuse lobe has point lights.
-        let radiance = glossy && settings.glossy_interpolation == GlossyInterpolation::Radiance;
-        let glossy_lights = glossy && !radiance;
-        let lobes = match (glossy_lights, radiance) {
-            (true, _) => GatherLobes::GlossyLights,
-            (false, true) => GatherLobes::GlossyRadiance,
-            (false, false) => GatherLobes::Diffuse,
+        let lobes = match (glossy, settings.glossy_interpolation) {
+            (false, _) => GatherLobes::Diffuse,
+            (true, GlossyInterpolation::Lights) => GatherLobes::GlossyLights,
+            (true, GlossyInterpolation::Radiance) => GatherLobes::GlossyRadiance,
         };
+        // With the glossy radiance interpolated, only the diffuse lobe has point lights.
+        let radiance = lobes == GatherLobes::GlossyRadiance;
+        let glossy_lights = lobes == GatherLobes::GlossyLights;
         let (interpolate, shade) = if radiance {
             let entry = "main_glossy_radiance";
             (
