@@ -236,11 +236,10 @@ pub struct Renderer {
     view: View,
     /// The sparse method's visibility mode and every mode's settings.
     visibility: VisibilitySettings,
-    /// The sparse method's interpolation kernel, light bound and near-field radius (m)
-    /// (`settings.sparse`).
-    /// The sparse method's shading settings (`settings.sparse`), the near field as a radius in
-    /// metres.
-    sparse_shading: (scene::InterpolationKernel, scene::LightBound, f32, scene::GlossyInterpolation),
+    /// The sparse method's shading settings (`settings.sparse`).
+    sparse_shading: scene::SparseShading,
+    /// `settings.sparse.near_field` as a radius (m): that many of the scene's sparse spacings.
+    near_radius: f32,
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The scene's `lights` and their direct light (`gpu::lights::many`), when it has any.
@@ -331,12 +330,8 @@ impl Renderer {
             glossy,
             view: View::Scene(scene.camera),
             visibility: VisibilitySettings::of(&scene.settings),
-            sparse_shading: (
-                scene.settings.sparse.kernel,
-                scene.settings.sparse.bound,
-                scene.settings.sparse.near_field * scene.sparse_spacing(),
-                scene.settings.sparse.glossy_interpolation,
-            ),
+            sparse_shading: scene.settings.sparse,
+            near_radius: scene.settings.sparse.near_field * scene.sparse_spacing(),
             exact_val_stride: 1,
             scene: scene_gpu,
             indirect: Indirect::default(),
@@ -733,14 +728,14 @@ impl Renderer {
             }
             match method {
                 Method::Sparse => {
-                    let (kernel, bound, near_radius, glossy_interpolation) = self.sparse_shading;
+                    let shading = self.sparse_shading;
                     let settings = SparseSettings {
                         glossy,
                         visibility: self.visibility,
-                        kernel,
-                        bound,
-                        near_radius,
-                        glossy_interpolation,
+                        kernel: shading.kernel,
+                        bound: shading.bound,
+                        near_radius: self.near_radius,
+                        glossy_interpolation: shading.glossy_interpolation,
                     };
                     built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
                         .fit(gpu, scene, capacity)?;
