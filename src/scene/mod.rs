@@ -800,7 +800,7 @@ pub fn adaptive_budget(sparse_points: usize, fraction: f32) -> usize {
 /// The adaptive candidates a mesh of `sparse_points` holds at `fraction`:
 /// [`ADAPTIVE_CANDIDATES`] per point of its budget, at most what the placement's elimination
 /// removes (`sparse::OVERSAMPLING - 1` per point).
-fn adaptive_candidates(sparse_points: usize, fraction: f32) -> usize {
+pub fn adaptive_candidates(sparse_points: usize, fraction: f32) -> usize {
     let most = sparse_points * (sparse::OVERSAMPLING - 1);
     (adaptive_budget(sparse_points, fraction) * ADAPTIVE_CANDIDATES).min(most)
 }

@@ -109,14 +109,27 @@ pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> 
     }
     limits.check_image(description.camera.width, description.camera.height, "camera")?;
     let sparse_points: u64 = description.meshes.iter().map(|m| m.sparse_points as u64).sum();
-    if sparse_points > limits.max_sparse_points as u64 {
+    // Adaptive candidates are sparse points the scene holds too.
+    let adaptive = description.settings.sparse.adaptive;
+    let candidates: u64 = description
+        .meshes
+        .iter()
+        .map(|m| crate::scene::adaptive_candidates(m.sparse_points as usize, adaptive) as u64)
+        .sum();
+    if sparse_points + candidates > limits.max_sparse_points as u64 {
+        let what = if candidates > 0 {
+            format!(
+                "{} sparse points over all meshes ({sparse_points} and {candidates} adaptive candidates, \
+                 settings.sparse.adaptive)",
+                sparse_points + candidates
+            )
+        } else {
+            format!("{sparse_points} sparse points over all meshes")
+        };
         return Err(ApiError::limit(
             limit::MAX_SPARSE_POINTS,
             Some("meshes".to_owned()),
-            format!(
-                "meshes: {sparse_points} sparse points over all meshes is over the limit of {}",
-                limits.max_sparse_points
-            ),
+            format!("meshes: {what} is over the limit of {}", limits.max_sparse_points),
         ));
     }
     for (i, mesh) in description.meshes.iter().enumerate() {

@@ -342,6 +342,15 @@ async fn work_per_scene_and_render_is_bounded_before_it_starts() {
     let e = server.post("/v1/scenes", &big).await.error(400, "limit_exceeded");
     assert_eq!((e["limit"].as_str(), e["field"].as_str()), (Some("max_sparse_points"), Some("meshes")));
     assert!(started.elapsed() < Duration::from_secs(5), "checked before loading");
+    // Adaptive candidates are points the scene holds: 25,000 points with `adaptive` 0.5 hold
+    // 50,000 candidates more, over the 65,536 points of the limit.
+    let mut adaptive = inline_scene();
+    adaptive["meshes"][0]["sparse_points"] = json!(25_000);
+    adaptive["settings"]["sparse"] = json!({"adaptive": 0.5});
+    let e = server.post("/v1/scenes", &adaptive).await.error(400, "limit_exceeded");
+    assert_eq!((e["limit"].as_str(), e["field"].as_str()), (Some("max_sparse_points"), Some("meshes")));
+    let message = e["message"].as_str().unwrap();
+    assert!(message.contains("75000 sparse points") && message.contains("50000 adaptive candidates"), "{message}");
 
     // Subdividing the room for 4096 sparse points would pass 1000 triangles.
     let mut dense = inline_scene();

@@ -462,10 +462,15 @@ fn extreme_materials_render_finite_and_non_negative() {
         .replace("\"exponent\": 20", "\"exponent\": 0")
         .replace("[10, 10, 10]", "[1e6, 1e6, 1e6]")
         .replace("[0.6, 1.6, 0.6]", "[-0.999, 1.0, 0.0]");
-    let mut scene = relume::scene::Scene::from_json_str(&json, &scene_dir).unwrap();
+    let plain = relume::scene::Scene::from_json_str(&json, &scene_dir).unwrap();
+    // The same with the most adaptive points (candidates placed at load).
+    let mut adaptive: serde_json::Value = serde_json::from_str(&json).unwrap();
+    adaptive["settings"]["sparse"] = serde_json::json!({"adaptive": 1.0});
+    let adaptive = relume::scene::Scene::from_json_str(&adaptive.to_string(), &scene_dir).unwrap();
     let gpu = gpu();
     // Both ways of carrying the glossy lobe: the paper's lights, and the interpolated radiance.
-    for glossy in [relume::scene::GlossyInterpolation::Lights, relume::scene::GlossyInterpolation::Radiance] {
+    let glossy_forms = [relume::scene::GlossyInterpolation::Lights, relume::scene::GlossyInterpolation::Radiance];
+    for (mut scene, glossy) in [plain, adaptive].into_iter().flat_map(|s| glossy_forms.map(|g| (s.clone(), g))) {
         scene.settings.sparse.glossy_interpolation = glossy;
         let mut renderer = Renderer::new(&gpu, &scene).unwrap();
         for method in [Method::Sparse, Method::BruteForce] {
