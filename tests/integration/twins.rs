@@ -127,18 +127,31 @@ fn glossy_radiance_interpolation_matches_cpu_twins() {
     assert_eq!(mid.vertex_glossy_radiance.len(), flat.vertices.len());
     assert!(mid.vertex_glossy_radiance.iter().any(|g| g[0] > 0.0), "some vertex must see glossy light");
     assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse, eye);
-    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
-    let expected = sparse_shading_twin(flat, &hits, &mid, eye);
+    let scale = assert_pixels_match_twin(&gpu, &renderer, &frame, &mid);
+    let changed = (0..lights.indirect.pixels.len())
+        .filter(|&i| (lights.indirect.rgb(i) - frame.indirect.rgb(i)).abs().max_element() > REL * scale)
+        .count();
+    assert!(changed > 0, "the glossy lobe must be carried differently");
+}
+
+/// Every covered pixel of `frame`'s indirect light against [`sparse_shading_twin`] at the
+/// renderer's camera view, from the GPU's own intermediates; returns the scale (the brightest
+/// expected pixel).
+fn assert_pixels_match_twin(
+    gpu: &relume::gpu::Gpu,
+    renderer: &Renderer,
+    frame: &relume::renderer::Rendered,
+    mid: &relume::renderer::SparseIntermediates,
+) -> f32 {
+    let hits = renderer.camera_view().unwrap().read(gpu).unwrap();
+    let expected = sparse_shading_twin(&renderer.scene.flat, &hits, mid, renderer.view().eye());
     let scale = max_of(expected.iter().flatten().copied());
     for (i, e) in expected.iter().enumerate() {
         if let Some(e) = e {
             assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("indirect pixel {i}"));
         }
     }
-    let changed = (0..lights.indirect.pixels.len())
-        .filter(|&i| (lights.indirect.rgb(i) - frame.indirect.rgb(i)).abs().max_element() > REL * scale)
-        .count();
-    assert!(changed > 0, "the glossy lobe must be carried differently");
+    scale
 }
 
 /// `twin::shade_sparse` at every pixel of `hits`, from the GPU's vertex lights in `mid`.
@@ -859,14 +872,7 @@ fn adaptive_points_match_cpu_twins() {
     check_scores(&mid, &[]);
     assert_gather_matches_twin(flat, &mid, eye, &renderer.read_vals(&gpu).unwrap());
     assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse, eye);
-    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
-    let expected = sparse_shading_twin(flat, &hits, &mid, eye);
-    let scale = max_of(expected.iter().flatten().copied());
-    for (i, e) in expected.iter().enumerate() {
-        if let Some(e) = e {
-            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("indirect pixel {i}"));
-        }
-    }
+    assert_pixels_match_twin(&gpu, &renderer, &frame, &mid);
     // The next frame: the chosen score HYSTERESIS times higher and all stay chosen.
     let before = mid.adaptive_chosen.clone();
     renderer.render(&gpu, Method::Sparse, w, h).unwrap();

@@ -3,7 +3,7 @@
 //! Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`. Run by
 //! [`super::SparseMethod`].
 
-use crate::gpu::pass::{Entry, PassDesc, Res, buffer, read, read_write};
+use crate::gpu::pass::{Binding, Entry, PassDesc, Res, buffer, read, read_write};
 use crate::gpu::shader::WORKGROUP_SIZE;
 use crate::scene::{InterpolationKernel, LightBound};
 
@@ -49,20 +49,25 @@ pub fn body(neighbours: u32, kernel: InterpolationKernel, bound: LightBound, bas
     )
 }
 
+/// The bindings of [`ADAPTIVE_PASS`]; [`PASS`] has the first nine (no candidates).
+const BINDINGS: &[Binding] = &[
+    read("sparse_points"),
+    read("vertex_neighbours"),
+    read("sparse_diffuse"),
+    read_write("vertex_diffuse"),
+    read("sparse_glossy"),
+    read_write("vertex_glossy"),
+    read_write("vertex_centres"),
+    read("gathered_glossy"),
+    read_write("vertex_glossy_radiance"),
+    read("vertex_candidates"),
+    read("chosen"),
+];
+
 /// One invocation per vertex.
 pub const PASS: PassDesc = PassDesc {
     label: "interpolate",
-    bindings: &[
-        read("sparse_points"),
-        read("vertex_neighbours"),
-        read("sparse_diffuse"),
-        read_write("vertex_diffuse"),
-        read("sparse_glossy"),
-        read_write("vertex_glossy"),
-        read_write("vertex_centres"),
-        read("gathered_glossy"),
-        read_write("vertex_glossy_radiance"),
-    ],
+    bindings: BINDINGS.split_at(9).0,
     entries: &[
         Entry::first("main", 4),
         Entry::first("main_glossy", 6),
@@ -87,19 +92,7 @@ pub const PASS: PassDesc = PassDesc {
 /// [`PASS`] for a scene with adaptive candidates: every entry also reads each vertex's nearest
 /// candidates and which were chosen this frame (`adaptive_candidates.wgsl`).
 pub const ADAPTIVE_PASS: PassDesc = PassDesc {
-    bindings: &[
-        read("sparse_points"),
-        read("vertex_neighbours"),
-        read("sparse_diffuse"),
-        read_write("vertex_diffuse"),
-        read("sparse_glossy"),
-        read_write("vertex_glossy"),
-        read_write("vertex_centres"),
-        read("gathered_glossy"),
-        read_write("vertex_glossy_radiance"),
-        read("vertex_candidates"),
-        read("chosen"),
-    ],
+    bindings: BINDINGS,
     entries: &[
         Entry {
             name: "main",
