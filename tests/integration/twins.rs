@@ -881,8 +881,13 @@ fn adaptive_points_match_cpu_twins() {
     for (c, (&b, &n)) in before.iter().zip(&next.adaptive_chosen).enumerate() {
         assert!(b == 0 || n != 0, "candidate {c} was dropped in a frame with the same light");
         if b != 0 {
+            // The gathered sums differ between frames by float rounding (the RSM's atomic
+            // append orders the VALs differently), so the factor holds to the file's REL.
+            let (got, want) = (next.adaptive_scores[c], HYSTERESIS * mid.adaptive_scores[c]);
             assert!(
-                (next.adaptive_scores[c] - HYSTERESIS * mid.adaptive_scores[c]).abs() <= 1e-5 * next.adaptive_scores[c]
+                (got - want).abs() <= REL * want,
+                "candidate {c}: score {got}, {HYSTERESIS} x {}",
+                mid.adaptive_scores[c]
             );
         }
     }
