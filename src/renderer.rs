@@ -905,6 +905,11 @@ impl Renderer {
             Some(b) => gpu.read_buffer::<[f32; 4]>(b, v)?,
             None => Vec::new(),
         };
+        let c = self.scene.flat.candidates as usize;
+        let (adaptive_scores, adaptive_chosen) = match &p.adaptive {
+            Some((a, _)) => (gpu.read_buffer::<f32>(&a.scores, c)?, gpu.read_buffer::<u32>(&a.chosen, c)?),
+            None => (Vec::new(), Vec::new()),
+        };
         Ok(SparseIntermediates {
             gathered_diffuse,
             gathered_glossy,
@@ -913,6 +918,8 @@ impl Renderer {
             vertex_diffuse,
             vertex_glossy,
             vertex_glossy_radiance,
+            adaptive_scores,
+            adaptive_chosen,
         })
     }
 }
@@ -939,6 +946,10 @@ pub struct SparseIntermediates {
     /// Per vertex, the interpolated glossy radiance factor (xyz; `w` 0): with
     /// `glossy_interpolation: "radiance"` only.
     pub vertex_glossy_radiance: Vec<[f32; 4]>,
+    /// Per adaptive candidate (`settings.sparse.adaptive`), this frame's score and whether it
+    /// was chosen (1); empty without candidates.
+    pub adaptive_scores: Vec<f32>,
+    pub adaptive_chosen: Vec<u32>,
 }
 
 /// Optical camera coordinates (x right, y down, z forward) to wgpu clip space for a pinhole

@@ -63,6 +63,9 @@ pub struct Config {
     pub near_field: Option<u32>,
     /// `settings.sparse.glossy_interpolation`; `None`: the scene's.
     pub glossy_interpolation: Option<GlossyInterpolation>,
+    /// `settings.sparse.adaptive` in hundredths (adaptive points per 100 sparse points);
+    /// `None`: the scene's.
+    pub adaptive_percent: Option<u32>,
     /// RSM side R: at most R² VALs (only lit texels become VALs).
     pub rsm_resolution: u32,
     pub occlusion: Occlusion,
@@ -163,6 +166,8 @@ pub struct Sweep {
     pub neighbours: Option<Vec<u32>>,
     pub near_field: Option<Vec<u32>>,
     pub glossy_interpolation: Option<Vec<GlossyInterpolation>>,
+    /// `settings.sparse.adaptive`, in hundredths.
+    pub adaptive: Option<Vec<u32>>,
     pub rsm_resolution: Option<Vec<u32>>,
     pub occlusion: Option<Vec<Occlusion>>,
     pub glossy: Option<Vec<bool>>,
@@ -185,6 +190,7 @@ pub const AXES: &[&str] = &[
     "neighbours",
     "near_field",
     "glossy_interpolation",
+    "adaptive",
     "rsm_resolution",
     "occlusion",
     "glossy",
@@ -273,6 +279,10 @@ impl Sweep {
                     let max = crate::scene::NEAR_FIELD_RANGE.1 as u32;
                     sweep.near_field = Some(parse_each(&flag, &values, |v| int_in(v, 0, max))?);
                 }
+                "adaptive" => {
+                    duplicate(sweep.adaptive.is_some())?;
+                    sweep.adaptive = Some(parse_each(&flag, &values, hundredths)?);
+                }
                 "glossy_interpolation" => {
                     duplicate(sweep.glossy_interpolation.is_some())?;
                     let all = [GlossyInterpolation::Lights, GlossyInterpolation::Radiance];
@@ -322,10 +332,13 @@ impl Sweep {
         if grid {
             let neighbours_values =
                 self.neighbours.clone().map_or(vec![base.neighbours], |v| v.into_iter().map(Some).collect());
-            for sparse in self
+            let sparse_values = self
                 .sparse_points
                 .clone()
-                .map_or(vec![base.sparse_points_per_mesh], |v| v.into_iter().map(Some).collect())
+                .map_or(vec![base.sparse_points_per_mesh], |v| v.into_iter().map(Some).collect());
+            for (sparse, adaptive_percent) in sparse_values
+                .into_iter()
+                .flat_map(|n| opts(&self.adaptive, base.adaptive_percent).into_iter().map(move |a| (n, a)))
             {
                 for (&neighbours, near_field) in neighbours_values
                     .iter()
@@ -342,6 +355,7 @@ impl Sweep {
                                     for ism in self.mode_variants(base) {
                                         let c = Config {
                                             sparse_points_per_mesh: sparse,
+                                            adaptive_percent,
                                             neighbours,
                                             near_field,
                                             glossy_interpolation,
@@ -380,6 +394,9 @@ impl Sweep {
         }
         for &v in self.glossy_interpolation.iter().flatten() {
             push(Config { glossy_interpolation: Some(v), ..*base });
+        }
+        for &v in self.adaptive.iter().flatten() {
+            push(Config { adaptive_percent: Some(v), ..*base });
         }
         for &v in self.rsm_resolution.iter().flatten() {
             push(Config { rsm_resolution: v, ..*base });
@@ -495,6 +512,18 @@ fn named<T: Copy>(v: &str, all: &[T], name: fn(T) -> &'static str) -> Result<T, 
     })
 }
 
+/// An `adaptive` value: a fraction in [`crate::scene::ADAPTIVE_RANGE`] in steps of 0.01, as
+/// hundredths.
+fn hundredths(v: &str) -> Result<u32, String> {
+    let (lo, hi) = crate::scene::ADAPTIVE_RANGE;
+    let x: f64 = v.trim().parse().map_err(|_| format!("`{v}` is not a number"))?;
+    let n = (x * 100.0).round();
+    if !(f64::from(lo)..=f64::from(hi)).contains(&x) || (x * 100.0 - n).abs() > 1e-6 {
+        return Err(format!("must be in [{lo}, {hi}] in steps of 0.01"));
+    }
+    Ok(n as u32)
+}
+
 fn int_in(v: &str, lo: u32, hi: u32) -> Result<u32, String> {
     let n: u32 = v.parse().map_err(|_| format!("not a whole number in {lo}..={hi}"))?;
     if (lo..=hi).contains(&n) { Ok(n) } else { Err(format!("must be in {lo}..={hi}")) }
@@ -552,6 +581,7 @@ impl BenchOptions {
             neighbours: None,
             near_field: None,
             glossy_interpolation: None,
+            adaptive_percent: None,
             rsm_resolution: scene.settings.rsm_resolution,
             occlusion: scene.settings.occlusion,
             glossy: scene.settings.glossy,
@@ -711,7 +741,12 @@ pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and textur
      overhead not counted); the reference passes' buffers are released before";
 
 /// What a renderer is built for: sparse points per mesh, RSM resolution, glossy.
-type RendererKey = (Option<u32>, Option<u32>, Option<u32>, Option<GlossyInterpolation>, u32, bool);
+/// What is decided when the scene loads: sparse points per mesh, neighbours, adaptive
+/// hundredths.
+type Placement = (Option<u32>, Option<u32>, Option<u32>);
+
+/// What needs a new renderer: the placement, near field, glossy interpolation, RSM size, glossy.
+type RendererKey = (Placement, Option<u32>, Option<GlossyInterpolation>, u32, bool);
 
 /// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
 /// `options.out`. `progress` is told each configuration as it starts.
@@ -852,17 +887,24 @@ fn run_job(
     // Group by what needs a new renderer (sparse points, RSM size, glossy), then by size.
     let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
     for c in &job.configs {
-        let key =
-            (c.sparse_points_per_mesh, c.neighbours, c.near_field, c.glossy_interpolation, c.rsm_resolution, c.glossy);
+        let key = (
+            (c.sparse_points_per_mesh, c.neighbours, c.adaptive_percent),
+            c.near_field,
+            c.glossy_interpolation,
+            c.rsm_resolution,
+            c.glossy,
+        );
         match groups.iter_mut().find(|(k, _)| *k == key) {
             Some((_, g)) => g.push(*c),
             None => groups.push((key, vec![*c])),
         }
     }
-    let mut scenes: HashMap<(Option<u32>, Option<u32>), Scene> = HashMap::new();
+    // Scenes by what is decided at load: sparse points, neighbours, adaptive candidates.
+    let mut scenes: HashMap<Placement, Scene> = HashMap::new();
     let mut base_scene = None;
-    for ((sparse, neighbours, near_field, glossy_interpolation, rsm, glossy), group) in groups {
-        let mut scene = match scenes.get(&(sparse, neighbours)) {
+    for ((placement, near_field, glossy_interpolation, rsm, glossy), group) in groups {
+        let (sparse, neighbours, adaptive) = placement;
+        let mut scene = match scenes.get(&placement) {
             Some(s) => s.clone(),
             None => {
                 let mut d = job.description.clone();
@@ -872,8 +914,11 @@ fn run_job(
                 if let Some(k) = neighbours {
                     d.settings.interpolation_neighbours = k;
                 }
+                if let Some(a) = adaptive {
+                    d.settings.sparse.adaptive = a as f32 / 100.0;
+                }
                 let s = Scene::from_description(&d, base_dir).map_err(scene_error)?;
-                scenes.insert((sparse, neighbours), s.clone());
+                scenes.insert(placement, s.clone());
                 s
             }
         };
@@ -1005,10 +1050,11 @@ pub fn describe(c: &Config) -> String {
     let sparse = c.sparse_points_per_mesh.map_or("scene".to_owned(), |n| n.to_string());
     let neighbours = c.neighbours.map_or(String::new(), |k| format!(", {k} neighbours"));
     let near = c.near_field.map_or(String::new(), |n| format!(", near field {n}"));
+    let adaptive = c.adaptive_percent.map_or(String::new(), |a| format!(", adaptive {}", f64::from(a) / 100.0));
     let glossy_interpolation =
         c.glossy_interpolation.map_or(String::new(), |g| format!(", glossy {}", glossy_interpolation_name(g)));
     format!(
-        "sparse/mesh {sparse}{neighbours}{near}{glossy_interpolation}, R {}, occlusion {}, glossy {}, {}x{}",
+        "sparse/mesh {sparse}{neighbours}{near}{adaptive}{glossy_interpolation}, R {}, occlusion {}, glossy {}, {}x{}",
         c.rsm_resolution,
         match c.occlusion {
             Occlusion::Off => "off",
@@ -1147,6 +1193,7 @@ pub fn csv(results: &BenchResults) -> String {
         "cluster_maps",
         "near_field",
         "glossy_interpolation",
+        "adaptive",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -1202,6 +1249,7 @@ pub fn csv(results: &BenchResults) -> String {
             o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
             ism(c.near_field),
             c.glossy_interpolation.map_or(String::new(), |g| glossy_interpolation_name(g).to_owned()),
+            c.adaptive_percent.map_or(String::new(), |a| (f64::from(a) / 100.0).to_string()),
         ]);
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
@@ -1222,6 +1270,7 @@ mod tests {
         neighbours: None,
         near_field: None,
         glossy_interpolation: None,
+        adaptive_percent: None,
         rsm_resolution: 64,
         occlusion: Occlusion::Off,
         glossy: true,
@@ -1310,6 +1359,22 @@ mod tests {
         assert!(grid.iter().all(|c| c.glossy_interpolation == Some(GlossyInterpolation::Radiance)));
         let e = Sweep::parse(&args(&["glossy_interpolation=pixel"])).unwrap_err().to_string();
         assert!(e.contains("glossy_interpolation") && e.contains("`lights` or `radiance`"), "{e}");
+    }
+
+    /// The adaptive axis: fractions in hundredths, one configuration each, and in the grid one
+    /// per sparse point count and fraction; out of range or finer than 0.01 is refused.
+    #[test]
+    fn adaptive_axis_measures_each_budget() {
+        let s = Sweep::parse(&args(&["adaptive=0,0.25,1"])).unwrap();
+        let a: Vec<Option<u32>> = s.configs(&BASE, false).iter().map(|c| c.adaptive_percent).collect();
+        assert_eq!(a, [None, Some(0), Some(25), Some(100)]);
+        let s = Sweep::parse(&args(&["adaptive=0,0.5", "sparse_points=64,128"])).unwrap();
+        let grid = s.configs(&BASE, true);
+        assert_eq!(grid.len(), 4);
+        for e in ["adaptive=1.5", "adaptive=0.125", "adaptive=x"] {
+            let e = Sweep::parse(&args(&[e])).unwrap_err().to_string();
+            assert!(e.contains("adaptive"), "{e}");
+        }
     }
 
     #[test]

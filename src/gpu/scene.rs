@@ -23,6 +23,17 @@ pub struct FlatScene {
     pub neighbours: u32,
     /// `neighbours` sparse point indices per vertex, nearest first, `u32::MAX` padded.
     pub vertex_neighbours: Vec<u32>,
+    /// How many of `sparse_points`, at the end, are adaptive candidates (every mesh's; the
+    /// points gathered every frame come first): 0 without `settings.sparse.adaptive`.
+    pub candidates: u32,
+    /// `neighbours` indices per candidate, into the points before the candidates: its mesh's
+    /// nearest points gathered every frame, nearest first, `u32::MAX` padded.
+    pub candidate_neighbours: Vec<u32>,
+    /// `neighbours` indices per vertex, with candidates only: its mesh's nearest candidates,
+    /// nearest first, `u32::MAX` padded.
+    pub vertex_candidates: Vec<u32>,
+    /// The most adaptive candidates a frame gathers (the meshes' budgets summed).
+    pub adaptive_budget: u32,
     /// Every diffuse texture, resized to one size; `None` when the scene has none.
     pub textures: Option<TextureArray>,
 }
@@ -81,14 +92,19 @@ impl FlatScene {
             neighbours: scene.settings.interpolation_neighbours,
             ..Default::default()
         };
+        // Every mesh's points gathered every frame first, then every mesh's adaptive candidates.
+        let base_total: usize = scene.meshes.iter().map(|m| m.sparse.base_len()).sum();
+        let any_candidates = scene.meshes.iter().any(|m| m.sparse.candidates > 0);
+        let (mut base_offset, mut candidate_offset) = (0u32, base_total as u32);
+        let mut candidates = Vec::new();
         for (mesh, &transform) in scene.meshes.iter().zip(model_to_world) {
             let placed = mesh.placed(transform);
             let vertex_base = flat.vertices.len() as u32;
-            let sparse_base = flat.sparse_points.len() as u32;
             let positions = placed.positions();
             let area = crate::scene::surface_area(&positions, &mesh.triangles);
             let sparse = &mesh.sparse;
-            let density = if area > 0.0 { (sparse.triangles.len() as f64 / area) as f32 } else { 0.0 };
+            let base = sparse.base_len();
+            let density = if area > 0.0 { (base as f64 / area) as f32 } else { 0.0 };
             for ((p, n), uv) in positions.into_iter().zip(placed.normals()).zip(&mesh.texcoords) {
                 flat.vertices.push(RawVertex { position: p.into(), s: uv.x, normal: n.into(), t: 1.0 - uv.y });
             }
@@ -98,18 +114,38 @@ impl FlatScene {
                 flat.triangle_sparse_density.push(density);
             }
             let world = placed.sparse_positions().into_iter().zip(placed.sparse_normals());
-            for (((p, n), radius), triangle) in world.zip(placed.occluder_radii()).zip(&sparse.triangles) {
+            for (i, (((p, n), radius), triangle)) in
+                world.zip(placed.occluder_radii()).zip(&sparse.triangles).enumerate()
+            {
                 let material = mesh.triangle_materials[*triangle as usize] as usize;
-                flat.sparse_points.push(RawSparsePoint {
+                let point = RawSparsePoint {
                     position: p.into(),
                     occluder_radius: radius,
                     normal: n.into(),
                     exponent: scene.materials[material].exponent,
-                });
+                };
+                if i < base { flat.sparse_points.push(point) } else { candidates.push(point) }
             }
-            flat.vertex_neighbours
-                .extend(sparse.vertex_neighbours.iter().map(|&i| if i == u32::MAX { i } else { i + sparse_base }));
+            // A mesh's point i is at `base_offset + i`, its candidate j at `candidate_offset + j`.
+            let flat_index = |i: u32| match i {
+                u32::MAX => u32::MAX,
+                i if (i as usize) < base => base_offset + i,
+                i => candidate_offset + i - base as u32,
+            };
+            flat.vertex_neighbours.extend(sparse.vertex_neighbours.iter().map(|&i| flat_index(i)));
+            flat.candidate_neighbours.extend(sparse.candidate_neighbours.iter().map(|&i| flat_index(i)));
+            if any_candidates && sparse.candidates == 0 {
+                // A row per vertex all the same: none near.
+                flat.vertex_candidates.extend(std::iter::repeat_n(u32::MAX, sparse.vertex_neighbours.len()));
+            }
+            flat.vertex_candidates.extend(sparse.vertex_candidates.iter().map(|&i| flat_index(i)));
+            let budget = crate::scene::adaptive_budget(base, scene.settings.sparse.adaptive).min(sparse.candidates);
+            flat.adaptive_budget += budget as u32;
+            base_offset += base as u32;
+            candidate_offset += sparse.candidates as u32;
         }
+        flat.candidates = candidates.len() as u32;
+        flat.sparse_points.extend(candidates);
         flat
     }
 
@@ -123,6 +159,11 @@ impl FlatScene {
 
     pub fn sparse_count(&self) -> u32 {
         self.sparse_points.len() as u32
+    }
+
+    /// The sparse points gathered every frame: all but the adaptive candidates, which follow them.
+    pub fn base_sparse_count(&self) -> u32 {
+        self.sparse_count() - self.candidates
     }
 
     /// Interpolated surface of `triangle` at barycentrics `b`: (position, unit normal, material).
@@ -184,6 +225,8 @@ pub struct GpuScene {
     pub indices: wgpu::Buffer,
     pub sparse_points: wgpu::Buffer,
     pub vertex_neighbours: wgpu::Buffer,
+    /// Only with adaptive candidates: [`FlatScene::vertex_candidates`].
+    pub vertex_candidates: Option<wgpu::Buffer>,
 }
 
 impl GpuScene {
@@ -201,6 +244,9 @@ impl GpuScene {
         let materials = gpu.storage_buffer("scene.materials", &flat.materials, none)?;
         let sparse_points = gpu.storage_buffer("scene.sparse_points", &flat.sparse_points, none)?;
         let vertex_neighbours = gpu.storage_buffer("scene.vertex_neighbours", &flat.vertex_neighbours, none)?;
+        let vertex_candidates = (flat.candidates > 0)
+            .then(|| gpu.storage_buffer("scene.vertex_candidates", &flat.vertex_candidates, none))
+            .transpose()?;
         let textures = match &flat.textures {
             Some(t) => Some(upload_textures(gpu, t)?),
             None => None,
@@ -246,7 +292,17 @@ impl GpuScene {
             layout: &layout,
             entries: &entries,
         });
-        Ok(Self { flat, layout, bind_group, frame, vertices, indices, sparse_points, vertex_neighbours })
+        Ok(Self {
+            flat,
+            layout,
+            bind_group,
+            frame,
+            vertices,
+            indices,
+            sparse_points,
+            vertex_neighbours,
+            vertex_candidates,
+        })
     }
 
     /// Whether the scene binds diffuse textures (`shader/scene_textures.wgsl`).

@@ -204,8 +204,11 @@ pub fn emitters_placed(scene: &Scene, model_to_world: &[Mat4]) -> Vec<Emitter> {
         let placed = mesh.placed(transform);
         let positions = placed.positions();
         let area = crate::scene::surface_area(&positions, &mesh.triangles) as f32;
-        let count = mesh.sparse.positions.len().max(1) as f32;
-        let points = placed.sparse_positions().into_iter().zip(placed.sparse_normals()).zip(&mesh.sparse.triangles);
+        // The points gathered every frame (the adaptive candidates lie between them).
+        let base = mesh.sparse.base_len();
+        let count = base.max(1) as f32;
+        let points =
+            placed.sparse_positions().into_iter().zip(placed.sparse_normals()).zip(&mesh.sparse.triangles).take(base);
         for ((position, normal), triangle) in points {
             let material = mesh.triangle_materials[*triangle as usize] as usize;
             let albedo = scene.materials[material].diffuse;

@@ -755,6 +755,26 @@ pub struct SparseShading {
     /// `"lights"` is the paper's.
     #[serde(default)]
     pub glossy_interpolation: GlossyInterpolation,
+    /// Adaptive sparse points (beyond the paper): every frame, up to this fraction of each
+    /// mesh's sparse points more are gathered, at the candidates where the neighbouring points'
+    /// gathered light differs most, in [0, 1]; default [`DEFAULT_ADAPTIVE`]. 0 is off (the
+    /// paper's). Each mesh holds [`ADAPTIVE_CANDIDATES`] candidates per extra point.
+    #[serde(default = "default_adaptive")]
+    pub adaptive: f32,
+}
+
+/// Adaptive sparse points unless a scene says otherwise: none.
+pub const DEFAULT_ADAPTIVE: f32 = 0.0;
+
+/// Range of [`SparseShading::adaptive`].
+pub const ADAPTIVE_RANGE: (f32, f32) = (0.0, 1.0);
+
+/// Candidates placed per adaptive point of the budget (`settings.sparse.adaptive`): the pool
+/// a frame chooses its extra points from.
+pub const ADAPTIVE_CANDIDATES: usize = 4;
+
+fn default_adaptive() -> f32 {
+    DEFAULT_ADAPTIVE
 }
 
 /// Near-field radius in sparse point spacings unless a scene says otherwise.
@@ -785,6 +805,7 @@ impl Default for SparseShading {
             subdivision: DEFAULT_SUBDIVISION,
             near_field: DEFAULT_NEAR_FIELD,
             glossy_interpolation: GlossyInterpolation::default(),
+            adaptive: DEFAULT_ADAPTIVE,
         }
     }
 }
@@ -1189,6 +1210,12 @@ impl SettingsDescription {
         if !(lo..=hi).contains(&near_field) {
             let message = format!("must be in [{lo}, {hi}], got {near_field}");
             return Err(SceneError::field(format!("{field}.sparse.near_field"), message));
+        }
+        let (lo, hi) = ADAPTIVE_RANGE;
+        let adaptive = self.sparse.adaptive;
+        if !(lo..=hi).contains(&adaptive) {
+            let message = format!("must be in [{lo}, {hi}], got {adaptive}");
+            return Err(SceneError::field(format!("{field}.sparse.adaptive"), message));
         }
         validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))?;
         validate_mr(&self.mr, &format!("{field}.mr"))?;
@@ -1883,6 +1910,10 @@ mod tests {
         assert_eq!(message, "settings.sparse.near_field: must be in [0, 8], got 9");
         let message = error_of(&with_settings(r#"{"sparse": {"near_field": -0.5}}"#));
         assert_eq!(message, "settings.sparse.near_field: must be in [0, 8], got -0.5");
+        let message = error_of(&with_settings(r#"{"sparse": {"adaptive": 1.5}}"#));
+        assert_eq!(message, "settings.sparse.adaptive: must be in [0, 1], got 1.5");
+        let message = error_of(&with_settings(r#"{"sparse": {"adaptive": -0.1}}"#));
+        assert_eq!(message, "settings.sparse.adaptive: must be in [0, 1], got -0.1");
         let message = error_of(&with_settings(r#"{"sparse": {"kernel": "cubic"}}"#));
         assert!(message.starts_with("settings.sparse.kernel: unknown variant `cubic`"), "{message}");
         let paper =
@@ -1897,7 +1928,8 @@ mod tests {
                 bound: LightBound::Off,
                 subdivision: 1.0,
                 near_field: 0.0,
-                glossy_interpolation: GlossyInterpolation::Lights
+                glossy_interpolation: GlossyInterpolation::Lights,
+                adaptive: 0.0,
             }
         );
         let radiance = r#"{"sparse": {"glossy_interpolation": "radiance"}}"#;

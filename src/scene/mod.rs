@@ -48,13 +48,14 @@ use glam::{Affine3A, DAffine3, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use self::gltf::{GltfSceneDescription, LUMENS_PER_WATT, MAX_GLTF_BYTES, phong_from_pbr};
 pub use description::{
-    CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, DirectSettings, DirectShadows,
-    GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, LightDescription, LightEntry,
-    MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_DIRECT_LIGHTS, MAX_ISM_POINTS, MAX_ISM_SPLATS,
-    MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MAX_SPARSE_POINTS, MaterialDescription,
-    MeshDescription, NEAR_FIELD_RANGE, Occlusion, OcclusionRule, OcclusionSetting, PointLightDescription,
-    RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SecondBounceSettings, SettingsDescription,
-    ShadowMapSource, SoftShadows, SparseShading, TransformDescription, frame_val_parts, parse_json,
+    ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION,
+    DirectSettings, DirectShadows, GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, LightDescription,
+    LightEntry, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_DIRECT_LIGHTS, MAX_ISM_POINTS,
+    MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MAX_SPARSE_POINTS,
+    MaterialDescription, MeshDescription, NEAR_FIELD_RANGE, Occlusion, OcclusionRule, OcclusionSetting,
+    PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SecondBounceSettings,
+    SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription, frame_val_parts,
+    parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
@@ -335,6 +336,17 @@ pub struct SparsePoints {
     /// `neighbours` entries per mesh vertex: indices of its nearest sparse points, nearest
     /// first, padded with `u32::MAX` when the mesh has fewer points.
     pub vertex_neighbours: Vec<u32>,
+    /// How many of the points, at the end of the arrays, are adaptive candidates
+    /// (`settings.sparse.adaptive`): gathered only in the frames that choose them, else given
+    /// the light interpolated from their neighbours among the other points. 0 without.
+    pub candidates: usize,
+    /// `neighbours` entries per candidate: its nearest points that are not candidates, nearest
+    /// first, `u32::MAX` padded.
+    pub candidate_neighbours: Vec<u32>,
+    /// `neighbours` entries per mesh vertex, with candidates only: its nearest candidates (as
+    /// indices of the points, so at least `len() - candidates`), nearest first, `u32::MAX`
+    /// padded. `vertex_neighbours` then holds the nearest points that are not candidates.
+    pub vertex_candidates: Vec<u32>,
 }
 
 impl Mesh {
@@ -369,9 +381,14 @@ impl Mesh {
 }
 
 impl SparsePoints {
-    /// Number of sparse points.
+    /// Number of sparse points, adaptive candidates included.
     pub fn len(&self) -> usize {
         self.positions.len()
+    }
+
+    /// Number of sparse points gathered every frame: all but the adaptive candidates.
+    pub fn base_len(&self) -> usize {
+        self.positions.len() - self.candidates
     }
 
     /// Whether there are no sparse points (never the case for a loaded mesh).
@@ -556,9 +573,9 @@ impl Scene {
             })
     }
 
-    /// Sparse points over all meshes.
+    /// Sparse points gathered every frame over all meshes (without the adaptive candidates).
     pub fn sparse_point_count(&self) -> usize {
-        self.meshes.iter().map(|m| m.sparse.len()).sum()
+        self.meshes.iter().map(|m| m.sparse.base_len()).sum()
     }
 
     /// The largest world-space sparse point spacing over the meshes (m): `sqrt(area / points)`
@@ -570,7 +587,7 @@ impl Scene {
             .filter(|m| !m.sparse.is_empty())
             .map(|m| {
                 let area = surface_area(&m.placed(m.model_to_world).positions(), &m.triangles);
-                (area / m.sparse.len() as f64).sqrt() as f32
+                (area / m.sparse.base_len() as f64).sqrt() as f32
             })
             .fold(0.0, f32::max)
     }
@@ -706,7 +723,8 @@ fn load_mesh(
     let subdivided_at = started.elapsed();
     let stream = index as u64;
     let neighbours = settings.interpolation_neighbours as usize;
-    let sparse = sparse::build(&geometry, sparse_count, neighbours, settings.seed, stream)
+    let candidates = adaptive_candidates(sparse_count, settings.sparse.adaptive);
+    let sparse = sparse::build(&geometry, sparse_count, candidates, neighbours, settings.seed, stream)
         .map_err(|message| SceneError::Obj { field: field.clone(), file: file.clone(), line: None, message })?;
 
     let name = file.file_stem().map_or_else(|| format!("mesh{index}"), |s| s.to_string_lossy().into_owned());
@@ -724,7 +742,8 @@ fn load_mesh(
         vertices = geometry.positions.len(),
         triangles = geometry.triangles.len(),
         obj_triangles = original_triangles,
-        sparse_points = sparse.len(),
+        sparse_points = sparse.base_len(),
+        adaptive_candidates = sparse.candidates,
         spacing,
         elapsed_ms = ms(started.elapsed()),
         "loaded mesh"
@@ -772,6 +791,20 @@ impl Geometry {
 }
 
 /// Total area of `triangles` (corner indices into `positions`), in f64 as [`triangle_area`].
+/// The adaptive points a mesh of `sparse_points` may gather in a frame at
+/// `settings.sparse.adaptive` = `fraction`: its share of the scene's budget.
+pub fn adaptive_budget(sparse_points: usize, fraction: f32) -> usize {
+    (sparse_points as f64 * f64::from(fraction)).round() as usize
+}
+
+/// The adaptive candidates a mesh of `sparse_points` holds at `fraction`:
+/// [`ADAPTIVE_CANDIDATES`] per point of its budget, at most what the placement's elimination
+/// removes (`sparse::OVERSAMPLING - 1` per point).
+fn adaptive_candidates(sparse_points: usize, fraction: f32) -> usize {
+    let most = sparse_points * (sparse::OVERSAMPLING - 1);
+    (adaptive_budget(sparse_points, fraction) * ADAPTIVE_CANDIDATES).min(most)
+}
+
 pub fn surface_area(positions: &[Vec3], triangles: &[[u32; 3]]) -> f64 {
     triangles.iter().map(|t| triangle_area(t.map(|i| positions[i as usize]))).sum()
 }

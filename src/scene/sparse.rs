@@ -43,20 +43,41 @@ fn tree_frame() -> Quat {
     Quat::from_euler(EulerRot::XYZ, 0.31, 0.77, 1.13)
 }
 
-/// Places `count` sparse points on the surface and links every vertex to its `neighbours`
-/// nearest points. `seed` and `stream` (the mesh index) make the placement reproducible.
+/// Places `count` sparse points on the surface, then `candidates` adaptive candidates after
+/// them (`settings.sparse.adaptive`: the points the elimination removed last, so they fill the
+/// gaps between the kept ones). Every vertex is linked to its `neighbours` nearest points of
+/// the first kind and, with candidates, to its `neighbours` nearest candidates; every
+/// candidate to its `neighbours` nearest points of the first kind. `seed` and `stream` (the
+/// mesh index) make the placement reproducible; the first `count` points and the vertices'
+/// links to them do not depend on `candidates`.
 pub(crate) fn build(
     geometry: &Geometry,
     count: usize,
+    candidates: usize,
     neighbours: usize,
     seed: u64,
     stream: u64,
 ) -> Result<SparsePoints, String> {
     let started = std::time::Instant::now();
-    let samples = place(geometry, count, seed, stream)?;
+    let samples = place(geometry, count, candidates, seed, stream)?;
     let placed_at = started.elapsed();
     let (positions, normals): (Vec<Vec3>, Vec<Vec3>) = samples.iter().map(|&(t, b)| evaluate(geometry, t, b)).unzip();
-    let (vertex_neighbours, occluder_radii) = link_vertices(&geometry.positions, &positions, neighbours)?;
+    // The placement keeps `count` points (all it drew when it drew fewer), then the candidates.
+    let base = positions.len().min(count);
+    let candidates = positions.len() - base;
+    let (vertex_neighbours, mut occluder_radii) = link_vertices(&geometry.positions, &positions[..base], neighbours)?;
+    // Candidates hide nothing: no vertex is theirs (disc radius 0).
+    occluder_radii.resize(positions.len(), 0.0);
+    let (vertex_candidates, candidate_neighbours) = if candidates > 0 {
+        let local = link_vertices(&geometry.positions, &positions[base..], neighbours)?.0;
+        let to_point = |i: u32| if i == u32::MAX { i } else { i + base as u32 };
+        (
+            local.into_iter().map(to_point).collect(),
+            link_vertices(&positions[base..], &positions[..base], neighbours)?.0,
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
     tracing::debug!(
         placement_ms = placed_at.as_secs_f64() * 1e3,
         neighbours_ms = (started.elapsed() - placed_at).as_secs_f64() * 1e3,
@@ -70,6 +91,9 @@ pub(crate) fn build(
         occluder_radii,
         neighbours,
         vertex_neighbours,
+        candidates,
+        candidate_neighbours,
+        vertex_candidates,
     })
 }
 
@@ -89,8 +113,9 @@ pub(crate) fn evaluate(geometry: &Geometry, t: u32, b: Vec2) -> (Vec3, Vec3) {
 }
 
 /// Chooses `count` (triangle, barycentrics) samples: area-proportional candidates thinned to
-/// blue noise.
-fn place(geometry: &Geometry, count: usize, seed: u64, stream: u64) -> Result<Vec<(u32, Vec2)>, String> {
+/// blue noise; then up to `extra` more, the last ones the thinning removed (the most recently
+/// removed first).
+fn place(geometry: &Geometry, count: usize, extra: usize, seed: u64, stream: u64) -> Result<Vec<(u32, Vec2)>, String> {
     let areas: Vec<f64> = (0..geometry.triangles.len()).map(|t| geometry.triangle_area(t)).collect();
     let mut cdf = Vec::with_capacity(areas.len());
     let mut total = 0.0f64;
@@ -125,16 +150,23 @@ fn place(geometry: &Geometry, count: usize, seed: u64, stream: u64) -> Result<Ve
             (b - a).cross(c - a).normalize_or_zero()
         })
         .collect();
-    let keep = eliminate(&positions, &face_normals, total, count)?;
-    Ok(keep.into_iter().map(|i| candidates[i]).collect())
+    let (keep, last_removed) = eliminate(&positions, &face_normals, total, count)?;
+    let extra = last_removed.iter().rev().take(extra);
+    Ok(keep.into_iter().chain(extra.copied()).map(|i| candidates[i]).collect())
 }
 
-/// Weighted sample elimination: indices (ascending) of the `count` candidates kept.
+/// Weighted sample elimination: indices (ascending) of the `count` candidates kept, and the
+/// removed ones in the order they were removed.
 /// `area` is the surface area the candidates cover, square model units.
-fn eliminate(positions: &[Vec3], normals: &[Vec3], area: f64, count: usize) -> Result<Vec<usize>, String> {
+fn eliminate(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    area: f64,
+    count: usize,
+) -> Result<(Vec<usize>, Vec<usize>), String> {
     let m = positions.len();
     if m <= count {
-        return Ok((0..m).collect());
+        return Ok(((0..m).collect(), Vec::new()));
     }
     // Largest Poisson disk radius for `count` points on a 2D domain of this area.
     let r_max = (area / (2.0 * 3f64.sqrt() * count as f64)).sqrt();
@@ -171,11 +203,13 @@ fn eliminate(positions: &[Vec3], normals: &[Vec3], area: f64, count: usize) -> R
     // Remove the most crowded candidate until `count` are left.
     let mut heap = IndexedMaxHeap::new(weights);
     let mut removed = vec![false; m];
+    let mut order = Vec::with_capacity(m - count);
     for _ in count..m {
         let Some(i) = heap.pop() else {
             break;
         };
         removed[i] = true;
+        order.push(i);
         for &j in &neighbours[offsets[i]..offsets[i + 1]] {
             let j = j as usize;
             if !removed[j] {
@@ -183,7 +217,7 @@ fn eliminate(positions: &[Vec3], normals: &[Vec3], area: f64, count: usize) -> R
             }
         }
     }
-    Ok((0..m).filter(|&i| !removed[i]).collect())
+    Ok(((0..m).filter(|&i| !removed[i]).collect(), order))
 }
 
 /// A binary max-heap over the indices `0..n` ordered by a key per index (ties: larger index
@@ -320,14 +354,14 @@ mod tests {
     #[test]
     fn placement_is_deterministic_per_seed_and_stream() {
         let g = square(1.0);
-        let a = build(&g, 100, 8, 7, 0).expect("builds");
-        let b = build(&g, 100, 8, 7, 0).expect("builds");
+        let a = build(&g, 100, 0, 8, 7, 0).expect("builds");
+        let b = build(&g, 100, 0, 8, 7, 0).expect("builds");
         assert_eq!(a.triangles, b.triangles);
         assert_eq!(a.barycentrics, b.barycentrics);
         assert_eq!(a.vertex_neighbours, b.vertex_neighbours);
-        let other_seed = build(&g, 100, 8, 8, 0).expect("builds");
+        let other_seed = build(&g, 100, 0, 8, 8, 0).expect("builds");
         assert_ne!(a.barycentrics, other_seed.barycentrics);
-        let other_stream = build(&g, 100, 8, 7, 1).expect("builds");
+        let other_stream = build(&g, 100, 0, 8, 7, 1).expect("builds");
         assert_ne!(a.barycentrics, other_stream.barycentrics);
     }
 
@@ -335,7 +369,7 @@ mod tests {
     fn points_lie_on_the_surface() {
         let mut g = square(2.0);
         g.positions[2].z = 1.0; // Bend one corner so the triangles differ.
-        let sparse = build(&g, 300, 8, 1, 0).expect("builds");
+        let sparse = build(&g, 300, 0, 8, 1, 0).expect("builds");
         assert_eq!(sparse.len(), 300);
         for i in 0..sparse.len() {
             let t = sparse.triangles[i];
@@ -357,7 +391,7 @@ mod tests {
         quad(&mut g, Vec2::new(2.0, 0.0), Vec2::new(5.0, 1.0));
         let count = 1024;
         for seed in 0..4 {
-            let sparse = build(&g, count, 8, seed, 0).expect("builds");
+            let sparse = build(&g, count, 0, 8, seed, 0).expect("builds");
             let small = sparse.triangles.iter().filter(|&&t| t < 2).count();
             let fraction = small as f64 / count as f64;
             // Tolerance: 0.02 of all points (8 % of the small quad's 256). The small quad's
@@ -370,7 +404,7 @@ mod tests {
     fn placement_is_well_spread() {
         // Blue noise keeps points apart: the closest pair is far from the ~0 of white noise.
         let count = 400;
-        let sparse = build(&square(1.0), count, 8, 3, 0).expect("builds");
+        let sparse = build(&square(1.0), count, 0, 8, 3, 0).expect("builds");
         let spacing = (1.0 / count as f32).sqrt();
         let mut closest = f32::INFINITY;
         for (i, p) in sparse.positions.iter().enumerate() {
@@ -388,7 +422,7 @@ mod tests {
         quad(&mut g, Vec2::ZERO, Vec2::ONE);
         g.triangles[2].swap(1, 2);
         g.triangles[3].swap(1, 2);
-        let sparse = build(&g, 200, 8, 5, 0).expect("builds");
+        let sparse = build(&g, 200, 0, 8, 5, 0).expect("builds");
         let front = sparse.triangles.iter().filter(|&&t| t < 2).count();
         assert!((front as i32 - 100).abs() <= 10, "{front} of 200 on the front");
     }
@@ -401,7 +435,7 @@ mod tests {
             g.positions.push(Vec3::new(0.05 * i as f32, 0.5, 0.0));
             g.normals.push(Vec3::Z);
         }
-        let sparse = build(&g, 3, 8, 2, 0).expect("builds");
+        let sparse = build(&g, 3, 0, 8, 2, 0).expect("builds");
         assert_eq!(sparse.vertex_neighbours.len(), 8 * g.positions.len());
         for (v, row) in sparse.vertex_neighbours.chunks_exact(8).enumerate() {
             assert!(row[..3].iter().all(|&i| i < 3), "{row:?}");
@@ -415,7 +449,7 @@ mod tests {
         }
 
         for k in [4, 8, 16] {
-            let sparse = build(&g, 64, k, 2, 0).expect("builds");
+            let sparse = build(&g, 64, 0, k, 2, 0).expect("builds");
             assert_eq!(sparse.vertex_neighbours.len(), k * g.positions.len());
             check_nearest_first(&g, &sparse, k);
         }
@@ -437,7 +471,7 @@ mod tests {
     fn occluder_radii_cover_their_vertices() {
         let mut g = square(1.0);
         super::super::subdivide::subdivide(&mut g, 0.1, 1 << 20).expect("within the cap");
-        let sparse = build(&g, 50, 8, 4, 0).expect("builds");
+        let sparse = build(&g, 50, 0, 8, 4, 0).expect("builds");
         let mut assigned = vec![0usize; sparse.len()];
         for (v, row) in sparse.vertex_neighbours.chunks_exact(8).enumerate() {
             let nearest = row[0] as usize;
@@ -484,6 +518,43 @@ mod tests {
     }
 
     #[test]
+    fn adaptive_candidates_fill_the_gaps_and_keep_the_points() {
+        let g = square(1.0);
+        let plain = build(&g, 100, 0, 8, 7, 0).expect("builds");
+        let with = build(&g, 100, 40, 8, 7, 0).expect("builds");
+        // The first points do not depend on the candidates.
+        assert_eq!(with.candidates, 40);
+        assert_eq!(with.len(), 140);
+        assert_eq!(&with.positions[..100], &plain.positions[..]);
+        assert!(plain.candidate_neighbours.is_empty() && plain.candidates == 0);
+        // Every candidate is linked to its nearest points among the first 100, nearest first.
+        assert_eq!(with.candidate_neighbours.len(), 40 * 8);
+        for (c, row) in with.candidate_neighbours.chunks_exact(8).enumerate() {
+            let p = with.positions[100 + c];
+            assert!(row.iter().all(|&i| i < 100), "{row:?}");
+            let nearest = plain.positions.iter().map(|q| p.distance(*q)).fold(f32::INFINITY, f32::min);
+            assert_eq!(p.distance(with.positions[row[0] as usize]), nearest);
+        }
+        // Vertices keep their links to the first 100 and gain their nearest candidates.
+        assert_eq!(with.vertex_neighbours, plain.vertex_neighbours);
+        assert_eq!(with.vertex_candidates.len(), 8 * g.positions.len());
+        assert!(with.vertex_candidates.iter().all(|&i| (100..140).contains(&i)));
+        assert!(with.occluder_radii[100..].iter().all(|&r| r == 0.0));
+        assert_eq!(with.occluder_radii[..100], plain.occluder_radii[..]);
+        // The candidates were removed last, so they sit in the gaps: a candidate is farther
+        // from its nearest point than white noise would be (a tenth of the spacing).
+        let spacing = (1.0f32 / 100.0).sqrt();
+        let gaps: f32 = (0..40)
+            .map(|c| {
+                let p = with.positions[100 + c];
+                with.positions[..100].iter().map(|q| p.distance(*q)).fold(f32::INFINITY, f32::min)
+            })
+            .sum::<f32>()
+            / 40.0;
+        assert!(gaps > 0.3 * spacing, "mean gap {gaps}, spacing {spacing}");
+    }
+
+    #[test]
     fn zero_area_meshes_are_an_error() {
         let g = Geometry {
             positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(2.0, 0.0, 0.0)],
@@ -492,6 +563,6 @@ mod tests {
             triangles: vec![[0, 1, 2]],
             triangle_materials: vec![0],
         };
-        assert!(build(&g, 10, 8, 1, 0).is_err());
+        assert!(build(&g, 10, 0, 8, 1, 0).is_err());
     }
 }

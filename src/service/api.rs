@@ -65,7 +65,7 @@ impl SceneInfo {
                     name: m.name.clone(),
                     vertices: m.positions.len(),
                     triangles: m.triangles.len(),
-                    sparse_points: m.sparse.len(),
+                    sparse_points: m.sparse.base_len(),
                 })
                 .collect(),
             triangles: scene.triangle_count(),

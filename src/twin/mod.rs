@@ -10,6 +10,7 @@
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
+pub mod adaptive;
 pub mod bounce;
 pub mod bvh;
 pub mod exact_cpu;

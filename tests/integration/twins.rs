@@ -272,7 +272,11 @@ fn assert_far_field_gather_matches_twin(
     let scale_e = max_of(cpu.iter().map(|g| g.irradiance));
     let scale_g = max_of(cpu.iter().map(|g| g.glossy_irradiance));
     assert!(scale_e > 0.0 && scale_g > 0.0);
+    let base = flat.base_sparse_count() as usize;
     for (i, c) in cpu.iter().enumerate() {
+        if i >= base && mid.adaptive_chosen[i - base] == 0 {
+            continue; // An adaptive candidate not gathered this frame.
+        }
         let (gd, gg) = (&mid.gathered_diffuse[i], &mid.gathered_glossy[i]);
         assert_close(gd.irradiance.into(), c.irradiance, REL, scale_e, 1e-9, &format!("E at sparse point {i}"));
         assert_close(gg.irradiance.into(), c.glossy_irradiance, REL, scale_g, 1e-9, &format!("G at sparse point {i}"));
@@ -710,14 +714,36 @@ fn assert_interpolation_matches_twin(
     let sparse_s: Vec<PointLight> = mid.sparse_glossy.iter().map(light).collect();
     let scale = max_of(sparse_d.iter().map(|l| l.intensity));
     let radiance_scale = max_of(mid.gathered_glossy.iter().map(|g| Vec3::from(g.irradiance)));
-    for (v, ids) in flat.vertex_neighbours.chunks_exact(flat.neighbours as usize).enumerate() {
+    let k = flat.neighbours as usize;
+    let base = flat.base_sparse_count() as usize;
+    for (v, ids) in flat.vertex_neighbours.chunks_exact(k).enumerate() {
         let vertex = flat.vertices[v];
-        let ids: Vec<usize> = ids.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
+        let mut ids: Vec<usize> = ids.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
         let sp = |i: usize| flat.sparse_points[i];
-        let offsets: Vec<Vec3> =
-            ids.iter().map(|&i| Vec3::from(sp(i).position) - Vec3::from(vertex.position)).collect();
-        let normals: Vec<Vec3> = ids.iter().map(|&i| sp(i).normal.into()).collect();
-        let w = twin::interpolation_weights(shading.kernel, vertex.normal.into(), &offsets, &normals);
+        let offsets_of = |ids: &[usize]| -> Vec<Vec3> {
+            ids.iter().map(|&i| Vec3::from(sp(i).position) - Vec3::from(vertex.position)).collect()
+        };
+        let normals_of = |ids: &[usize]| -> Vec<Vec3> { ids.iter().map(|&i| sp(i).normal.into()).collect() };
+        let offsets = offsets_of(&ids);
+        let mut w = twin::interpolation_weights(shading.kernel, vertex.normal.into(), &offsets, &normals_of(&ids));
+        if flat.candidates > 0 {
+            // Adaptive candidates: the chosen ones among the vertex's nearest join its points.
+            let row = &flat.vertex_candidates[v * k..(v + 1) * k];
+            let candidates: Vec<usize> = row.iter().take_while(|&&i| i != u32::MAX).map(|&i| i as usize).collect();
+            let chosen: Vec<bool> = candidates.iter().map(|&i| mid.adaptive_chosen[i - base] != 0).collect();
+            let cw = twin::adaptive::candidate_weights(
+                shading.kernel,
+                vertex.normal.into(),
+                &offsets,
+                &offsets_of(&candidates),
+                &normals_of(&candidates),
+                &chosen,
+            );
+            for (i, cw) in candidates.into_iter().zip(cw).filter(|(_, cw)| *cw > 0.0) {
+                ids.push(i);
+                w.push(cw);
+            }
+        }
         let d = twin::interpolate_lights(&w, &ids.iter().map(|&i| sparse_d[i]).collect::<Vec<_>>(), shading.bound);
         assert_close(
             light(&mid.vertex_diffuse[v]).intensity,
@@ -757,6 +783,97 @@ fn assert_interpolation_matches_twin(
         }
         let gpu_bound = light(&mid.vertex_diffuse[v]).bound;
         assert!((gpu_bound - d.bound).abs() <= 1e-5 * d.bound.max(1.0), "vertex {v} bound: {gpu_bound} vs {}", d.bound);
+    }
+}
+
+/// Adaptive sparse points (`settings.sparse.adaptive` 0.5: up to half the points' count more
+/// each frame, from twice the points' count of candidates): the GPU's scores against `twin::adaptive::candidate_score` from
+/// its own gathered sums, its choice against `twin::adaptive::select` of its scores, the chosen
+/// candidates' gather against `twin::gather_point`, the vertices' interpolation (chosen
+/// candidates weighed in) and the pixels against the twins. A second frame of the same view
+/// scores the chosen ones `HYSTERESIS` times higher and keeps every one of them. Same
+/// tolerances as the rest of this file; the choice may differ from the twin's only for a score
+/// within float rounding of a bin edge (CPU and GPU `log2` differ in the last bits), which the
+/// test allows for 2 candidates of 768.
+#[test]
+fn adaptive_points_match_cpu_twins() {
+    use twin::adaptive::{HYSTERESIS, candidate_score, scored_light, select};
+    let gpu = gpu();
+    let dir = super::fixture("scenes");
+    let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["settings"]["sparse"] = serde_json::json!({"adaptive": 0.5});
+    let scene = relume::scene::Scene::from_json_str(&json.to_string(), &dir).unwrap();
+    let (w, h) = (48, 40);
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let flat = &renderer.scene.flat.clone();
+    let (base, k) = (flat.base_sparse_count() as usize, flat.neighbours as usize);
+    assert_eq!((base, flat.candidates, flat.adaptive_budget), (768, 1536, 384));
+    let eye = renderer.view().eye();
+    let light_at = |mid: &relume::renderer::SparseIntermediates, i: usize| {
+        let g = twin::Gathered {
+            irradiance: mid.gathered_diffuse[i].irradiance.into(),
+            glossy_irradiance: mid.gathered_glossy[i].irradiance.into(),
+            ..Default::default()
+        };
+        scored_light(&g, true)
+    };
+    let twin_scores = |mid: &relume::renderer::SparseIntermediates, before: &[u32]| -> Vec<f32> {
+        (0..flat.candidates as usize)
+            .map(|c| {
+                let p = flat.sparse_points[base + c];
+                let ids: Vec<usize> = flat.candidate_neighbours[c * k..(c + 1) * k]
+                    .iter()
+                    .take_while(|&&i| i != u32::MAX)
+                    .map(|&i| i as usize)
+                    .collect();
+                let offsets: Vec<Vec3> =
+                    ids.iter().map(|&i| Vec3::from(flat.sparse_points[i].position) - Vec3::from(p.position)).collect();
+                let normals: Vec<Vec3> = ids.iter().map(|&i| flat.sparse_points[i].normal.into()).collect();
+                let w = twin::interpolation_weights(scene.settings.sparse.kernel, p.normal.into(), &offsets, &normals);
+                let y: Vec<f32> = ids.iter().map(|&i| light_at(mid, i)).collect();
+                candidate_score(&w, &y, before.get(c).is_some_and(|&b| b != 0))
+            })
+            .collect()
+    };
+    let check_scores = |mid: &relume::renderer::SparseIntermediates, before: &[u32]| {
+        let want = twin_scores(mid, before);
+        let scale = want.iter().copied().fold(0.0, f32::max);
+        assert!(scale > 0.0);
+        for (c, (&got, &want)) in mid.adaptive_scores.iter().zip(&want).enumerate() {
+            assert!((got - want).abs() <= REL * scale, "candidate {c}: score {got} vs twin {want}");
+        }
+        let twin_choice = select(&mid.adaptive_scores, flat.adaptive_budget);
+        let differ = twin_choice.iter().zip(&mid.adaptive_chosen).filter(|(t, g)| **t != (**g != 0)).count();
+        assert!(differ <= 2, "{differ} candidates chosen differently from the twin");
+        let n = mid.adaptive_chosen.iter().filter(|&&c| c != 0).count() as u32;
+        assert!(n > flat.adaptive_budget / 2 && n <= flat.adaptive_budget, "{n} chosen of {}", flat.adaptive_budget);
+    };
+    check_scores(&mid, &[]);
+    assert_gather_matches_twin(flat, &mid, eye, &renderer.read_vals(&gpu).unwrap());
+    assert_interpolation_matches_twin(flat, &mid, scene.settings.sparse, eye);
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let expected = sparse_shading_twin(flat, &hits, &mid, eye);
+    let scale = max_of(expected.iter().flatten().copied());
+    for (i, e) in expected.iter().enumerate() {
+        if let Some(e) = e {
+            assert_close(frame.indirect.rgb(i), *e, REL, scale, 1e-9, &format!("indirect pixel {i}"));
+        }
+    }
+    // The next frame: the chosen score HYSTERESIS times higher and all stay chosen.
+    let before = mid.adaptive_chosen.clone();
+    renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let next = renderer.read_sparse_intermediates(&gpu).unwrap();
+    check_scores(&next, &before);
+    for (c, (&b, &n)) in before.iter().zip(&next.adaptive_chosen).enumerate() {
+        assert!(b == 0 || n != 0, "candidate {c} was dropped in a frame with the same light");
+        if b != 0 {
+            assert!(
+                (next.adaptive_scores[c] - HYSTERESIS * mid.adaptive_scores[c]).abs() <= 1e-5 * next.adaptive_scores[c]
+            );
+        }
     }
 }
 

@@ -39,15 +39,53 @@ impl GatherLobes {
     }
 }
 
+/// Which sparse points a gather's receiver slots are (`receiver_point` in `gather.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Receivers {
+    /// Slot i is point i, for the points gathered every frame: all but the last `candidates`
+    /// (the adaptive candidates, `settings.sparse.adaptive`).
+    Leading { candidates: u32 },
+    /// Slot i is the i-th entry of the frame's list of chosen adaptive candidates
+    /// (`adaptive.wgsl`'s `compact`), bound at [`LIST_BINDING`].
+    Chosen,
+}
+
+/// The binding of the chosen candidates' list; their count is at the next.
+pub const LIST_BINDING: u32 = 7;
+
 /// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none), the
 /// receivers per invocation, whether the glossy mean position is summed, then `gather.wgsl`.
 /// `near_radius` (m): the near-field radius whose share the gather leaves out (0: none).
 pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32, lobes: GatherLobes) -> String {
+    list_body(groups, near_radius, receivers, lobes, Receivers::Leading { candidates: 0 })
+}
+
+/// [`body`] for the receiver slots `slots`.
+pub fn list_body(
+    groups: Option<u32>,
+    near_radius: f32,
+    receivers: u32,
+    lobes: GatherLobes,
+    slots: Receivers,
+) -> String {
     let visibility = group_wgsl(groups, 5);
     let receivers = receivers_wgsl(receivers);
     let glossy_mean = lobes == GatherLobes::GlossyLights;
+    let points = match slots {
+        Receivers::Leading { candidates } => format!(
+            "fn receiver_point(slot: u32) -> u32 {{\n    if slot < frame.sparse_count - {candidates}u {{\n        \
+             return slot;\n    }}\n    return NO_POINT;\n}}\n"
+        ),
+        Receivers::Chosen => format!(
+            "@group(0) @binding({LIST_BINDING}) var<storage, read> receiver_list: array<u32>;\n\
+             @group(0) @binding({}) var<storage, read> receiver_count: u32;\n\
+             fn receiver_point(slot: u32) -> u32 {{\n    if slot < min(receiver_count, arrayLength(&receiver_list)) {{\n        \
+             return receiver_list[slot];\n    }}\n    return NO_POINT;\n}}\n",
+            LIST_BINDING + 1
+        ),
+    };
     format!(
-        "{VAL_TILES}\n{visibility}\n{receivers}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n\
+        "{VAL_TILES}\n{visibility}\n{receivers}\n{points}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n\
          const GLOSSY_MEAN: bool = {glossy_mean};\n{WGSL}"
     )
 }
@@ -56,16 +94,12 @@ pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32, lobes: Gather
 /// sums, one statement per receiver.
 fn receivers_wgsl(receivers: u32) -> String {
     let adds: String = (0..receivers)
-        .map(|r| {
-            format!(
-                "    (*sums)[{r}] = add_val((*sums)[{r}], (*receivers)[{r}], first + {r}u, val, val_index, glossy);\n"
-            )
-        })
+        .map(|r| format!("    (*sums)[{r}] = add_val((*sums)[{r}], (*receivers)[{r}], val, val_index, glossy);\n"))
         .collect();
     format!(
         "const RECEIVERS: u32 = {receivers}u;\n\
          fn add_to_receivers(sums: ptr<function, array<Sums, RECEIVERS>>, receivers: ptr<function, array<Receiver, RECEIVERS>>, \
-         first: u32, val: Val, val_index: u32, glossy: bool) {{\n{adds}}}\n"
+         val: Val, val_index: u32, glossy: bool) {{\n{adds}}}\n"
     )
 }
 
@@ -82,7 +116,8 @@ pub fn receivers_for(gpu: &Gpu) -> u32 {
     if gpu.is_cpu() { CPU_RECEIVERS } else { 1 }
 }
 
-/// The bindings of [`GROUPED_PASS`]; [`PASS`] has the first five (no group table).
+/// The bindings of [`CHOSEN_PASS`]; [`GROUPED_PASS`] has the first seven (no list), [`PASS`]
+/// the first five (no group table).
 const BINDINGS: &[Binding] = &[
     read("sparse_points"),
     read("vals"),
@@ -91,6 +126,8 @@ const BINDINGS: &[Binding] = &[
     read_write("gathered_glossy"),
     read("group_of_val"),
     read("group_visibility"),
+    read("receiver_list"),
+    read("receiver_count"),
 ];
 
 /// One invocation per sparse point, `TILE_SIZE` per workgroup (the tile is the workgroup's).
@@ -104,7 +141,7 @@ pub const PASS: PassDesc = PassDesc {
 
 /// The gather of a group visibility mode: [`PASS`] plus the group table.
 pub const GROUPED_PASS: PassDesc = PassDesc {
-    bindings: BINDINGS,
+    bindings: BINDINGS.split_at(7).0,
     entries: &[Entry { name: "main", bindings: 7, except: &["gathered_glossy"] }, Entry::first("main_glossy", 7)],
     default_source: |textured| {
         GROUPED_PASS.source(&body(Some(64), 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights), textured)
@@ -112,17 +149,54 @@ pub const GROUPED_PASS: PassDesc = PassDesc {
     ..PASS
 };
 
+/// The gather at the adaptive candidates a frame chose ([`Receivers::Chosen`]), without a
+/// group visibility mode.
+pub const CHOSEN_PASS: PassDesc = PassDesc {
+    label: "adaptive_gather",
+    bindings: BINDINGS,
+    entries: &[
+        Entry { name: "main", bindings: 9, except: &["gathered_glossy", "group_of_val", "group_visibility"] },
+        Entry { name: "main_glossy", bindings: 9, except: &["group_of_val", "group_visibility"] },
+    ],
+    default_source: |textured| {
+        let body = list_body(None, 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights, Receivers::Chosen);
+        CHOSEN_PASS.source(&body, textured)
+    },
+    ..PASS
+};
+
+/// [`CHOSEN_PASS`] with a group visibility mode's table.
+pub const CHOSEN_GROUPED_PASS: PassDesc = PassDesc {
+    entries: &[Entry { name: "main", bindings: 9, except: &["gathered_glossy"] }, Entry::first("main_glossy", 9)],
+    default_source: |textured| {
+        let body = list_body(Some(64), 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights, Receivers::Chosen);
+        CHOSEN_GROUPED_PASS.source(&body, textured)
+    },
+    ..CHOSEN_PASS
+};
+
 pub struct Gather {
     kernels: Kernels,
     /// Sparse points per invocation.
     receivers: u32,
+    /// Which points its slots are.
+    slots: Receivers,
+}
+
+/// The chosen adaptive candidates' list and count (`adaptive.wgsl`'s `compact`), and how many
+/// slots the list has (the frame's budget).
+pub struct ChosenList<'a> {
+    pub list: &'a wgpu::Buffer,
+    pub count: &'a wgpu::Buffer,
+    pub slots: u32,
 }
 
 impl Gather {
     /// `lobes` says what to sum (a glossy one builds the entry point that also gathers the
     /// Phong lobe); `groups`, the group count of a group visibility mode, the one that reads
     /// its table. `near_radius` (m): leave out each VAL's near-field share at that radius (0:
-    /// none).
+    /// none). It gathers at the points gathered every frame (all but the scene's adaptive
+    /// candidates).
     pub fn new(
         gpu: &Gpu,
         scene: &GpuScene,
@@ -131,6 +205,18 @@ impl Gather {
         near_radius: f32,
     ) -> Result<Self, GpuError> {
         Self::variant(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu))
+    }
+
+    /// [`Gather::new`] at the adaptive candidates each frame chooses ([`Gather::record_chosen`]).
+    pub fn chosen(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        lobes: GatherLobes,
+        groups: Option<u32>,
+        near_radius: f32,
+    ) -> Result<Self, GpuError> {
+        let slots = Receivers::Chosen;
+        Self::build(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu), slots)
     }
 
     /// The pass with `tile_size` VALs per tile and threads per workgroup instead of
@@ -146,14 +232,34 @@ impl Gather {
         tile_size: u32,
         receivers: u32,
     ) -> Result<Self, GpuError> {
+        let slots = Receivers::Leading { candidates: scene.flat.candidates };
+        Self::build(gpu, scene, lobes, groups, near_radius, tile_size, receivers, slots)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn build(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        lobes: GatherLobes,
+        groups: Option<u32>,
+        near_radius: f32,
+        tile_size: u32,
+        receivers: u32,
+        slots: Receivers,
+    ) -> Result<Self, GpuError> {
         assert!((1..=MAX_RECEIVERS).contains(&receivers), "{receivers} receivers per invocation");
         let workgroup = [tile_size, 1, 1];
-        let desc = if groups.is_some() { &GROUPED_PASS } else { &PASS };
-        let source =
-            desc.source_with(&body(groups, near_radius, receivers, lobes), scene.textured(), workgroup, tile_size);
+        let desc = match (groups.is_some(), slots) {
+            (false, Receivers::Leading { .. }) => &PASS,
+            (true, Receivers::Leading { .. }) => &GROUPED_PASS,
+            (false, Receivers::Chosen) => &CHOSEN_PASS,
+            (true, Receivers::Chosen) => &CHOSEN_GROUPED_PASS,
+        };
+        let body = list_body(groups, near_radius, receivers, lobes, slots);
+        let source = desc.source_with(&body, scene.textured(), workgroup, tile_size);
         let entry = desc.lobe_entry(lobes.glossy());
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, workgroup, tile_size)?;
-        Ok(Self { kernels, receivers })
+        Ok(Self { kernels, receivers, slots })
     }
 
     /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]).
@@ -161,8 +267,8 @@ impl Gather {
         self.kernels.fit(gpu, scene, max_vals)
     }
 
-    /// Gather `vals` at every sparse point into `gathered`, with `groups`' visibility when
-    /// built for a group visibility mode.
+    /// Gather `vals` at every point gathered every frame into `gathered`, with `groups'`
+    /// visibility when built for a group visibility mode.
     pub fn record(
         &self,
         gpu: &Gpu,
@@ -173,6 +279,40 @@ impl Gather {
         groups: Option<&GroupTable<'_>>,
         span: Option<Span<'_>>,
     ) {
+        assert!(matches!(self.slots, Receivers::Leading { .. }), "the chosen candidates' gather needs their list");
+        let resources = self.resources(scene, vals, gathered, groups);
+        let n = scene.flat.base_sparse_count().div_ceil(self.receivers);
+        self.kernels.run(gpu, e, scene, &resources, [n, 1, 1], span);
+    }
+
+    /// Gather `vals` at the adaptive candidates in `chosen`'s list into their entries of
+    /// `gathered` (one slot per entry of the budget; slots past the frame's count do nothing).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_chosen(
+        &self,
+        gpu: &Gpu,
+        e: &mut wgpu::CommandEncoder,
+        scene: &GpuScene,
+        vals: &Vals,
+        gathered: &Lobes,
+        groups: Option<&GroupTable<'_>>,
+        chosen: &ChosenList<'_>,
+        span: Option<Span<'_>>,
+    ) {
+        assert_eq!(self.slots, Receivers::Chosen, "the gather of the points gathered every frame takes no list");
+        let mut resources = self.resources(scene, vals, gathered, groups);
+        resources.extend([buffer("receiver_list", chosen.list), buffer("receiver_count", chosen.count)]);
+        let n = chosen.slots.div_ceil(self.receivers);
+        self.kernels.run(gpu, e, scene, &resources, [n, 1, 1], span);
+    }
+
+    fn resources<'a>(
+        &self,
+        scene: &'a GpuScene,
+        vals: &'a Vals,
+        gathered: &'a Lobes,
+        groups: Option<&GroupTable<'a>>,
+    ) -> Vec<crate::gpu::pass::Res<'a>> {
         let mut resources = with_lobes(
             vec![
                 buffer("sparse_points", &scene.sparse_points),
@@ -184,7 +324,6 @@ impl Gather {
         if let Some(g) = groups {
             resources.extend([buffer("group_of_val", g.group_of_val), buffer("group_visibility", g.visibility)]);
         }
-        let n = scene.flat.sparse_count().div_ceil(self.receivers);
-        self.kernels.run(gpu, e, scene, &resources, [n, 1, 1], span);
+        resources
     }
 }

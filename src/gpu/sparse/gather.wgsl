@@ -23,6 +23,11 @@
 // `val_visibility(point, val)` is the fraction of a VAL's light that reaches the point: 1
 // without a group visibility mode (prepended by `gather.rs`), else its group's entry of the
 // table (`gpu/visibility/group.wgsl`).
+//
+// `receiver_point(slot)` (prepended by `gather.rs`) says which sparse point a receiver slot
+// gathers at, NO_POINT for none: slot i is point i up to the points gathered every frame
+// (`gather`), or the i-th adaptive candidate chosen this frame (`adaptive_gather`: the list
+// `adaptive.wgsl`'s `compact` wrote).
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> vals: array<Val>;
@@ -40,30 +45,33 @@ struct Sums {
     ws: f32,
 }
 
-// The point a receiver slot gathers at (a dummy past the last point), its eye direction and
-// that direction's cosine to the normal.
+const NO_POINT: u32 = 0xffffffffu;
+
+// The point a receiver slot gathers at (a dummy for NO_POINT), its index, its eye direction
+// and that direction's cosine to the normal.
 struct Receiver {
     point: SparsePoint,
+    index: u32,
     w_o: vec3<f32>,
     cos_o: f32,
 }
 
 fn receiver(index: u32) -> Receiver {
     var p = SparsePoint(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0);
-    if index < frame.sparse_count {
+    if index != NO_POINT {
         p = sparse_points[index];
     }
     let w_o = view_direction(p.position, p.normal, frame.eye);
-    return Receiver(p, w_o, dot(p.normal, w_o));
+    return Receiver(p, index, w_o, dot(p.normal, w_o));
 }
 
-// `s` with VAL `val` (the `val_index`-th) added as seen from the receiver `r` (point `index`).
-fn add_val(s: Sums, r: Receiver, index: u32, val: Val, val_index: u32, glossy: bool) -> Sums {
+// `s` with VAL `val` (the `val_index`-th) added as seen from the receiver `r`.
+fn add_val(s: Sums, r: Receiver, val: Val, val_index: u32, glossy: bool) -> Sums {
     var out = s;
     let p = r.point;
     let geo = val_geometry(p.position, p.normal, val.position, val.normal, val.area);
     let far = 1.0 - near_field_weight(distance(val.position, p.position), NEAR_FIELD_RADIUS);
-    let f = geo.weight * geo.cos_receiver * val_visibility(index, val_index) * far;
+    let f = geo.weight * geo.cos_receiver * val_visibility(r.index, val_index) * far;
     let e_j = val.flux * f;
     let y = luminance(val.flux) * f;
     out.e += e_j;
@@ -103,19 +111,19 @@ fn gather_lobe(cos_r: f32, k: f32) -> f32 {
     return select(lobe, 1.0, k <= 0.0);
 }
 
-// The sums of this dispatch's VALs at points [first, first + RECEIVERS).
+// The sums of this dispatch's VALs at the points of slots [first, first + RECEIVERS).
 fn gather_tiles(first: u32, local: u32, glossy: bool) -> array<Sums, RECEIVERS> {
     var sums: array<Sums, RECEIVERS>;
     var receivers: array<Receiver, RECEIVERS>;
     for (var r = 0u; r < RECEIVERS; r++) {
         sums[r] = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
-        receivers[r] = receiver(first + r);
+        receivers[r] = receiver(receiver_point(first + r));
     }
     let end = val_range_end();
     for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
         let n = load_tile(base, local, end);
         for (var j = 0u; j < n; j++) {
-            add_to_receivers(&sums, &receivers, first, tile[j], base + j, glossy);
+            add_to_receivers(&sums, &receivers, tile[j], base + j, glossy);
         }
         workgroupBarrier();
     }
@@ -142,8 +150,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     let first = id.x * RECEIVERS;
     let sums = gather_tiles(first, local, false);
     for (var r = 0u; r < RECEIVERS; r++) {
-        let i = first + r;
-        if i < frame.sparse_count {
+        let i = receiver_point(first + r);
+        if i != NO_POINT {
             let s = sums[r];
             gathered_diffuse[i] = merge_gathered(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
         }
@@ -155,8 +163,8 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invo
     let first = id.x * RECEIVERS;
     let sums = gather_tiles(first, local, true);
     for (var r = 0u; r < RECEIVERS; r++) {
-        let i = first + r;
-        if i < frame.sparse_count {
+        let i = receiver_point(first + r);
+        if i != NO_POINT {
             let s = sums[r];
             gathered_diffuse[i] = merge_gathered(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
             gathered_glossy[i] = merge_gathered(earlier_glossy(i), s.g, s.ws, s.ls, vec3<f32>(0.0));

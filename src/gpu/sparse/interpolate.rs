@@ -3,23 +3,48 @@
 //! Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`. Run by
 //! [`super::SparseMethod`].
 
-use crate::gpu::pass::{Entry, PassDesc, read, read_write};
+use crate::gpu::pass::{Entry, PassDesc, Res, buffer, read, read_write};
 use crate::gpu::shader::WORKGROUP_SIZE;
 use crate::scene::{InterpolationKernel, LightBound};
 
 pub const WGSL: &str = include_str!("interpolate.wgsl");
 
-/// The pass's own WGSL for `neighbours` sparse points per vertex, the `kernel`'s weights and
-/// the `bound`.
-pub fn body(neighbours: u32, kernel: InterpolationKernel, bound: LightBound) -> String {
+/// The interpolation weights over a receiver's sparse neighbours, which the adaptive
+/// candidates' fill shares (`interpolation_weights.wgsl`).
+pub const WEIGHTS_WGSL: &str = include_str!("interpolation_weights.wgsl");
+
+/// The weights' constants for `neighbours` sparse points per receiver and the `kernel`, then
+/// [`WEIGHTS_WGSL`]: what a pass using `neighbourhood_at` prepends.
+pub fn weights_head(neighbours: u32, kernel: InterpolationKernel) -> String {
     let smooth = kernel == InterpolationKernel::Smooth;
-    let bounded = bound == LightBound::Gathered;
     format!(
         "const NEIGHBOURS: u32 = {neighbours}u;\nconst SMOOTH_KERNEL: bool = {smooth};\n\
-         const BOUNDED: bool = {bounded};\nconst PLANE_FALLOFF: f32 = {:?};\n\
-         const FACING_EPSILON: f32 = {:?};\nconst BOUND_WEIGHT_FLOOR: f32 = {:?};\n{WGSL}",
+         const PLANE_FALLOFF: f32 = {:?};\nconst FACING_EPSILON: f32 = {:?};\n{WEIGHTS_WGSL}",
         crate::twin::PLANE_FALLOFF,
         crate::twin::FACING_EPSILON,
+    )
+}
+
+/// The adaptive candidates' part of a vertex's neighbourhood (`adaptive_candidates.wgsl`).
+pub const CANDIDATES_WGSL: &str = include_str!("adaptive_candidates.wgsl");
+
+/// The pass's own WGSL for `neighbours` sparse points per vertex, the `kernel`'s weights and
+/// the `bound`; `base_points`: with adaptive candidates, how many points come before them
+/// ([`ADAPTIVE_PASS`]).
+pub fn body(neighbours: u32, kernel: InterpolationKernel, bound: LightBound, base_points: Option<u32>) -> String {
+    let bounded = bound == LightBound::Gathered;
+    let candidates = match base_points {
+        None => "const ROW: u32 = NEIGHBOURS;\n\
+                 fn adaptive_candidates(v: u32, nb: VertexNeighbourhood, d_max: f32) -> VertexNeighbourhood {\n    \
+                 return nb;\n}\n"
+            .to_owned(),
+        Some(base) => {
+            format!("const ROW: u32 = 2u * NEIGHBOURS;\nconst BASE_POINTS: u32 = {base}u;\n{CANDIDATES_WGSL}")
+        }
+    };
+    format!(
+        "{}\nconst BOUNDED: bool = {bounded};\nconst BOUND_WEIGHT_FLOOR: f32 = {:?};\n{candidates}\n{WGSL}",
+        weights_head(neighbours, kernel),
         crate::twin::BOUND_WEIGHT_FLOOR
     )
 }
@@ -54,7 +79,71 @@ pub const PASS: PassDesc = PassDesc {
     ],
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
-        let body = body(crate::scene::DEFAULT_NEIGHBOURS, InterpolationKernel::default(), LightBound::default());
+        let body = body(crate::scene::DEFAULT_NEIGHBOURS, InterpolationKernel::default(), LightBound::default(), None);
         PASS.source(&body, textured)
     },
 };
+
+/// [`PASS`] for a scene with adaptive candidates: every entry also reads each vertex's nearest
+/// candidates and which were chosen this frame (`adaptive_candidates.wgsl`).
+pub const ADAPTIVE_PASS: PassDesc = PassDesc {
+    bindings: &[
+        read("sparse_points"),
+        read("vertex_neighbours"),
+        read("sparse_diffuse"),
+        read_write("vertex_diffuse"),
+        read("sparse_glossy"),
+        read_write("vertex_glossy"),
+        read_write("vertex_centres"),
+        read("gathered_glossy"),
+        read_write("vertex_glossy_radiance"),
+        read("vertex_candidates"),
+        read("chosen"),
+    ],
+    entries: &[
+        Entry {
+            name: "main",
+            bindings: 11,
+            except: &["sparse_glossy", "vertex_glossy", "vertex_centres", "gathered_glossy", "vertex_glossy_radiance"],
+        },
+        Entry {
+            name: "main_glossy",
+            bindings: 11,
+            except: &["vertex_centres", "gathered_glossy", "vertex_glossy_radiance"],
+        },
+        Entry {
+            name: "centres",
+            bindings: 11,
+            except: &[
+                "sparse_diffuse",
+                "vertex_diffuse",
+                "sparse_glossy",
+                "vertex_glossy",
+                "gathered_glossy",
+                "vertex_glossy_radiance",
+            ],
+        },
+        Entry {
+            name: "main_glossy_radiance",
+            bindings: 11,
+            except: &["sparse_glossy", "vertex_glossy", "vertex_centres"],
+        },
+    ],
+    default_source: |textured| {
+        let neighbours = crate::scene::DEFAULT_NEIGHBOURS;
+        let body = body(neighbours, InterpolationKernel::default(), LightBound::default(), Some(64));
+        ADAPTIVE_PASS.source(&body, textured)
+    },
+    ..PASS
+};
+
+/// The interpolation pass for a scene with (`adaptive`) or without adaptive candidates.
+pub fn pass(adaptive: bool) -> &'static PassDesc {
+    if adaptive { &ADAPTIVE_PASS } else { &PASS }
+}
+
+/// The resources [`ADAPTIVE_PASS`] binds after [`PASS`]'s: `chosen` per candidate.
+pub fn adaptive_resources<'a>(scene: &'a crate::gpu::scene::GpuScene, chosen: &'a wgpu::Buffer) -> [Res<'a>; 2] {
+    let candidates = scene.vertex_candidates.as_ref().expect("a scene with adaptive candidates");
+    [buffer("vertex_candidates", candidates), buffer("chosen", chosen)]
+}

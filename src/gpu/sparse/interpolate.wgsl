@@ -8,8 +8,8 @@
 // diffuse light and the interpolated glossy sums instead of a glossy light. With the near field on, `centres` writes each vertex's near-field centre: the
 // mean of its neighbours' positions with the same weights (`twin::near_field::vertex_centre`),
 // so that the per-pixel near field leaves out of a pixel what its sparse points left in.
-// NEIGHBOURS, SMOOTH_KERNEL, BOUNDED, PLANE_FALLOFF and FACING_EPSILON are prepended
-// (`interpolate::body`). Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`.
+// NEIGHBOURS, SMOOTH_KERNEL, BOUNDED, PLANE_FALLOFF, FACING_EPSILON and the weights
+// (`interpolation_weights.wgsl`) are prepended (`interpolate::body`). Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`.
 
 @group(0) @binding(0) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(1) var<storage, read> vertex_neighbours: array<array<u32, NEIGHBOURS>>;
@@ -24,76 +24,29 @@
 @group(0) @binding(7) var<storage, read> gathered_glossy: array<Gathered>;
 @group(0) @binding(8) var<storage, read_write> vertex_glossy_radiance: array<vec4<f32>>;
 
-// `twin::paper_weight` and `twin::smooth_weight`.
-fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
-    if d_max <= 0.0 {
-        return 1.0;
-    }
-    if !SMOOTH_KERNEL {
-        return max(1.0 - length(offset) / d_max, 0.0);
-    }
-    let q = max(1.0 - dot(offset, offset) / (d_max * d_max), 0.0);
-    let plane = clamp(1.0 + dot(n_v, offset) / (PLANE_FALLOFF * d_max), 0.0, 1.0);
-    return q * q * plane;
-}
-
-// `twin::facing`: cosines up to FACING_EPSILON count as facing away, so that perpendicular
-// surfaces weigh exactly nothing however the scene is turned.
-fn facing(n_v: vec3<f32>, n: vec3<f32>) -> f32 {
-    return clamp((dot(n_v, n) - FACING_EPSILON) / (1.0 - FACING_EPSILON), 0.0, 1.0);
-}
-
-fn interpolation_weights(n_v: vec3<f32>, offsets: array<vec3<f32>, NEIGHBOURS>, normals: array<vec3<f32>, NEIGHBOURS>, count: u32) -> array<f32, NEIGHBOURS> {
-    var d_max = 0.0;
-    for (var j = 0u; j < count; j++) {
-        d_max = max(d_max, length(offsets[j]));
-    }
-    var w: array<f32, NEIGHBOURS>;
-    var total = 0.0;
-    for (var j = 0u; j < count; j++) {
-        w[j] = spatial_weight(n_v, offsets[j], d_max) * facing(n_v, normals[j]);
-        total += w[j];
-    }
-    if total <= 0.0 && count > 0u {
-        var fallback = 0u;
-        for (var j = count; j > 0u; j--) {
-            if dot(n_v, normals[j - 1u]) > FACING_EPSILON {
-                fallback = j - 1u;
-            }
-        }
-        w[fallback] = 1.0;
-    }
-    return w;
-}
-
-struct Neighbourhood {
-    ids: array<u32, NEIGHBOURS>,
-    weights: array<f32, NEIGHBOURS>,
+// A vertex's weighted sparse points: its NEIGHBOURS nearest points gathered every frame, then,
+// with adaptive candidates (`adaptive_candidates`, prepended by `interpolate::body`), those of
+// its nearest candidates chosen this frame. ROW (prepended) holds both.
+struct VertexNeighbourhood {
+    ids: array<u32, ROW>,
+    weights: array<f32, ROW>,
     count: u32,
     total: f32,
 }
 
-fn neighbourhood(v: u32) -> Neighbourhood {
+fn neighbourhood(v: u32) -> VertexNeighbourhood {
     let vertex = vertices[v];
-    let ids = vertex_neighbours[v];
-    var offsets: array<vec3<f32>, NEIGHBOURS>;
-    var normals: array<vec3<f32>, NEIGHBOURS>;
-    var count = 0u;
-    for (var j = 0u; j < NEIGHBOURS; j++) {
-        if ids[j] == NO_NEIGHBOUR {
-            break;
-        }
-        let p = sparse_points[ids[j]];
-        offsets[j] = p.position - vertex.position;
-        normals[j] = p.normal;
-        count += 1u;
+    let nb = neighbourhood_at(vertex.position, vertex.normal, vertex_neighbours[v]);
+    var out: VertexNeighbourhood;
+    var d_max = 0.0;
+    for (var j = 0u; j < nb.count; j++) {
+        out.ids[j] = nb.ids[j];
+        out.weights[j] = nb.weights[j];
+        d_max = max(d_max, distance(sparse_points[nb.ids[j]].position, vertex.position));
     }
-    let w = interpolation_weights(vertex.normal, offsets, normals, count);
-    var total = 0.0;
-    for (var j = 0u; j < count; j++) {
-        total += w[j];
-    }
-    return Neighbourhood(ids, w, count, total);
+    out.count = nb.count;
+    out.total = nb.total;
+    return adaptive_candidates(v, out, d_max);
 }
 
 // The weighted mean of the lights `l` of the neighbourhood and, when BOUNDED, the largest
@@ -108,7 +61,7 @@ fn accumulate(out: PointLight, l: PointLight, weight: f32, total: f32) -> PointL
     return r;
 }
 
-fn interpolate_diffuse(nb: Neighbourhood) -> PointLight {
+fn interpolate_diffuse(nb: VertexNeighbourhood) -> PointLight {
     var out = PointLight(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
     if nb.total <= 0.0 {
         return out;
@@ -119,7 +72,7 @@ fn interpolate_diffuse(nb: Neighbourhood) -> PointLight {
     return out;
 }
 
-fn interpolate_glossy(nb: Neighbourhood) -> PointLight {
+fn interpolate_glossy(nb: VertexNeighbourhood) -> PointLight {
     var out = PointLight(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
     if nb.total <= 0.0 {
         return out;

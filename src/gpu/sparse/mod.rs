@@ -2,6 +2,7 @@
 //! the visibility mode (`gpu::visibility`), renormalise, interpolate per vertex, shade per
 //! pixel.
 
+pub mod adaptive;
 pub mod gather;
 pub mod interpolate;
 pub mod near_field;
@@ -16,6 +17,7 @@ use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::{self, Mode, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::scene::{GlossyInterpolation, InterpolationKernel, LightBound};
+use adaptive::Adaptive;
 use gather::{Gather, GatherLobes};
 use near_field::NearField;
 
@@ -52,6 +54,9 @@ pub struct SparseMethod {
     /// Per vertex, with `glossy_interpolation: "radiance"` only: the interpolated glossy sums
     /// (`vec4`, `w` unused). The sparse and vertex lights then have no glossy lobe.
     pub vertex_glossy_radiance: Option<wgpu::Buffer>,
+    /// Only for a scene with adaptive candidates (`settings.sparse.adaptive`): their choice and
+    /// fill, and the gather at the chosen ones.
+    pub adaptive: Option<(Adaptive, Gather)>,
 }
 
 impl SparseMethod {
@@ -64,7 +69,10 @@ impl SparseMethod {
             Some(Mode::Groups(g)) => Some(g.table().groups),
             _ => None,
         };
-        let interpolate_body = interpolate::body(scene.flat.neighbours, settings.kernel, settings.bound);
+        let adaptive_points = (scene.flat.candidates > 0).then(|| scene.flat.base_sparse_count());
+        let interpolate_body =
+            interpolate::body(scene.flat.neighbours, settings.kernel, settings.bound, adaptive_points);
+        let interpolate_pass = interpolate::pass(adaptive_points.is_some());
         let lobes = match (glossy, settings.glossy_interpolation) {
             (false, _) => GatherLobes::Diffuse,
             (true, GlossyInterpolation::Lights) => GatherLobes::GlossyLights,
@@ -76,23 +84,32 @@ impl SparseMethod {
         let (interpolate, shade) = if radiance {
             let entry = "main_glossy_radiance";
             (
-                Kernels::entry(gpu, scene, &interpolate::PASS, &interpolate_body, interpolate::PASS.entry(entry))?,
+                Kernels::entry(gpu, scene, interpolate_pass, &interpolate_body, interpolate_pass.entry(entry))?,
                 Kernels::entry(gpu, scene, &shade::PASS, shade::WGSL, shade::PASS.entry(entry))?,
             )
         } else {
             (
-                Kernels::lobes(gpu, scene, &interpolate::PASS, &interpolate_body, glossy)?,
+                Kernels::lobes(gpu, scene, interpolate_pass, &interpolate_body, glossy)?,
                 Kernels::lobes(gpu, scene, &shade::PASS, shade::WGSL, glossy)?,
             )
         };
+        let adaptive = (scene.flat.candidates > 0)
+            .then(|| -> Result<_, GpuError> {
+                Ok((
+                    Adaptive::new(gpu, scene, settings.kernel, glossy)?,
+                    Gather::chosen(gpu, scene, lobes, groups, settings.near_radius)?,
+                ))
+            })
+            .transpose()?;
         Ok(Self {
+            adaptive,
             gather: Gather::new(gpu, scene, lobes, groups, settings.near_radius)?,
             visibility,
             renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy_lights)?,
             interpolate,
             shade,
             near_field: (settings.near_radius > 0.0)
-                .then(|| NearField::new(gpu, scene, glossy, settings.near_radius, &interpolate_body))
+                .then(|| NearField::new(gpu, scene, glossy, settings.near_radius, interpolate_pass, &interpolate_body))
                 .transpose()?,
             gathered: Lobes::new::<RawGathered>(gpu, "gather.gathered", n, glossy)?,
             sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy_lights)?,
@@ -111,6 +128,9 @@ impl SparseMethod {
         if let Some(n) = &mut self.near_field {
             n.fit(gpu, scene, max_vals)?;
         }
+        if let Some((_, gather)) = &mut self.adaptive {
+            gather.fit(gpu, scene, max_vals)?;
+        }
         self.gather.fit(gpu, scene, max_vals)
     }
 }
@@ -122,9 +142,13 @@ impl Technique for SparseMethod {
             stages.extend(g.stages());
         }
         stages.push(gather::PASS.label);
+        if self.adaptive.is_some() {
+            stages.extend([adaptive::SELECT_STAGE, adaptive::GATHER_STAGE]);
+        }
         if let Some(Mode::Scale(v)) = &self.visibility {
             stages.push(v.stage());
         }
+
         stages.extend([renormalise::PASS.label, interpolate::PASS.label, shade::PASS.label]);
         if let Some(n) = &self.near_field {
             stages.extend(n.stages());
@@ -144,9 +168,17 @@ impl Technique for SparseMethod {
         rec.stage(gather::PASS.label, |e, s| {
             self.gather.record(gpu, e, scene, vals, &self.gathered, table.as_ref(), s)
         })?;
+        if let Some((adaptive, gather)) = &self.adaptive {
+            adaptive.record_select(gpu, scene, &self.gathered, rec)?;
+            let chosen = adaptive.chosen_list();
+            rec.stage(adaptive::GATHER_STAGE, |e, s| {
+                gather.record_chosen(gpu, e, scene, vals, &self.gathered, table.as_ref(), &chosen, s)
+            })?;
+        }
         if let Some(Mode::Scale(v)) = &self.visibility {
             rec.stage(v.stage(), |e, s| v.record(gpu, e, scene, &self.gathered, s))?;
         }
+
         let (points, vertices) = (scene.flat.sparse_count(), scene.flat.vertex_count());
         // With the glossy radiance interpolated, the point lights have no glossy lobe, so
         // `with_lobes` binds the diffuse buffers alone (the gathered glossy sums go to the
@@ -170,6 +202,8 @@ impl Technique for SparseMethod {
         if let Some((gathered, out)) = radiance {
             resources.extend([buffer("gathered_glossy", gathered), buffer("vertex_glossy_radiance", out)]);
         }
+        let chosen = self.adaptive.as_ref().map(|(a, _)| &a.chosen);
+        resources.extend(chosen.into_iter().flat_map(|c| interpolate::adaptive_resources(scene, c)));
         rec.stage(interpolate::PASS.label, |e, s| {
             self.interpolate.run(gpu, e, scene, &resources, [vertices, 1, 1], s)
         })?;
@@ -182,7 +216,7 @@ impl Technique for SparseMethod {
         let pixels = [camera.view.width, camera.view.height, 1];
         rec.stage(shade::PASS.label, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))?;
         match &self.near_field {
-            Some(n) => n.record(gpu, frame, rec),
+            Some(n) => n.record(gpu, frame, chosen, rec),
             None => Ok(()),
         }
     }

@@ -127,10 +127,11 @@ impl NearField {
         scene: &GpuScene,
         glossy: bool,
         radius: f32,
+        interpolate_pass: &'static PassDesc,
         interpolate_body: &str,
     ) -> Result<Self, GpuError> {
         let textured = scene.textured();
-        let desc = &interpolate::PASS;
+        let desc = interpolate_pass;
         let module = module_from_source(gpu, desc.label, desc.source(interpolate_body, textured))?;
         let centres = Kernel::build(gpu, scene, desc, &module, desc.entry("centres"), &[], desc.workgroup)?;
         let vertices = scene.flat.vertices.len().max(1);
@@ -165,7 +166,15 @@ impl NearField {
 
     /// Place every vertex's centre and sort the frame's VALs into the grid, then add the near
     /// field to every covered pixel of the camera's `indirect`.
-    pub fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
+    /// `chosen`: with adaptive candidates, which were chosen this frame (the centres weigh
+    /// them as the interpolation does).
+    pub fn record(
+        &self,
+        gpu: &Gpu,
+        frame: &Frame<'_>,
+        chosen: Option<&wgpu::Buffer>,
+        rec: &mut Recorder<'_>,
+    ) -> Result<(), GpuError> {
         let (scene, g) = (frame.scene, &self.grid);
         let (vals, val_count) = (|| buffer("vals", &frame.vals.buffer), || buffer("val_count", &frame.vals.count));
         let (counts, starts) = (|| buffer("grid_counts", &g.counts), || buffer("grid_starts", &g.starts));
@@ -173,14 +182,13 @@ impl NearField {
         let count = self.count.bind(gpu, &[vals(), val_count(), counts(), starts(), slots()]);
         let scan = self.scan.bind(gpu, &[counts(), starts()]);
         let scatter = self.scatter.bind(gpu, &[vals(), val_count(), starts(), slots(), buffer("grid_vals", &g.vals)]);
-        let centres = self.centres.bind(
-            gpu,
-            &[
-                buffer("sparse_points", &scene.sparse_points),
-                buffer("vertex_neighbours", &scene.vertex_neighbours),
-                buffer("vertex_centres", &self.vertex_centres),
-            ],
-        );
+        let mut centres = vec![
+            buffer("sparse_points", &scene.sparse_points),
+            buffer("vertex_neighbours", &scene.vertex_neighbours),
+            buffer("vertex_centres", &self.vertex_centres),
+        ];
+        centres.extend(chosen.into_iter().flat_map(|c| interpolate::adaptive_resources(scene, c)));
+        let centres = self.centres.bind(gpu, &centres);
         let n = frame.vals.capacity.min(g.capacity);
         rec.stage(GRID_STAGE, |e, s| {
             e.clear_buffer(&g.counts, 0, None);

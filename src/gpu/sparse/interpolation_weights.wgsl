@@ -1,0 +1,78 @@
+// Interpolation weights over a receiver's nearest sparse points (DESIGN.md §4 step 4), shared by
+// the per-vertex interpolation (`interpolate.wgsl`) and the adaptive candidates' fill
+// (`adaptive.wgsl`), which both declare `sparse_points`. NEIGHBOURS, SMOOTH_KERNEL,
+// PLANE_FALLOFF and FACING_EPSILON are prepended (`interpolate::weights_head`). Rust twins:
+// `twin::interpolation_weights`, `twin::paper_weight`, `twin::smooth_weight`, `twin::facing`.
+
+// `twin::paper_weight` and `twin::smooth_weight`.
+fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
+    if d_max <= 0.0 {
+        return 1.0;
+    }
+    if !SMOOTH_KERNEL {
+        return max(1.0 - length(offset) / d_max, 0.0);
+    }
+    let q = max(1.0 - dot(offset, offset) / (d_max * d_max), 0.0);
+    let plane = clamp(1.0 + dot(n_v, offset) / (PLANE_FALLOFF * d_max), 0.0, 1.0);
+    return q * q * plane;
+}
+
+// `twin::facing`: cosines up to FACING_EPSILON count as facing away, so that perpendicular
+// surfaces weigh exactly nothing however the scene is turned.
+fn facing(n_v: vec3<f32>, n: vec3<f32>) -> f32 {
+    return clamp((dot(n_v, n) - FACING_EPSILON) / (1.0 - FACING_EPSILON), 0.0, 1.0);
+}
+
+fn interpolation_weights(n_v: vec3<f32>, offsets: array<vec3<f32>, NEIGHBOURS>, normals: array<vec3<f32>, NEIGHBOURS>, count: u32) -> array<f32, NEIGHBOURS> {
+    var d_max = 0.0;
+    for (var j = 0u; j < count; j++) {
+        d_max = max(d_max, length(offsets[j]));
+    }
+    var w: array<f32, NEIGHBOURS>;
+    var total = 0.0;
+    for (var j = 0u; j < count; j++) {
+        w[j] = spatial_weight(n_v, offsets[j], d_max) * facing(n_v, normals[j]);
+        total += w[j];
+    }
+    if total <= 0.0 && count > 0u {
+        var fallback = 0u;
+        for (var j = count; j > 0u; j--) {
+            if dot(n_v, normals[j - 1u]) > FACING_EPSILON {
+                fallback = j - 1u;
+            }
+        }
+        w[fallback] = 1.0;
+    }
+    return w;
+}
+
+struct Neighbourhood {
+    ids: array<u32, NEIGHBOURS>,
+    weights: array<f32, NEIGHBOURS>,
+    count: u32,
+    total: f32,
+}
+
+// The weights of the sparse points `ids` (NO_NEIGHBOUR-terminated) for a receiver at `position`
+// with unit normal `normal`: a vertex, or an adaptive candidate taking its neighbours' light.
+fn neighbourhood_at(position: vec3<f32>, normal: vec3<f32>, ids: array<u32, NEIGHBOURS>) -> Neighbourhood {
+    var offsets: array<vec3<f32>, NEIGHBOURS>;
+    var normals: array<vec3<f32>, NEIGHBOURS>;
+    var count = 0u;
+    for (var j = 0u; j < NEIGHBOURS; j++) {
+        if ids[j] == NO_NEIGHBOUR {
+            break;
+        }
+        let p = sparse_points[ids[j]];
+        offsets[j] = p.position - position;
+        normals[j] = p.normal;
+        count += 1u;
+    }
+    let w = interpolation_weights(normal, offsets, normals, count);
+    var total = 0.0;
+    for (var j = 0u; j < count; j++) {
+        total += w[j];
+    }
+    return Neighbourhood(ids, w, count, total);
+}
+
