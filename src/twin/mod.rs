@@ -73,6 +73,24 @@ pub fn phong_lobe(cos_r: f32, k: f32) -> f32 {
     }
 }
 
+/// Log2 of the smallest lobe the gather sums ([`gather_lobe`]).
+pub const GATHER_LOBE_CUTOFF_LOG2: f32 = -64.0;
+
+/// The lobe as the gather sums it (`gather_lobe` in `gather.wgsl`): [`phong_lobe`], but 0
+/// where it is below `2^GATHER_LOBE_CUTOFF_LOG2`. That leaves out of a point's glossy sum less
+/// than 2^-64 of its irradiance, far under float rounding, and keeps the GPU's products of a
+/// tiny lobe with a small irradiance out of the subnormal range (slow on CPU adapters).
+pub fn gather_lobe(cos_r: f32, k: f32) -> f32 {
+    if k <= 0.0 {
+        1.0
+    } else if cos_r <= 0.0 {
+        0.0
+    } else {
+        let x = k * cos_r.log2();
+        if x < GATHER_LOBE_CUTOFF_LOG2 { 0.0 } else { x.exp2() }
+    }
+}
+
 /// Normalised modified-Phong specular factor `(k + 2) / (2 pi)` (1/sr).
 pub fn phong_normalisation(k: f32) -> f32 {
     (k + 2.0) / (2.0 * PI)
@@ -159,7 +177,7 @@ pub fn gather_far_field(x: Vec3, n_x: Vec3, k: f32, eye: Vec3, vals: &[Val], nea
         let far = 1.0 - near_field_weight(val.position.distance(x), near_radius);
         let f = geo.weight * geo.cos_receiver * far;
         let e_j = val.flux * f;
-        let lobe = phong_lobe(mirror(geo.direction, n_x).dot(w_o), k);
+        let lobe = gather_lobe(mirror(geo.direction, n_x).dot(w_o), k);
         let y = luminance(val.flux) * f;
         e += e_j;
         g += e_j * lobe;

@@ -209,6 +209,30 @@ fn phong_lobe_is_defined_everywhere() {
 }
 
 #[test]
+fn gather_lobe_is_phong_lobe_down_to_its_cutoff() {
+    assert_eq!(gather_lobe(0.0, 0.0), 1.0);
+    assert_eq!(gather_lobe(-0.5, 0.0), 1.0);
+    assert_eq!(gather_lobe(-0.5, 3.0), 0.0);
+    assert_eq!(gather_lobe(0.0, 3.0), 0.0);
+    assert_eq!(gather_lobe(1.0, 1e4), 1.0);
+    let cutoff = GATHER_LOBE_CUTOFF_LOG2.exp2();
+    for k in [0.5f32, 1.0, 10.0, 30.0, 60.0, 1e3, 1e4] {
+        for i in 1..=1000 {
+            let c = i as f32 / 1000.0;
+            let (exact, gathered) = (phong_lobe(c, k), gather_lobe(c, k));
+            if gathered == 0.0 {
+                assert!(exact < 2.0 * cutoff, "k {k} c {c}: left out {exact}");
+            } else {
+                assert_eq!(gathered, exact, "k {k} c {c}");
+            }
+        }
+    }
+    // A lobe just above the cutoff is kept, one just below is not.
+    assert!(gather_lobe(0.5, 63.9) > 0.0);
+    assert_eq!(gather_lobe(0.5, 64.1), 0.0);
+}
+
+#[test]
 fn spot_cone_flux_matches_closed_form_for_a_hard_edge() {
     let spot = SpotLight {
         position: Vec3::ZERO,

@@ -82,7 +82,7 @@ fn add_val(s: Sums, r: Receiver, val: Val, val_index: u32, glossy: bool) -> Sums
     if glossy {
         // dot(mirror(d, n), w_o) = 2 (n.d)(n.w_o) - d.w_o, with n.d the clamped
         // `cos_receiver`: where it clamps, `f` is 0 and so is whatever the lobe multiplies.
-        let lobe = phong_lobe(2.0 * geo.cos_receiver * r.cos_o - dot(geo.direction, r.w_o), p.exponent);
+        let lobe = gather_lobe(2.0 * geo.cos_receiver * r.cos_o - dot(geo.direction, r.w_o), p.exponent);
         out.g += e_j * lobe;
         // The lobe-weighted mean position only renormalises the paper's glossy lights
         // (GLOSSY_MEAN, prepended); the interpolated glossy radiance needs the sum alone.
@@ -93,6 +93,22 @@ fn add_val(s: Sums, r: Receiver, val: Val, val_index: u32, glossy: bool) -> Sums
         }
     }
     return out;
+}
+
+// `phong_lobe(cos_r, k)`, but 0 where it is below 2^GATHER_LOBE_CUTOFF_LOG2 (twin:
+// `twin::gather_lobe`). What that leaves out of a point's glossy sum is below 2^-64 of its
+// irradiance `E` (the same pairs' `e_j`), far under float rounding; what it saves is the
+// products of a tiny lobe with a small `e_j` that fall below f32's normal range: x86 runs
+// arithmetic on subnormal floats through slow microcode, and on llvmpipe those products
+// made up much of the glossy gather's extra time (README "Gather variants"). Written with
+// selects: llvmpipe runs both sides of a branch anyway (`log2` of `cos_r <= 0`, whatever it
+// gives, is selected away).
+const GATHER_LOBE_CUTOFF_LOG2: f32 = -64.0;
+
+fn gather_lobe(cos_r: f32, k: f32) -> f32 {
+    let x = k * log2(cos_r);
+    let lobe = select(exp2(x), 0.0, cos_r <= 0.0 || x < GATHER_LOBE_CUTOFF_LOG2);
+    return select(lobe, 1.0, k <= 0.0);
 }
 
 // The sums of this dispatch's VALs at the points of slots [first, first + RECEIVERS).
