@@ -22,8 +22,9 @@ use crate::gpu::visibility::VisibilitySettings;
 use crate::gpu::{Gpu, GpuError, MemoryInUse};
 use crate::renderer::{Method, Rendered, Renderer, stage};
 use crate::scene::{
-    ClusterSettings, GlossyInterpolation, IsmSettings, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion,
-    RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError, ShadowMapSource, SoftShadows,
+    ClusterSettings, GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, MAX_CLUSTERS,
+    MAX_SPARSE_POINTS, Occlusion, RSM_RESOLUTION_RANGE, Scene, SceneDescription, SceneError, ShadowMapSource,
+    SoftShadows,
 };
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -66,6 +67,10 @@ pub struct Config {
     /// `settings.sparse.adaptive` in hundredths (adaptive points per 100 sparse points);
     /// `None`: the scene's.
     pub adaptive_percent: Option<u32>,
+    /// `settings.sparse.kernel`, `bound` and `subdivision` (whole spacings); `None`: the scene's.
+    pub kernel: Option<InterpolationKernel>,
+    pub bound: Option<LightBound>,
+    pub subdivision: Option<u32>,
     /// RSM side R: at most R² VALs (only lit texels become VALs).
     pub rsm_resolution: u32,
     pub occlusion: Occlusion,
@@ -122,6 +127,22 @@ fn soft_name(s: SoftShadows) -> &'static str {
     }
 }
 
+/// `kernel`'s name in settings, CSV and labels.
+fn kernel_name(k: InterpolationKernel) -> &'static str {
+    match k {
+        InterpolationKernel::Paper => "paper",
+        InterpolationKernel::Smooth => "smooth",
+    }
+}
+
+/// `bound`'s name in settings, CSV and labels.
+fn bound_name(b: LightBound) -> &'static str {
+    match b {
+        LightBound::Off => "off",
+        LightBound::Gathered => "gathered",
+    }
+}
+
 /// `glossy_interpolation`'s name in settings, CSV and labels.
 fn glossy_interpolation_name(g: GlossyInterpolation) -> &'static str {
     match g {
@@ -168,6 +189,9 @@ pub struct Sweep {
     pub glossy_interpolation: Option<Vec<GlossyInterpolation>>,
     /// `settings.sparse.adaptive`, in hundredths.
     pub adaptive: Option<Vec<u32>>,
+    pub kernel: Option<Vec<InterpolationKernel>>,
+    pub bound: Option<Vec<LightBound>>,
+    pub subdivision: Option<Vec<u32>>,
     pub rsm_resolution: Option<Vec<u32>>,
     pub occlusion: Option<Vec<Occlusion>>,
     pub glossy: Option<Vec<bool>>,
@@ -191,6 +215,9 @@ pub const AXES: &[&str] = &[
     "near_field",
     "glossy_interpolation",
     "adaptive",
+    "kernel",
+    "bound",
+    "subdivision",
     "rsm_resolution",
     "occlusion",
     "glossy",
@@ -283,6 +310,21 @@ impl Sweep {
                     duplicate(sweep.adaptive.is_some())?;
                     sweep.adaptive = Some(parse_each(&flag, &values, hundredths)?);
                 }
+                "kernel" => {
+                    duplicate(sweep.kernel.is_some())?;
+                    let all = [InterpolationKernel::Paper, InterpolationKernel::Smooth];
+                    sweep.kernel = Some(parse_each(&flag, &values, |v| named(v, &all, kernel_name))?);
+                }
+                "bound" => {
+                    duplicate(sweep.bound.is_some())?;
+                    let all = [LightBound::Off, LightBound::Gathered];
+                    sweep.bound = Some(parse_each(&flag, &values, |v| named(v, &all, bound_name))?);
+                }
+                "subdivision" => {
+                    duplicate(sweep.subdivision.is_some())?;
+                    let (lo, hi) = crate::scene::SUBDIVISION_RANGE;
+                    sweep.subdivision = Some(parse_each(&flag, &values, |v| int_in(v, lo as u32, hi as u32))?);
+                }
                 "glossy_interpolation" => {
                     duplicate(sweep.glossy_interpolation.is_some())?;
                     let all = [GlossyInterpolation::Lights, GlossyInterpolation::Radiance];
@@ -336,10 +378,17 @@ impl Sweep {
                 .sparse_points
                 .clone()
                 .map_or(vec![base.sparse_points_per_mesh], |v| v.into_iter().map(Some).collect());
-            for (sparse, adaptive_percent) in sparse_values
+            let interpolation: Vec<_> = opts(&self.kernel, base.kernel)
+                .into_iter()
+                .flat_map(|k| opts(&self.bound, base.bound).into_iter().map(move |b| (k, b)))
+                .flat_map(|(k, b)| opts(&self.subdivision, base.subdivision).into_iter().map(move |d| (k, b, d)))
+                .collect();
+            let placements: Vec<_> = sparse_values
                 .into_iter()
                 .flat_map(|n| opts(&self.adaptive, base.adaptive_percent).into_iter().map(move |a| (n, a)))
-            {
+                .flat_map(|(n, a)| interpolation.iter().map(move |&(k, b, d)| (n, a, k, b, d)))
+                .collect();
+            for (sparse, adaptive_percent, kernel, bound, subdivision) in placements {
                 for (&neighbours, near_field) in neighbours_values
                     .iter()
                     .flat_map(|k| opts(&self.near_field, base.near_field).into_iter().map(move |n| (k, n)))
@@ -356,6 +405,9 @@ impl Sweep {
                                         let c = Config {
                                             sparse_points_per_mesh: sparse,
                                             adaptive_percent,
+                                            kernel,
+                                            bound,
+                                            subdivision,
                                             neighbours,
                                             near_field,
                                             glossy_interpolation,
@@ -397,6 +449,15 @@ impl Sweep {
         }
         for &v in self.adaptive.iter().flatten() {
             push(Config { adaptive_percent: Some(v), ..*base });
+        }
+        for &v in self.kernel.iter().flatten() {
+            push(Config { kernel: Some(v), ..*base });
+        }
+        for &v in self.bound.iter().flatten() {
+            push(Config { bound: Some(v), ..*base });
+        }
+        for &v in self.subdivision.iter().flatten() {
+            push(Config { subdivision: Some(v), ..*base });
         }
         for &v in self.rsm_resolution.iter().flatten() {
             push(Config { rsm_resolution: v, ..*base });
@@ -582,6 +643,9 @@ impl BenchOptions {
             near_field: None,
             glossy_interpolation: None,
             adaptive_percent: None,
+            kernel: None,
+            bound: None,
+            subdivision: None,
             rsm_resolution: scene.settings.rsm_resolution,
             occlusion: scene.settings.occlusion,
             glossy: scene.settings.glossy,
@@ -742,11 +806,15 @@ pub const GPU_MEMORY_NOTE: &str = "live device memory of every buffer and textur
 
 /// What a renderer is built for: sparse points per mesh, RSM resolution, glossy.
 /// What is decided when the scene loads: sparse points per mesh, neighbours, adaptive
-/// hundredths.
-type Placement = (Option<u32>, Option<u32>, Option<u32>);
+/// hundredths, subdivision.
+type Placement = (Option<u32>, Option<u32>, Option<u32>, Option<u32>);
 
-/// What needs a new renderer: the placement, near field, glossy interpolation, RSM size, glossy.
-type RendererKey = (Placement, Option<u32>, Option<GlossyInterpolation>, u32, bool);
+/// The sparse method's settings that need a new renderer but not a new scene: near field,
+/// glossy interpolation, kernel, bound.
+type Shading = (Option<u32>, Option<GlossyInterpolation>, Option<InterpolationKernel>, Option<LightBound>);
+
+/// What needs a new renderer: the placement, the shading, RSM size, glossy.
+type RendererKey = (Placement, Shading, u32, bool);
 
 /// Run the sweep and write `results.json`, `results.csv` and (with `plots`) the plots into
 /// `options.out`. `progress` is told each configuration as it starts.
@@ -888,9 +956,8 @@ fn run_job(
     let mut groups: Vec<(RendererKey, Vec<Config>)> = Vec::new();
     for c in &job.configs {
         let key = (
-            (c.sparse_points_per_mesh, c.neighbours, c.adaptive_percent),
-            c.near_field,
-            c.glossy_interpolation,
+            (c.sparse_points_per_mesh, c.neighbours, c.adaptive_percent, c.subdivision),
+            (c.near_field, c.glossy_interpolation, c.kernel, c.bound),
             c.rsm_resolution,
             c.glossy,
         );
@@ -902,8 +969,9 @@ fn run_job(
     // Scenes by what is decided at load: sparse points, neighbours, adaptive candidates.
     let mut scenes: HashMap<Placement, Scene> = HashMap::new();
     let mut base_scene = None;
-    for ((placement, near_field, glossy_interpolation, rsm, glossy), group) in groups {
-        let (sparse, neighbours, adaptive) = placement;
+    for ((placement, shading, rsm, glossy), group) in groups {
+        let (sparse, neighbours, adaptive, subdivision) = placement;
+        let (near_field, glossy_interpolation, kernel, bound) = shading;
         let mut scene = match scenes.get(&placement) {
             Some(s) => s.clone(),
             None => {
@@ -917,6 +985,9 @@ fn run_job(
                 if let Some(a) = adaptive {
                     d.settings.sparse.adaptive = a as f32 / 100.0;
                 }
+                if let Some(n) = subdivision {
+                    d.settings.sparse.subdivision = n as f32;
+                }
                 let s = Scene::from_description(&d, base_dir).map_err(scene_error)?;
                 scenes.insert(placement, s.clone());
                 s
@@ -929,6 +1000,12 @@ fn run_job(
         }
         if let Some(g) = glossy_interpolation {
             scene.settings.sparse.glossy_interpolation = g;
+        }
+        if let Some(k) = kernel {
+            scene.settings.sparse.kernel = k;
+        }
+        if let Some(b) = bound {
+            scene.settings.sparse.bound = b;
         }
         scene.settings.occlusion = group[0].occlusion;
         base_scene.get_or_insert_with(|| scene.clone());
@@ -1051,10 +1128,13 @@ pub fn describe(c: &Config) -> String {
     let neighbours = c.neighbours.map_or(String::new(), |k| format!(", {k} neighbours"));
     let near = c.near_field.map_or(String::new(), |n| format!(", near field {n}"));
     let adaptive = c.adaptive_percent.map_or(String::new(), |a| format!(", adaptive {}", f64::from(a) / 100.0));
+    let kernel = c.kernel.map_or(String::new(), |k| format!(", kernel {}", kernel_name(k)));
+    let bound = c.bound.map_or(String::new(), |b| format!(", bound {}", bound_name(b)));
+    let subdivision = c.subdivision.map_or(String::new(), |d| format!(", subdivision {d}"));
     let glossy_interpolation =
         c.glossy_interpolation.map_or(String::new(), |g| format!(", glossy {}", glossy_interpolation_name(g)));
     format!(
-        "sparse/mesh {sparse}{neighbours}{near}{adaptive}{glossy_interpolation}, R {}, occlusion {}, glossy {}, {}x{}",
+        "sparse/mesh {sparse}{neighbours}{near}{adaptive}{kernel}{bound}{subdivision}{glossy_interpolation}, R {}, occlusion {}, glossy {}, {}x{}",
         c.rsm_resolution,
         match c.occlusion {
             Occlusion::Off => "off",
@@ -1194,6 +1274,9 @@ pub fn csv(results: &BenchResults) -> String {
         "near_field",
         "glossy_interpolation",
         "adaptive",
+        "kernel",
+        "bound",
+        "subdivision",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -1250,6 +1333,9 @@ pub fn csv(results: &BenchResults) -> String {
             ism(c.near_field),
             c.glossy_interpolation.map_or(String::new(), |g| glossy_interpolation_name(g).to_owned()),
             c.adaptive_percent.map_or(String::new(), |a| (f64::from(a) / 100.0).to_string()),
+            c.kernel.map_or(String::new(), |k| kernel_name(k).to_owned()),
+            c.bound.map_or(String::new(), |b| bound_name(b).to_owned()),
+            ism(c.subdivision),
         ]);
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
@@ -1271,6 +1357,9 @@ mod tests {
         near_field: None,
         glossy_interpolation: None,
         adaptive_percent: None,
+        kernel: None,
+        bound: None,
+        subdivision: None,
         rsm_resolution: 64,
         occlusion: Occlusion::Off,
         glossy: true,
@@ -1374,6 +1463,25 @@ mod tests {
         for e in ["adaptive=1.5", "adaptive=0.125", "adaptive=x"] {
             let e = Sweep::parse(&args(&[e])).unwrap_err().to_string();
             assert!(e.contains("adaptive"), "{e}");
+        }
+    }
+
+    /// The interpolation's axes: `kernel` and `bound` by name, `subdivision` in whole spacings
+    /// within its range; in the grid one configuration per combination.
+    #[test]
+    fn kernel_bound_and_subdivision_axes_measure_each_value() {
+        let s = Sweep::parse(&args(&["kernel=paper,smooth", "bound=off,gathered", "subdivision=1,2"])).unwrap();
+        let one = s.configs(&BASE, false);
+        assert_eq!(one.len(), 7);
+        assert_eq!(one[1].kernel, Some(InterpolationKernel::Paper));
+        assert_eq!(one[4].bound, Some(LightBound::Gathered));
+        assert_eq!(one[6].subdivision, Some(2));
+        assert_eq!(s.configs(&BASE, true).len(), 8);
+        for (flag, wanted) in
+            [("kernel=linear", "`paper` or `smooth`"), ("bound=on", "`off` or `gathered`"), ("subdivision=0", "1..=16")]
+        {
+            let e = Sweep::parse(&args(&[flag])).unwrap_err().to_string();
+            assert!(e.contains(flag.split('=').next().unwrap()) && e.contains(wanted), "{e}");
         }
     }
 

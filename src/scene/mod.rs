@@ -53,9 +53,9 @@ pub use description::{
     LightEntry, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_DIRECT_LIGHTS, MAX_ISM_POINTS,
     MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MAX_SPARSE_POINTS,
     MaterialDescription, MeshDescription, NEAR_FIELD_RANGE, Occlusion, OcclusionRule, OcclusionSetting,
-    PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SecondBounceSettings,
-    SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription, frame_val_parts,
-    parse_json,
+    PointLightDescription, RSM_RESOLUTION_RANGE, SUBDIVISION_RANGE, ScaleDescription, SceneDescription,
+    SecondBounceSettings, SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription,
+    frame_val_parts, parse_json,
 };
 pub use error::SceneError;
 pub use texture::MAX_TEXTURE_SIDE;
