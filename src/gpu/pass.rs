@@ -363,10 +363,35 @@ impl Kernels {
         invocations: [u32; 3],
         span: Option<Span<'_>>,
     ) {
-        let parts = self.kernels.len();
+        self.run_parts(gpu, encoder, scene, resources, invocations, span, (0, self.kernels.len()));
+    }
+
+    /// How many dispatches [`Kernels::run`] makes.
+    pub fn len(&self) -> usize {
+        self.kernels.len()
+    }
+
+    /// Whether it has no kernel (never: every constructor builds one).
+    pub fn is_empty(&self) -> bool {
+        self.kernels.is_empty()
+    }
+
+    /// [`Kernels::run`] as the dispatches `first..` of `parts` of a stage timed by `span`, so
+    /// that two passes can share one stage's timestamps.
+    #[allow(clippy::too_many_arguments)]
+    pub fn run_parts(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        scene: &GpuScene,
+        resources: &[Res<'_>],
+        invocations: [u32; 3],
+        span: Option<Span<'_>>,
+        (first, parts): (usize, usize),
+    ) {
         for (part, kernel) in self.kernels.iter().enumerate() {
             let group = kernel.bind(gpu, resources);
-            let timestamps = span.as_ref().map(|s| s.compute_part(part, parts));
+            let timestamps = span.as_ref().map(|s| s.compute_part(first + part, parts));
             kernel.dispatch(encoder, &group, scene, invocations, timestamps);
         }
     }

@@ -23,6 +23,9 @@ pub struct FlatScene {
     pub neighbours: u32,
     /// `neighbours` sparse point indices per vertex, nearest first, `u32::MAX` padded.
     pub vertex_neighbours: Vec<u32>,
+    /// How many of `sparse_points`, at the start, lie on a material with a glossy lobe (with
+    /// `settings.glossy`): the gather sums the lobe over these only.
+    pub glossy_points: u32,
     /// How many of `sparse_points`, at the end, are adaptive candidates (every mesh's; the
     /// points gathered every frame come first): 0 without `settings.sparse.adaptive`.
     pub candidates: u32,
@@ -92,10 +95,20 @@ impl FlatScene {
             neighbours: scene.settings.interpolation_neighbours,
             ..Default::default()
         };
-        // Every mesh's points gathered every frame first, then every mesh's adaptive candidates.
+        // Every mesh's points gathered every frame first, those with a glossy lobe ahead of the
+        // rest (the gather sums the lobe only over the first ones), then every mesh's adaptive
+        // candidates.
+        let lobe = |mesh: &crate::scene::Mesh, i: usize| {
+            let material = mesh.triangle_materials[mesh.sparse.triangles[i] as usize] as usize;
+            scene.settings.glossy && scene.materials[material].is_glossy()
+        };
+        let glossy_total: usize =
+            scene.meshes.iter().map(|m| (0..m.sparse.base_len()).filter(|&i| lobe(m, i)).count()).sum();
         let base_total: usize = scene.meshes.iter().map(|m| m.sparse.base_len()).sum();
         let any_candidates = scene.meshes.iter().any(|m| m.sparse.candidates > 0);
-        let (mut base_offset, mut candidate_offset) = (0u32, base_total as u32);
+        let (mut glossy_offset, mut plain_offset) = (0u32, glossy_total as u32);
+        let mut candidate_offset = base_total as u32;
+        let mut points = vec![RawSparsePoint::default(); base_total];
         let mut candidates = Vec::new();
         for (mesh, &transform) in scene.meshes.iter().zip(model_to_world) {
             let placed = mesh.placed(transform);
@@ -113,6 +126,15 @@ impl FlatScene {
                 flat.triangle_materials.push(*m);
                 flat.triangle_sparse_density.push(density);
             }
+            // Where each of the mesh's points goes: its glossy ones, then the rest, in order;
+            // its candidate j at `candidate_offset + j`.
+            let mut at = Vec::with_capacity(sparse.len());
+            for i in 0..base {
+                let offset = if lobe(mesh, i) { &mut glossy_offset } else { &mut plain_offset };
+                at.push(*offset);
+                *offset += 1;
+            }
+            at.extend((0..sparse.candidates as u32).map(|j| candidate_offset + j));
             let world = placed.sparse_positions().into_iter().zip(placed.sparse_normals());
             for (i, (((p, n), radius), triangle)) in
                 world.zip(placed.occluder_radii()).zip(&sparse.triangles).enumerate()
@@ -124,14 +146,9 @@ impl FlatScene {
                     normal: n.into(),
                     exponent: scene.materials[material].exponent,
                 };
-                if i < base { flat.sparse_points.push(point) } else { candidates.push(point) }
+                if i < base { points[at[i] as usize] = point } else { candidates.push(point) }
             }
-            // A mesh's point i is at `base_offset + i`, its candidate j at `candidate_offset + j`.
-            let flat_index = |i: u32| match i {
-                u32::MAX => u32::MAX,
-                i if (i as usize) < base => base_offset + i,
-                i => candidate_offset + i - base as u32,
-            };
+            let flat_index = |i: u32| if i == u32::MAX { i } else { at[i as usize] };
             flat.vertex_neighbours.extend(sparse.vertex_neighbours.iter().map(|&i| flat_index(i)));
             flat.candidate_neighbours.extend(sparse.candidate_neighbours.iter().map(|&i| flat_index(i)));
             if any_candidates && sparse.candidates == 0 {
@@ -141,9 +158,10 @@ impl FlatScene {
             flat.vertex_candidates.extend(sparse.vertex_candidates.iter().map(|&i| flat_index(i)));
             let budget = crate::scene::adaptive_budget(base, scene.settings.sparse.adaptive).min(sparse.candidates);
             flat.adaptive_budget += budget as u32;
-            base_offset += base as u32;
             candidate_offset += sparse.candidates as u32;
         }
+        flat.glossy_points = glossy_total as u32;
+        flat.sparse_points = points;
         flat.candidates = candidates.len() as u32;
         flat.sparse_points.extend(candidates);
         flat

@@ -44,6 +44,7 @@ impl StageTimings {
 }
 
 /// The timestamp pair of one stage.
+#[derive(Clone, Copy)]
 pub struct Span<'a> {
     query_set: &'a wgpu::QuerySet,
     index: u32,

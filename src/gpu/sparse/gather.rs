@@ -42,9 +42,9 @@ impl GatherLobes {
 /// Which sparse points a gather's receiver slots are (`receiver_point` in `gather.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Receivers {
-    /// Slot i is point i, for the points gathered every frame: all but the last `candidates`
-    /// (the adaptive candidates, `settings.sparse.adaptive`).
-    Leading { candidates: u32 },
+    /// Slot i is point `first + i`, up to `end`: a range of the points gathered every frame
+    /// (those before the adaptive candidates, `settings.sparse.adaptive`).
+    Span { first: u32, end: u32 },
     /// Slot i is the i-th entry of the frame's list of chosen adaptive candidates
     /// (`adaptive.wgsl`'s `compact`), bound at [`LIST_BINDING`].
     Chosen,
@@ -57,7 +57,7 @@ pub const LIST_BINDING: u32 = 7;
 /// receivers per invocation, whether the glossy mean position is summed, then `gather.wgsl`.
 /// `near_radius` (m): the near-field radius whose share the gather leaves out (0: none).
 pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32, lobes: GatherLobes) -> String {
-    list_body(groups, near_radius, receivers, lobes, Receivers::Leading { candidates: 0 })
+    list_body(groups, near_radius, receivers, lobes, Receivers::Span { first: 0, end: u32::MAX })
 }
 
 /// [`body`] for the receiver slots `slots`.
@@ -72,9 +72,9 @@ pub fn list_body(
     let receivers = receivers_wgsl(receivers);
     let glossy_mean = lobes == GatherLobes::GlossyLights;
     let points = match slots {
-        Receivers::Leading { candidates } => format!(
-            "fn receiver_point(slot: u32) -> u32 {{\n    if slot < frame.sparse_count - {candidates}u {{\n        \
-             return slot;\n    }}\n    return NO_POINT;\n}}\n"
+        Receivers::Span { first, end } => format!(
+            "fn receiver_point(slot: u32) -> u32 {{\n    if slot < min({end}u, frame.sparse_count) - {first}u {{\n        \
+             return {first}u + slot;\n    }}\n    return NO_POINT;\n}}\n"
         ),
         Receivers::Chosen => format!(
             "@group(0) @binding({LIST_BINDING}) var<storage, read> receiver_list: array<u32>;\n\
@@ -181,6 +181,8 @@ pub struct Gather {
     receivers: u32,
     /// Which points its slots are.
     slots: Receivers,
+    /// Whether it writes the glossy sums (binds them).
+    glossy: bool,
 }
 
 /// The chosen adaptive candidates' list and count (`adaptive.wgsl`'s `compact`), and how many
@@ -205,6 +207,20 @@ impl Gather {
         near_radius: f32,
     ) -> Result<Self, GpuError> {
         Self::variant(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu))
+    }
+
+    /// [`Gather::new`] over the points `first..end` only (the points with a glossy lobe, or
+    /// those without).
+    pub fn span(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        lobes: GatherLobes,
+        groups: Option<u32>,
+        near_radius: f32,
+        (first, end): (u32, u32),
+    ) -> Result<Self, GpuError> {
+        let slots = Receivers::Span { first, end };
+        Self::build(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu), slots)
     }
 
     /// [`Gather::new`] at the adaptive candidates each frame chooses ([`Gather::record_chosen`]).
@@ -232,7 +248,7 @@ impl Gather {
         tile_size: u32,
         receivers: u32,
     ) -> Result<Self, GpuError> {
-        let slots = Receivers::Leading { candidates: scene.flat.candidates };
+        let slots = Receivers::Span { first: 0, end: scene.flat.base_sparse_count() };
         Self::build(gpu, scene, lobes, groups, near_radius, tile_size, receivers, slots)
     }
 
@@ -250,8 +266,8 @@ impl Gather {
         assert!((1..=MAX_RECEIVERS).contains(&receivers), "{receivers} receivers per invocation");
         let workgroup = [tile_size, 1, 1];
         let desc = match (groups.is_some(), slots) {
-            (false, Receivers::Leading { .. }) => &PASS,
-            (true, Receivers::Leading { .. }) => &GROUPED_PASS,
+            (false, Receivers::Span { .. }) => &PASS,
+            (true, Receivers::Span { .. }) => &GROUPED_PASS,
             (false, Receivers::Chosen) => &CHOSEN_PASS,
             (true, Receivers::Chosen) => &CHOSEN_GROUPED_PASS,
         };
@@ -259,7 +275,7 @@ impl Gather {
         let source = desc.source_with(&body, scene.textured(), workgroup, tile_size);
         let entry = desc.lobe_entry(lobes.glossy());
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, workgroup, tile_size)?;
-        Ok(Self { kernels, receivers, slots })
+        Ok(Self { kernels, receivers, slots, glossy: lobes.glossy() })
     }
 
     /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]).
@@ -267,8 +283,8 @@ impl Gather {
         self.kernels.fit(gpu, scene, max_vals)
     }
 
-    /// Gather `vals` at every point gathered every frame into `gathered`, with `groups'`
-    /// visibility when built for a group visibility mode.
+    /// Gather `vals` at its points (by default every point gathered every frame) into
+    /// `gathered`, with `groups'` visibility when built for a group visibility mode.
     pub fn record(
         &self,
         gpu: &Gpu,
@@ -279,10 +295,34 @@ impl Gather {
         groups: Option<&GroupTable<'_>>,
         span: Option<Span<'_>>,
     ) {
-        assert!(matches!(self.slots, Receivers::Leading { .. }), "the chosen candidates' gather needs their list");
+        self.record_parts(gpu, e, scene, vals, gathered, groups, span, (0, self.kernels.len()));
+    }
+
+    /// How many dispatches [`Gather::record`] makes (its VAL ranges).
+    pub fn parts(&self) -> usize {
+        self.kernels.len()
+    }
+
+    /// [`Gather::record`] as dispatches `parts.0..` of `parts.1` of a stage timed by `span`
+    /// (two gathers in one stage).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_parts(
+        &self,
+        gpu: &Gpu,
+        e: &mut wgpu::CommandEncoder,
+        scene: &GpuScene,
+        vals: &Vals,
+        gathered: &Lobes,
+        groups: Option<&GroupTable<'_>>,
+        span: Option<Span<'_>>,
+        parts: (usize, usize),
+    ) {
+        let Receivers::Span { first, end } = self.slots else {
+            panic!("the chosen candidates' gather needs their list");
+        };
         let resources = self.resources(scene, vals, gathered, groups);
-        let n = scene.flat.base_sparse_count().div_ceil(self.receivers);
-        self.kernels.run(gpu, e, scene, &resources, [n, 1, 1], span);
+        let n = (end.min(scene.flat.base_sparse_count()) - first).div_ceil(self.receivers);
+        self.kernels.run_parts(gpu, e, scene, &resources, [n, 1, 1], span, parts);
     }
 
     /// Gather `vals` at the adaptive candidates in `chosen`'s list into their entries of
@@ -313,14 +353,19 @@ impl Gather {
         gathered: &'a Lobes,
         groups: Option<&GroupTable<'a>>,
     ) -> Vec<crate::gpu::pass::Res<'a>> {
-        let mut resources = with_lobes(
-            vec![
-                buffer("sparse_points", &scene.sparse_points),
-                buffer("vals", &vals.buffer),
-                buffer("val_count", &vals.count),
-            ],
-            &[(gathered, "gathered_diffuse", "gathered_glossy")],
-        );
+        let fixed = vec![
+            buffer("sparse_points", &scene.sparse_points),
+            buffer("vals", &vals.buffer),
+            buffer("val_count", &vals.count),
+        ];
+        let mut resources = if self.glossy {
+            with_lobes(fixed, &[(gathered, "gathered_diffuse", "gathered_glossy")])
+        } else {
+            // The diffuse entry point, also where the scene has glossy sums (for other points).
+            let mut fixed = fixed;
+            fixed.push(buffer("gathered_diffuse", &gathered.diffuse));
+            fixed
+        };
         if let Some(g) = groups {
             resources.extend([buffer("group_of_val", g.group_of_val), buffer("group_visibility", g.visibility)]);
         }

@@ -37,7 +37,10 @@ pub struct SparseSettings {
 
 /// The sparse method's passes and the buffers between them.
 pub struct SparseMethod {
+    /// At the points with a glossy lobe (all, for a scene without one), with the lobe when the
+    /// scene has one; then at the others, without it (`plain_gather`), in the same stage.
     gather: Gather,
+    plain_gather: Option<Gather>,
     /// `None` when visibility is off.
     pub visibility: Option<Mode>,
     renormalise: Kernels,
@@ -101,9 +104,23 @@ impl SparseMethod {
                 ))
             })
             .transpose()?;
+        // The points with a glossy lobe come first (`FlatScene::glossy_points`): only they pay
+        // for it (on CPU adapters a branch per point saves nothing, both sides run).
+        let (glossy_points, base) = (scene.flat.glossy_points, scene.flat.base_sparse_count());
+        let near_radius = settings.near_radius;
+        let (gather, plain_gather) = if lobes.glossy() && glossy_points > 0 {
+            let plain = (base > glossy_points)
+                .then(|| Gather::span(gpu, scene, GatherLobes::Diffuse, groups, near_radius, (glossy_points, base)))
+                .transpose()?;
+            (Gather::span(gpu, scene, lobes, groups, near_radius, (0, glossy_points))?, plain)
+        } else {
+            // No point has a glossy lobe (or the scene none): the glossy sums stay 0.
+            (Gather::new(gpu, scene, GatherLobes::Diffuse, groups, near_radius)?, None)
+        };
         Ok(Self {
             adaptive,
-            gather: Gather::new(gpu, scene, lobes, groups, settings.near_radius)?,
+            gather,
+            plain_gather,
             visibility,
             renormalise: Kernels::lobes(gpu, scene, &renormalise::PASS, renormalise::WGSL, glossy_lights)?,
             interpolate,
@@ -130,6 +147,9 @@ impl SparseMethod {
         }
         if let Some((_, gather)) = &mut self.adaptive {
             gather.fit(gpu, scene, max_vals)?;
+        }
+        if let Some(plain) = &mut self.plain_gather {
+            plain.fit(gpu, scene, max_vals)?;
         }
         self.gather.fit(gpu, scene, max_vals)
     }
@@ -166,7 +186,13 @@ impl Technique for SparseMethod {
             _ => None,
         };
         rec.stage(gather::PASS.label, |e, s| {
-            self.gather.record(gpu, e, scene, vals, &self.gathered, table.as_ref(), s)
+            let first = self.gather.parts();
+            let parts = first + self.plain_gather.as_ref().map_or(0, Gather::parts);
+            let gathered = &self.gathered;
+            self.gather.record_parts(gpu, e, scene, vals, gathered, table.as_ref(), s, (0, parts));
+            if let Some(plain) = &self.plain_gather {
+                plain.record_parts(gpu, e, scene, vals, gathered, table.as_ref(), s, (first, parts));
+            }
         })?;
         if let Some((adaptive, gather)) = &self.adaptive {
             adaptive.record_select(gpu, scene, &self.gathered, rec)?;
