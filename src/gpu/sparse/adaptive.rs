@@ -4,7 +4,7 @@
 //! The scene's adaptive candidates (the last [`crate::gpu::scene::FlatScene::candidates`]
 //! sparse points) are scored every frame from what their neighbours gathered, the best within
 //! the frame's budget are gathered too (`adaptive_select`, then `adaptive_gather`: the gather
-//! over the chosen list, [`super::gather::Gather::chosen`]), and the interpolation weighs the
+//! over the chosen list, [`super::gather::Receivers::Chosen`]), and the interpolation weighs the
 //! chosen ones among each vertex's points (`adaptive_candidates.wgsl`). The choice of the
 //! frame before raises a candidate's score ([`twin::adaptive::HYSTERESIS`]), so this state is
 //! kept between frames.

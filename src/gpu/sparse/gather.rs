@@ -197,41 +197,17 @@ impl Gather {
     /// `lobes` says what to sum (a glossy one builds the entry point that also gathers the
     /// Phong lobe); `groups`, the group count of a group visibility mode, the one that reads
     /// its table. `near_radius` (m): leave out each VAL's near-field share at that radius (0:
-    /// none). It gathers at the points gathered every frame (all but the scene's adaptive
-    /// candidates).
+    /// none). `slots`: the points it gathers at, a span of those gathered every frame
+    /// ([`Gather::record`]) or the adaptive candidates each frame chooses
+    /// ([`Gather::record_chosen`]).
     pub fn new(
         gpu: &Gpu,
         scene: &GpuScene,
         lobes: GatherLobes,
         groups: Option<u32>,
         near_radius: f32,
+        slots: Receivers,
     ) -> Result<Self, GpuError> {
-        Self::variant(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu))
-    }
-
-    /// [`Gather::new`] over the points `first..end` only (the points with a glossy lobe, or
-    /// those without).
-    pub fn span(
-        gpu: &Gpu,
-        scene: &GpuScene,
-        lobes: GatherLobes,
-        groups: Option<u32>,
-        near_radius: f32,
-        (first, end): (u32, u32),
-    ) -> Result<Self, GpuError> {
-        let slots = Receivers::Span { first, end };
-        Self::build(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu), slots)
-    }
-
-    /// [`Gather::new`] at the adaptive candidates each frame chooses ([`Gather::record_chosen`]).
-    pub fn chosen(
-        gpu: &Gpu,
-        scene: &GpuScene,
-        lobes: GatherLobes,
-        groups: Option<u32>,
-        near_radius: f32,
-    ) -> Result<Self, GpuError> {
-        let slots = Receivers::Chosen;
         Self::build(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu), slots)
     }
 

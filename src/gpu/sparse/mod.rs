@@ -18,7 +18,7 @@ use crate::gpu::visibility::{self, Mode, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::scene::{GlossyInterpolation, InterpolationKernel, LightBound};
 use adaptive::Adaptive;
-use gather::{Gather, GatherLobes};
+use gather::{Gather, GatherLobes, Receivers};
 use near_field::NearField;
 
 /// What the sparse technique is built for: a change rebuilds it.
@@ -100,7 +100,7 @@ impl SparseMethod {
             .then(|| -> Result<_, GpuError> {
                 Ok((
                     Adaptive::new(gpu, scene, settings.kernel, glossy)?,
-                    Gather::chosen(gpu, scene, lobes, groups, settings.near_radius)?,
+                    Gather::new(gpu, scene, lobes, groups, settings.near_radius, Receivers::Chosen)?,
                 ))
             })
             .transpose()?;
@@ -108,14 +108,15 @@ impl SparseMethod {
         // for it (on CPU adapters a branch per point saves nothing, both sides run).
         let (glossy_points, base) = (scene.flat.glossy_points, scene.flat.base_sparse_count());
         let near_radius = settings.near_radius;
+        let span = |first, end| Receivers::Span { first, end };
         let (gather, plain_gather) = if lobes.glossy() && glossy_points > 0 {
             let plain = (base > glossy_points)
-                .then(|| Gather::span(gpu, scene, GatherLobes::Diffuse, groups, near_radius, (glossy_points, base)))
+                .then(|| Gather::new(gpu, scene, GatherLobes::Diffuse, groups, near_radius, span(glossy_points, base)))
                 .transpose()?;
-            (Gather::span(gpu, scene, lobes, groups, near_radius, (0, glossy_points))?, plain)
+            (Gather::new(gpu, scene, lobes, groups, near_radius, span(0, glossy_points))?, plain)
         } else {
             // No point has a glossy lobe (or the scene none): the glossy sums stay 0.
-            (Gather::new(gpu, scene, GatherLobes::Diffuse, groups, near_radius)?, None)
+            (Gather::new(gpu, scene, GatherLobes::Diffuse, groups, near_radius, span(0, base))?, None)
         };
         Ok(Self {
             adaptive,
