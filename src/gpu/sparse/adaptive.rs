@@ -101,7 +101,7 @@ impl Adaptive {
         let kernel = |name: &str| Kernel::build(gpu, scene, &PASS, &module, PASS.entry(name), &[], PASS.workgroup);
         let score = if glossy { "score_glossy" } else { "score" };
         let none = wgpu::BufferUsages::empty();
-        let per_candidate = |label: &str| gpu.storage_buffer_sized::<u32>(label, candidates as usize);
+
         Ok(Self {
             score: kernel(score)?,
             threshold: kernel("choose_threshold")?,
@@ -111,9 +111,9 @@ impl Adaptive {
                 &flat.candidate_neighbours,
                 none,
             )?,
-            scores: per_candidate("adaptive.scores")?,
+            scores: gpu.storage_buffer_sized::<f32>("adaptive.scores", candidates as usize)?,
             histogram: gpu.storage_buffer_sized::<u32>("adaptive.histogram", twin::adaptive::SCORE_BINS as usize)?,
-            chosen: per_candidate("adaptive.chosen")?,
+            chosen: gpu.storage_buffer_sized::<u32>("adaptive.chosen", candidates as usize)?,
             threshold_bin: gpu.storage_buffer_sized::<u32>("adaptive.threshold", 1)?,
             list: gpu.storage_buffer_sized::<u32>("adaptive.list", budget.max(1) as usize)?,
             count: gpu.storage_buffer_sized::<u32>("adaptive.count", 1)?,

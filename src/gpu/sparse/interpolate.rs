@@ -10,7 +10,7 @@ use crate::scene::{InterpolationKernel, LightBound};
 pub const WGSL: &str = include_str!("interpolate.wgsl");
 
 /// The interpolation weights over a receiver's sparse neighbours, which the adaptive
-/// candidates' fill shares (`interpolation_weights.wgsl`).
+/// candidates' score shares (`interpolation_weights.wgsl`).
 pub const WEIGHTS_WGSL: &str = include_str!("interpolation_weights.wgsl");
 
 /// The weights' constants for `neighbours` sparse points per receiver and the `kernel`, then

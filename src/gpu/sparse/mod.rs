@@ -57,8 +57,8 @@ pub struct SparseMethod {
     /// Per vertex, with `glossy_interpolation: "radiance"` only: the interpolated glossy sums
     /// (`vec4`, `w` unused). The sparse and vertex lights then have no glossy lobe.
     pub vertex_glossy_radiance: Option<wgpu::Buffer>,
-    /// Only for a scene with adaptive candidates (`settings.sparse.adaptive`): their choice and
-    /// fill, and the gather at the chosen ones.
+    /// Only for a scene with adaptive candidates (`settings.sparse.adaptive`): their choice, and
+    /// the gather at the chosen ones.
     pub adaptive: Option<(Adaptive, Gather)>,
 }
 
