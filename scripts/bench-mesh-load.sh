@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Mesh load time of high-valence OBJs (issue 19 item 5): 3 vertices and `f 1 2 3` repeated 10k,
+# Mesh load time of high-valence OBJs: 3 vertices and `f 1 2 3` repeated 10k,
 # 20k and 40k times (every edge shared by every face), beside 20k separate triangles. Prints
 # the load time of the mesh (parse, normals, subdivision, sparse points) from `relume render`'s
 # "loaded mesh" log line; the render itself (8x8) is not timed. Near-linear growth in the faces

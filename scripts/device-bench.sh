@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The one-shot GPU benchmark (issue 18): everything relume reports as GPU figures, in one run
+# The one-shot GPU benchmark: everything relume reports as GPU figures, in one run
 # of at most ~8 minutes on a lent device, or in seconds on lavapipe with --smoke (CI runs that,
 # so the script cannot rot).
 #

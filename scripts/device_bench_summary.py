@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Summary of scripts/device-bench.sh: results.json (every step's status, wall time and JSON
-output) and results.md (the headline figures beside issue 18's targets). Standard library only:
+output) and results.md (the headline figures beside the GPU targets). Standard library only:
 the device machine installs nothing.
 
 usage: device_bench_summary.py WORK STEPS_TSV OUT SMOKE

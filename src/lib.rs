@@ -1,6 +1,6 @@
 //! relume: one bounce of indirect light, diffuse and glossy, from thousands of virtual area
 //! lights (VALs), computed on the GPU with the sparse model-space shading method of Lensing &
-//! Broll 2013 (see `DESIGN.md` in the shared specification).
+//! Broll 2013 (see `docs/design.md`).
 //!
 //! # Conventions
 //!

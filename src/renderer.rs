@@ -44,15 +44,15 @@ use glam::{Affine3A, DAffine3, Mat4, Vec3, Vec4};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
-    /// The sparse model-space method (DESIGN.md §4).
+    /// The sparse model-space method (docs/design.md §4).
     Sparse,
-    /// Every VAL at every visible pixel (DESIGN.md §5).
+    /// Every VAL at every visible pixel (docs/design.md §5).
     BruteForce,
     /// The brute force with each VAL weighted by its group's imperfect-shadow-map lookup at the
     /// pixel (`settings.ism`): the ISMs' visibility without the sparse interpolation
     /// (`gpu::references::brute_force`).
     BruteForceIsm,
-    /// Brute force with a shadow ray per pixel and VAL through a BVH (DESIGN.md §5); see
+    /// Brute force with a shadow ray per pixel and VAL through a BVH (docs/design.md §5); see
     /// [`Renderer::set_exact_val_stride`].
     Exact,
 }
@@ -456,7 +456,7 @@ impl Renderer {
         Ok(())
     }
 
-    /// Light every following frame with `frame`'s VALs (DESIGN.md §2 "RGB-D frames"), made on
+    /// Light every following frame with `frame`'s VALs (docs/design.md §2 "RGB-D frames"), made on
     /// the GPU in the frame's `rgbd_vals` stage, plus the spot light's when the scene has one.
     pub fn set_rgbd_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame, settings: &RgbdSettings) -> Result<(), GpuError> {
         let scene = &self.scene;

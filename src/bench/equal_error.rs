@@ -1,5 +1,5 @@
 //! Speed at equal error: how long a converging estimator of the same image needs to reach each
-//! configuration's error (issue 18). relume's real-time method trades accuracy for time; on
+//! configuration's error. relume's real-time method trades accuracy for time; on
 //! hardware where an unbiased estimator that simply runs longer reaches the same error sooner,
 //! that trade has lost its point.
 //!

@@ -8,7 +8,7 @@
 //! its pipeline(s) and records each dispatch with one call that names its resources
 //! ([`pass::Kernel::run`]). Passes that have a glossy variant have two entry points, `main` and
 //! `main_glossy`; the glossy buffers are bound only by the latter and exist only when the scene
-//! has a glossy material. Shared WGSL (structs, the DESIGN.md formulas, the scene bindings) is
+//! has a glossy material. Shared WGSL (structs, the docs/design.md formulas, the scene bindings) is
 //! in `shader/`.
 
 pub mod differential;

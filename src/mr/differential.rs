@@ -1,4 +1,4 @@
-//! Differential rendering (issue 17; Debevec 1998, Knecht et al. 2010): what the virtual
+//! Differential rendering (Debevec 1998, Knecht et al. 2010): what the virtual
 //! content does to the real surfaces around it, its shadow and its reflected light.
 //!
 //! 1. **Receivers.** The depth frame's surfaces within `settings.mr.receiver_margin` of the

@@ -1,4 +1,4 @@
-//! Light from directions the camera never saw (issue 17): a distant environment of radiance
+//! Light from directions the camera never saw: a distant environment of radiance
 //! `L(w)` (W/(m² sr)), sampled on a latitude-longitude grid of `rows x 2 rows` directions
 //! about the world's `up` and turned into distant VALs, so it lights the sparse points through
 //! the same gather and occlusion as every VAL, and the real receivers of the differential pass

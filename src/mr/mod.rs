@@ -1,4 +1,4 @@
-//! Mixed reality (DESIGN.md §6): virtual content lit by a real room's RGB-D frames, rendered
+//! Mixed reality (docs/design.md §6): virtual content lit by a real room's RGB-D frames, rendered
 //! from each frame's camera and composited over its colour image, the real depth hiding the
 //! virtual object where real surfaces are nearer.
 //!
@@ -155,7 +155,7 @@ pub struct FrameSettings {
     pub method: Method,
 }
 
-/// The mixed-reality pipeline of one scene (DESIGN.md §6, issue 17), shared by `relume replay`
+/// The mixed-reality pipeline of one scene (docs/design.md §6), shared by `relume replay`
 /// ([`MrRenderer`]) and the service's streams (`service::gpu_worker`): a frame's VALs, the
 /// environment (`settings.environment`, the `auto` level raised by the differential pass's
 /// receivers), the render from the frame's camera, the differential relighting of the real

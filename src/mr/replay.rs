@@ -1,4 +1,4 @@
-//! `relume replay`: relight every frame of a recorded RGB-D sequence (DESIGN.md §6) and write
+//! `relume replay`: relight every frame of a recorded RGB-D sequence (docs/design.md §6) and write
 //! the composited frames, the indirect-only images and a timing and stability summary.
 
 use crate::gpu::Gpu;

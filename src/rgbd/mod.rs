@@ -1,4 +1,4 @@
-//! RGB-D frames as light sources (DESIGN.md §2 "RGB-D frames", §6): every valid depth pixel of
+//! RGB-D frames as light sources (docs/design.md §2 "RGB-D frames", §6): every valid depth pixel of
 //! a real room's camera frame (after downsampling) becomes a VAL, so virtual content placed in
 //! the room receives the room's colours as indirect light.
 //!
@@ -30,7 +30,7 @@ pub struct Intrinsics {
 }
 
 impl Intrinsics {
-    /// TUM RGB-D's registered depth (ECOSYSTEM.md): 640x480, fx = fy = 525, cx = 319.5, cy = 239.5.
+    /// TUM RGB-D's registered depth (docs/rgbd.md): 640x480, fx = fy = 525, cx = 319.5, cy = 239.5.
     pub const TUM: Intrinsics = Intrinsics { width: 640, height: 480, fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 };
 
     /// The same camera imaged at `width x height` (pixel centres stay at integer coordinates).
@@ -115,7 +115,7 @@ impl RgbdFrame {
     }
 }
 
-/// How a frame becomes VALs (DESIGN.md §2 "RGB-D frames"). Every field is a documented scene /
+/// How a frame becomes VALs (docs/design.md §2 "RGB-D frames"). Every field is a documented scene /
 /// stream setting with this default. Laid out as WGSL's `RgbdSettings`.
 #[repr(C)]
 #[derive(

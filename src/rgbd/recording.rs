@@ -1,4 +1,4 @@
-//! RGB-D recordings on disk (ECOSYSTEM.md "RGB-D conventions users bring"), in three layouts
+//! RGB-D recordings on disk (docs/rgbd.md "Recording layouts"), in three layouts
 //! that [`Recording::open`] tells apart by their files:
 //!
 //! - a TUM RGB-D directory (`rgb.txt`, `depth.txt`; below);

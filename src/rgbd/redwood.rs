@@ -1,4 +1,4 @@
-//! Open3D / Redwood RGB-D recordings (ECOSYSTEM.md "RGB-D conventions users bring"): the layout
+//! Open3D / Redwood RGB-D recordings (docs/rgbd.md "Recording layouts"): the layout
 //! of Open3D's `SampleRedwoodRGBDImages` and of its reconstruction system's datasets.
 //!
 //! A recording is a directory holding

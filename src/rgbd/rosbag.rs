@@ -1,5 +1,5 @@
 //! MCAP recordings (Foxglove; ROS 2's default bag format) of ROS 2 messages, CDR-encoded
-//! (ECOSYSTEM.md "RGB-D conventions users bring"), read with the `mcap` crate and decoded with
+//! (docs/rgbd.md "Recording layouts"), read with the `mcap` crate and decoded with
 //! `cdr-encoding`.
 //!
 //! What is read:

@@ -525,7 +525,7 @@ pub struct SettingsDescription {
     /// Sparse points each vertex interpolates from (paper eqs. 12-13), 1..=16; default 8.
     #[serde(default = "default_neighbours")]
     pub interpolation_neighbours: u32,
-    /// Indirect visibility: `"auto"` (default), `"off"`, `"disks"` (DESIGN.md §4 step 3),
+    /// Indirect visibility: `"auto"` (default), `"off"`, `"disks"` (docs/design.md §4 step 3),
     /// `"clusters"` (shadow maps of k-means clusters of the VALs, `clusters` below) or `"ism"`
     /// (imperfect shadow maps of VALs drawn by flux, `ism` below). `"auto"`
     /// is `"disks"` when the scene can occlude itself: more than one mesh, or a mesh that is
@@ -730,7 +730,7 @@ impl SecondBounceSettings {
     }
 }
 
-/// How the sparse method turns gathered light into pixels (DESIGN.md §4 steps 0, 2, 4). The
+/// How the sparse method turns gathered light into pixels (docs/design.md §4 steps 0, 2, 4). The
 /// paper's form is `{"kernel": "paper", "bound": "off", "subdivision": 1,
 /// "glossy_interpolation": "lights"}`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]

@@ -170,7 +170,7 @@ impl GltfSceneDescription {
 }
 
 /// A glTF light as relume's spot light, validated. relume's only emitter is one spot light
-/// (DESIGN.md §2): a point light outside the meshes' bounding sphere (`bounds`, asked only for
+/// (docs/design.md §2): a point light outside the meshes' bounding sphere (`bounds`, asked only for
 /// a point light) is the spot light that lights every mesh as it would ([`point_as_spot`]);
 /// one inside it, and directional lights, are errors.
 fn light_description(
@@ -220,7 +220,7 @@ const POINT_CONE_MARGIN: f32 = 1.01;
 
 /// A point light at `position` as the spot light that lights everything inside the sphere
 /// `(centre, radius)` exactly as the point light does: aimed at the centre, its inner and outer
-/// half-angles equal (no falloff inside, DESIGN.md §2) and the sphere's angular radius from
+/// half-angles equal (no falloff inside, docs/design.md §2) and the sphere's angular radius from
 /// the light (times [`POINT_CONE_MARGIN`]). The same radiant intensity, the same 1/d². An error
 /// when the light is inside the sphere or so near that the cone would pass
 /// [`MAX_OUTER_ANGLE_DEG`] (one perspective RSM cannot see around a point light).

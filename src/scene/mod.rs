@@ -1,5 +1,5 @@
 //! Scene loading: a JSON scene description, its OBJ/MTL meshes, and the per-mesh data that the
-//! sparse model-space shading pipeline precomputes at load (DESIGN.md §1 and §4 step 0).
+//! sparse model-space shading pipeline precomputes at load (docs/design.md §1 and §4 step 0).
 //!
 //! Loading a mesh runs, in order:
 //!
@@ -23,7 +23,7 @@
 //! bounding box, computed in f64 from the description (whose positions are f64). f32 keeps
 //! about 7 significant digits: at 100 km from the user's origin its spacing is 7.8 mm, and the
 //! RSM's depths, the gather's position sums and second moments and the biases in metres all
-//! lost their precision there (issue 19 item 8). Relative to the scene's centre, coordinates are
+//! lost their precision there. Relative to the scene's centre, coordinates are
 //! as large as the scene itself, wherever the scene is. Everything a user gives in world
 //! coordinates after load (render cameras and lights, stream transforms, RGB-D poses) goes
 //! through [`Scene::origin`] too ([`Scene::mesh_to_world`], [`Scene::local_pose`]); images have
@@ -102,7 +102,7 @@ pub struct Scene {
     pub origin: DVec3,
 }
 
-/// Normalised modified Phong material (DESIGN.md §1):
+/// Normalised modified Phong material (docs/design.md §1):
 /// `f = rho_d / pi + rho_s (k + 2) / (2 pi) max(0, dot(reflect(w_i, n), w_o))^k`,
 /// with `diffuse + specular <= 1` per channel guaranteed by the loader.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -168,7 +168,7 @@ impl std::fmt::Debug for Texture {
 }
 
 /// A spot light: radiant intensity `intensity` on the axis, falling off linearly in angle from
-/// 1 at `inner_angle` to 0 at `outer_angle` (DESIGN.md §2).
+/// 1 at `inner_angle` to 0 at `outer_angle` (docs/design.md §2).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpotLight {
     /// World-space position of the light, m.
@@ -269,7 +269,7 @@ pub struct Settings {
     pub exposure: Option<f32>,
     /// Sparse points each vertex interpolates from, 1..=[`MAX_NEIGHBOURS`].
     pub interpolation_neighbours: u32,
-    /// Indirect occlusion by disc occluders (DESIGN.md §4 step 3).
+    /// Indirect occlusion by disc occluders (docs/design.md §4 step 3).
     pub occlusion: Occlusion,
     pub occlusion_rule: OcclusionRule,
     /// How RGB-D frames become VALs.
@@ -315,7 +315,7 @@ pub struct Mesh {
     pub sparse: SparsePoints,
 }
 
-/// Sparse shading points of one mesh (DESIGN.md §4 step 0). Points are stored as triangle +
+/// Sparse shading points of one mesh (docs/design.md §4 step 0). Points are stored as triangle +
 /// barycentrics, so they follow a deformation of the mesh; positions and normals are the
 /// model-space evaluation at load.
 #[derive(Clone, Debug, Default)]

@@ -1,4 +1,4 @@
-//! Sparse shading points (DESIGN.md §4 step 0): placement, vertex neighbours, occluder radii.
+//! Sparse shading points (docs/design.md §4 step 0): placement, vertex neighbours, occluder radii.
 //!
 //! Placement is blue noise by weighted sample elimination (Yuksel 2015, "Sample Elimination
 //! for Generating Poisson Disk Sample Sets"): draw [`OVERSAMPLING`] times more candidates than

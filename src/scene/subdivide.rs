@@ -1,6 +1,6 @@
 //! Subdivision of triangles larger than the sparse point spacing.
 //!
-//! The per-vertex interpolation of the pipeline (DESIGN.md §4 step 4) only works when every
+//! The per-vertex interpolation of the pipeline (docs/design.md §4 step 4) only works when every
 //! vertex has sparse points nearby, so a Cornell box wall made of two triangles must be refined.
 //! Each round splits every edge longer than `max_edge` at its midpoint. Midpoints are shared
 //! through an edge map, so both triangles of an edge split it at the same new vertex; a triangle

@@ -5,7 +5,7 @@
 //! Bounce points are spread over every mesh by area at load ([`bounce_points`]: triangle +
 //! barycentrics, so they follow moving meshes); each is lit by the first bounce's VALs and
 //! becomes a candidate VAL re-emitting the diffuse part of what it receives
-//! ([`candidate_vals`]: flux `rho_d * E * area`, DESIGN.md §1-3; [`grouped_candidate_vals`]
+//! ([`candidate_vals`]: flux `rho_d * E * area`, docs/design.md §1-3; [`grouped_candidate_vals`]
 //! through the first bounce's groups with the sparse method's `clusters` or `ism` mode;
 //! [`disk_occluded_candidate_vals`] scaled by the sparse points' discs with `disks`);
 //! `count` of them, drawn by flux

@@ -1,4 +1,4 @@
-//! The bounding volume hierarchies over the scene's triangles for exact visibility (DESIGN.md §5),
+//! The bounding volume hierarchies over the scene's triangles for exact visibility (docs/design.md §5),
 //! both built by the `obvhs` crate from the same PLOC build (its `medium_build` preset, no
 //! spatial splits):
 //!

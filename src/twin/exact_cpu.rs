@@ -1,4 +1,4 @@
-//! The exact-visibility reference on the CPU (DESIGN.md §5): the same physics as
+//! The exact-visibility reference on the CPU (docs/design.md §5): the same physics as
 //! `shaders/exact.wgsl` (every VAL at every receiver, the disc form factor and Phong of
 //! [`val_radiance`], one shadow ray per receiver-VAL pair from `p + n RAY_OFFSET` to
 //! `l + n_l RAY_OFFSET`), over rayon's threads, through [`TraceBvh`] (obvhs's CWBVH): each

@@ -11,7 +11,7 @@
 //! double texels near the horizon, where a VAL carries flux. The cost: six draws per point light
 //! instead of two.
 //!
-//! Flux per texel: `Phi_t = rho_d * I * falloff * window * Omega_t` (DESIGN.md §2), with
+//! Flux per texel: `Phi_t = rho_d * I * falloff * window * Omega_t` (docs/design.md §2), with
 //! `Omega_t` the midpoint `side² cos³` rescaled per view so that a view's texels sum to the
 //! exact solid angle of its square ([`view_omega_scale`]): the six faces of a point light cover
 //! exactly 4 pi sr at any resolution, so a light's reflected flux does not depend on its share.
@@ -202,7 +202,7 @@ pub fn view_texel_solid_angle(ndc: Vec2, view: &RsmView) -> (f32, f32) {
 
 /// The VAL made from the view's texel at `ndc` that sees surface point `y` (normal `n_y`,
 /// diffuse albedo `rho_d`): `Phi = rho_d * I * falloff * window(|y - p_L|) * Omega`,
-/// `a = |y - p_L|² Omega`, normal toward the light (DESIGN.md §2).
+/// `a = |y - p_L|² Omega`, normal toward the light (docs/design.md §2).
 pub fn view_texel_val(ndc: Vec2, view: &RsmView, y: Vec3, n_y: Vec3, rho_d: Vec3) -> Val {
     let (omega, cos_theta) = view_texel_solid_angle(ndc, view);
     let s = &view.frame;

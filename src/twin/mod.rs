@@ -1,4 +1,4 @@
-//! CPU twins of every quantity the GPU passes compute (DESIGN.md §2-§4).
+//! CPU twins of every quantity the GPU passes compute (docs/design.md §2-§4).
 //!
 //! Each function here has a WGSL function of the same name and argument order in
 //! `shaders/common.wgsl` (or in the pass's own shader). Tests run both on the same inputs and
@@ -24,13 +24,13 @@ pub mod rsm;
 /// between them is undefined, so the pair contributes nothing (m²).
 pub const COINCIDENT_DISTANCE_SQ: f32 = 1e-24;
 /// Added to every averaging weight so an averaged light position stays defined when a receiver
-/// gets no light at all (DESIGN.md §4 step 1).
+/// gets no light at all (docs/design.md §4 step 1).
 pub const GATHER_EPSILON: f32 = 1e-30;
 /// Smallest distance (m) at which a renormalised point light is applied; closer lights are
 /// pushed out to it so the inverse-square law cannot divide by zero.
 pub const MIN_LIGHT_DISTANCE: f32 = 1e-4;
 /// Smallest cosine between a receiver normal and its renormalised light direction. A grazing
-/// averaged light is rotated toward the normal up to this cosine (DESIGN.md §4 step 2).
+/// averaged light is rotated toward the normal up to this cosine (docs/design.md §4 step 2).
 pub const MIN_RENORMALISE_COSINE: f32 = 0.02;
 /// Smallest `cos * lobe^k` a renormalised glossy light may divide by; below it the intensity is
 /// capped, which bounds the energy error to views within a few degrees of grazing.
@@ -56,7 +56,7 @@ pub fn luminance(c: Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
-/// Mirror `w` about `n`: `2 dot(n, w) n - w` (both unit; DESIGN.md's `reflect`, which is the
+/// Mirror `w` about `n`: `2 dot(n, w) n - w` (both unit; docs/design.md's `reflect`, which is the
 /// negation of WGSL's built-in `reflect`).
 pub fn mirror(w: Vec3, n: Vec3) -> Vec3 {
     2.0 * n.dot(w) * n - w
@@ -96,7 +96,7 @@ pub fn phong_normalisation(k: f32) -> f32 {
     (k + 2.0) / (2.0 * PI)
 }
 
-/// Geometric part of one VAL seen from a receiver (DESIGN.md §3).
+/// Geometric part of one VAL seen from a receiver (docs/design.md §3).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ValGeometry {
     /// Unit direction from the receiver to the VAL.
@@ -144,7 +144,7 @@ pub struct Val {
 pub use crate::scene::Material;
 pub use crate::scene::{InterpolationKernel, LightBound};
 
-/// What the gather accumulates at one sparse point (DESIGN.md §4 step 1).
+/// What the gather accumulates at one sparse point (docs/design.md §4 step 1).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct Gathered {
     /// `E_x`: irradiance (W/m²).
@@ -239,7 +239,7 @@ pub fn any_perpendicular(n: Vec3) -> Vec3 {
     n.cross(a).normalize()
 }
 
-/// Diffuse renormalisation (DESIGN.md §4 step 2, paper eq. 11): a point light that, applied at
+/// Diffuse renormalisation (docs/design.md §4 step 2, paper eq. 11): a point light that, applied at
 /// `x`, reproduces the gathered irradiance `e` exactly. Finite and non-negative for every input.
 /// Its bound is the luminance of `e`: what the sparse point saw.
 pub fn renormalise_diffuse(x: Vec3, n: Vec3, e: Vec3, averaged_position: Vec3) -> PointLight {
@@ -275,7 +275,7 @@ pub fn with_bound(light: PointLight, e: Vec3) -> PointLight {
     PointLight { bound: luminance(e).max(0.0), ..light }
 }
 
-/// Interpolation weights of a vertex's sparse neighbours (DESIGN.md §4 step 4) for the
+/// Interpolation weights of a vertex's sparse neighbours (docs/design.md §4 step 4) for the
 /// `kernel`. `offsets` are the neighbours' positions minus the vertex's, nearest first (as the
 /// k-d tree returns them), `normals` theirs. The result always sums to > 0 when `offsets` is
 /// non-empty.
@@ -402,7 +402,7 @@ pub fn point_light_radiance(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, lig
     }
 }
 
-/// Per-pixel sparse shading (DESIGN.md §4 step 5): the diffuse and glossy point lights, each
+/// Per-pixel sparse shading (docs/design.md §4 step 5): the diffuse and glossy point lights, each
 /// bounded ([`bound_light`]), applied with the pixel's own position, normal, material and view
 /// direction.
 pub fn shade_sparse(
@@ -499,7 +499,7 @@ pub fn shade_near_field<'a>(
 }
 
 /// Radiance (W/(m² sr)) toward `w_o` (unit, toward the eye) that one unoccluded VAL reflects
-/// at receiver (`p`, `n`): DESIGN.md §3's diffuse term plus, when `glossy`, the Phong term. The
+/// at receiver (`p`, `n`): docs/design.md §3's diffuse term plus, when `glossy`, the Phong term. The
 /// term every brute-force and exact-visibility pixel sums over its (visible) VALs.
 pub fn val_radiance(p: Vec3, n: Vec3, surface: &Material, w_o: Vec3, val: &Val, glossy: bool) -> Vec3 {
     let geo = val_geometry(p, n, val.position, val.normal, val.area);

@@ -1,4 +1,4 @@
-//! CPU twin of the RGB-D VAL generation (DESIGN.md §2 "RGB-D frames"); the GPU pass is
+//! CPU twin of the RGB-D VAL generation (docs/design.md §2 "RGB-D frames"); the GPU pass is
 //! `gpu::lights::rgbd` with `shaders/rgbd.wgsl`, whose functions have the same names and argument
 //! order. Where a function here takes the depth or colour image, its WGSL twin reads it from the
 //! pass's binding instead; where one returns `None`, its WGSL twin returns a zero vector.
@@ -11,7 +11,7 @@
 //!   ([`cell_centre`], the block's middle pixel, rounded down): a Gaussian of `sigma = radius/2`
 //!   pixels times `exp(-(dz/sigma_z)^2)` with `dz` relative to the centre pixel's depth, over
 //!   the valid pixels of the `(2 radius + 1)^2` window. Chosen over the block's median because it
-//!   is the filter DESIGN.md names, costs one fixed window per cell with no sort, and never
+//!   is the filter docs/design.md names, costs one fixed window per cell with no sort, and never
 //!   mixes two surfaces across a depth edge (the range weight drops the far one). A cell whose
 //!   centre pixel has no valid depth yields no VAL: holes are not filled from their rims.
 //! - **Validity.** A depth is valid when it is finite, `> 0` and in `[min_depth, max_depth]`;
@@ -27,7 +27,7 @@
 //! - **Area.** The block's footprint on the surface, [`footprint_area`]:
 //!   `(z/fx)(z/fy) n_px cos_alpha / max(cos, c_min)`, `n_px` the block's pixel count (`s^2` for
 //!   full blocks), `cos` between the normal and the direction to the camera and `cos_alpha`
-//!   between that direction and the optical axis. DESIGN.md's `(z/fx)(z/fy)/max(cos, c_min)`
+//!   between that direction and the optical axis. docs/design.md's `(z/fx)(z/fy)/max(cos, c_min)`
 //!   is this with `cos_alpha = 1`; off the optical axis it overstates every footprint by
 //!   `1/cos_alpha` (25 % in the corners of a TUM frame, 10 % summed over it), so a wall would
 //!   emit more than it reflects. With `cos_alpha` the footprints of a plane sum to its area.
@@ -283,7 +283,7 @@ pub fn grid_cell_val(
     })
 }
 
-/// Every VAL of `frame` (DESIGN.md §2 "RGB-D frames"), in grid order (row-major cells).
+/// Every VAL of `frame` (docs/design.md §2 "RGB-D frames"), in grid order (row-major cells).
 pub fn rgbd_vals(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<Val> {
     rgbd_vals_by_cell(frame, settings).into_iter().map(|(_, v)| v).collect()
 }

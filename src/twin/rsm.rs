@@ -1,4 +1,4 @@
-//! CPU twins of the spot light and its reflective shadow map (DESIGN.md §2, §4 step 6).
+//! CPU twins of the spot light and its reflective shadow map (docs/design.md §2, §4 step 6).
 
 use super::{Material, Val, mirror, phong_lobe, phong_normalisation, view_direction};
 use crate::scene::SpotLight;

@@ -307,7 +307,7 @@ fn finite_non_negative(v: Vec3) -> bool {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
-    /// DESIGN.md §4 step 2 extremes: k in [0, 1e4], distances 1e-6..1e4 m, zero area, zero
+    /// docs/design.md §4 step 2 extremes: k in [0, 1e4], distances 1e-6..1e4 m, zero area, zero
     /// flux, VALs behind the receiver. Every output finite and non-negative.
     #[test]
     fn renormalisation_is_finite_and_non_negative(
@@ -349,7 +349,7 @@ proptest! {
         prop_assert_eq!(l.intensity, Vec3::ZERO);
     }
 
-    /// DESIGN.md §4 step 4 extremes: weights are finite, non-negative and never all zero.
+    /// docs/design.md §4 step 4 extremes: weights are finite, non-negative and never all zero.
     #[test]
     fn interpolation_weights_are_usable(
         offsets in prop::collection::vec(prop::array::uniform3(-1e4f32..1e4), 1..=8),
@@ -448,7 +448,7 @@ impl Wall {
     }
 }
 
-/// Issue 21 item 2: a receiver moving along a flat wall across neighbour-set boundaries gets
+/// A receiver moving along a flat wall across neighbour-set boundaries gets
 /// continuously varying light. Tolerance: a largest step of at most 5 % of the mean per 1e-3
 /// spacings (the light varies by a few times its mean per spacing where few neighbours
 /// share it), and refining that step tenfold must shrink it at least threefold (a jump does
@@ -471,7 +471,7 @@ fn smooth_interpolation_is_continuous_along_a_wall() {
     }
 }
 
-/// Issue 21 item 2: the smooth kernel gives no weight to points behind the vertex's tangent
+/// The smooth kernel gives no weight to points behind the vertex's tangent
 /// plane by more than `PLANE_FALLOFF` of the support radius, even when they face the same way
 /// (a thin slab's parallel faces, a pillar's neighbouring face seen from its corner), and full
 /// weight to points on the plane.
@@ -487,7 +487,7 @@ fn smooth_kernel_ignores_points_behind_the_surface() {
     assert!(paper[1] > 0.0, "the paper's weights do not see the plane: {paper:?}");
 }
 
-/// Issue 21 item 1: a light that would deliver more irradiance than its bound is scaled to the
+/// Bounded renormalisation: a light that would deliver more irradiance than its bound is scaled to the
 /// bound exactly; one within it, or unbounded, is untouched; and a renormalised light applied
 /// at its own sparse point is within its bound (it reproduces the gathered irradiance).
 #[test]

@@ -71,7 +71,7 @@ fn auto_occlusion_follows_the_scene() {
     assert!(scene.meshes[1].may_occlude_itself(), "the bunny has concave parts (ears, legs)");
 }
 
-/// Issue 21 item 1: on Sponza (its default sparse points, a 64² RSM to keep the test short, at
+/// Bounded renormalisation on Sponza (its default sparse points, a 64² RSM to keep the test short, at
 /// 64x36 pixels) no pixel of the sparse image is brighter than 1.5x the brightest brute-force
 /// pixel with the default `settings.sparse.bound` ("gathered"). The paper's form (bound "off")
 /// is rendered beside it and its ratio printed: the issue measured 4.3x at 128².
@@ -94,7 +94,7 @@ fn sparse_sponza_has_no_fireflies() {
     assert!(ratios[0] <= 1.5, "bounded: {:.3}x the brightest brute-force pixel", ratios[0]);
 }
 
-/// Issue 21's open-room glossy fixture (`cornell_glossy_open.json`: the Cornell room without its
+/// The open-room glossy fixture (`cornell_glossy_open.json`: the Cornell room without its
 /// spheres, a glossy floor (k 30) and a glossy bunny (k 60)), small: a 32² RSM at 64x64. Its
 /// glossy stages run, the glossy lobe changes the image, and the sparse image stays near the
 /// brute force. Measured on lavapipe: 0.105 glossy (0.107 with the paper's glossy lights,

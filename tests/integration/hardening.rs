@@ -1,4 +1,4 @@
-//! What one client can make `relume serve` hold or do, bounded (issue 19, items 1-7): each test
+//! What one client can make `relume serve` hold or do, bounded: each test
 //! drives a real server on a loopback port, as a hostile or careless client would, and fails
 //! without the bound it checks. The GPU thread runs a fake backend (it sleeps a fixed time per
 //! render and answers grey images), so scheduling and limits are tested without a GPU and

@@ -1,4 +1,4 @@
-//! Issue 19 item 8: the renderer does not care where the origin is. A whole scene (meshes,
+//! The renderer does not care where the origin is. A whole scene (meshes,
 //! light, camera, and an RGB-D recording's poses) moved and turned anywhere within 100 km of the
 //! origin renders the same indirect image as at the origin, because everything the GPU sees is
 //! relative to the scene's floating origin (`Scene::origin`), composed in f64 on the CPU.

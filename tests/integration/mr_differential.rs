@@ -1,4 +1,4 @@
-//! Differential rendering onto real surfaces (issue 17): the GPU pass against its CPU twin, and
+//! Differential rendering onto real surfaces: the GPU pass against its CPU twin, and
 //! a real plate under a virtual box against the exact reference rendered with and without the
 //! box.
 
@@ -253,7 +253,7 @@ impl RestingBox {
     }
 }
 
-/// Ground truth for the `auto` environment's distribution (issue 17): a real plate under a
+/// Ground truth for the `auto` environment's distribution: a real plate under a
 /// virtual white box, lit by light the camera never sees, known here. The camera sees the
 /// plate alone (its VALs: radiance `rho E / pi`), so `auto` fills the upper cells (16 rows,
 /// fine enough that the grid's own quadrature error does not hide the distribution's) and

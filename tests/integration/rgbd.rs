@@ -1,4 +1,4 @@
-//! The RGB-D VAL pass (`gpu::lights::rgbd`) against its CPU twin (`twin::rgbd`, DESIGN.md §2
+//! The RGB-D VAL pass (`gpu::lights::rgbd`) against its CPU twin (`twin::rgbd`, docs/design.md §2
 //! "RGB-D frames") on a small synthetic frame, and its append contract: after what is already
 //! in the VAL buffer, never past the capacity.
 //!

@@ -352,7 +352,7 @@ async fn without_a_token_tickets_are_issued_and_checked_when_given() {
     app.stop().await;
 }
 
-/// Issue 20: a whole glTF scene (a top-level `gltf` field) is admitted like a mesh file: its
+/// A whole glTF scene (a top-level `gltf` field) is admitted like a mesh file: its
 /// path confined to the asset directory, its size under `max_mesh_bytes`, its fields and the
 /// file's own errors answered with 400 JSON naming the field.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

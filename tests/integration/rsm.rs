@@ -1,4 +1,4 @@
-//! The RSM against closed forms (DESIGN.md §2).
+//! The RSM against closed forms (docs/design.md §2).
 
 use super::{gpu, scratch};
 use glam::Vec3;

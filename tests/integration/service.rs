@@ -1076,7 +1076,7 @@ async fn a_recording_replays_through_the_server_as_offline() {
     }
 }
 
-/// Issue 20: a whole scene from one glTF file (its meshes, spot light and camera, with relume's
+/// A whole scene from one glTF file (its meshes, spot light and camera, with relume's
 /// settings beside it), sent as `fixtures/scenes/cornell_gltf_small.json` reads it, renders
 /// through the service as the renderer renders that file in this process.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -1,4 +1,4 @@
-//! Issue 17 on the service: a stream frame goes through the mixed-reality pipeline of `relume
+//! Mixed reality on the service: a stream frame goes through the mixed-reality pipeline of `relume
 //! replay` (`mr::MrPipeline`): the `auto` environment (its level raised by the differential
 //! receivers), the differential relighting of the real surfaces, the composite. Frames of
 //! `fixtures/recordings/tum_fr1_xyz` at a quarter of their size (160x120), the bunny with 256

@@ -1,4 +1,4 @@
-//! Closed loop of the mixed-reality path (issue 17): a synthetic recording of the Cornell box
+//! Closed loop of the mixed-reality path: a synthetic recording of the Cornell box
 //! lit by `cornell_bunny_small.json`'s spot light (without the bunny) is replayed with the
 //! bunny alone as virtual content; the bunny's gathered irradiance per sparse point must match
 //! the RSM path on the room, bunny and spot light together (occlusion off in both).

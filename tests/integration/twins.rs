@@ -472,7 +472,7 @@ fn rsm_vals_match_cpu_twin() {
     }
 }
 
-/// DESIGN.md §4 step 2 extremes on the GPU: Phong exponents 0 and 1e4 (the glossy divisions),
+/// docs/design.md §4 step 2 extremes on the GPU: Phong exponents 0 and 1e4 (the glossy divisions),
 /// an intense light, a surface right against the spot; every pixel finite and non-negative.
 #[test]
 fn extreme_materials_render_finite_and_non_negative() {

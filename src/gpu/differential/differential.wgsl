@@ -1,4 +1,4 @@
-// Differential rendering onto real surfaces (issue 17; Debevec 1998, Knecht et al. 2010): for
+// Differential rendering onto real surfaces (Debevec 1998, Knecht et al. 2010): for
 // each receiver (a real surface point near the virtual content, from the depth frame), the
 // irradiance the virtual content changes. Over `vals[0 .. real_count]` (the real VALs) it sums
 // the irradiance of every VAL (`unoccluded`, no visibility: the real light the depth frame's

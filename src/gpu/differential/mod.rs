@@ -1,5 +1,5 @@
 //! Differential rendering onto real surfaces (`differential.wgsl` + the BVH traversal of
-//! `references/bvh.wgsl`; issue 17, after Debevec 1998 and Knecht et al., ISMAR 2010): per real
+//! `references/bvh.wgsl`; after Debevec 1998 and Knecht et al., ISMAR 2010): per real
 //! receiver point, the irradiance of the real VALs, the part of it the virtual meshes block and
 //! the irradiance the virtual meshes' own sparse points add by reflection. `mr::differential`
 //! makes the receivers from a depth frame and turns these sums into the composite. Rust twin:

@@ -1,6 +1,6 @@
 // The second bounce, step 1 (paper 004 §4.1, imperfect reflective shadow maps: "shaded
 // points"): every bounce point (a triangle and barycentrics, spread over the meshes by area at
-// load, so it follows moving meshes) is lit by every first-bounce VAL (DESIGN.md §3, the disc
+// load, so it follows moving meshes) is lit by every first-bounce VAL (docs/design.md §3, the disc
 // form factor) seen through `val_visibility(point, val)` (prepended: 1 without visibility,
 // the first bounce's groups' lookup at the point with the sparse method's `clusters` or `ism`
 // mode, `visibility/group.wgsl`) and becomes a candidate VAL (with `disks`, `store_moments`

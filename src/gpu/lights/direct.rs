@@ -1,4 +1,4 @@
-//! Direct spot light with the RSM shadow map (`direct.wgsl`, DESIGN.md §4 step 6). Rust twin
+//! Direct spot light with the RSM shadow map (`direct.wgsl`, docs/design.md §4 step 6). Rust twin
 //! (without the shadow test): `twin::rsm::direct_radiance`. Run by
 //! [`super::spot::DirectLight`].
 

@@ -1,4 +1,4 @@
-// Direct light (DESIGN.md §4 step 6): the spot light through the Phong BRDF, shadowed by the
+// Direct light (docs/design.md §4 step 6): the spot light through the Phong BRDF, shadowed by the
 // RSM's distance-to-light map. Rust twin (without the shadow test): `twin::rsm::direct_radiance`.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;

@@ -1,4 +1,4 @@
-//! RGB-D frame to VALs (`rgbd.wgsl`, DESIGN.md §2 "RGB-D frames"): a depth + colour
+//! RGB-D frame to VALs (`rgbd.wgsl`, docs/design.md §2 "RGB-D frames"): a depth + colour
 //! frame becomes at most one VAL per `grid_step`-pixel cell, appended to a VAL buffer after
 //! whatever is already there (the RSM's spot-light VALs). Rust twin:
 //! `twin::rgbd::rgbd_vals`, whose module docs state the rules.

@@ -1,4 +1,4 @@
-// RGB-D frame to VALs (DESIGN.md §2 "RGB-D frames"), two dispatches over the grid of
+// RGB-D frame to VALs (docs/design.md §2 "RGB-D frames"), two dispatches over the grid of
 // `grid_step`-pixel cells: `filter_grid` writes each cell's bilateral-filtered depth (0 = no
 // VAL), then `main` turns every cell with depth into a VAL and appends it to `vals`. The rules
 // (grid, filter, normals, footprint area, colour) are stated once, in the Rust twins of

@@ -1,4 +1,4 @@
-// RSM to VALs (DESIGN.md §2): every texel of the light's visibility buffer that sees a surface
+// RSM to VALs (docs/design.md §2): every texel of the light's visibility buffer that sees a surface
 // becomes a Lambertian disc VAL re-emitting the diffuse part of the flux it receives. Texels
 // with no flux are not appended. Also writes each texel's distance to the light: the shadow map
 // of the direct pass.

@@ -1,4 +1,4 @@
-//! The spot light (DESIGN.md §2 "RSM of a spot light", §4 step 6): two techniques. [`SpotVals`]
+//! The spot light (docs/design.md §2 "RSM of a spot light", §4 step 6): two techniques. [`SpotVals`]
 //! rasterises the scene from the light (its RSM) and turns each lit texel into a VAL and a
 //! light-distance shadow map; [`DirectLight`] shades the camera's pixels with the light through
 //! that shadow map.

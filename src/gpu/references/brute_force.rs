@@ -1,4 +1,4 @@
-//! Brute-force reference (`brute_force.wgsl`, DESIGN.md §5). Rust twin:
+//! Brute-force reference (`brute_force.wgsl`, docs/design.md §5). Rust twin:
 //! `twin::shade_brute_force`. On CPU adapters the VALs go in ranges, one dispatch each,
 //! each adding to the radiance of the ones before ([`Kernels::val_ranges`]).
 //!

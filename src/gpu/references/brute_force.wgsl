@@ -1,4 +1,4 @@
-// Brute-force reference (DESIGN.md §5): every VAL applied to every visible pixel through §3,
+// Brute-force reference (docs/design.md §5): every VAL applied to every visible pixel through §3,
 // no sparse points, no interpolation. VALs stream through workgroup memory as in the gather, in
 // tiles and per-dispatch ranges (`shader/val_tiles.wgsl`, prepended), each range after the first
 // adding to the radiance the earlier ones wrote. `val_visibility(pixel, val)` (prepended)

@@ -1,4 +1,4 @@
-// Exact visibility (DESIGN.md §5): segment queries against the scene's triangles through the
+// Exact visibility (docs/design.md §5): segment queries against the scene's triangles through the
 // BVH built on the CPU (`twin::bvh`, whose `occluded` and `ray_triangle` are the twins).
 
 struct BvhNode {

@@ -1,4 +1,4 @@
-//! Exact-visibility reference (`exact.wgsl` + `bvh.wgsl`, DESIGN.md §5): the
+//! Exact-visibility reference (`exact.wgsl` + `bvh.wgsl`, docs/design.md §5): the
 //! brute force with a shadow ray per pixel and VAL through a BVH built on the CPU. Rust twins:
 //! `twin::shade_brute_force` over the VALs `twin::bvh::Bvh::occluded` lets through.
 

@@ -1,4 +1,4 @@
-// Exact-visibility reference (DESIGN.md §5): the brute force of `brute_force.wgsl` with a
+// Exact-visibility reference (docs/design.md §5): the brute force of `brute_force.wgsl` with a
 // shadow ray per pixel and VAL through the BVH (`bvh.wgsl`). Every VAL_STRIDE-th VAL is used,
 // its flux scaled by VAL_STRIDE: an unbiased subsample, since the VAL list is in no spatial
 // order. Unlike the brute force it does not tile VALs through workgroup memory (an earlier tiled

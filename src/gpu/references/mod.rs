@@ -1,4 +1,4 @@
-//! The GPU references (DESIGN.md §5): the brute force and exact visibility.
+//! The GPU references (docs/design.md §5): the brute force and exact visibility.
 
 pub mod brute_force;
 pub mod exact;

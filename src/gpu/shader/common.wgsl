@@ -1,4 +1,4 @@
-// Shared types and the quantities of DESIGN.md §2-§4. Every function that computes a quantity
+// Shared types and the quantities of docs/design.md §2-§4. Every function that computes a quantity
 // has a Rust twin of the same name and argument order in `src/twin/`.
 // Constants (WORKGROUP_SIZE, TILE_SIZE, NEIGHBOURS, the numerical guards) are prepended by
 // `src/gpu/shader.rs` from the Rust definitions, never written here.
@@ -35,7 +35,7 @@ struct Vertex {
     t: f32,
 }
 
-// Normalised modified Phong (DESIGN.md §1).
+// Normalised modified Phong (docs/design.md §1).
 // `diffuse_texture` is a layer of the scene's texture array, or -1; the albedo is
 // `diffuse * texture` (linear).
 struct Material {
@@ -110,7 +110,7 @@ fn luminance(c: vec3<f32>) -> f32 {
     return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
 }
 
-// DESIGN.md's reflect: 2 dot(n, w) n - w.
+// docs/design.md's reflect: 2 dot(n, w) n - w.
 fn mirror(w: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return 2.0 * dot(n, w) * n - w;
 }

@@ -1,4 +1,4 @@
-//! Gather at sparse points (`gather.wgsl`, DESIGN.md §4 step 1). Rust twin:
+//! Gather at sparse points (`gather.wgsl`, docs/design.md §4 step 1). Rust twin:
 //! `twin::gather_point`. With a group visibility mode ([`GROUPED_PASS`]) every VAL's
 //! contribution is scaled by its group's visibility at the point
 //! ([`crate::gpu::visibility::GroupTable`]).

@@ -1,4 +1,4 @@
-// Gather at sparse points (DESIGN.md §4 step 1): every VAL's irradiance summed at every sparse
+// Gather at sparse points (docs/design.md §4 step 1): every VAL's irradiance summed at every sparse
 // point, with the luminance-weighted mean VAL position; the glossy entry point also sums the
 // Phong-lobe-weighted irradiance toward the eye and, when GLOSSY_MEAN, its mean position. VALs stream through
 // workgroup memory in tiles of TILE_SIZE (`shader/val_tiles.wgsl`, prepended). Rust twin:

@@ -1,4 +1,4 @@
-//! Per-vertex interpolation (`interpolate.wgsl`, DESIGN.md §4 step 4): each vertex averages the
+//! Per-vertex interpolation (`interpolate.wgsl`, docs/design.md §4 step 4): each vertex averages the
 //! point lights of its nearest sparse points with the scene's kernel, and carries their bound.
 //! Rust twins: `twin::interpolation_weights`, `twin::interpolate_lights`. Run by
 //! [`super::SparseMethod`].

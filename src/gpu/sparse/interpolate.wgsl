@@ -1,4 +1,4 @@
-// Per-vertex interpolation (DESIGN.md §4 step 4, paper eqs. 12-13): each vertex averages the
+// Per-vertex interpolation (docs/design.md §4 step 4, paper eqs. 12-13): each vertex averages the
 // point lights of its NEIGHBOURS nearest sparse points. The weights are the paper's
 // (1 - d / d_max) * facing(n_v, n_x) when SMOOTH_KERNEL is false, else the smooth kernel
 // (1 - (d / d_max)^2)^2 * facing(n_v, n_x) * plane factor (`facing` is the paper's

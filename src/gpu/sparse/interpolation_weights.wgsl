@@ -1,4 +1,4 @@
-// Interpolation weights over a receiver's nearest sparse points (DESIGN.md §4 step 4), shared by
+// Interpolation weights over a receiver's nearest sparse points (docs/design.md §4 step 4), shared by
 // the per-vertex interpolation (`interpolate.wgsl`) and the adaptive candidates' score
 // (`adaptive.wgsl`), which both declare `sparse_points`. NEIGHBOURS, SMOOTH_KERNEL,
 // PLANE_FALLOFF and FACING_EPSILON are prepended (`interpolate::weights_head`). Rust twins:

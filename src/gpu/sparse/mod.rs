@@ -1,4 +1,4 @@
-//! The sparse model-space method (DESIGN.md §4), one technique: gather at the sparse points,
+//! The sparse model-space method (docs/design.md §4), one technique: gather at the sparse points,
 //! the visibility mode (`gpu::visibility`), renormalise, interpolate per vertex, shade per
 //! pixel.
 

@@ -1,4 +1,4 @@
-//! Renormalisation (`renormalise.wgsl`, DESIGN.md §4 step 2): the gathered sums of each sparse
+//! Renormalisation (`renormalise.wgsl`, docs/design.md §4 step 2): the gathered sums of each sparse
 //! point become point lights that reproduce them. Rust twins: `twin::renormalise_diffuse`,
 //! `twin::renormalise_glossy`. Run by [`super::SparseMethod`].
 

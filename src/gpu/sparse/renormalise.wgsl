@@ -1,4 +1,4 @@
-// Renormalisation (DESIGN.md §4 step 2, paper eq. 11): per sparse point, a diffuse (and glossy)
+// Renormalisation (docs/design.md §4 step 2, paper eq. 11): per sparse point, a diffuse (and glossy)
 // point light that reproduces exactly what was gathered there, bounded by the point's diffuse
 // irradiance (`PointLight.bound`). Rust twins: `twin::renormalise_diffuse`,
 // `twin::renormalise_glossy`, `twin::with_bound`.

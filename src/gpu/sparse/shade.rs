@@ -1,4 +1,4 @@
-//! Per-pixel sparse shading (`shade.wgsl`, DESIGN.md §4 step 5): each pixel applies the two
+//! Per-pixel sparse shading (`shade.wgsl`, docs/design.md §4 step 5): each pixel applies the two
 //! point lights interpolated across its triangle, or, with `glossy_interpolation: "radiance"`,
 //! the diffuse one and the interpolated glossy sums. Rust twins: `twin::shade_sparse`,
 //! `twin::glossy_from_radiance`. Run by [`super::SparseMethod`].

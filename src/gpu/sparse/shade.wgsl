@@ -1,4 +1,4 @@
-// Per-pixel sparse shading (DESIGN.md §4 step 5): the per-vertex point lights are interpolated
+// Per-pixel sparse shading (docs/design.md §4 step 5): the per-vertex point lights are interpolated
 // across the visible triangle, bounded (`bound_light`) and applied with the pixel's own
 // position, normal and material. With `glossy_interpolation: "radiance"`
 // (`main_glossy_radiance`) the glossy lobe is the vertices' interpolated gathered sums through

@@ -1,4 +1,4 @@
-//! Visibility modes of the sparse method (DESIGN.md §4 step 3). A mode is one of two kinds:
+//! Visibility modes of the sparse method (docs/design.md §4 step 3). A mode is one of two kinds:
 //!
 //! - a **scaling** mode ([`SparseVisibility`]: `disks/`) runs between the gather and the
 //!   renormalisation and scales what each sparse point gathered by the fraction of it that

@@ -1,4 +1,4 @@
-// The disc occluders' visibility of a light sphere (DESIGN.md §4 step 3, paper §3.3), shared
+// The disc occluders' visibility of a light sphere (docs/design.md §4 step 3, paper §3.3), shared
 // by the sparse points' `occlusion` pass (`disks.wgsl`) and the second bounce's
 // `bounce2_occlusion` (`gpu/lights/bounce_occlusion.wgsl`): every sparse point is a disc that
 // may hide part of the sphere standing for the light a receiver gathered. A disc occludes only

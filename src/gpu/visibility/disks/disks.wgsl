@@ -1,4 +1,4 @@
-// Disc-occluder visibility (DESIGN.md §4 step 3, paper §3.3): every other sparse point is a
+// Disc-occluder visibility (docs/design.md §4 step 3, paper §3.3): every other sparse point is a
 // disc that may hide part of the sphere standing for the light a sparse point gathered; the
 // gathered irradiance (and glossy irradiance) is scaled by the visible fraction before
 // renormalisation. A disc occludes only when its plane separates the point from the sphere's

@@ -1,4 +1,4 @@
-//! Disc-occluder visibility (`disks.wgsl`, DESIGN.md §4 step 3, the paper's §3.3): scales the
+//! Disc-occluder visibility (`disks.wgsl`, docs/design.md §4 step 3, the paper's §3.3): scales the
 //! gathered irradiance of every sparse point by the fraction of its light sphere that the other
 //! sparse points, as discs, leave visible. Rust twin: [`twin`].
 

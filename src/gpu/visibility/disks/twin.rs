@@ -1,5 +1,5 @@
-//! CPU twin of the disc-occluder approximation of indirect visibility (DESIGN.md §4 step 3,
-//! paper §3.3). Not yet wired into the GPU pipeline (issue 3): this is the statement of the
+//! CPU twin of the disc-occluder approximation of indirect visibility (docs/design.md §4 step 3,
+//! paper §3.3). This is the statement of the
 //! maths and its analytic tests, which the GPU pass will be checked against.
 //!
 //! Per sparse point `x`, the VALs it sees are summarised as a sphere `S` at the averaged light
