@@ -23,33 +23,20 @@ use crate::scene::Scene;
 use crate::twin::Val;
 use crate::twin::rgbd::{grid_size, srgb_to_linear};
 use glam::{Affine3A, Mat4, UVec2, Vec3};
-use serde::{Deserialize, Serialize};
 use std::f32::consts::PI;
 
 /// Upper bound of the estimated real albedo (module docs, step 3).
 pub const MAX_REAL_ALBEDO: f32 = 1.0;
 
-/// Mixed-reality compositing settings (`settings.mr` of a scene file); every field has a
-/// default.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct MrSettings {
-    /// Render the virtual content's shadow and reflected light onto the real surfaces; default
-    /// true.
-    pub differential: bool,
-    /// Real surfaces within this distance (m) of the virtual content's bounding box receive;
-    /// in (0, 10], default 0.3.
-    pub receiver_margin: f32,
-    /// One receiver per `receiver_step x receiver_step` depth pixels, 1..=64; default 4.
-    pub receiver_step: u32,
-    /// Where the differential pass runs: `auto` (default: the CPU on CPU adapters such as
-    /// lavapipe, the GPU otherwise), `gpu` or `cpu`. Both give the same sums.
-    pub device: DifferentialDevice,
-}
+pub use crate::scene::settings::MrSettings;
 
-impl Default for MrSettings {
-    fn default() -> Self {
-        Self { differential: true, receiver_margin: 0.3, receiver_step: 4, device: DifferentialDevice::Auto }
+impl From<crate::scene::settings::DifferentialDevice> for DifferentialDevice {
+    fn from(device: crate::scene::settings::DifferentialDevice) -> Self {
+        match device {
+            crate::scene::settings::DifferentialDevice::Auto => DifferentialDevice::Auto,
+            crate::scene::settings::DifferentialDevice::Gpu => DifferentialDevice::Gpu,
+            crate::scene::settings::DifferentialDevice::Cpu => DifferentialDevice::Cpu,
+        }
     }
 }
 

@@ -24,13 +24,16 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
-use crate::mr::differential::MrSettings;
-use crate::mr::environment::{EnvironmentSettings, EnvironmentSource, MAX_ENVIRONMENT_ROWS};
-use crate::rgbd::RgbdSettings;
 use glam::{DMat4, DQuat, DVec3, EulerRot, Vec3};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::{Deserialize, Serialize};
 
+use super::settings::{
+    ClusterSettings, DEFAULT_BOUNCES, DirectSettings, EnvironmentSettings, IsmSettings, MrSettings, Occlusion,
+    OcclusionRule, OcclusionSetting, POINT_VIEWS, RgbdSettings, SPOT_VIEWS, SecondBounceSettings, SparseShading,
+};
+pub(crate) use super::validate::int_in;
+use super::validate::{at_least, coordinates, finite, finite3, in_closed, positive, unit_interval3};
 use super::{Camera, Material, SceneError, Settings, SpotLight};
 
 /// Most sparse points one mesh may have.
@@ -45,8 +48,6 @@ pub const MAX_IMAGE_SIDE: u32 = 8192;
 pub const RSM_RESOLUTION_RANGE: (u32, u32) = (8, 2048);
 /// Largest spot light outer half-angle, degrees.
 pub const MAX_OUTER_ANGLE_DEG: f32 = 80.0;
-/// Largest `settings.mr.receiver_margin` (m): receivers cost one pass over every VAL each.
-pub const MAX_RECEIVER_MARGIN: f32 = 10.0;
 /// Open interval of the vertical field of view, degrees.
 pub const FOV_Y_RANGE_DEG: (f32, f32) = (1.0, 170.0);
 
@@ -546,7 +547,7 @@ pub struct SettingsDescription {
     pub mr: MrSettings,
     /// Light from the directions no VAL covers (replay and streams): `source` `"none"`
     /// (default), `"auto"` or `"map"`; `auto`'s `distribution` `"uniform"` or `"overcast"`
-    /// (`crate::mr::environment`).
+    /// (`mr::environment`).
     #[serde(default)]
     pub environment: EnvironmentSettings,
     /// The sparse method's interpolation, light bound and subdivision; every field has a
@@ -573,37 +574,6 @@ pub struct SettingsDescription {
     pub second_bounce: SecondBounceSettings,
 }
 
-/// Shadows of the direct light from the scene's `lights` (README "Many direct lights").
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields, default)]
-pub struct DirectSettings {
-    /// `"per_light"` (default: two paraboloid shadow maps per light, one hard-shadow test per
-    /// pixel and light) or `"light_cluster"` (paper 003: lights grouped by minimum distance,
-    /// two maps per group at a representative light, PCSS). Exact shadow rays are the CPU
-    /// reference (`twin::many_lights::direct_exact`), not a GPU mode yet.
-    pub shadows: DirectShadows,
-    /// LightCluster's initial minimum distance between cluster centres `d_init`, m, in
-    /// (0, 1e4]; default 1.
-    pub d_init: f32,
-    /// LightCluster's maximum view distance `z_far`, m (> 0): the minimum distance shrinks
-    /// with a centre's distance `d` from the camera as `d_init (1 - d / z_far)` (paper 003 §3.1.2),
-    /// so groups are finer near the camera. Default `null`: `d_init` everywhere (the paper's
-    /// advice against flicker).
-    pub z_far: Option<f32>,
-    /// Side of each of a light's (or group's) two paraboloid shadow maps, texels, in 16..=1024;
-    /// default 128. All maps share one atlas of at most [`MAX_CLUSTER_ATLAS_SIDE`] texels per
-    /// side, which with `max_lights` bounds this.
-    pub shadow_map_resolution: u32,
-    /// Most entries `lights` may hold, in 1..=[`MAX_DIRECT_LIGHTS`]; default 128.
-    pub max_lights: u32,
-    /// VALs the RSMs of `lights` make per frame at most, in 1..=[`MAX_LIGHTS_VAL_BUDGET`];
-    /// default 16384 (as many as the scene's `light` makes at its default `rsm_resolution`).
-    /// Split among the lights by emitted flux (a spot: one RSM view, a point light: six cube
-    /// faces, each light at least one texel per view, so at least 6 per point light and 1 per
-    /// spot); the scene's `light` keeps its own `rsm_resolution`².
-    pub val_budget: u32,
-}
-
 /// [`SceneDescription::frame_vals`] from its parts: whether the scene has a `light` and
 /// `lights`, its `rsm_resolution`, `direct.val_budget`, and `second_bounce.vals` when it has two
 /// bounces.
@@ -627,502 +597,6 @@ pub fn frame_val_parts(
     parts
 }
 
-/// Largest `settings.direct.val_budget`.
-pub const MAX_LIGHTS_VAL_BUDGET: u32 = 1 << 20;
-
-/// How the shadows of the scene's `lights` are computed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum DirectShadows {
-    /// One dual-paraboloid shadow map per light, one hard-shadow test per pixel and light.
-    #[default]
-    PerLight,
-    /// LightCluster (paper 003): one dual-paraboloid map per group, PCSS with the group's
-    /// extent as the light's radius; each light keeps its own position and intensity.
-    LightCluster,
-}
-
-/// Largest `settings.direct.max_lights`.
-pub const MAX_DIRECT_LIGHTS: u32 = 1024;
-
-impl Default for DirectSettings {
-    fn default() -> Self {
-        Self {
-            shadows: DirectShadows::PerLight,
-            d_init: 1.0,
-            z_far: None,
-            shadow_map_resolution: 128,
-            max_lights: 128,
-            val_budget: 16384,
-        }
-    }
-}
-
-impl DirectSettings {
-    /// Shadow maps per atlas side when every light has its own two maps (the most there can be).
-    pub fn atlas_columns(&self) -> u32 {
-        (2.0 * self.max_lights as f64).sqrt().ceil() as u32
-    }
-
-    /// Check every field and the bound on the atlas, naming the first bad field under `field`.
-    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        let d_field = format!("{field}.d_init");
-        positive(self.d_init, &d_field)?;
-        if self.d_init > 1.0e4 {
-            return Err(SceneError::field(d_field, format!("must be in (0, 1e4], got {}", self.d_init)));
-        }
-        if let Some(z_far) = self.z_far {
-            positive(z_far, &format!("{field}.z_far"))?;
-        }
-        int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
-        int_in(self.max_lights, 1, MAX_DIRECT_LIGHTS, &format!("{field}.max_lights"))?;
-        int_in(self.val_budget, 1, MAX_LIGHTS_VAL_BUDGET, &format!("{field}.val_budget"))?;
-        let side = self.atlas_columns() * self.shadow_map_resolution;
-        if side > MAX_CLUSTER_ATLAS_SIDE {
-            return Err(SceneError::field(
-                format!("{field}.shadow_map_resolution"),
-                format!(
-                    "{} maps of {} texels (two per light of max_lights = {}) need an atlas of {side} texels per side, over {MAX_CLUSTER_ATLAS_SIDE}",
-                    2 * self.max_lights,
-                    self.shadow_map_resolution,
-                    self.max_lights
-                ),
-            ));
-        }
-        Ok(())
-    }
-}
-
-fn default_bounces() -> u32 {
-    1
-}
-
-/// The second bounce of indirect light (paper 004 §4.1, imperfect reflective shadow maps):
-/// `points` points spread over the meshes by area are lit by the first bounce's VALs, and
-/// `vals` of them, drawn by the flux they reflect, become the second bounce's VALs.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields, default)]
-pub struct SecondBounceSettings {
-    /// Points lit by the first bounce (the candidates), in 16..=[`MAX_SECOND_BOUNCE_POINTS`];
-    /// default 4096. Each costs one gather of every first-bounce VAL.
-    pub points: u32,
-    /// Second-bounce VALs drawn from them by flux, in 1..=[`MAX_SECOND_BOUNCE_VALS`]; default
-    /// 1024 (the paper's VPL count).
-    pub vals: u32,
-}
-
-/// Most points the first bounce lights for the second.
-pub const MAX_SECOND_BOUNCE_POINTS: u32 = 1 << 18;
-/// Most second-bounce VALs per frame.
-pub const MAX_SECOND_BOUNCE_VALS: u32 = 1 << 16;
-
-impl Default for SecondBounceSettings {
-    fn default() -> Self {
-        Self { points: 4096, vals: 1024 }
-    }
-}
-
-impl SecondBounceSettings {
-    /// Check every field, naming the first bad one under `field`.
-    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        int_in(self.points, 16, MAX_SECOND_BOUNCE_POINTS, &format!("{field}.points"))?;
-        int_in(self.vals, 1, MAX_SECOND_BOUNCE_VALS, &format!("{field}.vals"))
-    }
-}
-
-/// How the sparse method turns gathered light into pixels (docs/design.md §4 steps 0, 2, 4). The
-/// paper's form is `{"kernel": "paper", "bound": "off", "subdivision": 1,
-/// "glossy_interpolation": "lights"}`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct SparseShading {
-    /// Interpolation weights of a vertex's sparse neighbours; default `"smooth"`.
-    #[serde(default)]
-    pub kernel: InterpolationKernel,
-    /// Upper bound on the irradiance an interpolated light may deliver; default `"gathered"`.
-    #[serde(default)]
-    pub bound: LightBound,
-    /// Edges longer than this many sparse point spacings `sqrt(area / sparse_points)` are split
-    /// at load, in [1, 16]; default [`DEFAULT_SUBDIVISION`]. 1 is the paper's.
-    #[serde(default = "default_subdivision")]
-    pub subdivision: f32,
-    /// Radius, in sparse point spacings (the largest over the meshes, in world space), within
-    /// which a VAL lights a receiver per pixel (the `near_field` stage) instead of through the
-    /// sparse points, in [0, 8]; default [`DEFAULT_NEAR_FIELD`]. 0 is off (the paper's).
-    #[serde(default = "default_near_field")]
-    pub near_field: f32,
-    /// How a pixel takes the glossy light of its sparse points; default `"radiance"`;
-    /// `"lights"` is the paper's.
-    #[serde(default)]
-    pub glossy_interpolation: GlossyInterpolation,
-    /// Adaptive sparse points (beyond the paper): every frame, up to this fraction of each
-    /// mesh's sparse points more are gathered, at the candidates where the neighbouring points'
-    /// gathered light differs most, in [0, 1]; default [`DEFAULT_ADAPTIVE`]. 0 is off (the
-    /// paper's). Each mesh holds [`ADAPTIVE_CANDIDATES`] candidates per extra point.
-    #[serde(default = "default_adaptive")]
-    pub adaptive: f32,
-}
-
-/// Adaptive sparse points unless a scene says otherwise: none.
-pub const DEFAULT_ADAPTIVE: f32 = 0.0;
-
-/// Range of [`SparseShading::adaptive`].
-pub const ADAPTIVE_RANGE: (f32, f32) = (0.0, 1.0);
-
-/// Candidates placed per adaptive point of the budget (`settings.sparse.adaptive`): the pool
-/// a frame chooses its extra points from.
-pub const ADAPTIVE_CANDIDATES: usize = 4;
-
-fn default_adaptive() -> f32 {
-    DEFAULT_ADAPTIVE
-}
-
-/// Near-field radius in sparse point spacings unless a scene says otherwise.
-pub const DEFAULT_NEAR_FIELD: f32 = 0.0;
-
-/// Range of [`SparseShading::near_field`].
-pub const NEAR_FIELD_RANGE: (f32, f32) = (0.0, 8.0);
-
-fn default_near_field() -> f32 {
-    DEFAULT_NEAR_FIELD
-}
-
-/// Subdivision edge length in sparse point spacings unless a scene says otherwise.
-pub const DEFAULT_SUBDIVISION: f32 = 2.0;
-
-/// Range of [`SparseShading::subdivision`].
-pub const SUBDIVISION_RANGE: (f32, f32) = (1.0, 16.0);
-
-fn default_subdivision() -> f32 {
-    DEFAULT_SUBDIVISION
-}
-
-impl Default for SparseShading {
-    fn default() -> Self {
-        SparseShading {
-            kernel: InterpolationKernel::default(),
-            bound: LightBound::default(),
-            subdivision: DEFAULT_SUBDIVISION,
-            near_field: DEFAULT_NEAR_FIELD,
-            glossy_interpolation: GlossyInterpolation::default(),
-            adaptive: DEFAULT_ADAPTIVE,
-        }
-    }
-}
-
-/// Settings of the `"clusters"` visibility mode (papers 000 §4-5, 001): the frame's VALs
-/// grouped by k-means, one paraboloid shadow map per cluster, soft shadows per sparse point and
-/// cluster.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields, default)]
-pub struct ClusterSettings {
-    /// How VALs are grouped: `"kmeans"` (the only one so far).
-    pub method: ClusterMethod,
-    /// Clusters (shadow maps), in 1..=[`MAX_CLUSTERS`]; default 64.
-    pub count: u32,
-    /// Side of each cluster's shadow map, texels, in 16..=1024; default 128. All maps share
-    /// one atlas of `ceil(sqrt(count))` maps per side, at most [`MAX_CLUSTER_ATLAS_SIDE`] texels.
-    pub shadow_map_resolution: u32,
-    /// Shadow filter: `"pcss"`, `"pcf"` or `"hard"` (default).
-    pub soft: SoftShadows,
-    /// Weight of the angle between normals (per radian) against the position distance in
-    /// units of the scene's bounding diagonal, in [0, 100]; default 0.43 (paper 000's
-    /// `w_a / w_x = 0.3 / 0.7`).
-    pub normal_weight: f32,
-    /// k-means iterations per frame, in 1..=[`MAX_KMEANS_ITERATIONS`], each started from the
-    /// previous frame's centres; default 4.
-    pub iterations: u32,
-    /// Where the clusters' shadow maps come from: `"raster"` (default: every triangle
-    /// rasterised into every map, exact depths) or `"ism"` (imperfect shadow maps splatted
-    /// from points with pull-push, as `settings.ism` says for points, pull-push and bias;
-    /// `shadow_map_resolution` must then be a power of two up to 512).
-    pub shadow_maps: ShadowMapSource,
-}
-
-/// Where the `"clusters"` mode's shadow maps come from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum ShadowMapSource {
-    /// Rasterised triangles: exact depth per texel.
-    #[default]
-    Raster,
-    /// Imperfect shadow maps (paper 004).
-    Ism,
-}
-
-/// Most clusters of the `"clusters"` visibility mode.
-pub const MAX_CLUSTERS: u32 = 256;
-/// Most k-means iterations per frame.
-pub const MAX_KMEANS_ITERATIONS: u32 = 32;
-/// Widest shadow-map atlas of the `"clusters"` mode (texels per side: 64 MiB of depth).
-pub const MAX_CLUSTER_ATLAS_SIDE: u32 = 4096;
-
-impl Default for ClusterSettings {
-    fn default() -> Self {
-        Self {
-            method: ClusterMethod::Kmeans,
-            count: 64,
-            shadow_map_resolution: 128,
-            // Measured closer to exact than PCSS on every fixture (README "Clustered visibility").
-            soft: SoftShadows::Hard,
-            normal_weight: 0.43,
-            iterations: 4,
-            shadow_maps: ShadowMapSource::Raster,
-        }
-    }
-}
-
-/// Settings of the `"ism"` visibility mode (paper 004, imperfect shadow maps): every frame
-/// `count` VALs are drawn by flux (the paper's importance-sampled VPLs), every VAL joins the
-/// nearest drawn one, and each group gets a low-resolution paraboloid shadow map splatted from
-/// its own random subset of points on the meshes, its holes filled by pull-push.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields, default)]
-pub struct IsmSettings {
-    /// Shadow maps (VALs drawn by flux) per frame, in 1..=[`MAX_ISMS`]; default 1024 (the
-    /// paper's VPL count).
-    pub count: u32,
-    /// Side of each paraboloid map, texels: a power of two in 16..=512; default 128 (the
-    /// paper's).
-    pub resolution: u32,
-    /// Points splatted into each map, in 16..=[`MAX_ISM_POINTS`]; default `null`: the paper's
-    /// rule `P ≈ N_res · N_vpl / 4`, a quarter of a map's `π/4 · resolution²` texels per map.
-    pub points: Option<u32>,
-    /// Pull-push levels, in 0..=4 (0: no hole filling); default 2 (the paper's).
-    pub pull_push_levels: u32,
-    /// Depths differing by at most this fraction of the scene's bounding diagonal (times
-    /// `2^level`) are averaged by the pull, in (0, 1]; default 0.05 (the paper's 5 %).
-    pub pull_threshold: f32,
-    /// A depth differing from the coarser level's by more than this fraction of the diagonal
-    /// (times `2^level`) is replaced by the push, in (0, 1]; default 0.05.
-    pub push_threshold: f32,
-    /// Shadow filter: `"pcss"`, `"pcf"` (default) or `"hard"`.
-    pub soft: SoftShadows,
-    /// Slope-scaled depth bias of the lookup, texels, in [0, 16]: a splatted point lies
-    /// anywhere in its texel, so a receiver's own surface seen at a grazing angle may lie
-    /// nearer than its tangent plane along the texel's centre ray by this many texel angles
-    /// times the tangent of the incidence; default 1.
-    pub slope_bias: f32,
-}
-
-/// Most imperfect shadow maps per frame.
-pub const MAX_ISMS: u32 = 4096;
-/// Most points splatted into one imperfect shadow map.
-pub const MAX_ISM_POINTS: u32 = 65536;
-/// Most texels of all imperfect shadow maps together (the finest level, 128 MiB: wgpu's default
-/// and lavapipe's largest storage buffer binding).
-pub const MAX_ISM_TEXELS: u64 = 1 << 25;
-/// Most points splatted per frame (all maps together).
-pub const MAX_ISM_SPLATS: u64 = 1 << 27;
-
-impl Default for IsmSettings {
-    fn default() -> Self {
-        Self {
-            count: 1024,
-            resolution: 128,
-            points: None,
-            pull_push_levels: 2,
-            pull_threshold: 0.05,
-            push_threshold: 0.05,
-            soft: SoftShadows::Pcf,
-            slope_bias: 1.0,
-        }
-    }
-}
-
-impl IsmSettings {
-    /// Points splatted into each map: `points`, or the paper's rule.
-    pub fn points_per_map(&self) -> u32 {
-        self.points.unwrap_or_else(|| {
-            let texels = std::f64::consts::FRAC_PI_4 * f64::from(self.resolution).powi(2);
-            ((texels / 4.0).round() as u32).clamp(16, MAX_ISM_POINTS)
-        })
-    }
-
-    /// Check every field and the bounds on memory and work, naming the first bad field under
-    /// `field`.
-    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        int_in(self.count, 1, MAX_ISMS, &format!("{field}.count"))?;
-        let r = self.resolution;
-        if !(16..=512).contains(&r) || !r.is_power_of_two() {
-            return Err(SceneError::field(
-                format!("{field}.resolution"),
-                format!("must be a power of two in 16..=512, got {r}"),
-            ));
-        }
-        if let Some(points) = self.points {
-            int_in(points, 16, MAX_ISM_POINTS, &format!("{field}.points"))?;
-        }
-        int_in(self.pull_push_levels, 0, 4, &format!("{field}.pull_push_levels"))?;
-        in_closed(self.slope_bias, 0.0, 16.0, &format!("{field}.slope_bias"))?;
-        for (value, name) in [(self.pull_threshold, "pull_threshold"), (self.push_threshold, "push_threshold")] {
-            if !(value > 0.0 && value <= 1.0) {
-                return Err(SceneError::field(format!("{field}.{name}"), format!("must be in (0, 1], got {value}")));
-            }
-        }
-        let texels = u64::from(self.count) * u64::from(r) * u64::from(r);
-        if texels > MAX_ISM_TEXELS {
-            return Err(SceneError::field(
-                format!("{field}.resolution"),
-                format!("{} maps of {r}x{r} texels are {texels} texels, over {MAX_ISM_TEXELS}", self.count),
-            ));
-        }
-        let splats = u64::from(self.count) * u64::from(self.points_per_map());
-        if splats > MAX_ISM_SPLATS {
-            return Err(SceneError::field(
-                format!("{field}.points"),
-                format!(
-                    "{} maps of {} points are {splats} points, over {MAX_ISM_SPLATS}",
-                    self.count,
-                    self.points_per_map()
-                ),
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// Interpolation weights of a vertex's sparse neighbours (`twin::interpolation_weights`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum InterpolationKernel {
-    /// Paper eq. 12: `(1 - d / d_max) * clamp(n_v . n_j, 0, 1)`.
-    Paper,
-    /// `(1 - (d / d_max)^2)^2 * clamp(n_v . n_j, 0, 1)`, times a factor that falls to zero for
-    /// points behind the vertex's tangent plane (the other side of thin geometry).
-    #[default]
-    Smooth,
-}
-
-/// Upper bound on the irradiance an interpolated point light may deliver at a pixel.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum LightBound {
-    /// None (the paper's).
-    Off,
-    /// The largest irradiance luminance that the sparse points it was interpolated from
-    /// gathered.
-    #[default]
-    Gathered,
-}
-
-/// How the sparse method carries glossy light from the sparse points to a pixel.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum GlossyInterpolation {
-    /// The paper's (eqs. 11-13): each sparse point's gathered glossy light becomes a
-    /// renormalised point light, each vertex averages its neighbours' lights (positions and
-    /// intensities) into one, interpolated across the triangle and applied at the pixel through
-    /// the pixel's own lobe.
-    Lights,
-    /// The glossy radiance each sparse point gathered toward the eye is interpolated with the
-    /// same weights and times the pixel's specular albedo and lobe normalisation; no glossy
-    /// point light. A sharp lobe evaluated for one merged light falls off within a few degrees
-    /// of where the averaged position puts it; the radiance itself varies as smoothly as the
-    /// reflected scene does. Closer to the brute force on every glossy fixture (README).
-    #[default]
-    Radiance,
-}
-
-impl ClusterSettings {
-    /// Shadow maps per atlas side.
-    pub fn atlas_columns(&self) -> u32 {
-        (self.count as f64).sqrt().ceil() as u32
-    }
-
-    /// Check every field and the bounds on memory, naming the first bad field under `field`.
-    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        int_in(self.count, 1, MAX_CLUSTERS, &format!("{field}.count"))?;
-        int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
-        in_closed(self.normal_weight, 0.0, 100.0, &format!("{field}.normal_weight"))?;
-        int_in(self.iterations, 1, MAX_KMEANS_ITERATIONS, &format!("{field}.iterations"))?;
-        if self.shadow_maps == ShadowMapSource::Ism {
-            let r = self.shadow_map_resolution;
-            let texels = u64::from(self.count) * u64::from(r) * u64::from(r);
-            if !r.is_power_of_two() || r > 512 || texels > MAX_ISM_TEXELS {
-                return Err(SceneError::field(
-                    format!("{field}.shadow_map_resolution"),
-                    format!(
-                        "imperfect shadow maps need a power of two up to 512 and at most {MAX_ISM_TEXELS} texels in all, got {} maps of {r}",
-                        self.count
-                    ),
-                ));
-            }
-        }
-        let side = self.atlas_columns() * self.shadow_map_resolution;
-        if side > MAX_CLUSTER_ATLAS_SIDE {
-            return Err(SceneError::field(
-                format!("{field}.shadow_map_resolution"),
-                format!(
-                    "{} maps of {} texels need an atlas of {side} texels per side, over {MAX_CLUSTER_ATLAS_SIDE}",
-                    self.count, self.shadow_map_resolution
-                ),
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// How the `"clusters"` mode groups VALs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum ClusterMethod {
-    /// k-means on position and normal angle (paper 000 §5.1).
-    #[default]
-    Kmeans,
-}
-
-/// How a cluster's shadow is filtered.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum SoftShadows {
-    /// Percentage-closer soft shadows: blocker search, penumbra from the cluster's radius and
-    /// the mean blocker distance, PCF of that width (paper 001).
-    Pcss,
-    /// PCF of a fixed width (1.5 texels).
-    Pcf,
-    /// One texel (the clusters' default).
-    #[default]
-    Hard,
-}
-
-/// Indirect occlusion mode.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum Occlusion {
-    #[default]
-    Off,
-    Disks,
-    /// Shadow maps of clusters of VALs ([`ClusterSettings`]).
-    Clusters,
-    /// Imperfect shadow maps of VALs drawn by flux ([`IsmSettings`]).
-    Ism,
-}
-
-/// Indirect occlusion as a scene file asks for it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum OcclusionSetting {
-    /// Disks when the scene can occlude itself, else off.
-    #[default]
-    Auto,
-    Off,
-    Disks,
-    Clusters,
-    Ism,
-}
-
-/// Combination rule of disc occluders.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
-#[serde(rename_all = "snake_case")]
-pub enum OcclusionRule {
-    /// `clamp(sum o_i, 0, 1)`: the paper's; double-counts overlapping occluders.
-    Sum,
-    /// `1 - prod(1 - o_i)`: closer to exact visibility on both measured fixtures (README).
-    #[default]
-    Product,
-}
-
 fn default_neighbours() -> u32 {
     super::DEFAULT_NEIGHBOURS
 }
@@ -1133,6 +607,10 @@ fn default_rsm_resolution() -> u32 {
 
 fn default_glossy() -> bool {
     true
+}
+
+fn default_bounces() -> u32 {
+    DEFAULT_BOUNCES
 }
 
 fn default_seed() -> u64 {
@@ -1199,91 +677,16 @@ impl SettingsDescription {
         if let Some(exposure) = self.exposure {
             positive(exposure, &format!("{field}.exposure"))?;
         }
-        let (lo, hi) = SUBDIVISION_RANGE;
-        let subdivision = self.sparse.subdivision;
-        if !(lo..=hi).contains(&subdivision) {
-            let message = format!("must be in [{lo}, {hi}], got {subdivision}");
-            return Err(SceneError::field(format!("{field}.sparse.subdivision"), message));
-        }
-        let (lo, hi) = NEAR_FIELD_RANGE;
-        let near_field = self.sparse.near_field;
-        if !(lo..=hi).contains(&near_field) {
-            let message = format!("must be in [{lo}, {hi}], got {near_field}");
-            return Err(SceneError::field(format!("{field}.sparse.near_field"), message));
-        }
-        let (lo, hi) = ADAPTIVE_RANGE;
-        let adaptive = self.sparse.adaptive;
-        if !(lo..=hi).contains(&adaptive) {
-            let message = format!("must be in [{lo}, {hi}], got {adaptive}");
-            return Err(SceneError::field(format!("{field}.sparse.adaptive"), message));
-        }
-        validate_rgbd(&self.rgbd, &format!("{field}.rgbd"))?;
-        validate_mr(&self.mr, &format!("{field}.mr"))?;
-        validate_environment(&self.environment, &format!("{field}.environment"))?;
+        self.sparse.validate(&format!("{field}.sparse"))?;
+        self.rgbd.validate(&format!("{field}.rgbd"))?;
+        self.mr.validate(&format!("{field}.mr"))?;
+        self.environment.validate(&format!("{field}.environment"))?;
         self.clusters.validate(&format!("{field}.clusters"))?;
         self.ism.validate(&format!("{field}.ism"))?;
         self.direct.validate(&format!("{field}.direct"))?;
         int_in(self.bounces, 1, 2, &format!("{field}.bounces"))?;
         self.second_bounce.validate(&format!("{field}.second_bounce"))
     }
-}
-
-/// Ranges of [`EnvironmentSettings`], naming the field of the first value out of range.
-pub fn validate_environment(e: &EnvironmentSettings, field: &str) -> Result<(), SceneError> {
-    positive(e.scale, &format!("{field}.scale"))?;
-    if !e.rotation_deg.is_finite() {
-        return Err(SceneError::field(
-            format!("{field}.rotation_deg"),
-            format!("must be finite, got {}", e.rotation_deg),
-        ));
-    }
-    let up = Vec3::from(e.up);
-    if !up.is_finite() || up.length_squared() < 1e-12 {
-        return Err(SceneError::field(format!("{field}.up"), format!("must be a finite non-zero vector, got {up}")));
-    }
-    int_in(e.rows, 2, MAX_ENVIRONMENT_ROWS, &format!("{field}.rows"))?;
-    if !e.rows.is_multiple_of(2) {
-        return Err(SceneError::field(format!("{field}.rows"), format!("must be even, got {}", e.rows)));
-    }
-    if let Some(albedo) = e.albedo
-        && !(albedo > 0.0 && albedo <= 1.0)
-    {
-        return Err(SceneError::field(format!("{field}.albedo"), format!("must be in (0, 1], got {albedo}")));
-    }
-    if e.calibrate_map && e.source != EnvironmentSource::Map {
-        return Err(SceneError::field(
-            format!("{field}.calibrate_map"),
-            "calibrates a map: only with source \"map\"".to_owned(),
-        ));
-    }
-    if e.source == EnvironmentSource::Map && e.map.is_none() {
-        return Err(SceneError::field(format!("{field}.map"), "source \"map\" needs a map path".to_owned()));
-    }
-    Ok(())
-}
-
-/// Ranges of [`MrSettings`], naming the field of the first value out of range.
-pub fn validate_mr(m: &MrSettings, field: &str) -> Result<(), SceneError> {
-    positive(m.receiver_margin, &format!("{field}.receiver_margin"))?;
-    in_closed(m.receiver_margin, 0.0, MAX_RECEIVER_MARGIN, &format!("{field}.receiver_margin"))?;
-    int_in(m.receiver_step, 1, 64, &format!("{field}.receiver_step"))
-}
-
-/// Ranges of [`RgbdSettings`], naming the field of the first value out of range.
-pub fn validate_rgbd(r: &RgbdSettings, field: &str) -> Result<(), SceneError> {
-    int_in(r.grid_step, 1, 64, &format!("{field}.grid_step"))?;
-    positive(r.min_depth, &format!("{field}.min_depth"))?;
-    positive(r.max_depth, &format!("{field}.max_depth"))?;
-    if r.max_depth <= r.min_depth {
-        return Err(SceneError::field(
-            format!("{field}.max_depth"),
-            format!("must be > min_depth ({}), got {}", r.min_depth, r.max_depth),
-        ));
-    }
-    at_least(r.radiance_scale, 0.0, &format!("{field}.radiance_scale"))?;
-    int_in(r.bilateral_radius, 0, 16, &format!("{field}.bilateral_radius"))?;
-    positive(r.bilateral_depth_sigma, &format!("{field}.bilateral_depth_sigma"))?;
-    in_closed(r.min_cosine, 1e-3, 1.0, &format!("{field}.min_cosine"))
 }
 
 impl TransformDescription {
@@ -1398,13 +801,13 @@ impl SceneDescription {
         for (i, light) in self.lights.iter().enumerate() {
             light.validate(&format!("lights[{i}]"))?;
         }
-        // A texel per RSM view of every light (`twin::light_rsms::split_val_budget`).
+        // A texel per RSM view of every light (as `twin::light_rsms::split_val_budget` splits it).
         let minimum: u32 = self
             .lights
             .iter()
             .map(|l| match l {
-                LightEntry::Spot(_) => crate::twin::light_rsms::SPOT_VIEWS,
-                LightEntry::Point(_) => crate::twin::light_rsms::POINT_VIEWS,
+                LightEntry::Spot(_) => SPOT_VIEWS,
+                LightEntry::Point(_) => POINT_VIEWS,
             })
             .sum();
         let budget = self.settings.direct.val_budget;
@@ -1433,68 +836,6 @@ pub(crate) fn key_path(parent: &str, key: &str) -> String {
         (true, true) => key.to_owned(),
         (false, true) => format!("{parent}.{key}"),
         (_, false) => format!("{parent}[{key:?}]"),
-    }
-}
-
-fn finite(value: f32, field: &str) -> Result<(), SceneError> {
-    if value.is_finite() {
-        Ok(())
-    } else {
-        Err(SceneError::field(field, format!("must be a finite number, got {value}")))
-    }
-}
-
-fn finite3(values: [f32; 3], field: &str) -> Result<(), SceneError> {
-    for (i, &value) in values.iter().enumerate() {
-        finite(value, &format!("{field}[{i}]"))?;
-    }
-    Ok(())
-}
-
-/// Finite world-space coordinates of magnitude at most [`MAX_COORDINATE_M`].
-fn coordinates(values: [f64; 3], field: &str) -> Result<(), SceneError> {
-    for (i, &value) in values.iter().enumerate() {
-        if !(value.is_finite() && value.abs() <= MAX_COORDINATE_M) {
-            return Err(SceneError::field(
-                format!("{field}[{i}]"),
-                format!("must be a finite number within +-{MAX_COORDINATE_M:e} m, got {value:e}"),
-            ));
-        }
-    }
-    Ok(())
-}
-
-fn positive(value: f32, field: &str) -> Result<(), SceneError> {
-    finite(value, field)?;
-    if value > 0.0 { Ok(()) } else { Err(SceneError::field(field, format!("must be > 0, got {value}"))) }
-}
-
-fn at_least(value: f32, min: f32, field: &str) -> Result<(), SceneError> {
-    finite(value, field)?;
-    if value >= min { Ok(()) } else { Err(SceneError::field(field, format!("must be >= {min}, got {value}"))) }
-}
-
-fn in_closed(value: f32, lo: f32, hi: f32, field: &str) -> Result<(), SceneError> {
-    finite(value, field)?;
-    if (lo..=hi).contains(&value) {
-        Ok(())
-    } else {
-        Err(SceneError::field(field, format!("must be in [{lo}, {hi}], got {value}")))
-    }
-}
-
-fn unit_interval3(values: [f32; 3], field: &str) -> Result<(), SceneError> {
-    for (i, &value) in values.iter().enumerate() {
-        in_closed(value, 0.0, 1.0, &format!("{field}[{i}]"))?;
-    }
-    Ok(())
-}
-
-pub(super) fn int_in(value: u32, lo: u32, hi: u32, field: &str) -> Result<(), SceneError> {
-    if (lo..=hi).contains(&value) {
-        Ok(())
-    } else {
-        Err(SceneError::field(field, format!("must be in {lo}..={hi}, got {value}")))
     }
 }
 
@@ -1595,6 +936,7 @@ fn json_path_at(text: &str, offset: usize) -> String {
 
 #[cfg(test)]
 mod tests {
+    use super::super::settings::*;
     use super::*;
 
     const MINIMAL: &str = r#"{
@@ -2005,7 +1347,7 @@ mod tests {
         let text = with_settings(r#"{"environment": {"source": "auto", "distribution": "overcast"}}"#);
         let d = SceneDescription::from_json_str(&text).expect("parses");
         d.validate().expect("valid");
-        assert_eq!(d.settings.environment.distribution, crate::mr::environment::EnvironmentDistribution::Overcast);
+        assert_eq!(d.settings.environment.distribution, EnvironmentDistribution::Overcast);
         let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
         assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
         let message = error_of(&with_settings(r#"{"interpolation_neighbours": 17}"#));

@@ -38,9 +38,11 @@ mod gltf;
 mod hash;
 mod normals;
 mod obj;
+pub mod settings;
 mod sparse;
 mod subdivide;
 mod texture;
+mod validate;
 
 use std::path::{Path, PathBuf};
 
@@ -48,16 +50,20 @@ use glam::{Affine3A, DAffine3, DMat4, DVec3, Mat3, Mat4, Vec2, Vec3};
 
 pub use self::gltf::{GltfSceneDescription, LUMENS_PER_WATT, MAX_GLTF_BYTES, phong_from_pbr};
 pub use description::{
-    ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, CameraDescription, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION,
-    DirectSettings, DirectShadows, GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, LightDescription,
-    LightEntry, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_COORDINATE_M, MAX_DIRECT_LIGHTS, MAX_ISM_POINTS,
-    MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MAX_SPARSE_POINTS,
-    MaterialDescription, MeshDescription, NEAR_FIELD_RANGE, Occlusion, OcclusionRule, OcclusionSetting,
-    PointLightDescription, RSM_RESOLUTION_RANGE, SUBDIVISION_RANGE, ScaleDescription, SceneDescription,
-    SecondBounceSettings, SettingsDescription, ShadowMapSource, SoftShadows, SparseShading, TransformDescription,
-    frame_val_parts, parse_json,
+    CameraDescription, LightDescription, LightEntry, MAX_COORDINATE_M, MAX_SPARSE_POINTS, MaterialDescription,
+    MeshDescription, PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription,
+    SettingsDescription, TransformDescription, frame_val_parts, parse_json,
 };
 pub use error::SceneError;
+pub use settings::{
+    ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, DifferentialDevice,
+    DirectSettings, DirectShadows, EnvironmentDistribution, EnvironmentSettings, EnvironmentSource,
+    GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS,
+    MAX_DIRECT_LIGHTS, MAX_ENVIRONMENT_ROWS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
+    MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MrSettings, NEAR_FIELD_RANGE, Occlusion, OcclusionRule,
+    OcclusionSetting, POINT_VIEWS, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE, SecondBounceSettings, ShadowMapSource,
+    SoftShadows, SparseShading,
+};
 pub use texture::MAX_TEXTURE_SIDE;
 
 /// Sparse points each vertex interpolates from (paper eqs. 12-13) unless the scene's
@@ -273,9 +279,9 @@ pub struct Settings {
     pub occlusion: Occlusion,
     pub occlusion_rule: OcclusionRule,
     /// How RGB-D frames become VALs.
-    pub rgbd: crate::rgbd::RgbdSettings,
+    pub rgbd: RgbdSettings,
     /// Mixed-reality compositing (differential rendering).
-    pub mr: crate::mr::differential::MrSettings,
+    pub mr: MrSettings,
     /// The sparse method's interpolation kernel, light bound and subdivision.
     pub sparse: SparseShading,
     /// The `Clusters` visibility mode's settings.

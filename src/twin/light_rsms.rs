@@ -24,8 +24,7 @@ use glam::{Mat4, Vec2, Vec3};
 use std::f32::consts::{FRAC_PI_4, PI};
 
 /// Views of a point light's RSM (a cube's faces) and of a spot's.
-pub const POINT_VIEWS: u32 = 6;
-pub const SPOT_VIEWS: u32 = 1;
+pub use crate::scene::settings::{POINT_VIEWS, SPOT_VIEWS};
 
 /// How many views a light's RSM has.
 pub fn views_of(light: &Light) -> u32 {

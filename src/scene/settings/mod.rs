@@ -1,0 +1,27 @@
+//! Every setting of a scene file's `settings`, with its default, its range and its one
+//! validation. The structs live here, at the bottom of the crate, so the scene description can
+//! hold them without reaching up into the modules that use them (`mr`, `rgbd`, `gpu`): those
+//! import them from here.
+
+mod bounce;
+mod direct;
+mod environment;
+mod mr;
+mod rgbd;
+mod sparse;
+mod visibility;
+
+pub use bounce::{DEFAULT_BOUNCES, MAX_SECOND_BOUNCE_POINTS, MAX_SECOND_BOUNCE_VALS, SecondBounceSettings};
+pub use direct::{DirectSettings, DirectShadows, MAX_DIRECT_LIGHTS, MAX_LIGHTS_VAL_BUDGET, POINT_VIEWS, SPOT_VIEWS};
+pub use environment::{EnvironmentDistribution, EnvironmentSettings, EnvironmentSource, MAX_ENVIRONMENT_ROWS};
+pub use mr::{DifferentialDevice, MAX_RECEIVER_MARGIN, MrSettings};
+pub use rgbd::RgbdSettings;
+pub use sparse::{
+    ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION,
+    GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, SUBDIVISION_RANGE, SparseShading,
+};
+pub use visibility::{
+    ClusterMethod, ClusterSettings, IsmSettings, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_ISM_POINTS, MAX_ISM_SPLATS,
+    MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, Occlusion, OcclusionRule, OcclusionSetting, ShadowMapSource,
+    SoftShadows,
+};

@@ -1,0 +1,58 @@
+//! `settings.mr`: mixed-reality compositing (differential rendering, `mr::differential`).
+
+use serde::{Deserialize, Serialize};
+
+use crate::scene::SceneError;
+use crate::scene::validate::{in_closed, int_in, positive};
+
+/// Largest `settings.mr.receiver_margin` (m): receivers cost one pass over every VAL each.
+pub const MAX_RECEIVER_MARGIN: f32 = 10.0;
+
+/// Mixed-reality compositing settings (`settings.mr` of a scene file); every field has a
+/// default.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct MrSettings {
+    /// Render the virtual content's shadow and reflected light onto the real surfaces; default
+    /// true.
+    pub differential: bool,
+    /// Real surfaces within this distance (m) of the virtual content's bounding box receive;
+    /// in (0, 10], default 0.3.
+    pub receiver_margin: f32,
+    /// One receiver per `receiver_step x receiver_step` depth pixels, 1..=64; default 4.
+    pub receiver_step: u32,
+    /// Where the differential pass runs: `auto` (default: the CPU on CPU adapters such as
+    /// lavapipe, the GPU otherwise), `gpu` or `cpu`. Both give the same sums.
+    pub device: DifferentialDevice,
+}
+
+impl Default for MrSettings {
+    fn default() -> Self {
+        Self { differential: true, receiver_margin: 0.3, receiver_step: 4, device: DifferentialDevice::Auto }
+    }
+}
+
+/// Where the differential pass runs (`settings.mr.device`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum DifferentialDevice {
+    /// The CPU on CPU adapters, the GPU otherwise. On lavapipe the GPU pass runs one
+    /// invocation per workgroup (for llvmpipe's loop limit) and is two orders of magnitude
+    /// slower than the CPU backend (docs/measurements/, mixed reality).
+    #[default]
+    Auto,
+    /// The GPU pass (`differential.wgsl`).
+    Gpu,
+    /// The pass's CPU twin over rayon's threads, deciding every shadow ray as the GPU pass does.
+    Cpu,
+}
+
+impl MrSettings {
+    /// Ranges of every field, naming the field of the first value out of range.
+    pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        let m = self;
+        positive(m.receiver_margin, &format!("{field}.receiver_margin"))?;
+        in_closed(m.receiver_margin, 0.0, MAX_RECEIVER_MARGIN, &format!("{field}.receiver_margin"))?;
+        int_in(m.receiver_step, 1, 64, &format!("{field}.receiver_step"))
+    }
+}
