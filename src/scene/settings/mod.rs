@@ -8,6 +8,7 @@ mod direct;
 mod environment;
 mod mr;
 mod rgbd;
+mod scene_file;
 mod sparse;
 mod visibility;
 
@@ -16,6 +17,7 @@ pub use direct::{DirectSettings, DirectShadows, MAX_DIRECT_LIGHTS, MAX_LIGHTS_VA
 pub use environment::{EnvironmentDistribution, EnvironmentSettings, EnvironmentSource, MAX_ENVIRONMENT_ROWS};
 pub use mr::{DifferentialDevice, MAX_RECEIVER_MARGIN, MrSettings};
 pub use rgbd::RgbdSettings;
+pub use scene_file::SettingsDescription;
 pub use sparse::{
     ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION,
     GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, SUBDIVISION_RANGE, SparseShading,
