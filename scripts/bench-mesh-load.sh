@@ -15,7 +15,7 @@ cat > "$dir/scene.json" <<'EOF'
  "light": {"position": [0.2, 0.2, 1], "direction": [0, 0, -1], "inner_angle_deg": 20,
            "outer_angle_deg": 30, "intensity": [1, 1, 1]},
  "camera": {"position": [0.3, 0.3, 2], "target": [0.3, 0.3, 0], "fov_y_deg": 40, "width": 8, "height": 8},
- "settings": {"rsm_resolution": 8}}
+ "settings": {"tuning": {"rsm_resolution": 8}}}
 EOF
 load_ms() {
   RUST_LOG=relume=info "$bin" render "$dir/scene.json" --out "$dir/out.png" 2>&1 \

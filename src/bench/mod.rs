@@ -980,13 +980,13 @@ fn run_job(
                     d.meshes.iter_mut().for_each(|m| m.sparse_points = n);
                 }
                 if let Some(k) = neighbours {
-                    d.settings.interpolation_neighbours = k;
+                    d.settings.tuning.interpolation_neighbours = Some(k);
                 }
                 if let Some(a) = adaptive {
-                    d.settings.sparse.adaptive = a as f32 / 100.0;
+                    d.settings.tuning.sparse.get_or_insert_default().adaptive = Some(a as f32 / 100.0);
                 }
                 if let Some(n) = subdivision {
-                    d.settings.sparse.subdivision = n as f32;
+                    d.settings.tuning.sparse.get_or_insert_default().subdivision = Some(n as f32);
                 }
                 let s = Scene::from_description(&d, base_dir).map_err(scene_error)?;
                 scenes.insert(placement, s.clone());

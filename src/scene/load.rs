@@ -5,8 +5,8 @@ use std::path::Path;
 
 use glam::{Affine3A, DAffine3, DMat4, DVec3, Mat4, Vec2, Vec3};
 
-use super::description::{CameraDescription, MeshDescription, SceneDescription};
-use super::settings::{ADAPTIVE_CANDIDATES, Occlusion, OcclusionSetting};
+use super::description::{CameraDescription, LightEntry, MeshDescription, SceneDescription};
+use super::settings::{ADAPTIVE_CANDIDATES, Quality, ResolvedConfig, SceneAnalysis, resolve};
 use super::{
     GltfSceneDescription, MAX_TRIANGLES_PER_MESH, Material, Mesh, Scene, SceneError, Settings, gltf, normals, obj,
     sparse, subdivide, texture,
@@ -18,20 +18,38 @@ impl Scene {
     /// A JSON object with a top-level `gltf` field is a [`GltfSceneDescription`]: the whole
     /// scene from one glTF file (its meshes, spot light and camera) with relume's settings.
     pub fn from_json_str(text: &str, base_dir: &Path) -> Result<Scene, SceneError> {
+        Self::from_json_str_at(text, base_dir, None)
+    }
+
+    /// [`Scene::from_json_str`] at `quality` instead of the scene file's `settings.quality`
+    /// (`None`: the file's).
+    pub fn from_json_str_at(text: &str, base_dir: &Path, quality: Option<Quality>) -> Result<Scene, SceneError> {
+        let at = |mut description: SceneDescription| {
+            if let Some(quality) = quality {
+                description.settings.quality = quality;
+            }
+            description
+        };
         if GltfSceneDescription::is_one(text) {
             let description = GltfSceneDescription::from_json_str(text)?.to_scene_description(base_dir)?;
-            return Self::from_description(&description, base_dir)
+            return Self::from_description(&at(description), base_dir)
                 .map_err(|e| e.with_field(GltfSceneDescription::field_in_form));
         }
-        Self::from_description(&SceneDescription::from_json_str(text)?, base_dir)
+        Self::from_description(&at(SceneDescription::from_json_str(text)?), base_dir)
     }
 
     /// Reads a scene file; OBJ paths are relative to the directory that holds it.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        Self::load_at(path, None)
+    }
+
+    /// [`Scene::load`] at `quality` instead of the file's `settings.quality` (`None`: the
+    /// file's).
+    pub fn load_at(path: &Path, quality: Option<Quality>) -> Result<Scene, SceneError> {
         let text =
             std::fs::read_to_string(path).map_err(|source| SceneError::Read { path: path.to_path_buf(), source })?;
         let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
-        Self::from_json_str(&text, base_dir)
+        Self::from_json_str_at(&text, base_dir, quality)
     }
 
     /// Validates a parsed description and loads every mesh it names; OBJ paths are relative to
@@ -50,7 +68,8 @@ impl Scene {
         max_triangles: usize,
     ) -> Result<Scene, SceneError> {
         description.validate()?;
-        let mut settings = description.settings.to_settings(false);
+        // What the loader reads depends on the level and the tuning only (`resolve`).
+        let load_settings = description.settings.before_load();
         let mut materials = Vec::new();
         let mut textures = texture::Textures::default();
         let mut meshes = Vec::with_capacity(description.meshes.len());
@@ -58,7 +77,8 @@ impl Scene {
         let mut triangles = 0usize;
         for (index, mesh_description) in description.meshes.iter().enumerate() {
             let budget = TriangleBudget { left: max_triangles.saturating_sub(triangles), total: max_triangles };
-            let mesh = load_mesh(mesh_description, index, base_dir, &settings, &budget, &mut materials, &mut textures)?;
+            let mesh =
+                load_mesh(mesh_description, index, base_dir, &load_settings, &budget, &mut materials, &mut textures)?;
             triangles += mesh.triangles.len();
             meshes.push(mesh);
         }
@@ -67,10 +87,19 @@ impl Scene {
         for (mesh, transform) in meshes.iter_mut().zip(&user_to_world) {
             mesh.model_to_world = local_matrix(origin, *transform);
         }
-        if description.settings.occlusion == OcclusionSetting::Auto {
-            let self_occluding = meshes.len() > 1 || meshes.iter().any(Mesh::may_occlude_itself);
-            settings.occlusion = if self_occluding { Occlusion::Disks } else { Occlusion::Off };
-        }
+        let analysis = analyse(&meshes, &materials, description);
+        let quality = description.settings.quality;
+        let (settings, choices) = resolve(quality, &analysis, &description.settings);
+        debug_assert_eq!(
+            (settings.sparse, settings.interpolation_neighbours, settings.seed),
+            (load_settings.sparse, load_settings.interpolation_neighbours, load_settings.seed),
+            "the loader's parameters do not depend on the analysis"
+        );
+        let method = match quality {
+            Quality::Reference => super::settings::Technique::Exact,
+            _ => super::settings::Technique::Sparse,
+        };
+        let resolved = ResolvedConfig { quality, budget_ms: description.settings.budget_ms, method, analysis, choices };
         Ok(Scene {
             meshes,
             materials,
@@ -79,6 +108,7 @@ impl Scene {
             lights: description.lights.iter().map(|l| l.to_light(origin)).collect(),
             camera: description.camera.to_camera(origin),
             settings,
+            resolved,
             anchor,
             origin,
         })
@@ -136,6 +166,28 @@ impl Scene {
     /// Vertices over all meshes (after subdivision and crease splitting).
     pub fn vertex_count(&self) -> usize {
         self.meshes.iter().map(|m| m.positions.len()).sum()
+    }
+}
+
+/// What the quality levels look at in a loaded scene (its meshes placed, its materials
+/// resolved).
+fn analyse(meshes: &[Mesh], materials: &[Material], description: &SceneDescription) -> SceneAnalysis {
+    let used_glossy = materials
+        .iter()
+        .enumerate()
+        .filter(|(i, m)| m.is_glossy() && meshes.iter().any(|mesh| mesh.triangle_materials.contains(&(*i as u32))))
+        .count();
+    let triangles: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+    let points: usize = meshes.iter().map(|m| m.sparse.base_len()).sum();
+    let spot_lights = description.lights.iter().filter(|l| matches!(l, LightEntry::Spot(_))).count();
+    SceneAnalysis {
+        meshes: meshes.len(),
+        concave_meshes: meshes.iter().filter(|m| m.may_occlude_itself()).map(|m| m.name.clone()).collect(),
+        glossy_materials: used_glossy,
+        spot_light: description.light.is_some(),
+        spot_lights,
+        point_lights: description.lights.len() - spot_lights,
+        triangles_per_sparse_point: if points == 0 { 0.0 } else { triangles as f32 / points as f32 },
     }
 }
 

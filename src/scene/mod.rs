@@ -70,8 +70,8 @@ pub use settings::{
     GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS,
     MAX_DIRECT_LIGHTS, MAX_ENVIRONMENT_ROWS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
     MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MrSettings, NEAR_FIELD_RANGE, Occlusion, OcclusionRule,
-    OcclusionSetting, POINT_VIEWS, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE, SecondBounceSettings, ShadowMapSource,
-    SoftShadows, SparseShading,
+    OcclusionSetting, POINT_VIEWS, Quality, ResolvedConfig, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE,
+    SecondBounceSettings, ShadowMapSource, SoftShadows, SparseShading,
 };
 pub use texture::MAX_TEXTURE_SIDE;
 
@@ -105,8 +105,11 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// The camera the final image is rendered from.
     pub camera: Camera,
-    /// Render settings.
+    /// Render settings, as resolved from the scene file's quality level and tuning.
     pub settings: Settings,
+    /// The quality level, the scene's analysis, and why each parameter of `settings` has its
+    /// value.
+    pub resolved: ResolvedConfig,
     /// The description's `anchor` (user coordinates), already applied to every mesh's
     /// [`Mesh::model_to_world`]; kept to place a mesh given a new transform
     /// ([`Scene::mesh_to_world`]).

@@ -650,7 +650,7 @@ impl Hostile {
             "light": {"position": [0, 1, 0], "direction": [0, -1, 0], "inner_angle_deg": 30,
                       "outer_angle_deg": 45, "intensity": [1, 1, 1]},
             "camera": {"position": [0, 1, 2], "target": [0, 0, 0], "fov_y_deg": 50, "width": 8, "height": 8},
-            "settings": {"rsm_resolution": 8}
+            "settings": {"tuning": {"rsm_resolution": 8}}
         });
         while tokio::time::Instant::now() < deadline {
             match connection.create_scene(&scene).await {

@@ -93,8 +93,8 @@ pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> 
         terms.push(format!("{field} {vals}"));
         if sum > limits.max_vals as u64 {
             let what = match terms.len() {
-                1 if field == "settings.rsm_resolution" => {
-                    let r = description.settings.rsm_resolution;
+                1 if field == "settings.tuning.rsm_resolution" => {
+                    let r = description.settings.before_load().rsm_resolution;
                     format!("{r}² = {vals} VALs per frame")
                 }
                 1 => format!("{vals} VALs per frame"),
@@ -110,7 +110,7 @@ pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> 
     limits.check_image(description.camera.width, description.camera.height, "camera")?;
     let sparse_points: u64 = description.meshes.iter().map(|m| m.sparse_points as u64).sum();
     // Adaptive candidates are sparse points the scene holds too.
-    let adaptive = description.settings.sparse.adaptive;
+    let adaptive = description.settings.before_load().sparse.adaptive;
     let candidates: u64 = description
         .meshes
         .iter()
@@ -120,7 +120,7 @@ pub fn admit(description: &SceneDescription, assets: &Path, limits: &Limits) -> 
         let what = if candidates > 0 {
             format!(
                 "{} sparse points over all meshes ({sparse_points} and {candidates} adaptive candidates, \
-                 settings.sparse.adaptive)",
+                 settings.tuning.sparse.adaptive)",
                 sparse_points + candidates
             )
         } else {
@@ -358,7 +358,7 @@ mod tests {
     /// crosses the limit is named.
     #[test]
     fn admission_bounds_the_frames_vals_by_every_part() {
-        let scene = |settings: &str, lights: bool| {
+        let scene_with = |tuning: &str, lights: bool, bounces: u32| {
             let lights = if lights {
                 r#", "lights": [{"type": "point", "position": [0, 1, 0], "intensity": [1, 1, 1]}]"#
             } else {
@@ -369,21 +369,25 @@ mod tests {
                 "light": {{"position": [0, 1.9, 0], "direction": [0, -1, 0], "inner_angle_deg": 30,
                           "outer_angle_deg": 40, "intensity": [1, 1, 1]}}{lights},
                 "camera": {{"position": [0, 1, 3], "target": [0, 1, 0], "fov_y_deg": 40, "width": 8, "height": 8}},
-                "settings": {settings}}}"#
+                "settings": {{"bounces": {bounces}, "tuning": {tuning}}}}}"#
             );
             SceneDescription::from_json_str(&json).expect("parses")
         };
+        let scene = |tuning: &str, lights: bool| scene_with(tuning, lights, 1);
         let limits = Limits { max_vals: 5000, ..Limits::default() };
         let admit = |d: &SceneDescription| admit(d, &assets(), &limits);
         // 64² = 4096 alone, and 4096 + 900 with lights: admitted.
         let ok = scene(r#"{"rsm_resolution": 64, "direct": {"val_budget": 900}}"#, true);
-        assert_eq!(ok.frame_vals(), vec![("settings.rsm_resolution", 4096), ("settings.direct.val_budget", 900)]);
+        assert_eq!(
+            ok.frame_vals(),
+            vec![("settings.tuning.rsm_resolution", 4096), ("settings.tuning.direct.val_budget", 900)]
+        );
         admit(&ok).expect("4996 VALs");
         // 4096 + 1000: the budget crosses the limit.
         let e = admit(&scene(r#"{"rsm_resolution": 64, "direct": {"val_budget": 1000}}"#, true)).expect_err("5096");
-        assert_eq!((e.limit, e.field.as_deref()), (Some(limit::MAX_VALS), Some("settings.direct.val_budget")));
+        assert_eq!((e.limit, e.field.as_deref()), (Some(limit::MAX_VALS), Some("settings.tuning.direct.val_budget")));
         assert!(
-            e.message.contains("settings.rsm_resolution 4096 + settings.direct.val_budget 1000 = 5096"),
+            e.message.contains("settings.tuning.rsm_resolution 4096 + settings.tuning.direct.val_budget 1000 = 5096"),
             "{}",
             e.message
         );
@@ -391,12 +395,12 @@ mod tests {
         admit(&scene(r#"{"rsm_resolution": 64, "direct": {"val_budget": 1000}}"#, false)).expect("4096 VALs");
         // The RSM alone over the limit names it.
         let e = admit(&scene(r#"{"rsm_resolution": 72}"#, false)).expect_err("72²");
-        assert_eq!(e.field.as_deref(), Some("settings.rsm_resolution"));
+        assert_eq!(e.field.as_deref(), Some("settings.tuning.rsm_resolution"));
         assert!(e.message.contains("72² = 5184 VALs per frame"), "{}", e.message);
         // A second bounce's VALs count too.
-        let e = admit(&scene(r#"{"rsm_resolution": 64, "bounces": 2, "second_bounce": {"vals": 1024}}"#, false))
+        let e = admit(&scene_with(r#"{"rsm_resolution": 64, "second_bounce": {"vals": 1024}}"#, false, 2))
             .expect_err("4096 + 1024");
-        assert_eq!(e.field.as_deref(), Some("settings.second_bounce.vals"));
+        assert_eq!(e.field.as_deref(), Some("settings.tuning.second_bounce.vals"));
     }
 
     #[test]
@@ -435,7 +439,7 @@ mod tests {
             info,
             exposure: None,
             mesh_count: 0,
-            settings: crate::scene::SettingsDescription::default().to_settings(false),
+            settings: crate::scene::SettingsDescription::default().before_load(),
             origin: glam::DVec3::ZERO,
         };
         a.commit(entry);

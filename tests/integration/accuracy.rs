@@ -11,8 +11,23 @@ fn fixture_with_settings(name: &str, settings: serde_json::Value) -> Scene {
     let dir = fixture("scenes");
     let text = std::fs::read_to_string(dir.join(name)).unwrap();
     let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    // Research knobs live under `settings.tuning`, what the user wants beside it.
+    const TUNING: [&str; 9] = [
+        "rsm_resolution",
+        "interpolation_neighbours",
+        "visibility",
+        "occlusion_rule",
+        "sparse",
+        "clusters",
+        "ism",
+        "direct",
+        "second_bounce",
+    ];
     for (key, value) in settings.as_object().expect("settings are an object") {
-        json["settings"][key] = value.clone();
+        match TUNING.contains(&key.as_str()) {
+            true => json["settings"]["tuning"][key] = value.clone(),
+            false => json["settings"][key] = value.clone(),
+        }
     }
     Scene::from_json_str(&json.to_string(), &dir).unwrap()
 }
@@ -24,7 +39,7 @@ fn rel_rmse_with_sparse_points(box_points: u32, bunny_points: u32, sparse: serde
         .replace("\"sparse_points\": 512", &format!("\"sparse_points\": {box_points}"))
         .replace("\"sparse_points\": 256", &format!("\"sparse_points\": {bunny_points}"));
     let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
-    json["settings"]["sparse"] = sparse;
+    json["settings"]["tuning"]["sparse"] = sparse;
     let scene = Scene::from_json_str(&json.to_string(), &dir).unwrap();
     let gpu = gpu();
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();

@@ -104,8 +104,9 @@ fn furnace(rho: f32) -> Scene {
         "light": { "position": [0.1, 1.9, 0.05], "direction": [0, -1, 0], "inner_angle_deg": 30,
                    "outer_angle_deg": 40, "intensity": [5, 5, 5] },
         "camera": { "position": [0, 1, 0.9], "target": [0, 1, 0], "fov_y_deg": 90, "width": 32, "height": 32 },
-        "settings": { "rsm_resolution": 48, "visibility": "off", "bounces": 2,
-                      "second_bounce": { "points": 4096, "vals": 512 } }
+        "settings": { "bounces": 2,
+                      "tuning": { "rsm_resolution": 48, "visibility": "off",
+                                  "second_bounce": { "points": 4096, "vals": 512 } } }
     });
     Scene::from_json_str(&json.to_string(), std::path::Path::new(".")).expect("furnace scene")
 }
@@ -414,9 +415,10 @@ fn plate_hides_bounce_points_through_the_ism() {
             "light": { "position": [-0.5, 1.0, 0.0], "direction": [-1, 0, 0], "inner_angle_deg": 45,
                        "outer_angle_deg": 50, "intensity": [5, 5, 5] },
             "camera": { "position": [0, 1, -3], "target": [0, 1, 0], "fov_y_deg": 60, "width": 8, "height": 8 },
-            "settings": { "rsm_resolution": 32, "visibility": visibility, "bounces": 2,
-                          "ism": { "count": 64, "resolution": 128, "points": 30000, "soft": "hard" },
-                          "second_bounce": { "points": 4096, "vals": 64 } }
+            "settings": { "bounces": 2,
+                          "tuning": { "rsm_resolution": 32, "visibility": visibility,
+                                      "ism": { "count": 64, "resolution": 128, "points": 30000, "soft": "hard" },
+                                      "second_bounce": { "points": 4096, "vals": 64 } } }
         });
         Scene::from_json_str(&json.to_string(), std::path::Path::new(".")).expect("plate scene")
     };

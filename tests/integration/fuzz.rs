@@ -201,6 +201,8 @@ const KEYS: &[&str] = &[
     "light",
     "camera",
     "settings",
+    "tuning",
+    "quality",
     "obj",
     "obj_text",
     "sparse_points",

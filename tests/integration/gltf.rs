@@ -18,7 +18,7 @@ fn cornell_json(mesh: &str) -> String {
         "light": {{ "position": [0.6, 1.6, 0.6], "direction": [-1.6, -0.3, -0.8],
                     "inner_angle_deg": 15, "outer_angle_deg": 25, "intensity": [10, 10, 10] }},
         "camera": {{ "position": [0, 1.0, 3.3], "target": [0, 0.9, 0], "fov_y_deg": 38, "width": 64, "height": 64 }},
-        "settings": {{ "rsm_resolution": 32, "occlusion": "off" }}
+        "settings": {{ "tuning": {{ "rsm_resolution": 32, "visibility": "off" }} }}
     }}"#
     )
 }

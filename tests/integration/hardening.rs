@@ -346,7 +346,7 @@ async fn work_per_scene_and_render_is_bounded_before_it_starts() {
     // 50,000 candidates more, over the 65,536 points of the limit.
     let mut adaptive = inline_scene();
     adaptive["meshes"][0]["sparse_points"] = json!(25_000);
-    adaptive["settings"]["sparse"] = json!({"adaptive": 0.5});
+    adaptive["settings"]["tuning"]["sparse"] = json!({"adaptive": 0.5});
     let e = server.post("/v1/scenes", &adaptive).await.error(400, "limit_exceeded");
     assert_eq!((e["limit"].as_str(), e["field"].as_str()), (Some("max_sparse_points"), Some("meshes")));
     let message = e["message"].as_str().unwrap();

@@ -37,7 +37,7 @@ fn read_description(name: &str) -> SceneDescription {
 
 fn description() -> SceneDescription {
     let mut description = read_description("cornell_bunny_small");
-    description.settings.occlusion = OcclusionSetting::Disks;
+    description.settings.tuning.visibility = Some(OcclusionSetting::Disks);
     description
 }
 
@@ -123,7 +123,7 @@ fn recording_description(occlusion: OcclusionSetting) -> SceneDescription {
     let mut description = read_description("mr_bunny");
     description.settings.rgbd.grid_step = 16;
     description.settings.mr.differential = false;
-    description.settings.occlusion = occlusion;
+    description.settings.tuning.visibility = Some(occlusion);
     description
 }
 

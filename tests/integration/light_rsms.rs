@@ -138,7 +138,7 @@ fn point_light_in_a_closed_box_reflects_albedo_times_power() {
             "meshes": [{{ "obj": "box.obj", "sparse_points": 64, "material": {{ "diffuse": [0.5, 0.5, 0.5] }} }}],
             "lights": [{{ "type": "point", "position": [0.1, -0.2, 0.15], "intensity": [2, 1, 0.5] }}],
             "camera": {{ "position": [0, 0, 0.9], "target": [0, 0, 0], "fov_y_deg": 60, "width": 8, "height": 8 }},
-            "settings": {{ "direct": {{ "val_budget": {budget} }} }}
+            "settings": {{ "tuning": {{ "direct": {{ "val_budget": {budget} }} }} }}
         }}"#
         );
         let scene = Scene::from_json_str(&json, &dir).unwrap();

@@ -360,7 +360,7 @@ async fn a_whole_gltf_scene_is_admitted_like_a_mesh_file() {
     let app = App::start(|c| c.limits.max_mesh_bytes = 4096).await;
     let scene = |gltf: &str| {
         json!({"gltf": gltf, "sparse_points": 64, "width": 16, "height": 16,
-                                     "skip_groups": ["light"], "settings": {"rsm_resolution": 16}})
+                                     "skip_groups": ["light"], "settings": {"tuning": {"rsm_resolution": 16}}})
     };
     for path in ["../Cargo.toml", "/etc/passwd", "meshes/../../src/lib.rs"] {
         let error = app.post("/v1/scenes", &scene(path)).await.error(400, "path_outside_assets");

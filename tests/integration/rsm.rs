@@ -31,7 +31,7 @@ fn rsm_flux_equals_analytic_cone_flux_on_a_plane() {
         "meshes": [{ "obj": "plane.obj", "sparse_points": 16, "material": { "diffuse": [0.8, 0.5, 0.2] } }],
         "light": { "position": [0, 2, 0], "direction": [0, -1, 0], "inner_angle_deg": 20, "outer_angle_deg": 35, "intensity": [3, 2, 1] },
         "camera": { "position": [0, 5, 5], "target": [0, 0, 0], "fov_y_deg": 45, "width": 8, "height": 8 },
-        "settings": { "rsm_resolution": 256 }
+        "settings": { "tuning": { "rsm_resolution": 256 } }
     }"#;
     let (gpu, renderer) = rendered_over_plane("rsm_plane", json);
     let total: Vec3 = renderer.read_vals(&gpu).unwrap().iter().map(|v| v.flux).sum();
@@ -58,7 +58,7 @@ fn rsm_grid_follows_the_lights_up() {
         "light": { "position": [0, 2, 0], "direction": [0.1, -1, 0.05], "up": [1, 0.3, 1],
                    "inner_angle_deg": 20, "outer_angle_deg": 35, "intensity": [1, 1, 1] },
         "camera": { "position": [0, 5, 5], "target": [0, 0, 0], "fov_y_deg": 45, "width": 8, "height": 8 },
-        "settings": { "rsm_resolution": 32 }
+        "settings": { "tuning": { "rsm_resolution": 32 } }
     }"#;
     let (gpu, renderer) = rendered_over_plane("rsm_up", json);
     let spot = renderer.spot().unwrap();

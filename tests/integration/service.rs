@@ -207,7 +207,7 @@ pub(super) fn inline_scene() -> Value {
         "light": {"position": [0, 1.8, 0.5], "direction": [0, -1, -0.3], "inner_angle_deg": 30,
                   "outer_angle_deg": 45, "intensity": [5, 5, 5]},
         "camera": {"position": [0, 1, 3], "target": [0, 0.5, 0], "fov_y_deg": 50, "width": 16, "height": 16},
-        "settings": {"rsm_resolution": 16}
+        "settings": {"tuning": {"rsm_resolution": 16}}
     })
 }
 
@@ -384,7 +384,7 @@ async fn bad_scenes_get_errors_naming_the_field() {
     let error = create(scene).await.error(413, "limit_exceeded");
     assert_eq!((error["limit"].as_str(), error["field"].as_str()), (Some("max_mesh_bytes"), Some("meshes[0].obj")));
     let mut scene = inline_scene();
-    scene["settings"]["rsm_resolution"] = json!(512);
+    scene["settings"]["tuning"]["rsm_resolution"] = json!(512);
     assert_eq!(create(scene).await.error(400, "limit_exceeded")["limit"], "max_vals");
     let mut scene = inline_scene();
     scene["camera"]["width"] = json!(8000);
@@ -438,7 +438,7 @@ async fn brute_force_ism_renders_and_is_refused_over_the_device_limit() {
     let server = TestServer::start(|_| {}).await;
     let mut scene = fixture_scene("cornell_bunny_small", 16);
     // Few small maps: the lookup at 256 pixels x 16 groups is fast on lavapipe.
-    scene["settings"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
+    scene["settings"]["tuning"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
     let id = server.create(&scene).await;
     let path = format!("/v1/scenes/{id}/render");
     let indirect = |method: &str| json!({"quality": {"method": method, "component": "indirect", "format": "f32"}});
@@ -464,7 +464,7 @@ async fn brute_force_ism_renders_and_is_refused_over_the_device_limit() {
     assert!(lit < unoccluded * 0.99, "the maps occlude nothing: {lit} vs {unoccluded}");
 
     // 2048x2048 pixels x 1,024 groups x 4 bytes = 16 GiB, over any device's storage binding.
-    scene["settings"]["ism"] = json!({"count": 1024});
+    scene["settings"]["tuning"]["ism"] = json!({"count": 1024});
     let big = server.create(&scene).await;
     let request = json!({
         "camera": {"position": [0, 1, 3.3], "target": [0, 0.9, 0], "fov_y_deg": 45, "width": 2048, "height": 2048},
@@ -754,7 +754,7 @@ async fn a_stream_relights_frames_and_follows_its_controls() {
 async fn a_stream_renders_brute_force_ism_and_refuses_it_over_the_device_limit() {
     let server = TestServer::start(|_| {}).await;
     let mut scene = inline_scene();
-    scene["settings"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
+    scene["settings"]["tuning"]["ism"] = json!({"count": 16, "resolution": 32, "points": 400});
     let id = server.create(&scene).await;
     let mut ws = server.stream(&id).await;
     let quality = |request_id| proto::Control {
@@ -775,7 +775,7 @@ async fn a_stream_renders_brute_force_ism_and_refuses_it_over_the_device_limit()
 
     // A 2048x2048 virtual view with 1,024 maps: 16 GiB of table.
     let mut scene = inline_scene();
-    scene["settings"]["ism"] = json!({"count": 1024});
+    scene["settings"]["tuning"]["ism"] = json!({"count": 1024});
     let big = server.create(&scene).await;
     let mut ws = server.stream(&big).await;
     let camera = proto::Camera {

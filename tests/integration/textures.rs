@@ -30,7 +30,7 @@ fn textured_albedo_matches_cpu_twin() {
         "meshes": [{ "obj": "floor.obj", "sparse_points": 64 }],
         "light": { "position": [0, 1.5, 0], "direction": [0, -1, 0], "inner_angle_deg": 40, "outer_angle_deg": 50, "intensity": [5, 5, 5] },
         "camera": { "position": [0, 2.5, 2.0], "target": [0, 0, 0], "fov_y_deg": 50, "width": 48, "height": 48 },
-        "settings": { "rsm_resolution": 32 }
+        "settings": { "tuning": { "rsm_resolution": 32 } }
     }"#;
     let scene = Scene::from_json_str(json, &dir).unwrap();
     assert_eq!(scene.textures.len(), 1);

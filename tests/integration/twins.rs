@@ -486,7 +486,7 @@ fn extreme_materials_render_finite_and_non_negative() {
     let plain = relume::scene::Scene::from_json_str(&json, &scene_dir).unwrap();
     // The same with the most adaptive points (candidates placed at load).
     let mut adaptive: serde_json::Value = serde_json::from_str(&json).unwrap();
-    adaptive["settings"]["sparse"] = serde_json::json!({"adaptive": 1.0});
+    adaptive["settings"]["tuning"]["sparse"] = serde_json::json!({"adaptive": 1.0});
     let adaptive = relume::scene::Scene::from_json_str(&adaptive.to_string(), &scene_dir).unwrap();
     let gpu = gpu();
     // Both ways of carrying the glossy lobe: the paper's lights, and the interpolated radiance.
@@ -828,7 +828,7 @@ fn adaptive_points_match_cpu_twins() {
     let dir = super::fixture("scenes");
     let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
     let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
-    json["settings"]["sparse"] = serde_json::json!({"adaptive": 0.5});
+    json["settings"]["tuning"]["sparse"] = serde_json::json!({"adaptive": 0.5});
     let scene = relume::scene::Scene::from_json_str(&json.to_string(), &dir).unwrap();
     let (w, h) = (48, 40);
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
@@ -911,7 +911,7 @@ fn interpolation_takes_the_scene_neighbour_count() {
     let mut images = Vec::new();
     for k in [4, 16] {
         let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
-        json["settings"]["interpolation_neighbours"] = k.into();
+        json["settings"]["tuning"]["interpolation_neighbours"] = k.into();
         let scene = relume::scene::Scene::from_json_str(&json.to_string(), &dir).unwrap();
         let mut renderer = Renderer::new(&gpu, &scene).unwrap();
         let frame = renderer.render(&gpu, Method::Sparse, 24, 20).unwrap();

@@ -14,7 +14,8 @@
 //!             "outer_angle_deg": 30, "intensity": [10, 10, 10]},
 //!   "camera": {"position": [0, 1, 3.5], "target": [0, 1, 0], "up": [0, 1, 0], "fov_y_deg": 40,
 //!              "width": 512, "height": 512},
-//!   "settings": {"rsm_resolution": 128, "glossy": true, "seed": 1, "exposure": null}
+//!   "settings": {"quality": "balanced", "glossy": true, "seed": 1, "exposure": null,
+//!                "tuning": {"rsm_resolution": 128}}
 //! }
 //! ```
 //!
@@ -66,9 +67,9 @@ pub struct SceneDescription {
     /// Direct lights beside `light` (README "Many direct lights"): spot lights (`{"type":
     /// "spot"}` and the fields of `light`) and point lights (`{"type": "point"}`,
     /// [`PointLightDescription`]). Each adds direct light (its shadows as
-    /// `settings.direct.shadows` says) and VALs from its own RSM, the VAL budget
-    /// `settings.direct.val_budget` split among them by emitted flux. At most
-    /// `settings.direct.max_lights`.
+    /// `settings.tuning.direct.shadows` says) and VALs from its own RSM, the VAL budget
+    /// `settings.tuning.direct.val_budget` split among them by emitted flux. At most
+    /// `settings.tuning.direct.max_lights`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lights: Vec<LightEntry>,
     /// Where the virtual content sits in the world, applied after every mesh's own transform:
@@ -77,7 +78,8 @@ pub struct SceneDescription {
     pub anchor: Option<TransformDescription>,
     /// The camera (for RGB-D replay and streams, each frame's camera replaces it).
     pub camera: CameraDescription,
-    /// Render settings; all have defaults.
+    /// Render settings: a quality level and what the user wants, the research knobs under
+    /// `tuning`; all have defaults.
     #[serde(default)]
     pub settings: SettingsDescription,
 }
@@ -94,13 +96,13 @@ pub fn frame_val_parts(
 ) -> Vec<(&'static str, u64)> {
     let mut parts = Vec::new();
     if light {
-        parts.push(("settings.rsm_resolution", u64::from(rsm_resolution).pow(2)));
+        parts.push(("settings.tuning.rsm_resolution", u64::from(rsm_resolution).pow(2)));
     }
     if lights {
-        parts.push(("settings.direct.val_budget", u64::from(val_budget)));
+        parts.push(("settings.tuning.direct.val_budget", u64::from(val_budget)));
     }
     if let Some(vals) = second_bounce_vals {
-        parts.push(("settings.second_bounce.vals", u64::from(vals)));
+        parts.push(("settings.tuning.second_bounce.vals", u64::from(vals)));
     }
     parts
 }
@@ -120,7 +122,7 @@ impl SceneDescription {
     /// bounce's (`second_bounce.vals`, only with `bounces: 2`). VALs uploaded or from an RGB-D
     /// frame come on top.
     pub fn frame_vals(&self) -> Vec<(&'static str, u64)> {
-        let s = &self.settings;
+        let s = self.settings.before_load();
         let second = (s.bounces == 2).then_some(s.second_bounce.vals);
         frame_val_parts(self.light.is_some(), !self.lights.is_empty(), s.rsm_resolution, s.direct.val_budget, second)
     }
@@ -142,11 +144,12 @@ impl SceneDescription {
         }
         self.camera.validate("camera")?;
         self.settings.validate("settings")?;
-        let max = self.settings.direct.max_lights;
+        let direct = self.settings.before_load().direct;
+        let max = direct.max_lights;
         if self.lights.len() > max as usize {
             return Err(SceneError::field(
                 "lights",
-                format!("holds {} lights, over settings.direct.max_lights = {max}", self.lights.len()),
+                format!("holds {} lights, over settings.tuning.direct.max_lights = {max}", self.lights.len()),
             ));
         }
         for (i, light) in self.lights.iter().enumerate() {
@@ -161,10 +164,10 @@ impl SceneDescription {
                 LightEntry::Point(_) => POINT_VIEWS,
             })
             .sum();
-        let budget = self.settings.direct.val_budget;
+        let budget = direct.val_budget;
         if budget < minimum {
             return Err(SceneError::field(
-                "settings.direct.val_budget",
+                "settings.tuning.direct.val_budget",
                 format!(
                     "must be at least {minimum} for these lights (one VAL per RSM view: 6 per point light, 1 per spot), got {budget}"
                 ),

@@ -29,9 +29,19 @@ fn edit(from: &str, to: &str) -> String {
     MINIMAL.replacen(from, to, 1)
 }
 
-/// `MINIMAL` with `lights` and `settings.direct` as given.
+/// `MINIMAL` with `lights` and `settings.tuning.direct` as given.
 fn with_lights(lights: &str, direct: &str) -> String {
-    edit(r#""meshes""#, &format!(r#""lights": [{lights}], "settings": {{"direct": {{{direct}}}}}, "meshes""#))
+    edit(
+        r#""meshes""#,
+        &format!(r#""lights": [{lights}], "settings": {{"tuning": {{"direct": {{{direct}}}}}}}, "meshes""#),
+    )
+}
+
+/// The settings resolved at the scene file's level for a scene that can (`self_occluding`) or
+/// cannot occlude itself.
+fn to_settings(settings: &SettingsDescription, self_occluding: bool) -> Settings {
+    let analysis = SceneAnalysis { meshes: if self_occluding { 2 } else { 1 }, ..SceneAnalysis::default() };
+    resolve(settings.quality, &analysis, settings).0
 }
 
 #[test]
@@ -56,9 +66,12 @@ fn lights_parse_spot_and_point_lights() {
     );
     assert!(matches!(lights[1], super::super::Light::Point(p) if p.range.is_none()));
     assert!(matches!(lights[2], super::super::Light::Spot(s) if (s.outer_angle - 20f32.to_radians()).abs() < 1e-6));
-    let direct = description.settings.direct;
+    let direct = description.settings.before_load().direct;
     assert_eq!((direct.shadows, direct.d_init, direct.z_far), (DirectShadows::LightCluster, 0.5, Some(30.0)));
-    assert_eq!(SceneDescription::from_json_str(MINIMAL).unwrap().settings.direct, DirectSettings::default());
+    assert_eq!(
+        SceneDescription::from_json_str(MINIMAL).unwrap().settings.before_load().direct,
+        DirectSettings::default()
+    );
 }
 
 #[test]
@@ -85,21 +98,21 @@ fn lights_errors_name_the_field() {
         (
             format!("{point}, {point}, {point}"),
             r#""max_lights": 2"#,
-            "lights: holds 3 lights, over settings.direct.max_lights = 2",
+            "lights: holds 3 lights, over settings.tuning.direct.max_lights = 2",
         ),
-        (point.to_owned(), r#""d_init": 0"#, "settings.direct.d_init: must be > 0, got 0"),
-        (point.to_owned(), r#""z_far": -1"#, "settings.direct.z_far: must be > 0, got -1"),
-        (point.to_owned(), r#""max_lights": 0"#, "settings.direct.max_lights: must be in 1..=1024, got 0"),
-        (point.to_owned(), r#""val_budget": 0"#, "settings.direct.val_budget: must be in 1..=1048576, got 0"),
+        (point.to_owned(), r#""d_init": 0"#, "settings.tuning.direct.d_init: must be > 0, got 0"),
+        (point.to_owned(), r#""z_far": -1"#, "settings.tuning.direct.z_far: must be > 0, got -1"),
+        (point.to_owned(), r#""max_lights": 0"#, "settings.tuning.direct.max_lights: must be in 1..=1024, got 0"),
+        (point.to_owned(), r#""val_budget": 0"#, "settings.tuning.direct.val_budget: must be in 1..=1048576, got 0"),
         (
             format!("{point}, {point}"),
             r#""val_budget": 11"#,
-            "settings.direct.val_budget: must be at least 12 for these lights (one VAL per RSM view: 6 per point light, 1 per spot), got 11",
+            "settings.tuning.direct.val_budget: must be at least 12 for these lights (one VAL per RSM view: 6 per point light, 1 per spot), got 11",
         ),
         (
             point.to_owned(),
             r#""shadow_map_resolution": 8"#,
-            "settings.direct.shadow_map_resolution: must be in 16..=1024, got 8",
+            "settings.tuning.direct.shadow_map_resolution: must be in 16..=1024, got 8",
         ),
     ] {
         let message = error_of(&with_lights(&lights, direct));
@@ -107,11 +120,11 @@ fn lights_errors_name_the_field() {
     }
     // 2 x 1024 maps of 1024 texels: over the atlas.
     let message = error_of(&with_lights(point, r#""max_lights": 1024, "shadow_map_resolution": 1024"#));
-    assert!(message.starts_with("settings.direct.shadow_map_resolution: 2048 maps of 1024 texels"), "{message}");
+    assert!(message.starts_with("settings.tuning.direct.shadow_map_resolution: 2048 maps of 1024 texels"), "{message}");
     let message = error_of(&with_lights(r#"{"type": "area", "position": [0, 1, 0]}"#, ""));
     assert!(message.starts_with("lights[0]"), "{message}");
     let message = error_of(&with_lights(point, r#""shadows": "exact""#));
-    assert!(message.starts_with("settings.direct.shadows"), "{message}");
+    assert!(message.starts_with("settings.tuning.direct.shadows"), "{message}");
 }
 
 #[test]
@@ -119,7 +132,7 @@ fn minimal_scene_gets_defaults() {
     let description = SceneDescription::from_json_str(MINIMAL).expect("parses");
     description.validate().expect("valid");
     assert_eq!(description.settings, SettingsDescription::default());
-    let settings = description.settings.to_settings(false);
+    let settings = to_settings(&description.settings, false);
     assert_eq!(settings.rsm_resolution, 128);
     assert!(settings.glossy);
     assert_eq!(settings.seed, 1);
@@ -263,12 +276,13 @@ fn settings_are_checked() {
         let text = MINIMAL.trim_end().trim_end_matches('}');
         format!("{text}, \"settings\": {settings}}}")
     };
+    let with_tuning = |tuning: &str| with_settings(&format!(r#"{{"tuning": {tuning}}}"#));
     let description = SceneDescription::from_json_str(&with_settings(
-        r#"{"rsm_resolution": 256, "glossy": false, "seed": 7, "exposure": 2.5}"#,
+        r#"{"glossy": false, "seed": 7, "exposure": 2.5, "tuning": {"rsm_resolution": 256}}"#,
     ))
     .expect("parses");
     description.validate().expect("valid");
-    let settings = description.settings.to_settings(false);
+    let settings = to_settings(&description.settings, false);
     assert_eq!(
         settings,
         Settings {
@@ -289,37 +303,44 @@ fn settings_are_checked() {
             second_bounce: SecondBounceSettings::default(),
         }
     );
-    let s = SceneDescription::from_json_str(&with_settings(r#"{"bounces": 2, "second_bounce": {"vals": 64}}"#))
-        .expect("parses");
+    let s =
+        SceneDescription::from_json_str(&with_settings(r#"{"bounces": 2, "tuning": {"second_bounce": {"vals": 64}}}"#))
+            .expect("parses");
     s.validate().expect("valid");
-    let settings = s.settings.to_settings(false);
+    let settings = to_settings(&s.settings, false);
     assert_eq!(settings.bounces, 2);
     assert_eq!(settings.second_bounce, SecondBounceSettings { points: 4096, vals: 64 });
     for (text, want) in [
         (r#"{"bounces": 3}"#, "settings.bounces: must be in 1..=2, got 3"),
         (r#"{"bounces": 0}"#, "settings.bounces: must be in 1..=2, got 0"),
-        (r#"{"second_bounce": {"vals": 0}}"#, "settings.second_bounce.vals: must be in 1..=65536, got 0"),
-        (r#"{"second_bounce": {"points": 8}}"#, "settings.second_bounce.points: must be in 16..=262144, got 8"),
+        (
+            r#"{"tuning": {"second_bounce": {"vals": 0}}}"#,
+            "settings.tuning.second_bounce.vals: must be in 1..=65536, got 0",
+        ),
+        (
+            r#"{"tuning": {"second_bounce": {"points": 8}}}"#,
+            "settings.tuning.second_bounce.points: must be in 16..=262144, got 8",
+        ),
     ] {
         assert_eq!(error_of(&with_settings(text)), want, "{text}");
     }
-    let message = error_of(&with_settings(r#"{"sparse": {"subdivision": 0.5}}"#));
-    assert_eq!(message, "settings.sparse.subdivision: must be in [1, 16], got 0.5");
-    let message = error_of(&with_settings(r#"{"sparse": {"near_field": 9}}"#));
-    assert_eq!(message, "settings.sparse.near_field: must be in [0, 8], got 9");
-    let message = error_of(&with_settings(r#"{"sparse": {"near_field": -0.5}}"#));
-    assert_eq!(message, "settings.sparse.near_field: must be in [0, 8], got -0.5");
-    let message = error_of(&with_settings(r#"{"sparse": {"adaptive": 1.5}}"#));
-    assert_eq!(message, "settings.sparse.adaptive: must be in [0, 1], got 1.5");
-    let message = error_of(&with_settings(r#"{"sparse": {"adaptive": -0.1}}"#));
-    assert_eq!(message, "settings.sparse.adaptive: must be in [0, 1], got -0.1");
-    let message = error_of(&with_settings(r#"{"sparse": {"kernel": "cubic"}}"#));
-    assert!(message.starts_with("settings.sparse.kernel: unknown variant `cubic`"), "{message}");
+    let message = error_of(&with_tuning(r#"{"sparse": {"subdivision": 0.5}}"#));
+    assert_eq!(message, "settings.tuning.sparse.subdivision: must be in [1, 16], got 0.5");
+    let message = error_of(&with_tuning(r#"{"sparse": {"near_field": 9}}"#));
+    assert_eq!(message, "settings.tuning.sparse.near_field: must be in [0, 8], got 9");
+    let message = error_of(&with_tuning(r#"{"sparse": {"near_field": -0.5}}"#));
+    assert_eq!(message, "settings.tuning.sparse.near_field: must be in [0, 8], got -0.5");
+    let message = error_of(&with_tuning(r#"{"sparse": {"adaptive": 1.5}}"#));
+    assert_eq!(message, "settings.tuning.sparse.adaptive: must be in [0, 1], got 1.5");
+    let message = error_of(&with_tuning(r#"{"sparse": {"adaptive": -0.1}}"#));
+    assert_eq!(message, "settings.tuning.sparse.adaptive: must be in [0, 1], got -0.1");
+    let message = error_of(&with_tuning(r#"{"sparse": {"kernel": "cubic"}}"#));
+    assert!(message.starts_with("settings.tuning.sparse.kernel: unknown variant `cubic`"), "{message}");
     let paper =
         r#"{"sparse": {"kernel": "paper", "bound": "off", "subdivision": 1, "glossy_interpolation": "lights"}}"#;
-    let description = SceneDescription::from_json_str(&with_settings(paper)).expect("parses");
+    let description = SceneDescription::from_json_str(&with_tuning(paper)).expect("parses");
     description.validate().expect("valid");
-    let sparse = description.settings.to_settings(false).sparse;
+    let sparse = to_settings(&description.settings, false).sparse;
     assert_eq!(
         sparse,
         SparseShading {
@@ -332,10 +353,10 @@ fn settings_are_checked() {
         }
     );
     let radiance = r#"{"sparse": {"glossy_interpolation": "radiance"}}"#;
-    let description = SceneDescription::from_json_str(&with_settings(radiance)).expect("parses");
-    let sparse = description.settings.to_settings(false).sparse;
+    let description = SceneDescription::from_json_str(&with_tuning(radiance)).expect("parses");
+    let sparse = to_settings(&description.settings, false).sparse;
     assert_eq!(sparse.glossy_interpolation, GlossyInterpolation::Radiance);
-    let message = error_of(&with_settings(r#"{"sparse": {"glossy_interpolation": "pixels"}}"#));
+    let message = error_of(&with_tuning(r#"{"sparse": {"glossy_interpolation": "pixels"}}"#));
     assert!(message.contains("glossy_interpolation") && message.contains("pixels"), "{message}");
     let message = error_of(&with_settings(r#"{"rgbd": {"min_depth": 2, "max_depth": 1}}"#));
     assert_eq!(message, "settings.rgbd.max_depth: must be > min_depth (2), got 1");
@@ -343,47 +364,53 @@ fn settings_are_checked() {
     assert_eq!(message, "settings.rgbd.grid_step: must be in 1..=64, got 0");
     // `visibility`, and `occlusion` its deprecated alias; not both.
     for key in ["visibility", "occlusion"] {
-        let text = with_settings(&format!(r#"{{"{key}": "clusters", "clusters": {{"count": 8, "soft": "pcf"}}}}"#));
+        let text = with_tuning(&format!(r#"{{"{key}": "clusters", "clusters": {{"count": 8, "soft": "pcf"}}}}"#));
         let d = SceneDescription::from_json_str(&text).expect("parses");
         d.validate().expect("valid");
-        let s = d.settings.to_settings(true);
+        let s = to_settings(&d.settings, true);
         assert_eq!(s.occlusion, Occlusion::Clusters, "{key}");
         assert_eq!(s.clusters, ClusterSettings { count: 8, soft: SoftShadows::Pcf, ..ClusterSettings::default() });
     }
-    assert!(SceneDescription::from_json_str(&with_settings(r#"{"visibility": "off", "occlusion": "off"}"#)).is_err());
-    let message = error_of(&with_settings(r#"{"clusters": {"count": 0}}"#));
-    assert_eq!(message, "settings.clusters.count: must be in 1..=256, got 0");
-    let message = error_of(&with_settings(r#"{"clusters": {"count": 256, "shadow_map_resolution": 1024}}"#));
-    assert!(message.starts_with("settings.clusters.shadow_map_resolution: 256 maps of 1024"), "{message}");
-    let message = error_of(&with_settings(r#"{"clusters": {"normal_weight": -1}}"#));
-    assert_eq!(message, "settings.clusters.normal_weight: must be in [0, 100], got -1");
-    let message = error_of(&with_settings(r#"{"clusters": {"iterations": 33}}"#));
-    assert_eq!(message, "settings.clusters.iterations: must be in 1..=32, got 33");
-    let message = error_of(&with_settings(r#"{"clusters": {"shadow_maps": "ism", "shadow_map_resolution": 96}}"#));
-    assert!(message.starts_with("settings.clusters.shadow_map_resolution: imperfect shadow maps need"), "{message}");
-    let message = error_of(&with_settings(r#"{"clusters": {"shadow_maps": "points"}}"#));
-    assert!(message.starts_with("settings.clusters.shadow_maps: unknown variant `points`"), "{message}");
-    let text = with_settings(r#"{"visibility": "ism", "ism": {"count": 16, "resolution": 32, "points": 100}}"#);
+    assert!(SceneDescription::from_json_str(&with_tuning(r#"{"visibility": "off", "occlusion": "off"}"#)).is_err());
+    let message = error_of(&with_tuning(r#"{"clusters": {"count": 0}}"#));
+    assert_eq!(message, "settings.tuning.clusters.count: must be in 1..=256, got 0");
+    let message = error_of(&with_tuning(r#"{"clusters": {"count": 256, "shadow_map_resolution": 1024}}"#));
+    assert!(message.starts_with("settings.tuning.clusters.shadow_map_resolution: 256 maps of 1024"), "{message}");
+    let message = error_of(&with_tuning(r#"{"clusters": {"normal_weight": -1}}"#));
+    assert_eq!(message, "settings.tuning.clusters.normal_weight: must be in [0, 100], got -1");
+    let message = error_of(&with_tuning(r#"{"clusters": {"iterations": 33}}"#));
+    assert_eq!(message, "settings.tuning.clusters.iterations: must be in 1..=32, got 33");
+    let message = error_of(&with_tuning(r#"{"clusters": {"shadow_maps": "ism", "shadow_map_resolution": 96}}"#));
+    assert!(
+        message.starts_with("settings.tuning.clusters.shadow_map_resolution: imperfect shadow maps need"),
+        "{message}"
+    );
+    let message = error_of(&with_tuning(r#"{"clusters": {"shadow_maps": "points"}}"#));
+    assert!(message.starts_with("settings.tuning.clusters.shadow_maps: unknown variant `points`"), "{message}");
+    let text = with_tuning(r#"{"visibility": "ism", "ism": {"count": 16, "resolution": 32, "points": 100}}"#);
     let d = SceneDescription::from_json_str(&text).expect("parses");
     d.validate().expect("valid");
-    let s = d.settings.to_settings(false);
+    let s = to_settings(&d.settings, false);
     assert_eq!(s.occlusion, Occlusion::Ism);
     assert_eq!(s.ism, IsmSettings { count: 16, resolution: 32, points: Some(100), ..IsmSettings::default() });
     // The paper's rule: a quarter of the pi/4 * 128^2 texels of a 128x128 map.
     assert_eq!(IsmSettings::default().points_per_map(), 3217);
     for (ism, want) in [
-        (r#"{"count": 0}"#, "settings.ism.count: must be in 1..=4096, got 0"),
-        (r#"{"resolution": 48}"#, "settings.ism.resolution: must be a power of two in 16..=512, got 48"),
-        (r#"{"points": 8}"#, "settings.ism.points: must be in 16..=65536, got 8"),
-        (r#"{"pull_push_levels": 5}"#, "settings.ism.pull_push_levels: must be in 0..=4, got 5"),
-        (r#"{"pull_threshold": 0}"#, "settings.ism.pull_threshold: must be in (0, 1], got 0"),
-        (r#"{"push_threshold": 2}"#, "settings.ism.push_threshold: must be in (0, 1], got 2"),
-        (r#"{"count": 1024, "resolution": 256}"#, "settings.ism.resolution: 1024 maps of 256x256 texels"),
-        (r#"{"count": 4096, "resolution": 32, "points": 65536}"#, "settings.ism.points: 4096 maps of 65536 points"),
-        (r#"{"spread": 1}"#, "settings.ism.spread: unknown field"),
-        (r#"{"slope_bias": -1}"#, "settings.ism.slope_bias: must be in [0, 16], got -1"),
+        (r#"{"count": 0}"#, "settings.tuning.ism.count: must be in 1..=4096, got 0"),
+        (r#"{"resolution": 48}"#, "settings.tuning.ism.resolution: must be a power of two in 16..=512, got 48"),
+        (r#"{"points": 8}"#, "settings.tuning.ism.points: must be in 16..=65536, got 8"),
+        (r#"{"pull_push_levels": 5}"#, "settings.tuning.ism.pull_push_levels: must be in 0..=4, got 5"),
+        (r#"{"pull_threshold": 0}"#, "settings.tuning.ism.pull_threshold: must be in (0, 1], got 0"),
+        (r#"{"push_threshold": 2}"#, "settings.tuning.ism.push_threshold: must be in (0, 1], got 2"),
+        (r#"{"count": 1024, "resolution": 256}"#, "settings.tuning.ism.resolution: 1024 maps of 256x256 texels"),
+        (
+            r#"{"count": 4096, "resolution": 32, "points": 65536}"#,
+            "settings.tuning.ism.points: 4096 maps of 65536 points",
+        ),
+        (r#"{"spread": 1}"#, "settings.tuning.ism.spread: unknown field"),
+        (r#"{"slope_bias": -1}"#, "settings.tuning.ism.slope_bias: must be in [0, 16], got -1"),
     ] {
-        let message = error_of(&with_settings(&format!(r#"{{"ism": {ism}}}"#)));
+        let message = error_of(&with_tuning(&format!(r#"{{"ism": {ism}}}"#)));
         assert!(message.starts_with(want), "{ism}: {message}");
     }
     for (settings, field) in [
@@ -400,10 +427,10 @@ fn settings_are_checked() {
     let d = SceneDescription::from_json_str(&text).expect("parses");
     d.validate().expect("valid");
     assert_eq!(d.settings.environment.distribution, EnvironmentDistribution::Overcast);
-    let message = error_of(&with_settings(r#"{"rsm_resolution": 4}"#));
-    assert_eq!(message, "settings.rsm_resolution: must be in 8..=2048, got 4");
-    let message = error_of(&with_settings(r#"{"interpolation_neighbours": 17}"#));
-    assert_eq!(message, "settings.interpolation_neighbours: must be in 1..=16, got 17");
+    let message = error_of(&with_tuning(r#"{"rsm_resolution": 4}"#));
+    assert_eq!(message, "settings.tuning.rsm_resolution: must be in 8..=2048, got 4");
+    let message = error_of(&with_tuning(r#"{"interpolation_neighbours": 17}"#));
+    assert_eq!(message, "settings.tuning.interpolation_neighbours: must be in 1..=16, got 17");
     let message = error_of(&with_settings(r#"{"exposure": 0}"#));
     assert_eq!(message, "settings.exposure: must be > 0, got 0");
     let message = error_of(&with_settings(r#"{"exposure": null, "gamma": 2.2}"#));
@@ -502,4 +529,45 @@ fn descriptions_round_trip_through_json() {
     let json = serde_json::to_string(&description).expect("serializes");
     let again = SceneDescription::from_json_str(&json).expect("parses again");
     assert_eq!(description, again);
+}
+
+/// A research knob in its old place, directly under `settings`, is an error naming the key and
+/// where it moved; under `tuning` it is accepted.
+#[test]
+fn settings_in_their_old_place_say_where_they_moved() {
+    let with_settings = |settings: &str| edit(r#""meshes""#, &format!(r#""settings": {settings}, "meshes""#));
+    for (old, value, moved) in [
+        ("rsm_resolution", "160", "rsm_resolution"),
+        ("interpolation_neighbours", "4", "interpolation_neighbours"),
+        ("visibility", r#""disks""#, "visibility"),
+        ("occlusion", r#""off""#, "visibility"),
+        ("occlusion_rule", r#""sum""#, "occlusion_rule"),
+        ("sparse", r#"{"near_field": 4}"#, "sparse"),
+        ("clusters", r#"{"count": 8}"#, "clusters"),
+        ("ism", r#"{"count": 8}"#, "ism"),
+        ("direct", r#"{"max_lights": 8}"#, "direct"),
+        ("second_bounce", r#"{"vals": 8}"#, "second_bounce"),
+    ] {
+        let message = error_of(&with_settings(&format!(r#"{{"glossy": true, "{old}": {value}}}"#)));
+        let want = format!("settings.{old}: moved to settings.tuning.{moved} (JSON line");
+        assert!(message.starts_with(&want), "{old}: {message}");
+        let tuned = with_settings(&format!(r#"{{"tuning": {{"{moved}": {value}}}}}"#));
+        SceneDescription::from_json_str(&tuned).and_then(|d| d.validate()).expect("valid under tuning");
+    }
+    // The moved keys are not written back.
+    let description = SceneDescription::from_json_str(MINIMAL).expect("parses");
+    let json = serde_json::to_value(&description.settings).expect("serializes");
+    assert_eq!(json.as_object().map(|o| o.contains_key("rsm_resolution")), Some(false), "{json}");
+}
+
+#[test]
+fn quality_and_budget_are_read_and_checked() {
+    let with_settings = |settings: &str| edit(r#""meshes""#, &format!(r#""settings": {settings}, "meshes""#));
+    let d =
+        SceneDescription::from_json_str(&with_settings(r#"{"quality": "fast", "budget_ms": 33.3}"#)).expect("parses");
+    d.validate().expect("valid");
+    assert_eq!((d.settings.quality, d.settings.budget_ms), (Quality::Fast, Some(33.3)));
+    assert_eq!(error_of(&with_settings(r#"{"budget_ms": 0}"#)), "settings.budget_ms: must be > 0, got 0");
+    let message = error_of(&with_settings(r#"{"quality": "best"}"#));
+    assert!(message.starts_with("settings.quality: unknown variant `best`"), "{message}");
 }

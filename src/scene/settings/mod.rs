@@ -7,21 +7,25 @@ mod bounce;
 mod direct;
 mod environment;
 mod mr;
+mod quality;
 mod rgbd;
 mod scene_file;
 mod sparse;
+mod tuning;
 mod visibility;
 
 pub use bounce::{DEFAULT_BOUNCES, MAX_SECOND_BOUNCE_POINTS, MAX_SECOND_BOUNCE_VALS, SecondBounceSettings};
 pub use direct::{DirectSettings, DirectShadows, MAX_DIRECT_LIGHTS, MAX_LIGHTS_VAL_BUDGET, POINT_VIEWS, SPOT_VIEWS};
 pub use environment::{EnvironmentDistribution, EnvironmentSettings, EnvironmentSource, MAX_ENVIRONMENT_ROWS};
 pub use mr::{DifferentialDevice, MAX_RECEIVER_MARGIN, MrSettings};
+pub use quality::{Choice, Quality, ResolvedConfig, SceneAnalysis, Technique, resolve};
 pub use rgbd::RgbdSettings;
 pub use scene_file::SettingsDescription;
 pub use sparse::{
     ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION,
     GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, SUBDIVISION_RANGE, SparseShading,
 };
+pub use tuning::{ClusterTuning, DirectTuning, IsmTuning, SecondBounceTuning, SparseTuning, Tuning};
 pub use visibility::{
     ClusterMethod, ClusterSettings, IsmSettings, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_ISM_POINTS, MAX_ISM_SPLATS,
     MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, Occlusion, OcclusionRule, OcclusionSetting, ShadowMapSource,

@@ -1,46 +1,75 @@
-//! The scene file's `settings` object.
+//! The scene file's `settings` object, in two layers: at the top what the user wants (a
+//! `quality` level, a frame-time budget, bounces, glossy, exposure, seed, and the RGB-D, mixed
+//! reality and environment inputs), and under `tuning` the research knobs that override what
+//! the level chose.
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 
-use super::{
-    ClusterSettings, DEFAULT_BOUNCES, DirectSettings, EnvironmentSettings, IsmSettings, MrSettings, Occlusion,
-    OcclusionRule, OcclusionSetting, RgbdSettings, SecondBounceSettings, SparseShading,
-};
+use super::quality::{Quality, SceneAnalysis, resolve};
+use super::tuning::Tuning;
+use super::{DEFAULT_BOUNCES, EnvironmentSettings, MrSettings, RgbdSettings};
 use crate::scene::description::RSM_RESOLUTION_RANGE;
 use crate::scene::validate::{int_in, positive};
-use crate::scene::{DEFAULT_NEIGHBOURS, MAX_NEIGHBOURS, SceneError, Settings};
+use crate::scene::{MAX_NEIGHBOURS, SceneError, Settings};
+
+/// A key that moved from `settings` to `settings.tuning`: present in a scene file, it is an
+/// error that says where it went. Never constructed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Moved {}
+
+/// One function per moved key, for `deserialize_with`: the error's field path is the key's
+/// (`settings.rsm_resolution`), its message where the key went.
+macro_rules! moved_keys {
+    ($($key:ident => $to:literal,)*) => {
+        mod moved {
+            use super::{Deserializer, Moved};
+            $(pub(super) fn $key<'de, D: Deserializer<'de>>(_: D) -> Result<Option<Moved>, D::Error> {
+                Err(serde::de::Error::custom(concat!("moved to settings.tuning.", $to)))
+            })*
+        }
+    };
+}
+
+moved_keys! {
+    rsm_resolution => "rsm_resolution",
+    interpolation_neighbours => "interpolation_neighbours",
+    visibility => "visibility",
+    occlusion => "visibility",
+    occlusion_rule => "occlusion_rule",
+    sparse => "sparse",
+    clusters => "clusters",
+    ism => "ism",
+    direct => "direct",
+    second_bounce => "second_bounce",
+}
 
 /// Render settings; every field has a default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SettingsDescription {
-    /// RSM side, texels, in 8..=2048; default 128.
-    #[serde(default = "default_rsm_resolution")]
-    pub rsm_resolution: u32,
+    /// What the frames should favour: `"fast"`, `"balanced"` (default: the parameters every
+    /// measured figure used), `"accurate"` or `"reference"` (accurate's parameters, rendered
+    /// with the exact reference method where a command can). The level picks the sparse
+    /// method's parameters for this scene (see the scene's resolved configuration for what and
+    /// why); `tuning` overrides any of them.
+    #[serde(default)]
+    pub quality: Quality,
+    /// Frame-time budget, ms, > 0; default none. Stored and reported; no level acts on it yet.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget_ms: Option<f32>,
+    /// Bounces of indirect light, 1 or 2; default 1. With 2, points on the meshes lit by the
+    /// first bounce's VALs become second-bounce VALs (paper 004 §4.1, `tuning.second_bounce`).
+    #[serde(default = "default_bounces")]
+    pub bounces: u32,
     /// Allow the glossy gather; default true.
     #[serde(default = "default_glossy")]
     pub glossy: bool,
-    /// Seed for sparse point placement; default 1.
-    #[serde(default = "default_seed")]
-    pub seed: u64,
     /// Exposure multiplier (> 0) before tone mapping; default `null` (automatic).
     #[serde(default)]
     pub exposure: Option<f32>,
-    /// Sparse points each vertex interpolates from (paper eqs. 12-13), 1..=16; default 8.
-    #[serde(default = "default_neighbours")]
-    pub interpolation_neighbours: u32,
-    /// Indirect visibility: `"auto"` (default), `"off"`, `"disks"` (docs/design.md §4 step 3),
-    /// `"clusters"` (shadow maps of k-means clusters of the VALs, `clusters` below) or `"ism"`
-    /// (imperfect shadow maps of VALs drawn by flux, `ism` below). `"auto"`
-    /// is `"disks"` when the scene can occlude itself: more than one mesh, or a mesh that is
-    /// neither a convex object nor a convex room ([`crate::scene::Scene`]). The JSON key is
-    /// `visibility`; `occlusion` is its deprecated alias (accepted, not both at once).
-    #[serde(default, rename = "visibility", alias = "occlusion")]
-    pub occlusion: OcclusionSetting,
-    /// How disc occluders combine: `"product"` (default: measured closer to exact) or `"sum"`
-    /// (the paper's).
-    #[serde(default)]
-    pub occlusion_rule: OcclusionRule,
+    /// Seed for sparse point placement; default 1.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
     /// How RGB-D frames become VALs (replay and streams); every field has a default.
     #[serde(default)]
     pub rgbd: RgbdSettings,
@@ -53,36 +82,43 @@ pub struct SettingsDescription {
     /// (`mr::environment`).
     #[serde(default)]
     pub environment: EnvironmentSettings,
-    /// The sparse method's interpolation, light bound and subdivision; every field has a
-    /// default.
-    #[serde(default)]
-    pub sparse: SparseShading,
-    /// The `"clusters"` visibility mode; every field has a default.
-    #[serde(default)]
-    pub clusters: ClusterSettings,
-    /// The `"ism"` visibility mode (imperfect shadow maps); every field has a default.
-    #[serde(default)]
-    pub ism: IsmSettings,
-    /// Direct light from the scene's `lights`: how their shadows are computed and the limit
-    /// on their count; every field has a default.
-    #[serde(default)]
-    pub direct: DirectSettings,
-    /// Bounces of indirect light, 1 or 2; default 1. With 2, points on the meshes lit by the
-    /// first bounce's VALs become second-bounce VALs (paper 004 §4.1, `second_bounce`).
-    #[serde(default = "default_bounces")]
-    pub bounces: u32,
-    /// The second bounce's points and VAL budget (used when `bounces` is 2); every field has a
-    /// default.
-    #[serde(default)]
-    pub second_bounce: SecondBounceSettings,
+    /// Research knobs; each optional, each overriding the level's choice.
+    #[serde(default, skip_serializing_if = "is_default")]
+    pub tuning: Tuning,
+    #[serde(default, deserialize_with = "moved::rsm_resolution", skip_serializing)]
+    #[schema(ignore)]
+    rsm_resolution: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::interpolation_neighbours", skip_serializing)]
+    #[schema(ignore)]
+    interpolation_neighbours: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::visibility", skip_serializing)]
+    #[schema(ignore)]
+    visibility: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::occlusion", skip_serializing)]
+    #[schema(ignore)]
+    occlusion: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::occlusion_rule", skip_serializing)]
+    #[schema(ignore)]
+    occlusion_rule: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::sparse", skip_serializing)]
+    #[schema(ignore)]
+    sparse: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::clusters", skip_serializing)]
+    #[schema(ignore)]
+    clusters: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::ism", skip_serializing)]
+    #[schema(ignore)]
+    ism: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::direct", skip_serializing)]
+    #[schema(ignore)]
+    direct: Option<Moved>,
+    #[serde(default, deserialize_with = "moved::second_bounce", skip_serializing)]
+    #[schema(ignore)]
+    second_bounce: Option<Moved>,
 }
 
-fn default_neighbours() -> u32 {
-    DEFAULT_NEIGHBOURS
-}
-
-fn default_rsm_resolution() -> u32 {
-    128
+fn is_default(tuning: &Tuning) -> bool {
+    *tuning == Tuning::default()
 }
 
 fn default_glossy() -> bool {
@@ -100,71 +136,63 @@ fn default_seed() -> u64 {
 impl Default for SettingsDescription {
     fn default() -> Self {
         SettingsDescription {
-            rsm_resolution: default_rsm_resolution(),
+            quality: Quality::Balanced,
+            budget_ms: None,
+            bounces: default_bounces(),
             glossy: default_glossy(),
-            seed: default_seed(),
             exposure: None,
-            interpolation_neighbours: default_neighbours(),
-            occlusion: OcclusionSetting::Auto,
-            occlusion_rule: OcclusionRule::Product,
+            seed: default_seed(),
             rgbd: RgbdSettings::default(),
             mr: MrSettings::default(),
             environment: EnvironmentSettings::default(),
-            sparse: SparseShading::default(),
-            clusters: ClusterSettings::default(),
-            ism: IsmSettings::default(),
-            direct: DirectSettings::default(),
-            bounces: default_bounces(),
-            second_bounce: SecondBounceSettings::default(),
+            tuning: Tuning::default(),
+            rsm_resolution: None,
+            interpolation_neighbours: None,
+            visibility: None,
+            occlusion: None,
+            occlusion_rule: None,
+            sparse: None,
+            clusters: None,
+            ism: None,
+            direct: None,
+            second_bounce: None,
         }
     }
 }
 
 impl SettingsDescription {
-    /// The settings (assumes [`SceneDescription::validate`] passed); `self_occluding` resolves
-    /// `"auto"` occlusion.
-    pub fn to_settings(&self, self_occluding: bool) -> Settings {
-        Settings {
-            rsm_resolution: self.rsm_resolution,
-            glossy: self.glossy,
-            seed: self.seed,
-            exposure: self.exposure,
-            interpolation_neighbours: self.interpolation_neighbours,
-            occlusion: match self.occlusion {
-                OcclusionSetting::Off => Occlusion::Off,
-                OcclusionSetting::Disks => Occlusion::Disks,
-                OcclusionSetting::Clusters => Occlusion::Clusters,
-                OcclusionSetting::Ism => Occlusion::Ism,
-                OcclusionSetting::Auto if self_occluding => Occlusion::Disks,
-                OcclusionSetting::Auto => Occlusion::Off,
-            },
-            occlusion_rule: self.occlusion_rule,
-            rgbd: self.rgbd,
-            mr: self.mr,
-            sparse: self.sparse,
-            clusters: self.clusters,
-            ism: self.ism,
-            direct: self.direct,
-            bounces: self.bounces,
-            second_bounce: self.second_bounce,
-        }
+    /// The settings before the scene is loaded: the level's and the tuning's parameters, with
+    /// the choices that need the loaded scene (visibility) made as for a scene that cannot
+    /// occlude itself. What the loader and the admission read (subdivision, neighbours,
+    /// adaptive points, the VALs per frame) is final here: [`resolve`] decides it from the level
+    /// and the tuning alone.
+    pub fn before_load(&self) -> Settings {
+        resolve(self.quality, &SceneAnalysis::default(), self).0
     }
 
+    /// Checks every value's range, naming the field of the first problem; a tuning value is
+    /// checked as resolved over the level, under `{field}.tuning`. Each settings struct's one
+    /// validation does the checking.
     pub(crate) fn validate(&self, field: &str) -> Result<(), SceneError> {
-        let (lo, hi) = RSM_RESOLUTION_RANGE;
-        int_in(self.rsm_resolution, lo, hi, &format!("{field}.rsm_resolution"))?;
-        int_in(self.interpolation_neighbours, 1, MAX_NEIGHBOURS, &format!("{field}.interpolation_neighbours"))?;
+        if let Some(ms) = self.budget_ms {
+            positive(ms, &format!("{field}.budget_ms"))?;
+        }
+        int_in(self.bounces, 1, 2, &format!("{field}.bounces"))?;
         if let Some(exposure) = self.exposure {
             positive(exposure, &format!("{field}.exposure"))?;
         }
-        self.sparse.validate(&format!("{field}.sparse"))?;
         self.rgbd.validate(&format!("{field}.rgbd"))?;
         self.mr.validate(&format!("{field}.mr"))?;
         self.environment.validate(&format!("{field}.environment"))?;
-        self.clusters.validate(&format!("{field}.clusters"))?;
-        self.ism.validate(&format!("{field}.ism"))?;
-        self.direct.validate(&format!("{field}.direct"))?;
-        int_in(self.bounces, 1, 2, &format!("{field}.bounces"))?;
-        self.second_bounce.validate(&format!("{field}.second_bounce"))
+        let tuning = format!("{field}.tuning");
+        let s = self.before_load();
+        let (lo, hi) = RSM_RESOLUTION_RANGE;
+        int_in(s.rsm_resolution, lo, hi, &format!("{tuning}.rsm_resolution"))?;
+        int_in(s.interpolation_neighbours, 1, MAX_NEIGHBOURS, &format!("{tuning}.interpolation_neighbours"))?;
+        s.sparse.validate(&format!("{tuning}.sparse"))?;
+        s.clusters.validate(&format!("{tuning}.clusters"))?;
+        s.ism.validate(&format!("{tuning}.ism"))?;
+        s.direct.validate(&format!("{tuning}.direct"))?;
+        s.second_bounce.validate(&format!("{tuning}.second_bounce"))
     }
 }

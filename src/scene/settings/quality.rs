@@ -1,0 +1,387 @@
+//! Quality levels: what the user asks for (`settings.quality`) turned into the parameters of the
+//! sparse method for one scene, each with the reason it was chosen.
+//!
+//! [`resolve`] is a pure function of the level, the [`SceneAnalysis`] of the loaded scene and
+//! the scene file's settings (their `tuning` overrides). The parameters the loader needs
+//! (subdivision, interpolation neighbours, adaptive candidates) and those the service admits a
+//! scene by (its VALs per frame) depend on the level and the tuning only, never on the
+//! analysis, so they are known before the meshes are read.
+//!
+//! The levels, from the measurements (docs/measurements/):
+//!
+//! | parameter | fast | balanced | accurate, reference |
+//! |---|---|---|---|
+//! | `rsm_resolution` | 64 | 128 | 128 |
+//! | `interpolation_neighbours` | 8 | 8 | 8 |
+//! | visibility, scene that can occlude itself | disks | disks | clusters |
+//! | visibility, scene that cannot | off | off | off |
+//! | `sparse.subdivision` | 4 | 2 | 2 |
+//! | `sparse.near_field` | 0 | 0 | 4 |
+//! | `sparse.adaptive` | 0 | 0 | 0 |
+//!
+//! `balanced` is the defaults every figure was measured with. `reference` takes accurate's
+//! parameters and asks for the exact reference method ([`Technique::Exact`]).
+
+use serde::{Deserialize, Serialize};
+
+use super::tuning::{SetField, json_value};
+use super::{
+    ClusterSettings, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION, IsmSettings, Occlusion, OcclusionRule, OcclusionSetting,
+    SettingsDescription, SparseShading,
+};
+use crate::scene::{DEFAULT_NEIGHBOURS, Settings};
+
+/// What the user wants of a scene's frames (`settings.quality`).
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Quality {
+    /// Cheaper parameters: fewer VALs from the spot light, coarser subdivision.
+    Fast,
+    /// The defaults every measured figure used.
+    #[default]
+    Balanced,
+    /// Parameters measured closer to the exact reference, at a higher cost: the near field, and
+    /// clustered shadow maps on scenes that can occlude themselves.
+    Accurate,
+    /// Accurate's parameters, rendered with the exact reference method (a shadow ray per pixel
+    /// and VAL) where a command can.
+    Reference,
+}
+
+impl Quality {
+    /// The level's name, as in a scene file.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Fast => "fast",
+            Quality::Balanced => "balanced",
+            Quality::Accurate => "accurate",
+            Quality::Reference => "reference",
+        }
+    }
+}
+
+/// How the indirect light of a resolved scene is asked to be computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Technique {
+    /// The sparse model-space method (docs/design.md §4).
+    #[default]
+    Sparse,
+    /// The exact reference: brute force with a shadow ray per pixel and VAL (docs/design.md §5).
+    Exact,
+}
+
+/// One parameter of the resolved configuration: its value and why it has it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct Choice {
+    /// The parameter, as a path under `settings` (`tuning.rsm_resolution` when the scene file
+    /// set it), or a name (`method`, `glossy gather`).
+    pub parameter: String,
+    /// Its value, as JSON text.
+    pub value: String,
+    pub reason: String,
+}
+
+impl std::fmt::Display for Choice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} = {}: {}", self.parameter, self.value, self.reason)
+    }
+}
+
+/// What the quality levels look at in a loaded scene. The default is a scene not yet loaded:
+/// nothing known, which decides nothing the loader needs.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct SceneAnalysis {
+    /// Meshes in the scene.
+    pub meshes: usize,
+    /// Names of the meshes that may occlude themselves: neither a convex object nor a convex
+    /// room (`Mesh::may_occlude_itself`).
+    pub concave_meshes: Vec<String>,
+    /// Materials in use with a glossy lobe (`rho_s > 0`).
+    pub glossy_materials: usize,
+    /// Whether the scene has a spot `light` (whose RSM makes `rsm_resolution²` VALs).
+    pub spot_light: bool,
+    /// Spot and point lights in `lights`.
+    pub spot_lights: usize,
+    pub point_lights: usize,
+    /// Triangles (after subdivision) per sparse point, over all meshes.
+    pub triangles_per_sparse_point: f32,
+}
+
+impl SceneAnalysis {
+    /// Whether one part of the scene can hide another from a third: more than one mesh, or a
+    /// mesh that is neither a convex object nor a convex room (the rule `"auto"` visibility has
+    /// always used).
+    pub fn self_occluding(&self) -> bool {
+        self.meshes > 1 || !self.concave_meshes.is_empty()
+    }
+
+    /// Why [`Self::self_occluding`] says what it says, for the reasons.
+    fn occlusion_reason(&self) -> String {
+        match (self.meshes, self.concave_meshes.as_slice()) {
+            (n, _) if n > 1 => format!("the scene can occlude itself ({n} meshes)"),
+            (_, [mesh, ..]) => {
+                format!("the scene can occlude itself (mesh `{mesh}` is neither a convex object nor a convex room)")
+            }
+            _ => "the scene cannot occlude itself (one mesh, a convex object or a convex room)".to_owned(),
+        }
+    }
+
+    /// What lights the scene, in words.
+    pub fn lit_by(&self) -> String {
+        let mut parts = Vec::new();
+        if self.spot_light {
+            parts.push("a spot light".to_owned());
+        }
+        if self.spot_lights + self.point_lights > 0 {
+            parts.push(format!("{} spot and {} point `lights`", self.spot_lights, self.point_lights));
+        }
+        if parts.is_empty() { "RGB-D frames (no light of its own)".to_owned() } else { parts.join(" and ") }
+    }
+}
+
+/// The resolved configuration of a scene: the level asked for, what it decided and why.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct ResolvedConfig {
+    pub quality: Quality,
+    /// The scene file's frame-time budget, ms; stored and reported, not yet acted on.
+    pub budget_ms: Option<f32>,
+    /// The technique the level asks for: `exact` for `reference`, else `sparse`.
+    pub method: Technique,
+    pub analysis: SceneAnalysis,
+    /// Every parameter the level or the scene file decided, with its reason.
+    pub choices: Vec<Choice>,
+}
+
+impl ResolvedConfig {
+    /// The configuration as lines of text: the level, the scene's analysis, then one line per
+    /// choice.
+    pub fn report(&self) -> String {
+        let a = &self.analysis;
+        let budget = self.budget_ms.map_or(String::new(), |ms| format!(", budget {ms} ms (not yet used)"));
+        let mut lines = vec![
+            format!(
+                "quality {}{budget}: technique {}",
+                self.quality.name(),
+                json_value(&self.method).trim_matches('"')
+            ),
+            format!(
+                "scene: {} mesh(es), {}, {} glossy material(s), lit by {}, {:.1} triangles per sparse point",
+                a.meshes,
+                if a.self_occluding() { "can occlude itself" } else { "cannot occlude itself" },
+                a.glossy_materials,
+                a.lit_by(),
+                a.triangles_per_sparse_point
+            ),
+        ];
+        lines.extend(self.choices.iter().map(|c| format!("  {c}")));
+        lines.join("\n")
+    }
+}
+
+/// The parameters a level picks whatever the scene: what the loader and the admission need.
+struct Level {
+    rsm_resolution: (u32, &'static str),
+    subdivision: (f32, &'static str),
+    near_field: (f32, &'static str),
+    adaptive: (f32, &'static str),
+}
+
+const RSM_BALANCED: &str = "16,384 VALs; more did not lower the error against exact visibility in the benchmark \
+     sweep (0.155-0.174 for 208 to 12,892 VALs on cornell_bunny_small, docs/measurements/ benchmark)";
+const SUBDIVISION_BALANCED: &str = "edges over 2 sparse point spacings split: fewer triangles than the paper's 1 at \
+     equal error (cornell_bunny 76,139 against 96,245 triangles, 0.0449 against 0.0447; docs/measurements/ \
+     sparse method on real scenes)";
+const NEAR_FIELD_OFF: &str = "off (the paper's): no grid pass per frame";
+const ADAPTIVE_OFF: &str = "off (the paper's)";
+
+fn level(quality: Quality) -> Level {
+    match quality {
+        Quality::Fast => Level {
+            rsm_resolution: (
+                64,
+                "a quarter of balanced's VALs: the gather's time grows about linearly with the VALs while \
+                 the error against brute force hardly depends on them (0.100-0.129 for 208 to 12,892 VALs on \
+                 cornell_bunny_small, docs/measurements/ benchmark)",
+            ),
+            subdivision: (
+                4.0,
+                "edges over 4 sparse point spacings split: a quarter fewer triangles than at 2 for a small \
+                 error increase (sponza_bunny 154,101 against 205,715 triangles, 0.387 against 0.373; \
+                 docs/measurements/ sparse method on real scenes)",
+            ),
+            near_field: (DEFAULT_NEAR_FIELD, NEAR_FIELD_OFF),
+            adaptive: (0.0, ADAPTIVE_OFF),
+        },
+        Quality::Balanced => Level {
+            rsm_resolution: (128, RSM_BALANCED),
+            subdivision: (DEFAULT_SUBDIVISION, SUBDIVISION_BALANCED),
+            near_field: (DEFAULT_NEAR_FIELD, NEAR_FIELD_OFF),
+            adaptive: (0.0, ADAPTIVE_OFF),
+        },
+        Quality::Accurate | Quality::Reference => Level {
+            rsm_resolution: (128, RSM_BALANCED),
+            subdivision: (DEFAULT_SUBDIVISION, SUBDIVISION_BALANCED),
+            near_field: (
+                4.0,
+                "VALs within 4 sparse point spacings light pixels directly: lower error on every measured \
+                 fixture (sponza_bunny 0.372 to 0.112, cornell_bunny 0.046 to 0.034, cornell_gltf_small 0.091 \
+                 to 0.055) for a grid pass per frame (docs/measurements/ near field)",
+            ),
+            adaptive: (
+                0.0,
+                "off: its gain was mixed (cornell_gltf_small worse at 0.25 and 1) and it was not measured \
+                 beside the near field (docs/measurements/ adaptive sparse points)",
+            ),
+        },
+    }
+}
+
+/// The level's choices and the scene file's overrides, gathered in order.
+struct Choices {
+    tuned: Vec<SetField>,
+    choices: Vec<Choice>,
+    level: &'static str,
+}
+
+impl Choices {
+    /// `value` as the level chose it for `parameter`, unless the scene file's tuning sets it
+    /// (the override's own choice then says what the level would have chosen).
+    fn level<T: Serialize>(&mut self, parameter: &str, value: T, reason: impl Into<String>) {
+        let value = json_value(&value);
+        let tuned = format!("tuning.{parameter}");
+        if let Some(i) = self.tuned.iter().position(|(path, _)| *path == tuned) {
+            let (path, set) = self.tuned.remove(i);
+            let reason = format!("set in the scene file ({} would choose {value})", self.level);
+            self.choices.push(Choice { parameter: path, value: set, reason });
+        } else {
+            self.choices.push(Choice { parameter: parameter.to_owned(), value, reason: reason.into() });
+        }
+    }
+
+    fn note(&mut self, parameter: &str, value: &str, reason: impl Into<String>) {
+        self.choices.push(Choice { parameter: parameter.to_owned(), value: value.to_owned(), reason: reason.into() });
+    }
+
+    /// The choices, with every override no level choice named after them.
+    fn finish(mut self) -> Vec<Choice> {
+        for (parameter, value) in self.tuned {
+            self.choices.push(Choice { parameter, value, reason: "set in the scene file".to_owned() });
+        }
+        self.choices
+    }
+}
+
+/// The settings of a scene at `quality`, given what `analysis` found in it and the scene file's
+/// `settings` (its user values, and its tuning, which wins over the level), with the reason for
+/// every choice. Pure: the same inputs give the same result.
+pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDescription) -> (Settings, Vec<Choice>) {
+    let tuning = &settings.tuning;
+    let mut choices = Choices { tuned: tuning.set_fields(), choices: Vec::new(), level: quality.name() };
+    let Level { rsm_resolution, subdivision, near_field, adaptive } = level(quality);
+
+    match quality {
+        Quality::Reference => choices.note(
+            "method",
+            "\"exact\"",
+            "quality \"reference\" asks for the exact reference method (a shadow ray per pixel and VAL); \
+             its sparse parameters are accurate's",
+        ),
+        _ => choices.note("method", "\"sparse\"", "the sparse model-space method"),
+    }
+
+    let rsm_reason = if analysis.spot_light || analysis.meshes == 0 {
+        rsm_resolution.1.to_owned()
+    } else {
+        "unused: the scene has no spot `light`".to_owned()
+    };
+    choices.level("rsm_resolution", rsm_resolution.0, rsm_reason);
+    choices.level(
+        "interpolation_neighbours",
+        DEFAULT_NEIGHBOURS,
+        "the paper's 8 (eqs. 12-13) at every level: no other count was measured against the error",
+    );
+
+    let occlusion_reason = analysis.occlusion_reason();
+    let level_visibility = match (analysis.self_occluding(), quality) {
+        (false, _) => (Occlusion::Off, occlusion_reason),
+        (true, Quality::Fast | Quality::Balanced) => (
+            Occlusion::Disks,
+            format!("{occlusion_reason}; disc occluders were closer to exact than none on every measured fixture"),
+        ),
+        (true, Quality::Accurate | Quality::Reference) => (
+            Occlusion::Clusters,
+            format!(
+                "{occlusion_reason}; shadow maps of clusters of VALs were closer to exact than disks on every \
+                 measured fixture but the glossy room (equal there), at 2.6-7x the disks' visibility cost \
+                 (docs/measurements/ visibility against exact)"
+            ),
+        ),
+    };
+    let occlusion = match tuning.visibility.unwrap_or(OcclusionSetting::Auto) {
+        OcclusionSetting::Auto => level_visibility.0,
+        OcclusionSetting::Off => Occlusion::Off,
+        OcclusionSetting::Disks => Occlusion::Disks,
+        OcclusionSetting::Clusters => Occlusion::Clusters,
+        OcclusionSetting::Ism => Occlusion::Ism,
+    };
+    choices.level("visibility", level_visibility.0, level_visibility.1);
+    let occlusion_rule = tuning.occlusion_rule.unwrap_or(OcclusionRule::Product);
+    if occlusion == Occlusion::Disks {
+        choices.level(
+            "occlusion_rule",
+            OcclusionRule::Product,
+            "product: closer to exact than the paper's sum on the ears close-up (0.154 against 0.263) and near \
+             it elsewhere (docs/measurements/ visibility against exact)",
+        );
+    }
+
+    let triangles = analysis.triangles_per_sparse_point;
+    let subdivision_reason = match triangles > 0.0 {
+        true => format!("{}; this scene: {triangles:.1} triangles per sparse point", subdivision.1),
+        false => subdivision.1.to_owned(),
+    };
+    choices.level("sparse.subdivision", subdivision.0, subdivision_reason);
+    choices.level("sparse.near_field", near_field.0, near_field.1);
+    choices.level("sparse.adaptive", adaptive.0, adaptive.1);
+    let sparse = SparseShading {
+        subdivision: subdivision.0,
+        near_field: near_field.0,
+        adaptive: adaptive.0,
+        ..SparseShading::default()
+    };
+    let sparse = tuning.sparse.map_or(sparse, |t| t.apply(sparse));
+
+    let glossy = match (settings.glossy, analysis.glossy_materials) {
+        (false, _) => ("off", "settings.glossy is false".to_owned()),
+        (true, 0) => ("off", "no glossy material".to_owned()),
+        (true, n) => ("on", format!("{n} glossy material(s): their lobe is gathered in a second pass")),
+    };
+    if analysis.meshes > 0 {
+        choices.note("glossy gather", glossy.0, glossy.1);
+    }
+    if let Some(ms) = settings.budget_ms {
+        choices.note("budget_ms", &json_value(&ms), "stored: no level acts on a frame-time budget yet");
+    }
+
+    let resolved = Settings {
+        rsm_resolution: tuning.rsm_resolution.unwrap_or(rsm_resolution.0),
+        glossy: settings.glossy,
+        seed: settings.seed,
+        exposure: settings.exposure,
+        interpolation_neighbours: tuning.interpolation_neighbours.unwrap_or(DEFAULT_NEIGHBOURS),
+        occlusion,
+        occlusion_rule,
+        rgbd: settings.rgbd,
+        mr: settings.mr,
+        sparse,
+        clusters: tuning.clusters.map_or(ClusterSettings::default(), |t| t.apply(ClusterSettings::default())),
+        ism: tuning.ism.map_or(IsmSettings::default(), |t| t.apply(IsmSettings::default())),
+        direct: tuning.direct.map_or(Default::default(), |t| t.apply(Default::default())),
+        bounces: settings.bounces,
+        second_bounce: tuning.second_bounce.map_or(Default::default(), |t| t.apply(Default::default())),
+    };
+    (resolved, choices.finish())
+}

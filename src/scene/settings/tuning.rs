@@ -1,0 +1,221 @@
+//! `settings.tuning`: the research knobs. Every field is optional; a value given here overrides
+//! what the scene's `quality` level chose (`super::quality::resolve`), field by field: a
+//! `"sparse": {"near_field": 4}` changes the near field and keeps the level's subdivision.
+
+use serde::{Deserialize, Serialize};
+
+use super::{
+    ClusterMethod, ClusterSettings, DirectSettings, DirectShadows, GlossyInterpolation, InterpolationKernel,
+    IsmSettings, LightBound, OcclusionRule, OcclusionSetting, SecondBounceSettings, ShadowMapSource, SoftShadows,
+    SparseShading,
+};
+
+/// One overridden value: its path under `settings.tuning` and the value as the scene file wrote it.
+pub type SetField = (String, String);
+
+/// A struct of optional overrides of one settings struct: each field `Some` replaces the base's.
+/// `plain` fields override a field of the same type; `optional` fields override an `Option`
+/// field of the base (`null` and absent alike leave the base's).
+macro_rules! overrides {
+    (
+        $(#[$meta:meta])*
+        $name:ident for $base:ident {
+            plain { $($(#[$pmeta:meta])* $plain:ident: $pty:ty,)* }
+            optional { $($(#[$ometa:meta])* $opt:ident: $oty:ty,)* }
+        }
+    ) => {
+        $(#[$meta])*
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+        #[serde(deny_unknown_fields)]
+        pub struct $name {
+            $($(#[$pmeta])* #[serde(default, skip_serializing_if = "Option::is_none")] pub $plain: Option<$pty>,)*
+            $($(#[$ometa])* #[serde(default, skip_serializing_if = "Option::is_none")] pub $opt: Option<$oty>,)*
+        }
+
+        impl $name {
+            /// `base` with every given field replaced.
+            pub fn apply(&self, base: $base) -> $base {
+                $base {
+                    $($plain: self.$plain.unwrap_or(base.$plain),)*
+                    $($opt: self.$opt.or(base.$opt),)*
+                }
+            }
+
+            /// The given fields, as `(prefix.field, value)`.
+            pub fn set_fields(&self, prefix: &str) -> Vec<SetField> {
+                let mut set = Vec::new();
+                $(if let Some(value) = &self.$plain {
+                    set.push((format!("{prefix}.{}", stringify!($plain)), json_value(value)));
+                })*
+                $(if let Some(value) = &self.$opt {
+                    set.push((format!("{prefix}.{}", stringify!($opt)), json_value(value)));
+                })*
+                set
+            }
+        }
+    };
+}
+
+/// A value as JSON text (`"disks"`, `4`, `0.5`), for the reasons of the resolved configuration.
+pub(crate) fn json_value<T: Serialize>(value: &T) -> String {
+    serde_json::to_string(value).unwrap_or_else(|_| "?".to_owned())
+}
+
+overrides! {
+    /// Overrides of the sparse method's interpolation, light bound, subdivision, near field and
+    /// adaptive points ([`SparseShading`], whose fields say what each does and its range).
+    SparseTuning for SparseShading {
+        plain {
+            /// `"smooth"` or `"paper"`.
+            kernel: InterpolationKernel,
+            /// `"gathered"` or `"off"`.
+            bound: LightBound,
+            /// Edge length in sparse point spacings, in [1, 16].
+            subdivision: f32,
+            /// Near-field radius in sparse point spacings, in [0, 8].
+            near_field: f32,
+            /// `"radiance"` or `"lights"`.
+            glossy_interpolation: GlossyInterpolation,
+            /// Adaptive points as a fraction of each mesh's sparse points, in [0, 1].
+            adaptive: f32,
+        }
+        optional {}
+    }
+}
+
+overrides! {
+    /// Overrides of the `"clusters"` visibility mode ([`ClusterSettings`]).
+    ClusterTuning for ClusterSettings {
+        plain {
+            method: ClusterMethod,
+            /// Clusters (shadow maps), in 1..=256.
+            count: u32,
+            /// Side of each cluster's shadow map, texels, in 16..=1024.
+            shadow_map_resolution: u32,
+            soft: SoftShadows,
+            /// In [0, 100].
+            normal_weight: f32,
+            /// k-means iterations per frame, in 1..=32.
+            iterations: u32,
+            shadow_maps: ShadowMapSource,
+        }
+        optional {}
+    }
+}
+
+overrides! {
+    /// Overrides of the `"ism"` visibility mode ([`IsmSettings`]).
+    IsmTuning for IsmSettings {
+        plain {
+            /// Shadow maps per frame, in 1..=4096.
+            count: u32,
+            /// Side of each map, a power of two in 16..=512.
+            resolution: u32,
+            /// Pull-push levels, in 0..=4.
+            pull_push_levels: u32,
+            /// In (0, 1].
+            pull_threshold: f32,
+            /// In (0, 1].
+            push_threshold: f32,
+            soft: SoftShadows,
+            /// Texels, in [0, 16].
+            slope_bias: f32,
+        }
+        optional {
+            /// Points splatted into each map, in 16..=65536; default the paper's rule.
+            points: u32,
+        }
+    }
+}
+
+overrides! {
+    /// Overrides of the shadows and VAL budget of the scene's `lights` ([`DirectSettings`]).
+    DirectTuning for DirectSettings {
+        plain {
+            shadows: DirectShadows,
+            /// m, in (0, 1e4].
+            d_init: f32,
+            /// Side of each paraboloid shadow map, texels, in 16..=1024.
+            shadow_map_resolution: u32,
+            /// In 1..=1024.
+            max_lights: u32,
+            /// In 1..=1048576.
+            val_budget: u32,
+        }
+        optional {
+            /// m, > 0.
+            z_far: f32,
+        }
+    }
+}
+
+overrides! {
+    /// Overrides of the second bounce's points and VALs ([`SecondBounceSettings`]).
+    SecondBounceTuning for SecondBounceSettings {
+        plain {
+            /// In 16..=262144.
+            points: u32,
+            /// In 1..=65536.
+            vals: u32,
+        }
+        optional {}
+    }
+}
+
+/// `settings.tuning`: research knobs. Each is optional: absent, the scene's `quality` level
+/// chooses it (the resolved configuration says what it chose and why); given, it wins.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Tuning {
+    /// RSM side, texels, in 8..=2048 (the spot `light`'s VALs are its square).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rsm_resolution: Option<u32>,
+    /// Sparse points each vertex interpolates from (paper eqs. 12-13), in 1..=16.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interpolation_neighbours: Option<u32>,
+    /// Indirect visibility: `"off"`, `"disks"` (docs/design.md §4 step 3), `"clusters"` (shadow
+    /// maps of k-means clusters of the VALs, `clusters`) or `"ism"` (imperfect shadow maps,
+    /// `ism`); `"auto"` is the level's choice, as absent. `occlusion` is this key's deprecated
+    /// alias (accepted, not both at once).
+    #[serde(default, rename = "visibility", alias = "occlusion", skip_serializing_if = "Option::is_none")]
+    pub visibility: Option<OcclusionSetting>,
+    /// How disc occluders combine: `"product"` or `"sum"` (the paper's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub occlusion_rule: Option<OcclusionRule>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sparse: Option<SparseTuning>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clusters: Option<ClusterTuning>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ism: Option<IsmTuning>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub direct: Option<DirectTuning>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub second_bounce: Option<SecondBounceTuning>,
+}
+
+impl Tuning {
+    /// Every field the scene file gives, as `(settings.tuning.path, value)`, in field order.
+    pub fn set_fields(&self) -> Vec<SetField> {
+        const AT: &str = "tuning";
+        let mut set = Vec::new();
+        if let Some(r) = self.rsm_resolution {
+            set.push((format!("{AT}.rsm_resolution"), r.to_string()));
+        }
+        if let Some(k) = self.interpolation_neighbours {
+            set.push((format!("{AT}.interpolation_neighbours"), k.to_string()));
+        }
+        if let Some(v) = self.visibility.filter(|v| *v != OcclusionSetting::Auto) {
+            set.push((format!("{AT}.visibility"), json_value(&v)));
+        }
+        if let Some(rule) = self.occlusion_rule {
+            set.push((format!("{AT}.occlusion_rule"), json_value(&rule)));
+        }
+        set.extend(self.sparse.map(|t| t.set_fields(&format!("{AT}.sparse"))).unwrap_or_default());
+        set.extend(self.clusters.map(|t| t.set_fields(&format!("{AT}.clusters"))).unwrap_or_default());
+        set.extend(self.ism.map(|t| t.set_fields(&format!("{AT}.ism"))).unwrap_or_default());
+        set.extend(self.direct.map(|t| t.set_fields(&format!("{AT}.direct"))).unwrap_or_default());
+        set.extend(self.second_bounce.map(|t| t.set_fields(&format!("{AT}.second_bounce"))).unwrap_or_default());
+        set
+    }
+}
