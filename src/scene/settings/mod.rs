@@ -11,6 +11,8 @@ mod quality;
 mod rgbd;
 mod scene_file;
 mod sparse;
+#[cfg(test)]
+mod tests;
 mod tuning;
 mod visibility;
 

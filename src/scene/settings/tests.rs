@@ -1,0 +1,189 @@
+//! Quality levels resolved per scene: the analysis' decisions on small scenes built for each
+//! case, overrides, and `balanced` as the defaults every figure was measured with.
+
+use std::path::Path;
+
+use super::*;
+use crate::scene::test_util::{LIGHT_AND_CAMERA, TempDir};
+use crate::scene::{DEFAULT_NEIGHBOURS, Scene, SceneDescription, Settings};
+
+/// A unit cube, counter-clockwise seen from outside (a convex object).
+const CUBE_OBJ: &str = "\
+v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n";
+
+/// The same cube seen from inside: a convex room.
+const ROOM_OBJ: &str = "\
+v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+f 2 3 4 1\nf 8 7 6 5\nf 5 6 2 1\nf 6 7 3 2\nf 7 8 4 3\nf 8 5 1 4\n";
+
+/// A scene of `meshes` (mesh entry bodies) and `settings`, loaded from a directory holding
+/// `cube.obj` and `room.obj`.
+fn load(meshes: &[&str], settings: &str) -> Scene {
+    let dir = TempDir::new("quality");
+    dir.write("cube.obj", CUBE_OBJ);
+    dir.write("room.obj", ROOM_OBJ);
+    let meshes: Vec<String> = meshes.iter().map(|m| format!("{{{m}}}")).collect();
+    let json = format!(r#"{{"meshes": [{}], {LIGHT_AND_CAMERA}, "settings": {settings}}}"#, meshes.join(", "));
+    Scene::from_json_str(&json, dir.path()).expect("scene loads")
+}
+
+fn choice<'a>(scene: &'a Scene, parameter: &str) -> &'a Choice {
+    let found = scene.resolved.choices.iter().find(|c| c.parameter == parameter);
+    found.unwrap_or_else(|| panic!("no choice of {parameter} in {:#?}", scene.resolved.choices))
+}
+
+const ROOM: &str = r#""obj": "room.obj", "sparse_points": 32"#;
+const CUBE: &str = r#""obj": "cube.obj", "sparse_points": 16"#;
+
+#[test]
+fn a_convex_room_needs_no_visibility_at_any_level() {
+    for quality in ["fast", "balanced", "accurate", "reference"] {
+        let scene = load(&[ROOM], &format!(r#"{{"quality": "{quality}"}}"#));
+        assert!(!scene.resolved.analysis.self_occluding());
+        assert_eq!(scene.settings.occlusion, Occlusion::Off, "{quality}");
+        let visibility = choice(&scene, "visibility");
+        assert_eq!(visibility.value, "\"off\"");
+        assert!(visibility.reason.contains("cannot occlude itself"), "{}", visibility.reason);
+    }
+}
+
+#[test]
+fn a_scene_that_can_occlude_itself_gets_the_levels_visibility() {
+    let scene = load(&[ROOM, CUBE], "{}");
+    assert_eq!(scene.settings.occlusion, Occlusion::Disks, "balanced: disks, as `auto` always was");
+    assert_eq!(choice(&scene, "visibility").to_string().split(':').next(), Some("visibility = \"disks\""));
+    assert!(choice(&scene, "visibility").reason.starts_with("the scene can occlude itself (2 meshes)"));
+    let accurate = load(&[ROOM, CUBE], r#"{"quality": "accurate"}"#);
+    assert_eq!(accurate.settings.occlusion, Occlusion::Clusters);
+    assert_eq!(accurate.settings.sparse.near_field, 4.0);
+    let fast = load(&[ROOM, CUBE], r#"{"quality": "fast"}"#);
+    assert_eq!(fast.settings.occlusion, Occlusion::Disks);
+    assert_eq!((fast.settings.rsm_resolution, fast.settings.sparse.subdivision), (64, 4.0));
+}
+
+#[test]
+fn a_scene_without_glossy_material_needs_no_glossy_gather() {
+    let scene = load(&[CUBE], "{}");
+    assert_eq!(scene.resolved.analysis.glossy_materials, 0);
+    let glossy = choice(&scene, "glossy gather");
+    assert_eq!((glossy.value.as_str(), glossy.reason.as_str()), ("off", "no glossy material"));
+    assert!(!scene.needs_glossy());
+    let shiny = format!(r#"{CUBE}, "material": {{"diffuse": [0.5, 0.5, 0.5], "specular": [0.2, 0.2, 0.2]}}"#);
+    let scene = load(&[&shiny], "{}");
+    assert_eq!(choice(&scene, "glossy gather").value, "on");
+    assert!(scene.needs_glossy());
+    let scene = load(&[&shiny], r#"{"glossy": false}"#);
+    assert_eq!(choice(&scene, "glossy gather").reason, "settings.glossy is false");
+}
+
+#[test]
+fn an_explicit_tuning_value_wins_over_the_level() {
+    let settings = r#"{"quality": "fast", "tuning": {"rsm_resolution": 160, "visibility": "ism",
+                       "sparse": {"near_field": 2}}}"#;
+    let scene = load(&[ROOM, CUBE], settings);
+    assert_eq!(scene.settings.rsm_resolution, 160);
+    assert_eq!(scene.settings.occlusion, Occlusion::Ism);
+    // The level keeps what the tuning does not set.
+    assert_eq!((scene.settings.sparse.near_field, scene.settings.sparse.subdivision), (2.0, 4.0));
+    let rsm = choice(&scene, "tuning.rsm_resolution");
+    assert_eq!(rsm.to_string(), "tuning.rsm_resolution = 160: set in the scene file (fast would choose 64)");
+    assert_eq!(choice(&scene, "tuning.visibility").value, "\"ism\"");
+    assert!(scene.resolved.choices.iter().all(|c| c.parameter != "rsm_resolution"));
+}
+
+#[test]
+fn reference_asks_for_the_exact_method_with_accurates_parameters() {
+    let reference = load(&[ROOM, CUBE], r#"{"quality": "reference", "budget_ms": 40}"#);
+    let accurate = load(&[ROOM, CUBE], r#"{"quality": "accurate"}"#);
+    assert_eq!(reference.resolved.method, Technique::Exact);
+    assert_eq!(accurate.resolved.method, Technique::Sparse);
+    assert_eq!(reference.settings, accurate.settings);
+    assert_eq!(reference.resolved.budget_ms, Some(40.0));
+    assert!(
+        reference.resolved.report().starts_with("quality reference, budget 40 ms"),
+        "{}",
+        reference.resolved.report()
+    );
+}
+
+/// What the loader and the admission read does not depend on the analysis, so it is final
+/// before the meshes are read.
+#[test]
+fn the_loaders_parameters_depend_on_the_level_and_tuning_only() {
+    let loaded = SceneAnalysis {
+        meshes: 3,
+        concave_meshes: vec!["bunny".to_owned()],
+        glossy_materials: 2,
+        spot_light: true,
+        spot_lights: 1,
+        point_lights: 4,
+        triangles_per_sparse_point: 9.5,
+    };
+    for quality in [Quality::Fast, Quality::Balanced, Quality::Accurate, Quality::Reference] {
+        let mut settings = SettingsDescription::default();
+        settings.quality = quality;
+        let (before, _) = resolve(quality, &SceneAnalysis::default(), &settings);
+        let (after, _) = resolve(quality, &loaded, &settings);
+        let load_time = |s: &Settings| (s.rsm_resolution, s.interpolation_neighbours, s.sparse, s.seed, s.direct);
+        assert_eq!(load_time(&before), load_time(&after), "{quality:?}");
+        assert_eq!(before.second_bounce, after.second_bounce);
+        settings.validate("settings").expect("every level's own values are valid");
+    }
+}
+
+/// `balanced` resolves to the defaults every image and figure was made with: each knob the
+/// scene file's or the old default, and `auto` visibility's rule. Checked on every fixture's
+/// settings, for a scene that can and one that cannot occlude itself.
+#[test]
+fn balanced_is_the_old_defaults_on_every_fixture() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenes");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&fixtures).expect("fixtures") {
+        let path = entry.expect("entry").path();
+        let text = std::fs::read_to_string(&path).expect("read");
+        let Ok(description) = SceneDescription::from_json_str(&text) else {
+            continue; // a glTF scene form: its settings are checked through its description below
+        };
+        let s = &description.settings;
+        assert_eq!(s.quality, Quality::Balanced, "{}", path.display());
+        let t = &s.tuning;
+        for self_occluding in [false, true] {
+            let analysis = SceneAnalysis { meshes: if self_occluding { 2 } else { 1 }, ..SceneAnalysis::default() };
+            let auto = if self_occluding { Occlusion::Disks } else { Occlusion::Off };
+            let old = Settings {
+                rsm_resolution: t.rsm_resolution.unwrap_or(128),
+                glossy: s.glossy,
+                seed: s.seed,
+                exposure: s.exposure,
+                interpolation_neighbours: t.interpolation_neighbours.unwrap_or(DEFAULT_NEIGHBOURS),
+                occlusion: match t.visibility.unwrap_or_default() {
+                    OcclusionSetting::Auto => auto,
+                    OcclusionSetting::Off => Occlusion::Off,
+                    OcclusionSetting::Disks => Occlusion::Disks,
+                    OcclusionSetting::Clusters => Occlusion::Clusters,
+                    OcclusionSetting::Ism => Occlusion::Ism,
+                },
+                occlusion_rule: t.occlusion_rule.unwrap_or(OcclusionRule::Product),
+                rgbd: s.rgbd,
+                mr: s.mr,
+                sparse: t.sparse.map_or(SparseShading::default(), |o| o.apply(SparseShading::default())),
+                clusters: t.clusters.map_or(ClusterSettings::default(), |o| o.apply(ClusterSettings::default())),
+                ism: t.ism.map_or(IsmSettings::default(), |o| o.apply(IsmSettings::default())),
+                direct: t.direct.map_or(DirectSettings::default(), |o| o.apply(DirectSettings::default())),
+                bounces: s.bounces,
+                second_bounce: t
+                    .second_bounce
+                    .map_or(SecondBounceSettings::default(), |o| o.apply(SecondBounceSettings::default())),
+            };
+            assert_eq!(resolve(Quality::Balanced, &analysis, s).0, old, "{}", path.display());
+        }
+        checked += 1;
+    }
+    assert!(checked >= 8, "only {checked} fixtures read");
+    // The defaults themselves are the numbers the figures name.
+    let defaults = SettingsDescription::default().before_load();
+    assert_eq!((defaults.rsm_resolution, defaults.interpolation_neighbours), (128, 8));
+    assert_eq!(defaults.sparse, SparseShading::default());
+    assert_eq!((defaults.sparse.subdivision, defaults.sparse.near_field, defaults.sparse.adaptive), (2.0, 0.0, 0.0));
+}
