@@ -22,11 +22,14 @@ pub struct Args {
     val_stride: u32,
     #[command(flatten)]
     exact: ExactArgs,
+    /// The quality level, instead of the scene file's `settings.quality`.
+    #[arg(long, value_enum)]
+    quality: Option<relume::scene::Quality>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let options = args.exact.options(args.val_stride)?;
-    let scene = load_renderable(&args.scene)?;
+    let scene = load_renderable(&args.scene, args.quality)?;
     let size = args.size.resolve(&scene)?;
     let gpu = Gpu::new()?;
     let exact = args.reference.map(|Reference::Exact| &options);

@@ -11,7 +11,7 @@ pub mod serve;
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use relume::bench::compare::{ExactOptions, ReferenceDevice};
-use relume::scene::Scene;
+use relume::scene::{Quality, Scene};
 use std::path::Path;
 
 #[derive(Parser)]
@@ -139,7 +139,12 @@ pub fn checked_val_stride(val_stride: u32) -> anyhow::Result<u32> {
 }
 
 pub fn load(path: &Path) -> anyhow::Result<Scene> {
-    Scene::load(path).with_context(|| format!("loading scene {}", path.display()))
+    load_at(path, None)
+}
+
+/// [`load`] at `quality` instead of the scene file's `settings.quality` (`None`: the file's).
+pub fn load_at(path: &Path, quality: Option<Quality>) -> anyhow::Result<Scene> {
+    Scene::load_at(path, quality).with_context(|| format!("loading scene {}", path.display()))
 }
 
 /// A scene for `record-synthetic`, which is lit by the scene's own spot light.
@@ -154,13 +159,15 @@ pub fn load_lit(path: &Path) -> anyhow::Result<Scene> {
 }
 
 /// A scene for `render` and `compare`: lit by its spot `light` or by its `lights` (each makes
-/// direct light and VALs from its RSM).
-pub fn load_renderable(path: &Path) -> anyhow::Result<Scene> {
-    let scene = load(path)?;
+/// direct light and VALs from its RSM). Prints its resolved configuration (quality level,
+/// technique, every parameter and the reason for it) to stderr.
+pub fn load_renderable(path: &Path, quality: Option<Quality>) -> anyhow::Result<Scene> {
+    let scene = load_at(path, quality)?;
     anyhow::ensure!(
         scene.light.is_some() || !scene.lights.is_empty(),
         "{}: light: required by this command unless the scene has `lights` (a scene with neither is lit by RGB-D frames: use `replay`)",
         path.display()
     );
+    eprintln!("{}", scene.resolved.report());
     Ok(scene)
 }

@@ -5,6 +5,7 @@ use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
 use relume::gpu::Gpu;
 use relume::image::LinearImage;
 use relume::renderer::{Component, Components, Method, Renderer};
+use relume::scene::{Quality, Technique};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
@@ -24,9 +25,13 @@ pub struct Args {
     /// `indirect` and `full`, each as `.png` and `.exr`, all at the full image's exposure.
     #[arg(long, conflicts_with_all = ["out", "hdr", "component"])]
     out_dir: Option<PathBuf>,
-    /// How the indirect light is computed.
-    #[arg(long, value_enum, default_value_t = Method::Sparse)]
-    method: Method,
+    /// How the indirect light is computed (default: sparse, or exact for a scene at quality
+    /// `reference`).
+    #[arg(long, value_enum)]
+    method: Option<Method>,
+    /// The quality level, instead of the scene file's `settings.quality`.
+    #[arg(long, value_enum)]
+    quality: Option<Quality>,
     #[command(flatten)]
     size: Size,
     /// Exposure multiplier before tone mapping (default: the scene's, else automatic).
@@ -44,19 +49,28 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let val_stride = checked_val_stride(args.val_stride)?;
     anyhow::ensure!(
-        args.reference_device.is_none() || args.method == Method::Exact,
+        args.reference_device.is_none() || args.method.is_none_or(|m| m == Method::Exact),
         "--reference-device: only with --method exact"
     );
     if let Some(e) = args.exposure {
         anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure: must be a positive number, got {e}");
     }
-    let scene = load_renderable(&args.scene)?;
+    let scene = load_renderable(&args.scene, args.quality)?;
+    // The scene's quality level asks for a technique; --method overrides it.
+    let method = args.method.unwrap_or(match scene.resolved.method {
+        Technique::Exact => Method::Exact,
+        Technique::Sparse => Method::Sparse,
+    });
+    anyhow::ensure!(
+        args.reference_device.is_none() || method == Method::Exact,
+        "--reference-device: only with --method exact (or a scene at quality reference)"
+    );
     let (w, h) = args.size.resolve(&scene)?;
     let gpu = Gpu::new()?;
     let mut renderer = Renderer::new(&gpu, &scene)?;
     renderer.set_exact_val_stride(val_stride);
     let needs = if args.out_dir.is_some() { Components::ALL } else { args.component.needs() };
-    let frame = match args.method {
+    let frame = match method {
         // A direct-only image needs no reference.
         Method::Exact if needs.indirect => {
             let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);

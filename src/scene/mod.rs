@@ -71,7 +71,7 @@ pub use settings::{
     MAX_DIRECT_LIGHTS, MAX_ENVIRONMENT_ROWS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
     MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MrSettings, NEAR_FIELD_RANGE, Occlusion, OcclusionRule,
     OcclusionSetting, POINT_VIEWS, Quality, ResolvedConfig, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE,
-    SecondBounceSettings, ShadowMapSource, SoftShadows, SparseShading,
+    SecondBounceSettings, ShadowMapSource, SoftShadows, SparseShading, Technique,
 };
 pub use texture::MAX_TEXTURE_SIDE;
 

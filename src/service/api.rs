@@ -5,7 +5,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::renderer::Method;
 use crate::scene::{
-    CameraDescription, GltfSceneDescription, LightDescription, Occlusion, Scene, SceneDescription, SceneError,
+    CameraDescription, GltfSceneDescription, LightDescription, Occlusion, ResolvedConfig, Scene, SceneDescription,
+    SceneError,
 };
 
 /// The body of `POST /v1/scenes`, for the API description: a scene description, or a whole
@@ -30,9 +31,9 @@ pub struct SceneInfo {
     pub triangles: usize,
     /// Sparse shading points over all meshes.
     pub sparse_points: usize,
-    /// Most VALs a frame makes from the scene's own lights: `settings.rsm_resolution²` (with a
-    /// `light`) + `settings.direct.val_budget` (with `lights`) + `settings.second_bounce.vals`
-    /// (with two bounces).
+    /// Most VALs a frame makes from the scene's own lights: `rsm_resolution²` (with a `light`)
+    /// + `direct.val_budget` (with `lights`) + `second_bounce.vals` (with two bounces), as
+    /// resolved (`resolved`).
     pub max_vals: u32,
     /// Whether frames run the glossy gather.
     pub glossy: bool,
@@ -43,6 +44,10 @@ pub struct SceneInfo {
     /// The spot light that render `light` overrides start from (none for scenes lit by RGB-D
     /// frames).
     pub light: Option<LightDescription>,
+    /// The scene's resolved configuration: its quality level, the technique it asks for, what
+    /// the analysis of the loaded scene found, and every parameter with the reason for its
+    /// value (the level's choice or the scene file's `settings.tuning`).
+    pub resolved: ResolvedConfig,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]
@@ -86,6 +91,7 @@ impl SceneInfo {
             occlusion: scene.settings.occlusion,
             camera,
             light,
+            resolved: scene.resolved.clone(),
         }
     }
 }
@@ -175,8 +181,8 @@ pub enum RenderMethod {
     /// Every VAL at every visible pixel (the reference; slow).
     BruteForce,
     /// The brute force with every VAL weighted by its group's imperfect-shadow-map lookup at
-    /// the pixel (the scene's `settings.ism`): the ISMs' visibility without the sparse
-    /// interpolation. Its table of pixels x `settings.ism.count` floats must fit the device's
+    /// the pixel (the scene's resolved `ism`, `settings.tuning.ism`): the ISMs' visibility without the sparse
+    /// interpolation. Its table of pixels x `ism.count` floats must fit the device's
     /// largest storage buffer binding, else 400 `limit_exceeded`.
     BruteForceIsm,
 }

@@ -431,6 +431,7 @@ mod tests {
                     "outer_angle_deg": 2, "intensity": [1, 1, 1]}"#,
             )
             .expect("light"),
+            resolved: Default::default(),
         };
         let id = a.id.clone();
         let entry = SceneEntry {

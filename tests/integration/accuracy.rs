@@ -79,7 +79,7 @@ fn auto_occlusion_follows_the_scene() {
     use relume::scene::Occlusion;
     let dir = fixture("scenes");
     let json = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
-    let auto = json.replace(r#", "occlusion": "off""#, "");
+    let auto = json.replace(r#", "visibility": "off""#, "");
     assert_ne!(auto, json, "the fixture names its occlusion setting");
     let scene = Scene::from_json_str(&auto, &dir).unwrap();
     assert_eq!(scene.settings.occlusion, Occlusion::Disks);

@@ -56,6 +56,42 @@ fn compare_prints_the_documented_fields() {
     assert!(v["adapter"].as_str().is_some_and(|a| !a.is_empty()));
 }
 
+/// `render` and `compare` print the resolved configuration to stderr; `--quality` replaces the
+/// scene's level, and a scene at `reference` renders with the exact method unless `--method`
+/// says otherwise.
+#[test]
+fn render_prints_the_resolved_configuration_and_takes_a_quality() {
+    let dir = scratch("cli_quality");
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let png = dir.join("q.png");
+    let args = |extra: &[&str]| {
+        let mut args = vec!["render", scene.to_str().unwrap(), "--out", png.to_str().unwrap()];
+        args.extend(["--component", "indirect", "--width", "8", "--height", "8"]);
+        args.extend(extra);
+        relume(&args)
+    };
+    let o = args(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stderr(&o);
+    assert!(text.contains("quality balanced: technique sparse"), "{text}");
+    assert!(text.contains("tuning.rsm_resolution = 32: set in the scene file"), "{text}");
+    assert!(text.contains("sparse.subdivision = 2.0: "), "{text}");
+    let o = args(&["--quality", "fast"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("sparse.subdivision = 4.0: "), "{}", stderr(&o));
+    // At `reference` the exact method renders; a direct-only image would skip it, so ask for
+    // the indirect light with every 64th VAL to stay quick.
+    let o = args(&["--quality", "reference", "--val-stride", "64", "--reference-device", "cpu"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("technique exact"), "{}", stderr(&o));
+    let o = args(&["--quality", "reference", "--method", "sparse", "--reference-device", "cpu"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--reference-device: only with --method exact"), "{}", stderr(&o));
+    let o = args(&["--quality", "best"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--quality"), "{}", stderr(&o));
+}
+
 #[test]
 fn bad_inputs_fail_with_a_message_naming_the_field() {
     let dir = scratch("cli_errors");
@@ -133,8 +169,8 @@ fn compare_reports_the_cpu_reference_and_its_noise() {
 fn two_bounces_are_compared_and_the_gpu_reference_refuses_them() {
     let dir = scratch("cli_two_bounces");
     let text = std::fs::read_to_string(fixture("scenes/cornell_bunny_small.json")).unwrap().replace(
-        "\"occlusion\": \"off\"",
-        "\"occlusion\": \"off\", \"bounces\": 2, \"second_bounce\": {\"points\": 256, \"vals\": 32}",
+        "\"visibility\": \"off\" }",
+        "\"visibility\": \"off\", \"second_bounce\": {\"points\": 256, \"vals\": 32} }, \"bounces\": 2",
     );
     // In the scratch directory, its meshes named by absolute path.
     let meshes = fixture("meshes");

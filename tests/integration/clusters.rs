@@ -18,11 +18,21 @@ use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
 
 /// `cornell_bunny_small.json` with `"visibility": mode` and `settings` (more entries of
-/// `settings`, e.g. `"clusters": {...}`) in place of its `"occlusion": "off"`.
+/// `settings.tuning`, e.g. `"clusters": {...}`, and `"bounces"`, which goes beside `tuning`) in
+/// place of its `"visibility": "off"`.
 pub(super) fn small_scene_with(mode: &str, settings: &str) -> Scene {
     let dir = super::fixture("scenes");
     let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
-    let json = base.replace("\"occlusion\": \"off\"", &format!("\"visibility\": \"{mode}\", {settings}"));
+    // `bounces` is what the user wants, beside `tuning`; the rest are research knobs in it.
+    let (bounces, settings) = match ["\"bounces\": 1", "\"bounces\": 2"].iter().find(|b| settings.contains(**b)) {
+        Some(b) => (format!("{b}, "), settings.replace(&format!("{b}, "), "").replace(*b, "")),
+        None => (String::new(), settings.to_owned()),
+    };
+    let settings = settings.trim().trim_end_matches(',');
+    let knobs = if settings.is_empty() { String::new() } else { format!(", {settings}") };
+    let json = base
+        .replace("\"visibility\": \"off\"", &format!("\"visibility\": \"{mode}\"{knobs}"))
+        .replace("\"tuning\": {", &format!("{bounces}\"tuning\": {{"));
     assert_ne!(json, base);
     Scene::from_json_str(&json, &dir).unwrap()
 }

@@ -404,3 +404,34 @@ async fn a_whole_gltf_scene_is_admitted_like_a_mesh_file() {
     assert_eq!(info["camera"]["width"], 16);
     app.stop().await;
 }
+
+/// `GET /v1/scenes/{id}` returns the resolved configuration (level, technique, analysis, and a
+/// reason per parameter); a research knob in its old place is a 400 naming the key and where it
+/// moved.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scenes_report_their_resolved_configuration() {
+    let app = App::start(|_| {}).await;
+    let mut scene = inline_scene();
+    scene["settings"] = json!({"quality": "fast", "budget_ms": 50, "tuning": {"interpolation_neighbours": 6}});
+    let id = app.create(&scene).await;
+    let info = app.get(&format!("/v1/scenes/{id}")).await.json();
+    let resolved = &info["resolved"];
+    assert_eq!((resolved["quality"].as_str(), resolved["method"].as_str()), (Some("fast"), Some("sparse")));
+    assert_eq!(resolved["budget_ms"].as_f64(), Some(50.0));
+    assert_eq!(resolved["analysis"]["meshes"].as_u64(), Some(1));
+    let choices = resolved["choices"].as_array().expect("choices");
+    let of = |parameter: &str| choices.iter().find(|c| c["parameter"] == parameter).cloned();
+    assert_eq!(of("rsm_resolution").expect("the level's")["value"], "64");
+    let tuned = of("tuning.interpolation_neighbours").expect("the file's");
+    assert_eq!(tuned["value"], "6");
+    assert!(tuned["reason"].as_str().unwrap().starts_with("set in the scene file"), "{tuned}");
+    assert!(choices.iter().all(|c| !c["reason"].as_str().unwrap_or_default().is_empty()), "{resolved}");
+
+    let mut old = inline_scene();
+    old["settings"] = json!({"rsm_resolution": 64});
+    let error = app.post("/v1/scenes", &old).await.error(400, "invalid_json");
+    assert_eq!(error["field"], "settings.rsm_resolution");
+    let message = error["message"].as_str().unwrap();
+    assert!(message.contains("moved to settings.tuning.rsm_resolution"), "{message}");
+    app.stop().await;
+}

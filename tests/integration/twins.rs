@@ -524,7 +524,7 @@ fn occlusion_matches_cpu_twin() {
     let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
     for (rule, combine) in [("sum", Combine::Sum), ("product", Combine::Product)] {
         let json = base
-            .replace("\"occlusion\": \"off\"", &format!("\"occlusion\": \"disks\", \"occlusion_rule\": \"{rule}\""));
+            .replace("\"visibility\": \"off\"", &format!("\"visibility\": \"disks\", \"occlusion_rule\": \"{rule}\""));
         assert_ne!(json, base);
         let scene = relume::scene::Scene::from_json_str(&json, &dir).unwrap();
         let gpu = gpu();
