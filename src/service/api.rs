@@ -214,15 +214,10 @@ pub enum ImageFormat {
 impl Quality {
     /// Checks the values serde cannot; errors name fields under `field` (`quality`).
     pub fn validate(&self, field: &str) -> Result<(), SceneError> {
-        if let Some(exposure) = self.exposure
-            && !(exposure.is_finite() && exposure > 0.0)
-        {
-            return Err(SceneError::Field {
-                field: format!("{field}.exposure"),
-                message: format!("must be a finite number > 0, got {exposure}"),
-            });
+        match self.exposure {
+            Some(exposure) => crate::scene::settings::validate_exposure(exposure, &format!("{field}.exposure")),
+            None => Ok(()),
         }
-        Ok(())
     }
 }
 

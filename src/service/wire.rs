@@ -111,8 +111,8 @@ pub struct RgbdSettingsPatch {
 }
 
 impl RgbdSettingsPatch {
-    /// `base` with these changes, validated; errors name fields under `field`
-    /// (`control.rgbd`).
+    /// `base` with these changes, validated as a scene file's `settings.rgbd` is
+    /// ([`RgbdSettings::validate`]); errors name fields under `field` (`control.rgbd`).
     pub fn apply(&self, base: &RgbdSettings, field: &str) -> Result<RgbdSettings, WireError> {
         let settings = RgbdSettings {
             grid_step: self.grid_step.unwrap_or(base.grid_step),
@@ -123,48 +123,10 @@ impl RgbdSettingsPatch {
             bilateral_depth_sigma: self.bilateral_depth_sigma.unwrap_or(base.bilateral_depth_sigma),
             min_cosine: self.min_cosine.unwrap_or(base.min_cosine),
         };
-        validate_rgbd_settings(&settings, field)?;
+        // The scene file's one check of these settings, so a stream accepts what a scene accepts.
+        settings.validate(field).map_err(WireError::from_scene)?;
         Ok(settings)
     }
-}
-
-/// Checks every [`RgbdSettings`] field's range; errors name fields under `field`.
-pub fn validate_rgbd_settings(s: &RgbdSettings, field: &str) -> Result<(), WireError> {
-    let f = |name: &str| format!("{field}.{name}");
-    if !(1..=256).contains(&s.grid_step) {
-        return Err(WireError::invalid(f("grid_step"), format!("must be in 1..=256, got {}", s.grid_step)));
-    }
-    if !(s.min_depth.is_finite() && s.min_depth >= 0.0) {
-        return Err(WireError::invalid(f("min_depth"), format!("must be a finite number >= 0, got {}", s.min_depth)));
-    }
-    if !(s.max_depth.is_finite() && s.max_depth > s.min_depth) {
-        return Err(WireError::invalid(
-            f("max_depth"),
-            format!("must be finite and > min_depth = {}, got {}", s.min_depth, s.max_depth),
-        ));
-    }
-    if !(s.radiance_scale.is_finite() && s.radiance_scale >= 0.0) {
-        return Err(WireError::invalid(
-            f("radiance_scale"),
-            format!("must be a finite number >= 0, got {}", s.radiance_scale),
-        ));
-    }
-    if s.bilateral_radius > 16 {
-        return Err(WireError::invalid(
-            f("bilateral_radius"),
-            format!("must be in 0..=16, got {}", s.bilateral_radius),
-        ));
-    }
-    if !(s.bilateral_depth_sigma.is_finite() && s.bilateral_depth_sigma > 0.0) {
-        return Err(WireError::invalid(
-            f("bilateral_depth_sigma"),
-            format!("must be a finite number > 0, got {}", s.bilateral_depth_sigma),
-        ));
-    }
-    if !(s.min_cosine > 0.0 && s.min_cosine <= 1.0) {
-        return Err(WireError::invalid(f("min_cosine"), format!("must be in (0, 1], got {}", s.min_cosine)));
-    }
-    Ok(())
 }
 
 /// Checks that a frame of these intrinsics yields at most `max_vals` VALs with `settings`'
@@ -599,10 +561,9 @@ fn decode_quality(q: proto::Quality) -> Result<StreamQuality, WireError> {
         proto::ImageFormat::Unspecified | proto::ImageFormat::Png => StreamImageFormat::Png,
         proto::ImageFormat::Rgba8 => StreamImageFormat::Rgba8,
     };
-    if let Some(exposure) = q.exposure
-        && !(exposure.is_finite() && exposure > 0.0)
-    {
-        return Err(WireError::invalid(format!("{field}.exposure"), format!("must be finite and > 0, got {exposure}")));
+    if let Some(exposure) = q.exposure {
+        crate::scene::settings::validate_exposure(exposure, &format!("{field}.exposure"))
+            .map_err(WireError::from_scene)?;
     }
     Ok(StreamQuality { method, component, exposure: q.exposure, format })
 }
@@ -1081,6 +1042,16 @@ mod tests {
             .apply(&RgbdSettings::default(), "control.rgbd")
             .unwrap_err();
         assert_eq!(e.field.as_deref(), Some("control.rgbd.max_depth"));
+        // The scene file's bounds: a grid step of 100 is refused, as in a scene file.
+        let e = RgbdSettingsPatch { grid_step: Some(100), ..Default::default() }
+            .apply(&RgbdSettings::default(), "control.rgbd")
+            .unwrap_err();
+        assert_eq!((e.code, e.field.as_deref()), (ErrorCode::InvalidField, Some("control.rgbd.grid_step")));
+        assert_eq!(e.message, "control.rgbd.grid_step: must be in 1..=64, got 100");
+        let e = RgbdSettingsPatch { min_depth: Some(0.0), ..Default::default() }
+            .apply(&RgbdSettings::default(), "control.rgbd")
+            .unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("control.rgbd.min_depth"));
     }
 
     #[test]

@@ -22,7 +22,7 @@ pub use environment::{EnvironmentDistribution, EnvironmentSettings, EnvironmentS
 pub use mr::{DifferentialDevice, MAX_RECEIVER_MARGIN, MrSettings};
 pub use quality::{Choice, Quality, ResolvedConfig, SceneAnalysis, Technique, resolve};
 pub use rgbd::RgbdSettings;
-pub use scene_file::SettingsDescription;
+pub use scene_file::{SettingsDescription, validate_exposure};
 pub use sparse::{
     ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION,
     GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, SUBDIVISION_RANGE, SparseShading,

@@ -160,6 +160,12 @@ impl Default for SettingsDescription {
     }
 }
 
+/// Checks an exposure multiplier (> 0 and finite): the scene file's `settings.exposure` and a
+/// render's or a stream's `quality.exposure` alike.
+pub fn validate_exposure(exposure: f32, field: &str) -> Result<(), SceneError> {
+    positive(exposure, field)
+}
+
 impl SettingsDescription {
     /// The settings before the scene is loaded: the level's and the tuning's parameters, with
     /// the choices that need the loaded scene (visibility) made as for a scene that cannot
@@ -179,7 +185,7 @@ impl SettingsDescription {
         }
         int_in(self.bounces, 1, 2, &format!("{field}.bounces"))?;
         if let Some(exposure) = self.exposure {
-            positive(exposure, &format!("{field}.exposure"))?;
+            validate_exposure(exposure, &format!("{field}.exposure"))?;
         }
         self.rgbd.validate(&format!("{field}.rgbd"))?;
         self.mr.validate(&format!("{field}.mr"))?;
