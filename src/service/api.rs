@@ -31,9 +31,9 @@ pub struct SceneInfo {
     pub triangles: usize,
     /// Sparse shading points over all meshes.
     pub sparse_points: usize,
-    /// Most VALs a frame makes from the scene's own lights: `rsm_resolution²` (with a `light`)
-    /// + `direct.val_budget` (with `lights`) + `second_bounce.vals` (with two bounces), as
-    /// resolved (`resolved`).
+    /// Most VALs a frame makes from the scene's own lights, as resolved (`resolved`):
+    /// `rsm_resolution²` (with a `light`) plus `direct.val_budget` (with `lights`) plus
+    /// `second_bounce.vals` (with two bounces).
     pub max_vals: u32,
     /// Whether frames run the glossy gather.
     pub glossy: bool,
