@@ -6,6 +6,7 @@ mod bench;
 mod bounce;
 mod cli;
 mod clusters;
+mod docs;
 mod fake_backend;
 mod frame;
 mod fuzz;
