@@ -245,7 +245,10 @@ fn citation_problems(c: &Citation, read_cited: &dyn Fn(&str) -> Option<String>) 
         for step in steps {
             let step_prefix = format!("Step {step}.");
             if !heads[at + 1..end].iter().any(|(_, t)| t.starts_with(&step_prefix)) {
-                problems.push(format!("cites {} §{section} step {step}, which §{section} has no heading `Step {step}.` for", c.path));
+                problems.push(format!(
+                    "cites {} §{section} step {step}, which §{section} has no heading `Step {step}.` for",
+                    c.path
+                ));
             }
         }
     }
@@ -479,7 +482,8 @@ fn citation_problems_catch_missing_files_sections_steps_and_titles() {
     let page_path = under(&["docs", "page.md"]);
     let page = "# Design\n## 1. Units\n## 4. Pipeline\n### Step 0. Load\n### Step 1. Gather\n## 5. References\n### Step 2. Not in four\n";
     let reader = |p: &str| (p == page_path).then(|| page.to_string());
-    let check = |text: &str| -> Vec<String> { citations(text).iter().flat_map(|c| citation_problems(c, &reader)).collect() };
+    let check =
+        |text: &str| -> Vec<String> { citations(text).iter().flat_map(|c| citation_problems(c, &reader)).collect() };
     assert!(check(&format!("{page_path} §1, §4 step 1")).is_empty());
     assert_eq!(check(&format!("{page_path} §2")).len(), 1, "a missing section");
     assert_eq!(check(&format!("{page_path} §4 step 2")).len(), 1, "a step of another section");
@@ -519,5 +523,9 @@ fn link_problems_catch_missing_files_and_anchors() {
     assert_eq!(check("[a](a.md#there)").len(), 1, "a missing anchor");
     assert_eq!(check("[a](#nowhere)").len(), 1, "a missing anchor on the page itself");
     assert_eq!(check(&format!("[a]({})", under(&["..", "..", "..", "a.md"]))).len(), 1, "a path out of the repository");
-    assert_eq!(check(&format!("![x]({})", under(&["..", "images", "x.png"]))).len(), 1, "a path relative to the wrong folder");
+    assert_eq!(
+        check(&format!("![x]({})", under(&["..", "images", "x.png"]))).len(),
+        1,
+        "a path relative to the wrong folder"
+    );
 }
