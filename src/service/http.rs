@@ -202,11 +202,7 @@ fn authorize(state: &AppState, request: &Request, tickets: bool) -> Result<(), A
     let Some(token) = &state.config.token else {
         return Ok(());
     };
-    let given = request
-        .headers()
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
+    let given = request.headers().get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).and_then(bearer_token);
     if given.is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes())) {
         Ok(())
     } else if tickets {
@@ -217,6 +213,14 @@ fn authorize(state: &AppState, request: &Request, tickets: bool) -> Result<(), A
     } else {
         Err(unauthorized("missing or wrong bearer token (Authorization: Bearer <token>)"))
     }
+}
+
+/// The token of an `Authorization: Bearer <token>` value. The scheme is case-insensitive
+/// (RFC 7235, section 2.1: `bearer`, `BEARER`) and separated from the token by one or more
+/// spaces.
+fn bearer_token(value: &str) -> Option<&str> {
+    let (scheme, token) = value.split_once(' ')?;
+    scheme.eq_ignore_ascii_case("bearer").then(|| token.trim_start_matches(' '))
 }
 
 /// Equality whose time does not depend on where the inputs differ.
@@ -577,6 +581,16 @@ impl Encoded {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_bearer_scheme_is_case_insensitive() {
+        for value in ["Bearer s3cret", "bearer s3cret", "BEARER s3cret", "bEaReR  s3cret"] {
+            assert_eq!(bearer_token(value), Some("s3cret"), "{value}");
+        }
+        for value in ["Basic s3cret", "Bearers3cret", "Bearer", "s3cret", "Token s3cret"] {
+            assert_ne!(bearer_token(value), Some("s3cret"), "{value}");
+        }
+    }
 
     #[test]
     fn tokens_compare_whole() {
