@@ -130,8 +130,34 @@ pub fn router(state: Arc<AppState>) -> Router {
         .method_not_allowed_fallback(|| async {
             ApiError::new(StatusCode::METHOD_NOT_ALLOWED, Code::MethodNotAllowed, "method not allowed on this route")
         })
+        .layer(middleware::from_fn_with_state(state.clone(), refuse_large_bodies))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .with_state(state)
+}
+
+/// Refuses at once, from its `Content-Length`, a request whose body is over `max_body_bytes`
+/// (413 `limit_exceeded`), on any route: nothing of the body is read, and a client that sent
+/// `Expect: 100-continue` is not told to go on. Bodies without a length are checked while
+/// they are read ([`read_body`]).
+async fn refuse_large_bodies(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
+    match too_large(&state, request.body()) {
+        Some(error) => error.into_response(),
+        None => next.run(request).await,
+    }
+}
+
+/// The 413 for a body whose announced length is over `max_body_bytes`.
+fn too_large(state: &AppState, body: &Body) -> Option<ApiError> {
+    use axum::body::HttpBody as _;
+    let max = state.config.limits.max_body_bytes;
+    let announced = body.size_hint().lower();
+    (announced > max as u64).then(|| {
+        ApiError::limit(
+            limit::MAX_BODY_BYTES,
+            None,
+            format!("the request body is {announced} bytes (Content-Length), over the limit of {max} bytes"),
+        )
+    })
 }
 
 /// Logs every request and records its latency by matched route.
@@ -231,6 +257,9 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 /// The body, refused with 413 past `max_body_bytes` (checked while reading, not trusted from
 /// `Content-Length`) and with 408 when it takes longer than `body_timeout_seconds`.
 async fn read_body(state: &AppState, body: Body) -> Result<bytes::Bytes, ApiError> {
+    if let Some(error) = too_large(state, &body) {
+        return Err(error);
+    }
     let max = state.config.limits.max_body_bytes;
     let too_large =
         || ApiError::limit(limit::MAX_BODY_BYTES, None, format!("the request body is over the limit of {max} bytes"));

@@ -4,11 +4,132 @@
 //! and empty stream messages. Each test drives a real server on a loopback port and fails
 //! without the fix it guards.
 
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use hyper::StatusCode;
 use relume::service::wire::ErrorCode;
 use relume::service::wire::proto::envelope::Body;
+use serde_json::Value;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
 
 use super::hardening::fake_server;
 use super::service::{envelope, frame, inline_scene};
+
+/// An answer read off a raw socket.
+struct RawAnswer {
+    status: u16,
+    /// The head, lower-cased.
+    head: String,
+    body: Vec<u8>,
+    /// From the end of the request to the end of the answer.
+    took: Duration,
+}
+
+impl RawAnswer {
+    /// Asserts a JSON error of this status, code and (when given) limit.
+    #[track_caller]
+    fn error(&self, status: u16, code: &str, limit: Option<&str>) {
+        let text = String::from_utf8_lossy(&self.body);
+        assert_eq!(self.status, status, "{}{text}", self.head);
+        assert!(self.head.contains("content-type: application/json\r\n"), "{}", self.head);
+        let body: Value = serde_json::from_slice(&self.body).unwrap_or_else(|e| panic!("not JSON ({e}): {text}"));
+        assert_eq!(body["error"]["code"], code, "{body}");
+        assert!(body["error"]["message"].as_str().is_some_and(|m| !m.is_empty()), "{body}");
+        assert_eq!(body["error"]["limit"].as_str(), limit, "{body}");
+    }
+}
+
+/// Sends `request` on a new connection (writing on while reading, ignoring a write the server
+/// cuts short) and reads one answer: its head, then `content-length` bytes of body.
+async fn exchange(addr: SocketAddr, request: Vec<u8>) -> RawAnswer {
+    let stream = TcpStream::connect(addr).await.expect("connects");
+    let (mut reader, mut writer) = stream.into_split();
+    let sent = Instant::now();
+    let writing = tokio::spawn(async move {
+        let _ = writer.write_all(&request).await;
+        writer
+    });
+    let read = async {
+        let mut received = Vec::new();
+        let mut buffer = [0u8; 4096];
+        loop {
+            if let Some(end) = received.windows(4).position(|w| w == b"\r\n\r\n") {
+                let head = String::from_utf8_lossy(&received[..end + 4]).to_ascii_lowercase();
+                let length = head
+                    .lines()
+                    .find_map(|l| l.strip_prefix("content-length: "))
+                    .and_then(|n| n.trim().parse::<usize>().ok())
+                    .unwrap_or(0);
+                if received.len() >= end + 4 + length {
+                    return (head, received[end + 4..end + 4 + length].to_vec());
+                }
+            }
+            match reader.read(&mut buffer).await {
+                Ok(0) | Err(_) => {
+                    panic!("the connection ended before a whole answer: {}", String::from_utf8_lossy(&received))
+                }
+                Ok(n) => received.extend_from_slice(&buffer[..n]),
+            }
+        }
+    };
+    let (head, body) = tokio::time::timeout(Duration::from_secs(40), read).await.expect("an answer within 40 s");
+    let took = sent.elapsed();
+    writing.abort();
+    let status = head.split(' ').nth(1).and_then(|s| s.parse().ok()).expect("a status line");
+    RawAnswer { status, head, body, took }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_http_layers_own_refusals_are_json() {
+    let server = fake_server(0, |c| c.limits.max_body_bytes = 1 << 20).await;
+    let addr = server.addr;
+    // A 100 kB scene id, and a 100 kB ticket: the request line alone is over max_header_bytes.
+    let long_id = format!("GET /v1/scenes/{} HTTP/1.1\r\nHost: x\r\n\r\n", "a".repeat(100_000));
+    exchange(addr, long_id.into_bytes()).await.error(431, "limit_exceeded", Some("max_header_bytes"));
+    let long_ticket = format!("GET /v1/scenes/s/stream?ticket={} HTTP/1.1\r\nHost: x\r\n\r\n", "t".repeat(100_000));
+    exchange(addr, long_ticket.into_bytes()).await.error(431, "limit_exceeded", Some("max_header_bytes"));
+    // 500 short headers: within the bytes, over the count.
+    let headers: String = (0..500).map(|i| format!("x-h{i}: v\r\n")).collect();
+    let many = format!("GET /healthz HTTP/1.1\r\nHost: x\r\n{headers}\r\n");
+    exchange(addr, many.into_bytes()).await.error(431, "limit_exceeded", Some("max_headers"));
+    // A 1 MB Authorization header.
+    let big = format!("GET /v1/scenes/x HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {}\r\n\r\n", "k".repeat(1 << 20));
+    exchange(addr, big.into_bytes()).await.error(431, "limit_exceeded", Some("max_header_bytes"));
+    // A negative Content-Length, and a TLS ClientHello where a request line belongs.
+    let negative = b"POST /v1/scenes HTTP/1.1\r\nHost: x\r\nContent-Length: -5\r\n\r\n".to_vec();
+    exchange(addr, negative).await.error(400, "bad_request", None);
+    let client_hello = vec![0x16, 0x03, 0x01, 0x02, 0x00, 0x01, 0x00, 0x01, 0xfc, 0x03, 0x03, 0x5a, 0x5a, 0x5a, 0x5a];
+    exchange(addr, client_hello).await.error(400, "bad_request", None);
+    // Well-formed requests on the same server are answered as before.
+    let healthz = exchange(addr, b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n".to_vec()).await;
+    assert_eq!(healthz.status, 200, "{}", healthz.head);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_body_over_the_limit_is_refused_from_its_content_length_at_once() {
+    let server = fake_server(0, |c| c.limits.max_body_bytes = 1 << 20).await;
+    let id = server.create(&inline_scene()).await;
+    let addr = server.addr;
+    for path in ["/v1/scenes".to_owned(), format!("/v1/scenes/{id}/render"), "/v1/tickets".to_owned()] {
+        for expect in ["Expect: 100-continue\r\n", ""] {
+            let request =
+                format!("POST {path} HTTP/1.1\r\nHost: x\r\n{expect}Content-Length: 10000000000\r\n\r\n").into_bytes();
+            let answer = exchange(addr, request).await;
+            answer.error(413, "limit_exceeded", Some("max_body_bytes"));
+            // It waited for neither the body nor the body timeout (30 s), and did not ask for
+            // the body it refuses.
+            assert!(answer.took < Duration::from_secs(1), "{path} {expect:?}: {:?}", answer.took);
+            assert!(!answer.head.contains("100 continue"), "{}", answer.head);
+        }
+    }
+    // Within the limit, the body is still read (and checked while read).
+    let reply = server.post("/v1/scenes", &inline_scene()).await;
+    assert_eq!(reply.status, StatusCode::CREATED);
+    server.stop().await;
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_empty_stream_message_is_malformed() {
