@@ -5,8 +5,9 @@
 //!
 //! Renders (HTTP renders and stream frames) wait per client and are counted against
 //! `max_client_queue` and `max_queue`: one more is refused at once ([`WorkerError::QueueFull`],
-//! HTTP 503). Scene creation and deletion go ahead of renders. A job whose requester has gone
-//! (client disconnected) is skipped. A panic inside a job (wgpu reports validation errors by
+//! HTTP 503). Scene creation and deletion go ahead of renders. A render whose requester has
+//! gone (client disconnected, stream closed) leaves the queue, freeing its place, and is never
+//! run. A panic inside a job (wgpu reports validation errors by
 //! panicking) fails that job only.
 //!
 //! The backend is a trait so that the service's scheduling, limits and error paths can be
@@ -167,6 +168,17 @@ enum Job {
     LoseDevice,
 }
 
+impl Job {
+    /// Whether nobody waits for the answer any more: the HTTP client disconnected (its
+    /// handler, holding the receiver, was dropped) or the stream closed.
+    fn abandoned(&self) -> bool {
+        match self {
+            Job::Render { reply, .. } | Job::StreamFrame { reply, .. } => reply.is_closed(),
+            Job::AddScene { .. } | Job::RemoveScene { .. } | Job::LoseDevice => false,
+        }
+    }
+}
+
 /// The handle the handlers hold.
 pub struct GpuWorker {
     queue: Arc<FairQueue<Job>>,
@@ -187,7 +199,8 @@ impl GpuWorker {
         limits: &Limits,
         metrics: Arc<Metrics>,
     ) -> Result<GpuWorker, WorkerError> {
-        let queue = Arc::new(FairQueue::new(limits.max_queue, limits.max_client_queue));
+        let queue =
+            Arc::new(FairQueue::new(limits.max_queue, limits.max_client_queue).dropping_abandoned(Job::abandoned));
         let (ready, is_ready) = std::sync::mpsc::sync_channel(1);
         let thread_queue = queue.clone();
         let thread = std::thread::Builder::new()

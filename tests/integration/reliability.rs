@@ -7,15 +7,17 @@
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
+use futures_util::SinkExt;
 use hyper::StatusCode;
 use relume::service::wire::ErrorCode;
 use relume::service::wire::proto::envelope::Body;
-use serde_json::Value;
+use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite;
 
 use super::hardening::fake_server;
-use super::service::{envelope, frame, inline_scene};
+use super::service::{TestServer, envelope, frame, inline_scene};
 
 /// An answer read off a raw socket.
 struct RawAnswer {
@@ -129,6 +131,81 @@ async fn a_body_over_the_limit_is_refused_from_its_content_length_at_once() {
     let reply = server.post("/v1/scenes", &inline_scene()).await;
     assert_eq!(reply.status, StatusCode::CREATED);
     server.stop().await;
+}
+
+/// The count of frames the GPU thread has rendered, from `/metrics`.
+async fn frames_rendered(server: &TestServer) -> u64 {
+    let text = String::from_utf8(server.get("/metrics").await.body.to_vec()).expect("UTF-8");
+    let line = text.lines().find_map(|l| l.strip_prefix("relume_frame_duration_seconds_count ")).expect("a count");
+    line.parse().expect("a number")
+}
+
+/// Waits (up to `within`) until the render queue holds `depth` renders; whether it did.
+async fn queue_reaches(server: &TestServer, depth: usize, within: Duration) -> bool {
+    let deadline = Instant::now() + within;
+    while server.state.worker.queue_depth() != depth {
+        if Instant::now() > deadline {
+            return false;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    true
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn renders_whose_clients_have_gone_leave_the_queue() {
+    const RENDER_MS: u64 = 2000;
+    let server = fake_server(RENDER_MS, |c| {
+        c.limits.max_client_queue = 2;
+        c.limits.max_queue = 16;
+    })
+    .await;
+    let id = server.create(&inline_scene()).await;
+    let path = format!("/v1/scenes/{id}/render");
+    // Three renders from this client: one goes to the GPU, two wait (its max_client_queue);
+    // then the client goes away.
+    let mut gone = Vec::new();
+    for _ in 0..3 {
+        let mut socket = TcpStream::connect(server.addr).await.expect("connects");
+        let request = format!("POST {path} HTTP/1.1\r\nHost: x\r\nContent-Length: 2\r\n\r\n{{}}");
+        socket.write_all(request.as_bytes()).await.expect("sent");
+        gone.push(socket);
+    }
+    assert!(queue_reaches(&server, 2, Duration::from_secs(5)).await, "two renders wait");
+    drop(gone);
+    // Their places are given back as soon as the server sees the connections close, long
+    // before the render on the GPU ends (the GPU thread used to skip them only then).
+    let emptied = queue_reaches(&server, 0, Duration::from_millis(500)).await;
+    // The same client's next render is taken and served after at most the one on the GPU.
+    let started = Instant::now();
+    let reply = server.post(&path, &json!({})).await;
+    assert_eq!(reply.status, StatusCode::OK, "{}", String::from_utf8_lossy(&reply.body));
+    let took = started.elapsed();
+    assert!(emptied, "the abandoned renders still count in the queue");
+    assert!(took < Duration::from_millis(2 * RENDER_MS + 1000), "served after {took:?}");
+    // Only the render on the GPU when its client left and this one ran.
+    assert_eq!(frames_rendered(&server).await, 2);
+
+    // A stream frame whose stream closes while it waits behind a render leaves the queue
+    // too (at once, not when the GPU thread comes to it).
+    let holding = tokio::spawn(raw_render(server.addr, path.clone()));
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let url = format!("ws://{}/v1/scenes/{id}/stream", server.addr);
+    let (mut stream, _) = tokio_tungstenite::connect_async(&url).await.expect("the stream opens");
+    let message = envelope(Body::RgbdFrame(frame(1, 8, 6)));
+    stream.send(tungstenite::Message::Binary(message.into())).await.expect("sent");
+    assert!(queue_reaches(&server, 1, Duration::from_secs(5)).await, "the frame waits behind the render");
+    drop(stream);
+    assert!(queue_reaches(&server, 0, Duration::from_millis(500)).await, "the closed stream's frame still waits");
+    assert_eq!(holding.await.expect("the render task"), StatusCode::OK);
+    assert_eq!(frames_rendered(&server).await, 3, "the frame of the closed stream was rendered");
+    server.stop().await;
+}
+
+/// A render of `path` (`{}`) on its own connection; its status.
+async fn raw_render(addr: SocketAddr, path: String) -> StatusCode {
+    let request = format!("POST {path} HTTP/1.1\r\nHost: x\r\nContent-Length: 2\r\nConnection: close\r\n\r\n{{}}");
+    StatusCode::from_u16(exchange(addr, request.into_bytes()).await.status).expect("a status")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
