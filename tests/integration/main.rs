@@ -21,6 +21,7 @@ mod mcap;
 mod mr_differential;
 mod recording;
 mod redwood;
+mod reliability;
 mod replay;
 mod rgbd;
 mod router;
