@@ -396,7 +396,10 @@ pub struct ExactComparison {
     /// pixel (`brute_force_ism`, the scene's `settings.ism`; `visibility_ms` its ISM stages,
     /// `gather_ms` its `brute_force` stage): the ISMs' error against exact without the sparse
     /// interpolation's, beside `modes_vs_exact`'s `ism`.
-    pub brute_force_ism_vs_exact: ModeVsExact,
+    /// `None` when its table would not fit the device's largest storage binding (large images
+    /// with many maps): `brute_force_ism_skipped` says why, and the rest of the comparison runs.
+    pub brute_force_ism_vs_exact: Option<ModeVsExact>,
+    pub brute_force_ism_skipped: Option<String>,
     /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
     /// with the `sum` and the `product` rule, `clusters` (the scene's `settings.clusters`) and
     /// `ism` (its `settings.ism`).
@@ -532,14 +535,22 @@ fn exact_comparison(
         let gather_ms = sparse.timings.total_of(&[stage::GATHER]);
         modes.push(ModeVsExact::against(&exact, exact_sum, key, &sparse, visibility_ms, gather_ms));
     }
-    let ism = renderer.render(gpu, Method::BruteForceIsm, w, h)?;
-    if let Some(dir) = images {
-        write_png(&ism.indirect, &dir.join("indirect_brute_force_ism.png"), exposure)?;
-    }
-    let ism_stages: Vec<&str> = ism.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
-    let (visibility_ms, brute_ms) = (ism.timings.total_of(&ism_stages), ism.timings.total_of(&[stage::BRUTE_FORCE]));
-    let brute_force_ism_vs_exact =
-        ModeVsExact::against(&exact, exact_sum, "brute_force_ism", &ism, visibility_ms, brute_ms);
+    let (brute_force_ism_vs_exact, brute_force_ism_skipped) = match renderer.render(gpu, Method::BruteForceIsm, w, h) {
+        Ok(ism) => {
+            if let Some(dir) = images {
+                write_png(&ism.indirect, &dir.join("indirect_brute_force_ism.png"), exposure)?;
+            }
+            let ism_stages: Vec<&str> =
+                ism.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
+            let (visibility_ms, brute_ms) =
+                (ism.timings.total_of(&ism_stages), ism.timings.total_of(&[stage::BRUTE_FORCE]));
+            (Some(ModeVsExact::against(&exact, exact_sum, "brute_force_ism", &ism, visibility_ms, brute_ms)), None)
+        }
+        // Its (pixel, group) table outgrows one storage binding at large sizes; the entry is
+        // optional, the rest of the comparison is not.
+        Err(e @ GpuError::TooLarge { .. }) => (None, Some(format!("skipped: {e}"))),
+        Err(e) => return Err(e.into()),
+    };
     renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
     let default = renderer.render(gpu, Method::Sparse, w, h)?;
     let estimate = crate::estimate::Estimator::new().estimate(
@@ -564,6 +575,7 @@ fn exact_comparison(
         exact_rel_stderr: exact.rel_stderr(),
         brute_force_vs_exact,
         brute_force_ism_vs_exact,
+        brute_force_ism_skipped,
         modes_vs_exact: modes,
         default_vs_exact,
     })
@@ -640,4 +652,23 @@ fn write_comparison(dir: &Path, sparse: &LinearImage, brute: &LinearImage, expos
             .collect(),
     };
     write_png(&diff, &dir.join("indirect_difference.png"), exposure * 4.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_worst_percent_is_dropped_from_both_sums() {
+        let flat = |v: f32| [v, v, v, 1.0];
+        let reference = LinearImage { width: 100, height: 1, pixels: vec![flat(1.0); 100] };
+        let mut test = reference.clone();
+        test.pixels[7] = flat(5.0);
+        test.pixels[8] = flat(1.5);
+        // One pixel of 100 is 1 %: the outlier goes, the smaller error stays.
+        let kept = rel_rmse_without_worst(&test, &reference, 0.01);
+        assert!((kept - (0.25f64 / 99.0).sqrt()).abs() < 1e-6, "{kept}");
+        assert!(relative_rmse(&test, &reference) > kept);
+        assert_eq!(rel_rmse_without_worst(&reference, &reference, 0.01), 0.0);
+    }
 }
