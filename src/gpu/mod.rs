@@ -313,14 +313,22 @@ impl Gpu {
         Ok(())
     }
 
-    /// Build shader modules, layouts or pipelines in `f` inside a validation error scope, so
-    /// that a shader or pipeline error comes back as [`GpuError::Pipeline`] for `label`.
+    /// Build shader modules, layouts or pipelines in `f` inside validation and internal error
+    /// scopes, so that a shader or pipeline error comes back as [`GpuError::Pipeline`] for
+    /// `label` instead of reaching wgpu's default handler, which panics. Internal errors are
+    /// what a backend's shader translation raises (naga's GLSL writer refusing a construct on
+    /// the GL backend, say).
     pub fn build_checked<R>(&self, label: &str, f: impl FnOnce() -> R) -> Result<R, GpuError> {
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let internal = self.device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let r = f();
-        match pollster::block_on(scope.pop()) {
+        let errors = [pollster::block_on(validation.pop()), pollster::block_on(internal.pop())];
+        match errors.into_iter().flatten().next() {
             None => Ok(r),
-            Some(e) => Err(GpuError::Pipeline { label: label.to_owned(), message: e.to_string() }),
+            Some(e) => Err(GpuError::Pipeline {
+                label: label.to_owned(),
+                message: format!("{e} (on the {:?} backend)", self.adapter_info.backend),
+            }),
         }
     }
 }

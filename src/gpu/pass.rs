@@ -22,8 +22,10 @@ pub enum Slot {
     StorageReadWrite,
     /// `texture_2d<u32>`
     TextureUint,
-    /// `texture_depth_2d`
-    Depth,
+    /// `texture_2d<f32>` bound to a depth texture's view as unfilterable float: `textureLoad`
+    /// of a `texture_depth_2d` has no GLSL translation (wgpu's GL backend refuses the pipeline),
+    /// while a float texture loads on every backend and gives the same depth.
+    DepthAsFloat,
 }
 
 impl Slot {
@@ -39,8 +41,8 @@ impl Slot {
                 view_dimension: wgpu::TextureViewDimension::D2,
                 multisampled: false,
             },
-            Slot::Depth => wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Depth,
+            Slot::DepthAsFloat => wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
                 view_dimension: wgpu::TextureViewDimension::D2,
                 multisampled: false,
             },
@@ -71,9 +73,9 @@ pub const fn texture(name: &'static str) -> Binding {
     Binding { name, slot: Slot::TextureUint }
 }
 
-/// `var name: texture_depth_2d`
+/// `var name: texture_2d<f32>`, bound to a depth texture's depth-only view ([`Slot::DepthAsFloat`]).
 pub const fn depth_texture(name: &'static str) -> Binding {
-    Binding { name, slot: Slot::Depth }
+    Binding { name, slot: Slot::DepthAsFloat }
 }
 
 /// An entry point and the pass's bindings it uses: the first `bindings` of them, but those
