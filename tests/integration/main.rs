@@ -2,6 +2,7 @@
 //! run on whatever adapter wgpu finds; in CI that is Mesa's lavapipe.
 
 mod accuracy;
+mod backends;
 mod bench;
 mod bounce;
 mod cli;
