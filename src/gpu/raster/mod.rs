@@ -191,12 +191,8 @@ impl Technique for CameraView {
     }
 }
 
-/// A decoded visibility texel: the triangle hit and its barycentrics, if any.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Hit {
-    pub triangle: u32,
-    pub barycentrics: glam::Vec2,
-}
+/// A decoded visibility texel (defined with the twins that resolve it, `twin::flat`).
+pub use crate::twin::flat::Hit;
 
 impl VisibilityTarget {
     /// Read the visibility buffer back, row-major from the top (for the CPU twins and tests).

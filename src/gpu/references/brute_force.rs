@@ -2,7 +2,7 @@
 //! `twin::shade_brute_force`. On CPU adapters the VALs go in ranges, one dispatch each,
 //! each adding to the radiance of the ones before ([`Kernels::val_ranges`]).
 //!
-//! **`brute_force_ism`** ([`crate::renderer::Method::BruteForceIsm`]): the same pass with every
+//! **`brute_force_ism`** (the renderer's `Method::BruteForceIsm`): the same pass with every
 //! VAL weighted by its group's imperfect-shadow-map lookup at the pixel, so that the ISMs' own
 //! error against exact visibility can be told from the sparse interpolation's. The `ism`
 //! mode's machinery as the sparse method runs it (`settings.ism`: VALs drawn by flux, groups,

@@ -15,8 +15,9 @@ pub const NO_NEIGHBOUR: u32 = u32::MAX;
 pub const NO_SURFACE_DISTANCE: f32 = 3.0e38;
 /// Shadow-map depth bias in RSM texel footprints.
 pub const SHADOW_BIAS_TEXELS: f32 = 1.5;
-/// Exact visibility: shadow rays start and end this far off the surfaces along their normals (m).
-pub const RAY_OFFSET: f32 = 1e-3;
+/// Exact visibility: shadow rays start and end this far off the surfaces along their normals
+/// (m); defined beside its CPU twin, `twin::exact_cpu`.
+pub use crate::twin::exact_cpu::RAY_OFFSET;
 
 const COMMON: &str = include_str!("common.wgsl");
 /// VAL tiles in workgroup memory and per-dispatch VAL ranges, for the passes that loop over

@@ -33,10 +33,8 @@ pub const SPLAT_WGSL: &str = include_str!("splat.wgsl");
 pub const PULL_PUSH_WGSL: &str = include_str!("pull_push.wgsl");
 pub const LOOKUP_WGSL: &str = include_str!("ism_lookup.wgsl");
 
-/// VALs per block of the flux sums (one invocation sums a block, one scans the blocks).
-pub const SAMPLE_BLOCK: u32 = 256;
-/// Mixed into every point's hash: the points are the same in every frame and run.
-pub const POINT_SEED: u32 = 0x9e37_79b9;
+/// The constants and lengths the twin shares with the passes (defined in [`twin`]).
+pub use twin::{IsmParams, POINT_SEED, SAMPLE_BLOCK};
 
 /// Stage names in the frame's timings.
 pub const SAMPLING_STAGE: &str = "ism_sampling";
@@ -56,22 +54,8 @@ pub fn cluster_settings(ism: &IsmSettings) -> ClusterSettings {
     }
 }
 
-/// The lengths of the mode in metres.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct IsmParams {
-    pub resolution: u32,
-    pub points: u32,
-    pub levels: u32,
-    /// Pull and push thresholds at the finest level (m).
-    pub pull_threshold: f32,
-    pub push_threshold: f32,
-    pub depth_far: f32,
-    /// Slope-scaled bias of the lookup (texels; `clusters::twin::slope_bias`): a splatted
-    /// point lies anywhere in its texel, not on the texel's centre ray.
-    pub slope_bias_texels: f32,
-}
-
 impl IsmParams {
+    /// The lengths for `ism`'s settings in a scene of `scale`.
     pub fn of(ism: &IsmSettings, scale: SceneScale) -> Self {
         Self {
             resolution: ism.resolution,
