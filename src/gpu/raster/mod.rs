@@ -5,6 +5,7 @@
 pub mod cull;
 
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::{Recorder, Span};
 use crate::gpu::{Gpu, GpuError};
@@ -19,7 +20,7 @@ pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth3
 
 /// The pass's complete WGSL (a render pipeline: vertex and fragment stages).
 pub fn source(textured: bool) -> String {
-    crate::gpu::shader::source(&format!("{STAGES_WGSL}\n{WGSL}"), textured)
+    crate::gpu::shader::source(&Wgsl::new().include(STAGES_WGSL).include(WGSL).finish(), textured)
 }
 
 #[derive(Clone)]
