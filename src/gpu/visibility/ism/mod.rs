@@ -172,7 +172,7 @@ impl FluxSampling {
             gpu,
             SAMPLING.label,
             SAMPLING.source(
-                &Wgsl::new().include(&head).include(FLUX_DRAW_WGSL).include(SAMPLING_WGSL).finish(),
+                &Wgsl::new().include(head).include(FLUX_DRAW_WGSL).include(SAMPLING_WGSL).finish(),
                 scene.textured(),
             ),
         )?;
