@@ -1,7 +1,7 @@
 //! The GPU side: one headless device, the scene's buffers, and the techniques, one folder each
 //! (`lights/`, `raster/`, `sparse/`, `visibility/`, `references/`), each pass's WGSL beside its
 //! Rust module. A technique ([`technique::Technique`]) prepares its resources and records its
-//! passes; [`crate::renderer`] runs the list of techniques a frame needs.
+//! passes; the renderer (`renderer`) runs the list of techniques a frame needs.
 //!
 //! Every pass declares its bindings, entry points and workgroup size once in a
 //! [`pass::PassDesc`] (checked against its WGSL by naga in `tests/integration/layout.rs`), owns
@@ -15,7 +15,9 @@ pub mod differential;
 pub mod lights;
 pub mod pass;
 pub mod raster;
-pub mod raw;
+/// The `#[repr(C)]` twins of the WGSL structs (`twin::raw`, beside the CPU twins that convert
+/// to and from them).
+pub use crate::twin::raw;
 pub mod references;
 pub mod scene;
 pub mod shader;

@@ -139,9 +139,8 @@ impl PassDesc {
     /// the exact pass's CPU-adapter workgroups).
     pub fn source_with(&self, body: &str, textured: bool, workgroup: [u32; 3], tile_size: u32) -> String {
         let [x, y, z] = workgroup;
-        let sizes =
-            format!("const WORKGROUP_X: u32 = {x}u;\nconst WORKGROUP_Y: u32 = {y}u;\nconst WORKGROUP_Z: u32 = {z}u;\n");
-        format!("{sizes}{}", shader::source_with_tile_size(body, textured, tile_size))
+        let sizes = shader::Wgsl::new().u32("WORKGROUP_X", x).u32("WORKGROUP_Y", y).u32("WORKGROUP_Z", z);
+        shader::prelude(sizes, textured, tile_size).include(body).finish()
     }
 }
 

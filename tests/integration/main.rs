@@ -15,6 +15,7 @@ mod gltf;
 mod hardening;
 mod hardening_origin;
 mod ism;
+mod layers;
 mod layout;
 mod light_rsms;
 mod many_lights;
