@@ -36,7 +36,6 @@
 //! `service::gpu_worker`'s: handlers send it jobs over a bounded channel.
 
 pub mod bench;
-pub mod estimate;
 pub mod gpu;
 pub mod image;
 pub mod mr;

@@ -274,7 +274,7 @@ pub fn exact_reference_seeded(
     })
 }
 
-pub use crate::estimate::second_bounce_exact;
+pub use crate::renderer::estimate::second_bounce_exact;
 
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and
 /// with `--reference exact` every occlusion mode against exact visibility.
@@ -425,9 +425,9 @@ pub struct DefaultVsExact {
     pub mean_ratio: f64,
     /// Brightest pixel's luminance over the reference's brightest.
     pub max_ratio: f64,
-    /// The frame's own estimate of `rel_rmse` (`crate::estimate`, default options), or `None`
+    /// The frame's own estimate of `rel_rmse` (`crate::renderer::estimate`, default options), or `None`
     /// when the frame has no pixel to estimate at.
-    pub error_estimate: Option<crate::estimate::ErrorEstimate>,
+    pub error_estimate: Option<crate::renderer::estimate::ErrorEstimate>,
     /// `error_estimate.rel_rmse` over the measured error (`rel_rmse_corrected`, else
     /// `rel_rmse`).
     pub estimate_ratio: Option<f64>,
@@ -553,11 +553,11 @@ fn exact_comparison(
     };
     renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
     let default = renderer.render(gpu, Method::Sparse, w, h)?;
-    let estimate = crate::estimate::Estimator::new().estimate(
+    let estimate = crate::renderer::estimate::Estimator::new().estimate(
         gpu,
         renderer,
         &default,
-        &crate::estimate::EstimateOptions::default(),
+        &crate::renderer::estimate::EstimateOptions::default(),
     )?;
     let default_vs_exact = default_vs_exact(&exact, scene.settings.occlusion, &default, estimate);
     Ok(ExactComparison {
@@ -587,7 +587,7 @@ fn default_vs_exact(
     exact: &ExactReference,
     visibility: Occlusion,
     rendered: &Rendered,
-    error_estimate: Option<crate::estimate::ErrorEstimate>,
+    error_estimate: Option<crate::renderer::estimate::ErrorEstimate>,
 ) -> DefaultVsExact {
     let (test, reference) = (&rendered.indirect, exact.indirect());
     let error = indirect_error(test, reference);

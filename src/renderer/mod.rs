@@ -41,6 +41,7 @@ use crate::scene::{self, Camera, Scene, SpotLight};
 use glam::{Affine3A, DAffine3, Mat4, Vec3};
 
 mod cache;
+pub mod estimate;
 mod method;
 mod readback;
 pub mod stage;
