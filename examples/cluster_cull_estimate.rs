@@ -1,5 +1,5 @@
 //! What a hemisphere cull could save the clusters mode's shadow maps (README "Clustered
-//! visibility", issue 15's cost target): one sparse frame of the scene with `visibility:
+//! visibility", its cost target): one sparse frame of the scene with `visibility:
 //! "clusters"` at its cluster settings, its clusters read back, and for every cluster the
 //! triangles whose box reaches the front of the cluster's plane (each map sees only that
 //! hemisphere), counted in the lights' RSM cull's chunks (`raster::cull`) and per triangle,

@@ -1,4 +1,4 @@
-//! Temporal stability of the clusters visibility mode (issue 15), as a benchmark that prints its
+//! Temporal stability of the clusters visibility mode, as a benchmark that prints its
 //! figures: the spot light moves sideways by 1 % of the scene's bounding radius per frame, and
 //! every frame's indirect image is rendered three ways at a small size:
 //!
@@ -10,7 +10,7 @@
 //! It prints, for each, the mean frame-to-frame change of the image `Σ|I_t − I_{t−1}| /
 //! Σ|I_{t−1}|` (pixels covered in both), and for the two cluster variants the change of their
 //! error against exact (`Σ|e_t − e_{t−1}| / Σ|X_{t−1}|`, `e = I − X`: flicker that is the
-//! method's, not the light's) and their mean rel RMSE against exact. Issue 15's target: the
+//! method's, not the light's) and their mean rel RMSE against exact. The target: the
 //! coherent image changes at most 1.5× as much as exact's.
 //!
 //! ```sh

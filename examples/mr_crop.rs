@@ -1,4 +1,4 @@
-//! The README's off / on / difference crop of a mixed-reality replay (issue 17): three
+//! The README's off / on / difference crop of a mixed-reality replay: three
 //! composited frames of the same size, cropped to one rectangle and set side by side with
 //! `|on - off| x gain` on the right.
 //!

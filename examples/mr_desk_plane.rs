@@ -1,4 +1,4 @@
-//! Where a mixed-reality scene's virtual content meets the real desk (issue 17): per frame of
+//! Where a mixed-reality scene's virtual content meets the real desk: per frame of
 //! a TUM recording, the plane fitted to the depth frame's points under the content's lowest
 //! vertices, the signed distance of the lowest vertex above that plane, and the pixel where
 //! the contact is seen.

@@ -10,6 +10,11 @@ have_lavapipe() {
 # nv-flip (the FLIP metric) builds its C++ with the system compiler.
 packages=""
 have_lavapipe || packages="mesa-vulkan-drivers libvulkan1"
+# Mesa's llvmpipe through EGL: wgpu's GL backend, which the backend test runs beside Vulkan.
+have_gl() {
+    ldconfig -p | grep -q libEGL_mesa.so.0 && ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1
+}
+have_gl || packages="$packages libegl1 libegl-mesa0 libgl1-mesa-dri"
 command -v c++ >/dev/null || packages="$packages g++"
 # scripts/device-bench.sh writes its summary with python3 (standard library only).
 command -v python3 >/dev/null || packages="$packages python3"

@@ -4,9 +4,13 @@
 //! [0, 1], encode as sRGB. Auto exposure maps the 99th-percentile luminance of covered pixels
 //! to 1.
 
-use crate::twin::luminance;
 use glam::Vec3;
 use std::path::Path;
+
+/// Luminance of a linear RGB triple (Rec. 709 weights).
+pub fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
 
 /// Errors writing images.
 #[derive(Debug, thiserror::Error)]

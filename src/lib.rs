@@ -22,7 +22,8 @@
 //!   (a visibility mode keeps its twin in its own folder, e.g. `gpu::visibility::disks::twin`).
 //! - [`rgbd`]: RGB-D recordings and frames as light sources; [`mr`]: relighting them (mixed
 //!   reality), `mr::replay` replaying a recording.
-//! - [`image`]: tone mapping, PNG/EXR output, error metrics.
+//! - [`image`]: tone mapping, PNG/EXR output, error metrics; [`val`]: the virtual area light, the
+//!   plain data type every layer exchanges.
 //! - [`bench`]: `relume bench` (sweeps and plots) and `bench::compare`, the figures of
 //!   `relume compare`, one code path.
 //! - [`service`]: `relume serve`, the HTTP + WebSocket service, a client of it
@@ -43,3 +44,4 @@ pub mod rgbd;
 pub mod scene;
 pub mod service;
 pub mod twin;
+pub mod val;

@@ -274,27 +274,7 @@ pub fn exact_reference_seeded(
     })
 }
 
-/// The exact reference's second bounce (`settings.bounces: 2`): `bounce`'s points on `flat`
-/// lit by `vals` through shadow rays in `bvh`, then drawn as the GPU's are
-/// (`twin::bounce`).
-pub fn second_bounce_exact(
-    flat: &crate::gpu::scene::FlatScene,
-    bounce: &crate::gpu::lights::bounce::SecondBounce,
-    vals: &[crate::twin::Val],
-    bvh: &crate::twin::bvh::TraceBvh,
-) -> Vec<crate::twin::Val> {
-    use crate::twin::bounce as twin;
-    let surfaces: Vec<twin::BounceSurface> = bounce
-        .points
-        .iter()
-        .map(|p| {
-            let (position, normal, m) = flat.surface_at(p.triangle, p.barycentrics);
-            twin::BounceSurface { position, normal, albedo: m.diffuse, area: p.area }
-        })
-        .collect();
-    let candidates = twin::candidate_vals(&surfaces, vals, Some(bvh));
-    twin::draw_vals(&candidates, bounce.settings.vals, bounce.drawn_area)
-}
+pub use crate::renderer::estimate::second_bounce_exact;
 
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and
 /// with `--reference exact` every occlusion mode against exact visibility.
@@ -416,11 +396,42 @@ pub struct ExactComparison {
     /// pixel (`brute_force_ism`, the scene's `settings.ism`; `visibility_ms` its ISM stages,
     /// `gather_ms` its `brute_force` stage): the ISMs' error against exact without the sparse
     /// interpolation's, beside `modes_vs_exact`'s `ism`.
-    pub brute_force_ism_vs_exact: ModeVsExact,
+    /// `None` when its table would not fit the device's largest storage binding (large images
+    /// with many maps): `brute_force_ism_skipped` says why, and the rest of the comparison runs.
+    pub brute_force_ism_vs_exact: Option<ModeVsExact>,
+    pub brute_force_ism_skipped: Option<String>,
     /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
     /// with the `sum` and the `product` rule, `clusters` (the scene's `settings.clusters`) and
     /// `ism` (its `settings.ism`).
     pub modes_vs_exact: Vec<ModeVsExact>,
+    /// The scene's own configuration (what a user gets without choosing anything) against the
+    /// reference, with the error estimate a frame reports beside it.
+    pub default_vs_exact: DefaultVsExact,
+}
+
+/// The scene's own configuration against the exact reference: the figures a user's frame
+/// would be judged by, and the estimate it reports of them.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DefaultVsExact {
+    /// The visibility mode it resolved to.
+    pub visibility: Occlusion,
+    pub rel_rmse: f64,
+    /// The error with the reference's own noise taken out (`None` for a stride).
+    pub rel_rmse_corrected: Option<f64>,
+    /// The relative RMSE over the pixels left after dropping the 1 % with the largest squared
+    /// error (from both sums): how much of the error a few pixels hold.
+    pub rel_rmse_without_worst_1pct: f64,
+    /// Summed indirect luminance over the reference's.
+    pub mean_ratio: f64,
+    /// Brightest pixel's luminance over the reference's brightest.
+    pub max_ratio: f64,
+    /// The frame's own estimate of `rel_rmse` (`crate::renderer::estimate`, default options), or `None`
+    /// when the frame has no pixel to estimate at.
+    pub error_estimate: Option<crate::renderer::estimate::ErrorEstimate>,
+    /// `error_estimate.rel_rmse` over the measured error (`rel_rmse_corrected`, else
+    /// `rel_rmse`).
+    pub estimate_ratio: Option<f64>,
+    pub stages_ms: Vec<(String, f64)>,
 }
 
 /// Measure `scene` at `width` x `height` as `relume compare` does; with `exact`, also against
@@ -449,7 +460,7 @@ pub fn compare(
     let ((sparse_sum, sparse_peak), (brute_sum, brute_peak)) =
         (sparse.indirect.luminance_sum_and_peak(), brute.indirect.luminance_sum_and_peak());
     let exact = match exact {
-        Some(options) => Some(exact_comparison(gpu, &mut renderer, (w, h), options, images, &brute)?),
+        Some(options) => Some(exact_comparison(gpu, &mut renderer, scene, (w, h), options, images, &brute)?),
         None => None,
     };
     let bounce_stages = renderer.bounce_stages();
@@ -491,6 +502,7 @@ pub fn compare(
 fn exact_comparison(
     gpu: &Gpu,
     renderer: &mut Renderer,
+    scene: &Scene,
     (w, h): (u32, u32),
     options: &ExactOptions,
     images: Option<&Path>,
@@ -523,14 +535,31 @@ fn exact_comparison(
         let gather_ms = sparse.timings.total_of(&[stage::GATHER]);
         modes.push(ModeVsExact::against(&exact, exact_sum, key, &sparse, visibility_ms, gather_ms));
     }
-    let ism = renderer.render(gpu, Method::BruteForceIsm, w, h)?;
-    if let Some(dir) = images {
-        write_png(&ism.indirect, &dir.join("indirect_brute_force_ism.png"), exposure)?;
-    }
-    let ism_stages: Vec<&str> = ism.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
-    let (visibility_ms, brute_ms) = (ism.timings.total_of(&ism_stages), ism.timings.total_of(&[stage::BRUTE_FORCE]));
-    let brute_force_ism_vs_exact =
-        ModeVsExact::against(&exact, exact_sum, "brute_force_ism", &ism, visibility_ms, brute_ms);
+    let (brute_force_ism_vs_exact, brute_force_ism_skipped) = match renderer.render(gpu, Method::BruteForceIsm, w, h) {
+        Ok(ism) => {
+            if let Some(dir) = images {
+                write_png(&ism.indirect, &dir.join("indirect_brute_force_ism.png"), exposure)?;
+            }
+            let ism_stages: Vec<&str> =
+                ism.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
+            let (visibility_ms, brute_ms) =
+                (ism.timings.total_of(&ism_stages), ism.timings.total_of(&[stage::BRUTE_FORCE]));
+            (Some(ModeVsExact::against(&exact, exact_sum, "brute_force_ism", &ism, visibility_ms, brute_ms)), None)
+        }
+        // Its (pixel, group) table outgrows one storage binding at large sizes; the entry is
+        // optional, the rest of the comparison is not.
+        Err(e @ GpuError::TooLarge { .. }) => (None, Some(format!("skipped: {e}"))),
+        Err(e) => return Err(e.into()),
+    };
+    renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
+    let default = renderer.render(gpu, Method::Sparse, w, h)?;
+    let estimate = crate::renderer::estimate::Estimator::new().estimate(
+        gpu,
+        renderer,
+        &default,
+        &crate::renderer::estimate::EstimateOptions::default(),
+    )?;
+    let default_vs_exact = default_vs_exact(&exact, scene.settings.occlusion, &default, estimate);
     Ok(ExactComparison {
         exact_ms: exact.ms(),
         exact_device: exact.device,
@@ -546,8 +575,53 @@ fn exact_comparison(
         exact_rel_stderr: exact.rel_stderr(),
         brute_force_vs_exact,
         brute_force_ism_vs_exact,
+        brute_force_ism_skipped,
         modes_vs_exact: modes,
+        default_vs_exact,
     })
+}
+
+/// [`DefaultVsExact`] of `rendered` (the scene's own configuration, `visibility`) against
+/// `exact`.
+fn default_vs_exact(
+    exact: &ExactReference,
+    visibility: Occlusion,
+    rendered: &Rendered,
+    error_estimate: Option<crate::renderer::estimate::ErrorEstimate>,
+) -> DefaultVsExact {
+    let (test, reference) = (&rendered.indirect, exact.indirect());
+    let error = indirect_error(test, reference);
+    let rel_rmse_corrected = exact.corrected_rel_rmse(test);
+    let ((test_sum, test_peak), (reference_sum, reference_peak)) =
+        (test.luminance_sum_and_peak(), reference.luminance_sum_and_peak());
+    let measured = rel_rmse_corrected.unwrap_or(error.rel_rmse);
+    DefaultVsExact {
+        visibility,
+        rel_rmse: error.rel_rmse,
+        rel_rmse_corrected,
+        rel_rmse_without_worst_1pct: rel_rmse_without_worst(test, reference, 0.01),
+        mean_ratio: test_sum / reference_sum,
+        max_ratio: test_peak / reference_peak,
+        estimate_ratio: error_estimate.map(|e| e.rel_rmse / measured),
+        error_estimate,
+        stages_ms: rendered.timings.stages.clone(),
+    }
+}
+
+/// The relative RMSE of `test` against `reference` over the covered pixels left after dropping
+/// the `fraction` of them with the largest squared error (from both sums).
+pub fn rel_rmse_without_worst(test: &LinearImage, reference: &LinearImage, fraction: f64) -> f64 {
+    let mut terms: Vec<(f64, f64)> = (0..reference.pixels.len())
+        .filter(|&i| reference.covered(i))
+        .map(|i| {
+            let (t, r) = (test.rgb(i), reference.rgb(i));
+            ((t - r).length_squared() as f64, r.length_squared() as f64)
+        })
+        .collect();
+    terms.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let dropped = (terms.len() as f64 * fraction).floor() as usize;
+    let (num, den) = terms[dropped..].iter().fold((0.0, 0.0), |(n, d), (e, r)| (n + e, d + r));
+    if den > 0.0 { (num / den).sqrt() } else { 0.0 }
 }
 
 fn write_png(image: &LinearImage, path: &Path, exposure: f32) -> Result<(), BenchError> {
@@ -578,4 +652,23 @@ fn write_comparison(dir: &Path, sparse: &LinearImage, brute: &LinearImage, expos
             .collect(),
     };
     write_png(&diff, &dir.join("indirect_difference.png"), exposure * 4.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_worst_percent_is_dropped_from_both_sums() {
+        let flat = |v: f32| [v, v, v, 1.0];
+        let reference = LinearImage { width: 100, height: 1, pixels: vec![flat(1.0); 100] };
+        let mut test = reference.clone();
+        test.pixels[7] = flat(5.0);
+        test.pixels[8] = flat(1.5);
+        // One pixel of 100 is 1 %: the outlier goes, the smaller error stays.
+        let kept = rel_rmse_without_worst(&test, &reference, 0.01);
+        assert!((kept - (0.25f64 / 99.0).sqrt()).abs() < 1e-6, "{kept}");
+        assert!(relative_rmse(&test, &reference) > kept);
+        assert_eq!(rel_rmse_without_worst(&reference, &reference, 0.01), 0.0);
+    }
 }

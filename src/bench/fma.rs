@@ -6,6 +6,7 @@ use super::BenchError;
 use crate::bench::compare;
 use crate::gpu::pass::module_from_source;
 use crate::gpu::raw::RawGathered;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::sparse::gather::{Gather, GatherLobes};
 use crate::gpu::timing::{Recorder, TimingSource};
 use crate::gpu::{Gpu, GpuError, Lobes};
@@ -124,10 +125,12 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
 
 /// Best time (ms) of `repeats` dispatches of the FMA kernel, after a warm-up dispatch.
 fn fma_kernel(gpu: &Gpu, invocations: u32, iterations: u32, repeats: u32) -> Result<f64, GpuError> {
-    let source = format!(
-        "const FMA_WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\nconst FMA_CHAINS: u32 = {CHAINS}u;\n\
-         const FMA_ITERATIONS: u32 = {iterations}u;\n{WGSL}"
-    );
+    let source = Wgsl::new()
+        .u32("FMA_WORKGROUP_SIZE", WORKGROUP_SIZE)
+        .u32("FMA_CHAINS", CHAINS as u32)
+        .u32("FMA_ITERATIONS", iterations)
+        .include(WGSL)
+        .finish();
     let module = module_from_source(gpu, "fma", source)?;
     let sink = gpu.storage_buffer_sized::<[f32; 4]>("fma.sink", invocations as usize)?;
     let (pipeline, group) = gpu.build_checked("fma", || {

@@ -1,7 +1,7 @@
 //! The GPU side: one headless device, the scene's buffers, and the techniques, one folder each
 //! (`lights/`, `raster/`, `sparse/`, `visibility/`, `references/`), each pass's WGSL beside its
 //! Rust module. A technique ([`technique::Technique`]) prepares its resources and records its
-//! passes; [`crate::renderer`] runs the list of techniques a frame needs.
+//! passes; the renderer (`renderer`) runs the list of techniques a frame needs.
 //!
 //! Every pass declares its bindings, entry points and workgroup size once in a
 //! [`pass::PassDesc`] (checked against its WGSL by naga in `tests/integration/layout.rs`), owns
@@ -15,7 +15,9 @@ pub mod differential;
 pub mod lights;
 pub mod pass;
 pub mod raster;
-pub mod raw;
+/// The `#[repr(C)]` twins of the WGSL structs (`twin::raw`, beside the CPU twins that convert
+/// to and from them).
+pub use crate::twin::raw;
 pub mod references;
 pub mod scene;
 pub mod shader;
@@ -313,14 +315,22 @@ impl Gpu {
         Ok(())
     }
 
-    /// Build shader modules, layouts or pipelines in `f` inside a validation error scope, so
-    /// that a shader or pipeline error comes back as [`GpuError::Pipeline`] for `label`.
+    /// Build shader modules, layouts or pipelines in `f` inside validation and internal error
+    /// scopes, so that a shader or pipeline error comes back as [`GpuError::Pipeline`] for
+    /// `label` instead of reaching wgpu's default handler, which panics. Internal errors are
+    /// what a backend's shader translation raises (naga's GLSL writer refusing a construct on
+    /// the GL backend, say).
     pub fn build_checked<R>(&self, label: &str, f: impl FnOnce() -> R) -> Result<R, GpuError> {
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let internal = self.device.push_error_scope(wgpu::ErrorFilter::Internal);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let r = f();
-        match pollster::block_on(scope.pop()) {
+        let errors = [pollster::block_on(validation.pop()), pollster::block_on(internal.pop())];
+        match errors.into_iter().flatten().next() {
             None => Ok(r),
-            Some(e) => Err(GpuError::Pipeline { label: label.to_owned(), message: e.to_string() }),
+            Some(e) => Err(GpuError::Pipeline {
+                label: label.to_owned(),
+                message: format!("{e} (on the {:?} backend)", self.adapter_info.backend),
+            }),
         }
     }
 }

@@ -22,8 +22,10 @@ pub enum Slot {
     StorageReadWrite,
     /// `texture_2d<u32>`
     TextureUint,
-    /// `texture_depth_2d`
-    Depth,
+    /// `texture_2d<f32>` bound to a depth texture's view as unfilterable float: `textureLoad`
+    /// of a `texture_depth_2d` has no GLSL translation (wgpu's GL backend refuses the pipeline),
+    /// while a float texture loads on every backend and gives the same depth.
+    DepthAsFloat,
 }
 
 impl Slot {
@@ -39,8 +41,8 @@ impl Slot {
                 view_dimension: wgpu::TextureViewDimension::D2,
                 multisampled: false,
             },
-            Slot::Depth => wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Depth,
+            Slot::DepthAsFloat => wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
                 view_dimension: wgpu::TextureViewDimension::D2,
                 multisampled: false,
             },
@@ -71,9 +73,9 @@ pub const fn texture(name: &'static str) -> Binding {
     Binding { name, slot: Slot::TextureUint }
 }
 
-/// `var name: texture_depth_2d`
+/// `var name: texture_2d<f32>`, bound to a depth texture's depth-only view ([`Slot::DepthAsFloat`]).
 pub const fn depth_texture(name: &'static str) -> Binding {
-    Binding { name, slot: Slot::Depth }
+    Binding { name, slot: Slot::DepthAsFloat }
 }
 
 /// An entry point and the pass's bindings it uses: the first `bindings` of them, but those
@@ -137,9 +139,8 @@ impl PassDesc {
     /// the exact pass's CPU-adapter workgroups).
     pub fn source_with(&self, body: &str, textured: bool, workgroup: [u32; 3], tile_size: u32) -> String {
         let [x, y, z] = workgroup;
-        let sizes =
-            format!("const WORKGROUP_X: u32 = {x}u;\nconst WORKGROUP_Y: u32 = {y}u;\nconst WORKGROUP_Z: u32 = {z}u;\n");
-        format!("{sizes}{}", shader::source_with_tile_size(body, textured, tile_size))
+        let sizes = shader::Wgsl::new().u32("WORKGROUP_X", x).u32("WORKGROUP_Y", y).u32("WORKGROUP_Z", z);
+        shader::prelude(sizes, textured, tile_size).include(body).finish()
     }
 }
 

@@ -1,5 +1,5 @@
 //! A technique prepares its resources for a scene and records its own passes; a frame is the
-//! ordered list of the techniques the scene and the request need ([`crate::renderer`] builds
+//! ordered list of the techniques the scene and the request need (the renderer builds
 //! it), each pass a stage of the frame's [`Recorder`]: a debug group and a timing span.
 //!
 //! The techniques (one folder each): the spot light's VALs and its direct light and the

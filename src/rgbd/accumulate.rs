@@ -19,7 +19,7 @@ use std::mem::size_of;
 
 use glam::Vec3;
 
-use crate::twin::Val;
+use crate::val::Val;
 
 /// Integer grid coordinates of a cell; ordered x, then y, then z.
 type CellKey = (i32, i32, i32);

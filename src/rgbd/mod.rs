@@ -2,8 +2,9 @@
 //! a real room's camera frame (after downsampling) becomes a VAL, so virtual content placed in
 //! the room receives the room's colours as indirect light.
 //!
-//! - [`recording`]: RGB-D recordings on disk (association, pose interpolation, intrinsics), in
-//!   the TUM layout or, through [`redwood`] and [`rosbag`], Open3D/Redwood's and MCAP files.
+//! - [`recording`]: RGB-D recordings on disk, in the TUM layout ([`tum`]), Open3D/Redwood's
+//!   ([`redwood`]) or MCAP files ([`rosbag`]); what the layouts' readers share ([`reader`]:
+//!   options, errors, checks) and the pose interpolation ([`poses`]).
 //! - [`accumulate`]: a persistent world-space VAL set across frames (paper §5, restriction 3).
 //! - `twin::rgbd`: the CPU twin of the VAL generation; `gpu::lights::rgbd`: the GPU pass.
 
@@ -11,9 +12,13 @@ use glam::DAffine3;
 use serde::{Deserialize, Serialize};
 
 pub mod accumulate;
+mod images;
+pub mod poses;
+pub mod reader;
 pub mod recording;
 pub mod redwood;
 pub mod rosbag;
+pub mod tum;
 
 /// Pinhole intrinsics of the depth image, registered to colour (pixels). Optical axes: x right,
 /// y down, z forward; pixel centres at integer coordinates. Laid out as WGSL's `Intrinsics`.

@@ -23,9 +23,9 @@ use glam::{DAffine3, DMat3, DMat4, DVec4};
 use serde::Deserialize;
 
 use super::Intrinsics;
-use super::recording::{
-    AssociationStats, FramePair, Frames, Layout, Parts, Recording, RecordingError, RecordingOptions, check_depth_scale,
-    check_intrinsics, data_lines, io_error, line_error, parse_number, read_text, value_error,
+use super::reader::{
+    AssociationStats, FramePair, Layout, Parts, RecordingError, RecordingOptions, check_depth_scale, check_intrinsics,
+    data_lines, io_error, line_error, parse_number, read_text, value_error,
 };
 
 /// Open3D's depth scale: 16-bit depth units (mm) per metre.
@@ -52,7 +52,7 @@ pub fn detect(dir: &Path) -> bool {
 /// Reads the Redwood recording in `dir`. Intrinsics: the camera JSON, else
 /// `options.intrinsics`, else [`Intrinsics::TUM`]; depth scale: `options.depth_scale`, else
 /// [`REDWOOD_DEPTH_SCALE`]. `options.tolerance_s` is not used (nothing to associate).
-pub fn open(dir: &Path, options: &RecordingOptions) -> Result<Recording, RecordingError> {
+pub(super) fn open(dir: &Path, options: &RecordingOptions) -> Result<Parts<Vec<FramePair>>, RecordingError> {
     let intrinsics = resolve_intrinsics(dir, options)?;
     let depth_scale = match options.depth_scale {
         Some(scale) => {
@@ -88,17 +88,17 @@ pub fn open(dir: &Path, options: &RecordingOptions) -> Result<Recording, Recordi
         Err(e) => return Err(e),
     };
     let n = pairs.len();
-    Ok(Recording::from_parts(Parts {
+    Ok(Parts {
         dir: dir.to_path_buf(),
         intrinsics,
         depth_scale,
         has_groundtruth,
         timestamps: (0..n).map(|i| i as f64 / REDWOOD_FRAME_RATE_HZ).collect(),
         poses,
-        frames: Frames::Files(pairs),
+        frames: pairs,
         stats: AssociationStats { depth_frames: n, colour_frames: n, ..Default::default() },
         layout: Layout::Redwood,
-    }))
+    })
 }
 
 /// Open3D's `PinholeCameraIntrinsic` JSON; sizes as numbers so a bad one is named.

@@ -39,9 +39,10 @@ use glam::DAffine3;
 use serde::{Deserialize, Serialize};
 
 use super::Intrinsics;
-use super::recording::{
-    AssociationStats, Frames, Layout, Parts, PoseSample, Recording, RecordingError, RecordingOptions,
-    check_depth_scale, check_intrinsics, check_tolerance, interpolate_pose, io_error, nearest, value_error,
+use super::poses::{PoseSample, interpolate_pose, nearest};
+use super::reader::{
+    AssociationStats, Layout, Parts, RecordingError, RecordingOptions, check_depth_scale, check_intrinsics,
+    check_tolerance, io_error, value_error, warn_skipped,
 };
 
 /// ROS's depth scale for `16UC1` depth (REP 118: millimetres): units per metre.
@@ -61,27 +62,7 @@ pub const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
 /// The topic of transforms valid at every time.
 pub const TF_STATIC_TOPIC: &str = "/tf_static";
 
-/// Topics to read from an MCAP file; `None` picks the default (module docs). Also the CLI
-/// flags of `relume replay`.
-#[derive(Clone, Debug, Default, PartialEq, Eq, clap::Args)]
-pub struct McapTopics {
-    /// MCAP recording: the colour sensor_msgs/msg/Image topic (default: the one Image topic
-    /// that is not the depth topic).
-    #[arg(long = "colour-topic")]
-    pub colour: Option<String>,
-    /// MCAP recording: the depth Image topic, 16UC1 (mm) or 32FC1 (m) (default: the one Image
-    /// topic whose name contains `depth`).
-    #[arg(long = "depth-topic")]
-    pub depth: Option<String>,
-    /// MCAP recording: the sensor_msgs/msg/CameraInfo topic (default: `camera_info` beside the
-    /// depth topic, else the only one).
-    #[arg(long = "camera-info-topic")]
-    pub camera_info: Option<String>,
-    /// MCAP recording: a geometry_msgs/msg/PoseStamped topic for the camera poses (default: the
-    /// only one, else /tf and /tf_static).
-    #[arg(long = "pose-topic")]
-    pub pose: Option<String>,
-}
+pub use super::reader::McapTopics;
 
 /// ROS 2 message types as CDR lays them out (field order and types of the `.msg` files).
 pub mod msg {
@@ -281,7 +262,7 @@ struct ChannelInfo {
 }
 
 /// Reads the MCAP file `file`.
-pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, RecordingError> {
+pub(super) fn open(file: &Path, options: &RecordingOptions) -> Result<Parts<Vec<FrameImages>>, RecordingError> {
     let tolerance = check_tolerance(options)?;
     let name = PathBuf::from(file.file_name().unwrap_or(file.as_os_str()));
     let record_error = |record: &str, message: String| RecordingError::Record {
@@ -451,18 +432,18 @@ pub fn open(file: &Path, options: &RecordingOptions) -> Result<Recording, Record
     if timestamps.is_empty() {
         return Err(RecordingError::NoFrames { stats });
     }
-    super::recording::warn_skipped(file, &stats, tolerance);
-    Ok(Recording::from_parts(Parts {
+    warn_skipped(file, &stats, tolerance);
+    Ok(Parts {
         dir: file.to_path_buf(),
         intrinsics,
         depth_scale,
         has_groundtruth: !matches!(pose_source, PoseSource::None),
         timestamps,
         poses: kept_poses,
-        frames: Frames::Mcap(frames),
+        frames,
         stats,
         layout: Layout::Mcap,
-    }))
+    })
 }
 
 /// The topics read: the options' or the defaults (module docs).

@@ -12,6 +12,11 @@ pub const DEFAULT_TICKET_SECONDS: u64 = 30;
 /// in code are treated as this.
 pub const MAX_TICKET_SECONDS: u64 = 3600;
 
+/// The bounds of [`Limits::max_header_bytes`]: hyper's smallest read buffer, and 64 KiB (a
+/// request target of 65,535 bytes or more, which the `http` crate cannot hold, is then over
+/// the limit too). Values set in code outside these are treated as the nearest bound.
+pub const HEADER_BYTES_RANGE: std::ops::RangeInclusive<usize> = 8192..=65_536;
+
 /// How `relume serve` runs.
 #[derive(Clone, Debug, clap::Args)]
 pub struct Config {
@@ -65,6 +70,15 @@ pub struct Limits {
     /// Largest HTTP request body, bytes (scene descriptions with inline OBJ text).
     #[arg(long, env = "RELUME_MAX_BODY_BYTES", default_value_t = Limits::default().max_body_bytes)]
     pub max_body_bytes: usize,
+    /// Largest HTTP request head, bytes: the request line (with the URI) and the headers
+    /// together (8192..=65536); a larger one is answered 431 and the connection closed.
+    #[arg(long, env = "RELUME_MAX_HEADER_BYTES", default_value_t = Limits::default().max_header_bytes,
+        value_parser = clap::builder::RangedU64ValueParser::<usize>::new()
+            .range(*HEADER_BYTES_RANGE.start() as u64..=*HEADER_BYTES_RANGE.end() as u64))]
+    pub max_header_bytes: usize,
+    /// Most headers of an HTTP request; one more is answered 431 and the connection closed.
+    #[arg(long, env = "RELUME_MAX_HEADERS", default_value_t = Limits::default().max_headers)]
+    pub max_headers: usize,
     /// Largest stream message (one protobuf envelope), bytes.
     #[arg(long, env = "RELUME_MAX_MESSAGE_BYTES", default_value_t = Limits::default().max_message_bytes)]
     pub max_message_bytes: usize,
@@ -116,6 +130,8 @@ impl Default for Limits {
     fn default() -> Self {
         Limits {
             max_body_bytes: 32 << 20,
+            max_header_bytes: 16 << 10,
+            max_headers: 100,
             max_message_bytes: 16 << 20,
             max_frame_side: 4096,
             max_vals: 65_536,
@@ -137,6 +153,8 @@ impl Default for Limits {
 /// line (`--max-vals`).
 pub mod limit {
     pub const MAX_BODY_BYTES: &str = "max_body_bytes";
+    pub const MAX_HEADER_BYTES: &str = "max_header_bytes";
+    pub const MAX_HEADERS: &str = "max_headers";
     pub const MAX_MESSAGE_BYTES: &str = "max_message_bytes";
     pub const MAX_FRAME_SIDE: &str = "max_frame_side";
     pub const MAX_VALS: &str = "max_vals";
@@ -172,6 +190,11 @@ impl LimitExceeded {
 }
 
 impl Limits {
+    /// [`Limits::max_header_bytes`] within [`HEADER_BYTES_RANGE`].
+    pub fn header_bytes(&self) -> usize {
+        self.max_header_bytes.clamp(*HEADER_BYTES_RANGE.start(), *HEADER_BYTES_RANGE.end())
+    }
+
     /// An image `width` x `height` within `max_frame_side` and `max_pixels`; errors name
     /// `{field}.width` / `.height`, or `field` for the pixel count.
     pub fn check_image(&self, width: u32, height: u32, field: &str) -> Result<(), LimitExceeded> {

@@ -15,6 +15,9 @@ use super::gpu_worker::WorkerError;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Code {
+    /// The request is not valid HTTP/1.1: its request line, a header or its framing (e.g. a
+    /// negative `Content-Length`) cannot be parsed.
+    BadRequest,
     /// The body is not JSON, or has an unknown or missing field or a value of the wrong type.
     InvalidJson,
     /// A value is out of range or inconsistent with another; `field` names it.
@@ -47,6 +50,7 @@ impl Code {
     /// The code as it appears in error bodies, e.g. `invalid_json`.
     pub fn as_str(self) -> &'static str {
         match self {
+            Code::BadRequest => "bad_request",
             Code::InvalidJson => "invalid_json",
             Code::InvalidField => "invalid_field",
             Code::InvalidScene => "invalid_scene",
@@ -219,22 +223,54 @@ impl std::fmt::Display for ApiError {
     }
 }
 
-impl IntoResponse for ApiError {
-    fn into_response(self) -> Response {
-        let body = ErrorBody {
+impl ApiError {
+    /// The JSON body.
+    fn body(&self) -> ErrorBody {
+        ErrorBody {
             error: ErrorDetail {
                 code: self.code,
-                message: self.message,
-                field: self.field,
+                message: self.message.clone(),
+                field: self.field.clone(),
                 limit: self.limit.map(str::to_owned),
             },
-        };
-        let mut response = (self.status, axum::Json(body)).into_response();
+        }
+    }
+
+    /// The headers that go with the body besides `Content-Type`.
+    fn extra_headers(&self) -> Vec<(header::HeaderName, HeaderValue)> {
+        let mut headers = Vec::new();
         if let Some(seconds) = self.retry_after {
-            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from(seconds));
+            headers.push((header::RETRY_AFTER, HeaderValue::from(seconds)));
         }
         if self.status == StatusCode::UNAUTHORIZED {
-            response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+            headers.push((header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer")));
+        }
+        headers
+    }
+
+    /// The whole answer as HTTP/1.1 bytes, ending with `Connection: close`: for the
+    /// connection loop, which answers some requests before (or instead of) hyper.
+    pub fn to_http1_bytes(&self) -> Vec<u8> {
+        let body = serde_json::to_vec(&self.body()).unwrap_or_default();
+        let mut head = format!(
+            "HTTP/1.1 {} {}\r\ncontent-type: application/json\r\ncontent-length: {}\r\n",
+            self.status.as_u16(),
+            self.status.canonical_reason().unwrap_or(""),
+            body.len()
+        );
+        for (name, value) in self.extra_headers() {
+            head.push_str(&format!("{name}: {}\r\n", value.to_str().unwrap_or("")));
+        }
+        head.push_str("connection: close\r\n\r\n");
+        [head.into_bytes(), body].concat()
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let mut response = (self.status, axum::Json(self.body())).into_response();
+        for (name, value) in self.extra_headers() {
+            response.headers_mut().insert(name, value);
         }
         response
     }

@@ -130,8 +130,34 @@ pub fn router(state: Arc<AppState>) -> Router {
         .method_not_allowed_fallback(|| async {
             ApiError::new(StatusCode::METHOD_NOT_ALLOWED, Code::MethodNotAllowed, "method not allowed on this route")
         })
+        .layer(middleware::from_fn_with_state(state.clone(), refuse_large_bodies))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .with_state(state)
+}
+
+/// Refuses at once, from its `Content-Length`, a request whose body is over `max_body_bytes`
+/// (413 `limit_exceeded`), on any route: nothing of the body is read, and a client that sent
+/// `Expect: 100-continue` is not told to go on. Bodies without a length are checked while
+/// they are read ([`read_body`]).
+async fn refuse_large_bodies(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
+    match too_large(&state, request.body()) {
+        Some(error) => error.into_response(),
+        None => next.run(request).await,
+    }
+}
+
+/// The 413 for a body whose announced length is over `max_body_bytes`.
+fn too_large(state: &AppState, body: &Body) -> Option<ApiError> {
+    use axum::body::HttpBody as _;
+    let max = state.config.limits.max_body_bytes;
+    let announced = body.size_hint().lower();
+    (announced > max as u64).then(|| {
+        ApiError::limit(
+            limit::MAX_BODY_BYTES,
+            None,
+            format!("the request body is {announced} bytes (Content-Length), over the limit of {max} bytes"),
+        )
+    })
 }
 
 /// Logs every request and records its latency by matched route.
@@ -202,11 +228,7 @@ fn authorize(state: &AppState, request: &Request, tickets: bool) -> Result<(), A
     let Some(token) = &state.config.token else {
         return Ok(());
     };
-    let given = request
-        .headers()
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
+    let given = request.headers().get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).and_then(bearer_token);
     if given.is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes())) {
         Ok(())
     } else if tickets {
@@ -219,6 +241,14 @@ fn authorize(state: &AppState, request: &Request, tickets: bool) -> Result<(), A
     }
 }
 
+/// The token of an `Authorization: Bearer <token>` value. The scheme is case-insensitive
+/// (RFC 7235, section 2.1: `bearer`, `BEARER`) and separated from the token by one or more
+/// spaces.
+fn bearer_token(value: &str) -> Option<&str> {
+    let (scheme, token) = value.split_once(' ')?;
+    scheme.eq_ignore_ascii_case("bearer").then(|| token.trim_start_matches(' '))
+}
+
 /// Equality whose time does not depend on where the inputs differ.
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
@@ -227,6 +257,9 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
 /// The body, refused with 413 past `max_body_bytes` (checked while reading, not trusted from
 /// `Content-Length`) and with 408 when it takes longer than `body_timeout_seconds`.
 async fn read_body(state: &AppState, body: Body) -> Result<bytes::Bytes, ApiError> {
+    if let Some(error) = too_large(state, &body) {
+        return Err(error);
+    }
     let max = state.config.limits.max_body_bytes;
     let too_large =
         || ApiError::limit(limit::MAX_BODY_BYTES, None, format!("the request body is over the limit of {max} bytes"));
@@ -577,6 +610,16 @@ impl Encoded {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_bearer_scheme_is_case_insensitive() {
+        for value in ["Bearer s3cret", "bearer s3cret", "BEARER s3cret", "bEaReR  s3cret"] {
+            assert_eq!(bearer_token(value), Some("s3cret"), "{value}");
+        }
+        for value in ["Basic s3cret", "Bearers3cret", "Bearer", "s3cret", "Token s3cret"] {
+            assert_ne!(bearer_token(value), Some("s3cret"), "{value}");
+        }
+    }
 
     #[test]
     fn tokens_compare_whole() {

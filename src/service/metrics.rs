@@ -53,6 +53,23 @@ struct Inner {
     dropped_frames: u64,
     stream_messages: BTreeMap<String, u64>,
     stream_errors: BTreeMap<String, u64>,
+    gpu_memory: Option<GpuMemory>,
+}
+
+/// What the GPU device holds, as wgpu counts it (its `counters` feature), read by the GPU
+/// thread after every job.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuMemory {
+    /// Live buffers.
+    pub buffers: u64,
+    /// Live textures.
+    pub textures: u64,
+    /// Memory allocated to buffers, bytes.
+    pub buffer_bytes: u64,
+    /// Memory allocated to textures, bytes.
+    pub texture_bytes: u64,
+    /// Device memory allocations (blocks that buffers and textures are placed in).
+    pub allocations: u64,
 }
 
 /// The service's metrics.
@@ -118,6 +135,15 @@ impl Metrics {
         *self.lock().stream_errors.entry(code.to_owned()).or_default() += 1;
     }
 
+    /// What the GPU device holds now (`None`: the backend does not count it).
+    pub fn set_gpu_memory(&self, memory: Option<GpuMemory>) {
+        self.lock().gpu_memory = memory;
+    }
+
+    pub fn gpu_memory(&self) -> Option<GpuMemory> {
+        self.lock().gpu_memory
+    }
+
     /// Mean wall time of the frames so far, seconds (None before the first).
     pub fn mean_frame_seconds(&self) -> Option<f64> {
         let inner = self.lock();
@@ -175,6 +201,18 @@ impl Metrics {
         for (code, count) in &inner.stream_errors {
             let _ = writeln!(out, "relume_stream_errors_total{{code=\"{}\"}} {count}", escape(code));
         }
+        if let Some(memory) = inner.gpu_memory {
+            for (name, help, value) in [
+                ("relume_gpu_buffers", "Live GPU buffers (wgpu's count).", memory.buffers),
+                ("relume_gpu_textures", "Live GPU textures (wgpu's count).", memory.textures),
+                ("relume_gpu_buffer_bytes", "GPU memory allocated to buffers, bytes.", memory.buffer_bytes),
+                ("relume_gpu_texture_bytes", "GPU memory allocated to textures, bytes.", memory.texture_bytes),
+                ("relume_gpu_memory_allocations", "GPU memory allocations.", memory.allocations),
+            ] {
+                header(&mut out, name, "gauge", help);
+                let _ = writeln!(out, "{name} {value}");
+            }
+        }
         out
     }
 }
@@ -192,6 +230,7 @@ impl Inner {
             dropped_frames: self.dropped_frames,
             stream_messages: self.stream_messages.clone(),
             stream_errors: self.stream_errors.clone(),
+            gpu_memory: self.gpu_memory,
         }
     }
 }
@@ -226,6 +265,11 @@ mod tests {
         assert!(text.contains("relume_frame_duration_seconds_bucket{le=\"0.25\"} 1"));
         assert!(text.contains("relume_gpu_seconds_total{stage=\"gather\"} 0.5"));
         assert!(text.contains("relume_render_queue_depth 2"));
+        assert!(!text.contains("relume_gpu_buffer_bytes"), "unknown until a backend counts it");
+        metrics.set_gpu_memory(Some(GpuMemory { buffers: 3, buffer_bytes: 4096, ..GpuMemory::default() }));
+        let text = metrics.render(&Gauges { queue_depth: 2, queue_capacity: 8, scenes: 1, streams: 0, connections: 1 });
+        assert!(text.contains("# TYPE relume_gpu_buffer_bytes gauge\nrelume_gpu_buffer_bytes 4096\n"), "{text}");
+        assert!(text.contains("relume_gpu_buffers 3\n"));
         assert!((metrics.mean_frame_seconds().expect("frames") - 0.2).abs() < 1e-12);
         // Every sample line belongs to a declared metric family.
         for line in text.lines().filter(|l| !l.starts_with('#')) {

@@ -10,6 +10,10 @@
 //! client, however many those send. Scene creation and deletion ("control" jobs) go ahead of
 //! renders; they are bounded by `max_scenes`, not here.
 //!
+//! A render whose requester has gone (the client disconnected, the stream closed) leaves the
+//! queue before every push, pop and count ([`FairQueue::dropping_abandoned`]): it holds no
+//! place of `max_client_queue` or `max_queue` and never reaches the GPU.
+//!
 //! `Retry-After` comes from the queue wait measured when the GPU thread took the client's
 //! recent renders (smoothed), or, for a client with none waiting, everyone's.
 
@@ -64,6 +68,8 @@ pub struct FairQueue<T> {
     ready: Condvar,
     max_total: usize,
     max_per_client: usize,
+    /// Whether a queued render's requester has gone.
+    abandoned: fn(&T) -> bool,
 }
 
 struct State<T> {
@@ -110,7 +116,20 @@ impl<T> FairQueue<T> {
             ready: Condvar::new(),
             max_total,
             max_per_client,
+            abandoned: |_| false,
         }
+    }
+
+    /// The same queue, where renders for which `abandoned` holds are dropped unrun.
+    pub fn dropping_abandoned(self, abandoned: fn(&T) -> bool) -> FairQueue<T> {
+        FairQueue { abandoned, ..self }
+    }
+
+    /// The state, locked, with the abandoned renders gone.
+    fn lock_pruned(&self) -> MutexGuard<'_, State<T>> {
+        let mut state = self.lock();
+        state.prune(self.abandoned);
+        state
     }
 
     fn lock(&self) -> MutexGuard<'_, State<T>> {
@@ -119,7 +138,7 @@ impl<T> FairQueue<T> {
 
     /// Queues a render of `client`, or refuses at once.
     pub fn push(&self, client: ClientId, job: T) -> Result<(), Refused> {
-        let mut state = self.lock();
+        let mut state = self.lock_pruned();
         if state.closed {
             return Err(Refused::Closed);
         }
@@ -165,6 +184,7 @@ impl<T> FairQueue<T> {
     pub fn pop(&self) -> Option<Taken<T>> {
         let mut state = self.lock();
         loop {
+            state.prune(self.abandoned);
             if let Some(job) = state.control.pop_front() {
                 return Some(Taken { job, waited: None });
             }
@@ -188,7 +208,7 @@ impl<T> FairQueue<T> {
 
     /// Renders waiting, all clients together.
     pub fn waiting(&self) -> usize {
-        self.lock().waiting
+        self.lock_pruned().waiting
     }
 
     pub fn capacity(&self) -> usize {
@@ -197,6 +217,19 @@ impl<T> FairQueue<T> {
 }
 
 impl<T> State<T> {
+    /// Drops the renders for which `abandoned` holds. A client left with none loses its entry
+    /// (and so its tag), as when its last render is taken.
+    fn prune(&mut self, abandoned: fn(&T) -> bool) {
+        let mut dropped = 0;
+        self.clients.retain(|_, queue| {
+            let before = queue.jobs.len();
+            queue.jobs.retain(|queued| !abandoned(&queued.job));
+            dropped += before - queue.jobs.len();
+            !queue.jobs.is_empty()
+        });
+        self.waiting -= dropped;
+    }
+
     /// The oldest render of `client` (which has one waiting).
     fn take_render(&mut self, client: ClientId) -> Taken<T> {
         let queue = self.clients.get_mut(&client).expect("a client with a render waiting");
@@ -287,6 +320,31 @@ mod tests {
         let full = FairQueue::new(1, 1);
         full.push(client(1), "a1").expect("room");
         assert!(matches!(full.push(client(2), "b1"), Err(Refused::Full { retry_after: None, .. })));
+    }
+
+    #[test]
+    fn abandoned_renders_leave_the_queue_and_free_their_places() {
+        let gone = |job: &&'static str| job.starts_with("gone");
+        let queue = FairQueue::new(3, 2).dropping_abandoned(gone);
+        queue.push(client(1), "gone1").expect("room");
+        queue.push(client(1), "gone2").expect("room");
+        queue.push(client(2), "gone3").expect("room");
+        // Neither this client's two places nor the total's three are held by the gone.
+        assert_eq!(queue.waiting(), 0);
+        queue.push(client(1), "a1").expect("room");
+        queue.push(client(1), "a2").expect("room");
+        queue.push(client(3), "c1").expect("room");
+        assert!(matches!(queue.push(client(1), "a3"), Err(Refused::ClientFull { waiting: 2, .. })));
+        assert_eq!(drain(&queue), ["a1", "c1", "a2"]);
+        // A render abandoned after it was queued is not handed out either.
+        static A1_GONE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+        let queue = FairQueue::new(4, 4)
+            .dropping_abandoned(|job: &&'static str| *job == "a1" && A1_GONE.load(std::sync::atomic::Ordering::SeqCst));
+        queue.push(client(1), "a1").expect("room");
+        queue.push(client(1), "a2").expect("room");
+        assert_eq!(queue.waiting(), 2);
+        A1_GONE.store(true, std::sync::atomic::Ordering::SeqCst);
+        assert_eq!(drain(&queue), ["a2"]);
     }
 
     #[test]

@@ -224,6 +224,15 @@ pub fn decode(bytes: &[u8], limits: &Limits) -> Result<ClientMessage, WireError>
     }
     let envelope = proto::Envelope::decode(bytes)
         .map_err(|e| WireError::new(ErrorCode::Malformed, None, format!("not a relume.v1.Envelope: {e}")))?;
+    // An empty message decodes as an envelope with neither version nor body: malformed, as
+    // the protocol says of an empty body, not a version this server does not speak.
+    if envelope.version == 0 && envelope.body.is_none() {
+        return Err(WireError::new(
+            ErrorCode::Malformed,
+            None,
+            "the message is empty (expected one relume.v1.Envelope with a version and a body)",
+        ));
+    }
     if envelope.version != PROTOCOL_VERSION {
         return Err(WireError::new(
             ErrorCode::UnsupportedVersion,
@@ -921,6 +930,10 @@ mod tests {
         let e = decode(&[0xff, 0xff, 0xff], &limits()).expect_err("garbage");
         assert_eq!(e.code, ErrorCode::Malformed);
         let e = decode(&[], &limits()).expect_err("empty");
+        assert_eq!((e.code, e.field.as_deref()), (ErrorCode::Malformed, None));
+        let e =
+            decode(&proto::Envelope { version: 0, body: Some(Body::RgbdFrame(frame())) }.encode_to_vec(), &limits())
+                .expect_err("version 0");
         assert_eq!((e.code, e.field.as_deref()), (ErrorCode::UnsupportedVersion, Some("version")));
         let e = decode(&proto::Envelope { version: 1, body: None }.encode_to_vec(), &limits()).expect_err("no body");
         assert_eq!((e.code, e.field.as_deref()), (ErrorCode::Malformed, Some("body")));

@@ -25,8 +25,8 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
 /// Distance (m) receivers and VALs are pushed along their normals before a shadow ray is cast
-/// between them (the GPU pass's `RAY_OFFSET`).
-pub use crate::gpu::shader::RAY_OFFSET;
+/// between them (the GPU passes' `RAY_OFFSET`, which the shader prelude takes from here).
+pub const RAY_OFFSET: f32 = 1e-3;
 
 /// The CPU reference's stage name in a frame's timings (BVH build and tracing).
 pub const STAGE: &str = "exact_cpu";

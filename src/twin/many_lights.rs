@@ -4,10 +4,9 @@
 //! shadow ray per receiver and light through the scene's BVH.
 
 use super::bvh::TraceBvh;
+use super::exact_cpu::RAY_OFFSET;
+use super::flat::{FlatScene, Hit};
 use super::rsm::direct_radiance;
-use crate::gpu::raster::Hit;
-use crate::gpu::scene::FlatScene;
-use crate::gpu::shader::RAY_OFFSET;
 use crate::gpu::visibility::clusters::twin::{Cluster, DepthTile, ShadowReceiver, cluster_visibility};
 use crate::image::LinearImage;
 use crate::scene::{Light, Material, SoftShadows, SpotLight};

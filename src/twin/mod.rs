@@ -14,9 +14,11 @@ pub mod adaptive;
 pub mod bounce;
 pub mod bvh;
 pub mod exact_cpu;
+pub mod flat;
 pub mod light_rsms;
 pub mod many_lights;
 pub mod near_field;
+pub mod raw;
 pub mod rgbd;
 pub mod rsm;
 
@@ -51,10 +53,9 @@ pub fn near_field_weight(d: f32, radius: f32) -> f32 {
     1.0 - t * t * (3.0 - 2.0 * t)
 }
 
-/// Luminance of a linear RGB triple (Rec. 709 weights).
-pub fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
-}
+/// Luminance of a linear RGB triple (Rec. 709 weights); defined beside the images it is
+/// measured on.
+pub use crate::image::luminance;
 
 /// Mirror `w` about `n`: `2 dot(n, w) n - w` (both unit; docs/design.md's `reflect`, which is the
 /// negation of WGSL's built-in `reflect`).
@@ -127,17 +128,8 @@ pub fn val_irradiance(x: Vec3, n_x: Vec3, val: &Val) -> Vec3 {
     val.flux * (g.weight * g.cos_receiver)
 }
 
-/// One virtual area light: a Lambertian disc.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Val {
-    pub position: Vec3,
-    /// Unit normal; the disc emits into the half-space it faces.
-    pub normal: Vec3,
-    /// Disc area (m²).
-    pub area: f32,
-    /// Emitted flux (W, RGB).
-    pub flux: Vec3,
-}
+/// One virtual area light, a plain data type every layer exchanges (defined in [`crate::val`]).
+pub use crate::val::Val;
 
 /// The twins take a receiver's material as [`crate::scene::Material`] with its diffuse texture
 /// already sampled into `diffuse` (`diffuse_texture` is not read), as WGSL's `Material.material`.

@@ -159,6 +159,18 @@ fn compare_reports_the_cpu_reference_and_its_noise() {
     let ism = &v["brute_force_ism_vs_exact"];
     assert_eq!(ism["mode"].as_str(), Some("brute_force_ism"));
     assert!(ism["rel_rmse"].as_f64().unwrap().is_finite() && ism["visibility_ms"].as_f64().unwrap() > 0.0);
+    assert!(v["brute_force_ism_skipped"].is_null(), "a small image's table fits");
+    // The scene's own configuration against exact, with the frame's estimate of that error.
+    let default = &v["default_vs_exact"];
+    let measured = default["rel_rmse_corrected"].as_f64().unwrap();
+    let estimate = &default["error_estimate"];
+    let (estimated, spread) = (estimate["rel_rmse"].as_f64().unwrap(), estimate["spread"].as_f64().unwrap());
+    assert!(measured.is_finite() && estimated.is_finite() && spread >= 0.0, "{default}");
+    assert!(estimate["pixels"].as_u64().unwrap() >= 4 && estimate["samples"].as_u64() == Some(128), "{estimate}");
+    let ratio = default["estimate_ratio"].as_f64().unwrap();
+    assert!((ratio - estimated / measured).abs() < 1e-9, "{ratio}");
+    let without_worst = default["rel_rmse_without_worst_1pct"].as_f64().unwrap();
+    assert!(without_worst <= default["rel_rmse"].as_f64().unwrap(), "{default}");
     assert_eq!((v["bounces"].as_u64(), v["second_bounce_ms"].as_f64()), (Some(1), Some(0.0)));
 }
 

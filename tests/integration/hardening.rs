@@ -25,7 +25,7 @@ use super::fake_backend::FakeBackend;
 use super::service::{Reply, TestServer, inline_scene};
 
 /// A server on the fake backend, renders taking `render_ms`.
-async fn fake_server(render_ms: u64, edit: impl FnOnce(&mut Config)) -> TestServer {
+pub(super) async fn fake_server(render_ms: u64, edit: impl FnOnce(&mut Config)) -> TestServer {
     TestServer::start_with(edit, move |config| {
         Box::pin(async move {
             let limits = config.limits;

@@ -143,8 +143,11 @@ fn slot_of(module: &naga::Module, global: &naga::GlobalVariable) -> relume::gpu:
         ) => Slot::TextureUint,
         (
             naga::AddressSpace::Handle,
-            naga::TypeInner::Image { class: naga::ImageClass::Depth { multi: false }, .. },
-        ) => Slot::Depth,
+            naga::TypeInner::Image {
+                class: naga::ImageClass::Sampled { kind: naga::ScalarKind::Float, multi: false },
+                ..
+            },
+        ) => Slot::DepthAsFloat,
         (space, ty) => panic!("{:?}: no slot for {space:?} {ty:?}", global.name),
     }
 }

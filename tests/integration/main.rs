@@ -2,10 +2,12 @@
 //! run on whatever adapter wgpu finds; in CI that is Mesa's lavapipe.
 
 mod accuracy;
+mod backends;
 mod bench;
 mod bounce;
 mod cli;
 mod clusters;
+mod docs;
 mod fake_backend;
 mod frame;
 mod fuzz;
@@ -13,6 +15,7 @@ mod gltf;
 mod hardening;
 mod hardening_origin;
 mod ism;
+mod layers;
 mod layout;
 mod light_rsms;
 mod many_lights;
@@ -20,6 +23,7 @@ mod mcap;
 mod mr_differential;
 mod recording;
 mod redwood;
+mod reliability;
 mod replay;
 mod rgbd;
 mod router;

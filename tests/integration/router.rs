@@ -149,6 +149,20 @@ async fn a_token_guards_the_v1_routes() {
     app.token = Some("s3cret".to_owned());
     let id = app.create(&inline_scene()).await;
     assert_eq!(app.get(&format!("/v1/scenes/{id}")).await.status, StatusCode::OK);
+    // The scheme is case-insensitive (RFC 7235, section 2.1); the token is not.
+    for (value, status) in [
+        ("bearer s3cret", StatusCode::OK),
+        ("BEARER s3cret", StatusCode::OK),
+        ("bearer  s3cret", StatusCode::OK),
+        ("bearer S3CRET", StatusCode::UNAUTHORIZED),
+        ("Basic s3cret", StatusCode::UNAUTHORIZED),
+    ] {
+        let request = hyper::Request::get(format!("/v1/scenes/{id}"))
+            .header("authorization", value)
+            .body(Body::empty())
+            .expect("request");
+        assert_eq!(app.send(request).await.status, status, "Authorization: {value}");
+    }
     // A WebSocket handshake without the token is refused before the upgrade.
     app.token = None;
     let handshake = hyper::Request::get(format!("/v1/scenes/{id}/stream"))

@@ -212,7 +212,7 @@ pub(super) fn inline_scene() -> Value {
 }
 
 /// A valid RGB-D frame envelope: `w` x `h`, raw RGB8, u16 depth (mm), identity pose.
-fn frame(frame_id: u64, w: u32, h: u32) -> proto::RgbdFrame {
+pub(super) fn frame(frame_id: u64, w: u32, h: u32) -> proto::RgbdFrame {
     let pixels = (w * h) as usize;
     proto::RgbdFrame {
         frame_id,

@@ -14,6 +14,7 @@ pub mod twin;
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::shader::{TILE_SIZE, WORKGROUP_SIZE};
 use crate::gpu::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
 use crate::twin::Val;
@@ -33,7 +34,7 @@ const _: () = assert!(DIFFERENTIAL_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 
 /// The pass's own WGSL: its constant, the BVH traversal, then `differential.wgsl`.
 pub fn body() -> String {
-    format!("const DIFFERENTIAL_LOOP_BUDGET: u32 = {DIFFERENTIAL_LOOP_BUDGET}u;\n{BVH}\n{WGSL}")
+    Wgsl::new().u32("DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET).include(BVH).include(WGSL).finish()
 }
 
 /// One invocation per receiver; `bvh_nodes` and `bvh_triangles` sit at bindings 4 and 5, where

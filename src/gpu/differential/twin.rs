@@ -2,8 +2,8 @@
 //! (`twin::bvh::Bvh::occluded`, the GPU traversal's twin, from `p + n RAY_OFFSET` to
 //! `l + n_l RAY_OFFSET`).
 
-use crate::gpu::shader::RAY_OFFSET;
 use crate::twin::bvh::Bvh;
+use crate::twin::exact_cpu::RAY_OFFSET;
 use crate::twin::{Val, val_geometry};
 use glam::Vec3;
 

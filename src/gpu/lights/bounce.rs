@@ -48,6 +48,7 @@ use crate::gpu::pass::{
 };
 use crate::gpu::raw::{RawGathered, RawVal};
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::shader::{TILE_SIZE, VAL_TILES, WORKGROUP_SIZE};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
@@ -110,7 +111,13 @@ pub fn points_body(groups: Option<u32>, moments: bool) -> String {
         true => MOMENTS_WGSL,
         false => "fn store_moments(index: u32, e: vec3<f32>, w: f32, l: vec3<f32>, l2: vec3<f32>) {}\n",
     };
-    format!("{VAL_TILES}\n{POINT_WGSL}\n{}\n{store}\n{POINTS_WGSL}", group_wgsl(groups, 4))
+    Wgsl::new()
+        .include(VAL_TILES)
+        .include(POINT_WGSL)
+        .include(&group_wgsl(groups, 4))
+        .include(store)
+        .include(POINTS_WGSL)
+        .finish()
 }
 
 /// The bindings of [`GROUPED_POINTS`]; [`POINTS`] has the first four (no group table).
@@ -168,7 +175,7 @@ pub const OCCLUSION: PassDesc = PassDesc {
 /// The occlusion pass's WGSL: the point, the discs' lookup with the combination rule
 /// (`product`, else `sum`), then `bounce_occlusion.wgsl`.
 fn occlusion_body(product: bool) -> String {
-    format!("{POINT_WGSL}\n{}\n{OCCLUSION_WGSL}", disks::lookup(product))
+    Wgsl::new().include(POINT_WGSL).include(&disks::lookup(product)).include(OCCLUSION_WGSL).finish()
 }
 
 /// The second bounce's disks: the points' moments and the occlusion pass.
@@ -215,7 +222,13 @@ pub const ISM_VISIBILITY: PassDesc = PassDesc {
 /// rasterised ones.
 fn visibility_body(head: &str, imperfect: bool) -> String {
     let maps = if imperfect { ism::LOOKUP_WGSL } else { clusters::RASTER_DEPTH_WGSL };
-    format!("{head}\n{POINT_WGSL}\n{maps}\n{}\n{VISIBILITY_WGSL}", clusters::VISIBILITY_LOOKUP_WGSL)
+    Wgsl::new()
+        .include(head)
+        .include(POINT_WGSL)
+        .include(maps)
+        .include(clusters::VISIBILITY_LOOKUP_WGSL)
+        .include(VISIBILITY_WGSL)
+        .finish()
 }
 
 /// The lookup pass at the bounce points and its WGSL after `head`, for `imperfect` maps or
@@ -247,11 +260,13 @@ pub const DRAW: PassDesc = PassDesc {
 
 /// The draw's WGSL: its constants, the shared flux draw, then `bounce_draw.wgsl`.
 fn draw_body(settings: &SecondBounceSettings, area: f32) -> String {
-    format!(
-        "const SAMPLE_BLOCK: u32 = {SAMPLE_BLOCK}u;\nconst SECOND_BOUNCE_VALS: u32 = {}u;\n\
-         const SECOND_BOUNCE_AREA: f32 = {area:e};\n{FLUX_DRAW_WGSL}\n{DRAW_WGSL}",
-        settings.vals
-    )
+    Wgsl::new()
+        .u32("SAMPLE_BLOCK", SAMPLE_BLOCK)
+        .u32("SECOND_BOUNCE_VALS", settings.vals)
+        .f32("SECOND_BOUNCE_AREA", area)
+        .include(FLUX_DRAW_WGSL)
+        .include(DRAW_WGSL)
+        .finish()
 }
 
 /// The second bounce's passes, its points and the candidates between them.

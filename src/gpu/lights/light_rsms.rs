@@ -18,6 +18,7 @@ use crate::gpu::raster::cull::TriangleChunks;
 use crate::gpu::raster::{self, Hit, begin_visibility_pass};
 use crate::gpu::scene::{GpuScene, depth_range_around};
 use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::{Gpu, GpuError};
@@ -46,13 +47,13 @@ pub const PASS: PassDesc = PassDesc {
 
 /// The VAL pass's WGSL after the shader prelude.
 fn body() -> String {
-    format!("{VIEW_WGSL}\n{WGSL}")
+    Wgsl::new().include(VIEW_WGSL).include(WGSL).finish()
 }
 
 /// The raster's complete WGSL (a render pipeline: vertex and fragment stages).
 pub fn raster_source(textured: bool) -> String {
     let stages = crate::gpu::raster::STAGES_WGSL;
-    crate::gpu::shader::source(&format!("{VIEW_WGSL}\n{stages}\n{RASTER_WGSL}"), textured)
+    crate::gpu::shader::source(&Wgsl::new().include(VIEW_WGSL).include(stages).include(RASTER_WGSL).finish(), textured)
 }
 
 /// WGSL `RsmView`.

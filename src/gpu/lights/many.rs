@@ -16,6 +16,7 @@ use crate::gpu::pass::{
 use crate::gpu::raster::cull::{TriangleChunks, box_outside_plane, box_reaches_front, clip_planes};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::IMAGE_TILE;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::clusters::{self, RawCluster, SceneScale, ShadowMaps};
@@ -89,11 +90,13 @@ fn maps_settings(groups: u32, resolution: u32, soft: SoftShadows) -> ClusterSett
 /// The pass's WGSL after the shader prelude.
 fn body(maps: &ClusterSettings, scale: SceneScale, groups: u32, add: bool) -> String {
     let head = clusters::header(maps, scale);
-    let [x, y, z] = AXIS.to_array();
-    format!(
-        "{}\nconst GROUP_COUNT: u32 = {groups}u;\nconst AXIS: vec3<f32> = vec3<f32>({x:?}, {y:?}, {z:?});\nconst ADD_TO_DIRECT: bool = {add};\n{WGSL}",
-        clusters::lookup_body(&head)
-    )
+    Wgsl::new()
+        .include(&clusters::lookup_body(&head))
+        .u32("GROUP_COUNT", groups)
+        .vec3_f32("AXIS", AXIS.to_array())
+        .bool("ADD_TO_DIRECT", add)
+        .include(WGSL)
+        .finish()
 }
 
 /// The groups `settings` asks for: every light alone, or LightCluster's (with the view

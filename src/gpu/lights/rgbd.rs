@@ -10,6 +10,7 @@
 use crate::gpu::pass::{Entry, Kernel, PassDesc, Res, buffer, module_from_source, read, read_write};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::{Frame, Technique, Vals};
 use crate::gpu::timing::{Recorder, Span};
 use crate::gpu::{Gpu, GpuError};
@@ -22,7 +23,7 @@ pub const WGSL: &str = include_str!("rgbd.wgsl");
 
 /// The pass's own WGSL: its constants from Rust, then `rgbd.wgsl`.
 pub fn body() -> String {
-    format!("const MIN_FOOTPRINT_COSINE: f32 = {MIN_FOOTPRINT_COSINE:e};\n{WGSL}")
+    Wgsl::new().f32("MIN_FOOTPRINT_COSINE", MIN_FOOTPRINT_COSINE).include(WGSL).finish()
 }
 
 /// One invocation per grid cell: `filter_grid` takes the first three bindings, `main` all but

@@ -5,6 +5,7 @@
 pub mod cull;
 
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::{Recorder, Span};
 use crate::gpu::{Gpu, GpuError};
@@ -19,7 +20,7 @@ pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth3
 
 /// The pass's complete WGSL (a render pipeline: vertex and fragment stages).
 pub fn source(textured: bool) -> String {
-    crate::gpu::shader::source(&format!("{STAGES_WGSL}\n{WGSL}"), textured)
+    crate::gpu::shader::source(&Wgsl::new().include(STAGES_WGSL).include(WGSL).finish(), textured)
 }
 
 #[derive(Clone)]
@@ -191,12 +192,8 @@ impl Technique for CameraView {
     }
 }
 
-/// A decoded visibility texel: the triangle hit and its barycentrics, if any.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Hit {
-    pub triangle: u32,
-    pub barycentrics: glam::Vec2,
-}
+/// A decoded visibility texel (defined with the twins that resolve it, `twin::flat`).
+pub use crate::twin::flat::Hit;
 
 impl VisibilityTarget {
     /// Read the visibility buffer back, row-major from the top (for the CPU twins and tests).

@@ -2,7 +2,7 @@
 //! `twin::shade_brute_force`. On CPU adapters the VALs go in ranges, one dispatch each,
 //! each adding to the radiance of the ones before ([`Kernels::val_ranges`]).
 //!
-//! **`brute_force_ism`** ([`crate::renderer::Method::BruteForceIsm`]): the same pass with every
+//! **`brute_force_ism`** (the renderer's `Method::BruteForceIsm`): the same pass with every
 //! VAL weighted by its group's imperfect-shadow-map lookup at the pixel, so that the ISMs' own
 //! error against exact visibility can be told from the sparse interpolation's. The `ism`
 //! mode's machinery as the sparse method runs it (`settings.ism`: VALs drawn by flux, groups,
@@ -15,7 +15,7 @@
 
 use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
 use crate::gpu::scene::GpuScene;
-use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE, VAL_TILES, WORKGROUP_SIZE};
+use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE, VAL_TILES, WORKGROUP_SIZE, Wgsl};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::clusters::{Clusters, Receivers, SceneScale, StageNames};
@@ -48,11 +48,18 @@ pub fn body(groups: Option<u32>, pixels: u32) -> String {
     let adds: String = (0..pixels)
         .map(|r| format!("    (*ls)[{r}] = add_val((*ls)[{r}], (*receivers)[{r}], val, val_index, glossy);\n"))
         .collect();
-    format!(
-        "{VAL_TILES}\n{visibility}\nconst PIXELS: u32 = {pixels}u;\n\
-         fn add_to_pixels(ls: ptr<function, array<vec3<f32>, PIXELS>>, receivers: ptr<function, array<Receiver, PIXELS>>, \
-         val: Val, val_index: u32, glossy: bool) {{\n{adds}}}\n{WGSL}"
-    )
+    // `add_to_pixels`, unrolled: one statement per pixel.
+    let add_to_pixels = format!(
+        "fn add_to_pixels(ls: ptr<function, array<vec3<f32>, PIXELS>>, receivers: ptr<function, array<Receiver, PIXELS>>, \
+         val: Val, val_index: u32, glossy: bool) {{\n{adds}}}\n"
+    );
+    Wgsl::new()
+        .include(VAL_TILES)
+        .include(&visibility)
+        .u32("PIXELS", pixels)
+        .include(&add_to_pixels)
+        .include(WGSL)
+        .finish()
 }
 
 /// Pixels per invocation on CPU adapters (a row's consecutive pixels share each VAL read from
@@ -106,7 +113,12 @@ pub const ISM_VISIBILITY: PassDesc = PassDesc {
 
 fn visibility_body(head: &str) -> String {
     use crate::gpu::visibility::clusters::VISIBILITY_LOOKUP_WGSL;
-    format!("{head}\n{}\n{VISIBILITY_LOOKUP_WGSL}\n{VISIBILITY_WGSL}", ism::LOOKUP_WGSL)
+    Wgsl::new()
+        .include(head)
+        .include(ism::LOOKUP_WGSL)
+        .include(VISIBILITY_LOOKUP_WGSL)
+        .include(VISIBILITY_WGSL)
+        .finish()
 }
 
 /// The lookup pass at the pixels and its WGSL after `head` ([`Clusters`] with

@@ -4,6 +4,7 @@
 
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write, texture, view};
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::{Recorder, Span, StageTimings};
@@ -23,9 +24,12 @@ const _: () = assert!(EXACT_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 
 /// The pass's own WGSL using every `val_stride`-th VAL.
 pub fn body(val_stride: u32) -> String {
-    format!(
-        "const VAL_STRIDE: u32 = {val_stride}u;\nconst EXACT_LOOP_BUDGET: u32 = {EXACT_LOOP_BUDGET}u;\n{BVH}\n{WGSL}"
-    )
+    Wgsl::new()
+        .u32("VAL_STRIDE", val_stride)
+        .u32("EXACT_LOOP_BUDGET", EXACT_LOOP_BUDGET)
+        .include(BVH)
+        .include(WGSL)
+        .finish()
 }
 
 /// One invocation per pixel, in rounds (see [`Exact::finish`]).

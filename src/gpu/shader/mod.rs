@@ -1,5 +1,10 @@
 //! WGSL assembly: the constants the shaders share with Rust are generated from the Rust
-//! definitions and prepended, followed by `common.wgsl`, `scene.wgsl` and the pass's own file.
+//! definitions and prepended, followed by `common.wgsl`, `scene.wgsl` and the pass's own file,
+//! all through [`Wgsl`] (`compose.rs`), the one way sources are put together.
+
+mod compose;
+
+pub use compose::Wgsl;
 
 use crate::twin;
 
@@ -15,8 +20,9 @@ pub const NO_NEIGHBOUR: u32 = u32::MAX;
 pub const NO_SURFACE_DISTANCE: f32 = 3.0e38;
 /// Shadow-map depth bias in RSM texel footprints.
 pub const SHADOW_BIAS_TEXELS: f32 = 1.5;
-/// Exact visibility: shadow rays start and end this far off the surfaces along their normals (m).
-pub const RAY_OFFSET: f32 = 1e-3;
+/// Exact visibility: shadow rays start and end this far off the surfaces along their normals
+/// (m); defined beside its CPU twin, `twin::exact_cpu`.
+pub use crate::twin::exact_cpu::RAY_OFFSET;
 
 const COMMON: &str = include_str!("common.wgsl");
 /// VAL tiles in workgroup memory and per-dispatch VAL ranges, for the passes that loop over
@@ -26,29 +32,22 @@ const SCENE: &str = include_str!("scene.wgsl");
 const SCENE_TEXTURES: &str = include_str!("scene_textures.wgsl");
 const SCENE_UNTEXTURED: &str = include_str!("scene_untextured.wgsl");
 
-fn header(tile_size: u32) -> String {
-    format!(
-        "const WORKGROUP_SIZE: u32 = {WORKGROUP_SIZE}u;\n\
-         const TILE_SIZE: u32 = {tile_size}u;\n\
-         const NO_NEIGHBOUR: u32 = {NO_NEIGHBOUR}u;\n\
-         const NO_SURFACE_DISTANCE: f32 = {NO_SURFACE_DISTANCE:e};\n\
-         const SHADOW_BIAS_TEXELS: f32 = {SHADOW_BIAS_TEXELS:e};\n\
-         const RAY_OFFSET: f32 = {RAY_OFFSET:e};\n\
-         const RAY_PARALLEL_EPSILON: f32 = {:e};\n\
-         const COINCIDENT_DISTANCE_SQ: f32 = {:e};\n\
-         const GATHER_EPSILON: f32 = {:e};\n\
-         const MIN_LIGHT_DISTANCE: f32 = {:e};\n\
-         const MIN_RENORMALISE_COSINE: f32 = {:e};\n\
-         const MIN_GLOSSY_RESPONSE: f32 = {:e};\n\
-         const NEAR_FIELD_INNER: f32 = {:e};\n",
-        twin::bvh::RAY_PARALLEL_EPSILON,
-        twin::COINCIDENT_DISTANCE_SQ,
-        twin::GATHER_EPSILON,
-        twin::MIN_LIGHT_DISTANCE,
-        twin::MIN_RENORMALISE_COSINE,
-        twin::MIN_GLOSSY_RESPONSE,
-        twin::NEAR_FIELD_INNER,
-    )
+/// The constants every shader shares with Rust, `TILE_SIZE` as given.
+fn header(tile_size: u32) -> Wgsl {
+    Wgsl::new()
+        .u32("WORKGROUP_SIZE", WORKGROUP_SIZE)
+        .u32("TILE_SIZE", tile_size)
+        .u32("NO_NEIGHBOUR", NO_NEIGHBOUR)
+        .f32("NO_SURFACE_DISTANCE", NO_SURFACE_DISTANCE)
+        .f32("SHADOW_BIAS_TEXELS", SHADOW_BIAS_TEXELS)
+        .f32("RAY_OFFSET", RAY_OFFSET)
+        .f32("RAY_PARALLEL_EPSILON", twin::bvh::RAY_PARALLEL_EPSILON)
+        .f32("COINCIDENT_DISTANCE_SQ", twin::COINCIDENT_DISTANCE_SQ)
+        .f32("GATHER_EPSILON", twin::GATHER_EPSILON)
+        .f32("MIN_LIGHT_DISTANCE", twin::MIN_LIGHT_DISTANCE)
+        .f32("MIN_RENORMALISE_COSINE", twin::MIN_RENORMALISE_COSINE)
+        .f32("MIN_GLOSSY_RESPONSE", twin::MIN_GLOSSY_RESPONSE)
+        .f32("NEAR_FIELD_INNER", twin::NEAR_FIELD_INNER)
 }
 
 /// The full WGSL source of a pass whose own file is `pass`; `textured` scenes bind the texture
@@ -59,8 +58,14 @@ pub fn source(pass: &str, textured: bool) -> String {
 
 /// [`source`] with another `TILE_SIZE` (the bench's gather variants).
 pub fn source_with_tile_size(pass: &str, textured: bool, tile_size: u32) -> String {
+    prelude(Wgsl::new(), textured, tile_size).include(pass).finish()
+}
+
+/// `first` (e.g. a pass's workgroup sizes), then the shared constants, `common.wgsl` and the
+/// scene's bindings (`textured` or not): what every pass's own WGSL follows.
+pub fn prelude(first: Wgsl, textured: bool, tile_size: u32) -> Wgsl {
     let textures = if textured { SCENE_TEXTURES } else { SCENE_UNTEXTURED };
-    format!("{}\n{COMMON}\n{textures}\n{SCENE}\n{pass}", header(tile_size))
+    first.include(&header(tile_size).finish()).include(COMMON).include(textures).include(SCENE)
 }
 
 /// Every shader's complete source, by pass label: the compute passes of

@@ -12,6 +12,7 @@
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write, with_lobes};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::timing::Recorder;
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::scene::InterpolationKernel;
@@ -31,12 +32,17 @@ pub const GATHER_STAGE: &str = "adaptive_gather";
 /// `neighbours` and `kernel`.
 pub fn body(base: u32, candidates: u32, budget: u32, neighbours: u32, kernel: InterpolationKernel) -> String {
     use twin::adaptive::{BINS_PER_OCTAVE, HYSTERESIS, SCORE_BINS, SCORE_LOG2_MIN};
-    format!(
-        "{}\nconst BASE_POINTS: u32 = {base}u;\nconst CANDIDATES: u32 = {candidates}u;\nconst BUDGET: u32 = {budget}u;\n\
-         const SCORE_BINS: u32 = {SCORE_BINS}u;\nconst BINS_PER_OCTAVE: f32 = {BINS_PER_OCTAVE:?};\n\
-         const SCORE_LOG2_MIN: f32 = {SCORE_LOG2_MIN:?};\nconst HYSTERESIS: f32 = {HYSTERESIS:?};\n{WGSL}",
-        interpolate::weights_head(neighbours, kernel)
-    )
+    Wgsl::new()
+        .include(&interpolate::weights_head(neighbours, kernel))
+        .u32("BASE_POINTS", base)
+        .u32("CANDIDATES", candidates)
+        .u32("BUDGET", budget)
+        .u32("SCORE_BINS", SCORE_BINS)
+        .f32("BINS_PER_OCTAVE", BINS_PER_OCTAVE)
+        .f32("SCORE_LOG2_MIN", SCORE_LOG2_MIN)
+        .f32("HYSTERESIS", HYSTERESIS)
+        .include(WGSL)
+        .finish()
 }
 
 const NOT_SELECTING: &[&str] = &["threshold", "receiver_list", "receiver_count"];

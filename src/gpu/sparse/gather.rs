@@ -11,6 +11,7 @@
 
 use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, read, read_write, with_lobes};
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::shader::{TILE_SIZE, VAL_TILES};
 use crate::gpu::technique::Vals;
 use crate::gpu::timing::Span;
@@ -69,7 +70,6 @@ pub fn list_body(
     slots: Receivers,
 ) -> String {
     let visibility = group_wgsl(groups, 5);
-    let receivers = receivers_wgsl(receivers);
     let glossy_mean = lobes == GatherLobes::GlossyLights;
     let points = match slots {
         Receivers::Span { first, end } => format!(
@@ -84,21 +84,26 @@ pub fn list_body(
             LIST_BINDING + 1
         ),
     };
-    format!(
-        "{VAL_TILES}\n{visibility}\n{receivers}\n{points}\nconst NEAR_FIELD_RADIUS: f32 = {near_radius:e};\n\
-         const GLOSSY_MEAN: bool = {glossy_mean};\n{WGSL}"
-    )
+    Wgsl::new()
+        .include(VAL_TILES)
+        .include(&visibility)
+        .u32("RECEIVERS", receivers)
+        .include(&add_to_receivers(receivers))
+        .include(&points)
+        .f32("NEAR_FIELD_RADIUS", near_radius)
+        .bool("GLOSSY_MEAN", glossy_mean)
+        .include(WGSL)
+        .finish()
 }
 
-/// `RECEIVERS` and `add_to_receivers` (`gather.wgsl`): one VAL added to each of `receivers`
-/// sums, one statement per receiver.
-fn receivers_wgsl(receivers: u32) -> String {
+/// `add_to_receivers` (`gather.wgsl`) for `RECEIVERS` = `receivers`: one VAL added to each of
+/// the sums, one statement per receiver.
+fn add_to_receivers(receivers: u32) -> String {
     let adds: String = (0..receivers)
         .map(|r| format!("    (*sums)[{r}] = add_val((*sums)[{r}], (*receivers)[{r}], val, val_index, glossy);\n"))
         .collect();
     format!(
-        "const RECEIVERS: u32 = {receivers}u;\n\
-         fn add_to_receivers(sums: ptr<function, array<Sums, RECEIVERS>>, receivers: ptr<function, array<Receiver, RECEIVERS>>, \
+        "fn add_to_receivers(sums: ptr<function, array<Sums, RECEIVERS>>, receivers: ptr<function, array<Receiver, RECEIVERS>>, \
          val: Val, val_index: u32, glossy: bool) {{\n{adds}}}\n"
     )
 }

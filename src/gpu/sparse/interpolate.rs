@@ -5,6 +5,7 @@
 
 use crate::gpu::pass::{Binding, Entry, PassDesc, Res, buffer, read, read_write};
 use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::gpu::shader::Wgsl;
 use crate::scene::{InterpolationKernel, LightBound};
 
 pub const WGSL: &str = include_str!("interpolate.wgsl");
@@ -17,12 +18,13 @@ pub const WEIGHTS_WGSL: &str = include_str!("interpolation_weights.wgsl");
 /// [`WEIGHTS_WGSL`]: what a pass using `neighbourhood_at` prepends.
 pub fn weights_head(neighbours: u32, kernel: InterpolationKernel) -> String {
     let smooth = kernel == InterpolationKernel::Smooth;
-    format!(
-        "const NEIGHBOURS: u32 = {neighbours}u;\nconst SMOOTH_KERNEL: bool = {smooth};\n\
-         const PLANE_FALLOFF: f32 = {:?};\nconst FACING_EPSILON: f32 = {:?};\n{WEIGHTS_WGSL}",
-        crate::twin::PLANE_FALLOFF,
-        crate::twin::FACING_EPSILON,
-    )
+    Wgsl::new()
+        .u32("NEIGHBOURS", neighbours)
+        .bool("SMOOTH_KERNEL", smooth)
+        .f32("PLANE_FALLOFF", crate::twin::PLANE_FALLOFF)
+        .f32("FACING_EPSILON", crate::twin::FACING_EPSILON)
+        .include(WEIGHTS_WGSL)
+        .finish()
 }
 
 /// The adaptive candidates' part of a vertex's neighbourhood (`adaptive_candidates.wgsl`).
@@ -33,20 +35,20 @@ pub const CANDIDATES_WGSL: &str = include_str!("adaptive_candidates.wgsl");
 /// ([`ADAPTIVE_PASS`]).
 pub fn body(neighbours: u32, kernel: InterpolationKernel, bound: LightBound, base_points: Option<u32>) -> String {
     let bounded = bound == LightBound::Gathered;
-    let candidates = match base_points {
-        None => "const ROW: u32 = NEIGHBOURS;\n\
-                 fn adaptive_candidates(v: u32, nb: VertexNeighbourhood, d_max: f32) -> VertexNeighbourhood {\n    \
-                 return nb;\n}\n"
-            .to_owned(),
+    let head = Wgsl::new()
+        .include(&weights_head(neighbours, kernel))
+        .bool("BOUNDED", bounded)
+        .f32("BOUND_WEIGHT_FLOOR", crate::twin::BOUND_WEIGHT_FLOOR);
+    let head = match base_points {
+        None => head.expression("ROW", "u32", "NEIGHBOURS").include(
+            "fn adaptive_candidates(v: u32, nb: VertexNeighbourhood, d_max: f32) -> VertexNeighbourhood {\n    \
+             return nb;\n}\n",
+        ),
         Some(base) => {
-            format!("const ROW: u32 = 2u * NEIGHBOURS;\nconst BASE_POINTS: u32 = {base}u;\n{CANDIDATES_WGSL}")
+            head.expression("ROW", "u32", "2u * NEIGHBOURS").u32("BASE_POINTS", base).include(CANDIDATES_WGSL)
         }
     };
-    format!(
-        "{}\nconst BOUNDED: bool = {bounded};\nconst BOUND_WEIGHT_FLOOR: f32 = {:?};\n{candidates}\n{WGSL}",
-        weights_head(neighbours, kernel),
-        crate::twin::BOUND_WEIGHT_FLOOR
-    )
+    head.include(WGSL).finish()
 }
 
 /// The bindings of [`ADAPTIVE_PASS`]; [`PASS`] has the first nine (no candidates).

@@ -20,6 +20,7 @@ use super::interpolate;
 use crate::gpu::pass::{Entry, Kernel, Kernels, PassDesc, buffer, module_from_source, read, read_write, texture, view};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::shader::{IMAGE_TILE, WORKGROUP_SIZE};
 use crate::gpu::technique::Frame;
 use crate::gpu::timing::Recorder;
@@ -39,7 +40,7 @@ pub const SHADE_STAGE: &str = "near_field";
 /// twice the radius.
 pub fn head(radius: f32) -> String {
     let cell = crate::twin::near_field::cell_size(radius);
-    format!("const NEAR_FIELD_RADIUS: f32 = {radius:e};\nconst NEAR_FIELD_CELL: f32 = {cell:e};\n{WGSL}")
+    Wgsl::new().f32("NEAR_FIELD_RADIUS", radius).f32("NEAR_FIELD_CELL", cell).include(WGSL).finish()
 }
 
 /// The grid: one invocation per VAL for the count and the scatter, one workgroup for the scan.
@@ -59,7 +60,7 @@ pub const GRID: PassDesc = PassDesc {
         Entry { name: "grid_scatter", bindings: 6, except: &["grid_counts"] },
     ],
     workgroup: [WORKGROUP_SIZE, 1, 1],
-    default_source: |textured| GRID.source(&format!("{}\n{GRID_WGSL}", head(0.25)), textured),
+    default_source: |textured| GRID.source(&Wgsl::new().include(&head(0.25)).include(GRID_WGSL).finish(), textured),
 };
 
 /// One invocation per pixel.
@@ -75,7 +76,7 @@ pub const SHADE: PassDesc = PassDesc {
     ],
     entries: &[Entry::first("main", 6), Entry::first("main_glossy", 6)],
     workgroup: IMAGE_TILE,
-    default_source: |textured| SHADE.source(&format!("{}\n{SHADE_WGSL}", head(0.25)), textured),
+    default_source: |textured| SHADE.source(&Wgsl::new().include(&head(0.25)).include(SHADE_WGSL).finish(), textured),
 };
 
 /// The grid's buffers, sized for a VAL capacity.
@@ -136,9 +137,13 @@ impl NearField {
         let centres = Kernel::build(gpu, scene, desc, &module, desc.entry("centres"), &[], desc.workgroup)?;
         let vertices = scene.flat.vertices.len().max(1);
         let head = head(radius);
-        let module = module_from_source(gpu, GRID.label, GRID.source(&format!("{head}\n{GRID_WGSL}"), textured))?;
+        let module = module_from_source(
+            gpu,
+            GRID.label,
+            GRID.source(&Wgsl::new().include(&head).include(GRID_WGSL).finish(), textured),
+        )?;
         let kernel = |name: &str| Kernel::build(gpu, scene, &GRID, &module, GRID.entry(name), &[], GRID.workgroup);
-        let source = SHADE.source(&format!("{head}\n{SHADE_WGSL}"), textured);
+        let source = SHADE.source(&Wgsl::new().include(&head).include(SHADE_WGSL).finish(), textured);
         // One loop iteration per near VAL (the weight and the bucket loops are a few more).
         let shade = Kernels::val_ranges(gpu, scene, &SHADE, source, SHADE.lobe_entry(glossy), SHADE.workgroup, 1)?;
         Ok(Self {

@@ -27,6 +27,7 @@ pub mod disks;
 pub mod ism;
 
 use crate::gpu::scene::GpuScene;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::Frame;
 use crate::gpu::timing::{Recorder, Span};
 use crate::gpu::{Gpu, GpuError, Lobes};
@@ -58,7 +59,7 @@ pub const GROUP_WGSL: &str = include_str!("group.wgsl");
 /// at the next): [`GROUP_WGSL`] for `groups` groups, or 1 for every VAL without a group mode.
 pub fn group_wgsl(groups: Option<u32>, binding: u32) -> String {
     match groups {
-        Some(g) => format!("const GROUP_COUNT: u32 = {g}u;\nconst GROUP_BINDING: u32 = {binding}u;\n{GROUP_WGSL}"),
+        Some(g) => Wgsl::new().u32("GROUP_COUNT", g).u32("GROUP_BINDING", binding).include(GROUP_WGSL).finish(),
         None => "fn val_visibility(receiver: u32, val: u32) -> f32 {\n    return 1.0;\n}\n".to_owned(),
     }
 }

@@ -19,6 +19,7 @@ use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, depth_texture, module_fr
 use crate::gpu::references::brute_force;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::Frame;
 use crate::gpu::timing::Recorder;
 use crate::gpu::{Gpu, GpuError};
@@ -112,40 +113,28 @@ pub fn header_with_slope_bias(settings: &ClusterSettings, scale: SceneScale, slo
         SoftShadows::Pcf => 1,
         SoftShadows::Hard => 2,
     };
-    format!(
-        "const CLUSTER_COUNT: u32 = {}u;\n\
-         const POSITION_SCALE: f32 = {:e};\n\
-         const NORMAL_WEIGHT: f32 = {:e};\n\
-         const PARTIAL_BLOCK: u32 = {PARTIAL_BLOCK}u;\n\
-         const MAP_RESOLUTION: u32 = {}u;\n\
-         const ATLAS_COLUMNS: u32 = {}u;\n\
-         const DEPTH_FAR: f32 = {:e};\n\
-         const SOFT_PCSS: u32 = 0u;\n\
-         const SOFT_PCF: u32 = 1u;\n\
-         const SOFT_HARD: u32 = 2u;\n\
-         const SOFT_SHADOWS: u32 = {soft}u;\n\
-         const SHADOW_TAPS: u32 = {}u;\n\
-         const PCF_RADIUS_TEXELS: f32 = {:e};\n\
-         const MAX_SHADOW_FILTER_ANGLE: f32 = {:e};\n\
-         const CLUSTER_NEAR_FRACTION: f32 = {:e};\n\
-         const SHADOW_RELATIVE_BIAS: f32 = {:e};\n\
-         const SLOPE_BIAS_TEXELS: f32 = {slope_bias_texels:e};\n\
-         const MAX_SLOPE: f32 = {:e};\n\
-         const SHADOW_RASTER_SLACK: f32 = {:e};\n{PARABOLOID}",
-        settings.count,
-        1.0 / scale.diagonal,
-        settings.normal_weight,
-        settings.shadow_map_resolution,
-        settings.atlas_columns(),
-        scale.depth_far(),
-        twin::SHADOW_TAPS,
-        twin::PCF_RADIUS_TEXELS,
-        twin::MAX_SHADOW_FILTER_ANGLE,
-        twin::CLUSTER_NEAR_FRACTION,
-        twin::SHADOW_RELATIVE_BIAS,
-        twin::MAX_SLOPE,
-        twin::SHADOW_RASTER_SLACK,
-    )
+    Wgsl::new()
+        .u32("CLUSTER_COUNT", settings.count)
+        .f32("POSITION_SCALE", 1.0 / scale.diagonal)
+        .f32("NORMAL_WEIGHT", settings.normal_weight)
+        .u32("PARTIAL_BLOCK", PARTIAL_BLOCK)
+        .u32("MAP_RESOLUTION", settings.shadow_map_resolution)
+        .u32("ATLAS_COLUMNS", settings.atlas_columns())
+        .f32("DEPTH_FAR", scale.depth_far())
+        .u32("SOFT_PCSS", 0)
+        .u32("SOFT_PCF", 1)
+        .u32("SOFT_HARD", 2)
+        .u32("SOFT_SHADOWS", soft)
+        .u32("SHADOW_TAPS", twin::SHADOW_TAPS)
+        .f32("PCF_RADIUS_TEXELS", twin::PCF_RADIUS_TEXELS)
+        .f32("MAX_SHADOW_FILTER_ANGLE", twin::MAX_SHADOW_FILTER_ANGLE)
+        .f32("CLUSTER_NEAR_FRACTION", twin::CLUSTER_NEAR_FRACTION)
+        .f32("SHADOW_RELATIVE_BIAS", twin::SHADOW_RELATIVE_BIAS)
+        .f32("SLOPE_BIAS_TEXELS", slope_bias_texels)
+        .f32("MAX_SLOPE", twin::MAX_SLOPE)
+        .f32("SHADOW_RASTER_SLACK", twin::SHADOW_RASTER_SLACK)
+        .include(PARABOLOID)
+        .finish()
 }
 
 fn default_header() -> String {
@@ -169,7 +158,9 @@ pub const CLUSTERING: PassDesc = PassDesc {
         Entry { name: "kmeans_reduce", bindings: 5, except: &["group_of_val"] },
     ],
     workgroup: [WORKGROUP_SIZE, 1, 1],
-    default_source: |textured| CLUSTERING.source(&format!("{}\n{CLUSTERING_WGSL}", default_header()), textured),
+    default_source: |textured| {
+        CLUSTERING.source(&Wgsl::new().include(&default_header()).include(CLUSTERING_WGSL).finish(), textured)
+    },
 };
 
 /// Per (sparse point, cluster) visibility.
@@ -183,17 +174,20 @@ pub const VISIBILITY: PassDesc = PassDesc {
 
 /// The visibility pass's WGSL after `head`, reading the rasterised atlas.
 pub fn visibility_body(head: &str) -> String {
-    format!("{head}\n{RASTER_DEPTH_WGSL}\n{VISIBILITY_WGSL}")
+    Wgsl::new().include(head).include(RASTER_DEPTH_WGSL).include(VISIBILITY_WGSL).finish()
 }
 
 /// The lookup's WGSL after `head`, reading the rasterised atlas, without the pass's entry point.
 pub fn lookup_body(head: &str) -> String {
-    format!("{head}\n{RASTER_DEPTH_WGSL}\n{VISIBILITY_LOOKUP_WGSL}")
+    Wgsl::new().include(head).include(RASTER_DEPTH_WGSL).include(VISIBILITY_LOOKUP_WGSL).finish()
 }
 
 /// The shadow-map raster's complete WGSL (vertex and fragment stages).
 pub fn shadow_maps_source(settings: &ClusterSettings, scale: SceneScale, textured: bool) -> String {
-    crate::gpu::shader::source(&format!("{}\n{SHADOW_MAPS_WGSL}", header(settings, scale)), textured)
+    crate::gpu::shader::source(
+        &Wgsl::new().include(&header(settings, scale)).include(SHADOW_MAPS_WGSL).finish(),
+        textured,
+    )
 }
 
 /// The shadow-map raster at the default settings (for the compilation test).
@@ -401,7 +395,7 @@ impl Clusters {
         let module = module_from_source(
             gpu,
             CLUSTERING.label,
-            CLUSTERING.source(&format!("{head}\n{CLUSTERING_WGSL}"), textured),
+            CLUSTERING.source(&Wgsl::new().include(&head).include(CLUSTERING_WGSL).finish(), textured),
         )?;
         let kernel = |name: &str| {
             Kernel::build(gpu, scene, &CLUSTERING, &module, CLUSTERING.entry(name), &[], CLUSTERING.workgroup)

@@ -1,7 +1,8 @@
 // The rasterised shadow maps as the visibility pass reads them: one depth atlas, distances
-// stored as a fraction of DEPTH_FAR (`shadow_maps.wgsl`).
+// stored as a fraction of DEPTH_FAR (`shadow_maps.wgsl`). Bound as an unfilterable float texture,
+// not `texture_depth_2d`, whose `textureLoad` does not translate to GLSL (the GL backend).
 
-@group(0) @binding(2) var shadow_atlas: texture_depth_2d;
+@group(0) @binding(2) var shadow_atlas: texture_2d<f32>;
 
 // Distance (m) in cluster k's map at `texel`; NOTHING outside the map or where nothing was drawn.
 fn map_depth(k: u32, texel: vec2<i32>) -> f32 {
@@ -9,7 +10,7 @@ fn map_depth(k: u32, texel: vec2<i32>) -> f32 {
     if texel.x < 0 || texel.y < 0 || texel.x >= r || texel.y >= r {
         return NOTHING;
     }
-    let d = textureLoad(shadow_atlas, vec2<i32>(atlas_origin(k)) + texel, 0);
+    let d = textureLoad(shadow_atlas, vec2<i32>(atlas_origin(k)) + texel, 0).x;
     if d >= 1.0 {
         return NOTHING;
     }

@@ -8,6 +8,7 @@ use super::SparseVisibility;
 use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, with_lobes};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::TILE_SIZE;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::timing::Span;
 use crate::gpu::{Gpu, GpuError, Lobes};
 
@@ -17,12 +18,12 @@ pub const LOOKUP_WGSL: &str = include_str!("disk_lookup.wgsl");
 
 /// The combination rule and the discs' lookup, for a pass that binds `sparse_points`.
 pub fn lookup(product: bool) -> String {
-    format!("const OCCLUSION_PRODUCT: bool = {product};\n{LOOKUP_WGSL}")
+    Wgsl::new().bool("OCCLUSION_PRODUCT", product).include(LOOKUP_WGSL).finish()
 }
 
 /// The pass's own WGSL with its combination rule.
 pub fn body(product: bool) -> String {
-    format!("{}\n{WGSL}", lookup(product))
+    Wgsl::new().include(&lookup(product)).include(WGSL).finish()
 }
 
 /// One invocation per sparse point; occluders stream through workgroup memory in tiles.

@@ -19,6 +19,7 @@ use super::clusters::{self, Clusters, SceneScale, StageNames};
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::WORKGROUP_SIZE;
+use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::Vals;
 use crate::gpu::timing::Recorder;
 use crate::gpu::{Gpu, GpuError};
@@ -33,10 +34,8 @@ pub const SPLAT_WGSL: &str = include_str!("splat.wgsl");
 pub const PULL_PUSH_WGSL: &str = include_str!("pull_push.wgsl");
 pub const LOOKUP_WGSL: &str = include_str!("ism_lookup.wgsl");
 
-/// VALs per block of the flux sums (one invocation sums a block, one scans the blocks).
-pub const SAMPLE_BLOCK: u32 = 256;
-/// Mixed into every point's hash: the points are the same in every frame and run.
-pub const POINT_SEED: u32 = 0x9e37_79b9;
+/// The constants and lengths the twin shares with the passes (defined in [`twin`]).
+pub use twin::{IsmParams, POINT_SEED, SAMPLE_BLOCK};
 
 /// Stage names in the frame's timings.
 pub const SAMPLING_STAGE: &str = "ism_sampling";
@@ -56,22 +55,8 @@ pub fn cluster_settings(ism: &IsmSettings) -> ClusterSettings {
     }
 }
 
-/// The lengths of the mode in metres.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct IsmParams {
-    pub resolution: u32,
-    pub points: u32,
-    pub levels: u32,
-    /// Pull and push thresholds at the finest level (m).
-    pub pull_threshold: f32,
-    pub push_threshold: f32,
-    pub depth_far: f32,
-    /// Slope-scaled bias of the lookup (texels; `clusters::twin::slope_bias`): a splatted
-    /// point lies anywhere in its texel, not on the texel's centre ray.
-    pub slope_bias_texels: f32,
-}
-
 impl IsmParams {
+    /// The lengths for `ism`'s settings in a scene of `scale`.
     pub fn of(ism: &IsmSettings, scale: SceneScale) -> Self {
         Self {
             resolution: ism.resolution,
@@ -100,17 +85,15 @@ pub fn for_clusters(clusters: &ClusterSettings, ism: &IsmSettings) -> IsmSetting
 /// [`header`] for the groups of `clusters`, with imperfect maps as `ism` says.
 pub fn header_with(clusters: &ClusterSettings, ism: &IsmSettings, scale: SceneScale) -> String {
     let p = IsmParams::of(ism, scale);
-    format!(
-        "{}\nconst ISM_POINTS: u32 = {}u;\n\
-         const PULL_THRESHOLD: f32 = {:e};\n\
-         const PUSH_THRESHOLD: f32 = {:e};\n\
-         const SAMPLE_BLOCK: u32 = {SAMPLE_BLOCK}u;\n\
-         const POINT_SEED: u32 = {POINT_SEED}u;\n{ISM_WGSL}",
-        clusters::header_with_slope_bias(clusters, scale, p.slope_bias_texels),
-        p.points,
-        p.pull_threshold,
-        p.push_threshold,
-    )
+    Wgsl::new()
+        .include(&clusters::header_with_slope_bias(clusters, scale, p.slope_bias_texels))
+        .u32("ISM_POINTS", p.points)
+        .f32("PULL_THRESHOLD", p.pull_threshold)
+        .f32("PUSH_THRESHOLD", p.push_threshold)
+        .u32("SAMPLE_BLOCK", SAMPLE_BLOCK)
+        .u32("POINT_SEED", POINT_SEED)
+        .include(ISM_WGSL)
+        .finish()
 }
 
 fn default_header() -> String {
@@ -124,7 +107,10 @@ pub const SAMPLING: PassDesc = PassDesc {
     entries: &[Entry::first("flux_blocks", 3), Entry::first("flux_scan", 3), Entry::first("flux_sample", 4)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
-        SAMPLING.source(&format!("{}\n{FLUX_DRAW_WGSL}\n{SAMPLING_WGSL}", default_header()), textured)
+        SAMPLING.source(
+            &Wgsl::new().include(&default_header()).include(FLUX_DRAW_WGSL).include(SAMPLING_WGSL).finish(),
+            textured,
+        )
     },
 };
 
@@ -134,7 +120,9 @@ pub const SPLAT: PassDesc = PassDesc {
     bindings: &[read("clusters"), read("triangle_cdf"), read_write("ism_atlas")],
     entries: &[Entry::first("splat", 3)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
-    default_source: |textured| SPLAT.source(&format!("{}\n{SPLAT_WGSL}", default_header()), textured),
+    default_source: |textured| {
+        SPLAT.source(&Wgsl::new().include(&default_header()).include(SPLAT_WGSL).finish(), textured)
+    },
 };
 
 /// One pull or push between two levels.
@@ -143,7 +131,9 @@ pub const PULL_PUSH: PassDesc = PassDesc {
     bindings: &[read_write("fine"), read_write("coarse")],
     entries: &[Entry::first("pull", 2), Entry::first("push", 2)],
     workgroup: [WORKGROUP_SIZE, 1, 1],
-    default_source: |textured| PULL_PUSH.source(&format!("{}\n{PULL_PUSH_WGSL}", default_header()), textured),
+    default_source: |textured| {
+        PULL_PUSH.source(&Wgsl::new().include(&default_header()).include(PULL_PUSH_WGSL).finish(), textured)
+    },
 };
 
 /// Per (sparse point, group) visibility through the maps: the clusters' lookup.
@@ -157,7 +147,7 @@ pub const VISIBILITY: PassDesc = PassDesc {
 
 /// The visibility pass's WGSL after `head`.
 pub fn visibility_body(head: &str) -> String {
-    format!("{head}\n{LOOKUP_WGSL}\n{}", clusters::VISIBILITY_WGSL)
+    Wgsl::new().include(head).include(LOOKUP_WGSL).include(clusters::VISIBILITY_WGSL).finish()
 }
 
 /// The `"ism"` visibility mode for a scene.
@@ -181,7 +171,10 @@ impl FluxSampling {
         let module = module_from_source(
             gpu,
             SAMPLING.label,
-            SAMPLING.source(&format!("{head}\n{FLUX_DRAW_WGSL}\n{SAMPLING_WGSL}"), scene.textured()),
+            SAMPLING.source(
+                &Wgsl::new().include(head).include(FLUX_DRAW_WGSL).include(SAMPLING_WGSL).finish(),
+                scene.textured(),
+            ),
         )?;
         let kernel =
             |name: &str| Kernel::build(gpu, scene, &SAMPLING, &module, SAMPLING.entry(name), &[], SAMPLING.workgroup);
@@ -244,11 +237,17 @@ pub struct Maps {
 impl Maps {
     pub fn new(gpu: &Gpu, scene: &GpuScene, head: &str, count: u32, params: IsmParams) -> Result<Self, GpuError> {
         let textured = scene.textured();
-        let splat_module =
-            module_from_source(gpu, SPLAT.label, SPLAT.source(&format!("{head}\n{SPLAT_WGSL}"), textured))?;
+        let splat_module = module_from_source(
+            gpu,
+            SPLAT.label,
+            SPLAT.source(&Wgsl::new().include(head).include(SPLAT_WGSL).finish(), textured),
+        )?;
         let splat = Kernel::build(gpu, scene, &SPLAT, &splat_module, SPLAT.entry("splat"), &[], SPLAT.workgroup)?;
-        let module =
-            module_from_source(gpu, PULL_PUSH.label, PULL_PUSH.source(&format!("{head}\n{PULL_PUSH_WGSL}"), textured))?;
+        let module = module_from_source(
+            gpu,
+            PULL_PUSH.label,
+            PULL_PUSH.source(&Wgsl::new().include(head).include(PULL_PUSH_WGSL).finish(), textured),
+        )?;
         let (mut pulls, mut pushes) = (Vec::new(), Vec::new());
         for level in 0..params.levels {
             let constants = [("LEVEL", f64::from(level))];

@@ -6,9 +6,28 @@
 use super::super::clusters::twin::{
     CLUSTER_NEAR_FRACTION, Cluster, KmeansParams, disc_texel, kmeans_step, paraboloid_project, val_is_lit,
 };
-use super::{IsmParams, POINT_SEED, SAMPLE_BLOCK};
 use crate::twin::{Val, luminance};
 use glam::Vec3;
+
+/// VALs per block of the flux sums (one invocation sums a block, one scans the blocks).
+pub const SAMPLE_BLOCK: u32 = 256;
+/// Mixed into every point's hash: the points are the same in every frame and run.
+pub const POINT_SEED: u32 = 0x9e37_79b9;
+
+/// The lengths of the mode in metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IsmParams {
+    pub resolution: u32,
+    pub points: u32,
+    pub levels: u32,
+    /// Pull and push thresholds at the finest level (m).
+    pub pull_threshold: f32,
+    pub push_threshold: f32,
+    pub depth_far: f32,
+    /// Slope-scaled bias of the lookup (texels; `clusters::twin::slope_bias`): a splatted
+    /// point lies anywhere in its texel, not on the texel's centre ray.
+    pub slope_bias_texels: f32,
+}
 
 /// `distance` with its lowest 3 bits set to `level` (WGSL `encode_depth_at`, decoded).
 pub fn at_level(distance: f32, level: u32) -> f32 {

@@ -26,200 +26,31 @@ use crate::gpu::lights::many::ManyLights;
 use crate::gpu::lights::rgbd::RgbdVals;
 use crate::gpu::lights::spot::{DirectLight, SpotVals};
 use crate::gpu::raster::{CameraView, Visibility, VisibilityTarget};
-use crate::gpu::raw::{RawFrame, RawGathered, RawPointLight, RawVal};
+use crate::gpu::raw::{RawFrame, RawVal};
 use crate::gpu::references::brute_force::BruteForce;
 use crate::gpu::references::exact::Exact;
 use crate::gpu::scene::{FlatScene, GpuScene};
 use crate::gpu::sparse::{SparseMethod, SparseSettings};
 use crate::gpu::technique::{CameraTarget, Frame, Technique, Vals};
-use crate::gpu::timing::{Recorder, StageTimings};
+use crate::gpu::timing::Recorder;
 use crate::gpu::visibility::VisibilitySettings;
-use crate::gpu::{Gpu, GpuError, Lobes};
+use crate::gpu::{Gpu, GpuError};
 use crate::image::LinearImage;
 use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
 use crate::scene::{self, Camera, Scene, SpotLight};
-use glam::{Affine3A, DAffine3, Mat4, Vec3, Vec4};
+use glam::{Affine3A, DAffine3, Mat4, Vec3};
 
-/// How the indirect light is computed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// The sparse model-space method (docs/design.md §4).
-    Sparse,
-    /// Every VAL at every visible pixel (docs/design.md §5).
-    BruteForce,
-    /// The brute force with each VAL weighted by its group's imperfect-shadow-map lookup at the
-    /// pixel (`settings.ism`): the ISMs' visibility without the sparse interpolation
-    /// (`gpu::references::brute_force`).
-    BruteForceIsm,
-    /// Brute force with a shadow ray per pixel and VAL through a BVH (docs/design.md §5); see
-    /// [`Renderer::set_exact_val_stride`].
-    Exact,
-}
+mod cache;
+pub mod estimate;
+mod method;
+mod readback;
+pub mod stage;
+mod view;
 
-/// Which light the image shows.
-#[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, utoipa::ToSchema, clap::ValueEnum,
-)]
-#[serde(rename_all = "snake_case")]
-pub enum Component {
-    /// Direct plus indirect.
-    #[default]
-    Full,
-    Direct,
-    Indirect,
-}
-
-impl Component {
-    /// This component of a frame.
-    pub fn of(self, frame: &Rendered) -> LinearImage {
-        match self {
-            Component::Full => frame.direct.add(&frame.indirect),
-            Component::Direct => frame.direct.clone(),
-            Component::Indirect => frame.indirect.clone(),
-        }
-    }
-
-    /// What a frame must compute to show it.
-    pub fn needs(self) -> Components {
-        match self {
-            Component::Full => Components::ALL,
-            Component::Direct => Components::DIRECT,
-            Component::Indirect => Components::INDIRECT,
-        }
-    }
-}
-
-/// Which components a frame computes. A component left out runs none of its techniques (a
-/// direct-only frame has no gather); its image comes back black with the coverage in alpha.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Components {
-    pub direct: bool,
-    pub indirect: bool,
-}
-
-impl Components {
-    pub const ALL: Self = Self { direct: true, indirect: true };
-    pub const DIRECT: Self = Self { direct: true, indirect: false };
-    pub const INDIRECT: Self = Self { direct: false, indirect: true };
-}
-
-/// Stage names, as reported in timings: each is the name its technique records.
-pub mod stage {
-    use crate::gpu::lights::{rgbd::RgbdVals, spot};
-    use crate::gpu::raster::CameraView;
-    use crate::gpu::{references, sparse, visibility};
-
-    pub const RSM_RASTER: &str = spot::RSM_RASTER;
-    pub const RSM_VALS: &str = spot::RSM_VALS;
-    /// The RSMs of the scene's `lights` (only with `lights`).
-    pub const LIGHTS_RSM_RASTER: &str = crate::gpu::lights::light_rsms::RASTER_STAGE;
-    pub const LIGHTS_RSM_VALS: &str = crate::gpu::lights::light_rsms::VALS_STAGE;
-    pub const RGBD_VALS: &str = RgbdVals::STAGE;
-    /// The second bounce's stages (`settings.bounces: 2`).
-    pub const BOUNCE2_POINTS: &str = crate::gpu::lights::bounce::POINTS_STAGE;
-    pub const BOUNCE2_VALS: &str = crate::gpu::lights::bounce::DRAW_STAGE;
-    /// The disks' occlusion of the bounce points (the sparse method with `disks` only).
-    pub const BOUNCE2_OCCLUSION: &str = crate::gpu::lights::bounce::OCCLUSION_STAGE;
-    /// The lookup of the first bounce's groups at the bounce points (`visibility` `clusters` or
-    /// `ism`, sparse method), after that instance's grouping and maps (`bounce::STAGES`).
-    pub const BOUNCE2_VISIBILITY: &str = crate::gpu::lights::bounce::VISIBILITY_STAGE;
-    pub const VISIBILITY: &str = CameraView::STAGE;
-    pub const GATHER: &str = sparse::gather::PASS.label;
-    pub const OCCLUSION: &str = visibility::disks::PASS.label;
-    /// The `Clusters` visibility mode's stages.
-    pub const CLUSTERING: &str = visibility::clusters::CLUSTERING_STAGE;
-    pub const CLUSTER_SHADOW_MAPS: &str = visibility::clusters::SHADOW_MAPS_STAGE;
-    pub const CLUSTER_VISIBILITY: &str = visibility::clusters::VISIBILITY.label;
-    /// The `Ism` visibility mode's stages.
-    pub const ISM_SAMPLING: &str = visibility::ism::SAMPLING_STAGE;
-    pub const ISM_SPLAT: &str = visibility::ism::SPLAT_STAGE;
-    pub const ISM_PULL_PUSH: &str = visibility::ism::PULL_PUSH_STAGE;
-    pub const ISM_VISIBILITY: &str = visibility::ism::VISIBILITY.label;
-    pub const RENORMALISE: &str = sparse::renormalise::PASS.label;
-    pub const INTERPOLATE: &str = sparse::interpolate::PASS.label;
-    pub const SHADE: &str = sparse::shade::PASS.label;
-    pub const BRUTE_FORCE: &str = references::brute_force::PASS.label;
-    /// `brute_force_ism`'s lookup at the pixels (after its groups and maps).
-    pub const BRUTE_FORCE_ISM_VISIBILITY: &str = references::brute_force::ISM_VISIBILITY_STAGE;
-    pub const EXACT: &str = references::exact::PASS.label;
-    pub const DIRECT: &str = spot::DIRECT;
-}
-
-/// One rendered frame: linear radiance (W/(m² sr)), alpha = 1 where geometry covers the pixel.
-pub struct Rendered {
-    pub direct: LinearImage,
-    pub indirect: LinearImage,
-    pub timings: StageTimings,
-    /// The stages of the technique that computed the indirect light (empty when it was not
-    /// asked for).
-    pub indirect_stages: Vec<&'static str>,
-    /// VALs with non-zero flux this frame.
-    pub val_count: u32,
-    /// Method::Exact: the rounds it took (see `gpu::references::exact`); 0 for the other methods.
-    pub exact_rounds: u32,
-}
-
-impl Rendered {
-    /// Time of the stages that computed the indirect light (ms).
-    pub fn indirect_ms(&self) -> f64 {
-        self.timings.total_of(&self.indirect_stages)
-    }
-}
-
-/// Where the camera image is rendered from.
-#[derive(Clone, Copy, Debug)]
-pub enum View {
-    /// The scene file's perspective camera.
-    Scene(Camera),
-    /// A pinhole camera (an RGB-D frame's): intrinsics, scaled to the render size, and a
-    /// camera-to-world pose in optical axes (x right, y down, z forward), relative to the
-    /// scene's origin ([`Renderer::set_pinhole_view`] takes it in the user's world coordinates).
-    Pinhole { intrinsics: Intrinsics, camera_to_world: Affine3A },
-}
-
-impl View {
-    /// World-space position of the eye.
-    pub fn eye(&self) -> Vec3 {
-        match self {
-            View::Scene(c) => c.position,
-            View::Pinhole { camera_to_world, .. } => camera_to_world.translation.into(),
-        }
-    }
-}
-
-/// A technique with the settings it was built for: asked for with other settings, it is built
-/// anew.
-struct Built<K, T> {
-    key: K,
-    technique: T,
-}
-
-/// `slot`'s technique if it was built for `key`, else `build()` in its place.
-fn built_for<K: PartialEq, T>(
-    slot: &mut Option<Built<K, T>>,
-    key: K,
-    build: impl FnOnce() -> Result<T, GpuError>,
-) -> Result<&mut T, GpuError> {
-    if slot.as_ref().is_none_or(|b| b.key != key) {
-        *slot = None;
-        *slot = Some(Built { key, technique: build()? });
-    }
-    Ok(&mut slot.as_mut().expect("set above").technique)
-}
-
-/// The indirect techniques, each kept (with its buffers) until it is asked for with other
-/// settings or [`Renderer::release_reference_passes`] drops it.
-#[derive(Default)]
-struct Indirect {
-    sparse: Option<Built<SparseSettings, SparseMethod>>,
-    /// Keyed by `glossy`.
-    brute_force: Option<Built<bool, BruteForce>>,
-    /// Keyed by `glossy` and the ISM settings.
-    brute_force_ism: Option<Built<(bool, scene::IsmSettings), BruteForce>>,
-    /// Keyed by (`glossy`, VAL stride, placement generation: the BVH is the placed geometry's).
-    exact: Option<Built<(bool, u32, u64), Exact>>,
-}
+use cache::{Built, Indirect, built_for};
+pub use method::{Component, Components, Method, Rendered};
+pub use readback::SparseIntermediates;
+pub use view::{View, pinhole_to_clip};
 
 /// The spot light's two techniques: only for scenes with a spot light.
 struct Spot {
@@ -831,172 +662,8 @@ impl Renderer {
         }
     }
 
-    /// The camera's visibility buffer of the last frame.
-    pub fn camera_view(&self) -> Option<&VisibilityTarget> {
-        self.target.as_ref().map(|t| &t.view)
-    }
-
     /// How many VALs lit the last frame (appends past the capacity are dropped).
     fn live_val_count(&self, gpu: &Gpu) -> Result<u32, GpuError> {
         Ok(gpu.read_buffer::<u32>(&self.vals.count, 1)?[0].min(self.vals.capacity))
-    }
-
-    /// The live VALs of the last frame (for the CPU twins and diagnostics).
-    pub fn read_vals(&self, gpu: &Gpu) -> Result<Vec<crate::twin::Val>, GpuError> {
-        let n = self.live_val_count(gpu)? as usize;
-        Ok(gpu.read_buffer::<RawVal>(&self.vals.buffer, n)?.iter().map(Into::into).collect())
-    }
-
-    /// The second bounce (`settings.bounces: 2`), when the scene has one.
-    pub fn second_bounce(&self) -> Option<&SecondBounce> {
-        self.bounce.as_ref()
-    }
-
-    /// The second bounce's stages (none with one bounce).
-    pub fn bounce_stages(&self) -> Vec<&'static str> {
-        self.bounce.as_ref().map_or_else(Vec::new, |b| b.stages())
-    }
-
-    /// The stages of the sparse method's visibility mode, as last built (none when off).
-    pub fn visibility_stages(&self) -> Vec<&'static str> {
-        self.sparse().and_then(|s| s.visibility.as_ref()).map_or_else(Vec::new, |m| m.stages())
-    }
-
-    /// The sparse method's group visibility mode, once a sparse frame with one was rendered.
-    pub fn group_visibility(&self) -> Option<&dyn crate::gpu::visibility::GroupVisibility> {
-        match &self.sparse()?.visibility {
-            Some(crate::gpu::visibility::Mode::Groups(g)) => Some(g.as_ref()),
-            _ => None,
-        }
-    }
-
-    /// `brute_force_ism`'s groups and maps, once a frame of that method was rendered.
-    pub fn brute_force_ism_groups(&self) -> Option<&crate::gpu::visibility::clusters::Clusters> {
-        self.indirect.brute_force_ism.as_ref()?.technique.groups()
-    }
-
-    /// The sparse technique, once a sparse frame was rendered.
-    fn sparse(&self) -> Option<&SparseMethod> {
-        self.indirect.sparse.as_ref().map(|b| &b.technique)
-    }
-
-    /// Diffuse irradiance (W/m²) the last sparse frame gathered at each sparse point (after
-    /// occlusion); empty before the first sparse frame.
-    pub fn read_gathered_irradiance(&self, gpu: &Gpu) -> Result<Vec<Vec3>, GpuError> {
-        let Some(p) = self.sparse() else {
-            return Ok(Vec::new());
-        };
-        let gathered = gpu.read_buffer::<RawGathered>(&p.gathered.diffuse, self.scene.flat.sparse_points.len())?;
-        Ok(gathered.iter().map(|g| Vec3::from(g.irradiance)).collect())
-    }
-
-    /// The last sparse frame's intermediate buffers: (gathered, sparse lights, vertex lights),
-    /// each per lobe (glossy empty when the scene has none).
-    pub fn read_sparse_intermediates(&self, gpu: &Gpu) -> Result<SparseIntermediates, GpuError> {
-        let Some(p) = self.sparse() else {
-            return Ok(SparseIntermediates::default());
-        };
-        let n = self.scene.flat.sparse_points.len();
-        let v = self.scene.flat.vertices.len();
-        let (gathered_diffuse, gathered_glossy) = read_lobes::<RawGathered>(gpu, &p.gathered, n)?;
-        let (sparse_diffuse, sparse_glossy) = read_lobes::<RawPointLight>(gpu, &p.sparse_lights, n)?;
-        let (vertex_diffuse, vertex_glossy) = read_lobes::<RawPointLight>(gpu, &p.vertex_lights, v)?;
-        let vertex_glossy_radiance = match &p.vertex_glossy_radiance {
-            Some(b) => gpu.read_buffer::<[f32; 4]>(b, v)?,
-            None => Vec::new(),
-        };
-        let c = self.scene.flat.candidates as usize;
-        let (adaptive_scores, adaptive_chosen) = match &p.adaptive {
-            Some((a, _)) => (gpu.read_buffer::<f32>(&a.scores, c)?, gpu.read_buffer::<u32>(&a.chosen, c)?),
-            None => (Vec::new(), Vec::new()),
-        };
-        Ok(SparseIntermediates {
-            gathered_diffuse,
-            gathered_glossy,
-            sparse_diffuse,
-            sparse_glossy,
-            vertex_diffuse,
-            vertex_glossy,
-            vertex_glossy_radiance,
-            adaptive_scores,
-            adaptive_chosen,
-        })
-    }
-}
-
-/// Both lobes of `l` (the glossy one empty when absent).
-fn read_lobes<T: bytemuck::Pod>(gpu: &Gpu, l: &Lobes, count: usize) -> Result<(Vec<T>, Vec<T>), GpuError> {
-    let glossy = match &l.glossy {
-        Some(b) => gpu.read_buffer::<T>(b, count)?,
-        None => Vec::new(),
-    };
-    Ok((gpu.read_buffer::<T>(&l.diffuse, count)?, glossy))
-}
-
-/// GPU intermediates of the sparse pipeline, read back.
-#[derive(Default)]
-pub struct SparseIntermediates {
-    pub gathered_diffuse: Vec<RawGathered>,
-    pub gathered_glossy: Vec<RawGathered>,
-    pub sparse_diffuse: Vec<RawPointLight>,
-    pub sparse_glossy: Vec<RawPointLight>,
-    pub vertex_diffuse: Vec<RawPointLight>,
-    /// Empty with `glossy_interpolation: "radiance"`.
-    pub vertex_glossy: Vec<RawPointLight>,
-    /// Per vertex, the interpolated glossy radiance factor (xyz; `w` 0): with
-    /// `glossy_interpolation: "radiance"` only.
-    pub vertex_glossy_radiance: Vec<[f32; 4]>,
-    /// Per adaptive candidate (`settings.sparse.adaptive`), this frame's score and whether it
-    /// was chosen (1); empty without candidates.
-    pub adaptive_scores: Vec<f32>,
-    pub adaptive_chosen: Vec<u32>,
-}
-
-/// Optical camera coordinates (x right, y down, z forward) to wgpu clip space for a pinhole
-/// camera whose pixel centres sit at integer coordinates: the image spans u in [-0.5, w - 0.5].
-/// Depth maps `near..far` to `0..1` like `perspective` (DirectX convention).
-pub fn pinhole_to_clip(k: &Intrinsics, near: f32, far: f32) -> Mat4 {
-    let (w, h) = (k.width as f32, k.height as f32);
-    let depth = far / (far - near);
-    Mat4::from_cols(
-        Vec4::new(2.0 * k.fx / w, 0.0, 0.0, 0.0),
-        Vec4::new(0.0, -2.0 * k.fy / h, 0.0, 0.0),
-        Vec4::new(2.0 * (k.cx + 0.5) / w - 1.0, 1.0 - 2.0 * (k.cy + 0.5) / h, depth, 1.0),
-        Vec4::new(0.0, 0.0, -near * depth, 0.0),
-    )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The clip transform lands a point on the pixel the intrinsics project it to, and maps the
-    /// near and far planes to depth 0 and 1.
-    #[test]
-    fn pinhole_to_clip_matches_intrinsics() {
-        let k = Intrinsics { width: 64, height: 48, fx: 50.0, fy: 55.0, cx: 30.2, cy: 25.7 };
-        let m = pinhole_to_clip(&k, 0.1, 10.0);
-        for p in [Vec3::new(0.3, -0.2, 1.5), Vec3::new(-1.0, 0.7, 4.0), Vec3::new(0.0, 0.0, 0.1)] {
-            let clip = m * p.extend(1.0);
-            let ndc = clip.truncate() / clip.w;
-            let pixel = glam::Vec2::new((ndc.x + 1.0) * 0.5 * 64.0 - 0.5, (1.0 - ndc.y) * 0.5 * 48.0 - 0.5);
-            assert!((pixel - k.project(p)).abs().max_element() < 1e-4, "{p}: {pixel} vs {}", k.project(p));
-        }
-        let depth = |z: f32| {
-            let c = m * Vec4::new(0.0, 0.0, z, 1.0);
-            c.z / c.w
-        };
-        assert!(depth(0.1).abs() < 1e-6 && (depth(10.0) - 1.0).abs() < 1e-6);
-    }
-
-    /// Scaling the intrinsics keeps the image of a point at the same fraction of the image.
-    #[test]
-    fn scaled_intrinsics_keep_image_fractions() {
-        let k = Intrinsics::TUM;
-        let half = k.scaled_to(320, 240);
-        let p = Vec3::new(0.4, -0.3, 2.0);
-        let (a, b) = (k.project(p), half.project(p));
-        assert!(((a.x + 0.5) / 640.0 - (b.x + 0.5) / 320.0).abs() < 1e-6);
-        assert!(((a.y + 0.5) / 480.0 - (b.y + 0.5) / 240.0).abs() < 1e-6);
     }
 }

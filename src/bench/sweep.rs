@@ -1,0 +1,430 @@
+//! The sweep: the values given for each axis (`--sweep`), parsed, and the configurations they
+//! make, one axis at a time around the base or (`grid`) every combination.
+
+use super::{BenchError, flag_error};
+use crate::scene::{
+    GlossyInterpolation, InterpolationKernel, LightBound, MAX_CLUSTERS, MAX_SPARSE_POINTS, Occlusion,
+    RSM_RESOLUTION_RANGE, ShadowMapSource, SoftShadows,
+};
+
+use super::config::{
+    ClusterOverrides, Config, bound_name, glossy_interpolation_name, kernel_name, maps_name, soft_name,
+};
+
+/// Most pixels on one side of a bench image (as `render`'s `--width`).
+const MAX_SIDE: u32 = 8192;
+
+/// The values given for each axis (`None`: the axis is not swept).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Sweep {
+    pub sparse_points: Option<Vec<u32>>,
+    pub neighbours: Option<Vec<u32>>,
+    pub near_field: Option<Vec<u32>>,
+    pub glossy_interpolation: Option<Vec<GlossyInterpolation>>,
+    /// `settings.sparse.adaptive`, in hundredths.
+    pub adaptive: Option<Vec<u32>>,
+    pub kernel: Option<Vec<InterpolationKernel>>,
+    pub bound: Option<Vec<LightBound>>,
+    pub subdivision: Option<Vec<u32>>,
+    pub rsm_resolution: Option<Vec<u32>>,
+    pub occlusion: Option<Vec<Occlusion>>,
+    pub glossy: Option<Vec<bool>>,
+    pub resolution: Option<Vec<(u32, u32)>>,
+    /// The `ism` mode's axes: each value is measured with `occlusion` `ism`.
+    pub ism_count: Option<Vec<u32>>,
+    pub ism_resolution: Option<Vec<u32>>,
+    pub ism_points: Option<Vec<u32>>,
+    pub ism_pull_push_levels: Option<Vec<u32>>,
+    /// The `clusters` mode's axes: each value is measured with `occlusion` `clusters`.
+    pub cluster_count: Option<Vec<u32>>,
+    pub cluster_resolution: Option<Vec<u32>>,
+    pub cluster_soft: Option<Vec<SoftShadows>>,
+    pub cluster_maps: Option<Vec<ShadowMapSource>>,
+}
+
+/// The axis names `--sweep` accepts.
+pub const AXES: &[&str] = &[
+    "sparse_points",
+    "neighbours",
+    "near_field",
+    "glossy_interpolation",
+    "adaptive",
+    "kernel",
+    "bound",
+    "subdivision",
+    "rsm_resolution",
+    "occlusion",
+    "glossy",
+    "resolution",
+    "ism_count",
+    "ism_resolution",
+    "ism_points",
+    "ism_pull_push_levels",
+    "cluster_count",
+    "cluster_resolution",
+    "cluster_soft",
+    "cluster_maps",
+];
+
+impl Sweep {
+    /// Parse `--sweep axis=v1,v2,...` arguments; each axis at most once.
+    pub fn parse(args: &[String]) -> Result<Self, BenchError> {
+        let mut sweep = Sweep::default();
+        for arg in args {
+            let Some((axis, values)) = arg.split_once('=') else {
+                return Err(flag_error("--sweep", format!("expected AXIS=V1,V2,..., got `{arg}`")));
+            };
+            let axis = axis.trim();
+            let flag = format!("--sweep {axis}");
+            let values: Vec<&str> = values.split(',').map(str::trim).collect();
+            if values.iter().any(|v| v.is_empty()) {
+                return Err(flag_error(&flag, format!("empty value in `{arg}`")));
+            }
+            let duplicate = |given: bool| {
+                if given { Err(flag_error(&flag, "given more than once")) } else { Ok(()) }
+            };
+            match axis {
+                "sparse_points" => {
+                    duplicate(sweep.sparse_points.is_some())?;
+                    sweep.sparse_points = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_SPARSE_POINTS))?);
+                }
+                "rsm_resolution" => {
+                    duplicate(sweep.rsm_resolution.is_some())?;
+                    let (lo, hi) = RSM_RESOLUTION_RANGE;
+                    sweep.rsm_resolution = Some(parse_each(&flag, &values, |v| int_in(v, lo, hi))?);
+                }
+                "occlusion" => {
+                    duplicate(sweep.occlusion.is_some())?;
+                    sweep.occlusion = Some(parse_each(&flag, &values, |v| match v {
+                        "off" => Ok(Occlusion::Off),
+                        "disks" => Ok(Occlusion::Disks),
+                        "clusters" => Ok(Occlusion::Clusters),
+                        "ism" => Ok(Occlusion::Ism),
+                        _ => Err("expected `off`, `disks`, `clusters` or `ism`".to_owned()),
+                    })?);
+                }
+                "glossy" => {
+                    duplicate(sweep.glossy.is_some())?;
+                    sweep.glossy = Some(parse_each(&flag, &values, |v| match v {
+                        "on" | "true" => Ok(true),
+                        "off" | "false" => Ok(false),
+                        _ => Err("expected `on` or `off`".to_owned()),
+                    })?);
+                }
+                "resolution" => {
+                    duplicate(sweep.resolution.is_some())?;
+                    sweep.resolution = Some(parse_each(&flag, &values, parse_resolution)?);
+                }
+                "ism_count" => {
+                    duplicate(sweep.ism_count.is_some())?;
+                    sweep.ism_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, crate::scene::MAX_ISMS))?);
+                }
+                "ism_resolution" => {
+                    duplicate(sweep.ism_resolution.is_some())?;
+                    sweep.ism_resolution = Some(parse_each(&flag, &values, |v| {
+                        let n = int_in(v, 16, 512)?;
+                        if n.is_power_of_two() { Ok(n) } else { Err("must be a power of two in 16..=512".to_owned()) }
+                    })?);
+                }
+                "ism_points" => {
+                    duplicate(sweep.ism_points.is_some())?;
+                    let max = crate::scene::MAX_ISM_POINTS;
+                    sweep.ism_points = Some(parse_each(&flag, &values, |v| int_in(v, 16, max))?);
+                }
+                "ism_pull_push_levels" => {
+                    duplicate(sweep.ism_pull_push_levels.is_some())?;
+                    sweep.ism_pull_push_levels = Some(parse_each(&flag, &values, |v| int_in(v, 0, 4))?);
+                }
+                "near_field" => {
+                    duplicate(sweep.near_field.is_some())?;
+                    let max = crate::scene::NEAR_FIELD_RANGE.1 as u32;
+                    sweep.near_field = Some(parse_each(&flag, &values, |v| int_in(v, 0, max))?);
+                }
+                "adaptive" => {
+                    duplicate(sweep.adaptive.is_some())?;
+                    sweep.adaptive = Some(parse_each(&flag, &values, hundredths)?);
+                }
+                "kernel" => {
+                    duplicate(sweep.kernel.is_some())?;
+                    let all = [InterpolationKernel::Paper, InterpolationKernel::Smooth];
+                    sweep.kernel = Some(parse_each(&flag, &values, |v| named(v, &all, kernel_name))?);
+                }
+                "bound" => {
+                    duplicate(sweep.bound.is_some())?;
+                    let all = [LightBound::Off, LightBound::Gathered];
+                    sweep.bound = Some(parse_each(&flag, &values, |v| named(v, &all, bound_name))?);
+                }
+                "subdivision" => {
+                    duplicate(sweep.subdivision.is_some())?;
+                    let (lo, hi) = crate::scene::SUBDIVISION_RANGE;
+                    sweep.subdivision = Some(parse_each(&flag, &values, |v| int_in(v, lo as u32, hi as u32))?);
+                }
+                "glossy_interpolation" => {
+                    duplicate(sweep.glossy_interpolation.is_some())?;
+                    let all = [GlossyInterpolation::Lights, GlossyInterpolation::Radiance];
+                    sweep.glossy_interpolation =
+                        Some(parse_each(&flag, &values, |v| named(v, &all, glossy_interpolation_name))?);
+                }
+                "cluster_count" => {
+                    duplicate(sweep.cluster_count.is_some())?;
+                    sweep.cluster_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_CLUSTERS))?);
+                }
+                "cluster_resolution" => {
+                    duplicate(sweep.cluster_resolution.is_some())?;
+                    sweep.cluster_resolution = Some(parse_each(&flag, &values, |v| int_in(v, 16, 1024))?);
+                }
+                "cluster_soft" => {
+                    duplicate(sweep.cluster_soft.is_some())?;
+                    let all = [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard];
+                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| named(v, &all, soft_name))?);
+                }
+                "cluster_maps" => {
+                    duplicate(sweep.cluster_maps.is_some())?;
+                    let all = [ShadowMapSource::Raster, ShadowMapSource::Ism];
+                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| named(v, &all, maps_name))?);
+                }
+                "neighbours" | "neighbors" => {
+                    duplicate(sweep.neighbours.is_some())?;
+                    let max = crate::scene::MAX_NEIGHBOURS;
+                    sweep.neighbours = Some(parse_each(&flag, &values, |v| int_in(v, 1, max))?);
+                }
+                _ => {
+                    return Err(flag_error(&flag, format!("unknown axis; the axes are {}", AXES.join(", "))));
+                }
+            }
+        }
+        Ok(sweep)
+    }
+
+    /// The configurations: each swept axis varied alone around `base` (duplicates dropped), or
+    /// with `grid` every combination.
+    pub fn configs(&self, base: &Config, grid: bool) -> Vec<Config> {
+        let mut out: Vec<Config> = Vec::new();
+        let mut push = |c: Config| {
+            if !out.contains(&c) {
+                out.push(c);
+            }
+        };
+        if grid {
+            let neighbours_values =
+                self.neighbours.clone().map_or(vec![base.neighbours], |v| v.into_iter().map(Some).collect());
+            let sparse_values = self
+                .sparse_points
+                .clone()
+                .map_or(vec![base.sparse_points_per_mesh], |v| v.into_iter().map(Some).collect());
+            let interpolation: Vec<_> = opts(&self.kernel, base.kernel)
+                .into_iter()
+                .flat_map(|k| opts(&self.bound, base.bound).into_iter().map(move |b| (k, b)))
+                .flat_map(|(k, b)| opts(&self.subdivision, base.subdivision).into_iter().map(move |d| (k, b, d)))
+                .collect();
+            let placements: Vec<_> = sparse_values
+                .into_iter()
+                .flat_map(|n| opts(&self.adaptive, base.adaptive_percent).into_iter().map(move |a| (n, a)))
+                .flat_map(|(n, a)| interpolation.iter().map(move |&(k, b, d)| (n, a, k, b, d)))
+                .collect();
+            for (sparse, adaptive_percent, kernel, bound, subdivision) in placements {
+                for (&neighbours, near_field) in neighbours_values
+                    .iter()
+                    .flat_map(|k| opts(&self.near_field, base.near_field).into_iter().map(move |n| (k, n)))
+                {
+                    for (&rsm, glossy_interpolation) in
+                        one(&self.rsm_resolution, base.rsm_resolution).iter().flat_map(|r| {
+                            opts(&self.glossy_interpolation, base.glossy_interpolation).into_iter().map(move |g| (r, g))
+                        })
+                    {
+                        for &glossy in &one(&self.glossy, base.glossy) {
+                            for &(width, height) in &one(&self.resolution, (base.width, base.height)) {
+                                for &occlusion in &one(&self.occlusion, base.occlusion) {
+                                    for ism in self.mode_variants(base) {
+                                        let c = Config {
+                                            sparse_points_per_mesh: sparse,
+                                            adaptive_percent,
+                                            kernel,
+                                            bound,
+                                            subdivision,
+                                            neighbours,
+                                            near_field,
+                                            glossy_interpolation,
+                                            rsm_resolution: rsm,
+                                            occlusion,
+                                            glossy,
+                                            width,
+                                            height,
+                                            ..ism
+                                        };
+                                        // A mode's values only mean something in that mode.
+                                        let c = if occlusion == Occlusion::Ism { c } else { c.without_ism() };
+                                        push(if occlusion == Occlusion::Clusters {
+                                            c
+                                        } else {
+                                            Config { clusters: ClusterOverrides::NONE, ..c }
+                                        });
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            return out;
+        }
+        push(*base);
+        for &v in self.sparse_points.iter().flatten() {
+            push(Config { sparse_points_per_mesh: Some(v), ..*base });
+        }
+        for &v in self.neighbours.iter().flatten() {
+            push(Config { neighbours: Some(v), ..*base });
+        }
+        for &v in self.near_field.iter().flatten() {
+            push(Config { near_field: Some(v), ..*base });
+        }
+        for &v in self.glossy_interpolation.iter().flatten() {
+            push(Config { glossy_interpolation: Some(v), ..*base });
+        }
+        for &v in self.adaptive.iter().flatten() {
+            push(Config { adaptive_percent: Some(v), ..*base });
+        }
+        for &v in self.kernel.iter().flatten() {
+            push(Config { kernel: Some(v), ..*base });
+        }
+        for &v in self.bound.iter().flatten() {
+            push(Config { bound: Some(v), ..*base });
+        }
+        for &v in self.subdivision.iter().flatten() {
+            push(Config { subdivision: Some(v), ..*base });
+        }
+        for &v in self.rsm_resolution.iter().flatten() {
+            push(Config { rsm_resolution: v, ..*base });
+        }
+        for &v in self.occlusion.iter().flatten() {
+            push(Config { occlusion: v, ..*base });
+        }
+        for &v in self.glossy.iter().flatten() {
+            push(Config { glossy: v, ..*base });
+        }
+        for &(width, height) in self.resolution.iter().flatten() {
+            push(Config { width, height, ..*base });
+        }
+        let ism = Config { occlusion: Occlusion::Ism, ..*base };
+        for &v in self.ism_count.iter().flatten() {
+            push(Config { ism_count: Some(v), ..ism });
+        }
+        for &v in self.ism_resolution.iter().flatten() {
+            push(Config { ism_resolution: Some(v), ..ism });
+        }
+        for &v in self.ism_points.iter().flatten() {
+            push(Config { ism_points: Some(v), ..ism });
+        }
+        for &v in self.ism_pull_push_levels.iter().flatten() {
+            push(Config { ism_pull_push_levels: Some(v), ..ism });
+        }
+        let clusters = Config { occlusion: Occlusion::Clusters, ..*base };
+        let with = |o: ClusterOverrides| Config { clusters: o, ..clusters };
+        for &v in self.cluster_count.iter().flatten() {
+            push(with(ClusterOverrides { count: Some(v), ..base.clusters }));
+        }
+        for &v in self.cluster_resolution.iter().flatten() {
+            push(with(ClusterOverrides { shadow_map_resolution: Some(v), ..base.clusters }));
+        }
+        for &v in self.cluster_soft.iter().flatten() {
+            push(with(ClusterOverrides { soft: Some(v), ..base.clusters }));
+        }
+        for &v in self.cluster_maps.iter().flatten() {
+            push(with(ClusterOverrides { shadow_maps: Some(v), ..base.clusters }));
+        }
+        out
+    }
+
+    /// Every combination of the ISM and cluster axes' values as overrides on `base` (the grid).
+    fn mode_variants(&self, base: &Config) -> Vec<Config> {
+        let mut out = Vec::new();
+        for ism_count in opts(&self.ism_count, base.ism_count) {
+            for ism_resolution in opts(&self.ism_resolution, base.ism_resolution) {
+                for ism_points in opts(&self.ism_points, base.ism_points) {
+                    for ism_pull_push_levels in opts(&self.ism_pull_push_levels, base.ism_pull_push_levels) {
+                        for clusters in self.cluster_variants(&base.clusters) {
+                            out.push(Config {
+                                ism_count,
+                                ism_resolution,
+                                ism_points,
+                                ism_pull_push_levels,
+                                clusters,
+                                ..*base
+                            });
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Every combination of the cluster axes' values as overrides on `base`.
+    fn cluster_variants(&self, base: &ClusterOverrides) -> Vec<ClusterOverrides> {
+        let mut out = Vec::new();
+        for count in opts(&self.cluster_count, base.count) {
+            for shadow_map_resolution in opts(&self.cluster_resolution, base.shadow_map_resolution) {
+                for soft in opts(&self.cluster_soft, base.soft) {
+                    for shadow_maps in opts(&self.cluster_maps, base.shadow_maps) {
+                        out.push(ClusterOverrides { count, shadow_map_resolution, soft, shadow_maps });
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The values of an override axis as overrides, or the base override alone when it is not swept.
+fn opts<T: Copy>(values: &Option<Vec<T>>, base: Option<T>) -> Vec<Option<T>> {
+    values.as_ref().map_or(vec![base], |v| v.iter().copied().map(Some).collect())
+}
+
+/// The values of an axis, or the base value alone when it is not swept.
+fn one<T: Clone>(values: &Option<Vec<T>>, base: T) -> Vec<T> {
+    values.clone().unwrap_or_else(|| vec![base])
+}
+
+fn parse_each<T>(flag: &str, values: &[&str], f: impl Fn(&str) -> Result<T, String>) -> Result<Vec<T>, BenchError> {
+    values.iter().map(|v| f(v).map_err(|m| flag_error(flag, format!("`{v}`: {m}")))).collect()
+}
+
+/// The one of `all` whose `name` is `v`; the error lists the names (`expected `a`, `b` or `c``).
+fn named<T: Copy>(v: &str, all: &[T], name: fn(T) -> &'static str) -> Result<T, String> {
+    all.iter().copied().find(|x| name(*x) == v).ok_or_else(|| {
+        let names: Vec<String> = all.iter().map(|x| format!("`{}`", name(*x))).collect();
+        match names.split_last() {
+            Some((last, [])) => format!("expected {last}"),
+            Some((last, rest)) => format!("expected {} or {last}", rest.join(", ")),
+            None => "no value is accepted".to_owned(),
+        }
+    })
+}
+
+/// An `adaptive` value: a fraction in [`crate::scene::ADAPTIVE_RANGE`] in steps of 0.01, as
+/// hundredths.
+fn hundredths(v: &str) -> Result<u32, String> {
+    let (lo, hi) = crate::scene::ADAPTIVE_RANGE;
+    let x: f64 = v.trim().parse().map_err(|_| format!("`{v}` is not a number"))?;
+    let n = (x * 100.0).round();
+    if !(f64::from(lo)..=f64::from(hi)).contains(&x) || (x * 100.0 - n).abs() > 1e-6 {
+        return Err(format!("must be in [{lo}, {hi}] in steps of 0.01"));
+    }
+    Ok(n as u32)
+}
+
+fn int_in(v: &str, lo: u32, hi: u32) -> Result<u32, String> {
+    let n: u32 = v.parse().map_err(|_| format!("not a whole number in {lo}..={hi}"))?;
+    if (lo..=hi).contains(&n) { Ok(n) } else { Err(format!("must be in {lo}..={hi}")) }
+}
+
+/// `WxH` or `N` (square).
+fn parse_resolution(v: &str) -> Result<(u32, u32), String> {
+    match v.split_once(['x', 'X']) {
+        Some((w, h)) => Ok((int_in(w, 1, MAX_SIDE)?, int_in(h, 1, MAX_SIDE)?)),
+        None => {
+            let n = int_in(v, 1, MAX_SIDE)?;
+            Ok((n, n))
+        }
+    }
+}

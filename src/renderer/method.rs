@@ -1,0 +1,90 @@
+//! What a frame is asked for (the method of the indirect light, the components) and what it
+//! returns ([`Rendered`]).
+
+use crate::gpu::timing::StageTimings;
+use crate::image::LinearImage;
+
+/// How the indirect light is computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// The sparse model-space method (docs/design.md §4).
+    Sparse,
+    /// Every VAL at every visible pixel (docs/design.md §5).
+    BruteForce,
+    /// The brute force with each VAL weighted by its group's imperfect-shadow-map lookup at the
+    /// pixel (`settings.ism`): the ISMs' visibility without the sparse interpolation
+    /// (`gpu::references::brute_force`).
+    BruteForceIsm,
+    /// Brute force with a shadow ray per pixel and VAL through a BVH (docs/design.md §5); see
+    /// [`super::Renderer::set_exact_val_stride`].
+    Exact,
+}
+
+/// Which light the image shows.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, utoipa::ToSchema, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Component {
+    /// Direct plus indirect.
+    #[default]
+    Full,
+    Direct,
+    Indirect,
+}
+
+impl Component {
+    /// This component of a frame.
+    pub fn of(self, frame: &Rendered) -> LinearImage {
+        match self {
+            Component::Full => frame.direct.add(&frame.indirect),
+            Component::Direct => frame.direct.clone(),
+            Component::Indirect => frame.indirect.clone(),
+        }
+    }
+
+    /// What a frame must compute to show it.
+    pub fn needs(self) -> Components {
+        match self {
+            Component::Full => Components::ALL,
+            Component::Direct => Components::DIRECT,
+            Component::Indirect => Components::INDIRECT,
+        }
+    }
+}
+
+/// Which components a frame computes. A component left out runs none of its techniques (a
+/// direct-only frame has no gather); its image comes back black with the coverage in alpha.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Components {
+    pub direct: bool,
+    pub indirect: bool,
+}
+
+impl Components {
+    pub const ALL: Self = Self { direct: true, indirect: true };
+    pub const DIRECT: Self = Self { direct: true, indirect: false };
+    pub const INDIRECT: Self = Self { direct: false, indirect: true };
+}
+
+/// One rendered frame: linear radiance (W/(m² sr)), alpha = 1 where geometry covers the pixel.
+pub struct Rendered {
+    pub direct: LinearImage,
+    pub indirect: LinearImage,
+    pub timings: StageTimings,
+    /// The stages of the technique that computed the indirect light (empty when it was not
+    /// asked for).
+    pub indirect_stages: Vec<&'static str>,
+    /// VALs with non-zero flux this frame.
+    pub val_count: u32,
+    /// Method::Exact: the rounds it took (see `gpu::references::exact`); 0 for the other methods.
+    pub exact_rounds: u32,
+}
+
+impl Rendered {
+    /// Time of the stages that computed the indirect light (ms).
+    pub fn indirect_ms(&self) -> f64 {
+        self.timings.total_of(&self.indirect_stages)
+    }
+}
