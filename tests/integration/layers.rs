@@ -47,12 +47,6 @@ const LAYERS: &[(&str, u8)] = &[
 /// Layer names for the messages.
 const LAYER_NAMES: [&str; 7] = ["data", "twins", "GPU techniques", "renderer", "mr/bench", "service", "CLI"];
 
-/// Imports tolerated for now, as (importing file prefix, imported module prefix): the scene's
-/// resolved settings still hold the settings structs of `mr`, `rgbd` and `twin`. BEING REMOVED
-/// by the move of the settings structs into `src/scene/settings/`; delete this list then.
-const ALLOWED_WHILE_SETTINGS_MOVE: &[(&str, &str)] =
-    &[("src/scene/", "mr"), ("src/scene/", "rgbd"), ("src/scene/", "twin")];
-
 /// The layer of the file at `path` (relative to the repository, `/`-separated), or `None` for
 /// the crate root `src/lib.rs`, which only declares the modules.
 fn layer_of(path: &str) -> Option<Result<u8, String>> {
@@ -405,12 +399,6 @@ fn violations(sources: &BTreeMap<String, String>) -> Vec<String> {
                 problems.push(format!("{path}:{line}: the CLI imports the library as `relume::{name}`, not `crate::`"));
                 continue;
             }
-            let allowed = ALLOWED_WHILE_SETTINGS_MOVE
-                .iter()
-                .any(|(from, to)| path.starts_with(from) && (name == *to || name.starts_with(&format!("{to}::"))));
-            if allowed {
-                continue;
-            }
             let Some(Ok(their)) = layer_of(&file) else { continue };
             if their > layer {
                 problems.push(format!(
@@ -531,10 +519,10 @@ fn layers_checker_reports_upward_imports() {
     );
 }
 
-/// A cycle between two modules of the same layer is reported; the allowed list hides only
-/// the scene's imports it names.
+/// A cycle between two modules of the same layer is reported, and the data layer reaching up is
+/// reported whichever module it reaches.
 #[test]
-fn layers_checker_reports_cycles_and_honours_only_the_listed_exceptions() {
+fn layers_checker_reports_cycles_and_the_data_layer_reaching_up() {
     let sources = tree_of(&[
         ("src/mr/mod.rs", "use crate::bench::Plot;"),
         ("src/bench/mod.rs", "pub struct Plot; use crate::mr;"),
@@ -542,9 +530,10 @@ fn layers_checker_reports_cycles_and_honours_only_the_listed_exceptions() {
         ("src/gpu/mod.rs", "pub struct Gpu;"),
     ]);
     let problems = violations(&sources);
-    assert_eq!(problems.len(), 2, "{problems:#?}");
-    assert_eq!(problems[0], "src/scene/mod.rs:1: imports gpu (layer 2, GPU techniques) from layer 0 (data)");
-    assert!(problems[1].starts_with("import cycle between top-level modules bench, mr: "), "{}", problems[1]);
+    assert_eq!(problems.len(), 3, "{problems:#?}");
+    assert_eq!(problems[0], "src/scene/mod.rs:1: imports mr (layer 4, mr/bench) from layer 0 (data)");
+    assert_eq!(problems[1], "src/scene/mod.rs:1: imports gpu (layer 2, GPU techniques) from layer 0 (data)");
+    assert!(problems[2].starts_with("import cycle between top-level modules bench, mr: "), "{}", problems[2]);
 }
 
 #[test]
