@@ -1,4 +1,4 @@
-//! The cull of the lights' RSM views (README "VALs from every light's RSM"), side by side in
+//! The cull of the lights' RSM views (docs/measurements/many-lights.md "VALs from every light's RSM"), side by side in
 //! one run: indirect-only sparse frames with the cull off and on, alternated (off, on, off, on,
 //! ...) so the shared machine's load falls on both alike; per setting the median wall time of
 //! `lights_rsm_raster` and of the gather, the triangles drawn over all views and the views

@@ -14,7 +14,7 @@ What it keeps, so that relume loads the same triangles from both files:
   file order. Polygons are fans from their first corner; each primitive's vertices are in
   order of first use, as tobj's single-index export has them. Positions are float32, indices
   uint32. No normals are written when the OBJ has none (relume computes them, as for the OBJ).
-- Materials (relume's mapping inverted, README "glTF"): Kd and Ks become baseColorFactor =
+- Materials (relume's mapping inverted, docs/scene-format.md "glTF"): Kd and Ks become baseColorFactor =
   Kd / (1 - Ks), metallic 0, KHR_materials_specular (specularFactor 0 when Ks = 0, else
   specularColorFactor = Ks / 0.04), roughnessFactor from Ns; so relume's rho_d, rho_s and
   exponent come back as Kd, Ks and Ns (up to float rounding). Emission (Ke) is dropped: relume

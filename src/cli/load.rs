@@ -42,7 +42,7 @@ pub struct Args {
     json: bool,
     /// Soak test instead: one normal stream and HTTP client alone, then beside a hostile
     /// mix (floods, slow and idle sockets, bad stream messages, scene churn), each phase
-    /// --seconds long, on loopback (README, "Soak test").
+    /// --seconds long, on loopback (docs/service.md "Load and soak tests").
     #[arg(long)]
     chaos: bool,
 }

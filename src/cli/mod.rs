@@ -30,7 +30,7 @@ pub enum Command {
     Compare(compare::Args),
     /// Sweep quality settings: per configuration the time of every stage, the device memory
     /// held and the indirect error against brute force (and exact); writes results.json,
-    /// results.csv and plots into --out (see README, "Benchmark").
+    /// results.csv and plots into --out (see docs/measurements/benchmark.md).
     Bench(bench::Args),
     /// Relight every frame of an RGB-D recording (a TUM or Open3D/Redwood folder, or an MCAP
     /// file) with a scene's virtual content: writes composited and indirect-only frames and a
@@ -38,12 +38,12 @@ pub enum Command {
     Replay(replay::Args),
     /// Render a synthetic TUM RGB-D recording of a scene's lit room (colour = direct radiance
     /// / radiance_scale, depth, ground-truth poses along an arc) for closed-loop tests of
-    /// `replay` (see README, "Closed loop: synthetic recordings").
+    /// `replay` (see docs/measurements/closed-loop.md).
     RecordSynthetic(record_synthetic::Args),
     /// Load benchmark of the service: streams replaying a recording plus HTTP render clients,
     /// for a fixed time; prints throughput, latency percentiles, dropped frames, peak memory.
     Load(load::Args),
-    /// Serve the HTTP + WebSocket API (see README, "Service"). Every flag also reads the
+    /// Serve the HTTP + WebSocket API (see docs/service.md). Every flag also reads the
     /// environment variable shown; SIGINT/SIGTERM shut down gracefully.
     Serve(relume::service::Config),
     /// Print the service's OpenAPI 3.1 document (the contents of proto/openapi.json).

@@ -1,8 +1,8 @@
 //! `relume record-synthetic`: a synthetic RGB-D recording of a known, lit room rendered by
 //! relume itself, in the TUM layout that [`crate::rgbd::recording::Recording::open_tum`] reads.
 //! Replaying it against virtual content closes the loop: the content's indirect light from the
-//! recording's VALs can be compared with the RSM path on the same room and light (README,
-//! "Closed loop: synthetic recordings").
+//! recording's VALs can be compared with the RSM path on the same room and light
+//! (docs/measurements/closed-loop.md).
 //!
 //! Per frame `i` (timestamp `i / FRAME_RATE_HZ` s) the directory gets
 //!

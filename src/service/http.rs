@@ -36,8 +36,8 @@ use super::{recordings, stream, tickets, viewer};
     info(
         title = "relume",
         description = "One-bounce indirect light from thousands of virtual area lights, rendered on \
-            the GPU. Scenes are created from a scene description (the scene file format of the \
-            README, mesh paths relative to the server's asset directory, or OBJ text inline), \
+            the GPU. Scenes are created from a scene description (the scene file format of \
+            docs/scene-format.md, mesh paths relative to the server's asset directory, or OBJ text inline), \
             then rendered with a camera, light overrides and quality settings. Errors are JSON \
             `{\"error\": {\"code\", \"message\", \"field\", \"limit\"}}`.",
         license(name = "MIT OR Apache-2.0")
@@ -349,7 +349,7 @@ async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
     post,
     path = "/v1/scenes",
     tag = "scenes",
-    request_body(content = SceneRequest, description = "A scene description, or a whole glTF scene (README, \"Scene files\", \"glTF\")"),
+    request_body(content = SceneRequest, description = "A scene description, or a whole glTF scene (docs/scene-format.md)"),
     responses(
         (status = 201, description = "Created", body = SceneInfo,
             headers(("Location" = String, description = "/v1/scenes/{id}"))),

@@ -158,7 +158,7 @@ fn downscale(uri: &Uri) -> Result<u32, ApiError> {
 
 /// The recordings the server holds.
 ///
-/// The TUM RGB-D recordings (README, "Replay") under the asset directory's `recordings/`;
+/// The TUM RGB-D recordings (docs/rgbd.md) under the asset directory's `recordings/`;
 /// directories that do not open as one are left out (and logged).
 #[utoipa::path(
     get,

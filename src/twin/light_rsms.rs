@@ -1,5 +1,5 @@
-//! CPU twins of the RSMs of the scene's `lights` (`gpu::lights::light_rsms`, README "Many
-//! direct lights"): the split of one VAL budget among the lights by emitted flux, each light's
+//! CPU twins of the RSMs of the scene's `lights` (`gpu::lights::light_rsms`,
+//! docs/measurements/many-lights.md): the split of one VAL budget among the lights by emitted flux, each light's
 //! views (a spot: one perspective view over its cone, as the scene's `light`; a point light: the
 //! six 90° faces of a cube around it), a texel's direction and solid angle, and the VAL a texel
 //! makes.

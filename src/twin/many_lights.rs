@@ -1,4 +1,4 @@
-//! CPU twins of the many-light direct pass (`gpu::lights::many`, README "Many direct lights"):
+//! CPU twins of the many-light direct pass (`gpu::lights::many`, docs/measurements/many-lights.md):
 //! LightCluster's minimum-distance clustering of the lights (paper 003 §3.1), each light's
 //! direct radiance, the dual-paraboloid shadow-map lookup per group, and the reference: a
 //! shadow ray per receiver and light through the scene's BVH.

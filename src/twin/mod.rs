@@ -363,7 +363,7 @@ pub fn interpolate_lights(weights: &[f32], lights: &[PointLight], bound: LightBo
 /// `light` with its intensity scaled down so that the irradiance luminance it delivers at
 /// (`p`, `n`) is at most its bound (unchanged when the bound is 0). This is what keeps an
 /// interpolated light that lands close to a surface from making a firefly the gather never
-/// saw; the energy it removes is measured by `relume compare` (README).
+/// saw; the energy it removes is measured by `relume compare` (docs/measurements/).
 pub fn bound_light(p: Vec3, n: Vec3, light: &PointLight) -> PointLight {
     if light.bound <= 0.0 {
         return *light;

@@ -1,5 +1,5 @@
 //! The sparse method against the brute-force reference on the small fixture: close, and closer
-//! with more sparse points. (The 512² figures of the README come from `relume compare`.)
+//! with more sparse points. (The 512² figures in docs/measurements/ come from `relume compare`.)
 
 use super::{fixture, gpu};
 use relume::image::relative_rmse;

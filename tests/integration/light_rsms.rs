@@ -202,7 +202,7 @@ fn sorted_bits(vals: &[Val]) -> Vec<[u32; 10]> {
     bits
 }
 
-/// The cull of the RSM views (`raster::cull`, README "VALs from every light's RSM") changes the
+/// The cull of the RSM views (`raster::cull`, docs/measurements/many-lights.md "VALs from every light's RSM") changes the
 /// raster's work, not its VALs: with the lights above plus a point light of range 0.4 m near the
 /// floor, the culled frame draws far fewer triangles (the range drops some that the frustum
 /// keeps), the atlas of every view without a range is the same texel for texel, and the VALs

@@ -1,4 +1,4 @@
-//! Direct light from many lights (`gpu::lights::many`, README "Many direct lights") against its
+//! Direct light from many lights (`gpu::lights::many`, docs/measurements/many-lights.md) against its
 //! CPU twins (`twin::many_lights`) on the GPU's own shadow maps and visibility buffer, in both
 //! modes, and against the exact shadow-ray reference.
 //!

@@ -106,7 +106,7 @@ fn closed_loop(name: &str, frames: u32, arc_deg: f64, size: u32, grid_step: u32,
 }
 
 /// `CL_FRAMES`, `CL_ARC`, `CL_TURN`, `CL_SIZE`, `CL_STEP` and, for the accumulated loop, `CL_CELL` (the
-/// accumulator's cell, m) override the measured configuration (README, "Closed loop").
+/// accumulator's cell, m) override the measured configuration (docs/measurements/closed-loop.md).
 fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name).ok().and_then(|s| s.parse().ok()).unwrap_or(default)
 }
@@ -123,7 +123,7 @@ fn closed_loop_full_arc() {
 /// The replay's light is every frame's, accumulated at the default 5 cm cell, though the VALs
 /// here are about 10 cm apart: each pose's VALs of a surface replace the older ones in their
 /// patch (`rgbd::accumulate::PATCH_REACH`). Measured rel RMSE 0.050, replay / RSM 1.04–1.10;
-/// before the patch rule 2.59, the surfaces counted once per pose (README, "Closed loop").
+/// before the patch rule 2.59, the surfaces counted once per pose (docs/measurements/closed-loop.md).
 #[test]
 fn closed_loop_accumulated() {
     let (frames, arc, size, step) = (env("CL_FRAMES", 8), env("CL_ARC", 60.0), env("CL_SIZE", 96), env("CL_STEP", 4));

@@ -115,8 +115,8 @@ pub fn scene_bvh(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>, Bvh) {
 pub enum DifferentialDevice {
     /// The CPU on CPU adapters, the GPU otherwise. On lavapipe the GPU pass runs one
     /// invocation per workgroup (for llvmpipe's loop limit, see [`workgroup`]) and is two
-    /// orders of magnitude slower than the CPU backend (README, "Mixed reality that looks
-    /// right").
+    /// orders of magnitude slower than the CPU backend (docs/measurements/mixed-reality.md, "The
+    /// differential pass on the CPU").
     #[default]
     Auto,
     /// `differential.wgsl`.

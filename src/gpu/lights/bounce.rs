@@ -29,7 +29,7 @@
 //! second-bounce VALs the first bounce's groups instead would shadow a VAL on the ceiling from a
 //! map centred on the lit wall. The paper also renders two sets (IRSMs of the first-bounce VPLs,
 //! then ISMs of all VPLs); the cost is the mode's stages twice, minus the lookup's share for
-//! the fewer bounce points (measured in the README, "Two bounces").
+//! the fewer bounce points (measured in docs/measurements/two-bounces.md).
 //!
 //! **With `disks`** (a scaling mode: no per-VAL visibility to give a point), each point gets
 //! what a sparse point gets: `bounce2_points` also keeps its light sphere's moments (the

@@ -1,4 +1,4 @@
-//! VALs from the RSMs of the scene's `lights` (README "Many direct lights"; docs/design.md §2): one
+//! VALs from the RSMs of the scene's `lights` (docs/measurements/many-lights.md; docs/design.md §2): one
 //! VAL budget (`settings.direct.val_budget`) split among the lights by emitted flux
 //! ([`split_val_budget`]), each light's RSM at the resolution its share allows (a spot: one
 //! perspective view over its cone, as the scene's `light`; a point light: six cube faces), all

@@ -1,4 +1,4 @@
-// The lights' RSMs to VALs (docs/design.md §2, README "Many direct lights"): one invocation per
+// The lights' RSMs to VALs (docs/design.md §2, docs/measurements/many-lights.md): one invocation per
 // texel of every view (the views' texels numbered one after the other, `first_texel`); a texel
 // that sees a surface becomes a Lambertian disc VAL re-emitting the diffuse part of the flux
 // its light sends into the texel's solid angle. Texels with no flux are not appended. Rust

@@ -1,4 +1,4 @@
-//! Direct light from the scene's `lights` (README "Many direct lights", `many_lights.wgsl`):
+//! Direct light from the scene's `lights` (docs/measurements/many-lights.md, `many_lights.wgsl`):
 //! the lights are grouped on the CPU (each alone in the `"per_light"` mode; LightCluster's
 //! minimum-distance groups, paper 003 §3.1, in the `"light_cluster"` mode), every group gets
 //! two paraboloid shadow maps at its centre light (the clusters module's raster, one atlas),
@@ -249,7 +249,7 @@ impl ManyLights {
     /// centre into the hemisphere, and the raster's barycentric slack is allowed for), so the
     /// maps are the same texel for texel. Not culled against the lights' `range`: a lookup's
     /// receiver-plane depth at a grazed receiver reaches past it, so far surfaces still count
-    /// (README "Many direct lights").
+    /// (docs/measurements/many-lights.md).
     pub fn draws(&self, scene: &GpuScene) -> Vec<Vec<std::ops::Range<u32>>> {
         if !self.culling {
             return vec![vec![0..scene.flat.triangle_count()]; self.map_bounds.len()];

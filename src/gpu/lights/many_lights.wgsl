@@ -1,4 +1,4 @@
-// Direct light from the scene's `lights` (README "Many direct lights"), after the clusters
+// Direct light from the scene's `lights` (docs/measurements/many-lights.md), after the clusters
 // module's header, `paraboloid.wgsl`, `raster_depth.wgsl` (binding 2) and `cluster_visibility.wgsl`
 // (binding 1 `clusters`), whose lookups it reuses: the lights come sorted by group, and every group (one light in the
 // `per_light` mode, a LightCluster group of paper 003 otherwise) has two paraboloid maps at its

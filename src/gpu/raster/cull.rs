@@ -1,4 +1,4 @@
-//! Which triangles a raster view can draw (README "VALs from every light's RSM": culling), on the
+//! Which triangles a raster view can draw (docs/measurements/many-lights.md "VALs from every light's RSM": culling), on the
 //! CPU before the draws are recorded. The scene's triangles are taken in their own order in
 //! chunks of [`CHUNK_TRIANGLES`], each with its world-space bounding box, and the chunks in
 //! blocks of [`BLOCK_CHUNKS`] (one box each, for a coarse first test). A view draws the chunks

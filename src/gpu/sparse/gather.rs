@@ -109,7 +109,7 @@ fn add_to_receivers(receivers: u32) -> String {
 }
 
 /// Sparse points per invocation on CPU adapters, measured by the bench's gather variants
-/// (README "Gather variants"); GPUs take one, for parallelism (a frame has only thousands of
+/// (docs/measurements/gather-variants.md); GPUs take one, for parallelism (a frame has only thousands of
 /// points).
 pub const CPU_RECEIVERS: u32 = 8;
 

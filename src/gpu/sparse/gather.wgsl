@@ -100,7 +100,7 @@ fn add_val(s: Sums, r: Receiver, val: Val, val_index: u32, glossy: bool) -> Sums
 // irradiance `E` (the same pairs' `e_j`), far under float rounding; what it saves is the
 // products of a tiny lobe with a small `e_j` that fall below f32's normal range: x86 runs
 // arithmetic on subnormal floats through slow microcode, and on llvmpipe those products
-// made up much of the glossy gather's extra time (README "Gather variants"). Written with
+// made up much of the glossy gather's extra time (docs/measurements/gather-variants.md). Written with
 // selects: llvmpipe runs both sides of a branch anyway (`log2` of `cos_r <= 0`, whatever it
 // gives, is selected away).
 const GATHER_LOBE_CUTOFF_LOG2: f32 = -64.0;

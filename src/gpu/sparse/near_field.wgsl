@@ -1,4 +1,4 @@
-// The sparse method's near field (README "Sparse method on real scenes"): a VAL closer to a
+// The sparse method's near field (docs/measurements/sparse-real-scenes.md): a VAL closer to a
 // receiver than NEAR_FIELD_RADIUS lights it per pixel, with the pixel's own position, normal
 // and material, instead of through the sparse points (the gather leaves that share out:
 // `gather.wgsl`). The pixel finds those VALs in a uniform grid of cells NEAR_FIELD_CELL = 2 x

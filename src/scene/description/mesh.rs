@@ -26,7 +26,7 @@ pub struct MeshDescription {
     pub obj: String,
     /// glTF 2.0 file (`.gltf` or `.glb`) instead of `obj`, relative to the scene file's
     /// directory: every mesh of its default scene, placed by its node transforms, becomes this
-    /// one mesh (README "glTF"); `skip_groups` names nodes and `materials` glTF materials.
+    /// one mesh (docs/scene-format.md "glTF"); `skip_groups` names nodes and `materials` glTF materials.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gltf: Option<String>,
     /// The OBJ file's text inline, instead of reading `obj`. It may not load MTL files

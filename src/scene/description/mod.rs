@@ -64,7 +64,7 @@ pub struct SceneDescription {
     /// provides them instead (a scene with neither renders no indirect light).
     #[serde(default)]
     pub light: Option<LightDescription>,
-    /// Direct lights beside `light` (README "Many direct lights"): spot lights (`{"type":
+    /// Direct lights beside `light` (docs/measurements/many-lights.md): spot lights (`{"type":
     /// "spot"}` and the fields of `light`) and point lights (`{"type": "point"}`,
     /// [`PointLightDescription`]). Each adds direct light (its shadows as
     /// `settings.tuning.direct.shadows` says) and VALs from its own RSM, the VAL budget
@@ -118,7 +118,7 @@ impl SceneDescription {
     /// bounds each part, in the order the frame appends them: the `light`'s RSM
     /// (`rsm_resolution`², only with a `light`), the RSMs of `lights` (their shared
     /// `direct.val_budget`, only with `lights`: `light` is not part of that budget, since its
-    /// RSM is also its direct shadow map, README "VALs from every light's RSM"), and the second
+    /// RSM is also its direct shadow map, docs/measurements/many-lights.md "VALs from every light's RSM"), and the second
     /// bounce's (`second_bounce.vals`, only with `bounces: 2`). VALs uploaded or from an RGB-D
     /// frame come on top.
     pub fn frame_vals(&self) -> Vec<(&'static str, u64)> {

@@ -27,7 +27,7 @@ impl Default for Pbr {
     }
 }
 
-/// The normalised Phong material standing for a metallic-roughness one (README "glTF"):
+/// The normalised Phong material standing for a metallic-roughness one (docs/scene-format.md "glTF"):
 ///
 /// - specular albedo `rho_s = mix(F0, baseColor, metallic)`, with the dielectric reflectance
 ///   at normal incidence `F0 = min(((ior - 1) / (ior + 1))² specularColor, 1) specular`

@@ -13,7 +13,7 @@ pub const LUMENS_PER_WATT: f32 = 683.0;
 ///
 /// ```json
 /// {"gltf": "cornell_box.glb", "sparse_points": 512, "width": 64, "height": 64,
-///  "skip_groups": ["light"], "settings": {"rsm_resolution": 32}}
+///  "skip_groups": ["light"], "settings": {"tuning": {"rsm_resolution": 32}}}
 /// ```
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]

@@ -12,7 +12,7 @@ use super::visibility::MAX_CLUSTER_ATLAS_SIDE;
 pub const POINT_VIEWS: u32 = 6;
 pub const SPOT_VIEWS: u32 = 1;
 
-/// Shadows of the direct light from the scene's `lights` (README "Many direct lights").
+/// Shadows of the direct light from the scene's `lights` (docs/measurements/many-lights.md).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DirectSettings {

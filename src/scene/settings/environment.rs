@@ -31,8 +31,8 @@ pub enum EnvironmentDistribution {
     Uniform,
     /// The CIE standard overcast sky about the frame's up: `(1 + 2 cos theta) / 3` of the
     /// zenith's radiance above the horizon, a third of it below (the default: nearer the
-    /// truth than `uniform` when the light comes from above, README "Mixed reality that
-    /// looks right").
+    /// truth than `uniform` when the light comes from above, docs/measurements/mixed-reality.md
+    /// "Differential rendering and the environment").
     #[default]
     Overcast,
 }

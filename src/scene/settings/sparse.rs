@@ -140,7 +140,7 @@ pub enum GlossyInterpolation {
     /// same weights and times the pixel's specular albedo and lobe normalisation; no glossy
     /// point light. A sharp lobe evaluated for one merged light falls off within a few degrees
     /// of where the averaged position puts it; the radiance itself varies as smoothly as the
-    /// reflected scene does. Closer to the brute force on every glossy fixture (README).
+    /// reflected scene does. Closer to the brute force on every glossy fixture (docs/measurements/sparse-real-scenes.md).
     #[default]
     Radiance,
 }

@@ -59,7 +59,7 @@ impl Default for ClusterSettings {
             method: ClusterMethod::Kmeans,
             count: 64,
             shadow_map_resolution: 128,
-            // Measured closer to exact than PCSS on every fixture (README "Clustered visibility").
+            // Measured closer to exact than PCSS on every fixture (docs/measurements/clustered-visibility.md).
             soft: SoftShadows::Hard,
             normal_weight: 0.43,
             iterations: 4,
@@ -272,7 +272,7 @@ pub enum OcclusionSetting {
 pub enum OcclusionRule {
     /// `clamp(sum o_i, 0, 1)`: the paper's; double-counts overlapping occluders.
     Sum,
-    /// `1 - prod(1 - o_i)`: closer to exact visibility on both measured fixtures (README).
+    /// `1 - prod(1 - o_i)`: closer to exact visibility on both measured fixtures (docs/measurements/disc-occlusion.md).
     #[default]
     Product,
 }
