@@ -13,6 +13,7 @@ pub mod compare;
 mod config;
 pub mod equal_error;
 pub mod fma;
+pub mod levels;
 pub mod plot;
 mod results;
 mod run;

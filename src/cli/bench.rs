@@ -1,7 +1,7 @@
 //! `relume bench`: the sweep of quality settings, the paper's Table 1, the FMA and temporal
 //! measurements.
 
-use super::{ExactArgs, Reference};
+use super::{ExactArgs, Reference, Size};
 use relume::gpu::Gpu;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -32,8 +32,16 @@ pub struct Args {
     /// With --reference exact: also measure the speed at equal error, the time relume's own
     /// converging estimator (the CPU exact reference with N importance-sampled VALs per pixel)
     /// needs for each configuration's error; the N to measure (default 2,4,...,256).
-    #[arg(long, value_name = "N1,N2,...", num_args = 0..=1, default_missing_value = "", requires = "reference")]
+    #[arg(long, value_name = "N1,N2,...", num_args = 0..=1, default_missing_value = "")]
     equal_error: Option<String>,
+    /// Every quality level of the scene (fast, balanced, accurate, reference) against one exact
+    /// reference: levels.json and levels.md in --out (with --equal-error, each level's
+    /// estimator time at equal error).
+    #[arg(long, conflicts_with_all = ["sweep", "grid", "quick", "table1", "reference"])]
+    levels: bool,
+    /// With --levels: the image size (default: the scene camera's).
+    #[command(flatten)]
+    size: Size,
     /// Skip the plots (results.json and results.csv only).
     #[arg(long)]
     no_plots: bool,
@@ -58,7 +66,15 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    anyhow::ensure!(args.val_stride.is_none() || args.reference.is_some(), "--val-stride: only with --reference exact");
+    anyhow::ensure!(
+        args.val_stride.is_none() || args.reference.is_some() || args.levels,
+        "--val-stride: only with --reference exact or --levels"
+    );
+    anyhow::ensure!(
+        args.equal_error.is_none() || args.reference.is_some() || args.levels,
+        "--equal-error: only with --reference exact or --levels"
+    );
+    anyhow::ensure!(args.levels || args.size.resolve_optional()?.is_none(), "--width/--height: only with --levels");
     let exact = match args.reference {
         Some(Reference::Exact) => Some(args.exact.options(args.val_stride.unwrap_or(1))?),
         None => None,
@@ -72,6 +88,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .collect::<anyhow::Result<Vec<u32>>>()?,
         ),
     };
+    if args.levels {
+        return levels(&args, equal_error.as_deref());
+    }
     let options = relume::bench::BenchOptions {
         scene: args.scene,
         sweep: relume::bench::Sweep::parse(&args.sweep)?,
@@ -140,5 +159,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         results.timing.as_str(),
         options.out.join("results.json").display()
     );
+    Ok(())
+}
+
+/// `relume bench --levels`: every quality level against one exact reference.
+fn levels(args: &Args, equal_error: Option<&[u32]>) -> anyhow::Result<()> {
+    let exact = args.exact.options(args.val_stride.unwrap_or(1))?;
+    let size = args.size.resolve_optional()?;
+    let gpu = Gpu::new()?;
+    let report = relume::bench::levels::levels(&gpu, &args.scene, size, &exact, equal_error)?;
+    std::fs::create_dir_all(&args.out)?;
+    std::fs::write(args.out.join("levels.json"), serde_json::to_string_pretty(&report)?)?;
+    let table = relume::bench::levels::markdown(&report);
+    std::fs::write(args.out.join("levels.md"), &table)?;
+    eprint!("{table}");
+    eprintln!("wrote {}", args.out.join("levels.json").display());
     Ok(())
 }
