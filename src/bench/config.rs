@@ -43,6 +43,32 @@ pub struct Config {
     pub clusters: ClusterOverrides,
 }
 
+impl Config {
+    /// A configuration of these settings and size that overrides nothing else of the scene's.
+    pub const fn new(rsm_resolution: u32, occlusion: Occlusion, glossy: bool, width: u32, height: u32) -> Self {
+        Config {
+            sparse_points_per_mesh: None,
+            neighbours: None,
+            near_field: None,
+            glossy_interpolation: None,
+            adaptive_percent: None,
+            kernel: None,
+            bound: None,
+            subdivision: None,
+            rsm_resolution,
+            occlusion,
+            glossy,
+            width,
+            height,
+            ism_count: None,
+            ism_resolution: None,
+            ism_points: None,
+            ism_pull_push_levels: None,
+            clusters: ClusterOverrides::NONE,
+        }
+    }
+}
+
 /// Overrides of `settings.clusters` (`None`: the scene's).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct ClusterOverrides {

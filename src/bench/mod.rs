@@ -62,26 +62,7 @@ mod tests {
         a.iter().map(|s| s.to_string()).collect()
     }
 
-    const BASE: Config = Config {
-        sparse_points_per_mesh: None,
-        neighbours: None,
-        near_field: None,
-        glossy_interpolation: None,
-        adaptive_percent: None,
-        kernel: None,
-        bound: None,
-        subdivision: None,
-        rsm_resolution: 64,
-        occlusion: Occlusion::Off,
-        glossy: true,
-        width: 100,
-        height: 50,
-        ism_count: None,
-        ism_resolution: None,
-        ism_points: None,
-        ism_pull_push_levels: None,
-        clusters: ClusterOverrides::NONE,
-    };
+    const BASE: Config = Config::new(64, Occlusion::Off, true, 100, 50);
 
     #[test]
     fn sweep_parses_every_axis() {

@@ -13,7 +13,7 @@ use crate::scene::{
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use super::config::{ClusterOverrides, Config, describe};
+use super::config::{Config, describe};
 use super::plot;
 use super::results::{BenchResults, BruteForceIsmResult, ConfigResult, GPU_MEMORY_NOTE, write_file, write_results};
 use super::sweep::Sweep;
@@ -54,26 +54,13 @@ impl BenchOptions {
     /// The base configuration (the scene's settings; with `quick`, 32 sparse points per mesh,
     /// R = 8 and 32x32 unless the sweep gives a resolution) and the configurations.
     pub fn configs(&self, description: &SceneDescription, scene: &Scene) -> Vec<Config> {
-        let mut base = Config {
-            sparse_points_per_mesh: None,
-            neighbours: None,
-            near_field: None,
-            glossy_interpolation: None,
-            adaptive_percent: None,
-            kernel: None,
-            bound: None,
-            subdivision: None,
-            rsm_resolution: scene.settings.rsm_resolution,
-            occlusion: scene.settings.occlusion,
-            glossy: scene.settings.glossy,
-            width: description.camera.width,
-            height: description.camera.height,
-            ism_count: None,
-            ism_resolution: None,
-            ism_points: None,
-            ism_pull_push_levels: None,
-            clusters: ClusterOverrides::NONE,
-        };
+        let mut base = Config::new(
+            scene.settings.rsm_resolution,
+            scene.settings.occlusion,
+            scene.settings.glossy,
+            description.camera.width,
+            description.camera.height,
+        );
         let mut sweep = self.sweep.clone();
         if self.quick {
             base.sparse_points_per_mesh = Some(QUICK_SPARSE[0]);

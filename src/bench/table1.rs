@@ -66,23 +66,7 @@ pub fn jobs(description: &SceneDescription, scene: &Scene, quick: bool) -> Vec<J
                     for &(_, glossy, occlusion) in &MODES {
                         configs.push(Config {
                             sparse_points_per_mesh: Some((total / meshes).max(1)),
-                            neighbours: None,
-                            near_field: None,
-                            glossy_interpolation: None,
-                            adaptive_percent: None,
-                            kernel: None,
-                            bound: None,
-                            subdivision: None,
-                            rsm_resolution,
-                            occlusion,
-                            glossy,
-                            width,
-                            height,
-                            ism_count: None,
-                            ism_resolution: None,
-                            ism_points: None,
-                            ism_pull_push_levels: None,
-                            clusters: crate::bench::ClusterOverrides::NONE,
+                            ..Config::new(rsm_resolution, occlusion, glossy, width, height)
                         });
                     }
                 }
@@ -168,26 +152,8 @@ mod tests {
 
     #[test]
     fn paper_fps_finds_table_1_cells() {
-        let config = Config {
-            sparse_points_per_mesh: Some(341),
-            neighbours: None,
-            near_field: None,
-            glossy_interpolation: None,
-            adaptive_percent: None,
-            kernel: None,
-            bound: None,
-            subdivision: None,
-            rsm_resolution: 256,
-            occlusion: Occlusion::Disks,
-            glossy: true,
-            width: 1920,
-            height: 1080,
-            ism_count: None,
-            ism_resolution: None,
-            ism_points: None,
-            ism_pull_push_levels: None,
-            clusters: crate::bench::ClusterOverrides::NONE,
-        };
+        let config =
+            Config { sparse_points_per_mesh: Some(341), ..Config::new(256, Occlusion::Disks, true, 1920, 1080) };
         assert_eq!(paper_fps("table1_730k", &config, 4092), Some(23));
         assert_eq!(
             paper_fps("table1_200k", &Config { glossy: false, occlusion: Occlusion::Off, ..config }, 16_384),

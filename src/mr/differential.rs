@@ -17,7 +17,7 @@
 //!    explains (lit by light no VAL stands for) from darkening more than a white surface would.
 //!    Receiver values are interpolated bilinearly to pixels.
 
-use crate::gpu::differential::{DifferentialDevice, Receiver, ReceiverLight};
+use crate::gpu::differential::{Receiver, ReceiverLight};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use crate::twin::Val;
@@ -29,16 +29,6 @@ use std::f32::consts::PI;
 pub const MAX_REAL_ALBEDO: f32 = 1.0;
 
 pub use crate::scene::settings::MrSettings;
-
-impl From<crate::scene::settings::DifferentialDevice> for DifferentialDevice {
-    fn from(device: crate::scene::settings::DifferentialDevice) -> Self {
-        match device {
-            crate::scene::settings::DifferentialDevice::Auto => DifferentialDevice::Auto,
-            crate::scene::settings::DifferentialDevice::Gpu => DifferentialDevice::Gpu,
-            crate::scene::settings::DifferentialDevice::Cpu => DifferentialDevice::Cpu,
-        }
-    }
-}
 
 /// Per-channel real albedo from a pixel's radiance `camera_radiance` (W/(m² sr)) and the
 /// irradiance its surface is estimated to receive (W/m²).

@@ -271,7 +271,7 @@ impl MrPipeline {
         let differential = match self.mr.differential {
             false => None,
             true => Some(DifferentialState {
-                pass: Differential::on(gpu, &renderer.scene, self.mr.device.into())?,
+                pass: Differential::on(gpu, &renderer.scene, self.mr.device)?,
                 emitters: differential::emitters_placed(scene, model_to_world),
                 bounds: differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position))),
             }),

@@ -109,24 +109,8 @@ pub fn scene_bvh(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>, Bvh) {
     (positions, triangles, bvh)
 }
 
-/// Where the differential pass runs (`settings.mr.device`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum DifferentialDevice {
-    /// The CPU on CPU adapters, the GPU otherwise. On lavapipe the GPU pass runs one
-    /// invocation per workgroup (for llvmpipe's loop limit, see [`workgroup`]) and is two
-    /// orders of magnitude slower than the CPU backend (docs/measurements/mixed-reality.md, "The
-    /// differential pass on the CPU").
-    #[default]
-    Auto,
-    /// `differential.wgsl`.
-    Gpu,
-    /// The twin, [`twin::receiver_light`], over rayon's threads: the GPU traversal's twin
-    /// (`Bvh::occluded`), so every shadow ray is decided as the GPU pass decides it. (obvhs's
-    /// CWBVH traversal, the CPU exact reference's, decides rays that graze a triangle's edge or
-    /// a node's box otherwise: on the plate-and-box test one receiver in 1,089 differed.)
-    Cpu,
-}
+/// Where the differential pass runs (`settings.mr.device`), a setting of the scene.
+pub use crate::scene::settings::DifferentialDevice;
 
 /// The differential pass for one scene placement, on the GPU or the CPU.
 pub struct Differential {
