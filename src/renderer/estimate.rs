@@ -1,6 +1,9 @@
 //! The error estimate reported with every frame: how far the frame's indirect light is from the
-//! exact reference (every VAL, shadow rays through the scene's BVH), estimated at a few hundred
-//! of its pixels instead of all of them.
+//! exact reference (every VAL, shadow rays through the scene's BVH), estimated at about a
+//! thousand of its pixels instead of all of them. The VALs are the frame's own: with two
+//! bounces, the second bounce's VALs as the frame drew them, so the estimate leaves out the
+//! error of the second bounce's own points (the exact reference of `relume compare` lights
+//! them through shadow rays).
 //!
 //! At `pixels` covered pixels chosen by stratified sampling over the frame's covered pixels
 //! (one uniform pick in each of `pixels` equal runs of them, in row-major order), the CPU
@@ -111,16 +114,15 @@ impl Estimator {
         if picked.len() < 4 {
             return Ok(None);
         }
-        let mut vals = renderer.read_vals(gpu)?;
+        // The frame's own VALs: with two bounces they include the second bounce's, drawn from
+        // the bounce points the frame lit, so its estimate measures what the frame made of them.
+        let vals = renderer.read_vals(gpu)?;
         let flat = &renderer.scene.flat;
         let placement = renderer.placement().to_vec();
         if self.bvh.as_ref().is_none_or(|(p, _)| *p != placement) {
             self.bvh = Some((placement, build_bvh(flat)));
         }
         let bvh = &self.bvh.as_ref().expect("built above").1;
-        if let Some(bounce) = renderer.second_bounce() {
-            vals.extend(second_bounce_exact(flat, bounce, &vals, bvh));
-        }
         let eye = renderer.view().eye();
         let receivers: Vec<Option<Receiver>> = picked
             .iter()
