@@ -32,6 +32,8 @@ page=docs/measurements/levels.md
     echo "GPU figures come from \`scripts/device-bench.sh\`."
     echo
     for n in $scenes; do
+        echo "## \`fixtures/scenes/$n.json\`"
+        echo
         cat "$out/$n/levels.md"
         echo
     done
