@@ -184,8 +184,11 @@ async fn renders_whose_clients_have_gone_leave_the_queue() {
     let took = started.elapsed();
     assert!(emptied, "the abandoned renders still count in the queue");
     assert!(took < Duration::from_millis(2 * RENDER_MS + 1000), "served after {took:?}");
-    // Only the render on the GPU when its client left and this one ran.
-    assert_eq!(frames_rendered(&server).await, 2);
+    // The two abandoned renders that waited did not run: only this one, and the render that
+    // was on the GPU when its client left, if the GPU thread had started it by then (on a
+    // loaded machine it can still be waiting, and is then dropped too).
+    let rendered = frames_rendered(&server).await;
+    assert!((1..=2).contains(&rendered), "{rendered} renders ran");
 
     // A stream frame whose stream closes while it waits behind a render leaves the queue
     // too (at once, not when the GPU thread comes to it).
