@@ -54,7 +54,7 @@ pub const MAX_COORDINATE_M: f64 = 1.0e7;
 /// within 1 % down to a 0.35 mm box (scale 1e-4; `tests/integration/scale.rs`).
 pub const MIN_SCENE_EXTENT_M: f64 = 1.0e-3;
 /// Largest diagonal of a scene's extent (as [`MIN_SCENE_EXTENT_M`]), m: 1,000 km. The 1/s² law
-/// holds within 0.3 % up to a 5,200 km box (`cornell_bunny_small.json` scaled by 1.5e6); from
+/// holds within 1 % up to a 5,200 km box (`cornell_bunny_small.json` scaled by 1.5e6); from
 /// 5,900 km (scale 1.7e6) its indirect image is 8-11 % too bright and its direct 1 % too dark.
 pub const MAX_SCENE_EXTENT_M: f64 = 1.0e6;
 /// Smallest and largest factor of a mesh's (and the anchor's) `transform.scale`, each axis:
