@@ -83,7 +83,19 @@ impl Scene {
             meshes.push(mesh);
         }
         let user_to_world: Vec<DMat4> = description.meshes.iter().map(|m| anchor * m.transform.to_matrix()).collect();
-        let origin = floating_origin(&meshes, &user_to_world, &description.camera);
+        let boxes: Vec<_> = meshes.iter().zip(&user_to_world).map(|(m, t)| world_bounds(m, t)).collect();
+        // A mesh that alone spans more than the renderer resolves (or is the whole scene) is
+        // named; otherwise the meshes together.
+        for (index, &(lo, hi)) in boxes.iter().enumerate().filter_map(|(i, b)| b.as_ref().map(|b| (i, b))) {
+            if meshes.len() == 1 || lo.distance(hi) > super::description::MAX_SCENE_EXTENT_M {
+                super::validate::scene_extent(lo.distance(hi), &format!("meshes[{index}]"))?;
+            }
+        }
+        let bounds = boxes.into_iter().flatten().reduce(|(lo, hi), (l, h)| (lo.min(l), hi.max(h)));
+        if let Some((lo, hi)) = bounds {
+            super::validate::scene_extent(lo.distance(hi), "meshes")?;
+        }
+        let origin = floating_origin(bounds, &description.camera);
         for (mesh, transform) in meshes.iter_mut().zip(&user_to_world) {
             mesh.model_to_world = local_matrix(origin, *transform);
         }
@@ -209,20 +221,24 @@ impl TriangleBudget {
     }
 }
 
-/// The scene's floating origin ([`Scene::origin`]): the centre of the bounding box of every
-/// vertex in user world coordinates, computed in f64. The meshes are what the precision-critical
-/// sums (RSM depths, the gather's moments, occluder discs) run over, so their centre keeps every
-/// such coordinate as small as the scene; the camera and the light usually sit near or inside it.
-/// A scene without vertices uses the camera's position.
-fn floating_origin(meshes: &[Mesh], user_to_world: &[DMat4], camera: &CameraDescription) -> DVec3 {
+/// The bounding box (min, max corner) of `mesh`'s vertices placed by `user_to_world` (user
+/// world coordinates), computed in f64; `None` for a mesh without vertices.
+fn world_bounds(mesh: &Mesh, user_to_world: &DMat4) -> Option<(DVec3, DVec3)> {
     let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-    for (mesh, transform) in meshes.iter().zip(user_to_world) {
-        for p in &mesh.positions {
-            let world = transform.transform_point3(p.as_dvec3());
-            (lo, hi) = (lo.min(world), hi.max(world));
-        }
+    for p in &mesh.positions {
+        let world = user_to_world.transform_point3(p.as_dvec3());
+        (lo, hi) = (lo.min(world), hi.max(world));
     }
-    if lo.cmple(hi).all() { (lo + hi) * 0.5 } else { DVec3::from_array(camera.position) }
+    lo.cmple(hi).all().then_some((lo, hi))
+}
+
+/// The scene's floating origin ([`Scene::origin`]): the centre of `bounds`, the bounding box of
+/// every mesh's vertices in user world coordinates ([`world_bounds`]). The meshes are what the
+/// precision-critical sums (RSM depths, the gather's moments, occluder discs) run over, so their
+/// centre keeps every such coordinate as small as the scene; the camera and the light usually
+/// sit near or inside it. A scene without vertices uses the camera's position.
+fn floating_origin(bounds: Option<(DVec3, DVec3)>, camera: &CameraDescription) -> DVec3 {
+    bounds.map_or_else(|| DVec3::from_array(camera.position), |(lo, hi)| (lo + hi) * 0.5)
 }
 
 /// `pose` (user coordinates, f64) relative to `origin`: the translation subtracted in f64, and

@@ -56,9 +56,10 @@ use glam::{DMat4, DVec3, Mat4, Vec3};
 
 pub use self::gltf::{GltfSceneDescription, LUMENS_PER_WATT, MAX_GLTF_BYTES, phong_from_pbr};
 pub use description::{
-    CameraDescription, LightDescription, LightEntry, MAX_COORDINATE_M, MAX_SPARSE_POINTS, MaterialDescription,
-    MeshDescription, PointLightDescription, RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription,
-    SettingsDescription, TransformDescription, frame_val_parts, parse_json,
+    CameraDescription, LightDescription, LightEntry, MAX_COORDINATE_M, MAX_SCENE_EXTENT_M, MAX_SPARSE_POINTS,
+    MESH_SCALE_RANGE, MIN_SCENE_EXTENT_M, MaterialDescription, MeshDescription, PointLightDescription,
+    RSM_RESOLUTION_RANGE, ScaleDescription, SceneDescription, SettingsDescription, TransformDescription,
+    frame_val_parts, parse_json,
 };
 pub use error::SceneError;
 pub(crate) use load::{Geometry, TriangleBudget};

@@ -28,6 +28,7 @@ mod replay;
 mod rgbd;
 mod router;
 mod rsm;
+mod scale;
 mod service;
 mod stream_mr;
 mod synthetic;

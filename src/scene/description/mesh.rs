@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::MAX_SPARSE_POINTS;
 use super::json::key_path;
-use crate::scene::validate::{coordinates, finite3, in_closed, int_in, positive, unit_interval3};
+use crate::scene::validate::{coordinates, finite3, in_closed, int_in, scale_factor, unit_interval3};
 use crate::scene::{Material, SceneError};
 
 /// Largest amount by which `diffuse + specular` may exceed 1 before it counts as an error
@@ -60,7 +60,7 @@ pub struct TransformDescription {
     /// Euler angles about X, then Y, then Z (glam `EulerRot::XYZ`), degrees.
     #[serde(default)]
     pub rotation_deg: [f32; 3],
-    /// Uniform or per-axis scale, each > 0.
+    /// Uniform or per-axis scale, each in [`super::MESH_SCALE_RANGE`].
     #[serde(default)]
     pub scale: ScaleDescription,
 }
@@ -226,17 +226,17 @@ impl TransformDescription {
         )
     }
 
-    /// Checks that every number is finite and every scale factor positive; `field` is this
-    /// transform's path.
+    /// Checks that every number is finite, the translation within [`MAX_COORDINATE_M`] and every
+    /// scale factor within [`super::MESH_SCALE_RANGE`]; `field` is this transform's path.
     pub fn validate(&self, field: &str) -> Result<(), SceneError> {
         coordinates(self.translation, &format!("{field}.translation"))?;
         finite3(self.rotation_deg, &format!("{field}.rotation_deg"))?;
         let scale_field = format!("{field}.scale");
         match self.scale {
-            ScaleDescription::Uniform(s) => positive(s, &scale_field),
+            ScaleDescription::Uniform(s) => scale_factor(s, &scale_field),
             ScaleDescription::PerAxis(s) => {
                 for (i, &value) in s.iter().enumerate() {
-                    positive(value, &format!("{scale_field}[{i}]"))?;
+                    scale_factor(value, &format!("{scale_field}[{i}]"))?;
                 }
                 Ok(())
             }

@@ -45,6 +45,24 @@ pub const MAX_SPARSE_POINTS: u32 = 65_536;
 /// camera's position and target), m: 10,000 km, the Earth's scale. Positions are held in f64
 /// and made relative to the scene's origin before they become f32 (see [`crate::scene::Scene::origin`]).
 pub const MAX_COORDINATE_M: f64 = 1.0e7;
+/// Smallest diagonal of a scene's extent, m: the bounding box of its meshes' vertices in world
+/// space (each mesh's transform and the anchor applied), 1 mm. Below it the renderer's absolute
+/// floors are no longer negligible: the spot light's inverse-square law is clamped at
+/// `twin::MIN_LIGHT_DISTANCE` (0.1 mm), which turned `cornell_bunny_small.json` scaled by
+/// 1e-5 (a 35 µm box) black in its direct light, and the camera's far plane at 1 mm
+/// (`twin::flat::depth_range_around`) clipped the whole image at 1e-8. The 1/s² law holds
+/// within 1 % down to a 0.35 mm box (scale 1e-4; `tests/integration/scale.rs`).
+pub const MIN_SCENE_EXTENT_M: f64 = 1.0e-3;
+/// Largest diagonal of a scene's extent (as [`MIN_SCENE_EXTENT_M`]), m: 1,000 km. The 1/s² law
+/// holds within 1 % up to a 5,200 km box (`cornell_bunny_small.json` scaled by 1.5e6); from
+/// 5,900 km (scale 1.7e6) its indirect image is 8-11 % too bright and its direct 1 % too dark.
+pub const MAX_SCENE_EXTENT_M: f64 = 1.0e6;
+/// Smallest and largest factor of a mesh's (and the anchor's) `transform.scale`, each axis:
+/// 1e-7 to 1e7, a metre of model made 0.1 µm to [`MAX_COORDINATE_M`]. Wide enough that the
+/// extent's bounds ([`MIN_SCENE_EXTENT_M`], [`MAX_SCENE_EXTENT_M`]), not this, limit a scene
+/// scaled as a whole; narrow enough to name the field of a unit mistake such as 1e30, which
+/// loaded and rendered black before.
+pub const MESH_SCALE_RANGE: (f32, f32) = (1.0e-7, 1.0e7);
 /// Largest image side, pixels.
 pub const MAX_IMAGE_SIDE: u32 = 8192;
 /// Smallest and largest RSM side, texels.
