@@ -247,3 +247,43 @@ fn bench_measures_brute_force_ism_beside_the_ism_configurations() {
     assert!(lines[1..].iter().all(|l| l.split(',').count() == columns), "{csv}");
     assert!(dir.join("error_vs_time_exact.png").exists());
 }
+
+/// `relume bench --levels`: every level against one exact reference, and the frame's error
+/// estimate within a factor 1.5 of the error measured against that reference, on three
+/// fixtures at 64² (more pixels than the estimate looks at, so it does sample).
+#[test]
+fn levels_are_measured_and_the_estimate_is_within_1_5x_of_the_error() {
+    for name in ["cornell_bunny_small", "cornell_gltf_small", "cornell_bunny_two_bounces"] {
+        let dir = scratch(&format!("bench_levels_{name}"));
+        let scene = fixture(&format!("scenes/{name}.json"));
+        let (w, h) = if name == "cornell_bunny_two_bounces" { ("48", "48") } else { ("64", "64") };
+        let o = relume(&[
+            "bench",
+            "--levels",
+            scene.to_str().unwrap(),
+            "--width",
+            w,
+            "--height",
+            h,
+            "--out",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("levels.json")).unwrap()).unwrap();
+        let levels = report["levels"].as_array().unwrap();
+        let names: Vec<&str> = levels.iter().map(|l| l["level"].as_str().unwrap()).collect();
+        assert_eq!(names, ["fast", "balanced", "accurate", "reference"], "{name}");
+        for l in &levels[..3] {
+            let measured = finite_non_negative(l, "rel_rmse_vs_exact");
+            let estimate = &l["error_estimate"];
+            let estimated = estimate["rel_rmse"].as_f64().unwrap();
+            assert!(estimate["pixels"].as_u64().unwrap() == 1024, "{name}: the estimate samples: {estimate}");
+            let ratio = estimated / measured;
+            assert!((1.0 / 1.5..=1.5).contains(&ratio), "{name} {}: estimate {estimated} vs {measured}", l["level"]);
+            assert!(l["resolved"]["choices"].as_array().is_some_and(|c| !c.is_empty()), "{name}: {l}");
+        }
+        assert_eq!(levels[3]["resolved"]["method"].as_str(), Some("exact"));
+        assert!(std::fs::read_to_string(dir.join("levels.md")).unwrap().contains("| balanced | sparse |"));
+    }
+}
