@@ -202,7 +202,8 @@ async fn renders_whose_clients_have_gone_leave_the_queue() {
     drop(stream);
     assert!(queue_reaches(&server, 0, Duration::from_millis(500)).await, "the closed stream's frame still waits");
     assert_eq!(holding.await.expect("the render task"), StatusCode::OK);
-    assert_eq!(frames_rendered(&server).await, 3, "the frame of the closed stream was rendered");
+    // The holding render ran; the closed stream's frame did not.
+    assert_eq!(frames_rendered(&server).await, rendered + 1, "the frame of the closed stream was rendered");
     server.stop().await;
 }
 
