@@ -520,14 +520,12 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
         Some(r) => {
             let occlusion = match r.occlusion {
                 None => None,
-                Some(value) => Some(match proto::Occlusion::try_from(value) {
-                    Ok(proto::Occlusion::Unspecified) => None,
-                    Ok(proto::Occlusion::Off) => Some(Occlusion::Off),
-                    Ok(proto::Occlusion::Disks) => Some(Occlusion::Disks),
+                Some(value) => match proto::Occlusion::try_from(value) {
+                    Ok(mode) => Some(occlusion_from_proto(mode)),
                     Err(_) => {
                         return Err(WireError::invalid("control.render.occlusion", format!("unknown value {value}")));
                     }
-                }),
+                },
             };
             Some(RenderSettingsPatch { occlusion, glossy: r.glossy })
         }
@@ -676,6 +674,28 @@ pub fn encode_rgbd_frame(frame_id: u64, frame: &RgbdFrame) -> Vec<u8> {
         }),
     });
     proto::Envelope { version: PROTOCOL_VERSION, body: Some(body) }.encode_to_vec()
+}
+
+/// A stream's visibility mode (`None`: back to the scene's setting).
+pub fn occlusion_from_proto(mode: proto::Occlusion) -> Option<Occlusion> {
+    match mode {
+        proto::Occlusion::Unspecified => None,
+        proto::Occlusion::Off => Some(Occlusion::Off),
+        proto::Occlusion::Disks => Some(Occlusion::Disks),
+        proto::Occlusion::Clusters => Some(Occlusion::Clusters),
+        proto::Occlusion::Ism => Some(Occlusion::Ism),
+    }
+}
+
+/// The protobuf value of every visibility mode: exhaustive, so a mode added to the scene's
+/// settings without one in `relume.proto` does not compile.
+pub fn occlusion_to_proto(mode: Occlusion) -> proto::Occlusion {
+    match mode {
+        Occlusion::Off => proto::Occlusion::Off,
+        Occlusion::Disks => proto::Occlusion::Disks,
+        Occlusion::Clusters => proto::Occlusion::Clusters,
+        Occlusion::Ism => proto::Occlusion::Ism,
+    }
 }
 
 #[cfg(test)]

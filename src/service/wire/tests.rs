@@ -407,3 +407,30 @@ fn server_messages_encode_as_version_1_envelopes() {
     let Some(Body::SettingsAck(a)) = envelope.body else { panic!("not an ack") };
     assert_eq!((a.request_id, a.applied), (8, vec!["camera".to_owned()]));
 }
+
+/// The protobuf schema, the scene file's JSON names and the OpenAPI document list the same
+/// visibility modes: every protobuf value but `UNSPECIFIED` is a mode, and back; its name is the
+/// JSON name; the OpenAPI document's `Occlusion` schema lists exactly those names.
+#[test]
+fn visibility_modes_agree_between_proto_json_and_openapi() {
+    let mut json_names = Vec::new();
+    for value in 1..64 {
+        let Ok(mode) = proto::Occlusion::try_from(value) else { continue };
+        let scene = occlusion_from_proto(mode).expect("a mode");
+        assert_eq!(occlusion_to_proto(scene), mode);
+        let json = serde_json::to_value(scene).unwrap();
+        let name = json.as_str().unwrap().to_owned();
+        assert_eq!(mode.as_str_name(), format!("OCCLUSION_{}", name.to_uppercase()));
+        json_names.push(name);
+    }
+    assert_eq!(json_names, ["off", "disks", "clusters", "ism"]);
+    let openapi: serde_json::Value =
+        serde_json::from_str(include_str!("../../../proto/openapi.json")).expect("the OpenAPI document");
+    let listed: Vec<&str> = openapi["components"]["schemas"]["Occlusion"]["enum"]
+        .as_array()
+        .expect("an Occlusion enum in the OpenAPI document")
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(listed, json_names);
+}
