@@ -213,7 +213,6 @@ pub fn exact_reference_seeded(
     options: &ExactOptions,
     seed: u64,
 ) -> Result<ExactReference, GpuError> {
-    use crate::twin::bvh::TraceBvh;
     use crate::twin::exact_cpu::{self as cpu, CameraRays, PixelSampling, Receiver, Receivers, ValSampling};
     let device = options.device_on(gpu);
     if device == ReferenceDevice::Gpu {
@@ -236,9 +235,7 @@ pub fn exact_reference_seeded(
     let start = std::time::Instant::now();
     let flat = &renderer.scene.flat;
     let eye = renderer.view().eye();
-    let positions: Vec<glam::Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
-    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    let bvh = TraceBvh::build(&positions, &triangles);
+    let bvh = flat.trace_bvh();
     let surface = |t: u32, b: glam::Vec2| {
         let (p, n, s) = flat.surface_at(t, b);
         Receiver::new(p, n, s, eye)
@@ -274,7 +271,26 @@ pub fn exact_reference_seeded(
     })
 }
 
-pub use crate::renderer::estimate::second_bounce_exact;
+/// The exact reference's second bounce (`settings.bounces: 2`): `bounce`'s points on `flat`
+/// lit by `vals` through shadow rays in `bvh`, then drawn as the GPU's are (`twin::bounce`).
+pub fn second_bounce_exact(
+    flat: &crate::gpu::scene::FlatScene,
+    bounce: &crate::gpu::lights::bounce::SecondBounce,
+    vals: &[crate::twin::Val],
+    bvh: &crate::twin::bvh::TraceBvh,
+) -> Vec<crate::twin::Val> {
+    use crate::twin::bounce as twin;
+    let surfaces: Vec<twin::BounceSurface> = bounce
+        .points
+        .iter()
+        .map(|p| {
+            let (position, normal, m) = flat.surface_at(p.triangle, p.barycentrics);
+            twin::BounceSurface { position, normal, albedo: m.diffuse, area: p.area }
+        })
+        .collect();
+    let candidates = twin::candidate_vals(&surfaces, vals, Some(bvh));
+    twin::draw_vals(&candidates, bounce.settings.vals, bounce.drawn_area)
+}
 
 /// `relume compare`'s report: sparse against the brute force (both without visibility), and
 /// with `--reference exact` every occlusion mode against exact visibility.

@@ -68,8 +68,7 @@ pub fn levels(
     equal_error_samples: Option<&[u32]>,
 ) -> Result<LevelsReport, BenchError> {
     let load = |quality| {
-        Scene::load_at(path, Some(quality))
-            .map_err(|e| BenchError::Flag { flag: "SCENE".into(), message: format!("{}: {e}", path.display()) })
+        Scene::load_at(path, Some(quality)).map_err(|source| BenchError::Scene { path: path.to_owned(), source })
     };
     let finest = load(Quality::Reference)?;
     let (w, h) = size.unwrap_or((finest.camera.width, finest.camera.height));

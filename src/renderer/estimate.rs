@@ -23,11 +23,9 @@
 //! millions of the exact reference at 256². The
 //! scene's BVH is built once and kept while the meshes stay where they are.
 
-use crate::gpu::scene::FlatScene;
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, noise_corrected_relative_rmse, relative_stderr};
 use crate::renderer::{Rendered, Renderer};
-use crate::twin::Val;
 use crate::twin::bvh::TraceBvh;
 use crate::twin::exact_cpu::{self as cpu, Receiver, Receivers, ValSampling};
 use glam::{Mat4, Vec3};
@@ -120,7 +118,7 @@ impl Estimator {
         let flat = &renderer.scene.flat;
         let placement = renderer.placement().to_vec();
         if self.bvh.as_ref().is_none_or(|(p, _)| *p != placement) {
-            self.bvh = Some((placement, build_bvh(flat)));
+            self.bvh = Some((placement, flat.trace_bvh()));
         }
         let bvh = &self.bvh.as_ref().expect("built above").1;
         let eye = renderer.view().eye();
@@ -178,34 +176,6 @@ fn stratified(items: &[usize], count: usize, seed: u64) -> Vec<usize> {
             items[rng.random_range(lo..hi)]
         })
         .collect()
-}
-
-/// The BVH of the scene's triangles where they are now.
-fn build_bvh(flat: &FlatScene) -> TraceBvh {
-    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
-    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    TraceBvh::build(&positions, &triangles)
-}
-
-/// The exact reference's second bounce (`settings.bounces: 2`): `bounce`'s points on `flat`
-/// lit by `vals` through shadow rays in `bvh`, then drawn as the GPU's are (`twin::bounce`).
-pub fn second_bounce_exact(
-    flat: &FlatScene,
-    bounce: &crate::gpu::lights::bounce::SecondBounce,
-    vals: &[Val],
-    bvh: &TraceBvh,
-) -> Vec<Val> {
-    use crate::twin::bounce as twin;
-    let surfaces: Vec<twin::BounceSurface> = bounce
-        .points
-        .iter()
-        .map(|p| {
-            let (position, normal, m) = flat.surface_at(p.triangle, p.barycentrics);
-            twin::BounceSurface { position, normal, albedo: m.diffuse, area: p.area }
-        })
-        .collect();
-    let candidates = twin::candidate_vals(&surfaces, vals, Some(bvh));
-    twin::draw_vals(&candidates, bounce.settings.vals, bounce.drawn_area)
 }
 
 #[cfg(test)]

@@ -69,6 +69,14 @@ impl TextureArray {
 }
 
 impl FlatScene {
+    /// The scene's triangles, where they are now, in the BVH the CPU references trace their
+    /// shadow rays through.
+    pub fn trace_bvh(&self) -> twin::bvh::TraceBvh {
+        let positions: Vec<Vec3> = self.vertices.iter().map(|v| v.position.into()).collect();
+        let triangles: Vec<[u32; 3]> = self.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        twin::bvh::TraceBvh::build(&positions, &triangles)
+    }
+
     /// Apply every mesh's model transform and concatenate.
     pub fn from_scene(scene: &Scene) -> Self {
         let transforms: Vec<Mat4> = scene.meshes.iter().map(|m| m.model_to_world).collect();

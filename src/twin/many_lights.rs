@@ -256,9 +256,7 @@ pub fn exact_image(
     eye: Vec3,
     lights: &[Light],
 ) -> LinearImage {
-    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
-    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    let bvh = TraceBvh::build(&positions, &triangles);
+    let bvh = flat.trace_bvh();
     image_of(flat, hits, width, height, |p, n, m| direct_exact(&bvh, p, n, m, eye, lights))
 }
 
