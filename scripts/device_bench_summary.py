@@ -23,7 +23,9 @@ def step_output(work: Path, name: str):
     written = {
         "table1": work / "table1" / "results.json",
         "sweep": work / "sweep" / "results.json",
-        "replay": work / "replay" / "summary.json",
+        "mr_640": work / "mr_640" / "summary.json",
+        "mr_1280": work / "mr_1280" / "summary.json",
+        "levels_1080": work / "levels_1080" / "levels.json",
     }.get(name)
     if written is not None:
         return load_json(written)
@@ -47,11 +49,13 @@ def main() -> int:
     steps = []
     for line in steps_tsv.read_text().splitlines():
         name, status, ms, limit = line.split("\t")
+        skipped = status == "skipped"
         steps.append(
             {
                 "name": name,
-                "exit": int(status),
-                "timed_out": int(status) in (124, 137),
+                "exit": None if skipped else int(status),
+                "skipped": skipped,
+                "timed_out": not skipped and int(status) in (124, 137),
                 "wall_s": float(ms) / 1000.0,
                 "limit_s": int(limit),
                 "output": step_output(work, name),
@@ -68,7 +72,11 @@ def main() -> int:
     md = [f"# relume device benchmark{' (smoke: tiny sizes, not figures)' if smoke else ''}", ""]
     md += [f"Adapter: {adapter or 'unknown'}; timing source: {timing or 'unknown'}.", ""]
     md += ["| step | exit | wall s |", "|---|---|---|"]
-    md += [f"| {s['name']} | {s['exit']}{' (timed out)' if s['timed_out'] else ''} | {s['wall_s']:.1f} |" for s in steps]
+    md += [
+        f"| {s['name']} | {'skipped (deadline)' if s['skipped'] else s['exit']}{' (timed out)' if s['timed_out'] else ''} "
+        f"| {s['wall_s']:.1f} |"
+        for s in steps
+    ]
 
     table1 = by_name.get("table1")
     if isinstance(table1, dict) and table1.get("configs"):
@@ -130,17 +138,53 @@ def main() -> int:
             + "."
         ]
 
-    replay = by_name.get("replay")
-    if isinstance(replay, dict) and replay.get("frame_ms"):
-        frames = replay["frame_ms"]
-        steady = frames[1:] or frames
-        shown.add("replay")
-        md += ["", "## Replay of the fixture recording", ""]
+    for name in ("mr_640", "mr_1280"):
+        replay = by_name.get(name)
+        if isinstance(replay, dict) and replay.get("frame_ms"):
+            frames = replay["frame_ms"]
+            steady = sorted(frames[1:] or frames)
+            median = steady[len(steady) // 2]
+            shown.add(name)
+            md += ["", f"## Mixed-reality replay at {replay['width']}x{replay['height']} (targets: 30 and 90 fps)", ""]
+            md += [
+                f"{replay['frames']} frames: median frame {fmt(median)} ms ({fmt(fps(median))} fps) after the first "
+                f"(load to read-back, wall clock); stage means: "
+                + ", ".join(f"{k} {fmt(sum(v) / len(v))} ms" for k, v in sorted(replay.get("stage_ms", {}).items()) if v)
+                + "."
+            ]
+
+    levels = by_name.get("levels_1080")
+    if isinstance(levels, dict) and levels.get("levels"):
+        shown.add("levels_1080")
+        md += ["", f"## Quality levels at {levels['width']}x{levels['height']}", ""]
+        md += ["| level | technique | rel RMSE vs exact | estimate | indirect ms | fps |", "|---|---|---|---|---|---|"]
+        for row in levels["levels"]:
+            estimate = row.get("error_estimate") or {}
+            method = row.get("resolved", {}).get("method", "")
+            md.append(
+                f"| {row['level']} | {method} | {fmt(row['rel_rmse_vs_exact'])} | {fmt(estimate.get('rel_rmse'))} "
+                f"| {fmt(row['ms'])} | {fmt(fps(row['ms']))} |"
+            )
+
+    sponza = by_name.get("sponza_512")
+    if isinstance(sponza, dict) and "speedup" in sponza:
+        shown.add("sponza_512")
+        md += ["", "## Sponza: sparse vs brute force (target at 512 wide: >= 5x)", ""]
         md += [
-            f"{replay['frames']} frames at {replay['width']}x{replay['height']}: mean frame {fmt(sum(steady) / len(steady))} ms "
-            f"after the first (load to read-back, wall clock); stage means: "
-            + ", ".join(f"{k} {fmt(sum(v) / len(v))} ms" for k, v in sorted(replay.get("stage_ms", {}).items()) if v)
-            + "."
+            f"{sponza['width']}x{sponza['height']}, {sponza['vals']} VALs: sparse {fmt(sponza['sparse_ms'])} ms, "
+            f"brute force {fmt(sponza['brute_force_ms'])} ms, speed-up {fmt(sponza['speedup'])}x."
+        ]
+
+    load = by_name.get("load")
+    if isinstance(load, dict) and "frames_per_second" in load:
+        shown.add("load")
+        md += ["", "## The service under load (one process, one GPU)", ""]
+        md += [
+            f"{load['streams']} streams at {fmt(load['fps_per_stream'])} fps and {load['http_clients']} HTTP clients for "
+            f"{fmt(load['seconds'])} s: {fmt(load['frames_per_second'])} frames/s (p50 {fmt(load['frame_latency_p50_ms'])} ms, "
+            f"p99 {fmt(load['frame_latency_p99_ms'])} ms, {load['frames_dropped']} dropped), "
+            f"{fmt(load['renders_per_second'])} renders/s (p50 {fmt(load['render_latency_p50_ms'])} ms, "
+            f"p99 {fmt(load['render_latency_p99_ms'])} ms, {load['renders_refused']} refused)."
         ]
     (out / "results.md").write_text("\n".join(md) + "\n")
     # A step that succeeded but whose figures could not be read means this script and relume's
