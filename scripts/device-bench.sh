@@ -98,6 +98,8 @@ step() {
 scenes=fixtures/scenes
 if [ "$smoke" = 1 ]; then
     # Tiny sizes: checks every step's machinery on lavapipe in well under a minute.
+    # GPU timestamps even on lavapipe, as on the device, so that their recording is checked too.
+    export RELUME_TIMING=gpu
     step table1 120 "$bin" bench "$scenes/cornell_bunny_small.json" --table1 --quick --no-plots --no-temporal --out "$work/table1"
     step levels_1080 120 "$bin" bench "$scenes/cornell_bunny_small.json" --levels --width 24 --height 16 --out "$work/levels_1080"
     step mr_640 120 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$scenes/mr_bunny_differential.json" --frames 2 --width 64 --height 48 --out "$work/mr_640"

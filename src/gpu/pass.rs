@@ -392,7 +392,7 @@ impl Kernels {
     ) {
         for (part, kernel) in self.kernels.iter().enumerate() {
             let group = kernel.bind(gpu, resources);
-            let timestamps = span.as_ref().map(|s| s.compute_part(first + part, parts));
+            let timestamps = span.as_ref().and_then(|s| s.compute_part(first + part, parts));
             kernel.dispatch(encoder, &group, scene, invocations, timestamps);
         }
     }

@@ -52,17 +52,24 @@ pub struct Span<'a> {
 
 impl<'a> Span<'a> {
     pub fn compute(&self) -> wgpu::ComputePassTimestampWrites<'a> {
-        self.compute_part(0, 1)
+        wgpu::ComputePassTimestampWrites {
+            query_set: self.query_set,
+            beginning_of_pass_write_index: Some(2 * self.index),
+            end_of_pass_write_index: Some(2 * self.index + 1),
+        }
     }
 
     /// Pass `part` of `parts` compute passes that make one stage: the first writes the
-    /// beginning timestamp, the last the end.
-    pub fn compute_part(&self, part: usize, parts: usize) -> wgpu::ComputePassTimestampWrites<'a> {
-        wgpu::ComputePassTimestampWrites {
+    /// beginning timestamp, the last the end, and a pass in between none (`None`: wgpu refuses
+    /// timestamp writes with neither index).
+    pub fn compute_part(&self, part: usize, parts: usize) -> Option<wgpu::ComputePassTimestampWrites<'a>> {
+        let begin = (part == 0).then_some(2 * self.index);
+        let end = (part + 1 == parts).then_some(2 * self.index + 1);
+        (begin.is_some() || end.is_some()).then_some(wgpu::ComputePassTimestampWrites {
             query_set: self.query_set,
-            beginning_of_pass_write_index: (part == 0).then_some(2 * self.index),
-            end_of_pass_write_index: (part + 1 == parts).then_some(2 * self.index + 1),
-        }
+            beginning_of_pass_write_index: begin,
+            end_of_pass_write_index: end,
+        })
     }
 
     pub fn render(&self) -> wgpu::RenderPassTimestampWrites<'a> {

@@ -341,3 +341,35 @@ fn render_takes_a_scene_lit_by_lights_alone() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("light: required by this command unless the scene has `lights`"), "{}", stderr(&o));
 }
+
+/// With GPU timestamps (what real GPUs use; lavapipe only when `RELUME_TIMING=gpu` asks), every
+/// technique's passes record valid timestamp writes: a stage made of several passes writes its
+/// beginning in the first and its end in the last, none in between (wgpu refuses writes with
+/// neither). `compare --reference exact` runs the exact reference in rounds and every visibility
+/// mode; `bench --levels` every level, the near field and the clusters among them.
+#[test]
+fn every_technique_records_valid_gpu_timestamps() {
+    let scene = fixture("scenes/cornell_bunny_small.json");
+    let dir = scratch("cli_gpu_timestamps");
+    let run = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_relume")).env("RELUME_TIMING", "gpu").args(args).output().unwrap();
+        assert!(o.status.success(), "relume {args:?}: {}", stderr(&o));
+        o
+    };
+    let o = run(&["compare", scene.to_str().unwrap(), "--width", "16", "--height", "12", "--reference", "exact"]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(v["timing"].as_str(), Some("gpu_timestamps"), "the adapter must offer timestamps for this test: {v}");
+    run(&[
+        "bench",
+        scene.to_str().unwrap(),
+        "--levels",
+        "--width",
+        "16",
+        "--height",
+        "12",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let levels: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("levels.json")).unwrap()).unwrap();
+    assert_eq!(levels["levels"].as_array().map(Vec::len), Some(4), "{levels}");
+}

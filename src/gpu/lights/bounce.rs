@@ -453,7 +453,7 @@ impl Technique for SecondBounce {
                 ],
             );
             rec.stage(OCCLUSION_STAGE, |e, s| {
-                let timestamps = s.as_ref().map(|s| s.compute_part(0, 1));
+                let timestamps = s.as_ref().and_then(|s| s.compute_part(0, 1));
                 d.kernel.dispatch(e, &group, scene, [points, 1, 1], timestamps);
             })?;
         }
@@ -473,7 +473,7 @@ impl Technique for SecondBounce {
         ];
         rec.stage(DRAW_STAGE, |e, s| {
             for (part, (kernel, group, invocations)) in steps.iter().enumerate() {
-                let timestamps = s.as_ref().map(|s| s.compute_part(part, steps.len()));
+                let timestamps = s.as_ref().and_then(|s| s.compute_part(part, steps.len()));
                 kernel.dispatch(e, group, scene, [*invocations, 1, 1], timestamps);
             }
         })

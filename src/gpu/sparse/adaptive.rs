@@ -171,7 +171,7 @@ impl Adaptive {
         rec.stage(SELECT_STAGE, |e, s| {
             e.clear_buffer(&self.histogram, 0, None);
             e.clear_buffer(&self.count, 0, None);
-            let part = |i| s.as_ref().map(|s| s.compute_part(i, 3));
+            let part = |i| s.as_ref().and_then(|s| s.compute_part(i, 3));
             self.score.dispatch(e, &score, scene, [n, 1, 1], part(0));
             self.threshold.dispatch(e, &threshold, scene, [1, 1, 1], part(1));
             self.compact.dispatch(e, &compact, scene, [n, 1, 1], part(2));

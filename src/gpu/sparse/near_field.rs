@@ -197,7 +197,7 @@ impl NearField {
         let n = frame.vals.capacity.min(g.capacity);
         rec.stage(GRID_STAGE, |e, s| {
             e.clear_buffer(&g.counts, 0, None);
-            let part = |i| s.as_ref().map(|s| s.compute_part(i, 4));
+            let part = |i| s.as_ref().and_then(|s| s.compute_part(i, 4));
             self.centres.dispatch(e, &centres, scene, [scene.flat.vertex_count(), 1, 1], part(0));
             self.count.dispatch(e, &count, scene, [n, 1, 1], part(1));
             self.scan.dispatch(e, &scan, scene, [WORKGROUP_SIZE, 1, 1], part(2));

@@ -528,7 +528,7 @@ impl Clusters {
             let parts = rounds * steps.len();
             for i in 0..rounds {
                 for (j, (kernel, group, invocations)) in steps.iter().enumerate() {
-                    let timestamps = s.as_ref().map(|s| s.compute_part(i * steps.len() + j, parts));
+                    let timestamps = s.as_ref().and_then(|s| s.compute_part(i * steps.len() + j, parts));
                     kernel.dispatch(e, group, scene, *invocations, timestamps);
                 }
             }

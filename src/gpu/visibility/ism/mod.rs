@@ -322,12 +322,12 @@ impl Maps {
             let parts = 2 * levels;
             for (l, (pull, group)) in self.pulls.iter().zip(&pull_groups).enumerate() {
                 let texels = side(l as u32 + 1).pow(2);
-                let timestamps = s.as_ref().map(|s| s.compute_part(l, parts));
+                let timestamps = s.as_ref().and_then(|s| s.compute_part(l, parts));
                 pull.dispatch(e, group, scene, [texels, count, 1], timestamps);
             }
             for (i, l) in (0..levels).rev().enumerate() {
                 let texels = side(l as u32).pow(2);
-                let timestamps = s.as_ref().map(|s| s.compute_part(levels + i, parts));
+                let timestamps = s.as_ref().and_then(|s| s.compute_part(levels + i, parts));
                 self.pushes[l].dispatch(e, &push_groups[l], scene, [texels, count, 1], timestamps);
             }
         })
