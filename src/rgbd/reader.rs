@@ -15,8 +15,8 @@ pub const DEFAULT_TOLERANCE_S: f64 = 0.02;
 /// What the caller (CLI flags) adds to a recording.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RecordingOptions {
-    /// Intrinsics for a recording without an intrinsics file or camera info ([`Intrinsics::TUM`]
-    /// when `None`).
+    /// Intrinsics for a recording without an intrinsics file or camera info (when `None`:
+    /// [`Intrinsics::TUM`] for a folder; for an MCAP file without camera info, an error).
     pub intrinsics: Option<Intrinsics>,
     /// Depth units per metre when `intrinsics.json` gives none (when `None`: [`super::tum::TUM_DEPTH_SCALE`]
     /// for TUM, 1000 for Open3D/Redwood and MCAP `16UC1`).

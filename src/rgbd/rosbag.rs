@@ -9,11 +9,16 @@
 //!   per metre unless the options give a depth scale; 0 = none) or `32FC1` (metres; NaN = none),
 //!   registered to colour (same size as the camera info);
 //! - intrinsics: the first `sensor_msgs/msg/CameraInfo` message (`width`, `height`, `k` row-major)
-//!   on its topic; without one, the options' intrinsics or [`Intrinsics::TUM`];
+//!   on its topic; without one, the options' intrinsics, else an error (a bag's images need not
+//!   be TUM's);
 //! - poses: `geometry_msgs/msg/PoseStamped` on a pose topic (the pose of the depth image's
 //!   optical frame), or else the `tf2_msgs/msg/TFMessage` transforms of `/tf` and `/tf_static`,
-//!   composed from the root of the tree down to the depth image's `header.frame_id`; without
-//!   either, every pose is the identity.
+//!   composed from the root of the tree down to the depth image's `header.frame_id` (for
+//!   example `map -> odom -> base_link` on `/tf`, then `base_link -> camera_link ->
+//!   camera_color_frame -> camera_color_optical_frame` on `/tf_static`), each moving link
+//!   interpolated as tf2 does; without either, every pose is the identity. A frame that no
+//!   transform places, or a static chain that stops short of the frames `/tf` moves, is an
+//!   error naming the frames.
 //!
 //! Topics come from [`McapTopics`] or, by default: the depth topic is the one `Image` topic whose
 //! name contains `depth`, the colour topic the one other `Image` topic, the camera info the
@@ -61,6 +66,8 @@ pub const TF_MESSAGE: &str = "tf2_msgs/msg/TFMessage";
 pub const POSE_STAMPED: &str = "geometry_msgs/msg/PoseStamped";
 /// The topic of transforms valid at every time.
 pub const TF_STATIC_TOPIC: &str = "/tf_static";
+/// What an error about the transform tree names as its record.
+const TF_RECORD: &str = "/tf and /tf_static";
 
 pub use super::reader::McapTopics;
 
@@ -371,9 +378,17 @@ pub(super) fn open(file: &Path, options: &RecordingOptions) -> Result<Parts<Vec<
         Some((record, info)) => intrinsics_of(info)
             .map_err(|(field, message)| record_error(record, format!("field `{field}`: {message}")))?,
         None => {
-            let k = options.intrinsics.unwrap_or(Intrinsics::TUM);
+            let Some(k) = options.intrinsics else {
+                return Err(record_error(
+                    "topics",
+                    format!(
+                        "no {CAMERA_INFO} topic, so the camera's intrinsics are unknown: record the camera's \
+                         camera_info topic too, or give them with --intrinsics fx,fy,cx,cy"
+                    ),
+                ));
+            };
             check_intrinsics(&k).map_err(|(field, message)| value_error("recording options", field, message))?;
-            tracing::warn!("{}: no camera info; using intrinsics {k:?}", file.display());
+            tracing::warn!("{}: no camera info; using the given intrinsics {k:?}", file.display());
             k
         }
     };
@@ -405,7 +420,14 @@ pub(super) fn open(file: &Path, options: &RecordingOptions) -> Result<Parts<Vec<
         tracing::warn!("{}: no poses (no pose topic, no /tf); every frame gets the identity pose", file.display());
         PoseSource::None
     } else {
-        transforms.check_frame(&camera_frame).map_err(|message| record_error(TF_MESSAGE, message))?;
+        let moves = transforms.check_frame(&camera_frame).map_err(|message| record_error(TF_RECORD, message))?;
+        if !moves {
+            tracing::warn!(
+                "{}: no /tf transform moves the depth image's frame `{camera_frame}` (only /tf_static places it): \
+                 every frame gets the same pose",
+                file.display()
+            );
+        }
         PoseSource::Tf(transforms)
     };
 
@@ -640,25 +662,63 @@ impl Transforms {
         Ok(())
     }
 
-    /// Checks that `frame` is in the tree and its chain to the root has no cycle.
-    fn check_frame(&self, frame: &str) -> Result<(), String> {
+    /// The frames from `frame` up to the root of its tree (`frame` first), with whether a
+    /// dynamic link lies on the way; `None` on a cycle.
+    fn chain<'a>(&'a self, frame: &'a str) -> Option<(Vec<&'a str>, bool)> {
+        let (mut chain, mut moves) = (vec![frame], false);
+        for _ in 0..=self.edges.len() {
+            let Some(edge) = self.edges.get(*chain.last()?) else { return Some((chain, moves)) };
+            moves |= !edge.is_static;
+            chain.push(&edge.parent);
+        }
+        None
+    }
+
+    /// Checks that `frame` is in the tree, that its chain to the root has no cycle, and, when
+    /// `/tf` moves some frames, that the chain reaches one of them (a chain of static links
+    /// that stops short of the moving ones means a link is missing from the recording).
+    /// Returns whether a dynamic link lies on the chain.
+    fn check_frame(&self, frame: &str) -> Result<bool, String> {
         if !self.edges.contains_key(frame) {
             let mut frames: Vec<&str> = self.edges.keys().map(String::as_str).collect();
             frames.sort_unstable();
-            return Err(format!("no transform to the depth image's frame `{frame}`; child frames: {frames:?}"));
+            let hint = if self.edges.values().any(|e| e.is_static) {
+                ""
+            } else {
+                " (the file has no /tf_static, where the camera's optical frames usually are: record it too)"
+            };
+            return Err(format!(
+                "no transform places the depth image's frame `{frame}` (its header.frame_id){hint}; the transforms place {frames:?}"
+            ));
         }
-        let mut current = frame;
-        for _ in 0..=self.edges.len() {
-            match self.edges.get(current) {
-                Some(edge) => current = &edge.parent,
-                None => return Ok(()),
-            }
+        let (chain, moves) =
+            self.chain(frame).ok_or_else(|| format!("the transforms above frame `{frame}` form a cycle"))?;
+        if !moves && self.edges.values().any(|e| !e.is_static) {
+            let top = chain.last().copied().unwrap_or(frame);
+            let mut moving_roots: Vec<&str> = self
+                .edges
+                .iter()
+                .filter(|(_, edge)| !edge.is_static)
+                .filter_map(|(child, _)| self.chain(child).and_then(|(up, _)| up.last().copied()))
+                .collect();
+            moving_roots.sort_unstable();
+            moving_roots.dedup();
+            let path: Vec<&str> = chain.iter().rev().copied().collect();
+            return Err(format!(
+                "the depth image's frame `{frame}` hangs from `{top}` by static links only ({}), and no transform \
+                 places `{top}` in the tree that /tf moves (rooted at {moving_roots:?}): a link above `{top}` is \
+                 missing",
+                path.join(" -> ")
+            ));
         }
-        Err(format!("the transforms above frame `{frame}` form a cycle"))
+        Ok(moves)
     }
 
-    /// Root-to-`frame` placement at `t`: the chain of parent transforms composed, each
-    /// interpolated (static ones as they are); `None` when one has no sample within `tolerance`.
+    /// Root-to-`frame` placement at `t`: the chain of parent transforms composed, static ones
+    /// as they are, dynamic ones as tf2 looks them up: interpolated between the link's two
+    /// samples around `t` however far apart (a localiser may publish `map -> odom` at 1 Hz),
+    /// the end sample just outside them; `None` when `t` lies further than `tolerance` outside
+    /// a link's samples.
     fn at(&self, frame: &str, t: f64, tolerance: f64) -> Option<DAffine3> {
         let mut pose = DAffine3::IDENTITY;
         let mut current = frame;
@@ -668,7 +728,9 @@ impl Transforms {
                 let s = edge.samples.first()?;
                 DAffine3::from_rotation_translation(s.rotation, s.translation)
             } else {
-                interpolate_pose(&edge.samples, t, tolerance)?
+                let inside = edge.samples.first().is_some_and(|s| s.timestamp <= t)
+                    && edge.samples.last().is_some_and(|s| t <= s.timestamp);
+                interpolate_pose(&edge.samples, t, if inside { f64::INFINITY } else { tolerance })?
             };
             pose = local * pose;
             current = &edge.parent;

@@ -31,6 +31,7 @@ mod rsm;
 mod scale;
 mod service;
 mod stream_mr;
+mod stream_visibility;
 mod synthetic;
 mod textures;
 mod twins;

@@ -7,6 +7,7 @@ use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+use glam::{DAffine3, DQuat, DVec3};
 use proptest::prelude::*;
 use relume::rgbd::recording::{Layout, Recording, RecordingOptions};
 use relume::rgbd::rosbag::{self, McapTopics, msg};
@@ -357,4 +358,175 @@ proptest! {
         let _ = msg::decode::<msg::CameraInfo>(&bytes);
         let _ = msg::decode::<msg::TfMessage>(&bytes);
     }
+}
+
+/// The ROS 2 bag that the reference implementation's Python writer made of the first 8 TUM
+/// frames (`tools/make_ros2_mcap.py`; its SOURCE.md says how): RealSense topic names, `16UC1`
+/// millimetres, camera info, and the pose as `map -> odom -> base_link` on `/tf` below
+/// `base_link -> camera_link -> camera_color_frame -> camera_color_optical_frame` on `/tf_static`.
+const ROS2_BAG: &str = "recordings/tum_fr1_xyz_ros2/tum_fr1_xyz_ros2.mcap";
+
+/// The ground truth of the TUM folder through the bag's chain of frames, as its SOURCE.md and
+/// `tools/make_ros2_mcap.py` state it (written out here, not read from the bag): `map -> odom`
+/// (constant) and the static `base_link -> camera_color_optical_frame`. `odom -> base_link` at
+/// each ground-truth sample is `odom_from_map * sample * optical_from_base`; at a frame's stamp
+/// it is interpolated between the two samples around it (tf2's lookup), then composed back.
+fn ground_truth_through_the_chain(groundtruth: &[(f64, Vec<String>)], t: f64) -> DAffine3 {
+    let placement = |t: [f64; 3], q: [f64; 4]| {
+        DAffine3::from_rotation_translation(DQuat::from_array(q).normalize(), DVec3::from_array(t))
+    };
+    let about = |axis: DVec3, degrees: f64| DQuat::from_axis_angle(axis, degrees.to_radians()).to_array();
+    let map_from_odom = placement([2.0, -1.0, 0.0], about(DVec3::Z, 0.5f64.to_degrees()));
+    let base_from_optical = placement([0.20, 0.0, 0.45], about(DVec3::Y, 10.0))
+        * placement([-0.0003, 0.0148, 0.0001], [0.0012, -0.0009, 0.0031, 1.0])
+        * placement([0.0; 3], [-0.5, 0.5, -0.5, 0.5]);
+    let after = groundtruth.partition_point(|(s, _)| *s <= t);
+    let odom_from_base = |(_, fields): &(f64, Vec<String>)| {
+        let v: Vec<f64> = fields.iter().map(|f| f.parse().unwrap()).collect();
+        map_from_odom.inverse() * placement([v[0], v[1], v[2]], [v[3], v[4], v[5], v[6]]) * base_from_optical.inverse()
+    };
+    let (a, b) = (&groundtruth[after - 1], &groundtruth[after]);
+    let s = (t - a.0) / (b.0 - a.0);
+    let (_, qa, ta) = odom_from_base(a).to_scale_rotation_translation();
+    let (_, qb, tb) = odom_from_base(b).to_scale_rotation_translation();
+    let odom_from_base = DAffine3::from_rotation_translation(qa.slerp(qb, s).normalize(), ta.lerp(tb, s));
+    map_from_odom * odom_from_base * base_from_optical
+}
+
+/// Largest difference of two poses' matrix entries (rotation and translation, m).
+fn pose_difference(a: DAffine3, b: DAffine3) -> f64 {
+    let rotation = (a.matrix3 - b.matrix3).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    (a.translation - b.translation).abs().max_element().max(rotation)
+}
+
+/// Replayed with no options, it gives TUM's frames: the same stamps, the ground truth through
+/// the chain within 1e-6, the colour pixels of the crop the camera info states, and the depth
+/// of that crop in whole millimetres (`(raw + 2) / 5` of TUM's 5000 units per metre).
+#[test]
+fn ros2_bag_of_an_independent_writer_replays_the_tum_frames() {
+    let bag = Recording::open(&fixture(ROS2_BAG), &RecordingOptions::default()).unwrap();
+    let dir = fixture("recordings/tum_fr1_xyz");
+    let tum = Recording::open(&dir, &RecordingOptions::default()).unwrap();
+    assert_eq!(bag.layout(), Layout::Mcap);
+    assert_eq!(bag.len(), 8, "every depth frame has a colour frame and a pose: {:?}", bag.stats());
+    assert!(bag.has_groundtruth());
+    assert_eq!(bag.depth_scale(), rosbag::ROS_DEPTH_SCALE);
+    // The camera info is TUM's registered camera, cropped: the principal point moves by whole
+    // pixels, the focal lengths stay.
+    let (k, full) = (*bag.intrinsics(), *tum.intrinsics());
+    assert_eq!((k.width, k.height, k.fx, k.fy), (320, 240, full.fx, full.fy));
+    let (left, top) = (full.cx - k.cx, full.cy - k.cy);
+    assert_eq!((left, top), (160.0, 120.0));
+    let (left, top) = (left as usize, top as usize);
+    let depth_files: BTreeMap<String, String> = tum_lines(&dir.join("depth.txt"))
+        .into_iter()
+        .map(|(t, fields)| (format!("{t:.6}"), fields[0].clone()))
+        .collect();
+    let groundtruth = tum_lines(&dir.join("groundtruth.txt"));
+
+    let (mut through_chain, mut against_tum) = (0.0f64, 0.0f64);
+    for i in 0..bag.len() {
+        let (a, b) = (bag.frame(i).unwrap(), tum.frame(i).unwrap());
+        assert_eq!(a.timestamp, b.timestamp, "frame {i}: stamps are TUM's to the nanosecond");
+        through_chain = through_chain
+            .max(pose_difference(a.camera_to_world, ground_truth_through_the_chain(&groundtruth, a.timestamp)));
+        against_tum = against_tum.max(pose_difference(a.camera_to_world, b.camera_to_world));
+
+        let source = image::open(dir.join(&depth_files[&format!("{:.6}", b.timestamp)])).unwrap().into_luma16();
+        let (mut colour_differ, mut depth_differ) = (0, 0);
+        for y in 0..k.height as usize {
+            for x in 0..k.width as usize {
+                let (p, q) = (y * k.width as usize + x, (y + top) * full.width as usize + x + left);
+                colour_differ += usize::from(a.color[p] != b.color[q]);
+                let raw = source.get_pixel((x + left) as u32, (y + top) as u32).0[0];
+                let millimetres = (u32::from(raw) + 2) / 5;
+                depth_differ += usize::from(a.depth[p] != millimetres as f32 / 1000.0);
+            }
+        }
+        assert_eq!((colour_differ, depth_differ), (0, 0), "frame {i}: pixels that differ (colour, depth)");
+    }
+    eprintln!(
+        "ROS 2 bag poses: {through_chain:.1e} from the ground truth through the chain, {against_tum:.1e} from the TUM folder's"
+    );
+    assert!(through_chain <= 1e-6, "poses differ from the ground truth through the chain by {through_chain:e}");
+    // The TUM reader interpolates the optical frame's samples, the bag's reader base_link's,
+    // 0.5 m away: between 10 ms samples of a turning camera the two paths part by about
+    // 1e-6 m (lever arm times the square of the turn).
+    assert!(against_tum <= 1e-5, "poses differ from the TUM folder's by {against_tum:e}");
+}
+
+/// A copy of the ROS 2 bag without the messages `drop` picks.
+fn ros2_bag_without(name: &str, drop: impl Fn(&mcap::Message) -> bool) -> PathBuf {
+    let bytes = std::fs::read(fixture(ROS2_BAG)).unwrap();
+    let path = scratch(&format!("mcap_ros2_without_{name}")).join("bag.mcap");
+    let mut writer = mcap::Writer::new(BufWriter::new(std::fs::File::create(&path).unwrap())).unwrap();
+    let mut dropped = 0;
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        if drop(&message) {
+            dropped += 1;
+        } else {
+            writer.write(&message).unwrap();
+        }
+    }
+    writer.finish().unwrap();
+    assert!(dropped > 0, "{name}: nothing left out");
+    path
+}
+
+/// A ROS 2 bag that lacks a topic or a link of the chain is an error that names what is missing.
+#[test]
+fn ros2_bag_missing_a_topic_or_link_is_an_error_naming_it() {
+    let open_err =
+        |path: &Path| Recording::open(path, &RecordingOptions::default()).map(|_| ()).unwrap_err().to_string();
+    let topic_is = |topic: &'static str| move |m: &mcap::Message| m.channel.topic == topic;
+
+    let error = open_err(&ros2_bag_without("depth", topic_is("/camera/aligned_depth_to_color/image_raw")));
+    assert!(error.starts_with("bag.mcap: topics: no depth topic"), "{error}");
+    assert!(error.contains("\"/camera/color/image_raw\"") && error.contains("--depth-topic"), "{error}");
+
+    let error = open_err(&ros2_bag_without("camera_info", topic_is("/camera/color/camera_info")));
+    assert!(error.starts_with("bag.mcap: topics: no sensor_msgs/msg/CameraInfo topic"), "{error}");
+    assert!(error.contains("--intrinsics"), "{error}");
+    // Given the intrinsics, it reads.
+    let options = RecordingOptions {
+        intrinsics: Some(relume::rgbd::Intrinsics {
+            width: 320,
+            height: 240,
+            fx: 525.0,
+            fy: 525.0,
+            cx: 159.5,
+            cy: 119.5,
+        }),
+        ..Default::default()
+    };
+    let without_info = ros2_bag_without("camera_info_given", topic_is("/camera/color/camera_info"));
+    assert_eq!(Recording::open(&without_info, &options).unwrap().len(), 8);
+
+    let error = open_err(&ros2_bag_without("tf_static", topic_is("/tf_static")));
+    assert!(
+        error.starts_with(
+            "bag.mcap: /tf and /tf_static: no transform places the depth image's frame `camera_color_optical_frame`"
+        ),
+        "{error}"
+    );
+    assert!(error.contains("no /tf_static") && error.contains("[\"base_link\", \"odom\"]"), "{error}");
+
+    // odom -> base_link left out of /tf: the static chain stops at base_link, which nothing
+    // places under map.
+    let error = open_err(&ros2_bag_without("odom_link", |m| {
+        m.channel.topic == "/tf"
+            && msg::decode::<msg::TfMessage>(&m.data)
+                .unwrap()
+                .transforms
+                .iter()
+                .any(|t| t.child_frame_id == "base_link")
+    }));
+    assert!(error.contains("hangs from `base_link` by static links only (base_link -> camera_link -> camera_color_frame -> camera_color_optical_frame)"), "{error}");
+    assert!(error.contains("rooted at [\"map\"]"), "{error}");
+
+    // Without /tf at all the camera stands where /tf_static puts it: every pose the same.
+    let still = Recording::open(&ros2_bag_without("tf", topic_is("/tf")), &RecordingOptions::default()).unwrap();
+    assert_eq!(still.len(), 8);
+    assert!(still.poses().iter().all(|p| *p == still.poses()[0]) && still.poses()[0] != DAffine3::IDENTITY);
 }

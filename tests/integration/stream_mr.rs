@@ -25,7 +25,7 @@ const DOWNSCALE: u32 = 4;
 /// 160x120 frames), with the differential pass on or off and the `auto` environment, and the
 /// bunny 0.16 m further along the desk than in the fixture so that its contact with the desk
 /// is in view (the README's "The shadow is still faint" placement).
-fn mr_scene(differential: bool) -> Value {
+pub(super) fn mr_scene(differential: bool) -> Value {
     let mut scene = fixture_scene("mr_bunny", 64);
     scene["meshes"][0]["sparse_points"] = 256.into();
     scene["anchor"]["translation"] = json!([0.68, 0.66, 0.70]);
@@ -37,7 +37,7 @@ fn mr_scene(differential: bool) -> Value {
 
 /// Frames `indices` of the fixture recording at 1/[`DOWNSCALE`] of their size: the stream
 /// message (as a Rust client encodes it) and the frame the server decodes from it.
-fn frames(indices: &[usize]) -> Vec<(Vec<u8>, RgbdFrame)> {
+pub(super) fn frames(indices: &[usize]) -> Vec<(Vec<u8>, RgbdFrame)> {
     let recording = Recording::open(&fixture("recordings/tum_fr1_xyz"), &RecordingOptions::default()).expect("rec");
     indices
         .iter()
@@ -54,7 +54,7 @@ fn frames(indices: &[usize]) -> Vec<(Vec<u8>, RgbdFrame)> {
 
 /// `relume replay`'s renderer on `scene` (paths relative to `fixtures/`, its
 /// `settings.environment` read as the replay reads it), relighting `frames` in order.
-fn offline(scene: &Value, frames: &[&RgbdFrame]) -> Vec<MrFrame> {
+pub(super) fn offline(scene: &Value, frames: &[&RgbdFrame]) -> Vec<MrFrame> {
     let gpu = super::gpu();
     let text = scene.to_string();
     let loaded = Scene::from_json_str(&text, &fixture("")).expect("scene");
@@ -67,7 +67,7 @@ fn offline(scene: &Value, frames: &[&RgbdFrame]) -> Vec<MrFrame> {
 }
 
 /// The largest difference in any channel, and how many pixels differ by more than one level.
-fn difference(a: &image::RgbImage, b: &[[u8; 3]]) -> (u8, usize) {
+pub(super) fn difference(a: &image::RgbImage, b: &[[u8; 3]]) -> (u8, usize) {
     let per_pixel: Vec<u8> =
         a.pixels().zip(b).map(|(p, q)| (0..3).map(|c| p.0[c].abs_diff(q[c])).max().unwrap_or(0)).collect();
     (per_pixel.iter().copied().max().unwrap_or(0), per_pixel.iter().filter(|&&d| d > 1).count())
