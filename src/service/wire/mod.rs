@@ -543,7 +543,7 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
             };
             let budget_ms = match r.budget_ms {
                 None => None,
-                Some(ms) if ms == 0.0 => Some(None),
+                Some(0.0) => Some(None),
                 Some(ms) => {
                     crate::scene::settings::validate_budget_ms(ms, "control.render.budget_ms")
                         .map_err(WireError::from_scene)?;
