@@ -69,6 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let gpu = Gpu::new()?;
     let mut renderer = Renderer::new(&gpu, &scene)?;
     renderer.set_exact_val_stride(val_stride);
+    renderer.set_error_estimate(Some(relume::renderer::estimate::PER_FRAME));
     let needs = if args.out_dir.is_some() { Components::ALL } else { args.component.needs() };
     let frame = match method {
         // A direct-only image needs no reference.
@@ -109,6 +110,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frame.timings.source,
         stages.join(", ")
     );
+    let estimate = frame.error_estimate;
+    match estimate {
+        Some(e) => eprintln!(
+            "error estimate: indirect rel RMSE {:.4} +- {:.4} against the exact reference ({} pixels x {} VALs, {:.1} ms)",
+            e.rel_rmse, e.spread, e.pixels, e.samples, e.ms
+        ),
+        None => eprintln!("error estimate: none (no indirect light computed, or the exact reference rendered it)"),
+    }
+    let summary = serde_json::json!({
+        "written": written,
+        "width": w,
+        "height": h,
+        "method": method,
+        "quality": scene.resolved.quality,
+        "val_count": frame.val_count,
+        "exposure": exposure,
+        "timings_ms": frame.timings.stages.iter().cloned().collect::<std::collections::BTreeMap<String, f64>>(),
+        "error_estimate": estimate,
+    });
+    println!("{summary}");
     Ok(())
 }
 

@@ -51,6 +51,12 @@ pub struct Args {
     /// sent and its composite written to `composited/`.
     #[arg(long)]
     server: Option<String>,
+    /// Hold each frame's time under this many milliseconds: the replay moves frame by frame
+    /// between the scene's level and cheaper or richer parameters (VAL grid, render size,
+    /// visibility, near field), and reports what each frame ran at (default: the scene's
+    /// `settings.budget_ms`, else none).
+    #[arg(long)]
+    budget_ms: Option<f32>,
     /// With --server: the server's bearer token.
     #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
     token: Option<String>,
@@ -60,14 +66,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let exposure = args.exposure;
     anyhow::ensure!(exposure.is_finite() && exposure > 0.0, "--exposure: must be a positive number, got {exposure}");
     anyhow::ensure!(args.frames != Some(0), "--frames: must be at least 1");
+    if let Some(ms) = args.budget_ms {
+        relume::scene::settings::validate_budget_ms(ms, "--budget-ms").map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
     let recording_options = relume::rgbd::recording::RecordingOptions {
         mcap: args.mcap,
         ..recording_options(args.intrinsics, args.depth_scale)?
     };
     if let Some(server) = args.server {
         anyhow::ensure!(
-            !args.accumulate && args.size.width.is_none() && args.size.height.is_none(),
-            "--accumulate, --width and --height: not available with --server (the stream renders each frame at its own size, without accumulation)"
+            !args.accumulate && args.size.width.is_none() && args.size.height.is_none() && args.budget_ms.is_none(),
+            "--accumulate, --width, --height and --budget-ms: not available with --server (the stream renders each frame at its own size, without accumulation, at the scene's budget)"
         );
         let options = relume::service::client::RemoteReplayOptions {
             server,
@@ -97,6 +106,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         accumulate,
         exposure,
         progress: true,
+        budget_ms: args.budget_ms,
     };
     replay_command(&options)
 }
@@ -141,6 +151,28 @@ fn replay_command(options: &relume::mr::replay::ReplayOptions) -> anyhow::Result
         if summary.accumulate { " (accumulating)" } else { "" },
     );
     eprintln!("{}", relume::mr::replay::stage_table(&summary.stage_ms, ("frame (wall)", &summary.frame_ms)));
+    let estimates: Vec<f64> = summary.error_estimate.iter().flatten().copied().collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    eprintln!(
+        "error estimate per frame: mean rel RMSE {:.4} over {} frames, {:.2} ms mean ({:.1} % of the mean frame)",
+        mean(&estimates),
+        estimates.len(),
+        mean(&summary.error_estimate_ms),
+        100.0 * mean(&summary.error_estimate_ms) / mean(&summary.frame_ms).max(1e-9),
+    );
+    let levels: Vec<String> = summary.level_frames.iter().map(|(l, n)| format!("{l} {n}")).collect();
+    let last = summary
+        .parameters
+        .last()
+        .map(|p| p.pairs().iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(" "));
+    eprintln!(
+        "budget {}: p90 frame after the first 5 {:.1} ms; frames per level: {}; last frame ran at {}; mean composite change {:.3} levels",
+        summary.budget_ms.map_or("none".to_owned(), |ms| format!("{ms} ms")),
+        summary.p90_frame_ms_after_5,
+        levels.join(", "),
+        last.unwrap_or_default(),
+        mean(&summary.composite_change),
+    );
     eprintln!("wrote {}", options.out.display());
     Ok(())
 }

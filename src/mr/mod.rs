@@ -73,6 +73,9 @@ pub struct MrFrame {
     /// Diffuse irradiance (W/m²) at each sparse point of the virtual object: view-independent,
     /// so its change between frames measures how steady the light is.
     pub sparse_irradiance: Vec<Vec3>,
+    /// The frame's estimated indirect error, when the renderer estimates it
+    /// (`Renderer::set_error_estimate`).
+    pub error_estimate: Option<crate::renderer::estimate::ErrorEstimate>,
 }
 
 /// `relume replay`'s renderer: one scene's [`Renderer`] and [`MrPipeline`], the replay's
@@ -135,7 +138,18 @@ impl MrRenderer {
             timings: relit.rendered.timings,
             val_count: relit.rendered.val_count,
             sparse_irradiance: relit.sparse_irradiance,
+            error_estimate: relit.rendered.error_estimate,
         })
+    }
+
+    /// The renderer, to change what the next frames run at (a budget's parameters).
+    pub fn renderer_mut(&mut self) -> &mut Renderer {
+        &mut self.renderer
+    }
+
+    /// How the next frames are rendered (their size, RGB-D settings), to change them.
+    pub fn frame_settings_mut(&mut self) -> &mut FrameSettings {
+        &mut self.settings
     }
 }
 

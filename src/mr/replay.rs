@@ -6,6 +6,8 @@ use crate::gpu::timing::TimingSource;
 use crate::image::LinearImage;
 use crate::mr::environment::Environment;
 use crate::mr::{AccumulateOptions, MrOptions, MrRenderer, relative_change};
+use crate::renderer::budget::{self, BudgetController, FrameParameters};
+use crate::renderer::estimate::PER_FRAME;
 use crate::rgbd::recording::{Recording, RecordingOptions};
 use crate::scene::Scene;
 use anyhow::Context;
@@ -32,6 +34,10 @@ pub struct ReplayOptions {
     pub exposure: f32,
     /// Draw a progress bar on standard error.
     pub progress: bool,
+    /// Hold the frame time under this many ms by moving between parameter sets frame by
+    /// frame (`renderer::budget`); `None` (or the scene's `settings.budget_ms` when given):
+    /// the scene's level throughout.
+    pub budget_ms: Option<f32>,
 }
 
 /// Figures of one replay, written as `summary.json`.
@@ -56,6 +62,23 @@ pub struct ReplaySummary {
     pub mean_irradiance_change: f64,
     /// Exposure used for the indirect-only images (fixed from the first lit frame on).
     pub indirect_exposure: f32,
+    /// The frame-time budget the replay held (`--budget-ms`, else the scene's `budget_ms`).
+    pub budget_ms: Option<f32>,
+    /// What each frame ran at: the level and the parameters (the scene's level throughout
+    /// without a budget).
+    pub parameters: Vec<FrameParameters>,
+    /// Each frame's estimated relative RMSE of its indirect light against the exact reference
+    /// (`renderer::estimate::PER_FRAME`; `null` where the frame had nothing to estimate).
+    pub error_estimate: Vec<Option<f64>>,
+    /// Each frame's time spent on that estimate (ms, part of `frame_ms`).
+    pub error_estimate_ms: Vec<f64>,
+    /// Mean absolute change of the composite from the previous frame, 8-bit levels per channel;
+    /// one entry per frame after the first.
+    pub composite_change: Vec<f64>,
+    /// 90th percentile of `frame_ms` after the first 5 frames (all of them when fewer).
+    pub p90_frame_ms_after_5: f64,
+    /// Frames per level the frames ran at.
+    pub level_frames: BTreeMap<String, usize>,
 }
 
 /// Replay `options.recording` on `gpu`, writing images as it goes.
@@ -71,9 +94,17 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
     // it is read from the description, its map relative to the scene file.
     let text =
         std::fs::read_to_string(&options.scene).with_context(|| format!("reading {}", options.scene.display()))?;
-    let environment = crate::scene::SceneDescription::from_json_str(&text)?.settings.environment;
+    let description = crate::scene::SceneDescription::from_json_str(&text)?;
     let base_dir = options.scene.parent().unwrap_or(Path::new("."));
-    mr.set_environment(Environment::from_settings(&environment, base_dir)?);
+    mr.set_environment(Environment::from_settings(&description.settings.environment, base_dir)?);
+    mr.renderer_mut().set_error_estimate(Some(PER_FRAME));
+    let level = scene.resolved.quality;
+    let analysis = &scene.resolved.analysis;
+    let budget_ms = options.budget_ms.or(description.settings.budget_ms);
+    let mut controller = budget_ms
+        .map(|ms| BudgetController::at_level(ms, budget::ladder(analysis, &description.settings, true), level));
+    let level_parameters = budget::level_parameters(level, analysis, &description.settings);
+    let base_rgbd = scene.settings.rgbd;
     let composited_dir = options.out.join("composited");
     let indirect_dir = options.out.join("indirect");
     for dir in [&composited_dir, &indirect_dir] {
@@ -93,14 +124,37 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
         irradiance_change: Vec::new(),
         mean_irradiance_change: 0.0,
         indirect_exposure: 0.0,
+        budget_ms,
+        parameters: Vec::new(),
+        error_estimate: Vec::new(),
+        error_estimate_ms: Vec::new(),
+        composite_change: Vec::new(),
+        p90_frame_ms_after_5: 0.0,
+        level_frames: BTreeMap::new(),
     };
+    let mut previous_composite: Option<Vec<[u8; 3]>> = None;
     let mut previous: Option<Vec<Vec3>> = None;
     let mut indirect_exposure = None;
     for i in 0..frames {
         let frame = recording.frame(i)?;
+        let parameters = controller.as_ref().map_or(level_parameters, BudgetController::parameters);
+        apply(&mut mr, &parameters, &scene, base_rgbd, (width, height));
         let start = Instant::now();
-        let out = mr.render_frame(gpu, &frame)?;
-        summary.frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let mut out = mr.render_frame(gpu, &frame)?;
+        let (w, h) = parameters.scaled(width, height);
+        out.composited = budget::upscale_rgb(&out.composited, w, h, width, height);
+        let frame_ms = start.elapsed().as_secs_f64() * 1e3;
+        summary.frame_ms.push(frame_ms);
+        if let Some(c) = controller.as_mut() {
+            c.observe(frame_ms);
+        }
+        *summary.level_frames.entry(parameters.level.name().to_owned()).or_default() += 1;
+        summary.parameters.push(parameters);
+        summary.error_estimate.push(out.error_estimate.map(|e| e.rel_rmse));
+        summary.error_estimate_ms.push(out.error_estimate.map_or(0.0, |e| e.ms));
+        if let Some(p) = &previous_composite {
+            summary.composite_change.push(budget::mean_abs_change(p, &out.composited));
+        }
         summary.timing = match out.timings.source {
             TimingSource::GpuTimestamps => "gpu_timestamps",
             TimingSource::WallClock => "wall_clock",
@@ -117,8 +171,11 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
         let name = format!("{i:04}.png");
         write_rgb(&composited_dir.join(&name), width, height, &out.composited)?;
         write_indirect(&indirect_dir.join(&name), &out.indirect, exposure)?;
+        previous_composite = Some(out.composited);
         bar.inc(1);
     }
+    summary.p90_frame_ms_after_5 =
+        p90(summary.frame_ms.get(5..).filter(|v| !v.is_empty()).unwrap_or(&summary.frame_ms));
     bar.finish_and_clear();
     let n = summary.irradiance_change.len().max(1) as f64;
     summary.mean_irradiance_change = summary.irradiance_change.iter().fold(0.0, |a, b| a + b) / n;
@@ -127,6 +184,27 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
     let path = options.out.join("summary.json");
     std::fs::write(&path, json).with_context(|| format!("writing {}", path.display()))?;
     Ok(summary)
+}
+
+/// Sets what the next frame of `mr` runs at: the visibility mode, the near field, the RGB-D
+/// grid (the scene's `grid_step` times `vals_step`, at most 64) and the render size.
+fn apply(mr: &mut MrRenderer, p: &FrameParameters, scene: &Scene, rgbd: crate::rgbd::RgbdSettings, size: (u32, u32)) {
+    let renderer = mr.renderer_mut();
+    renderer.set_occlusion(p.occlusion, scene.settings.occlusion_rule);
+    renderer.set_near_field(p.near_field);
+    let settings = mr.frame_settings_mut();
+    settings.rgbd = crate::rgbd::RgbdSettings { grid_step: (rgbd.grid_step * p.vals_step).min(64), ..rgbd };
+    (settings.width, settings.height) = p.scaled(size.0, size.1);
+}
+
+/// The 90th percentile (nearest rank) of `values`; 0 for none.
+pub fn p90(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    match sorted.len() {
+        0 => 0.0,
+        n => sorted[(n * 9).div_ceil(10) - 1],
+    }
 }
 
 /// A progress bar over `frames` frames on standard error, or a hidden one.

@@ -22,6 +22,17 @@
 //! about 131k shadow rays at the defaults (1,024 pixels, 128 VALs each), against the tens of
 //! millions of the exact reference at 256². The
 //! scene's BVH is built once and kept while the meshes stay where they are.
+//!
+//! Every frame of `relume render`, `relume replay`, the service's renders and streams runs the
+//! cheaper [`PER_FRAME`] variant (`Renderer::set_error_estimate`): 64 pixels x 32 VALs, 2,048
+//! shadow rays, a sixteenth of the rays of the default. Its trade: its own sampling error,
+//! which shrinks as 1/sqrt(pixels), is about four times the default's where the frame's error
+//! is spread evenly; successive frames look at other pixels, so their estimates average out
+//! over a stream (the spread each frame reports says how far one frame's is to be trusted);
+//! `relume compare`
+//! and `relume bench --levels` keep the default. Its cost beside the frame's is measured by
+//! `relume replay` (`summary.json`: `error_estimate_ms` beside `frame_ms`;
+//! docs/measurements/budget.md).
 
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, noise_corrected_relative_rmse, relative_stderr};
@@ -38,6 +49,10 @@ use std::time::Instant;
 pub const DEFAULT_PIXELS: u32 = 1024;
 /// VALs each of them draws by default.
 pub const DEFAULT_SAMPLES: u32 = 128;
+/// The per-frame estimate: few enough pixels and VALs to run after every frame.
+pub const PER_FRAME: EstimateOptions = EstimateOptions { pixels: 64, samples: 32, seed: 1 };
+/// The stage the per-frame estimate's time is reported as.
+pub const STAGE: &str = "error_estimate";
 /// Bounds of [`EstimateOptions::pixels`]: at least one per interleaved quarter, at most what a
 /// frame's estimate should cost.
 pub const PIXELS_RANGE: (u32, u32) = (4, 1 << 16);

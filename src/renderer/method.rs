@@ -80,6 +80,9 @@ pub struct Rendered {
     pub val_count: u32,
     /// Method::Exact: the rounds it took (see `gpu::references::exact`); 0 for the other methods.
     pub exact_rounds: u32,
+    /// The frame's estimated error against the exact reference, when the renderer was asked to
+    /// estimate it (`Renderer::set_error_estimate`) and the frame has indirect light.
+    pub error_estimate: Option<super::estimate::ErrorEstimate>,
 }
 
 impl Rendered {

@@ -40,6 +40,7 @@ use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
 use crate::scene::{self, Camera, Scene, SpotLight};
 use glam::{Affine3A, DAffine3, Mat4, Vec3};
 
+pub mod budget;
 mod cache;
 pub mod estimate;
 mod method;
@@ -71,6 +72,12 @@ pub struct Renderer {
     sparse_shading: scene::SparseShading,
     /// `settings.sparse.near_field` as a radius (m): that many of the scene's sparse spacings.
     near_radius: f32,
+    /// The scene's sparse point spacing (m), the near field's unit.
+    sparse_spacing: f32,
+    /// The error estimate run after every frame with indirect light, when asked for
+    /// ([`Renderer::set_error_estimate`]), and the frames it has looked at (its seed).
+    estimate: Option<(estimate::Estimator, estimate::EstimateOptions)>,
+    estimated_frames: u64,
     exact_val_stride: u32,
     spot: Option<Spot>,
     /// The scene's `lights` and their direct light (`gpu::lights::many`), when it has any.
@@ -163,6 +170,9 @@ impl Renderer {
             visibility: VisibilitySettings::of(&scene.settings),
             sparse_shading: scene.settings.sparse,
             near_radius: scene.settings.sparse.near_field * scene.sparse_spacing(),
+            sparse_spacing: scene.sparse_spacing(),
+            estimate: None,
+            estimated_frames: 0,
             exact_val_stride: 1,
             scene: scene_gpu,
             indirect: Indirect::default(),
@@ -226,6 +236,26 @@ impl Renderer {
     /// Change the occlusion mode from the next sparse frame on (the modes' settings stay).
     pub fn set_occlusion(&mut self, occlusion: scene::Occlusion, rule: scene::OcclusionRule) {
         (self.visibility.mode, self.visibility.rule) = (occlusion, rule);
+    }
+
+    /// Change `sparse.near_field` (in sparse point spacings; 0: off) from the next sparse frame
+    /// on; the sparse method's passes are rebuilt when it changes.
+    pub fn set_near_field(&mut self, spacings: f32) {
+        self.near_radius = spacings.max(0.0) * self.sparse_spacing;
+    }
+
+    /// Run the error estimate ([`estimate::Estimator`]) after every frame that computes indirect
+    /// light, with `options` (its seed is offset by the frame's index, so that successive
+    /// frames look at other pixels); `None`: no estimate. Its time is the frame's
+    /// `error_estimate` stage.
+    pub fn set_error_estimate(&mut self, options: Option<estimate::EstimateOptions>) {
+        match options {
+            None => self.estimate = None,
+            Some(options) => {
+                let estimator = self.estimate.take().map_or_else(estimate::Estimator::new, |(e, _)| e);
+                self.estimate = Some((estimator, options));
+            }
+        }
     }
 
     /// Allow or forbid the glossy lobe (it still runs only when a material is glossy) from the
@@ -464,14 +494,28 @@ impl Renderer {
             }
         };
         let val_count = self.live_val_count(gpu)?;
-        Ok(Rendered {
+        let mut rendered = Rendered {
             direct: LinearImage { width, height, pixels: direct },
             indirect: LinearImage { width, height, pixels: indirect },
             timings,
             indirect_stages,
             val_count,
             exact_rounds,
-        })
+            error_estimate: None,
+        };
+        if components.indirect
+            && let Some((mut estimator, options)) = self.estimate.take()
+        {
+            let seed = options.seed.wrapping_add(self.estimated_frames);
+            self.estimated_frames += 1;
+            let result = estimator.estimate(gpu, self, &rendered, &estimate::EstimateOptions { seed, ..options });
+            self.estimate = Some((estimator, options));
+            rendered.error_estimate = result?;
+            if let Some(e) = &rendered.error_estimate {
+                rendered.timings.stages.push((estimate::STAGE.to_owned(), e.ms));
+            }
+        }
+        Ok(rendered)
     }
 
     /// The frame's techniques in order, and which of them computes the indirect light. Call

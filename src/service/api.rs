@@ -159,8 +159,19 @@ impl LightOverride {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Quality {
+    /// The quality level (default: the scene's `settings.quality`): the level's parameters
+    /// resolved for the scene, those a loaded scene can change per frame (visibility mode,
+    /// near field); `reference` renders the exact reference unless `method` is given.
     #[serde(default)]
-    pub method: RenderMethod,
+    pub level: Option<crate::scene::Quality>,
+    /// A frame-time budget, ms, in [0.1, 600000] (default: the scene's `settings.budget_ms`).
+    /// A render is one frame: nothing adapts to it; the answer says whether the frame met it
+    /// (`X-Relume-Budget-Met`). Streams adapt to theirs.
+    #[serde(default)]
+    pub budget_ms: Option<f32>,
+    /// Default: `sparse` (the exact reference at level `reference`).
+    #[serde(default)]
+    pub method: Option<RenderMethod>,
     #[serde(default)]
     pub component: Component,
     /// Exposure multiplier before tone mapping (PNG only), > 0; default the scene's
@@ -214,6 +225,9 @@ pub enum ImageFormat {
 impl Quality {
     /// Checks the values serde cannot; errors name fields under `field` (`quality`).
     pub fn validate(&self, field: &str) -> Result<(), SceneError> {
+        if let Some(ms) = self.budget_ms {
+            crate::scene::settings::validate_budget_ms(ms, &format!("{field}.budget_ms"))?;
+        }
         match self.exposure {
             Some(exposure) => crate::scene::settings::validate_exposure(exposure, &format!("{field}.exposure")),
             None => Ok(()),

@@ -109,6 +109,9 @@ pub struct RenderJob {
     pub method: Method,
     pub width: u32,
     pub height: u32,
+    /// The request's level's visibility mode and near field (sparse point spacings).
+    pub occlusion: Occlusion,
+    pub near_field: f32,
 }
 /// A composited stream frame (sRGB, row-major) and how long compositing took, ms.
 pub type Composite = (Vec<[u8; 3]>, f64);
@@ -146,6 +149,8 @@ pub struct StreamFrameJob {
     /// the stream changed them).
     pub occlusion: Occlusion,
     pub glossy: bool,
+    /// `sparse.near_field` of the stream's level (sparse point spacings).
+    pub near_field: f32,
 }
 
 enum Job {
@@ -406,7 +411,8 @@ impl Backend for GpuBackend {
     }
 
     fn add_scene(&mut self, id: &str, scene: Scene, environment: Environment) -> Result<(), WorkerError> {
-        let renderer = Renderer::new(&self.gpu, &scene)?;
+        let mut renderer = Renderer::new(&self.gpu, &scene)?;
+        renderer.set_error_estimate(Some(crate::renderer::estimate::PER_FRAME));
         let mr = MrPipeline::new(scene.settings.mr, environment);
         self.scenes.insert(id.to_owned(), Loaded { scene, renderer, mr });
         self.settle("creating a scene");
@@ -451,7 +457,8 @@ impl Backend for GpuBackend {
         self.gpu = gpu;
         let gpu = &self.gpu;
         self.scenes.retain(|id, loaded| match guarded(|| Ok(Renderer::new(gpu, &loaded.scene)?)) {
-            Ok(renderer) => {
+            Ok(mut renderer) => {
+                renderer.set_error_estimate(Some(crate::renderer::estimate::PER_FRAME));
                 loaded.renderer = renderer;
                 loaded.mr.forget_placement();
                 true
@@ -510,7 +517,8 @@ fn timed(
 fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, WorkerError> {
     let Loaded { scene, renderer, .. } = loaded;
     renderer.place_meshes(gpu, scene, &placement(scene, &[]));
-    renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
+    renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);
+    renderer.set_near_field(job.near_field);
     renderer.set_glossy(scene.settings.glossy);
     renderer.clear_vals();
     renderer.set_camera(job.camera);
@@ -544,6 +552,7 @@ fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> 
     let Loaded { scene, renderer, mr } = loaded;
     mr.place(gpu, renderer, scene, &placement(scene, &job.model_transforms))?;
     renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);
+    renderer.set_near_field(job.near_field);
     renderer.set_glossy(job.glossy);
     if let Some(light) = job.light.as_ref().or(scene.light.as_ref()) {
         renderer.set_spot_light(light);

@@ -383,6 +383,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
         exposure: description.settings.exposure,
         mesh_count: scene.meshes.len(),
         settings: scene.settings,
+        described: description.settings.clone(),
         origin: scene.origin,
         info: info.clone(),
     };
@@ -465,6 +466,15 @@ async fn delete_scene(
                 ("X-Relume-Val-Count" = u32, description = "VALs with non-zero flux in this frame"),
                 ("X-Relume-Exposure" = f32, description = "The exposure of a PNG"),
                 ("X-Relume-Timing-Source" = String, description = "`gpu_timestamps` or `wall_clock`"),
+                ("X-Relume-Quality" = String, description = "The level the render ran at"),
+                ("X-Relume-Parameters" = String, description = "What it ran at, `name=value` pairs separated \
+                    by `; `: `level`, `visibility`, `near_field`, `vals_step`, `resolution_scale`"),
+                ("X-Relume-Error-Estimate" = f64, description = "Estimated relative RMSE of the indirect light \
+                    against the exact reference (src/renderer/estimate.rs); absent when the render has none"),
+                ("X-Relume-Error-Estimate-Spread" = f64, description = "The estimate's standard error"),
+                ("X-Relume-Budget-Ms" = f32, description = "The frame-time budget, when one was given"),
+                ("X-Relume-Budget-Met" = bool, description = "Whether the frame's time on the GPU thread was \
+                    within the budget"),
             )),
         (status = 400, description = "Invalid JSON or field (`field` names it), or over max_frame_side or \
             max_pixels", body = ErrorBody),
@@ -511,12 +521,23 @@ async fn render_scene(
     };
     let quality = request.quality;
     quality.validate("quality").map_err(|e| ApiError::scene(&e, &state.assets))?;
+    let resolved = &entry.info.resolved;
+    let level = quality.level.unwrap_or(resolved.quality);
+    let parameters = crate::renderer::budget::level_parameters(level, &resolved.analysis, &entry.described);
+    let budget_ms = quality.budget_ms.or(resolved.budget_ms);
+    let method = match (quality.method, level) {
+        (Some(method), _) => method.into(),
+        (None, crate::scene::Quality::Reference) => crate::renderer::Method::Exact,
+        (None, _) => crate::renderer::Method::Sparse,
+    };
     let job = RenderJob {
         camera: camera.to_camera(entry.origin),
         light: light.map(|l| l.to_spot_light(entry.origin)),
-        method: quality.method.into(),
+        method,
         width: camera.width,
         height: camera.height,
+        occlusion: parameters.occlusion,
+        near_field: parameters.near_field,
     };
     let answer = state.worker.try_render(client, &id, job).inspect_err(|error| {
         if matches!(error, WorkerError::QueueFull { .. }) {
@@ -524,13 +545,34 @@ async fn render_scene(
         }
     })?;
     let output = answer.await.map_err(|_| WorkerError::Stopped)??;
+    let met = budget_ms.map(|ms| output.gpu_ms <= f64::from(ms));
+    let estimate = output.frame.error_estimate;
+    state.metrics.record_frame_quality(estimate.map(|e| e.rel_rmse), &parameters, met.map(|m| !m));
     let exposure = quality.exposure.or(entry.exposure);
     let format = quality.format;
     let component = quality.component;
     let encoded = tokio::task::spawn_blocking(move || encode(&output, component, format, exposure))
         .await
         .map_err(ApiError::internal)??;
-    Ok(encoded.into_response(started))
+    let mut response = encoded.into_response(started);
+    let headers = response.headers_mut();
+    let mut put = |name: &'static str, value: String| {
+        if let Ok(value) = HeaderValue::from_str(&value) {
+            headers.insert(name, value);
+        }
+    };
+    put("x-relume-quality", level.name().to_owned());
+    let pairs: Vec<String> = parameters.pairs().iter().map(|(k, v)| format!("{k}={v}")).collect();
+    put("x-relume-parameters", pairs.join("; "));
+    if let Some(e) = estimate {
+        put("x-relume-error-estimate", format!("{:.6}", e.rel_rmse));
+        put("x-relume-error-estimate-spread", format!("{:.6}", e.spread));
+    }
+    if let (Some(ms), Some(met)) = (budget_ms, met) {
+        put("x-relume-budget-ms", ms.to_string());
+        put("x-relume-budget-met", met.to_string());
+    }
+    Ok(response)
 }
 
 /// A rendered image, encoded, with what its headers say.

@@ -11,17 +11,32 @@ use crate::gpu::timing::StageTimings;
 const BUCKETS: [f64; 16] =
     [0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 300.0];
 
-#[derive(Clone, Debug, Default)]
+/// Upper bounds of the error estimate's histogram (relative RMSE).
+const ERROR_BUCKETS: [f64; 12] = [0.005, 0.01, 0.02, 0.03, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5, 1.0];
+
+#[derive(Clone, Debug)]
 struct Histogram {
+    bounds: &'static [f64],
     /// Per bucket (not cumulative); the last counts values above every bound.
-    counts: [u64; BUCKETS.len() + 1],
+    counts: Vec<u64>,
     sum: f64,
     count: u64,
 }
 
+impl Default for Histogram {
+    /// A histogram of durations, seconds.
+    fn default() -> Self {
+        Histogram::new(&BUCKETS)
+    }
+}
+
 impl Histogram {
+    fn new(bounds: &'static [f64]) -> Self {
+        Histogram { bounds, counts: vec![0; bounds.len() + 1], sum: 0.0, count: 0 }
+    }
+
     fn observe(&mut self, value: f64) {
-        let bucket = BUCKETS.iter().position(|&le| value <= le).unwrap_or(BUCKETS.len());
+        let bucket = self.bounds.iter().position(|&le| value <= le).unwrap_or(self.bounds.len());
         self.counts[bucket] += 1;
         self.sum += value;
         self.count += 1;
@@ -30,7 +45,7 @@ impl Histogram {
     fn write(&self, out: &mut String, name: &str, labels: &str) {
         let mut cumulative = 0;
         let sep = if labels.is_empty() { "" } else { "," };
-        for (le, count) in BUCKETS.iter().zip(&self.counts) {
+        for (le, count) in self.bounds.iter().zip(&self.counts) {
             cumulative += count;
             let _ = writeln!(out, "{name}_bucket{{{labels}{sep}le=\"{le}\"}} {cumulative}");
         }
@@ -41,8 +56,32 @@ impl Histogram {
     }
 }
 
+/// What the frames ran at and how far from exact they were estimated to be.
+#[derive(Clone, Debug)]
+struct FrameQuality {
+    error_estimate: Histogram,
+    frames_by_level: BTreeMap<String, u64>,
+    /// The last frame's parameters (name, value), numeric ones only.
+    parameters: BTreeMap<String, f64>,
+    over_budget: u64,
+    within_budget: u64,
+}
+
+impl Default for FrameQuality {
+    fn default() -> Self {
+        FrameQuality {
+            error_estimate: Histogram::new(&ERROR_BUCKETS),
+            frames_by_level: BTreeMap::new(),
+            parameters: BTreeMap::new(),
+            over_budget: 0,
+            within_budget: 0,
+        }
+    }
+}
+
 #[derive(Default)]
 struct Inner {
+    quality: FrameQuality,
     /// (route, method, status) -> count.
     requests: BTreeMap<(String, String, u16), u64>,
     request_seconds: BTreeMap<String, Histogram>,
@@ -110,6 +149,32 @@ impl Metrics {
         }
     }
 
+    /// A rendered frame's error estimate (relative RMSE, when it had one), the level and
+    /// parameters it ran at, and whether it went over its budget (when it had one).
+    pub fn record_frame_quality(
+        &self,
+        error_estimate: Option<f64>,
+        parameters: &crate::renderer::budget::FrameParameters,
+        over_budget: Option<bool>,
+    ) {
+        let mut inner = self.lock();
+        let q = &mut inner.quality;
+        if let Some(e) = error_estimate {
+            q.error_estimate.observe(e);
+        }
+        *q.frames_by_level.entry(parameters.level.name().to_owned()).or_default() += 1;
+        for (name, value) in parameters.pairs() {
+            if let Ok(value) = value.parse::<f64>() {
+                q.parameters.insert(name, value);
+            }
+        }
+        match over_budget {
+            Some(true) => q.over_budget += 1,
+            Some(false) => q.within_budget += 1,
+            None => {}
+        }
+    }
+
     /// A render refused because the queue was full.
     pub fn record_rejected_render(&self) {
         self.lock().renders_rejected += 1;
@@ -173,6 +238,30 @@ impl Metrics {
         }
         header(&mut out, "relume_frame_duration_seconds", "histogram", "Wall time of a frame on the GPU thread.");
         inner.frame_seconds.write(&mut out, "relume_frame_duration_seconds", "");
+        let q = &inner.quality;
+        header(
+            &mut out,
+            "relume_frame_error_estimate",
+            "histogram",
+            "Estimated relative RMSE of each frame's indirect light against the exact reference.",
+        );
+        q.error_estimate.write(&mut out, "relume_frame_error_estimate", "");
+        header(&mut out, "relume_frames_by_level_total", "counter", "Frames rendered, by the level they ran at.");
+        for (level, count) in &q.frames_by_level {
+            let _ = writeln!(out, "relume_frames_by_level_total{{level=\"{}\"}} {count}", escape(level));
+        }
+        header(
+            &mut out,
+            "relume_frame_parameter",
+            "gauge",
+            "The last frame's parameters (vals_step, near_field, ...).",
+        );
+        for (name, value) in &q.parameters {
+            let _ = writeln!(out, "relume_frame_parameter{{name=\"{}\"}} {value}", escape(name));
+        }
+        header(&mut out, "relume_frames_budget_total", "counter", "Frames with a budget, by whether they met it.");
+        let _ = writeln!(out, "relume_frames_budget_total{{met=\"true\"}} {}", q.within_budget);
+        let _ = writeln!(out, "relume_frames_budget_total{{met=\"false\"}} {}", q.over_budget);
         header(&mut out, "relume_gpu_seconds_total", "counter", "Time spent in each GPU stage.");
         for (stage, seconds) in &inner.gpu_seconds {
             let _ = writeln!(out, "relume_gpu_seconds_total{{stage=\"{}\"}} {seconds}", escape(stage));
@@ -221,6 +310,7 @@ impl Inner {
     /// A copy, so the lock is not held while formatting.
     fn clone_for_render(&self) -> Inner {
         Inner {
+            quality: self.quality.clone(),
             requests: self.requests.clone(),
             request_seconds: self.request_seconds.clone(),
             frame_seconds: self.frame_seconds.clone(),
@@ -254,6 +344,15 @@ mod tests {
         let timings = StageTimings { source: TimingSource::WallClock, stages: vec![("gather".to_owned(), 250.0)] };
         metrics.record_frame(0.3, &timings);
         metrics.record_frame(0.1, &timings);
+        let parameters = crate::renderer::budget::FrameParameters {
+            level: crate::scene::Quality::Fast,
+            occlusion: crate::scene::Occlusion::Disks,
+            near_field: 0.0,
+            vals_step: 2,
+            resolution_scale: 1.0,
+        };
+        metrics.record_frame_quality(Some(0.04), &parameters, Some(true));
+        metrics.record_frame_quality(None, &parameters, None);
         let text = metrics.render(&Gauges { queue_depth: 2, queue_capacity: 8, scenes: 1, streams: 0, connections: 1 });
         assert!(text.contains("relume_http_requests_total{route=\"/v1/scenes\",method=\"POST\",status=\"201\"} 2"));
         assert!(text.contains("relume_http_request_duration_seconds_bucket{route=\"/v1/scenes\",le=\"0.001\"} 0"));
@@ -265,6 +364,12 @@ mod tests {
         assert!(text.contains("relume_frame_duration_seconds_bucket{le=\"0.25\"} 1"));
         assert!(text.contains("relume_gpu_seconds_total{stage=\"gather\"} 0.5"));
         assert!(text.contains("relume_render_queue_depth 2"));
+        assert!(text.contains("relume_frame_error_estimate_bucket{le=\"0.03\"} 0"), "{text}");
+        assert!(text.contains("relume_frame_error_estimate_bucket{le=\"0.05\"} 1"));
+        assert!(text.contains("relume_frame_error_estimate_count 1"));
+        assert!(text.contains("relume_frames_by_level_total{level=\"fast\"} 2"));
+        assert!(text.contains("relume_frame_parameter{name=\"vals_step\"} 2"));
+        assert!(text.contains("relume_frames_budget_total{met=\"false\"} 1"));
         assert!(!text.contains("relume_gpu_buffer_bytes"), "unknown until a backend counts it");
         metrics.set_gpu_memory(Some(GpuMemory { buffers: 3, buffer_bytes: 4096, ..GpuMemory::default() }));
         let text = metrics.render(&Gauges { queue_depth: 2, queue_capacity: 8, scenes: 1, streams: 0, connections: 1 });

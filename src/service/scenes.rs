@@ -234,6 +234,8 @@ pub struct SceneEntry {
     pub mesh_count: usize,
     /// The loaded scene's render settings (occlusion resolved): where a stream starts.
     pub settings: crate::scene::Settings,
+    /// The scene file's settings, which a render's or a stream's level is resolved from.
+    pub described: crate::scene::SettingsDescription,
     /// The loaded scene's floating origin ([`crate::scene::Scene::origin`]): render and
     /// stream cameras and lights, given in user coordinates, are made relative to it.
     pub origin: glam::DVec3,
@@ -441,6 +443,7 @@ mod tests {
             exposure: None,
             mesh_count: 0,
             settings: crate::scene::SettingsDescription::default().before_load(),
+            described: Default::default(),
             origin: glam::DVec3::ZERO,
         };
         a.commit(entry);

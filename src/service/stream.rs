@@ -23,8 +23,11 @@ use tokio::sync::oneshot;
 use tokio_tungstenite::tungstenite;
 
 use crate::gpu::GpuError;
+use crate::renderer::Method;
+use crate::renderer::budget::{self, BudgetController, FrameParameters};
 use crate::rgbd::RgbdSettings;
-use crate::scene::{CameraDescription, LightDescription, Occlusion, TransformDescription};
+use crate::scene::settings::{SceneAnalysis, SettingsDescription};
+use crate::scene::{CameraDescription, LightDescription, Occlusion, Quality, TransformDescription};
 
 use super::AppState;
 use super::error::ApiError;
@@ -51,6 +54,11 @@ use super::wire::{
         ("id" = String, Path, description = "The scene's id"),
         ("ticket" = Option<String>, Query, description = "A single-use ticket from `POST /v1/tickets`, in place \
             of the bearer token; checked (and spent) whenever it is given"),
+        ("quality" = Option<Quality>, Query, description = "The stream's quality level from its first frame \
+            (default: the scene's `settings.quality`); a control message's `render.quality` changes it"),
+        ("budget_ms" = Option<f32>, Query, description = "The stream's frame-time budget, ms, in [0.1, 600000] \
+            (default: the scene's `settings.budget_ms`): frames move between the level's parameters and cheaper \
+            or richer ones to hold it; a control message's `render.budget_ms` changes it"),
         ("Sec-WebSocket-Protocol" = Option<String>, Header, description = "`relume.v1` (selected when \
             offered), and optionally `relume.ticket.<ticket>`: a ticket in place of `?ticket=`, out of the URL"),
     ),
@@ -58,8 +66,9 @@ use super::wire::{
         (status = 101, description = "WebSocket stream: one `relume.v1.Envelope` (proto/relume.proto) per \
             binary message. Each RGB-D frame is answered with the relit frame (`RenderedFrame`) or an \
             `Error`; each control message with a `SettingsAck` or an `Error`."),
-        (status = 400, description = "Not a WebSocket upgrade request, a ticket given more than once, or a \
-            ticket subprotocol without `relume.v1` beside it",
+        (status = 400, description = "Not a WebSocket upgrade request, a ticket given more than once, a \
+            ticket subprotocol without `relume.v1` beside it, or an invalid `quality` or `budget_ms` (`field` \
+            names it)",
             body = super::error::ErrorBody),
         (status = 401, description = "Missing or wrong bearer token, or an unknown, used or expired ticket",
             body = super::error::ErrorBody),
@@ -73,12 +82,14 @@ pub async fn open_stream(
     State(state): State<Arc<AppState>>,
     client: ClientId,
     Path(id): Path<String>,
+    uri: axum::http::Uri,
     upgrade: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
     if state.shutting_down() {
         return Err(ApiError::shutting_down());
     }
     let scene = state.scenes.get(&id).ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
+    let start = stream_start(&uri).map_err(|e| ApiError::scene(&e, &state.assets))?;
     let upgrade = upgrade.map_err(|rejection| {
         ApiError::new(rejection.status(), super::error::Code::UpgradeRequired, rejection.body_text())
     })?;
@@ -91,8 +102,45 @@ pub async fn open_stream(
     let upgrade = upgrade.protocols([super::tickets::STREAM_PROTOCOL]);
     Ok(upgrade.max_message_size(transport_limit).max_frame_size(transport_limit).on_upgrade(move |socket| async move {
         let _open = open;
-        Session::new(state.clone(), client, id, &scene).run(socket).await;
+        Session::new(state.clone(), client, id, &scene, start).run(socket).await;
     }))
+}
+
+/// The level and budget a stream starts with (`?quality=`, `?budget_ms=`; `None`: the
+/// scene's).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StreamStart {
+    pub quality: Option<Quality>,
+    pub budget_ms: Option<f32>,
+}
+
+/// The `quality` and `budget_ms` query parameters of a stream handshake, validated as a scene
+/// file's `settings.quality` and `settings.budget_ms` are; other parameters are left alone.
+pub fn stream_start(uri: &axum::http::Uri) -> Result<StreamStart, crate::scene::SceneError> {
+    use crate::scene::SceneError;
+    let mut start = StreamStart::default();
+    for pair in uri.query().unwrap_or("").split('&') {
+        let (key, value) = pair.split_once('=').unwrap_or((pair, ""));
+        let value = percent_encoding::percent_decode_str(value).decode_utf8_lossy();
+        match key {
+            "quality" => {
+                let level = Quality::ALL.into_iter().find(|q| q.name() == value).ok_or_else(|| {
+                    let names: Vec<&str> = Quality::ALL.iter().map(|q| q.name()).collect();
+                    SceneError::field("quality", format!("must be one of {}, got `{value}`", names.join(", ")))
+                })?;
+                start.quality = Some(level);
+            }
+            "budget_ms" => {
+                let ms: f32 = value
+                    .parse()
+                    .map_err(|_| SceneError::field("budget_ms", format!("must be a number of ms, got `{value}`")))?;
+                crate::scene::settings::validate_budget_ms(ms, "budget_ms")?;
+                start.budget_ms = Some(ms);
+            }
+            _ => {}
+        }
+    }
+    Ok(start)
 }
 
 /// The most bytes of one incoming message a stream buffers: `2 * max_message_bytes` (at least
@@ -110,8 +158,12 @@ struct Settings {
     model_transforms: BTreeMap<u32, TransformDescription>,
     quality: StreamQuality,
     rgbd: RgbdSettings,
-    occlusion: Occlusion,
+    /// The visibility mode the client set, over the level's.
+    occlusion: Option<Occlusion>,
     glossy: bool,
+    /// The quality level and the frame-time budget.
+    level: Quality,
+    budget_ms: Option<f32>,
 }
 
 /// A frame on the GPU thread.
@@ -120,6 +172,9 @@ struct InFlight {
     timestamp: f64,
     decode_ms: f64,
     quality: StreamQuality,
+    /// What the frame runs at, and the stream's budget then.
+    parameters: FrameParameters,
+    budget_ms: Option<f32>,
     answer: oneshot::Receiver<Result<RenderOutput, WorkerError>>,
 }
 
@@ -131,9 +186,14 @@ struct Session {
     mesh_count: usize,
     /// The scene's floating origin: the stream's cameras and lights are made relative to it.
     origin: glam::DVec3,
-    /// The scene's settings: what `Occlusion::Unspecified` goes back to.
-    scene_settings: crate::scene::Settings,
+    /// The scene's level, what `QUALITY_LEVEL_UNSPECIFIED` goes back to; its analysis and
+    /// file's settings, which a level is resolved from.
+    scene_level: Quality,
+    analysis: SceneAnalysis,
+    described: SettingsDescription,
     settings: Settings,
+    /// With a budget: what moves the frames between parameter sets.
+    controller: Option<BudgetController>,
     in_flight: Option<InFlight>,
     /// The newest frame not yet submitted (and how long it took to decode, ms).
     waiting: Option<(FrameMessage, f64)>,
@@ -141,8 +201,15 @@ struct Session {
 }
 
 impl Session {
-    fn new(state: Arc<AppState>, client: ClientId, scene_id: String, scene: &SceneEntry) -> Session {
-        Session {
+    fn new(
+        state: Arc<AppState>,
+        client: ClientId,
+        scene_id: String,
+        scene: &SceneEntry,
+        start: StreamStart,
+    ) -> Session {
+        let resolved = &scene.info.resolved;
+        let mut session = Session {
             state,
             client,
             scene_id,
@@ -154,13 +221,37 @@ impl Session {
                 model_transforms: BTreeMap::new(),
                 quality: StreamQuality { exposure: scene.exposure, ..StreamQuality::default() },
                 rgbd: scene.settings.rgbd,
-                occlusion: scene.settings.occlusion,
+                occlusion: None,
                 glossy: scene.settings.glossy,
+                level: start.quality.unwrap_or(resolved.quality),
+                budget_ms: start.budget_ms.or(resolved.budget_ms),
             },
-            scene_settings: scene.settings,
+            scene_level: resolved.quality,
+            analysis: resolved.analysis.clone(),
+            described: scene.described.clone(),
+            controller: None,
             in_flight: None,
             waiting: None,
             dropped_frames: 0,
+        };
+        session.restart_controller();
+        session
+    }
+
+    /// A new controller for the stream's level and budget (none without a budget).
+    fn restart_controller(&mut self) {
+        let s = &self.settings;
+        self.controller = s.budget_ms.map(|ms| {
+            let ladder = budget::ladder(&self.analysis, &self.described, false);
+            BudgetController::at_level(ms, ladder, s.level)
+        });
+    }
+
+    /// What the next frame runs at: the controller's parameters, else the level's.
+    fn parameters(&self) -> FrameParameters {
+        match &self.controller {
+            Some(c) => c.parameters(),
+            None => budget::level_parameters(self.settings.level, &self.analysis, &self.described),
         }
     }
 
@@ -301,25 +392,43 @@ impl Session {
     /// Sends the waiting frame to the GPU thread; an error reply when it cannot be queued.
     fn submit_waiting(&mut self) -> Option<ServerMessage> {
         let (message, decode_ms) = self.waiting.take()?;
+        let mut parameters = self.parameters();
         let s = &self.settings;
+        parameters.occlusion = s.occlusion.unwrap_or(parameters.occlusion);
+        // `reference` asks for the exact reference, unless the client chose another method.
+        let method = match (s.level, s.quality.method) {
+            (Quality::Reference, Method::Sparse) => Method::Exact,
+            (_, method) => method,
+        };
+        let rgbd = RgbdSettings { grid_step: (s.rgbd.grid_step * parameters.vals_step).min(64), ..s.rgbd };
         let job = StreamFrameJob {
             frame_id: message.frame_id,
             frame: message.frame,
             camera: s.camera.as_ref().map(|c| c.to_camera(self.origin)),
             light: s.light.as_ref().map(|l| l.to_spot_light(self.origin)),
             model_transforms: s.model_transforms.iter().map(|(&mesh, t)| (mesh, t.to_matrix())).collect(),
-            method: s.quality.method,
+            method,
             component: s.quality.component,
             exposure: s.quality.exposure,
             format: s.quality.format,
-            rgbd: s.rgbd,
-            occlusion: s.occlusion,
+            rgbd,
+            occlusion: parameters.occlusion,
+            near_field: parameters.near_field,
             glossy: s.glossy,
         };
         let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);
         match self.state.worker.try_render_stream_frame(self.client, &self.scene_id, job) {
             Ok(answer) => {
-                self.in_flight = Some(InFlight { frame_id, timestamp, decode_ms, quality: s.quality, answer });
+                let budget_ms = s.budget_ms;
+                self.in_flight = Some(InFlight {
+                    frame_id,
+                    timestamp,
+                    decode_ms,
+                    quality: s.quality,
+                    parameters,
+                    budget_ms,
+                    answer,
+                });
                 None
             }
             Err(error) => {
@@ -341,6 +450,20 @@ impl Session {
             Ok(Err(error)) => return ServerMessage::Error(WireError::from(error).with_frame(frame_id)),
             Err(_) => return ServerMessage::Error(WireError::from(WorkerError::Stopped).with_frame(frame_id)),
         };
+        // The controller learns the frame's time where the frame ran at its current rung (not
+        // one left behind by a control message while the frame was in flight).
+        let ran_at =
+            |c: &BudgetController| FrameParameters { occlusion: c.parameters().occlusion, ..in_flight.parameters };
+        if let Some(c) = self.controller.as_mut()
+            && c.parameters() == ran_at(c)
+        {
+            c.observe(output.gpu_ms);
+        }
+        self.state.metrics.record_frame_quality(
+            output.frame.error_estimate.map(|e| e.rel_rmse),
+            &in_flight.parameters,
+            in_flight.budget_ms.map(|b| output.gpu_ms > f64::from(b)),
+        );
         let dropped_frames = self.dropped_frames;
         let encoded = tokio::task::spawn_blocking(move || rendered_frame(&in_flight, output, dropped_frames)).await;
         match encoded {
@@ -395,16 +518,31 @@ impl Session {
             next.rgbd = rgbd.apply(&self.settings.rgbd, "control.rgbd")?;
             applied.push("rgbd");
         }
+        let mut restart = false;
         if let Some(render) = control.render {
             if let Some(occlusion) = render.occlusion {
-                next.occlusion = occlusion.unwrap_or(self.scene_settings.occlusion);
+                next.occlusion = occlusion;
             }
             if let Some(glossy) = render.glossy {
                 next.glossy = glossy;
             }
+            if let Some(level) = render.quality {
+                next.level = level.unwrap_or(self.scene_level);
+                restart |= next.level != self.settings.level;
+            }
+            if let Some(budget_ms) = render.budget_ms {
+                next.budget_ms = budget_ms;
+                restart |= budget_ms.is_some() != self.settings.budget_ms.is_some();
+            }
             applied.push("render");
         }
+        let budget_changed = next.budget_ms != self.settings.budget_ms;
         self.settings = next;
+        if restart {
+            self.restart_controller();
+        } else if let (true, Some(c), Some(ms)) = (budget_changed, self.controller.as_mut(), self.settings.budget_ms) {
+            c.set_budget_ms(ms);
+        }
         Ok(applied.into_iter().map(str::to_owned).collect())
     }
 }
@@ -446,6 +584,10 @@ fn rendered_frame(in_flight: &InFlight, output: RenderOutput, dropped_frames: u6
         timings,
         val_count: output.frame.val_count,
         dropped_frames,
+        error_estimate: output.frame.error_estimate,
+        quality: in_flight.parameters.level,
+        parameters: in_flight.parameters.pairs(),
+        budget_ms: in_flight.budget_ms,
     })
 }
 

@@ -76,6 +76,14 @@ fn render_prints_the_resolved_configuration_and_takes_a_quality() {
     assert!(text.contains("quality balanced: technique sparse"), "{text}");
     assert!(text.contains("tuning.rsm_resolution = 32: set in the scene file"), "{text}");
     assert!(text.contains("sparse.subdivision = 2.0: "), "{text}");
+    // Every frame carries its error estimate: printed, and in the JSON on standard output.
+    assert!(text.contains("error estimate: indirect rel RMSE "), "{text}");
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(v["quality"], "balanced");
+    let e = &v["error_estimate"];
+    assert!(e["rel_rmse"].as_f64().is_some_and(|r| r.is_finite() && r >= 0.0), "{v}");
+    assert!(e["pixels"].as_u64().is_some_and(|p| p > 0), "{v}");
+    assert!(v["timings_ms"]["error_estimate"].as_f64().is_some(), "{v}");
     let o = args(&["--quality", "fast"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("sparse.subdivision = 4.0: "), "{}", stderr(&o));

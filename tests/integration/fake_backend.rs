@@ -42,6 +42,7 @@ impl FakeBackend {
                 indirect_stages: Vec::new(),
                 val_count: 0,
                 exact_rounds: 0,
+                error_estimate: None,
             },
             None,
         ))

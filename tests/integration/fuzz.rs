@@ -60,7 +60,11 @@ fn valid_control() -> Vec<u8> {
         }],
         quality: Some(proto::Quality { method: 1, component: 2, exposure: Some(1.0), format: 1 }),
         rgbd: Some(proto::RgbdSettings { grid_step: Some(4), max_depth: Some(5.0), ..Default::default() }),
-        render: Some(proto::RenderSettings { occlusion: Some(proto::Occlusion::Disks as i32), glossy: Some(false) }),
+        render: Some(proto::RenderSettings {
+            occlusion: Some(proto::Occlusion::Disks as i32),
+            glossy: Some(false),
+            ..Default::default()
+        }),
     };
     proto::Envelope { version: PROTOCOL_VERSION, body: Some(Body::Control(control)) }.encode_to_vec()
 }

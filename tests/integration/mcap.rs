@@ -214,6 +214,7 @@ fn mcap_replay_equals_the_tum_replay() {
             accumulate: None,
             exposure: 1.0,
             progress: false,
+            budget_ms: None,
         };
         let summary = relume::mr::replay::replay(&gpu, &options).unwrap();
         outputs.push((out, summary));

@@ -178,6 +178,7 @@ fn redwood_replays() {
         accumulate: None,
         exposure: 1.0,
         progress: false,
+        budget_ms: None,
     };
     let summary = relume::mr::replay::replay(&gpu(), &options).unwrap();
     assert_eq!(summary.frames, 5);

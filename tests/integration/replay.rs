@@ -156,6 +156,40 @@ fn replay_command_writes_frames_and_summary() {
     assert!(summary["stage_ms"]["rgbd_vals"].as_array().unwrap().iter().all(|v| v.as_f64().unwrap() >= 0.0));
 }
 
+/// `relume replay --budget-ms` with a budget no frame can meet falls, frame by frame, to the
+/// cheapest rung of its ladder and reports what each frame ran at (the level, its parameters),
+/// each frame's error estimate and the composite's frame-to-frame change; the composites stay
+/// at the output size while the render size drops (dynamic resolution).
+#[test]
+fn replay_with_a_budget_reports_the_levels_it_ran_at() {
+    let out = scratch("replay_budget");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(["replay", fixture("recordings/tum_fr1_xyz").to_str().unwrap(), "--scene"])
+        .arg(fixture("scenes/mr_bunny.json"))
+        .args(["--frames", "5", "--width", "80", "--height", "60", "--budget-ms", "0.5", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("budget 0.5 ms: p90 frame after the first 5"), "{stderr}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["budget_ms"], 0.5);
+    let parameters = summary["parameters"].as_array().unwrap();
+    assert_eq!(parameters.len(), 5);
+    assert_eq!(parameters[0]["level"], "balanced", "the scene's level first");
+    let last = &parameters[4];
+    assert_eq!((last["level"].as_str(), last["occlusion"].as_str()), (Some("fast"), Some("off")), "{last}");
+    assert_eq!((last["vals_step"].as_u64(), last["resolution_scale"].as_f64()), (Some(3), Some(0.5)), "{last}");
+    assert!(summary["level_frames"]["fast"].as_u64().unwrap() >= 2, "{summary}");
+    let estimates = summary["error_estimate"].as_array().unwrap();
+    assert!(estimates.iter().all(|e| e.as_f64().is_some_and(|e| e.is_finite() && e >= 0.0)), "{estimates:?}");
+    assert_eq!(summary["composite_change"].as_array().unwrap().len(), 4);
+    let image = image::open(out.join("composited").join("0004.png")).unwrap();
+    assert_eq!((image.width(), image.height()), (80, 60));
+}
+
 /// A scene with its own spot light gets the spot's VALs on top of the frame's: both sources
 /// append to one VAL buffer sized for both.
 #[test]

@@ -139,7 +139,9 @@ impl TestServer {
     }
 }
 
-pub(super) struct Ws(tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>);
+pub(super) struct Ws(
+    pub(super) tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>,
+);
 
 impl Ws {
     async fn send(&mut self, message: tungstenite::Message) {
@@ -715,7 +717,11 @@ async fn a_stream_relights_frames_and_follows_its_controls() {
     for (request_id, occlusion, expected) in [(5, proto::Occlusion::Disks, true), (6, proto::Occlusion::Off, false)] {
         let control = proto::Control {
             request_id,
-            render: Some(proto::RenderSettings { occlusion: Some(occlusion as i32), glossy: Some(false) }),
+            render: Some(proto::RenderSettings {
+                occlusion: Some(occlusion as i32),
+                glossy: Some(false),
+                ..Default::default()
+            }),
             ..Default::default()
         };
         match ws.exchange(envelope(Body::Control(control))).await {

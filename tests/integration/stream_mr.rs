@@ -244,3 +244,68 @@ async fn an_environment_map_on_the_service_is_confined_and_bounded() {
     drop(ws);
     server.stop().await;
 }
+
+/// The parameters a streamed frame reports it ran at, by name.
+fn parameter(frame: &proto::RenderedFrame, name: &str) -> String {
+    let found = frame.parameters.iter().find(|p| p.name == name);
+    found.unwrap_or_else(|| panic!("no parameter {name} in {:?}", frame.parameters)).value.clone()
+}
+
+/// A stream's quality level, chosen at the start (`?quality=`) and changed mid-stream by a
+/// control message, changes what its frames run at (the level's visibility mode and near
+/// field, resolved for the scene); every frame carries its error estimate; and a budget far
+/// under the frame's time makes the controller fall, frame by frame, to the cheapest rung
+/// (visibility off, a third of the VAL grid), which the frames report.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_changes_its_level_mid_stream_and_falls_under_a_budget() {
+    let scene = mr_scene(false);
+    let frames = frames(&[0, 1, 2, 3, 4, 5]);
+    let server = TestServer::start(|_| {}).await;
+    let id = server.create(&scene).await;
+    let refused = server.get(&format!("/v1/scenes/{id}/stream?quality=best")).await;
+    assert_eq!(refused.status, 400, "{}", refused.json());
+    assert_eq!(refused.json()["field"], "quality");
+    let url = format!("ws://{}/v1/scenes/{id}/stream?quality=fast", server.addr);
+    let (ws, _) = tokio_tungstenite::connect_async(url).await.expect("the stream opens");
+    let mut ws = super::service::Ws(ws);
+    let (first, _) = streamed_png(ws.exchange(frames[0].0.clone()).await, 0);
+    assert_eq!(first.quality(), proto::QualityLevel::Fast);
+    assert_eq!(parameter(&first, "visibility"), "disks", "the bunny can occlude itself");
+    assert_eq!(parameter(&first, "near_field"), "0");
+    let estimate = first.error_estimate.expect("every frame carries its error estimate");
+    assert!(estimate.rel_rmse.is_finite() && estimate.rel_rmse >= 0.0 && estimate.pixels > 0, "{estimate:?}");
+    assert!(first.timings.iter().any(|t| t.stage == "error_estimate"), "{:?}", first.timings);
+
+    let level = |quality: Option<i32>, budget_ms: Option<f32>, request_id| {
+        let render = proto::RenderSettings { quality, budget_ms, ..Default::default() };
+        envelope(Body::Control(proto::Control { request_id, render: Some(render), ..Default::default() }))
+    };
+    let accurate = Some(proto::QualityLevel::Accurate as i32);
+    assert!(matches!(ws.exchange(level(accurate, None, 1)).await, Body::SettingsAck(_)));
+    let (second, _) = streamed_png(ws.exchange(frames[1].0.clone()).await, 1);
+    assert_eq!(second.quality(), proto::QualityLevel::Accurate);
+    assert_eq!(parameter(&second, "visibility"), "clusters");
+    assert_eq!(parameter(&second, "near_field"), "4");
+    assert!(second.error_estimate.is_some());
+
+    // A budget no frame can meet: down two rungs per frame (over 1.5x the budget).
+    assert!(matches!(ws.exchange(level(None, Some(0.5), 2)).await, Body::SettingsAck(_)));
+    let mut last = None;
+    for (i, (bytes, _)) in frames.iter().enumerate().skip(2) {
+        let (frame, _) = streamed_png(ws.exchange(bytes.clone()).await, i as u64);
+        assert_eq!(frame.budget_ms, 0.5);
+        last = Some(frame);
+    }
+    let last = last.expect("frames");
+    assert_eq!(last.quality(), proto::QualityLevel::Fast, "{:?}", last.parameters);
+    assert_eq!(parameter(&last, "visibility"), "off");
+    assert_eq!(parameter(&last, "vals_step"), "3");
+    let bad = ws.exchange(level(None, Some(-3.0), 3)).await;
+    let Body::Error(e) = bad else { panic!("a budget out of range is an error, got {bad:?}") };
+    assert_eq!(e.field, "control.render.budget_ms");
+    drop(ws);
+    let metrics = String::from_utf8(server.get("/metrics").await.body.to_vec()).expect("text");
+    assert!(metrics.contains("relume_frame_error_estimate_count 6"), "{metrics}");
+    assert!(metrics.contains("relume_frames_by_level_total{level=\"accurate\"} 2"), "{metrics}");
+    server.stop().await;
+}

@@ -36,6 +36,7 @@ use crate::scene::{DEFAULT_NEIGHBOURS, Settings};
     Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema, clap::ValueEnum,
 )]
 #[serde(rename_all = "snake_case")]
+#[schema(as = QualityLevel)]
 pub enum Quality {
     /// Cheaper parameters: fewer VALs from the spot light, coarser subdivision.
     Fast,
@@ -50,7 +51,19 @@ pub enum Quality {
     Reference,
 }
 
+/// Bounds of a frame-time budget (`budget_ms` of a scene file, a render request, a stream),
+/// ms: from a tenth of a millisecond to ten minutes.
+pub const BUDGET_RANGE_MS: (f32, f32) = (0.1, 600_000.0);
+
+/// The one check of a frame-time budget wherever it is given; errors name `field`.
+pub fn validate_budget_ms(ms: f32, field: &str) -> Result<(), crate::scene::SceneError> {
+    crate::scene::validate::in_closed(ms, BUDGET_RANGE_MS.0, BUDGET_RANGE_MS.1, field)
+}
+
 impl Quality {
+    /// Every level, cheapest first.
+    pub const ALL: [Quality; 4] = [Quality::Fast, Quality::Balanced, Quality::Accurate, Quality::Reference];
+
     /// The level's name, as in a scene file.
     pub fn name(self) -> &'static str {
         match self {
@@ -146,7 +159,8 @@ impl SceneAnalysis {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct ResolvedConfig {
     pub quality: Quality,
-    /// The scene file's frame-time budget, ms; stored and reported, not yet acted on.
+    /// The scene file's frame-time budget, ms: streams and `relume replay` hold their frame
+    /// time under it (`renderer::budget`); a single render reports whether it met it.
     pub budget_ms: Option<f32>,
     /// The technique the level asks for: `exact` for `reference`, else `sparse`.
     pub method: Technique,
@@ -160,7 +174,7 @@ impl ResolvedConfig {
     /// choice.
     pub fn report(&self) -> String {
         let a = &self.analysis;
-        let budget = self.budget_ms.map_or(String::new(), |ms| format!(", budget {ms} ms (not yet used)"));
+        let budget = self.budget_ms.map_or(String::new(), |ms| format!(", budget {ms} ms"));
         let mut lines = vec![
             format!(
                 "quality {}{budget}: technique {}",
@@ -363,7 +377,12 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
         choices.note("glossy gather", glossy.0, glossy.1);
     }
     if let Some(ms) = settings.budget_ms {
-        choices.note("budget_ms", &json_value(&ms), "stored: no level acts on a frame-time budget yet");
+        choices.note(
+            "budget_ms",
+            &json_value(&ms),
+            "streams and replays move frame by frame between this level's parameters and cheaper or richer ones to \
+             hold the frame time under it (renderer::budget); a single render reports whether it met it",
+        );
     }
 
     let resolved = Settings {

@@ -54,7 +54,8 @@ pub struct SettingsDescription {
     /// why); `tuning` overrides any of them.
     #[serde(default)]
     pub quality: Quality,
-    /// Frame-time budget, ms, > 0; default none. Stored and reported; no level acts on it yet.
+    /// Frame-time budget, ms, in [0.1, 600000]; default none. Streams and `relume replay`
+    /// adapt their parameters frame by frame to hold it (`renderer::budget`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub budget_ms: Option<f32>,
     /// Bounces of indirect light, 1 or 2; default 1. With 2, points on the meshes lit by the
@@ -181,7 +182,7 @@ impl SettingsDescription {
     /// validation does the checking.
     pub(crate) fn validate(&self, field: &str) -> Result<(), SceneError> {
         if let Some(ms) = self.budget_ms {
-            positive(ms, &format!("{field}.budget_ms"))?;
+            super::quality::validate_budget_ms(ms, &format!("{field}.budget_ms"))?;
         }
         int_in(self.bounces, 1, 2, &format!("{field}.bounces"))?;
         if let Some(exposure) = self.exposure {

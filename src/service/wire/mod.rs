@@ -10,9 +10,10 @@
 use glam::{DAffine3, DVec3, Mat3, Mat4, Quat, Vec3};
 use prost::Message;
 
+use crate::renderer::estimate::ErrorEstimate;
 use crate::rgbd::{Intrinsics, RgbdFrame, RgbdSettings};
 use crate::scene::{
-    CameraDescription, MAX_COORDINATE_M, Occlusion, ScaleDescription, SceneError, TransformDescription,
+    CameraDescription, MAX_COORDINATE_M, Occlusion, Quality, ScaleDescription, SceneError, TransformDescription,
 };
 
 use super::api::{Component, LightOverride};
@@ -63,11 +64,15 @@ pub struct ControlMessage {
 }
 
 /// Changes to a stream's render settings; absent fields keep their value.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RenderSettingsPatch {
     /// `Some(None)`: back to the scene's setting.
     pub occlusion: Option<Option<Occlusion>>,
     pub glossy: Option<bool>,
+    /// `Some(None)`: back to the scene's level.
+    pub quality: Option<Option<Quality>>,
+    /// `Some(None)`: no budget.
+    pub budget_ms: Option<Option<f32>>,
 }
 
 /// How a stream's frames are rendered and sent back.
@@ -527,7 +532,25 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
                     }
                 },
             };
-            Some(RenderSettingsPatch { occlusion, glossy: r.glossy })
+            let quality = match r.quality {
+                None => None,
+                Some(value) => match proto::QualityLevel::try_from(value) {
+                    Ok(level) => Some(quality_from_proto(level)),
+                    Err(_) => {
+                        return Err(WireError::invalid("control.render.quality", format!("unknown value {value}")));
+                    }
+                },
+            };
+            let budget_ms = match r.budget_ms {
+                None => None,
+                Some(0.0) => Some(None),
+                Some(ms) => {
+                    crate::scene::settings::validate_budget_ms(ms, "control.render.budget_ms")
+                        .map_err(WireError::from_scene)?;
+                    Some(Some(ms))
+                }
+            };
+            Some(RenderSettingsPatch { occlusion, glossy: r.glossy, quality, budget_ms })
         }
     };
     Ok(ControlMessage { request_id: c.request_id, camera, light, model_transforms, quality, rgbd, render })
@@ -599,6 +622,11 @@ pub struct RenderedFrame {
     pub timings: Vec<(String, f64)>,
     pub val_count: u32,
     pub dropped_frames: u64,
+    pub error_estimate: Option<ErrorEstimate>,
+    /// The level the frame ran at, and its parameters (name, value).
+    pub quality: Quality,
+    pub parameters: Vec<(String, String)>,
+    pub budget_ms: Option<f32>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -631,6 +659,17 @@ pub fn encode(message: ServerMessage) -> Vec<u8> {
             timings: f.timings.into_iter().map(|(stage, ms)| proto::StageTiming { stage, ms }).collect(),
             val_count: f.val_count,
             dropped_frames: f.dropped_frames,
+            error_estimate: f.error_estimate.map(|e| proto::ErrorEstimate {
+                rel_rmse: e.rel_rmse,
+                spread: e.spread,
+                reference_noise: e.reference_noise,
+                pixels: e.pixels,
+                samples: e.samples,
+                ms: e.ms,
+            }),
+            quality: quality_to_proto(f.quality) as i32,
+            parameters: f.parameters.into_iter().map(|(name, value)| proto::Parameter { name, value }).collect(),
+            budget_ms: f.budget_ms.unwrap_or(0.0),
         }),
         ServerMessage::Error(e) => Body::Error(proto::Error {
             code: e.code as i32,
@@ -695,6 +734,28 @@ pub fn occlusion_to_proto(mode: Occlusion) -> proto::Occlusion {
         Occlusion::Disks => proto::Occlusion::Disks,
         Occlusion::Clusters => proto::Occlusion::Clusters,
         Occlusion::Ism => proto::Occlusion::Ism,
+    }
+}
+
+/// A stream's quality level (`None`: back to the scene's).
+pub fn quality_from_proto(level: proto::QualityLevel) -> Option<Quality> {
+    match level {
+        proto::QualityLevel::Unspecified => None,
+        proto::QualityLevel::Fast => Some(Quality::Fast),
+        proto::QualityLevel::Balanced => Some(Quality::Balanced),
+        proto::QualityLevel::Accurate => Some(Quality::Accurate),
+        proto::QualityLevel::Reference => Some(Quality::Reference),
+    }
+}
+
+/// The protobuf value of every quality level: exhaustive, so a level added to the scene's
+/// settings without one in `relume.proto` does not compile.
+pub fn quality_to_proto(level: Quality) -> proto::QualityLevel {
+    match level {
+        Quality::Fast => proto::QualityLevel::Fast,
+        Quality::Balanced => proto::QualityLevel::Balanced,
+        Quality::Accurate => proto::QualityLevel::Accurate,
+        Quality::Reference => proto::QualityLevel::Reference,
     }
 }
 

@@ -272,7 +272,7 @@ fn the_viewers_control_bytes_are_prosts_and_decode() {
         request_id: 300,
         quality: Some(proto::Quality { component: 3, format: 1, ..Default::default() }),
         rgbd: Some(proto::RgbdSettings { grid_step: Some(12), ..Default::default() }),
-        render: Some(proto::RenderSettings { occlusion: Some(2), glossy: Some(false) }),
+        render: Some(proto::RenderSettings { occlusion: Some(2), glossy: Some(false), ..Default::default() }),
         ..Default::default()
     };
     assert_eq!(envelope(Body::Control(control.clone())), VIEWER_CONTROL);
@@ -280,7 +280,7 @@ fn the_viewers_control_bytes_are_prosts_and_decode() {
         request_id: 0,
         quality: Some(proto::Quality { component: 1, exposure: Some(0.5), format: 2, ..Default::default() }),
         rgbd: Some(proto::RgbdSettings { grid_step: Some(4), radiance_scale: Some(2.5), ..Default::default() }),
-        render: Some(proto::RenderSettings { occlusion: None, glossy: Some(true) }),
+        render: Some(proto::RenderSettings { occlusion: None, glossy: Some(true), ..Default::default() }),
         ..Default::default()
     };
     assert_eq!(envelope(Body::Control(floats)), VIEWER_CONTROL_FLOATS);
@@ -288,15 +288,31 @@ fn the_viewers_control_bytes_are_prosts_and_decode() {
     assert_eq!(c.request_id, 300);
     assert_eq!(c.quality.expect("quality").component, Component::Indirect);
     assert_eq!(c.rgbd.expect("rgbd").grid_step, Some(12));
-    assert_eq!(c.render, Some(RenderSettingsPatch { occlusion: Some(Some(Occlusion::Disks)), glossy: Some(false) }));
+    assert_eq!(
+        c.render,
+        Some(RenderSettingsPatch {
+            occlusion: Some(Some(Occlusion::Disks)),
+            glossy: Some(false),
+            ..Default::default()
+        })
+    );
 
-    let unset =
-        proto::Control { render: Some(proto::RenderSettings { occlusion: Some(0), glossy: None }), ..control.clone() };
+    let unset = proto::Control {
+        render: Some(proto::RenderSettings { occlusion: Some(0), glossy: None, ..Default::default() }),
+        ..control.clone()
+    };
     let ClientMessage::Control(c) = decode(&envelope(Body::Control(unset)), &limits()).expect("valid") else {
         panic!("control")
     };
-    assert_eq!(c.render, Some(RenderSettingsPatch { occlusion: Some(None), glossy: None }), "0: the scene's");
-    let bad = proto::Control { render: Some(proto::RenderSettings { occlusion: Some(7), glossy: None }), ..control };
+    assert_eq!(
+        c.render,
+        Some(RenderSettingsPatch { occlusion: Some(None), glossy: None, ..Default::default() }),
+        "0: the scene's"
+    );
+    let bad = proto::Control {
+        render: Some(proto::RenderSettings { occlusion: Some(7), glossy: None, ..Default::default() }),
+        ..control
+    };
     let e = decode(&envelope(Body::Control(bad)), &limits()).unwrap_err();
     assert_eq!(e.field.as_deref(), Some("control.render.occlusion"));
 }
@@ -387,11 +403,17 @@ fn server_messages_encode_as_version_1_envelopes() {
         timings: vec![("gather".to_owned(), 1.5)],
         val_count: 100,
         dropped_frames: 2,
+        error_estimate: None,
+        quality: crate::scene::Quality::Fast,
+        parameters: vec![("vals_step".to_owned(), "2".to_owned())],
+        budget_ms: Some(40.0),
     };
     let envelope = proto::Envelope::decode(encode(ServerMessage::Frame(frame)).as_slice()).expect("decodes");
     assert_eq!(envelope.version, PROTOCOL_VERSION);
     let Some(Body::RenderedFrame(f)) = envelope.body else { panic!("not a frame") };
     assert_eq!((f.frame_id, f.width, f.val_count, f.dropped_frames), (3, 2, 100, 2));
+    assert_eq!((f.quality(), f.budget_ms, f.error_estimate), (proto::QualityLevel::Fast, 40.0, None));
+    assert_eq!((f.parameters[0].name.as_str(), f.parameters[0].value.as_str()), ("vals_step", "2"));
     assert_eq!(f.timings[0].stage, "gather");
     assert_eq!(f.image, Some(proto::rendered_frame::Image::Rgba8(vec![1; 8])));
 
@@ -433,4 +455,59 @@ fn visibility_modes_agree_between_proto_json_and_openapi() {
         .map(|v| v.as_str().unwrap())
         .collect();
     assert_eq!(listed, json_names);
+}
+
+/// The protobuf schema, the scene file's JSON names and the OpenAPI document list the same
+/// quality levels: every protobuf value but `UNSPECIFIED` is a level, and back; its name is
+/// the JSON name; the OpenAPI document's `QualityLevel` schema lists exactly those names, cheapest
+/// first, as `Quality::ALL` does.
+#[test]
+fn quality_levels_agree_between_proto_json_and_openapi() {
+    let mut json_names = Vec::new();
+    for value in 1..64 {
+        let Ok(level) = proto::QualityLevel::try_from(value) else { continue };
+        let scene = quality_from_proto(level).expect("a level");
+        assert_eq!(quality_to_proto(scene), level);
+        let json = serde_json::to_value(scene).unwrap();
+        let name = json.as_str().unwrap().to_owned();
+        assert_eq!(name, scene.name());
+        assert_eq!(level.as_str_name(), format!("QUALITY_LEVEL_{}", name.to_uppercase()));
+        json_names.push(name);
+    }
+    let all: Vec<&str> = crate::scene::Quality::ALL.iter().map(|q| q.name()).collect();
+    assert_eq!(json_names, all);
+    let openapi: serde_json::Value =
+        serde_json::from_str(include_str!("../../../proto/openapi.json")).expect("the OpenAPI document");
+    let listed: Vec<&str> = openapi["components"]["schemas"]["QualityLevel"]["enum"]
+        .as_array()
+        .expect("a QualityLevel enum in the OpenAPI document")
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(listed, json_names);
+}
+
+/// A control message's level and budget: a level, back to the scene's (0), a budget, no
+/// budget (0), and the one check of a budget's range naming the field.
+#[test]
+fn control_messages_carry_a_level_and_a_budget() {
+    let control = |quality: Option<i32>, budget_ms: Option<f32>| {
+        let render = proto::RenderSettings { quality, budget_ms, ..Default::default() };
+        decode(&envelope(Body::Control(proto::Control { render: Some(render), ..Default::default() })), &limits())
+    };
+    let render = |m: Result<ClientMessage, WireError>| match m.expect("valid") {
+        ClientMessage::Control(c) => c.render.expect("render"),
+        ClientMessage::Frame(_) => panic!("a control message"),
+    };
+    let fast = render(control(Some(proto::QualityLevel::Fast as i32), Some(25.0)));
+    assert_eq!((fast.quality, fast.budget_ms), (Some(Some(crate::scene::Quality::Fast)), Some(Some(25.0))));
+    let back = render(control(Some(0), Some(0.0)));
+    assert_eq!((back.quality, back.budget_ms), (Some(None), Some(None)));
+    let e = control(Some(9), None).unwrap_err();
+    assert_eq!(e.field.as_deref(), Some("control.render.quality"));
+    for bad in [-1.0, 0.01, f32::NAN, 1e9] {
+        let e = control(None, Some(bad)).unwrap_err();
+        assert_eq!(e.field.as_deref(), Some("control.render.budget_ms"), "{bad}");
+        assert_eq!(e.code, ErrorCode::InvalidField);
+    }
 }

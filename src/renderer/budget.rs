@@ -1,0 +1,406 @@
+//! The frame budget controller (`budget_ms` of streams and `relume replay --budget-ms`): it
+//! moves a stream's frames along a ladder of parameter sets ([`FrameParameters`], cheapest
+//! first) to hold the measured frame time under the budget, as dynamic resolution does in game
+//! engines.
+//!
+//! It acts on what it measures, never on an assumed split of the frame's cost: it keeps, per
+//! rung, a smoothed frame time (an exponential moving average, weight [`SMOOTHING`] on the
+//! newest frame) of the frames that ran there. After each frame:
+//!
+//! - over the budget (smoothed): one rung down, two when over 1.5x the budget, or straight to
+//!   the richest lower rung already measured under [`TARGET`] x budget;
+//! - under [`TARGET`] x budget for [`HOLD_FRAMES`] frames in a row: one rung up when that rung
+//!   was measured under the target, or, not yet measured, when this one is under
+//!   [`PROBE_HEADROOM`] x the target (a probe). A probe that lands over the budget goes back
+//!   down and that rung is not tried again for [`BACKOFF_FRAMES`] frames, doubled at each
+//!   failure;
+//! - otherwise it holds.
+//!
+//! The hold, the target below the budget and the back-off are the hysteresis: rungs change
+//! seldom, so the image does not pop from one frame to the next (the change it adds is measured
+//! by `relume replay --budget-ms`, docs/measurements/budget.md).
+
+use serde::Serialize;
+
+use crate::scene::settings::{SceneAnalysis, SettingsDescription, resolve};
+use crate::scene::{Occlusion, Quality, Settings};
+
+/// The controller aims at this fraction of the budget, so that noise stays under it.
+pub const TARGET: f64 = 0.9;
+/// Weight of the newest frame in a rung's smoothed frame time.
+pub const SMOOTHING: f64 = 0.5;
+/// Frames under the target in a row before the controller tries a richer rung.
+pub const HOLD_FRAMES: u32 = 6;
+/// A rung not yet measured is tried only when the current one is under this fraction of the
+/// target.
+pub const PROBE_HEADROOM: f64 = 0.75;
+/// Frames a rung that went over the budget is not tried again (doubled at each failure).
+pub const BACKOFF_FRAMES: u64 = 16;
+
+/// What one frame runs at: the parameters a loaded scene's renderer can change from one frame
+/// to the next.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct FrameParameters {
+    /// The level these parameters are (or, below the lowest level's own, are cheaper than).
+    pub level: Quality,
+    /// The visibility mode of the indirect light.
+    pub occlusion: Occlusion,
+    /// `sparse.near_field`, in sparse point spacings (0: off).
+    pub near_field: f32,
+    /// Multiplier of the RGB-D `grid_step`: a frame's depth pixels give 1/`vals_step`² of the
+    /// VALs (frames lit by RGB-D only).
+    pub vals_step: u32,
+    /// Render size over output size; the composite is scaled back up to the output size
+    /// (dynamic resolution).
+    pub resolution_scale: f32,
+}
+
+impl FrameParameters {
+    /// The runtime parameters of `settings` (a level's resolved settings) at full resolution.
+    pub fn of(level: Quality, settings: &Settings) -> FrameParameters {
+        FrameParameters {
+            level,
+            occlusion: settings.occlusion,
+            near_field: settings.sparse.near_field,
+            vals_step: 1,
+            resolution_scale: 1.0,
+        }
+    }
+
+    /// The parameters as `name=value` pairs, as frames report them.
+    pub fn pairs(&self) -> Vec<(String, String)> {
+        let occlusion = serde_json::to_value(self.occlusion).ok().and_then(|v| v.as_str().map(str::to_owned));
+        vec![
+            ("level".to_owned(), self.level.name().to_owned()),
+            ("visibility".to_owned(), occlusion.unwrap_or_default()),
+            ("near_field".to_owned(), format!("{}", self.near_field)),
+            ("vals_step".to_owned(), self.vals_step.to_string()),
+            ("resolution_scale".to_owned(), format!("{}", self.resolution_scale)),
+        ]
+    }
+
+    /// Output size scaled by `resolution_scale` (at least 1 x 1).
+    pub fn scaled(&self, width: u32, height: u32) -> (u32, u32) {
+        let s = self.resolution_scale.clamp(0.05, 1.0);
+        (((width as f32 * s).round() as u32).max(1), ((height as f32 * s).round() as u32).max(1))
+    }
+}
+
+/// The runtime parameters of `level` on a loaded scene: the level resolved for the scene's
+/// analysis and the scene file's settings (whose tuning still wins). Parameters fixed when the
+/// meshes loaded (the RSM size, subdivision, adaptive points) keep their loaded values.
+pub fn level_parameters(level: Quality, analysis: &SceneAnalysis, settings: &SettingsDescription) -> FrameParameters {
+    let (resolved, _) = resolve(level, analysis, settings);
+    FrameParameters::of(level, &resolved)
+}
+
+/// The ladder of a budgeted stream, cheapest first: below `fast`'s own parameters, the VALs of
+/// an RGB-D frame halved then thirded on each side and (with `scale`) the render size scaled
+/// down to half, visibility off last; then each level's own parameters, `fast`, `balanced`,
+/// `accurate`. Consecutive rungs with the same parameters are merged (the richer level's name
+/// kept). Without `scale` no rung changes the render size (a stream whose frames are not
+/// composited, or a render).
+pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: bool) -> Vec<FrameParameters> {
+    let [fast, balanced, accurate] =
+        [Quality::Fast, Quality::Balanced, Quality::Accurate].map(|q| level_parameters(q, analysis, settings));
+    let below = |occlusion, vals_step, resolution_scale| FrameParameters {
+        occlusion,
+        vals_step,
+        resolution_scale: if scale { resolution_scale } else { 1.0 },
+        ..fast
+    };
+    let mut rungs = vec![
+        below(Occlusion::Off, 3, 0.5),
+        below(Occlusion::Off, 2, 0.5),
+        below(fast.occlusion, 2, 0.5),
+        below(fast.occlusion, 2, 0.6),
+        below(fast.occlusion, 2, 0.7),
+        below(fast.occlusion, 1, 0.7),
+        below(fast.occlusion, 1, 0.85),
+        fast,
+        balanced,
+        accurate,
+    ];
+    let same = |a: &FrameParameters, b: &FrameParameters| FrameParameters { level: b.level, ..*a } == *b;
+    rungs.dedup_by(|richer, cheaper| {
+        if same(cheaper, richer) {
+            cheaper.level = richer.level;
+            true
+        } else {
+            false
+        }
+    });
+    rungs
+}
+
+/// What the controller decided after a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Move {
+    Hold,
+    Down,
+    Up,
+}
+
+/// Holds a stream's frame time under its budget by moving along a ladder of parameters.
+#[derive(Clone, Debug)]
+pub struct BudgetController {
+    budget_ms: f64,
+    ladder: Vec<FrameParameters>,
+    rung: usize,
+    /// Smoothed frame time (ms) per rung, once a frame ran there.
+    cost: Vec<Option<f64>>,
+    /// Frames under the target in a row at the current rung.
+    under: u32,
+    /// Per rung: the frame before which it is not tried again, and the next back-off.
+    blocked_until: Vec<u64>,
+    backoff: Vec<u64>,
+    /// Whether the current rung was reached by a probe (a move up to an unmeasured rung).
+    probing: bool,
+    frames: u64,
+}
+
+impl BudgetController {
+    /// A controller for `budget_ms` starting at `start` (an index into `ladder`, clamped).
+    pub fn new(budget_ms: f32, ladder: Vec<FrameParameters>, start: usize) -> BudgetController {
+        assert!(!ladder.is_empty(), "a ladder has at least one rung");
+        let n = ladder.len();
+        BudgetController {
+            budget_ms: f64::from(budget_ms),
+            rung: start.min(n - 1),
+            ladder,
+            cost: vec![None; n],
+            under: 0,
+            blocked_until: vec![0; n],
+            backoff: vec![BACKOFF_FRAMES; n],
+            probing: false,
+            frames: 0,
+        }
+    }
+
+    /// A controller starting at `level`'s own rung (the richest rung of that level).
+    pub fn at_level(budget_ms: f32, ladder: Vec<FrameParameters>, level: Quality) -> BudgetController {
+        let level = match level {
+            Quality::Reference => Quality::Accurate,
+            other => other,
+        };
+        let start = ladder.iter().rposition(|p| p.level == level).unwrap_or(ladder.len() - 1);
+        BudgetController::new(budget_ms, ladder, start)
+    }
+
+    pub fn budget_ms(&self) -> f64 {
+        self.budget_ms
+    }
+
+    /// Change the budget; the measured costs stay.
+    pub fn set_budget_ms(&mut self, budget_ms: f32) {
+        self.budget_ms = f64::from(budget_ms);
+        self.under = 0;
+    }
+
+    /// The parameters of the next frame.
+    pub fn parameters(&self) -> FrameParameters {
+        self.ladder[self.rung]
+    }
+
+    pub fn rung(&self) -> usize {
+        self.rung
+    }
+
+    pub fn ladder(&self) -> &[FrameParameters] {
+        &self.ladder
+    }
+
+    /// Records the time of a frame that ran at [`Self::parameters`] and picks the next frame's.
+    pub fn observe(&mut self, frame_ms: f64) -> Move {
+        self.frames += 1;
+        let r = self.rung;
+        let smoothed = match self.cost[r] {
+            Some(previous) => SMOOTHING * frame_ms + (1.0 - SMOOTHING) * previous,
+            None => frame_ms,
+        };
+        self.cost[r] = Some(smoothed);
+        let target = self.budget_ms * TARGET;
+        if smoothed > self.budget_ms && r > 0 {
+            if self.probing {
+                self.blocked_until[r] = self.frames + self.backoff[r];
+                self.backoff[r] = self.backoff[r].saturating_mul(2);
+            }
+            let measured = (0..r).rev().find(|&i| self.cost[i].is_some_and(|c| c <= target));
+            let steps = if smoothed > 1.5 * self.budget_ms { 2 } else { 1 };
+            self.rung = measured.map_or(r.saturating_sub(steps), |i| i.max(r.saturating_sub(steps)));
+            // A lower rung measured over the target too is passed when the one measured under
+            // it is lower still: the measured one is where the time held.
+            if let Some(i) = measured
+                && self.cost[self.rung].is_some_and(|c| c > target)
+            {
+                self.rung = i;
+            }
+            self.under = 0;
+            self.probing = false;
+            return Move::Down;
+        }
+        if smoothed >= target || r + 1 == self.ladder.len() {
+            self.under = 0;
+            self.probing = false;
+            return Move::Hold;
+        }
+        self.under += 1;
+        if self.under < HOLD_FRAMES || self.frames < self.blocked_until[r + 1] {
+            return Move::Hold;
+        }
+        let up = match self.cost[r + 1] {
+            Some(cost) => cost <= target,
+            None => smoothed <= target * PROBE_HEADROOM,
+        };
+        if !up {
+            return Move::Hold;
+        }
+        self.probing = self.cost[r + 1].is_none();
+        self.rung = r + 1;
+        self.under = 0;
+        Move::Up
+    }
+}
+
+/// `pixels` (`width` x `height`, row-major sRGB) resized to `out_width` x `out_height` by
+/// bilinear interpolation, pixel centres aligned: how a composite rendered at a lower
+/// resolution is brought back to the output size.
+pub fn upscale_rgb(pixels: &[[u8; 3]], width: u32, height: u32, out_width: u32, out_height: u32) -> Vec<[u8; 3]> {
+    if (width, height) == (out_width, out_height) {
+        return pixels.to_vec();
+    }
+    let (w, h) = (width as usize, height as usize);
+    let sample = |x: f32, y: f32| -> [u8; 3] {
+        let x = x.clamp(0.0, (w - 1) as f32);
+        let y = y.clamp(0.0, (h - 1) as f32);
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+        let p = |x: usize, y: usize, c: usize| f32::from(pixels[y * w + x][c]);
+        std::array::from_fn(|c| {
+            let top = p(x0, y0, c) * (1.0 - fx) + p(x1, y0, c) * fx;
+            let bottom = p(x0, y1, c) * (1.0 - fx) + p(x1, y1, c) * fx;
+            (top * (1.0 - fy) + bottom * fy).round().clamp(0.0, 255.0) as u8
+        })
+    };
+    let (sx, sy) = (width as f32 / out_width as f32, height as f32 / out_height as f32);
+    (0..out_width as usize * out_height as usize)
+        .map(|i| {
+            let (x, y) = (i % out_width as usize, i / out_width as usize);
+            sample((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5)
+        })
+        .collect()
+}
+
+/// Mean absolute difference of two sRGB images of the same size, in 8-bit levels per channel:
+/// the frame-to-frame change of a replay's composites.
+pub fn mean_abs_change(a: &[[u8; 3]], b: &[[u8; 3]]) -> f64 {
+    if a.len() != b.len() || a.is_empty() {
+        return 0.0;
+    }
+    let sum: u64 = a.iter().zip(b).map(|(p, q)| (0..3).map(|c| u64::from(p[c].abs_diff(q[c]))).sum::<u64>()).sum();
+    sum as f64 / (a.len() * 3) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rungs(n: usize) -> Vec<FrameParameters> {
+        let levels = [Quality::Fast, Quality::Balanced, Quality::Accurate];
+        (0..n)
+            .map(|i| FrameParameters {
+                level: levels[(i * 3 / n).min(2)],
+                occlusion: Occlusion::Disks,
+                near_field: 0.0,
+                vals_step: 1,
+                resolution_scale: 0.5 + 0.5 * i as f32 / (n - 1) as f32,
+            })
+            .collect()
+    }
+
+    /// A synthetic cost model: the frame's time grows with the rung (a fixed part, and a part
+    /// that grows with the rung), with noise of +-`noise` (a fixed pseudo-random sequence).
+    fn run(budget: f32, cost: impl Fn(usize) -> f64, noise: f64, frames: usize) -> (Vec<f64>, Vec<usize>, usize) {
+        let mut c = BudgetController::new(budget, rungs(10), 7);
+        let mut times = Vec::new();
+        let mut rungs = Vec::new();
+        let mut moves = 0;
+        let mut state = 12345u64;
+        for _ in 0..frames {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let u = (state >> 33) as f64 / (1u64 << 31) as f64;
+            let ms = cost(c.rung()) * (1.0 + noise * (2.0 * u - 1.0));
+            times.push(ms);
+            rungs.push(c.rung());
+            if c.observe(ms) != Move::Hold {
+                moves += 1;
+            }
+        }
+        (times, rungs, moves)
+    }
+
+    fn p90(v: &[f64]) -> f64 {
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        s[(s.len() * 9).div_ceil(10) - 1]
+    }
+
+    #[test]
+    fn a_tight_budget_falls_and_holds_within_ten_percent() {
+        // Rung 7 takes 1000 ms; a budget of 500 ms is met from rung 3 down.
+        let cost = |r: usize| 300.0 + 100.0 * r as f64;
+        let (times, rungs, moves) = run(500.0, cost, 0.08, 60);
+        let after = &times[5..];
+        assert!(p90(after) <= 550.0, "p90 {} over the budget + 10 %: {times:?}", p90(after));
+        assert!(rungs[5..].iter().all(|&r| r < 7), "it fell: {rungs:?}");
+        assert!(moves <= 12, "{moves} moves in 60 frames: popping ({rungs:?})");
+        // It does not sit far below: the richest rung that fits is 1 (400 ms at most +8 %).
+        let settled = &rungs[30..];
+        assert!(settled.iter().filter(|&&r| r >= 1).count() * 10 >= settled.len() * 8, "{rungs:?}");
+    }
+
+    #[test]
+    fn a_loose_budget_rises_to_the_top() {
+        let cost = |r: usize| 100.0 + 20.0 * r as f64;
+        let (times, rungs, _) = run(1000.0, cost, 0.05, 60);
+        assert_eq!(*rungs.last().unwrap(), 9, "{rungs:?}");
+        assert!(times.iter().all(|&t| t < 1000.0));
+    }
+
+    #[test]
+    fn a_failed_probe_backs_off() {
+        // Rung 8 is far over a budget that rung 7 meets with room: probes of 8 must not repeat
+        // every few frames.
+        let cost = |r: usize| if r >= 8 { 2000.0 } else { 500.0 };
+        let (_, rungs, _) = run(1000.0, cost, 0.0, 120);
+        let probes = rungs.windows(2).filter(|w| w[0] == 7 && w[1] == 8).count();
+        assert!((1..=3).contains(&probes), "{probes} probes in 120 frames: {rungs:?}");
+    }
+
+    #[test]
+    fn the_ladder_is_cheapest_first_and_names_the_levels() {
+        let analysis = SceneAnalysis { meshes: 2, ..SceneAnalysis::default() };
+        let settings = SettingsDescription::default();
+        let ladder = ladder(&analysis, &settings, true);
+        assert_eq!(ladder.first().unwrap().occlusion, Occlusion::Off);
+        assert_eq!(ladder.last().unwrap().level, Quality::Accurate);
+        assert_eq!(ladder.last().unwrap().occlusion, Occlusion::Clusters);
+        assert!(ladder.iter().any(|p| p.level == Quality::Balanced));
+        let c = BudgetController::at_level(100.0, ladder.clone(), Quality::Balanced);
+        assert_eq!(c.parameters().level, Quality::Balanced);
+        assert_eq!(c.parameters(), level_parameters(Quality::Balanced, &analysis, &settings));
+        assert!(super::ladder(&analysis, &settings, false).iter().all(|p| p.resolution_scale == 1.0));
+    }
+
+    #[test]
+    fn upscaling_keeps_a_flat_image_and_its_size() {
+        let flat = vec![[10, 20, 30]; 4 * 3];
+        let up = upscale_rgb(&flat, 4, 3, 8, 6);
+        assert_eq!(up.len(), 48);
+        assert!(up.iter().all(|p| *p == [10, 20, 30]));
+        assert_eq!(mean_abs_change(&flat, &flat), 0.0);
+        assert_eq!(mean_abs_change(&[[0, 0, 0]], &[[3, 6, 9]]), 6.0);
+    }
+}
