@@ -264,7 +264,7 @@ async fn a_stream_changes_its_level_mid_stream_and_falls_under_a_budget() {
     let id = server.create(&scene).await;
     let refused = server.get(&format!("/v1/scenes/{id}/stream?quality=best")).await;
     assert_eq!(refused.status, 400, "{}", refused.json());
-    assert_eq!(refused.json()["field"], "quality");
+    assert_eq!(refused.json()["error"]["field"], "quality", "{}", refused.json());
     let url = format!("ws://{}/v1/scenes/{id}/stream?quality=fast", server.addr);
     let (ws, _) = tokio_tungstenite::connect_async(url).await.expect("the stream opens");
     let mut ws = super::service::Ws(ws);

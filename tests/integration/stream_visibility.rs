@@ -44,7 +44,7 @@ async fn a_stream_renders_every_visibility_mode_as_the_offline_replay() {
     for (i, (mode, name, _)) in MODES.iter().enumerate() {
         let control = proto::Control {
             request_id: i as u64 + 1,
-            render: Some(proto::RenderSettings { occlusion: Some(*mode as i32), glossy: None }),
+            render: Some(proto::RenderSettings { occlusion: Some(*mode as i32), ..Default::default() }),
             ..Default::default()
         };
         let ack = ws.exchange(envelope(Body::Control(control))).await;

@@ -567,7 +567,7 @@ fn quality_and_budget_are_read_and_checked() {
         SceneDescription::from_json_str(&with_settings(r#"{"quality": "fast", "budget_ms": 33.3}"#)).expect("parses");
     d.validate().expect("valid");
     assert_eq!((d.settings.quality, d.settings.budget_ms), (Quality::Fast, Some(33.3)));
-    assert_eq!(error_of(&with_settings(r#"{"budget_ms": 0}"#)), "settings.budget_ms: must be > 0, got 0");
+    assert_eq!(error_of(&with_settings(r#"{"budget_ms": 0}"#)), "settings.budget_ms: must be in [0.1, 600000], got 0");
     let message = error_of(&with_settings(r#"{"quality": "best"}"#));
     assert!(message.starts_with("settings.quality: unknown variant `best`"), "{message}");
 }
