@@ -157,14 +157,19 @@ impl Ws {
         self.answer().await
     }
 
+    /// The next envelope, past the server's keep-alive pings (every
+    /// `timeouts.stream_ping_seconds`; tungstenite queues their pongs itself) and any pong.
     async fn answer(&mut self) -> Body {
-        match self.next().await {
-            tungstenite::Message::Binary(bytes) => {
-                let envelope = proto::Envelope::decode(bytes.as_ref()).expect("an Envelope");
-                assert_eq!(envelope.version, PROTOCOL_VERSION);
-                envelope.body.expect("a body")
+        loop {
+            match self.next().await {
+                tungstenite::Message::Binary(bytes) => {
+                    let envelope = proto::Envelope::decode(bytes.as_ref()).expect("an Envelope");
+                    assert_eq!(envelope.version, PROTOCOL_VERSION);
+                    return envelope.body.expect("a body");
+                }
+                tungstenite::Message::Ping(_) | tungstenite::Message::Pong(_) => continue,
+                other => panic!("expected a binary message, got {other:?}"),
             }
-            other => panic!("expected a binary message, got {other:?}"),
         }
     }
 

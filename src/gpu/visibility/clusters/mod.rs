@@ -74,8 +74,10 @@ pub struct RawClusterSums {
     pub offset_sq: f32,
 }
 
-/// The scene-dependent lengths of the mode: 1 / the scene's bounding diagonal scales the
-/// clustering distance, and shadow maps store distances up to twice the diagonal.
+/// The scene-dependent length of the mode, the meshes' bounding diagonal: 1 / it scales the
+/// clustering distance, and the rasterised maps store distances in units of it
+/// ([`twin::encode_map_depth`]: every distance from 0 to infinity, since the cluster centres are
+/// the VALs', which may lie anywhere, e.g. metres away from a small virtual object in a real room).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SceneScale {
     pub diagonal: f32,
@@ -89,10 +91,6 @@ impl SceneScale {
         });
         let diagonal = (hi - lo).length();
         Self { diagonal: if diagonal.is_finite() && diagonal > 0.0 { diagonal } else { 1.0 } }
-    }
-
-    pub fn depth_far(&self) -> f32 {
-        2.0 * self.diagonal
     }
 
     pub fn kmeans(&self, settings: &ClusterSettings) -> twin::KmeansParams {
@@ -120,7 +118,7 @@ pub fn header_with_slope_bias(settings: &ClusterSettings, scale: SceneScale, slo
         .u32("PARTIAL_BLOCK", PARTIAL_BLOCK)
         .u32("MAP_RESOLUTION", settings.shadow_map_resolution)
         .u32("ATLAS_COLUMNS", settings.atlas_columns())
-        .f32("DEPTH_FAR", scale.depth_far())
+        .f32("DEPTH_SCALE", scale.diagonal)
         .u32("SOFT_PCSS", 0)
         .u32("SOFT_PCF", 1)
         .u32("SOFT_HARD", 2)
@@ -621,15 +619,13 @@ impl ShadowMaps {
         );
         gpu.submit_and_wait(encoder)?;
         let words: Vec<f32> = gpu.read_buffer(&staging, (row / 4 * side) as usize)?;
-        let far = scale.depth_far();
         let columns = settings.atlas_columns();
         Ok((0..m)
             .map(|k| {
                 let (cx, cy) = ((k as u32 % columns) * res, (k as u32 / columns) * res);
                 (0..res * res)
                     .map(|i| {
-                        let d = words[((cy + i / res) * row / 4 + cx + i % res) as usize];
-                        if d >= 1.0 { f32::INFINITY } else { d * far }
+                        twin::decode_map_depth(words[((cy + i / res) * row / 4 + cx + i % res) as usize], scale.diagonal)
                     })
                     .collect()
             })

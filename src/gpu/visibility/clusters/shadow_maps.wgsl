@@ -2,11 +2,18 @@
 // draws every triangle into cluster k's tile (the viewport). Edges are straight in the disc
 // while the projection bends them, so the depth is not interpolated: each fragment casts its
 // texel's ray from the cluster centre against its triangle (corners passed flat) and writes
-// the exact distance / DEPTH_FAR; fragments whose ray misses the triangle (by more than
+// the exact distance, encoded by `encode_map_depth` (any distance below 1, so no far plane: a
+// cluster's centre may lie metres from the meshes); fragments whose ray misses the triangle (by more than
 // SHADOW_RASTER_SLACK in barycentrics, which keeps neighbours watertight) or that lie nearer
 // than CLUSTER_NEAR_FRACTION x the radius (the cluster's own surface) are dropped.
 
 @group(0) @binding(0) var<storage, read> clusters: array<Cluster>;
+
+// A distance (m) as the atlas stores it: t / (t + DEPTH_SCALE), monotone and below 1 for every
+// finite distance (1, the cleared value, is nothing drawn). Rust twin: `twin::encode_map_depth`.
+fn encode_map_depth(t: f32) -> f32 {
+    return t / (t + DEPTH_SCALE);
+}
 
 struct ShadowVertex {
     @builtin(position) clip: vec4<f32>,
@@ -60,8 +67,8 @@ fn fs_main(in: ShadowVertex) -> @builtin(frag_depth) f32 {
     let w = dot(v, qv) * inv;
     let t = dot(e2, qv) * inv;
     let slack = SHADOW_RASTER_SLACK;
-    if u < -slack || w < -slack || u + w > 1.0 + slack || t <= c.radius * CLUSTER_NEAR_FRACTION || t >= DEPTH_FAR {
+    if u < -slack || w < -slack || u + w > 1.0 + slack || !(t > c.radius * CLUSTER_NEAR_FRACTION) || !(t < NOTHING) {
         discard;
     }
-    return t / DEPTH_FAR;
+    return encode_map_depth(t);
 }

@@ -187,6 +187,21 @@ pub const SHADOW_RASTER_SLACK: f32 = 0.1;
 /// covers curved receivers and rounding).
 pub const SHADOW_RELATIVE_BIAS: f32 = 0.02;
 
+/// WGSL `encode_map_depth` (`shadow_maps.wgsl`): what the rasterised atlas stores for a distance
+/// `t` (m), `t / (t + scale)` with `scale` the meshes' diagonal. It keeps the order of distances,
+/// maps all of them, however far, below 1 (the cleared atlas: nothing drawn), and loses little
+/// precision: a float's relative step near 1 is 6e-8, so a distance 100 diagonals away keeps
+/// about 6e-6 relative, far under the lookup's bias ([`SHADOW_RELATIVE_BIAS`]).
+pub fn encode_map_depth(t: f32, scale: f32) -> f32 {
+    t / (t + scale)
+}
+
+/// WGSL `decode_map_depth` (`raster_depth.wgsl`): the distance (m) of a stored depth,
+/// `f32::INFINITY` for 1 (nothing drawn).
+pub fn decode_map_depth(d: f32, scale: f32) -> f32 {
+    if d >= 1.0 { f32::INFINITY } else { scale * d / (1.0 - d) }
+}
+
 /// One cluster's shadow map: distances (m) from the centre along each texel's direction,
 /// `f32::INFINITY` where nothing was drawn.
 pub struct DepthTile<'a> {

@@ -64,7 +64,6 @@ impl IsmParams {
             levels: ism.pull_push_levels,
             pull_threshold: ism.pull_threshold * scale.diagonal,
             push_threshold: ism.push_threshold * scale.diagonal,
-            depth_far: scale.depth_far(),
             slope_bias_texels: ism.slope_bias,
         }
     }

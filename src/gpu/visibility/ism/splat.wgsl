@@ -4,7 +4,9 @@
 // follows the meshes as they move (the current vertices). A point in the front hemisphere of
 // group k's centre lands in one texel of its paraboloid map, nearest distance kept; points
 // nearer than CLUSTER_NEAR_FRACTION x the group's radius (its own surface) are skipped, as in
-// the rasterised maps. Rust twin: `twin::splat`.
+// the rasterised maps. No far plane: a group's centre is its VALs' and may lie metres from the
+// meshes, and a distance of any size is stored as its float's bits (`ism.wgsl`). Rust twin:
+// `twin::splat`.
 
 @group(0) @binding(0) var<storage, read> clusters: array<Cluster>;
 @group(0) @binding(1) var<storage, read> triangle_cdf: array<f32>;
@@ -64,7 +66,7 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let d = ism_point(k, j) - c.position;
     let distance = length(d);
-    if !(distance > c.radius * CLUSTER_NEAR_FRACTION) || distance >= DEPTH_FAR {
+    if !(distance > c.radius * CLUSTER_NEAR_FRACTION) || !(distance < NOTHING) {
         return;
     }
     let v = d / distance;

@@ -23,7 +23,6 @@ pub struct IsmParams {
     /// Pull and push thresholds at the finest level (m).
     pub pull_threshold: f32,
     pub push_threshold: f32,
-    pub depth_far: f32,
     /// Slope-scaled bias of the lookup (texels; `clusters::twin::slope_bias`): a splatted
     /// point lies anywhere in its texel, not on the texel's centre ray.
     pub slope_bias_texels: f32,
@@ -181,7 +180,7 @@ pub fn splat(
         let distance = d.length();
         // NaN distances are skipped too, as in WGSL.
         if distance.partial_cmp(&(cluster.radius * CLUSTER_NEAR_FRACTION)) != Some(std::cmp::Ordering::Greater)
-            || distance >= params.depth_far
+            || !distance.is_finite()
         {
             continue;
         }
@@ -272,7 +271,6 @@ mod tests {
             levels,
             pull_threshold: 0.05,
             push_threshold: 0.05,
-            depth_far: 100.0,
             slope_bias_texels: crate::scene::IsmSettings::default().slope_bias,
         }
     }
