@@ -9,6 +9,15 @@
 
 @group(0) @binding(0) var<storage, read> clusters: array<Cluster>;
 
+// Cluster c's map frame; with FOCUS_BOUNDS the meshes' bounding sphere follows the clusters
+// (`clusters/mod.rs`, written every frame).
+fn frame_of(c: Cluster) -> MapFrame {
+    if FOCUS_BOUNDS == 0u {
+        return MapFrame(c.normal, 1.0);
+    }
+    return cluster_map_frame(c, clusters[CLUSTER_COUNT]);
+}
+
 // A distance (m) as the atlas stores it: t / (t + DEPTH_SCALE), monotone and below 1 for every
 // finite distance (1, the cleared value, is nothing drawn). Rust twin: `twin::encode_map_depth`.
 fn encode_map_depth(t: f32) -> f32 {
@@ -37,8 +46,9 @@ fn vs_main(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) k:
     let d = vertices[indices[vertex_index]].position - c.position;
     let v = d / max(length(d), 1e-20);
     // Corners behind the hemisphere land outside the disc; bounded so the raster stays sane.
-    let t = any_perpendicular(c.normal);
-    let q = vec2<f32>(dot(v, t), dot(v, cross(c.normal, t))) / max(1.0 + dot(v, c.normal), 1e-2);
+    let f = frame_of(c);
+    let t = any_perpendicular(f.axis);
+    let q = vec2<f32>(dot(v, t), dot(v, cross(f.axis, t))) / max(1.0 + dot(v, f.axis), 1e-2) / f.scale;
     out.clip = vec4<f32>(q, 0.5, 1.0);
     return out;
 }
@@ -51,7 +61,7 @@ fn fs_main(in: ShadowVertex) -> @builtin(frag_depth) f32 {
     if dot(q, q) > 1.0 {
         discard;
     }
-    let v = paraboloid_direction(q, c.normal);
+    let v = map_direction(q, frame_of(c));
     // Möller-Trumbore from the centre along v.
     let e1 = in.p1 - in.p0;
     let e2 = in.p2 - in.p0;
