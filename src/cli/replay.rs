@@ -40,7 +40,8 @@ pub struct Args {
     /// divided by radiance_scale as the room's was multiplied).
     #[arg(long, default_value_t = 1.0)]
     exposure: f32,
-    /// Intrinsics for a recording without intrinsics.json: fx,fy,cx,cy (default: TUM's).
+    /// Intrinsics fx,fy,cx,cy for a recording without its own: a directory without intrinsics.json
+    /// (default: TUM's), an .mcap without camera info (no default: required there).
     #[arg(long, value_delimiter = ',', num_args = 4)]
     intrinsics: Option<Vec<f32>>,
     /// Depth units per metre for a recording without intrinsics.json (default 5000, TUM's).

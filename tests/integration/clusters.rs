@@ -13,9 +13,14 @@
 
 use super::{assert_close, gpu};
 use glam::Vec3;
+use rayon::prelude::*;
 use relume::gpu::visibility::clusters::{ClusterReadback, Clusters, twin};
 use relume::renderer::{Method, Renderer};
 use relume::scene::Scene;
+use relume::twin::bvh::Bvh;
+use relume::twin::exact_cpu::RAY_OFFSET;
+use relume::twin::flat::FlatScene;
+use relume::twin::{Val, luminance, val_irradiance};
 
 /// `cornell_bunny_small.json` with `"visibility": mode` and `settings` (more entries of
 /// `settings.tuning`, e.g. `"clusters": {...}`, and `"bounces"`, which goes beside `tuning`) in
@@ -109,7 +114,7 @@ pub(super) fn assert_lookup_and_gather_match(
             let tile = twin::DepthTile { resolution, depths: &r.maps[k], slope_bias_texels };
             let receiver =
                 twin::ShadowReceiver { offset: Vec3::from(p.position) - c.position, normal: p.normal.into() };
-            let cpu = twin::cluster_visibility(&tile, c, &receiver, r.settings.soft);
+            let cpu = twin::cluster_visibility_in(&tile, c, &r.frames[k], &receiver, r.settings.soft);
             let gpu = r.visibility[i * m + k];
             let d = (cpu - gpu).abs();
             sum_diff += d;
@@ -158,4 +163,127 @@ fn clusters_start_from_last_frames_centres() {
     let r = readback(&renderer, &gpu, vals.len());
     assert_ne!(first, r.clusters, "the light moved");
     assert_kmeans_matches(&first, &vals, &r, 1.0 / r.kmeans.position_scale);
+}
+
+/// The mean over `flat`'s sparse points of the luminance of the diffuse irradiance (W/m²) from
+/// `vals`, without visibility and with exact visibility: every VAL through a shadow ray against
+/// the meshes, from `p + n RAY_OFFSET` to `l + n_l RAY_OFFSET` as the exact reference casts it.
+pub(super) fn exact_sparse_irradiance(flat: &FlatScene, vals: &[Val]) -> (f64, f64) {
+    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| Vec3::from(v.position)).collect();
+    let triangles: Vec<[u32; 3]> = flat.indices.chunks(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let bvh = Bvh::build(&positions, &triangles);
+    let sums: Vec<(f64, f64)> = flat
+        .sparse_points
+        .par_iter()
+        .map(|p| {
+            let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
+            let mut sum = (0.0, 0.0);
+            for v in vals {
+                let e = f64::from(luminance(val_irradiance(x, n, v)));
+                if e <= 0.0 {
+                    continue;
+                }
+                sum.0 += e;
+                let target = v.position + v.normal * RAY_OFFSET;
+                if !bvh.occluded(&positions, &triangles, x + n * RAY_OFFSET, target) {
+                    sum.1 += e;
+                }
+            }
+            sum
+        })
+        .collect();
+    let count = sums.len().max(1) as f64;
+    (sums.iter().map(|s| s.0).sum::<f64>() / count, sums.iter().map(|s| s.1).sum::<f64>() / count)
+}
+
+/// The bunny of `mr_bunny.json` alone (about 0.3 m across, 512 sparse points) with the group
+/// visibility `mode` and its `settings`, lit by 600 VALs on a sphere `radius` metres around it
+/// facing it (a room's lights seen from a small virtual object, as in mixed reality): one
+/// sparse frame, its VALs and the mode's readback.
+pub(super) fn far_lit_bunny(
+    mode: &str,
+    settings: serde_json::Value,
+    radius: f32,
+) -> (relume::gpu::Gpu, Renderer, Vec<Val>, ClusterReadback) {
+    let dir = super::fixture("scenes");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("mr_bunny.json")).unwrap()).unwrap();
+    json["meshes"][0]["sparse_points"] = 512.into();
+    json["settings"]["tuning"] = serde_json::json!({ "visibility": mode, mode: settings });
+    let scene = Scene::from_json_str(&json.to_string(), &dir).unwrap();
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let (centre, bunny) = renderer.scene.flat.bounding_sphere();
+    assert!(bunny < 0.3, "a small object: bounding radius {bunny} m");
+    // A Fibonacci sphere: every direction, VALs of equal area and flux.
+    let n = 600;
+    let area = 4.0 * std::f32::consts::PI * radius * radius / n as f32;
+    let vals: Vec<Val> = (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let phi = i as f32 * std::f32::consts::PI * (3.0 - 5f32.sqrt());
+            let d = Vec3::new((1.0 - z * z).sqrt() * phi.cos(), (1.0 - z * z).sqrt() * phi.sin(), z);
+            Val { position: centre + d * radius, normal: -d, area, flux: Vec3::splat(0.05) }
+        })
+        .collect();
+    renderer.set_vals(&gpu, &vals).unwrap();
+    renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    let read = renderer.read_vals(&gpu).unwrap();
+    assert_eq!(read.len(), vals.len());
+    let r = readback(&renderer, &gpu, read.len());
+    (gpu, renderer, read, r)
+}
+
+/// Mean luminance of the gathered diffuse irradiance at the sparse points (W/m²).
+pub(super) fn gathered_mean(renderer: &Renderer, gpu: &relume::gpu::Gpu) -> f64 {
+    let mid = renderer.read_sparse_intermediates(gpu).unwrap();
+    let n = mid.gathered_diffuse.len().max(1) as f64;
+    mid.gathered_diffuse.iter().map(|g| f64::from(luminance(g.irradiance.into()))).sum::<f64>() / n
+}
+
+/// How far a group mode's darkening of the far-lit bunny may stray from the exact darkening
+/// (relative). Loose, to what the modes give now (measured): clusters 0.21 of it, ISM 0.39,
+/// their shadows thinned by the lookup's relative bias (2 % of 2.3 m, 4.6 cm on a 0.3 m
+/// object), which scaling with the focus overcorrects (1.47 here, and 4x too dark on the MR
+/// stream, whose environment VALs 1000 m away then shadow with no bias at all). With the far
+/// plane at twice the diagonal both modes gave none; with hemisphere maps, 0.18 and 0.10.
+pub(super) const FAR_DARKENING_TOLERANCE: f64 = 0.85;
+
+/// The group mode's gathered light on the far-lit bunny against the exact reference: darker
+/// than without visibility, by the exact darkening within [`FAR_DARKENING_TOLERANCE`].
+pub(super) fn assert_far_darkening(name: &str, renderer: &Renderer, gpu: &relume::gpu::Gpu, vals: &[Val]) {
+    let (unoccluded, exact) = exact_sparse_irradiance(&renderer.scene.flat, vals);
+    let e = gathered_mean(renderer, gpu);
+    let (darkening, want) = (unoccluded - e, unoccluded - exact);
+    eprintln!(
+        "{name}: {e:.6} W/m², exact {exact:.6}, unoccluded {unoccluded:.6}; darkening ratio {:.3}",
+        darkening / want
+    );
+    assert!(want > 0.05 * unoccluded, "the bunny shadows itself: exact {exact}, unoccluded {unoccluded}");
+    assert!((darkening - want).abs() <= FAR_DARKENING_TOLERANCE * want, "{name}: darkens by {darkening}, exact {want}");
+}
+
+/// Every lit group's map is focused on the meshes (its centre lies outside their bounding
+/// sphere) and the object covers over a tenth of it (a hemisphere map of 64² would give it a
+/// couple of texels).
+pub(super) fn assert_maps_hold_the_object(r: &ClusterReadback) {
+    for (k, ((c, map), f)) in r.clusters.iter().zip(&r.maps).zip(&r.frames).enumerate() {
+        if c.count > 0.0 {
+            let drawn = map.iter().filter(|d| d.is_finite()).count();
+            assert!(f.scale < 0.2, "group {k} at {c:?}: the map is not focused on the object ({f:?})");
+            assert!(drawn * 10 > map.len(), "group {k} at {c:?}: the object fills {drawn} of {} texels", map.len());
+        }
+    }
+}
+
+/// VALs 2.5 m from a 0.3 m object (a room's light on a virtual object): every lit cluster's map
+/// holds the object (no far plane cuts it off), the lookup and the gather match their twins,
+/// and the light it leaves is the exact reference's within the tolerance.
+#[test]
+fn clusters_shadow_a_small_object_lit_from_far() {
+    let settings = serde_json::json!({ "count": 16, "shadow_map_resolution": 64, "iterations": 3, "soft": "pcss" });
+    let (gpu, renderer, vals, r) = far_lit_bunny("clusters", settings, 2.5);
+    assert_maps_hold_the_object(&r);
+    assert_lookup_and_gather_match(&renderer, &gpu, &vals, &r, r.settings.shadow_map_resolution);
+    assert_far_darkening("clusters", &renderer, &gpu, &vals);
 }

@@ -4,10 +4,23 @@
 //! `settings.tuning.visibility` set to that mode. The scene and frames are those of
 //! `stream_mr.rs` (a 160x120 TUM frame, the bunny with 256 sparse points, the differential pass
 //! on).
+//!
+//! The exact reference (the frame's own VALs through shadow rays at the sparse points) darkens
+//! the bunny from 4.116 to 3.656 W/m²; the discs give 3.626. The group modes are printed against
+//! it but not held to it yet: clusters darken by 0.38 of the exact darkening, and ISM by almost
+//! nothing, because its flux draw spends its groups on the `auto` environment's VALs (1000 m
+//! away, large flux) and leaves the room's VALs in a handful of groups.
 
+use relume::mr::environment::Environment;
+use relume::mr::{FrameSettings, MrPipeline};
+use relume::renderer::{Method, Renderer};
+use relume::rgbd::RgbdFrame;
+use relume::scene::{Scene, SceneDescription};
 use relume::service::wire::{self, proto, proto::envelope::Body};
-use serde_json::json;
+use serde_json::{Value, json};
 
+use super::clusters::exact_sparse_irradiance;
+use super::fixture;
 use super::service::{TestServer, envelope, streamed_png};
 use super::stream_mr::{difference, frames, mr_scene, offline};
 
@@ -25,6 +38,33 @@ fn mean_irradiance(irradiance: &[glam::Vec3]) -> f64 {
     sum / irradiance.len().max(1) as f64
 }
 
+/// The bunny's mean irradiance (luminance, W/m², as [`mean_irradiance`]) in `frame` without
+/// and with exact visibility: the VALs that lit the frame (the room's and the environment's, read
+/// back from the renderer after the MR pipeline set them) summed at every sparse point on the
+/// CPU, each through a shadow ray against the bunny (the exact reference's offsets).
+fn exact_reference(scene: &Value, frame: &RgbdFrame) -> (f64, f64) {
+    let gpu = super::gpu();
+    let text = scene.to_string();
+    let loaded = Scene::from_json_str(&text, &fixture("")).expect("scene");
+    let environment = SceneDescription::from_json_str(&text).expect("description").settings.environment;
+    let mut renderer = Renderer::new(&gpu, &loaded).expect("renderer");
+    let mut mr = MrPipeline::new(loaded.settings.mr, Environment::None);
+    mr.set_environment(Environment::from_settings(&environment, &fixture("")).expect("environment"));
+    let placement = renderer.placement().to_vec();
+    mr.place(&gpu, &mut renderer, &loaded, &placement).expect("placed");
+    let k = frame.intrinsics;
+    let settings = FrameSettings {
+        width: k.width,
+        height: k.height,
+        exposure: 1.0,
+        rgbd: loaded.settings.rgbd,
+        method: Method::Sparse,
+    };
+    mr.render_frame(&gpu, &mut renderer, frame, &settings, None).expect("render");
+    let vals = renderer.read_vals(&gpu).expect("the frame's VALs");
+    exact_sparse_irradiance(&renderer.scene.flat, &vals)
+}
+
 /// A stream renders frame 0 in every mode, chosen by a control message: the mode's own stage
 /// runs (and no other mode's), the composite is the offline replay's with that mode within one
 /// 8-bit level (the tolerance `stream_mr.rs` explains: the VALs' order, and with it float sums,
@@ -35,9 +75,9 @@ async fn a_stream_renders_every_visibility_mode_as_the_offline_replay() {
     let scene = mr_scene(true);
     let frames = frames(&[0]);
     let frame = frames[0].1.clone();
-    // Four frames with the differential pass on the CPU twin take longer than the server's
-    // 15 s between pings, which the test's client does not expect between its exchanges.
-    let server = TestServer::start(|c| c.timeouts.stream_ping_seconds = 3600).await;
+    // Four frames with the differential pass on the CPU twin take longer than the server's 15 s
+    // between keep-alive pings, which the client's `answer` steps over.
+    let server = TestServer::start(|_| {}).await;
     let id = server.create(&scene).await;
     let mut ws = server.stream(&id).await;
     let mut streamed = Vec::new();
@@ -56,15 +96,16 @@ async fn a_stream_renders_every_visibility_mode_as_the_offline_replay() {
     drop(ws);
     server.stop().await;
 
-    let expected = tokio::task::spawn_blocking(move || {
-        MODES
+    let (expected, (unoccluded, exact)) = tokio::task::spawn_blocking(move || {
+        let replays = MODES
             .iter()
             .map(|(_, name, _)| {
                 let mut scene = scene.clone();
                 scene["settings"]["tuning"] = json!({ "visibility": name });
                 offline(&scene, &[&frame]).remove(0)
             })
-            .collect::<Vec<_>>()
+            .collect::<Vec<_>>();
+        (replays, exact_reference(&scene, &frame))
     })
     .await
     .expect("the offline replays");
@@ -89,5 +130,15 @@ async fn a_stream_renders_every_visibility_mode_as_the_offline_replay() {
     let off = irradiance[2];
     for ((_, name, _), e) in MODES.iter().zip(&irradiance) {
         assert!(*e <= off * 1.001, "{name}: {e} W/m², more than without visibility ({off})");
+    }
+    eprintln!("exact reference: {unoccluded:.7} W/m² without visibility, {exact:.7} W/m² with it");
+    // The CPU sum without visibility is the GPU's off (the gather sums every VAL; 1e-3 relative
+    // as the twins, `twins.rs`): the reference is lit by the frame's own VALs.
+    assert!((unoccluded - off).abs() <= 1e-3 * off, "CPU sum {unoccluded} W/m², GPU off {off}");
+    assert!(exact < off * 0.95, "the bunny shadows itself: exact {exact} W/m², off {off}");
+    // The group modes against it: printed, not yet held to a tolerance (see the module's note).
+    for (i, name) in [(0, "clusters"), (1, "ism")] {
+        let (darkening, want) = (off - irradiance[i], off - exact);
+        eprintln!("{name}: darkens the bunny by {darkening:.7} W/m², exact {want:.7} (ratio {:.3})", darkening / want);
     }
 }

@@ -21,15 +21,25 @@ fn receiver_plane_depth(offset: vec3<f32>, normal: vec3<f32>, v: vec3<f32>) -> f
     return NOTHING;
 }
 
+// Cluster c's map frame (`paraboloid.wgsl`); with FOCUS_BOUNDS the meshes' bounding sphere
+// follows the clusters (`clusters/mod.rs`, written every frame).
+fn frame_of(c: Cluster) -> MapFrame {
+    if FOCUS_BOUNDS == 0u {
+        return MapFrame(c.normal, 1.0);
+    }
+    return cluster_map_frame(c, clusters[CLUSTER_COUNT]);
+}
+
 // The blocker's distance at `texel`, or -1 when it holds none.
 fn blocker_at(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>, texel: vec2<i32>) -> f32 {
     let z = map_depth(k, texel);
     if z >= NOTHING {
         return -1.0;
     }
-    let v = paraboloid_direction(texel_disc(texel), c.normal);
+    let f = frame_of(c);
+    let v = map_direction(texel_disc(texel), f);
     let zr = min(receiver_plane_depth(offset, normal, v), length(offset) * 4.0);
-    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(v, c.normal, normal) * depth_spread(z)) {
+    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(v, f, normal) * depth_spread(z)) {
         return z;
     }
     return -1.0;
@@ -46,13 +56,13 @@ fn depth_spread(z: f32) -> f32 {
 // imperfect shadow maps' splatted points lie anywhere in their texel): across
 // SLOPE_BIAS_TEXELS texels the receiver's plane moves by that many texel angles times the
 // tangent of the ray's incidence on it, relative to its distance. 0 for the rasterised maps.
-fn slope_bias(v: vec3<f32>, map_normal: vec3<f32>, receiver_normal: vec3<f32>) -> f32 {
+fn slope_bias(v: vec3<f32>, f: MapFrame, receiver_normal: vec3<f32>) -> f32 {
     if SLOPE_BIAS_TEXELS == 0.0 {
         return 0.0;
     }
     let cos_i = clamp(-dot(v, receiver_normal), 1e-3, 1.0);
     let tan_i = min(sqrt(1.0 - cos_i * cos_i) / cos_i, MAX_SLOPE);
-    return SLOPE_BIAS_TEXELS * tan_i / texels_per_radian(dot(v, map_normal));
+    return SLOPE_BIAS_TEXELS * tan_i / map_texels_per_radian(v, f);
 }
 
 fn tap(centre: vec2<f32>, radius: f32, i: u32) -> vec2<i32> {
@@ -95,6 +105,11 @@ fn texels_per_radian(cos_theta: f32) -> f32 {
     return f32(MAP_RESOLUTION) * 0.5 / (1.0 + cos_theta);
 }
 
+// Texels per radian of map frame `f` in direction `v`.
+fn map_texels_per_radian(v: vec3<f32>, f: MapFrame) -> f32 {
+    return texels_per_radian(dot(v, f.axis)) / f.scale;
+}
+
 fn cluster_visibility(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>) -> f32 {
     let zr = length(offset);
     if c.count == 0.0 || zr <= 0.0 {
@@ -105,8 +120,9 @@ fn cluster_visibility(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>) 
     if cos_theta <= 0.0 || dot(normal, v) >= 0.0 {
         return 1.0;
     }
-    let centre = disc_texel(paraboloid_project(v, c.normal));
-    let per_radian = texels_per_radian(cos_theta);
+    let f = frame_of(c);
+    let centre = disc_texel(map_project(v, f));
+    let per_radian = map_texels_per_radian(v, f);
     let max_texels = MAX_SHADOW_FILTER_ANGLE * per_radian;
     if SOFT_SHADOWS == SOFT_HARD {
         return pcf(k, c, offset, normal, centre, 0.0);

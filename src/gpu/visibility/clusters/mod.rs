@@ -74,8 +74,10 @@ pub struct RawClusterSums {
     pub offset_sq: f32,
 }
 
-/// The scene-dependent lengths of the mode: 1 / the scene's bounding diagonal scales the
-/// clustering distance, and shadow maps store distances up to twice the diagonal.
+/// The scene-dependent length of the mode, the meshes' bounding diagonal: 1 / it scales the
+/// clustering distance, and the rasterised maps store distances in units of it
+/// ([`twin::encode_map_depth`]: every distance from 0 to infinity, since the cluster centres are
+/// the VALs', which may lie anywhere, e.g. metres away from a small virtual object in a real room).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SceneScale {
     pub diagonal: f32,
@@ -91,10 +93,6 @@ impl SceneScale {
         Self { diagonal: if diagonal.is_finite() && diagonal > 0.0 { diagonal } else { 1.0 } }
     }
 
-    pub fn depth_far(&self) -> f32 {
-        2.0 * self.diagonal
-    }
-
     pub fn kmeans(&self, settings: &ClusterSettings) -> twin::KmeansParams {
         twin::KmeansParams { position_scale: 1.0 / self.diagonal, normal_weight: settings.normal_weight }
     }
@@ -108,6 +106,12 @@ pub fn header(settings: &ClusterSettings, scale: SceneScale) -> String {
 
 /// [`header`] with `slope_bias_texels` of slope-scaled bias (`twin::slope_bias`).
 pub fn header_with_slope_bias(settings: &ClusterSettings, scale: SceneScale, slope_bias_texels: f32) -> String {
+    header_focused(settings, scale, slope_bias_texels, false)
+}
+
+/// [`header_with_slope_bias`], with `focus` the maps focused on the meshes' bounding sphere
+/// (`twin::map_frame`), which the clusters buffer then holds after its clusters ([`Clusters`]).
+pub fn header_focused(settings: &ClusterSettings, scale: SceneScale, slope_bias_texels: f32, focus: bool) -> String {
     let soft = match settings.soft {
         SoftShadows::Pcss => 0,
         SoftShadows::Pcf => 1,
@@ -120,7 +124,7 @@ pub fn header_with_slope_bias(settings: &ClusterSettings, scale: SceneScale, slo
         .u32("PARTIAL_BLOCK", PARTIAL_BLOCK)
         .u32("MAP_RESOLUTION", settings.shadow_map_resolution)
         .u32("ATLAS_COLUMNS", settings.atlas_columns())
-        .f32("DEPTH_FAR", scale.depth_far())
+        .f32("DEPTH_SCALE", scale.diagonal)
         .u32("SOFT_PCSS", 0)
         .u32("SOFT_PCF", 1)
         .u32("SOFT_HARD", 2)
@@ -133,6 +137,8 @@ pub fn header_with_slope_bias(settings: &ClusterSettings, scale: SceneScale, slo
         .f32("SLOPE_BIAS_TEXELS", slope_bias_texels)
         .f32("MAX_SLOPE", twin::MAX_SLOPE)
         .f32("SHADOW_RASTER_SLACK", twin::SHADOW_RASTER_SLACK)
+        .u32("FOCUS_BOUNDS", u32::from(focus))
+        .f32("FOCUS_MARGIN", twin::FOCUS_MARGIN)
         .include(PARABOLOID)
         .finish()
 }
@@ -184,10 +190,12 @@ pub fn lookup_body(head: &str) -> String {
 
 /// The shadow-map raster's complete WGSL (vertex and fragment stages).
 pub fn shadow_maps_source(settings: &ClusterSettings, scale: SceneScale, textured: bool) -> String {
-    crate::gpu::shader::source(
-        &Wgsl::new().include(&header(settings, scale)).include(SHADOW_MAPS_WGSL).finish(),
-        textured,
-    )
+    shadow_maps_source_after(&header(settings, scale), textured)
+}
+
+/// The shadow-map raster's complete WGSL after the constants `head`.
+fn shadow_maps_source_after(head: &str, textured: bool) -> String {
+    crate::gpu::shader::source(&Wgsl::new().include(head).include(SHADOW_MAPS_WGSL).finish(), textured)
 }
 
 /// The shadow-map raster at the default settings (for the compilation test).
@@ -211,8 +219,13 @@ impl ShadowMaps {
         settings: &ClusterSettings,
         scale: SceneScale,
     ) -> Result<Self, GpuError> {
+        Self::after(gpu, scene, settings, &header(settings, scale))
+    }
+
+    /// The maps with the constants `head` (e.g. focused on the meshes, [`header_focused`]).
+    fn after(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings, head: &str) -> Result<Self, GpuError> {
         let label = SHADOW_MAPS_STAGE;
-        let module = module_from_source(gpu, label, shadow_maps_source(settings, scale, scene.textured()))?;
+        let module = module_from_source(gpu, label, shadow_maps_source_after(head, scene.textured()))?;
         let side = settings.atlas_columns() * settings.shadow_map_resolution;
         let limit = gpu.device.limits().max_texture_dimension_2d;
         if side > limit {
@@ -387,9 +400,11 @@ impl Clusters {
         names: StageNames,
     ) -> Result<Self, GpuError> {
         let scale = SceneScale::of(scene);
+        // The maps are focused on the meshes: the clusters buffer holds their bounding sphere
+        // after the clusters (written every frame, [`Clusters::record_at`]).
         let head = match ism {
-            Some(ism) => ism::header_with(settings, ism, scale),
-            None => header(settings, scale),
+            Some(ism) => ism::focused_header_with(settings, ism, scale),
+            None => header_focused(settings, scale, 0.0, true),
         };
         let textured = scene.textured();
         let module = module_from_source(
@@ -406,7 +421,7 @@ impl Clusters {
         };
         let maps = match ism {
             Some(ism) => Maps::Ism(ism::Maps::new(gpu, scene, &head, settings.count, ism::IsmParams::of(ism, scale))?),
-            None => Maps::Raster(ShadowMaps::new(gpu, scene, settings, scale)?),
+            None => Maps::Raster(ShadowMaps::after(gpu, scene, settings, &head)?),
         };
         let imperfect = ism.is_some();
         let (visibility_desc, visibility_body) = match (receivers, imperfect) {
@@ -443,7 +458,7 @@ impl Clusters {
                 &[],
                 visibility_desc.workgroup,
             )?,
-            clusters: gpu.storage_buffer_sized::<RawCluster>("clustering.clusters", m)?,
+            clusters: gpu.storage_buffer_sized::<RawCluster>("clustering.clusters", m + 1)?,
             group_of_val: gpu.storage_buffer_sized::<u32>("clustering.group_of_val", 1)?,
             partials: gpu.storage_buffer_sized::<RawClusterSums>("clustering.cluster_partials", m)?,
             capacity: 1,
@@ -491,6 +506,12 @@ impl Clusters {
     ) -> Result<(), GpuError> {
         let scene = frame.scene;
         let m = self.settings.count;
+        // The meshes' bounding sphere (as they are placed now) after the clusters: the maps'
+        // focus (`paraboloid.wgsl`, `cluster_map_frame`).
+        let (centre, radius) = scene.flat.bounding_sphere();
+        let bounds = RawCluster { position: centre.into(), count: 0.0, normal: [0.0, 0.0, 1.0], radius };
+        let offset = u64::from(m) * std::mem::size_of::<RawCluster>() as u64;
+        gpu.queue.write_buffer(&self.clusters, offset, bytemuck::bytes_of(&bounds));
         let resources = [
             buffer("vals", &frame.vals.buffer),
             buffer("val_count", &frame.vals.count),
@@ -570,13 +591,16 @@ impl Clusters {
     /// first `vals` VALs' cluster, the visibility table and the shadow maps.
     pub fn read(&self, gpu: &Gpu, vals: usize, points: usize) -> Result<ClusterReadback, GpuError> {
         let m = self.settings.count as usize;
-        let clusters: Vec<RawCluster> = gpu.read_buffer(&self.clusters, m)?;
+        let mut clusters: Vec<RawCluster> = gpu.read_buffer(&self.clusters, m + 1)?;
+        let bounds = clusters.pop().map(|b| (Vec3::from(b.position), b.radius));
+        let clusters: Vec<twin::Cluster> = clusters.iter().map(Into::into).collect();
         let maps = match &self.maps {
             Maps::Raster(maps) => maps.read(gpu, &self.settings, self.scale)?,
             Maps::Ism(maps) => maps.read(gpu)?,
         };
         Ok(ClusterReadback {
-            clusters: clusters.iter().map(Into::into).collect(),
+            frames: clusters.iter().map(|c| twin::map_frame(c, bounds)).collect(),
+            clusters,
             group_of_val: gpu.read_buffer(&self.group_of_val, vals.min(self.capacity as usize))?,
             visibility: gpu.read_buffer(&self.group_visibility, points * m)?,
             maps,
@@ -621,15 +645,16 @@ impl ShadowMaps {
         );
         gpu.submit_and_wait(encoder)?;
         let words: Vec<f32> = gpu.read_buffer(&staging, (row / 4 * side) as usize)?;
-        let far = scale.depth_far();
         let columns = settings.atlas_columns();
         Ok((0..m)
             .map(|k| {
                 let (cx, cy) = ((k as u32 % columns) * res, (k as u32 / columns) * res);
                 (0..res * res)
                     .map(|i| {
-                        let d = words[((cy + i / res) * row / 4 + cx + i % res) as usize];
-                        if d >= 1.0 { f32::INFINITY } else { d * far }
+                        twin::decode_map_depth(
+                            words[((cy + i / res) * row / 4 + cx + i % res) as usize],
+                            scale.diagonal,
+                        )
                     })
                     .collect()
             })
@@ -703,6 +728,9 @@ fn table_label(receivers: Receivers) -> &'static str {
 /// What [`Clusters::read`] returns.
 pub struct ClusterReadback {
     pub clusters: Vec<twin::Cluster>,
+    /// Each cluster's map frame, focused on the meshes' bounding sphere as the frame's was
+    /// (`twin::map_frame`).
+    pub frames: Vec<twin::MapFrame>,
     pub group_of_val: Vec<u32>,
     /// Sparse points x clusters.
     pub visibility: Vec<f32>,

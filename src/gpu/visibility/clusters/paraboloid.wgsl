@@ -31,6 +31,38 @@ fn paraboloid_direction(q: vec2<f32>, normal: vec3<f32>) -> vec3<f32> {
     return normalize(t * q.x * s + b * q.y * s + normal * vn);
 }
 
+// A map's frame: its axis, and the disc's scale, tan of half the widest angle from the axis it
+// holds (1: the hemisphere, the paraboloid of paper 000).
+struct MapFrame {
+    axis: vec3<f32>,
+    scale: f32,
+}
+
+// The frame of cluster `c`'s map: the hemisphere around its normal; or with FOCUS_BOUNDS, when
+// the centre lies outside the meshes' bounding sphere `bounds` (position and radius), the cone
+// around the direction to the sphere that just holds it, so the map's texels all go to the
+// meshes (a room's VALs metres from a small virtual object). Rust twin: `twin::map_frame`.
+fn cluster_map_frame(c: Cluster, bounds: Cluster) -> MapFrame {
+    let d = bounds.position - c.position;
+    let distance = length(d);
+    let r = bounds.radius * FOCUS_MARGIN;
+    if FOCUS_BOUNDS == 0u || !(distance > r) {
+        return MapFrame(c.normal, 1.0);
+    }
+    let s = r / distance;
+    return MapFrame(d / distance, s / (1.0 + sqrt(max(1.0 - s * s, 0.0))));
+}
+
+// `paraboloid_project` around the frame's axis, scaled to its disc.
+fn map_project(v: vec3<f32>, f: MapFrame) -> vec2<f32> {
+    return paraboloid_project(v, f.axis) / f.scale;
+}
+
+// Inverse of `map_project`.
+fn map_direction(q: vec2<f32>, f: MapFrame) -> vec3<f32> {
+    return paraboloid_direction(q * f.scale, f.axis);
+}
+
 fn texel_disc(texel: vec2<i32>) -> vec2<f32> {
     let r = f32(MAP_RESOLUTION);
     return vec2<f32>((f32(texel.x) + 0.5) / r * 2.0 - 1.0, 1.0 - (f32(texel.y) + 0.5) / r * 2.0);

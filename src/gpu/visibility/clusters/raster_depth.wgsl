@@ -1,5 +1,5 @@
 // The rasterised shadow maps as the visibility pass reads them: one depth atlas, distances
-// stored as a fraction of DEPTH_FAR (`shadow_maps.wgsl`). Bound as an unfilterable float texture,
+// stored as t / (t + DEPTH_SCALE) (`shadow_maps.wgsl`, `encode_map_depth`). Bound as an unfilterable float texture,
 // not `texture_depth_2d`, whose `textureLoad` does not translate to GLSL (the GL backend).
 
 @group(0) @binding(2) var shadow_atlas: texture_2d<f32>;
@@ -10,9 +10,14 @@ fn map_depth(k: u32, texel: vec2<i32>) -> f32 {
     if texel.x < 0 || texel.y < 0 || texel.x >= r || texel.y >= r {
         return NOTHING;
     }
-    let d = textureLoad(shadow_atlas, vec2<i32>(atlas_origin(k)) + texel, 0).x;
+    return decode_map_depth(textureLoad(shadow_atlas, vec2<i32>(atlas_origin(k)) + texel, 0).x);
+}
+
+// The distance (m) of a stored depth; NOTHING for 1 (nothing drawn). Rust twin:
+// `twin::decode_map_depth`.
+fn decode_map_depth(d: f32) -> f32 {
     if d >= 1.0 {
         return NOTHING;
     }
-    return d * DEPTH_FAR;
+    return DEPTH_SCALE * d / (1.0 - d);
 }

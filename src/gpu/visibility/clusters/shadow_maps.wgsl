@@ -2,11 +2,27 @@
 // draws every triangle into cluster k's tile (the viewport). Edges are straight in the disc
 // while the projection bends them, so the depth is not interpolated: each fragment casts its
 // texel's ray from the cluster centre against its triangle (corners passed flat) and writes
-// the exact distance / DEPTH_FAR; fragments whose ray misses the triangle (by more than
+// the exact distance, encoded by `encode_map_depth` (any distance below 1, so no far plane: a
+// cluster's centre may lie metres from the meshes); fragments whose ray misses the triangle (by more than
 // SHADOW_RASTER_SLACK in barycentrics, which keeps neighbours watertight) or that lie nearer
 // than CLUSTER_NEAR_FRACTION x the radius (the cluster's own surface) are dropped.
 
 @group(0) @binding(0) var<storage, read> clusters: array<Cluster>;
+
+// Cluster c's map frame; with FOCUS_BOUNDS the meshes' bounding sphere follows the clusters
+// (`clusters/mod.rs`, written every frame).
+fn frame_of(c: Cluster) -> MapFrame {
+    if FOCUS_BOUNDS == 0u {
+        return MapFrame(c.normal, 1.0);
+    }
+    return cluster_map_frame(c, clusters[CLUSTER_COUNT]);
+}
+
+// A distance (m) as the atlas stores it: t / (t + DEPTH_SCALE), monotone and below 1 for every
+// finite distance (1, the cleared value, is nothing drawn). Rust twin: `twin::encode_map_depth`.
+fn encode_map_depth(t: f32) -> f32 {
+    return t / (t + DEPTH_SCALE);
+}
 
 struct ShadowVertex {
     @builtin(position) clip: vec4<f32>,
@@ -30,8 +46,9 @@ fn vs_main(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) k:
     let d = vertices[indices[vertex_index]].position - c.position;
     let v = d / max(length(d), 1e-20);
     // Corners behind the hemisphere land outside the disc; bounded so the raster stays sane.
-    let t = any_perpendicular(c.normal);
-    let q = vec2<f32>(dot(v, t), dot(v, cross(c.normal, t))) / max(1.0 + dot(v, c.normal), 1e-2);
+    let f = frame_of(c);
+    let t = any_perpendicular(f.axis);
+    let q = vec2<f32>(dot(v, t), dot(v, cross(f.axis, t))) / max(1.0 + dot(v, f.axis), 1e-2) / f.scale;
     out.clip = vec4<f32>(q, 0.5, 1.0);
     return out;
 }
@@ -44,7 +61,7 @@ fn fs_main(in: ShadowVertex) -> @builtin(frag_depth) f32 {
     if dot(q, q) > 1.0 {
         discard;
     }
-    let v = paraboloid_direction(q, c.normal);
+    let v = map_direction(q, frame_of(c));
     // Möller-Trumbore from the centre along v.
     let e1 = in.p1 - in.p0;
     let e2 = in.p2 - in.p0;
@@ -60,8 +77,8 @@ fn fs_main(in: ShadowVertex) -> @builtin(frag_depth) f32 {
     let w = dot(v, qv) * inv;
     let t = dot(e2, qv) * inv;
     let slack = SHADOW_RASTER_SLACK;
-    if u < -slack || w < -slack || u + w > 1.0 + slack || t <= c.radius * CLUSTER_NEAR_FRACTION || t >= DEPTH_FAR {
+    if u < -slack || w < -slack || u + w > 1.0 + slack || !(t > c.radius * CLUSTER_NEAR_FRACTION) || !(t < NOTHING) {
         discard;
     }
-    return t / DEPTH_FAR;
+    return encode_map_depth(t);
 }

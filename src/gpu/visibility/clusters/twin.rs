@@ -158,6 +158,55 @@ pub fn paraboloid_direction(q: Vec2, normal: Vec3) -> Vec3 {
     (t * q.x * s + b * q.y * s + normal * vn).normalize()
 }
 
+/// A map's frame: its axis, and the disc's scale, `tan` of half the widest angle from the axis
+/// it holds (1: the hemisphere, paper 000's paraboloid map).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapFrame {
+    pub axis: Vec3,
+    pub scale: f32,
+}
+
+impl MapFrame {
+    /// The hemisphere around `normal`.
+    pub fn hemisphere(normal: Vec3) -> Self {
+        Self { axis: normal, scale: 1.0 }
+    }
+}
+
+/// The meshes' bounding radius is widened by this factor before a map is focused on it
+/// (rounding: every point of the meshes must land inside the disc).
+pub const FOCUS_MARGIN: f32 = 1.01;
+
+/// WGSL `cluster_map_frame`: the frame of `cluster`'s map. The hemisphere around its normal, or
+/// with `bounds` (the meshes' bounding sphere: centre, radius), when the centre lies outside it,
+/// the narrowest cone around the direction to the sphere that holds it: all the map's texels go
+/// to the meshes, however far the cluster is (a real room's VALs metres from a small virtual
+/// object, which a hemisphere map of 64² would hold in a couple of texels).
+pub fn map_frame(cluster: &Cluster, bounds: Option<(Vec3, f32)>) -> MapFrame {
+    let Some((centre, radius)) = bounds else {
+        return MapFrame::hemisphere(cluster.normal);
+    };
+    let d = centre - cluster.position;
+    let distance = d.length();
+    let r = radius * FOCUS_MARGIN;
+    // Also the hemisphere for a NaN distance, as in WGSL.
+    if distance.partial_cmp(&r) != Some(std::cmp::Ordering::Greater) {
+        return MapFrame::hemisphere(cluster.normal);
+    }
+    let s = r / distance;
+    MapFrame { axis: d / distance, scale: s / (1.0 + (1.0 - s * s).max(0.0).sqrt()) }
+}
+
+/// [`paraboloid_project`] around the frame's axis, scaled to its disc (WGSL `map_project`).
+pub fn map_project(v: Vec3, frame: &MapFrame) -> Vec2 {
+    paraboloid_project(v, frame.axis) / frame.scale
+}
+
+/// Inverse of [`map_project`] (WGSL `map_direction`).
+pub fn map_direction(q: Vec2, frame: &MapFrame) -> Vec3 {
+    paraboloid_direction(q * frame.scale, frame.axis)
+}
+
 /// Disc point of texel `texel` of a `resolution`² map: texel centres, `y` down.
 pub fn texel_disc(texel: IVec2, resolution: u32) -> Vec2 {
     let r = resolution as f32;
@@ -186,6 +235,21 @@ pub const SHADOW_RASTER_SLACK: f32 = 0.1;
 /// Relative depth bias of the shadow test (receiver-plane depths are exact for planes; this
 /// covers curved receivers and rounding).
 pub const SHADOW_RELATIVE_BIAS: f32 = 0.02;
+
+/// WGSL `encode_map_depth` (`shadow_maps.wgsl`): what the rasterised atlas stores for a distance
+/// `t` (m), `t / (t + scale)` with `scale` the meshes' diagonal. It keeps the order of distances,
+/// maps all of them, however far, below 1 (the cleared atlas: nothing drawn), and loses little
+/// precision: a float's relative step near 1 is 6e-8, so a distance 100 diagonals away keeps
+/// about 6e-6 relative, far under the lookup's bias ([`SHADOW_RELATIVE_BIAS`]).
+pub fn encode_map_depth(t: f32, scale: f32) -> f32 {
+    t / (t + scale)
+}
+
+/// WGSL `decode_map_depth` (`raster_depth.wgsl`): the distance (m) of a stored depth,
+/// `f32::INFINITY` for 1 (nothing drawn).
+pub fn decode_map_depth(d: f32, scale: f32) -> f32 {
+    if d >= 1.0 { f32::INFINITY } else { scale * d / (1.0 - d) }
+}
 
 /// One cluster's shadow map: distances (m) from the centre along each texel's direction,
 /// `f32::INFINITY` where nothing was drawn.
@@ -224,15 +288,14 @@ pub fn receiver_plane_depth(r: &ShadowReceiver, v: Vec3) -> f32 {
 }
 
 /// Whether the map's texel `texel` holds a blocker of `r`, and its distance.
-fn blocker_at(tile: &DepthTile<'_>, cluster: &Cluster, r: &ShadowReceiver, texel: IVec2) -> Option<f32> {
+fn blocker_at(tile: &DepthTile<'_>, frame: &MapFrame, r: &ShadowReceiver, texel: IVec2) -> Option<f32> {
     let z = tile.depth(texel);
     if !z.is_finite() {
         return None;
     }
-    let v = paraboloid_direction(texel_disc(texel, tile.resolution), cluster.normal);
+    let v = map_direction(texel_disc(texel, tile.resolution), frame);
     let zr = receiver_plane_depth(r, v).min(r.offset.length() * 4.0);
-    (z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(tile, v, cluster.normal, r.normal) * depth_spread(z)))
-        .then_some(z)
+    (z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(tile, v, frame, r.normal) * depth_spread(z))).then_some(z)
 }
 
 /// WGSL `depth_spread`: texels a stored depth stands for, `2^level` from its lowest 3 bits (an
@@ -246,13 +309,13 @@ pub const MAX_SLOPE: f32 = 10.0;
 
 /// WGSL `slope_bias`: `slope_bias_texels` texel angles times the tangent of the ray's incidence
 /// on the receiver's plane (relative depth); 0 for maps with exact per-texel depths.
-pub fn slope_bias(tile: &DepthTile<'_>, v: Vec3, map_normal: Vec3, receiver_normal: Vec3) -> f32 {
+pub fn slope_bias(tile: &DepthTile<'_>, v: Vec3, frame: &MapFrame, receiver_normal: Vec3) -> f32 {
     if tile.slope_bias_texels == 0.0 {
         return 0.0;
     }
     let cos_i = (-v.dot(receiver_normal)).clamp(1e-3, 1.0);
     let tan_i = ((1.0 - cos_i * cos_i).sqrt() / cos_i).min(MAX_SLOPE);
-    tile.slope_bias_texels * tan_i / texels_per_radian(v.dot(map_normal), tile.resolution)
+    tile.slope_bias_texels * tan_i / map_texels_per_radian(v, frame, tile.resolution)
 }
 
 /// The `SHADOW_TAPS`² grid of texels over `[-radius, radius]²` around `centre` (texel coords).
@@ -267,14 +330,14 @@ fn taps(centre: Vec2, radius: f32) -> impl Iterator<Item = IVec2> {
 /// PCSS step 1: mean distance of the blockers among the taps within `radius` texels, if any.
 pub fn blocker_search(
     tile: &DepthTile<'_>,
-    cluster: &Cluster,
+    frame: &MapFrame,
     r: &ShadowReceiver,
     centre: Vec2,
     radius: f32,
 ) -> Option<f32> {
     let (mut sum, mut n) = (0.0, 0u32);
     for t in taps(centre, radius) {
-        if let Some(z) = blocker_at(tile, cluster, r, t) {
+        if let Some(z) = blocker_at(tile, frame, r, t) {
             sum += z;
             n += 1;
         }
@@ -283,8 +346,8 @@ pub fn blocker_search(
 }
 
 /// PCF: fraction of the taps within `radius` texels that no blocker hides.
-pub fn pcf(tile: &DepthTile<'_>, cluster: &Cluster, r: &ShadowReceiver, centre: Vec2, radius: f32) -> f32 {
-    let blocked = taps(centre, radius).filter(|t| blocker_at(tile, cluster, r, *t).is_some()).count();
+pub fn pcf(tile: &DepthTile<'_>, frame: &MapFrame, r: &ShadowReceiver, centre: Vec2, radius: f32) -> f32 {
+    let blocked = taps(centre, radius).filter(|t| blocker_at(tile, frame, r, *t).is_some()).count();
     1.0 - blocked as f32 / (SHADOW_TAPS * SHADOW_TAPS) as f32
 }
 
@@ -301,10 +364,26 @@ pub fn texels_per_radian(cos_theta: f32, resolution: u32) -> f32 {
     resolution as f32 * 0.5 / (1.0 + cos_theta)
 }
 
+/// Texels per radian of a map of `frame` in direction `v` (WGSL `map_texels_per_radian`).
+pub fn map_texels_per_radian(v: Vec3, frame: &MapFrame, resolution: u32) -> f32 {
+    texels_per_radian(v.dot(frame.axis), resolution) / frame.scale
+}
+
 /// Fraction of `cluster`'s light reaching receiver `r` (`offset` from its centre): 1 for an
 /// empty cluster, a receiver behind its plane or facing away from it (no shadow information
 /// there: 000 §5.1 assumes full visibility).
 pub fn cluster_visibility(tile: &DepthTile<'_>, cluster: &Cluster, r: &ShadowReceiver, soft: Soft) -> f32 {
+    cluster_visibility_in(tile, cluster, &MapFrame::hemisphere(cluster.normal), r, soft)
+}
+
+/// [`cluster_visibility`] through a map of `frame` ([`map_frame`]).
+pub fn cluster_visibility_in(
+    tile: &DepthTile<'_>,
+    cluster: &Cluster,
+    frame: &MapFrame,
+    r: &ShadowReceiver,
+    soft: Soft,
+) -> f32 {
     let zr = r.offset.length();
     if cluster.count == 0.0 || zr <= 0.0 {
         return 1.0;
@@ -315,20 +394,20 @@ pub fn cluster_visibility(tile: &DepthTile<'_>, cluster: &Cluster, r: &ShadowRec
         return 1.0;
     }
     let res = tile.resolution;
-    let centre = disc_texel(paraboloid_project(v, cluster.normal), res);
-    let per_radian = texels_per_radian(cos_theta, res);
+    let centre = disc_texel(map_project(v, frame), res);
+    let per_radian = map_texels_per_radian(v, frame, res);
     let max_texels = MAX_SHADOW_FILTER_ANGLE * per_radian;
     match soft {
-        Soft::Hard => pcf(tile, cluster, r, centre, 0.0),
-        Soft::Pcf => pcf(tile, cluster, r, centre, PCF_RADIUS_TEXELS),
+        Soft::Hard => pcf(tile, frame, r, centre, 0.0),
+        Soft::Pcf => pcf(tile, frame, r, centre, PCF_RADIUS_TEXELS),
         Soft::Pcss => {
             let near = (cluster.radius * CLUSTER_NEAR_FRACTION).max(1e-4 * zr);
             let search = (penumbra_angle(cluster.radius, near, zr) * per_radian).min(max_texels);
-            match blocker_search(tile, cluster, r, centre, search) {
+            match blocker_search(tile, frame, r, centre, search) {
                 None => 1.0,
                 Some(zb) => {
                     let w = (penumbra_angle(cluster.radius, zb, zr) * per_radian).min(max_texels);
-                    pcf(tile, cluster, r, centre, w)
+                    pcf(tile, frame, r, centre, w)
                 }
             }
         }
@@ -431,15 +510,16 @@ mod tests {
         let (depths, cluster) = half_map();
         let tile = DepthTile { resolution: 64, depths: &depths, slope_bias_texels: 0.0 };
         let r = receiver(0.0);
+        let frame = MapFrame::hemisphere(cluster.normal);
         let t = tile_of(&cluster, &r, 64);
         // Receiver straight ahead: texel coordinate 32.0, the edge; taps at 32 + {-4,-2,0,2,4}.
         assert_eq!(t, Vec2::new(32.0, 32.0));
-        assert_eq!(blocker_search(&tile, &cluster, &r, t, 4.0), Some(1.0));
-        assert_eq!(blocker_search(&tile, &cluster, &r, t + Vec2::new(10.0, 0.0), 4.0), None);
+        assert_eq!(blocker_search(&tile, &frame, &r, t, 4.0), Some(1.0));
+        assert_eq!(blocker_search(&tile, &frame, &r, t + Vec2::new(10.0, 0.0), 4.0), None);
         // Two of five columns fall left of the edge.
-        assert!((pcf(&tile, &cluster, &r, t, 4.0) - 3.0 / 5.0).abs() < 1e-6);
-        assert_eq!(pcf(&tile, &cluster, &r, t - Vec2::new(10.0, 0.0), 4.0), 0.0);
-        assert_eq!(pcf(&tile, &cluster, &r, t + Vec2::new(10.0, 0.0), 4.0), 1.0);
+        assert!((pcf(&tile, &frame, &r, t, 4.0) - 3.0 / 5.0).abs() < 1e-6);
+        assert_eq!(pcf(&tile, &frame, &r, t - Vec2::new(10.0, 0.0), 4.0), 0.0);
+        assert_eq!(pcf(&tile, &frame, &r, t + Vec2::new(10.0, 0.0), 4.0), 1.0);
         // A receiver nearer than the blockers is lit.
         let near = ShadowReceiver { offset: Vec3::new(-0.1, 0.0, 0.5), normal: Vec3::NEG_Z };
         assert_eq!(cluster_visibility(&tile, &cluster, &near, Soft::Pcss), 1.0);

@@ -64,7 +64,6 @@ impl IsmParams {
             levels: ism.pull_push_levels,
             pull_threshold: ism.pull_threshold * scale.diagonal,
             push_threshold: ism.push_threshold * scale.diagonal,
-            depth_far: scale.depth_far(),
             slope_bias_texels: ism.slope_bias,
         }
     }
@@ -84,9 +83,18 @@ pub fn for_clusters(clusters: &ClusterSettings, ism: &IsmSettings) -> IsmSetting
 
 /// [`header`] for the groups of `clusters`, with imperfect maps as `ism` says.
 pub fn header_with(clusters: &ClusterSettings, ism: &IsmSettings, scale: SceneScale) -> String {
+    header_for(clusters, ism, scale, false)
+}
+
+/// [`header_with`] with the maps focused on the meshes (`clusters::header_focused`).
+pub fn focused_header_with(clusters: &ClusterSettings, ism: &IsmSettings, scale: SceneScale) -> String {
+    header_for(clusters, ism, scale, true)
+}
+
+fn header_for(clusters: &ClusterSettings, ism: &IsmSettings, scale: SceneScale, focus: bool) -> String {
     let p = IsmParams::of(ism, scale);
     Wgsl::new()
-        .include(&clusters::header_with_slope_bias(clusters, scale, p.slope_bias_texels))
+        .include(&clusters::header_focused(clusters, scale, p.slope_bias_texels, focus))
         .u32("ISM_POINTS", p.points)
         .f32("PULL_THRESHOLD", p.pull_threshold)
         .f32("PUSH_THRESHOLD", p.push_threshold)

@@ -2,9 +2,12 @@
 // each on a triangle drawn by area (`triangle_cdf`: running sums of the triangle areas at load)
 // with uniform barycentrics, all from a hash of (k, j): a fixed random subset per map that
 // follows the meshes as they move (the current vertices). A point in the front hemisphere of
-// group k's centre lands in one texel of its paraboloid map, nearest distance kept; points
+// group k's map frame (`cluster_map_frame`) lands in one texel of its paraboloid map, nearest
+// distance kept; points
 // nearer than CLUSTER_NEAR_FRACTION x the group's radius (its own surface) are skipped, as in
-// the rasterised maps. Rust twin: `twin::splat`.
+// the rasterised maps. No far plane: a group's centre is its VALs' and may lie metres from the
+// meshes, and a distance of any size is stored as its float's bits (`ism.wgsl`). Rust twin:
+// `twin::splat`.
 
 @group(0) @binding(0) var<storage, read> clusters: array<Cluster>;
 @group(0) @binding(1) var<storage, read> triangle_cdf: array<f32>;
@@ -64,14 +67,18 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let d = ism_point(k, j) - c.position;
     let distance = length(d);
-    if !(distance > c.radius * CLUSTER_NEAR_FRACTION) || distance >= DEPTH_FAR {
+    if !(distance > c.radius * CLUSTER_NEAR_FRACTION) || !(distance < NOTHING) {
         return;
     }
     let v = d / distance;
-    if dot(v, c.normal) <= 0.0 {
+    var f = MapFrame(c.normal, 1.0);
+    if FOCUS_BOUNDS != 0u {
+        f = cluster_map_frame(c, clusters[CLUSTER_COUNT]);
+    }
+    if dot(v, f.axis) <= 0.0 {
         return;
     }
-    let t = floor(disc_texel(paraboloid_project(v, c.normal)));
+    let t = floor(disc_texel(map_project(v, f)));
     let r = f32(MAP_RESOLUTION);
     if t.x < 0.0 || t.y < 0.0 || t.x >= r || t.y >= r {
         return;

@@ -4,7 +4,7 @@
 //! where it is empty; the lookup is the clusters' [`cluster_visibility`](super::super::clusters::twin::cluster_visibility).
 
 use super::super::clusters::twin::{
-    CLUSTER_NEAR_FRACTION, Cluster, KmeansParams, disc_texel, kmeans_step, paraboloid_project, val_is_lit,
+    CLUSTER_NEAR_FRACTION, Cluster, KmeansParams, MapFrame, disc_texel, kmeans_step, map_project, val_is_lit,
 };
 use crate::twin::{Val, luminance};
 use glam::Vec3;
@@ -23,7 +23,6 @@ pub struct IsmParams {
     /// Pull and push thresholds at the finest level (m).
     pub pull_threshold: f32,
     pub push_threshold: f32,
-    pub depth_far: f32,
     /// Slope-scaled bias of the lookup (texels; `clusters::twin::slope_bias`): a splatted
     /// point lies anywhere in its texel, not on the texel's centre ray.
     pub slope_bias_texels: f32,
@@ -171,6 +170,20 @@ pub fn splat(
     positions: &[Vec3],
     indices: &[u32],
 ) -> Vec<f32> {
+    splat_in(cluster, &MapFrame::hemisphere(cluster.normal), k, params, cdf, positions, indices)
+}
+
+/// [`splat`] into a map of `frame` ([`map_frame`](super::super::clusters::twin::map_frame)):
+/// the points in the front hemisphere of its axis.
+pub fn splat_in(
+    cluster: &Cluster,
+    frame: &MapFrame,
+    k: u32,
+    params: &IsmParams,
+    cdf: &[f32],
+    positions: &[Vec3],
+    indices: &[u32],
+) -> Vec<f32> {
     let n = params.resolution;
     let mut map = vec![f32::INFINITY; (n * n) as usize];
     if cluster.count == 0.0 {
@@ -181,15 +194,15 @@ pub fn splat(
         let distance = d.length();
         // NaN distances are skipped too, as in WGSL.
         if distance.partial_cmp(&(cluster.radius * CLUSTER_NEAR_FRACTION)) != Some(std::cmp::Ordering::Greater)
-            || distance >= params.depth_far
+            || !distance.is_finite()
         {
             continue;
         }
         let v = d / distance;
-        if v.dot(cluster.normal) <= 0.0 {
+        if v.dot(frame.axis) <= 0.0 {
             continue;
         }
-        let t = disc_texel(paraboloid_project(v, cluster.normal), n).floor();
+        let t = disc_texel(map_project(v, frame), n).floor();
         if t.x < 0.0 || t.y < 0.0 || t.x >= n as f32 || t.y >= n as f32 {
             continue;
         }
@@ -272,7 +285,6 @@ mod tests {
             levels,
             pull_threshold: 0.05,
             push_threshold: 0.05,
-            depth_far: 100.0,
             slope_bias_texels: crate::scene::IsmSettings::default().slope_bias,
         }
     }
