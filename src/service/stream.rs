@@ -78,7 +78,8 @@ pub async fn open_stream(
     if state.shutting_down() {
         return Err(ApiError::shutting_down());
     }
-    let scene = state.scenes.get(&id).ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
+    let scene =
+        super::store::scene(&state, &id).await?.ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
     let upgrade = upgrade.map_err(|rejection| {
         ApiError::new(rejection.status(), super::error::Code::UpgradeRequired, rejection.body_text())
     })?;
@@ -127,6 +128,8 @@ struct Session {
     state: Arc<AppState>,
     /// Whose queue the stream's frames wait in.
     client: ClientId,
+    /// The GPU worker the stream's frames go to.
+    pin: super::workers::StreamPin,
     scene_id: String,
     mesh_count: usize,
     /// The scene's floating origin: the stream's cameras and lights are made relative to it.
@@ -143,6 +146,7 @@ struct Session {
 impl Session {
     fn new(state: Arc<AppState>, client: ClientId, scene_id: String, scene: &SceneEntry) -> Session {
         Session {
+            pin: state.workers.pin(&scene_id),
             state,
             client,
             scene_id,
@@ -317,7 +321,7 @@ impl Session {
             glossy: s.glossy,
         };
         let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);
-        match self.state.worker.try_render_stream_frame(self.client, &self.scene_id, job) {
+        match self.state.workers.try_render_stream_frame(&mut self.pin, self.client, &self.scene_id, job) {
             Ok(answer) => {
                 self.in_flight = Some(InFlight { frame_id, timestamp, decode_ms, quality: s.quality, answer });
                 None
