@@ -17,6 +17,9 @@ pub const MAX_TICKET_SECONDS: u64 = 3600;
 /// the limit too). Values set in code outside these are treated as the nearest bound.
 pub const HEADER_BYTES_RANGE: std::ops::RangeInclusive<usize> = 8192..=65_536;
 
+/// The largest [`Config::drain_delay_seconds`] (ten minutes).
+pub const MAX_DRAIN_DELAY_SECONDS: u64 = 600;
+
 /// The default of [`Config::worker_quarantine_seconds`].
 pub const DEFAULT_QUARANTINE_SECONDS: u64 = 30;
 
@@ -112,6 +115,12 @@ pub struct Config {
     /// SIGINT or SIGTERM before they are dropped.
     #[arg(long, env = "RELUME_SHUTDOWN_GRACE_SECONDS", default_value_t = 30)]
     pub shutdown_grace_seconds: u64,
+    /// Seconds between SIGTERM (or SIGINT) and the start of the shutdown, during which the
+    /// process serves as before but `/readyz` answers 503 `draining`, so that load balancers
+    /// and Kubernetes stop sending it work before it stops accepting connections.
+    #[arg(long, env = "RELUME_DRAIN_DELAY_SECONDS", default_value_t = 0,
+        value_parser = clap::value_parser!(u64).range(0..=MAX_DRAIN_DELAY_SECONDS))]
+    pub drain_delay_seconds: u64,
     /// GPU workers, one thread and one device each: `all` (one per adapter found), `N`
     /// (1..=64; N workers on the adapters found in turn, so N above the adapter count opens
     /// several devices on one adapter) or a comma-separated list of names (each a
@@ -144,6 +153,7 @@ impl Config {
             token: None,
             ticket_seconds: DEFAULT_TICKET_SECONDS,
             shutdown_grace_seconds: 30,
+            drain_delay_seconds: 0,
             adapters: AdapterSelection::Count(1),
             worker_quarantine_seconds: DEFAULT_QUARANTINE_SECONDS,
             scene_store: None,

@@ -23,11 +23,11 @@
 //! - [`client`]: a client of the service (`relume replay --server`); [`load`]: its load
 //!   benchmark (`relume load`).
 //!
-//! Shutdown (SIGINT, SIGTERM, or the future given to [`Server::run`]): the server stops
+//! Shutdown (SIGINT, SIGTERM, or the future given to [`Server::run`]): `/readyz` answers 503
+//! `draining` at once; after `drain_delay_seconds` (0 by default) the server stops
 //! accepting connections, answers new work with 503 `shutting_down`, lets in-flight requests
 //! and queued renders finish, closes streams with 1001 (going away) after an `Error` of code
-//! `SHUTTING_DOWN`, then stops the GPU threads. `/readyz` answers 503 from the moment
-//! shutdown begins, so a load balancer stops sending new work. After `shutdown_grace_seconds` whatever is
+//! `SHUTTING_DOWN`, then stops the GPU threads. After `shutdown_grace_seconds` whatever is
 //! left is dropped.
 
 pub mod api;
@@ -99,6 +99,8 @@ pub struct AppState {
     store_loads: tokio::sync::Mutex<()>,
     pub metrics: Arc<Metrics>,
     shutdown: watch::Sender<bool>,
+    /// A signal came: `/readyz` says `draining` (shutdown begins `drain_delay_seconds` later).
+    draining: std::sync::atomic::AtomicBool,
     streams: AtomicUsize,
     streams_closed: Notify,
     connections: listen::Connections,
@@ -151,6 +153,7 @@ impl AppState {
             store_loads: tokio::sync::Mutex::new(()),
             metrics,
             shutdown: watch::Sender::new(false),
+            draining: std::sync::atomic::AtomicBool::new(false),
             streams: AtomicUsize::new(0),
             streams_closed: Notify::new(),
             connections: listen::Connections::new(max_connections),
@@ -165,6 +168,11 @@ impl AppState {
     /// Becomes `true` when shutdown begins.
     pub fn shutdown_receiver(&self) -> watch::Receiver<bool> {
         self.shutdown.subscribe()
+    }
+
+    /// Whether a signal came: from then on the process is draining, shut down or not yet.
+    pub fn draining(&self) -> bool {
+        self.draining.load(Ordering::SeqCst) || self.shutting_down()
     }
 
     fn begin_shutdown(&self) {
@@ -239,11 +247,8 @@ impl Server {
     /// Checks the asset directory, starts the GPU workers (`config.adapters`) and binds
     /// `config.addr`.
     pub async fn bind(config: Config) -> Result<Server, ServeError> {
-        let addr = config.addr;
         let workers_config = config.clone();
-        let state = AppState::start_workers(config, move |metrics| Workers::start(&workers_config, metrics)).await?;
-        let listener = tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
-        Ok(Server { listener, state })
+        Server::bind_workers(config, move |metrics| Workers::start(&workers_config, metrics)).await
     }
 
     /// [`Server::bind`] with the worker `start` makes (on a blocking thread), e.g. one on
@@ -254,6 +259,17 @@ impl Server {
     ) -> Result<Server, ServeError> {
         let addr = config.addr;
         let state = AppState::start(config, start).await?;
+        let listener = tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
+        Ok(Server { listener, state })
+    }
+
+    /// [`Server::bind`] with the workers `start` makes (on a blocking thread).
+    pub async fn bind_workers(
+        config: Config,
+        start: impl FnOnce(Arc<Metrics>) -> Result<Workers, WorkerError> + Send + 'static,
+    ) -> Result<Server, ServeError> {
+        let addr = config.addr;
+        let state = AppState::start_workers(config, start).await?;
         let listener = tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
         Ok(Server { listener, state })
     }
@@ -281,8 +297,14 @@ impl Server {
             "serving"
         );
         let signalled = state.clone();
+        let drain_delay = Duration::from_secs(state.config.drain_delay_seconds);
         let graceful = async move {
             shutdown.await;
+            signalled.draining.store(true, Ordering::SeqCst);
+            if !drain_delay.is_zero() {
+                tracing::info!(?drain_delay, "draining: /readyz answers 503, serving as before until the delay is over");
+                tokio::time::sleep(drain_delay).await;
+            }
             tracing::info!("shutting down: refusing new work, finishing in-flight requests and queued renders");
             signalled.begin_shutdown();
         };

@@ -1,6 +1,7 @@
 //! `GET /readyz`: whether a load balancer (or Kubernetes' readiness probe) should send this
 //! process new work. Beside `/healthz` (is the process alive), it answers 503 while the
-//! process drains after SIGTERM or SIGINT and while it is saturated: every GPU worker that is
+//! process drains after SIGTERM or SIGINT (from the signal: during `drain_delay_seconds` it
+//! still serves, then it stops accepting) and while it is saturated: every GPU worker that is
 //! up has `max_queue` renders waiting, or `max_streams` streams are open. Work already on the
 //! process goes on either way.
 
@@ -39,7 +40,7 @@ pub async fn readyz(State(state): State<Arc<AppState>>) -> (StatusCode, Json<Rea
 pub fn readiness(state: &AppState) -> Readiness {
     let streams = state.streams();
     let max_streams = state.config.limits.max_streams;
-    let status = if state.shutting_down() {
+    let status = if state.draining() {
         "draining"
     } else if state.workers.saturated() || streams >= max_streams {
         "saturated"

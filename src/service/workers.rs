@@ -152,11 +152,11 @@ impl Workers {
     /// Builds the scene on the worker [`Workers::candidates`] puts first; with several
     /// workers, keeps it for the others.
     pub async fn add_scene(&self, id: &str, scene: Scene, environment: Environment) -> Result<(), WorkerError> {
-        let first = self.candidates(id, &[])[0];
         if self.workers.len() > 1 {
             let source = Arc::new(SceneSource::new(scene.clone(), environment.clone()));
             self.sources().insert(id.to_owned(), source);
         }
+        let first = self.candidates(id, &[])[0];
         let result = self.workers[first].add_scene(id, scene, environment).await;
         if result.is_err() {
             self.sources().remove(id);

@@ -34,6 +34,7 @@ mod stream_mr;
 mod synthetic;
 mod textures;
 mod twins;
+mod workers;
 
 use relume::gpu::Gpu;
 use relume::scene::Scene;
