@@ -13,14 +13,21 @@
 # the kill renders through the balancer while the killed backend is down.
 #
 # Usage: scripts/cluster-test.sh [--bin PATH] [--out DIR] [--frames N]
+#        scripts/cluster-test.sh --scaling [--seconds S] [--bin PATH]
+# --scaling instead runs `relume load` (3 streams, 3 HTTP clients, S s, default 20) through
+# the balancer with 1, 2 and 3 backends and writes docs/measurements/cluster-scaling.md.
 # Installs only Debian's `haproxy` when missing (as scripts/setup.sh installs packages).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN="${CARGO_TARGET_DIR:-target}/debug/relume"
 OUT=out/cluster-test
 FRAMES=37
+SCALING=false
+SECONDS_PER_RUN=20
 while [ $# -gt 0 ]; do
     case "$1" in
+        --scaling) SCALING=true; shift ;;
+        --seconds) SECONDS_PER_RUN="$2"; shift 2 ;;
         --bin) BIN="$2"; shift 2 ;;
         --out) OUT="$2"; shift 2 ;;
         --frames) FRAMES="$2"; shift 2 ;;
@@ -74,12 +81,58 @@ wait_ready() {  # url
     echo "cluster-test: $1 never became ready" >&2
     exit 1
 }
+start_balancer() {
+    RELUME_LB_BIND="127.0.0.1:$LB" RELUME_BACKEND_1="127.0.0.1:$P1" RELUME_BACKEND_2="127.0.0.1:$P2" \
+        RELUME_BACKEND_3="127.0.0.1:$P3" haproxy -db -f deploy/haproxy/haproxy.cfg >>"$OUT/haproxy.log" 2>&1 &
+    HAPROXY_PID=$!
+}
+BALANCER="http://127.0.0.1:$LB"
+
+if [ "$SCALING" = true ]; then
+    page=docs/measurements/cluster-scaling.md
+    rows=""
+    for n in 1 2 3; do
+        for i in $(seq 0 $((n - 1))); do start_backend "$i"; done
+        for i in $(seq 0 $((n - 1))); do wait_ready "http://127.0.0.1:${PORTS[$i]}"; done
+        start_balancer
+        wait_ready "$BALANCER"
+        # Backends not started fail their checks twice (1 s apart) and leave the balancer.
+        sleep 3
+        "$BIN" load --server "$BALANCER" --streams 3 --http 3 --seconds "$SECONDS_PER_RUN" --json >"$OUT/scaling-$n.json"
+        rows="$rows$(jq -r --arg n "$n" '"| \($n) | \(.frames_sent) | \(.frames_rendered) | \(.frames_per_second*100|round/100) | \(.frame_latency_p50_ms|round) / \(.frame_latency_p99_ms|round) ms | \(.renders_ok) | \(.renders_per_second*100|round/100) | \(.render_latency_p50_ms|round) / \(.render_latency_p99_ms|round) ms | \(.renders_refused) | \(.renders_failed) |"' "$OUT/scaling-$n.json")
+"
+        cleanup
+        PIDS=("" "" "")
+        HAPROXY_PID=""
+    done
+    {
+        echo "# Throughput through the balancer with 1, 2 and 3 backends"
+        echo
+        echo "Written by \`scripts/cluster-test.sh --scaling --seconds $SECONDS_PER_RUN\` on $(date -u +%Y-%m-%d) ($(git rev-parse --short HEAD)):"
+        echo "HAProxy (deploy/haproxy/haproxy.cfg) in front of N \`relume serve\` (dev profile, lavapipe) on"
+        echo "this machine's $(nproc) cores, and one \`relume load --streams 3 --http 3 --seconds $SECONDS_PER_RUN\` through it:"
+        echo "three streams of \`mr_bunny.json\` (640x480 frames at 10 fps, each on its own scene) and three"
+        echo "HTTP clients rendering \`cornell_bunny_small.json\` (64x64) back to back. How it is run:"
+        echo "[deploy](../deploy.md)."
+        echo
+        echo "| backends | frames sent | rendered | frames/s | frame p50 / p99 | renders | renders/s | render p50 / p99 | refused | failed |"
+        echo "|---|---|---|---|---|---|---|---|---|---|"
+        printf '%s' "$rows"
+        echo
+        echo "Every backend renders on lavapipe, which spreads one frame over all the cores: on this"
+        echo "machine the backends share the same $(nproc) cores, so more backends cannot render more,"
+        echo "and the figures above measure the balancer's spreading and overhead, not a speed-up. The"
+        echo "cap is the CPU: with one GPU per backend each backend's throughput would add, but no"
+        echo "device bench of the service was measured, so this page gives no figure for that."
+    } >"$page"
+    echo "cluster-test: wrote $page"
+    cat "$page"
+    exit 0
+fi
+
 for i in 0 1 2; do start_backend "$i"; done
 for port in "${PORTS[@]}"; do wait_ready "http://127.0.0.1:$port"; done
-RELUME_LB_BIND="127.0.0.1:$LB" RELUME_BACKEND_1="127.0.0.1:$P1" RELUME_BACKEND_2="127.0.0.1:$P2" \
-    RELUME_BACKEND_3="127.0.0.1:$P3" haproxy -db -f deploy/haproxy/haproxy.cfg >"$OUT/haproxy.log" 2>&1 &
-HAPROXY_PID=$!
-BALANCER="http://127.0.0.1:$LB"
+start_balancer
 wait_ready "$BALANCER"
 echo "cluster-test: HAProxy on $LB, backends on ${PORTS[*]}"
 

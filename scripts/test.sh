@@ -13,6 +13,8 @@ cargo clippy --all-targets --quiet -- -D warnings
 cargo test
 # `cargo test` built the binary the viewer test starts (`relume serve` on port 0).
 RELUME_BIN="${CARGO_TARGET_DIR:-target}/debug/relume" node tests/e2e/viewer.test.mjs
+# The Dockerfile, Kubernetes manifests and HAProxy configurations, checked offline (checkov).
+deploy/check.sh
 # A local cluster (HAProxy and three `relume serve`) losing a backend mid-stream: about a minute.
 scripts/cluster-test.sh --bin "${CARGO_TARGET_DIR:-target}/debug/relume" --out out/cluster-test
 # The GPU benchmark's script at tiny sizes on lavapipe, so that it works when a device is lent.
