@@ -182,15 +182,17 @@ impl Connection {
         loop {
             let error = match self.open_stream(id).await {
                 Ok(stream) => return Ok((stream, recreated)),
-                Err(error) if error.downcast_ref::<SceneUnknown>().is_some() => match self.create_scene(description).await {
-                    Ok(new_id) => {
-                        tracing::warn!(old = %id, new = %new_id, "the server no longer knows the scene: created it again");
-                        *id = new_id;
-                        recreated = true;
-                        continue;
+                Err(error) if error.downcast_ref::<SceneUnknown>().is_some() => {
+                    match self.create_scene(description).await {
+                        Ok(new_id) => {
+                            tracing::warn!(old = %id, new = %new_id, "the server no longer knows the scene: created it again");
+                            *id = new_id;
+                            recreated = true;
+                            continue;
+                        }
+                        Err(error) => error,
                     }
-                    Err(error) => error,
-                },
+                }
                 Err(error) => error,
             };
             tracing::warn!("the stream is gone, reconnecting: {error:#}");

@@ -444,7 +444,8 @@ fn run(mut backend: impl Backend, queue: &FairQueue<Job>, thread: &Thread) {
                     tracing::debug!(scene = %id, "render skipped: the client has gone");
                     continue;
                 }
-                let result = render_held(&mut backend, thread, &id, source.as_deref(), queue_ms, |b| b.render(&id, &job));
+                let result =
+                    render_held(&mut backend, thread, &id, source.as_deref(), queue_ms, |b| b.render(&id, &job));
                 let _ = reply.send(result);
             }
             Job::StreamFrame { id, job, source, reply } => {

@@ -171,7 +171,8 @@ pub async fn run(options: &LoadOptions) -> anyhow::Result<LoadReport> {
     for id in &stream_ids {
         let (connection, id, frames, fps) = (connection.clone(), id.clone(), frames.clone(), options.fps);
         let recover = stream_recover.clone();
-        streams.push(tokio::spawn(async move { drive_stream(&connection, id, &frames, fps, deadline, &recover).await }));
+        streams
+            .push(tokio::spawn(async move { drive_stream(&connection, id, &frames, fps, deadline, &recover).await }));
     }
     let mut renders = Vec::new();
     for _ in 0..options.http_clients {

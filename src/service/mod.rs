@@ -126,9 +126,9 @@ impl AppState {
         start: impl FnOnce(Arc<Metrics>) -> Result<Workers, WorkerError> + Send + 'static,
     ) -> Result<Arc<AppState>, ServeError> {
         let store = match &config.scene_store {
-            Some(dir) => Some(
-                store::SceneStore::open(dir).map_err(|source| ServeError::Store { path: dir.clone(), source })?,
-            ),
+            Some(dir) => {
+                Some(store::SceneStore::open(dir).map_err(|source| ServeError::Store { path: dir.clone(), source })?)
+            }
             None => None,
         };
         let assets = std::fs::canonicalize(&config.assets)
@@ -302,7 +302,10 @@ impl Server {
             shutdown.await;
             signalled.draining.store(true, Ordering::SeqCst);
             if !drain_delay.is_zero() {
-                tracing::info!(?drain_delay, "draining: /readyz answers 503, serving as before until the delay is over");
+                tracing::info!(
+                    ?drain_delay,
+                    "draining: /readyz answers 503, serving as before until the delay is over"
+                );
                 tokio::time::sleep(drain_delay).await;
             }
             tracing::info!("shutting down: refusing new work, finishing in-flight requests and queued renders");

@@ -78,8 +78,9 @@ pub async fn open_stream(
     if state.shutting_down() {
         return Err(ApiError::shutting_down());
     }
-    let scene =
-        super::store::scene(&state, &id).await?.ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
+    let scene = super::store::scene(&state, &id)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
     let upgrade = upgrade.map_err(|rejection| {
         ApiError::new(rejection.status(), super::error::Code::UpgradeRequired, rejection.body_text())
     })?;

@@ -29,9 +29,7 @@ use crate::mr::environment::Environment;
 use crate::scene::Scene;
 
 use super::config::Config;
-use super::gpu_worker::{
-    GpuWorker, RenderJob, RenderOutput, SceneSource, StreamFrameJob, WorkerError, WorkerStatus,
-};
+use super::gpu_worker::{GpuWorker, RenderJob, RenderOutput, SceneSource, StreamFrameJob, WorkerError, WorkerStatus};
 use super::metrics::{Metrics, WorkerGauges};
 use super::schedule::ClientId;
 
@@ -51,7 +49,8 @@ impl Workers {
     /// Starts one worker per adapter `config.adapters` selects, each waiting until its device
     /// is open. Blocks: call it from `spawn_blocking`.
     pub fn start(config: &Config, metrics: Arc<Metrics>) -> Result<Workers, WorkerError> {
-        let names: Vec<String> = Gpu::adapters().iter().map(|info| format!("{} ({:?})", info.name, info.backend)).collect();
+        let names: Vec<String> =
+            Gpu::adapters().iter().map(|info| format!("{} ({:?})", info.name, info.backend)).collect();
         let adapters = config
             .adapters
             .workers(&names)

@@ -5,9 +5,9 @@
 use std::time::Duration;
 
 use hyper::StatusCode;
+use relume::service::client::Connection;
 use relume::service::config::AdapterSelection;
 use relume::service::wire::proto::envelope::Body;
-use relume::service::client::Connection;
 use relume::service::{Config, GpuWorker, Server, WorkerError, Workers};
 use serde_json::{Value, json};
 
@@ -98,7 +98,10 @@ async fn two_devices_share_the_renders_pin_streams_and_take_over_a_lost_device()
     assert_eq!(worker_value(&text, "relume_worker_streams", wa), 0.0);
 
     // Deleting a scene removes it from every worker.
-    assert_eq!(server.request(hyper::Method::DELETE, &format!("/v1/scenes/{a}"), "").await.status, StatusCode::NO_CONTENT);
+    assert_eq!(
+        server.request(hyper::Method::DELETE, &format!("/v1/scenes/{a}"), "").await.status,
+        StatusCode::NO_CONTENT
+    );
     assert!((0..2).all(|w| !server.state.workers.get(w).expect("worker").holds(&a)));
     drop(ws);
     server.stop().await;
@@ -151,7 +154,10 @@ async fn a_scene_outlives_its_backend_through_the_shared_store() {
     assert!(matches!(ws.exchange(envelope(Body::RgbdFrame(frame(1, 8, 8)))).await, Body::RenderedFrame(_)));
     drop(ws);
     // Deleted through one backend, it is gone from the others too.
-    assert_eq!(third.request(hyper::Method::DELETE, &format!("/v1/scenes/{id}"), "").await.status, StatusCode::NO_CONTENT);
+    assert_eq!(
+        third.request(hyper::Method::DELETE, &format!("/v1/scenes/{id}"), "").await.status,
+        StatusCode::NO_CONTENT
+    );
     second.get(&format!("/v1/scenes/{id}")).await.error(404, "not_found");
     second.post(&format!("/v1/scenes/{id}/render"), &json!({})).await.error(404, "not_found");
     // Ids not of a scene's form never reach the file system.
