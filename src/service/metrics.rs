@@ -88,6 +88,9 @@ struct WorkerCounts {
     gpu_memory: Option<GpuMemory>,
 }
 
+/// A per-worker metric family: name, type, help, and its value for one worker.
+type WorkerFamily = (&'static str, &'static str, &'static str, fn(&WorkerGauges, &WorkerCounts) -> String);
+
 /// One GPU worker's gauges, read when the metrics are scraped.
 pub struct WorkerGauges {
     /// Its number: the `worker` label.
@@ -170,7 +173,7 @@ impl Metrics {
         for w in workers {
             let _ = writeln!(out, "relume_worker_info{{worker=\"{}\",adapter=\"{}\"}} 1", w.worker, escape(&w.adapter));
         }
-        let families: [(&str, &str, &str, fn(&WorkerGauges, &WorkerCounts) -> String); 7] = [
+        let families: [WorkerFamily; 7] = [
             ("relume_worker_up", "gauge", "1 when the worker takes new work, 0 after its device was lost.", |w, _| {
                 u8::from(w.up).to_string()
             }),
