@@ -90,6 +90,7 @@ BALANCER="http://127.0.0.1:$LB"
 
 if [ "$SCALING" = true ]; then
     page=docs/measurements/cluster-scaling.md
+    loadavg=$(cut -d' ' -f1-3 /proc/loadavg)
     rows=""
     for n in 1 2 3; do
         for i in $(seq 0 $((n - 1))); do start_backend "$i"; done
@@ -112,7 +113,8 @@ if [ "$SCALING" = true ]; then
         echo "HAProxy (deploy/haproxy/haproxy.cfg) in front of N \`relume serve\` (dev profile, lavapipe) on"
         echo "this machine's $(nproc) cores, and one \`relume load --streams 3 --http 3 --seconds $SECONDS_PER_RUN\` through it:"
         echo "three streams of \`mr_bunny.json\` (640x480 frames at 10 fps, each on its own scene) and three"
-        echo "HTTP clients rendering \`cornell_bunny_small.json\` (64x64) back to back. How it is run:"
+        echo "HTTP clients rendering \`cornell_bunny_small.json\` (64x64) back to back; the load average"
+        echo "when it started was $loadavg (other work sharing the cores). How it is run:"
         echo "[deploy](../deploy.md)."
         echo
         echo "| backends | frames sent | rendered | frames/s | frame p50 / p99 | renders | renders/s | render p50 / p99 | refused | failed |"
@@ -120,10 +122,11 @@ if [ "$SCALING" = true ]; then
         printf '%s' "$rows"
         echo
         echo "Every backend renders on lavapipe, which spreads one frame over all the cores: on this"
-        echo "machine the backends share the same $(nproc) cores, so more backends cannot render more,"
-        echo "and the figures above measure the balancer's spreading and overhead, not a speed-up. The"
-        echo "cap is the CPU: with one GPU per backend each backend's throughput would add, but no"
-        echo "device bench of the service was measured, so this page gives no figure for that."
+        echo "machine the backends share the same $(nproc) cores, so more backends bring no more compute. What"
+        echo "grows from one backend to two comes from overlapping one process's serial parts (decoding,"
+        echo "encoding, the waits between GPU submissions) with another's rendering, and is capped by the"
+        echo "CPU. With one GPU per backend each backend's throughput would add, but no device bench of"
+        echo "the service was measured, so this page gives no figure for that."
     } >"$page"
     echo "cluster-test: wrote $page"
     cat "$page"

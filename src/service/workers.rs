@@ -28,7 +28,7 @@ use crate::gpu::Gpu;
 use crate::mr::environment::Environment;
 use crate::scene::Scene;
 
-use super::config::Config;
+use super::config::{AdapterSelection, Config};
 use super::gpu_worker::{GpuWorker, RenderJob, RenderOutput, SceneSource, StreamFrameJob, WorkerError, WorkerStatus};
 use super::metrics::{Metrics, WorkerGauges};
 use super::schedule::ClientId;
@@ -49,8 +49,11 @@ impl Workers {
     /// Starts one worker per adapter `config.adapters` selects, each waiting until its device
     /// is open. Blocks: call it from `spawn_blocking`.
     pub fn start(config: &Config, metrics: Arc<Metrics>) -> Result<Workers, WorkerError> {
-        let names: Vec<String> =
-            Gpu::adapters().iter().map(|info| format!("{} ({:?})", info.name, info.backend)).collect();
+        // One worker takes wgpu's own choice: no need to list the adapters.
+        let names: Vec<String> = match config.adapters {
+            AdapterSelection::Count(1) => Vec::new(),
+            _ => Gpu::adapters().iter().map(|info| format!("{} ({:?})", info.name, info.backend)).collect(),
+        };
         let adapters = config
             .adapters
             .workers(&names)
@@ -111,9 +114,13 @@ impl Workers {
         self.workers.iter().filter(|w| w.healthy(self.quarantine)).count()
     }
 
-    /// Whether every worker that is up has its queue full (or none is up).
+    /// Whether every worker that is up (every worker, when none is) has its queue full.
     pub fn saturated(&self) -> bool {
-        self.workers.iter().filter(|w| w.healthy(self.quarantine)).all(|w| w.queue_depth() >= w.queue_capacity())
+        let full = |w: &&GpuWorker| w.queue_depth() >= w.queue_capacity();
+        match self.up() {
+            0 => self.workers.iter().all(|w| full(&w)),
+            _ => self.workers.iter().filter(|w| w.healthy(self.quarantine)).all(|w| full(&w)),
+        }
     }
 
     fn sources(&self) -> std::sync::MutexGuard<'_, HashMap<String, Arc<SceneSource>>> {
@@ -145,7 +152,17 @@ impl Workers {
         }
         let mut down: Vec<&GpuWorker> = remaining().filter(|w| !up(w)).collect();
         down.sort_by_key(|w| (w.load(), w.index()));
-        holders.into_iter().chain(others).chain(down).map(GpuWorker::index).collect()
+        let order: Vec<usize> = holders.into_iter().chain(others).chain(down).map(GpuWorker::index).collect();
+        if order.is_empty() && tried.is_empty() {
+            // A scene being deleted that no worker holds: any worker answers (not found).
+            return vec![0];
+        }
+        order
+    }
+
+    /// The first of [`Workers::candidates`] with nothing tried.
+    fn first(&self, id: &str) -> usize {
+        self.candidates(id, &[]).first().copied().unwrap_or(0)
     }
 
     /// Builds the scene on the worker [`Workers::candidates`] puts first; with several
@@ -155,7 +172,7 @@ impl Workers {
             let source = Arc::new(SceneSource::new(scene.clone(), environment.clone()));
             self.sources().insert(id.to_owned(), source);
         }
-        let first = self.candidates(id, &[])[0];
+        let first = self.first(id);
         let result = self.workers[first].add_scene(id, scene, environment).await;
         if result.is_err() {
             self.sources().remove(id);
@@ -208,7 +225,7 @@ impl Workers {
 
     /// Pins a new stream of scene `id` to the worker [`Workers::candidates`] puts first.
     pub fn pin(&self, id: &str) -> StreamPin {
-        StreamPin::new(&self.workers[self.candidates(id, &[])[0]])
+        StreamPin::new(&self.workers[self.first(id)])
     }
 
     /// Queues a stream frame on the stream's worker; when that worker's device was lost and
@@ -221,7 +238,7 @@ impl Workers {
         job: StreamFrameJob,
     ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
         if !self.workers[pin.worker].healthy(self.quarantine) {
-            let best = self.candidates(id, &[])[0];
+            let best = self.first(id);
             if best != pin.worker && self.workers[best].healthy(self.quarantine) {
                 tracing::warn!(from = pin.worker, to = best, scene = %id, "stream moved: its worker lost its device");
                 *pin = StreamPin::new(&self.workers[best]);
