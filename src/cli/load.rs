@@ -45,6 +45,12 @@ pub struct Args {
     /// --seconds long, on loopback (docs/service.md "Load and soak tests").
     #[arg(long)]
     chaos: bool,
+    /// Seconds a client tries to get its stream back, or its renders answered, after the
+    /// server went away (a backend behind a load balancer stopped or died), waiting 0.1 s
+    /// doubling to 2 s; the frames in flight are counted lost. 0: the run fails instead.
+    #[arg(long, default_value_t = relume::service::client::DEFAULT_RECONNECT_SECONDS,
+        value_parser = clap::value_parser!(u64).range(0..=3600))]
+    reconnect_seconds: u64,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -63,6 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         assets: args.assets,
         frames: args.frames,
         chaos: args.chaos,
+        reconnect: std::time::Duration::from_secs(args.reconnect_seconds),
     };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     if args.chaos {

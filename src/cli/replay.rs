@@ -61,6 +61,12 @@ pub struct Args {
     /// With --server: the server's bearer token.
     #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
     token: Option<String>,
+    /// With --server: seconds to try to get a stream back after one ends (its backend stopped
+    /// or died; through a load balancer the new one may be on another backend), waiting 0.1 s
+    /// doubling to 2 s between tries; the frame in flight is lost and counted. 0: stop instead.
+    #[arg(long, default_value_t = relume::service::client::DEFAULT_RECONNECT_SECONDS,
+        value_parser = clap::value_parser!(u64).range(0..=3600))]
+    reconnect_seconds: u64,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -89,6 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             frames: args.frames,
             exposure: Some(exposure),
             progress: true,
+            reconnect: std::time::Duration::from_secs(args.reconnect_seconds),
         };
         return remote_replay_command(&options);
     }
@@ -129,6 +136,12 @@ fn remote_replay_command(options: &relume::service::client::RemoteReplayOptions)
         relume::service::client::quantile(&summary.round_trip_ms, 0.99),
         summary.dropped_frames,
     );
+    if summary.reconnects > 0 {
+        eprintln!(
+            "the stream ended {} times: {} frames lost in flight ({:?}), {} scenes created again",
+            summary.reconnects, summary.frames_lost, summary.lost_frames, summary.scenes_recreated
+        );
+    }
     eprintln!("{}", relume::mr::replay::stage_table(&summary.stage_ms, ("round trip", &summary.round_trip_ms)));
     eprintln!("wrote {}", options.out.display());
     Ok(())

@@ -172,22 +172,62 @@ pub struct Gpu {
 impl Gpu {
     /// Open the first adapter headlessly (backend choice honours `WGPU_BACKEND`).
     pub fn new() -> Result<Self, GpuError> {
-        pollster::block_on(Self::new_async())
+        pollster::block_on(Self::new_async(None))
     }
 
-    async fn new_async() -> Result<Self, GpuError> {
+    /// Open adapter `index` of [`Gpu::adapters`] (the service's `--adapters`: one device per
+    /// GPU); [`GpuError::Unsupported`] when there are not that many.
+    pub fn on_adapter(index: usize) -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async(Some(index)))
+    }
+
+    /// The adapters found (backends as `WGPU_BACKEND` says), most capable first: discrete,
+    /// integrated, virtual, CPU, other; in the driver's order among equals.
+    pub fn adapters() -> Vec<wgpu::AdapterInfo> {
+        pollster::block_on(Self::sorted_adapters(&Self::instance())).iter().map(wgpu::Adapter::get_info).collect()
+    }
+
+    fn instance() -> wgpu::Instance {
         // Debug markers and validation layers are opt-in (WGPU_DEBUG=1, WGPU_VALIDATION=1): Mesa
         // 22's lavapipe crashes in vkCmdBeginDebugUtilsLabelEXT, which wgpu's debug builds use.
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.flags = wgpu::InstanceFlags::empty().with_env();
         desc.backends = wgpu::Backends::from_env().unwrap_or_default();
-        let instance = wgpu::Instance::new(desc);
-        let adapter = instance
-            .request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                ..Default::default()
-            })
-            .await?;
+        wgpu::Instance::new(desc)
+    }
+
+    async fn sorted_adapters(instance: &wgpu::Instance) -> Vec<wgpu::Adapter> {
+        let backends = wgpu::Backends::from_env().unwrap_or_default();
+        let mut adapters = instance.enumerate_adapters(backends).await;
+        adapters.sort_by_key(|a| match a.get_info().device_type {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Cpu => 3,
+            wgpu::DeviceType::Other => 4,
+        });
+        adapters
+    }
+
+    async fn new_async(index: Option<usize>) -> Result<Self, GpuError> {
+        let instance = Self::instance();
+        let adapter = match index {
+            None => {
+                instance
+                    .request_adapter(&wgpu::RequestAdapterOptions {
+                        power_preference: wgpu::PowerPreference::HighPerformance,
+                        ..Default::default()
+                    })
+                    .await?
+            }
+            Some(index) => {
+                let adapters = Self::sorted_adapters(&instance).await;
+                let found = adapters.len();
+                adapters.into_iter().nth(index).ok_or_else(|| {
+                    GpuError::Unsupported(format!("adapter {index}: only {found} GPU adapters were found"))
+                })?
+            }
+        };
         let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
         // Timestamps are used on real GPUs. On CPU adapters they are not trusted: lavapipe
         // (Mesa 22.3) reported 0.05 ms for a gather that took 6.7 s of wall time. There each

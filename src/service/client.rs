@@ -27,6 +27,45 @@ use crate::service::wire::{PROTOCOL_VERSION, encode_rgbd_frame};
 /// How long any one answer from the server may take before the client gives up.
 pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(120);
 
+/// The first wait before a client opens a stream again after it ended (doubled each try, up
+/// to [`MAX_RETRY_DELAY`]).
+pub const FIRST_RETRY_DELAY: Duration = Duration::from_millis(100);
+
+/// The longest wait between two tries.
+pub const MAX_RETRY_DELAY: Duration = Duration::from_secs(2);
+
+/// The default of `--reconnect-seconds`: how long a client tries to get a stream back.
+pub const DEFAULT_RECONNECT_SECONDS: u64 = 60;
+
+/// The server does not know the scene (404): the backend that held it is gone and no scene
+/// store shares it.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct SceneUnknown(String);
+
+/// Waits of a retry loop: [`FIRST_RETRY_DELAY`], doubled up to [`MAX_RETRY_DELAY`], until
+/// `give_up` has passed since the first.
+pub struct Backoff {
+    delay: Duration,
+    deadline: Instant,
+}
+
+impl Backoff {
+    pub fn new(give_up: Duration) -> Backoff {
+        Backoff { delay: FIRST_RETRY_DELAY, deadline: Instant::now() + give_up }
+    }
+
+    /// Sleeps the next wait; false (at once) once `give_up` has passed.
+    pub async fn wait(&mut self) -> bool {
+        if Instant::now() + self.delay > self.deadline {
+            return false;
+        }
+        tokio::time::sleep(self.delay).await;
+        self.delay = (self.delay * 2).min(MAX_RETRY_DELAY);
+        true
+    }
+}
+
 /// A relume server: its address and the bearer token, if it wants one.
 #[derive(Clone)]
 pub struct Connection {
@@ -117,11 +156,50 @@ impl Connection {
             Ok(ok) => ok,
             Err(tungstenite::Error::Http(response)) => {
                 let body = response.body().clone().unwrap_or_default();
-                bail!("opening the stream: {}", server_error(response.status(), &body));
+                let error = format!("opening the stream: {}", server_error(response.status(), &body));
+                if response.status() == StatusCode::NOT_FOUND {
+                    return Err(SceneUnknown(error).into());
+                }
+                bail!(error);
             }
             Err(e) => return Err(e).context("opening the stream"),
         };
         Ok(Stream { ws })
+    }
+
+    /// Opens scene `id`'s stream again after the last one ended (its backend stopped or died;
+    /// through a load balancer the new stream may land on another backend): tries at once,
+    /// then with [`Backoff`] until `give_up`. A scene the server no longer knows is created
+    /// again from `description` and `id` changes to the new one's; the answer says whether.
+    pub async fn reopen_stream(
+        &self,
+        id: &mut String,
+        description: &Value,
+        give_up: Duration,
+    ) -> anyhow::Result<(Stream, bool)> {
+        let mut backoff = Backoff::new(give_up);
+        let mut recreated = false;
+        loop {
+            let error = match self.open_stream(id).await {
+                Ok(stream) => return Ok((stream, recreated)),
+                Err(error) if error.downcast_ref::<SceneUnknown>().is_some() => {
+                    match self.create_scene(description).await {
+                        Ok(new_id) => {
+                            tracing::warn!(old = %id, new = %new_id, "the server no longer knows the scene: created it again");
+                            *id = new_id;
+                            recreated = true;
+                            continue;
+                        }
+                        Err(error) => error,
+                    }
+                }
+                Err(error) => error,
+            };
+            tracing::warn!("the stream is gone, reconnecting: {error:#}");
+            if !backoff.wait().await {
+                return Err(error.context(format!("no stream back within {give_up:?}")));
+            }
+        }
     }
 }
 
@@ -280,6 +358,8 @@ pub struct RemoteReplayOptions {
     /// Exposure of the virtual content in the composite (the stream's default is 1).
     pub exposure: Option<f32>,
     pub progress: bool,
+    /// How long to try to get a stream back after one ended (0: give up at once).
+    pub reconnect: Duration,
 }
 
 /// Figures of one replay over the wire, written as `summary.json`.
@@ -298,6 +378,13 @@ pub struct RemoteReplaySummary {
     pub round_trip_ms: Vec<f64>,
     /// Frames the server dropped (none are expected: the replay waits for each answer).
     pub dropped_frames: u64,
+    /// Frames sent whose answer never came because the stream ended (the frames in flight
+    /// when a backend stopped or died), and their indices.
+    pub frames_lost: u64,
+    pub lost_frames: Vec<usize>,
+    /// Streams opened again after one ended, and scenes created again on the way.
+    pub reconnects: u32,
+    pub scenes_recreated: u32,
 }
 
 /// Streams `options.recording` through a relume server one frame at a time (each frame is sent
@@ -310,8 +397,9 @@ pub async fn replay_remote(options: &RemoteReplayOptions) -> anyhow::Result<Remo
     let connection = Connection::new(&options.server, options.token.clone())?;
     let composited_dir = options.out.join("composited");
     std::fs::create_dir_all(&composited_dir).with_context(|| format!("creating {}", composited_dir.display()))?;
-    let scene_id = connection.create_scene(&description).await?;
-    let result = stream_recording(&connection, &scene_id, &recording, frames, options, &composited_dir).await;
+    let mut scene_id = connection.create_scene(&description).await?;
+    let result =
+        stream_recording(&connection, &mut scene_id, &description, &recording, frames, options, &composited_dir).await;
     let deleted = connection.delete_scene(&scene_id).await;
     let summary = result?;
     deleted?;
@@ -321,15 +409,8 @@ pub async fn replay_remote(options: &RemoteReplayOptions) -> anyhow::Result<Remo
     Ok(summary)
 }
 
-async fn stream_recording(
-    connection: &Connection,
-    scene_id: &str,
-    recording: &Recording,
-    frames: usize,
-    options: &RemoteReplayOptions,
-    composited_dir: &Path,
-) -> anyhow::Result<RemoteReplaySummary> {
-    let mut stream = connection.open_stream(scene_id).await?;
+/// Sets the stream's exposure, when the options give one.
+async fn configure(stream: &mut Stream, options: &RemoteReplayOptions) -> anyhow::Result<()> {
     if let Some(exposure) = options.exposure {
         let quality = proto::Quality { exposure: Some(exposure), ..Default::default() };
         stream.send_control(proto::Control { request_id: 1, quality: Some(quality), ..Default::default() }).await?;
@@ -339,9 +420,43 @@ async fn stream_recording(
             other => bail!("expected a SettingsAck, got {other:?}"),
         }
     }
+    Ok(())
+}
+
+/// Sends frame `i` and waits for its answer: `None` when the stream ended first (closed,
+/// broken, or a `SHUTTING_DOWN` error for the frame).
+async fn exchange(stream: &mut Stream, i: usize, frame: &RgbdFrame) -> anyhow::Result<Option<proto::RenderedFrame>> {
+    if let Err(error) = stream.send_frame(i as u64, frame).await {
+        tracing::warn!("frame {i}: {error:#}");
+        return Ok(None);
+    }
+    match stream.next().await {
+        Ok(Some(Body::RenderedFrame(f))) if f.frame_id == i as u64 => Ok(Some(f)),
+        Ok(Some(Body::Error(e))) if e.code() == proto::ErrorCode::ShuttingDown => Ok(None),
+        Ok(Some(Body::Error(e))) => bail!("frame {i}: {}", describe_error(&e)),
+        Ok(Some(other)) => bail!("frame {i}: expected a RenderedFrame, got {other:?}"),
+        Ok(None) => Ok(None),
+        Err(error) => {
+            tracing::warn!("frame {i}: {error:#}");
+            Ok(None)
+        }
+    }
+}
+
+async fn stream_recording(
+    connection: &Connection,
+    scene_id: &mut String,
+    description: &Value,
+    recording: &Recording,
+    frames: usize,
+    options: &RemoteReplayOptions,
+    composited_dir: &Path,
+) -> anyhow::Result<RemoteReplaySummary> {
+    let mut stream = connection.open_stream(scene_id).await?;
+    configure(&mut stream, options).await?;
     let mut summary = RemoteReplaySummary {
         server: options.server.clone(),
-        scene_id: scene_id.to_owned(),
+        scene_id: scene_id.clone(),
         frames,
         width: 0,
         height: 0,
@@ -349,17 +464,30 @@ async fn stream_recording(
         stage_ms: BTreeMap::new(),
         round_trip_ms: Vec::new(),
         dropped_frames: 0,
+        frames_lost: 0,
+        lost_frames: Vec::new(),
+        reconnects: 0,
+        scenes_recreated: 0,
     };
     let bar = crate::mr::replay::progress_bar(options.progress, frames as u64);
     for i in 0..frames {
         let frame = recording.frame(i)?;
         let sent = Instant::now();
-        stream.send_frame(i as u64, &frame).await?;
-        let rendered = match stream.next().await? {
-            Some(Body::RenderedFrame(f)) if f.frame_id == i as u64 => f,
-            Some(Body::Error(e)) => bail!("frame {i}: {}", describe_error(&e)),
-            Some(other) => bail!("frame {i}: expected a RenderedFrame, got {other:?}"),
-            None => bail!("frame {i}: the server closed the stream"),
+        let Some(rendered) = exchange(&mut stream, i, &frame).await? else {
+            // The stream ended with this frame in flight: it is lost; the next goes on a new one.
+            summary.frames_lost += 1;
+            summary.lost_frames.push(i);
+            if options.reconnect.is_zero() {
+                bail!("frame {i}: the stream ended (no reconnecting with --reconnect-seconds 0)");
+            }
+            let (reopened, recreated) = connection.reopen_stream(scene_id, description, options.reconnect).await?;
+            stream = reopened;
+            configure(&mut stream, options).await?;
+            summary.reconnects += 1;
+            summary.scenes_recreated += u32::from(recreated);
+            summary.scene_id = scene_id.clone();
+            bar.inc(1);
+            continue;
         };
         summary.round_trip_ms.push(sent.elapsed().as_secs_f64() * 1e3);
         (summary.width, summary.height) = (rendered.width, rendered.height);

@@ -17,6 +17,80 @@ pub const MAX_TICKET_SECONDS: u64 = 3600;
 /// the limit too). Values set in code outside these are treated as the nearest bound.
 pub const HEADER_BYTES_RANGE: std::ops::RangeInclusive<usize> = 8192..=65_536;
 
+/// The largest [`Config::drain_delay_seconds`] (ten minutes).
+pub const MAX_DRAIN_DELAY_SECONDS: u64 = 600;
+
+/// The default of [`Config::worker_quarantine_seconds`].
+pub const DEFAULT_QUARANTINE_SECONDS: u64 = 30;
+
+/// The most workers `--adapters N` starts.
+pub const MAX_WORKERS: usize = 64;
+
+/// Which GPU adapters get a worker (`--adapters`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum AdapterSelection {
+    /// One worker per adapter found.
+    All,
+    /// This many workers, on the adapters found in turn (the first adapter alone for 1, as
+    /// wgpu chooses it).
+    Count(usize),
+    /// One worker per adapter whose name contains one of these (case-insensitive).
+    Names(Vec<String>),
+}
+
+impl std::str::FromStr for AdapterSelection {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<AdapterSelection, String> {
+        let text = text.trim();
+        if text.eq_ignore_ascii_case("all") {
+            return Ok(AdapterSelection::All);
+        }
+        if let Ok(count) = text.parse::<usize>() {
+            return match count {
+                1..=MAX_WORKERS => Ok(AdapterSelection::Count(count)),
+                _ => Err(format!("{count} workers: between 1 and {MAX_WORKERS}")),
+            };
+        }
+        let names: Vec<String> = text.split(',').map(|name| name.trim().to_owned()).collect();
+        if names.iter().any(String::is_empty) {
+            return Err(format!("`{text}`: `all`, a count, or adapter names separated by commas (none empty)"));
+        }
+        Ok(AdapterSelection::Names(names))
+    }
+}
+
+impl AdapterSelection {
+    /// The adapter of each worker, as an index into `adapters` (the names of
+    /// [`crate::gpu::Gpu::adapters`]); `None` for wgpu's own choice (a single worker). Errors
+    /// name the name that matches no adapter.
+    pub fn workers(&self, adapters: &[String]) -> Result<Vec<Option<usize>>, String> {
+        match self {
+            AdapterSelection::Count(1) => Ok(vec![None]),
+            AdapterSelection::Count(count) => Ok((0..*count).map(|i| Some(i % adapters.len().max(1))).collect()),
+            AdapterSelection::All if adapters.is_empty() => Ok(vec![None]),
+            AdapterSelection::All => Ok((0..adapters.len()).map(Some).collect()),
+            AdapterSelection::Names(names) => {
+                let mut chosen = Vec::new();
+                for name in names {
+                    let wanted = name.to_lowercase();
+                    let matches: Vec<usize> =
+                        (0..adapters.len()).filter(|&i| adapters[i].to_lowercase().contains(&wanted)).collect();
+                    if matches.is_empty() {
+                        return Err(format!("no adapter named `{name}` (found: {})", adapters.join("; ")));
+                    }
+                    for index in matches {
+                        if !chosen.contains(&Some(index)) {
+                            chosen.push(Some(index));
+                        }
+                    }
+                }
+                Ok(chosen)
+            }
+        }
+    }
+}
+
 /// How `relume serve` runs.
 #[derive(Clone, Debug, clap::Args)]
 pub struct Config {
@@ -41,6 +115,28 @@ pub struct Config {
     /// SIGINT or SIGTERM before they are dropped.
     #[arg(long, env = "RELUME_SHUTDOWN_GRACE_SECONDS", default_value_t = 30)]
     pub shutdown_grace_seconds: u64,
+    /// Seconds between SIGTERM (or SIGINT) and the start of the shutdown, during which the
+    /// process serves as before but `/readyz` answers 503 `draining`, so that load balancers
+    /// and Kubernetes stop sending it work before it stops accepting connections.
+    #[arg(long, env = "RELUME_DRAIN_DELAY_SECONDS", default_value_t = 0,
+        value_parser = clap::value_parser!(u64).range(0..=MAX_DRAIN_DELAY_SECONDS))]
+    pub drain_delay_seconds: u64,
+    /// GPU workers, one thread and one device each: `all` (one per adapter found), `N`
+    /// (1..=64; N workers on the adapters found in turn, so N above the adapter count opens
+    /// several devices on one adapter) or a comma-separated list of names (each a
+    /// case-insensitive part of an adapter's name; every adapter it matches gets a worker).
+    #[arg(long, env = "RELUME_ADAPTERS", default_value = "1")]
+    pub adapters: AdapterSelection,
+    /// Seconds a worker whose device was lost gets no new work while another worker is up
+    /// (its streams move to another worker too).
+    #[arg(long, env = "RELUME_WORKER_QUARANTINE_SECONDS", default_value_t = DEFAULT_QUARANTINE_SECONDS)]
+    pub worker_quarantine_seconds: u64,
+    /// A directory the backends behind one load balancer share: every scene created is also
+    /// written there (its description, by id), and a request for a scene this process does not
+    /// hold loads it from there, so a scene outlives the backend that created it. A scene
+    /// whose file is gone (deleted through another backend) is dropped here too.
+    #[arg(long, env = "RELUME_SCENE_STORE")]
+    pub scene_store: Option<PathBuf>,
     #[command(flatten)]
     pub limits: Limits,
     #[command(flatten)]
@@ -57,6 +153,10 @@ impl Config {
             token: None,
             ticket_seconds: DEFAULT_TICKET_SECONDS,
             shutdown_grace_seconds: 30,
+            drain_delay_seconds: 0,
+            adapters: AdapterSelection::Count(1),
+            worker_quarantine_seconds: DEFAULT_QUARANTINE_SECONDS,
+            scene_store: None,
             limits: Limits::default(),
             timeouts: Timeouts::default(),
         }
@@ -245,5 +345,23 @@ impl Default for Timeouts {
             stream_ping_seconds: 15,
             stream_idle_seconds: 60,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn adapters_are_chosen_by_count_all_or_name() {
+        let found = ["NVIDIA H100 (Vulkan)".to_owned(), "llvmpipe (LLVM 15) (Vulkan)".to_owned()];
+        let parse = |text: &str| text.parse::<AdapterSelection>();
+        assert_eq!(parse("1").and_then(|s| s.workers(&found)), Ok(vec![None]));
+        assert_eq!(parse("3").and_then(|s| s.workers(&found)), Ok(vec![Some(0), Some(1), Some(0)]));
+        assert_eq!(parse("ALL").and_then(|s| s.workers(&found)), Ok(vec![Some(0), Some(1)]));
+        assert_eq!(parse("h100, LLVMpipe,nvidia").and_then(|s| s.workers(&found)), Ok(vec![Some(0), Some(1)]));
+        let error = parse("radeon").and_then(|s| s.workers(&found)).expect_err("no such adapter");
+        assert!(error.contains("`radeon`") && error.contains("llvmpipe"), "{error}");
+        assert!(parse("0").is_err() && parse("65").is_err() && parse("a,,b").is_err() && parse("").is_err());
     }
 }

@@ -10,12 +10,16 @@
 //! run. A panic inside a job (wgpu reports validation errors by
 //! panicking) fails that job only.
 //!
+//! A process may run several workers, one per GPU ([`super::workers`] routes between them).
+//! A render may carry its scene's [`SceneSource`]: a worker that does not hold the scene yet
+//! uploads it on its own thread before rendering (lazily, the first time it needs it).
+//!
 //! The backend is a trait so that the service's scheduling, limits and error paths can be
 //! driven without a GPU (the tests' fake backend sleeps and answers black images).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -153,6 +157,45 @@ pub struct StreamFrameJob {
     pub near_field: f32,
 }
 
+/// A scene as loaded, kept while several workers may need to upload it.
+pub struct SceneSource {
+    pub scene: Scene,
+    pub environment: Environment,
+    /// Set when the scene is deleted: a render of it still queued does not upload it again.
+    pub deleted: AtomicBool,
+}
+
+impl SceneSource {
+    pub fn new(scene: Scene, environment: Environment) -> SceneSource {
+        SceneSource { scene, environment, deleted: AtomicBool::new(false) }
+    }
+}
+
+/// What a worker's thread tells the router about itself.
+#[derive(Default)]
+pub struct WorkerStatus {
+    /// Renders being run now (0 or 1).
+    busy: AtomicUsize,
+    /// The scenes the worker holds (uploaded and not removed).
+    held: Mutex<HashSet<String>>,
+    /// When the device was last lost.
+    lost_at: Mutex<Option<Instant>>,
+    /// Devices lost so far.
+    device_losses: AtomicU64,
+    /// Streams pinned to the worker ([`super::workers::StreamPin`]).
+    pub(super) streams: AtomicUsize,
+}
+
+impl WorkerStatus {
+    fn held(&self) -> std::sync::MutexGuard<'_, HashSet<String>> {
+        self.held.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn lost_at(&self) -> std::sync::MutexGuard<'_, Option<Instant>> {
+        self.lost_at.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+}
+
 enum Job {
     AddScene {
         id: String,
@@ -167,11 +210,13 @@ enum Job {
     Render {
         id: String,
         job: RenderJob,
+        source: Option<Arc<SceneSource>>,
         reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
     },
     StreamFrame {
         id: String,
         job: Box<StreamFrameJob>,
+        source: Option<Arc<SceneSource>>,
         reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
     },
     LoseDevice,
@@ -190,7 +235,10 @@ impl Job {
 
 /// The handle the handlers hold.
 pub struct GpuWorker {
+    /// The worker's number in the process (its `worker` label in `/metrics`).
+    index: usize,
     queue: Arc<FairQueue<Job>>,
+    status: Arc<WorkerStatus>,
     adapter: String,
     thread: Mutex<Option<std::thread::JoinHandle<()>>>,
 }
@@ -202,8 +250,28 @@ impl GpuWorker {
         GpuWorker::start_with(|| Ok(GpuBackend::new(Gpu::new()?)), limits, metrics)
     }
 
+    /// Worker `index` on adapter `adapter` of [`Gpu::adapters`] (`None`: wgpu's choice).
+    pub fn start_on(
+        index: usize,
+        adapter: Option<usize>,
+        limits: &Limits,
+        metrics: Arc<Metrics>,
+    ) -> Result<GpuWorker, WorkerError> {
+        GpuWorker::start_numbered(index, move || GpuBackend::on(adapter), limits, metrics)
+    }
+
     /// Starts the GPU thread on the backend `open` makes there. Blocks until it is made.
     pub fn start_with<B: Backend>(
+        open: impl FnOnce() -> Result<B, WorkerError> + Send + 'static,
+        limits: &Limits,
+        metrics: Arc<Metrics>,
+    ) -> Result<GpuWorker, WorkerError> {
+        GpuWorker::start_numbered(0, open, limits, metrics)
+    }
+
+    /// [`GpuWorker::start_with`] as worker `index` of the process.
+    pub fn start_numbered<B: Backend>(
+        index: usize,
         open: impl FnOnce() -> Result<B, WorkerError> + Send + 'static,
         limits: &Limits,
         metrics: Arc<Metrics>,
@@ -212,8 +280,10 @@ impl GpuWorker {
             Arc::new(FairQueue::new(limits.max_queue, limits.max_client_queue).dropping_abandoned(Job::abandoned));
         let (ready, is_ready) = std::sync::mpsc::sync_channel(1);
         let thread_queue = queue.clone();
+        let status = Arc::new(WorkerStatus::default());
+        let thread_status = status.clone();
         let thread = std::thread::Builder::new()
-            .name("relume-gpu".to_owned())
+            .name(format!("relume-gpu-{index}"))
             .spawn(move || {
                 let backend = match open() {
                     Ok(backend) => backend,
@@ -223,12 +293,52 @@ impl GpuWorker {
                     }
                 };
                 let _ = ready.send(Ok(backend.adapter()));
-                run(backend, &thread_queue, &metrics);
+                run(backend, &thread_queue, &Thread { index, metrics: &metrics, status: &thread_status });
             })
             .map_err(|e| WorkerError::Panicked(format!("cannot spawn the GPU thread: {e}")))?;
         let adapter = is_ready.recv().map_err(|_| WorkerError::Stopped)??;
-        tracing::info!(adapter = %adapter, limits.max_queue, limits.max_client_queue, "GPU thread ready");
-        Ok(GpuWorker { queue, adapter, thread: Mutex::new(Some(thread)) })
+        tracing::info!(worker = index, adapter = %adapter, limits.max_queue, limits.max_client_queue, "GPU thread ready");
+        Ok(GpuWorker { index, queue, status, adapter, thread: Mutex::new(Some(thread)) })
+    }
+
+    /// The worker's number in the process.
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
+    /// What the worker's thread reports.
+    pub fn status(&self) -> &Arc<WorkerStatus> {
+        &self.status
+    }
+
+    /// Renders waiting or running, and streams pinned: what the router balances.
+    pub fn load(&self) -> usize {
+        self.queue_depth() + self.status.busy.load(Ordering::SeqCst) + self.status.streams.load(Ordering::SeqCst)
+    }
+
+    /// Whether the worker has uploaded scene `id`.
+    pub fn holds(&self, id: &str) -> bool {
+        self.status.held().contains(id)
+    }
+
+    /// Scenes the worker holds.
+    pub fn scenes(&self) -> usize {
+        self.status.held().len()
+    }
+
+    /// Streams pinned to the worker.
+    pub fn streams(&self) -> usize {
+        self.status.streams.load(Ordering::SeqCst)
+    }
+
+    /// Devices lost so far.
+    pub fn device_losses(&self) -> u64 {
+        self.status.device_losses.load(Ordering::SeqCst)
+    }
+
+    /// False for `quarantine` after the device was lost.
+    pub fn healthy(&self, quarantine: Duration) -> bool {
+        self.status.lost_at().is_none_or(|at| at.elapsed() >= quarantine)
     }
 
     /// The adapter's name and backend.
@@ -264,14 +374,16 @@ impl GpuWorker {
 
     /// Queues a render of `client`, or refuses at once when its queue or the whole queue is
     /// full.
+    /// With `source`, a worker that does not hold the scene uploads it first.
     pub fn try_render(
         &self,
         client: ClientId,
         id: &str,
         job: RenderJob,
+        source: Option<Arc<SceneSource>>,
     ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.queue.push(client, Job::Render { id: id.to_owned(), job, reply })?;
+        self.queue.push(client, Job::Render { id: id.to_owned(), job, source, reply })?;
         Ok(answer)
     }
 
@@ -281,9 +393,10 @@ impl GpuWorker {
         client: ClientId,
         id: &str,
         job: StreamFrameJob,
+        source: Option<Arc<SceneSource>>,
     ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.queue.push(client, Job::StreamFrame { id: id.to_owned(), job: Box::new(job), reply })?;
+        self.queue.push(client, Job::StreamFrame { id: id.to_owned(), job: Box::new(job), source, reply })?;
         Ok(answer)
     }
 
@@ -305,48 +418,111 @@ impl GpuWorker {
     }
 }
 
+/// What the GPU thread reports to: its number, the metrics and the router's view of it.
+struct Thread<'a> {
+    index: usize,
+    metrics: &'a Metrics,
+    status: &'a WorkerStatus,
+}
+
 /// The GPU thread's loop: one job at a time, in the queue's order, until it is closed and
 /// empty. A job that fails because the device was lost answers [`WorkerError::DeviceLost`].
-fn run(mut backend: impl Backend, queue: &FairQueue<Job>, metrics: &Metrics) {
+fn run(mut backend: impl Backend, queue: &FairQueue<Job>, thread: &Thread) {
     while let Some(taken) = queue.pop() {
         backend.recover();
         let queue_ms = taken.waited.unwrap_or_default().as_secs_f64() * 1e3;
         match taken.job {
             Job::AddScene { id, scene, environment, reply } => {
                 let result = guarded(|| backend.add_scene(&id, *scene, *environment));
-                let _ = reply.send(lost_or(&mut backend, result));
+                let result = lost_or(&mut backend, thread, result);
+                if result.is_ok() {
+                    thread.status.held().insert(id);
+                }
+                let _ = reply.send(result);
             }
             Job::RemoveScene { id, reply } => {
+                thread.status.held().remove(&id);
                 let _ = reply.send(backend.remove_scene(&id));
             }
-            Job::Render { id, job, reply } => {
+            Job::Render { id, job, source, reply } => {
                 if reply.is_closed() {
                     tracing::debug!(scene = %id, "render skipped: the client has gone");
                     continue;
                 }
-                let result = timed(metrics, queue_ms, || backend.render(&id, &job));
-                let _ = reply.send(lost_or(&mut backend, result));
+                let result =
+                    render_held(&mut backend, thread, &id, source.as_deref(), queue_ms, |b| b.render(&id, &job));
+                let _ = reply.send(result);
             }
-            Job::StreamFrame { id, job, reply } => {
+            Job::StreamFrame { id, job, source, reply } => {
                 if reply.is_closed() {
                     continue;
                 }
-                let result = timed(metrics, queue_ms, || backend.render_stream_frame(&id, &job));
-                let _ = reply.send(lost_or(&mut backend, result));
+                let result = render_held(&mut backend, thread, &id, source.as_deref(), queue_ms, |b| {
+                    b.render_stream_frame(&id, &job)
+                });
+                let _ = reply.send(result);
             }
             Job::LoseDevice => backend.lose_device(),
         }
-        metrics.set_gpu_memory(backend.memory());
+        thread.metrics.set_worker_gpu_memory(thread.index, backend.memory());
     }
-    tracing::info!("GPU thread stopped");
+    tracing::info!(worker = thread.index, "GPU thread stopped");
+}
+
+/// Runs `render` on scene `id`, uploading it first from `source` when the worker does not hold
+/// it (or no longer does: a scene a new device could not rebuild), timed and counted busy.
+fn render_held<B: Backend>(
+    backend: &mut B,
+    thread: &Thread,
+    id: &str,
+    source: Option<&SceneSource>,
+    queue_ms: f64,
+    render: impl Fn(&mut B) -> Result<Frame, WorkerError>,
+) -> Result<RenderOutput, WorkerError> {
+    thread.status.busy.fetch_add(1, Ordering::SeqCst);
+    let started = Instant::now();
+    let mut result = upload_if_missing(backend, thread, id, source, false)
+        .and_then(|()| timed(thread, queue_ms, started, || render(backend)));
+    if matches!(result, Err(WorkerError::SceneNotFound(_))) && source.is_some() {
+        result = upload_if_missing(backend, thread, id, source, true)
+            .and_then(|()| timed(thread, queue_ms, started, || render(backend)));
+    }
+    let result = lost_or(backend, thread, result);
+    thread.status.busy.fetch_sub(1, Ordering::SeqCst);
+    result
+}
+
+/// Uploads scene `id` from `source` unless the worker holds it (`again`: whatever it thinks).
+/// A deleted scene is not uploaded ([`WorkerError::SceneNotFound`]).
+fn upload_if_missing(
+    backend: &mut impl Backend,
+    thread: &Thread,
+    id: &str,
+    source: Option<&SceneSource>,
+    again: bool,
+) -> Result<(), WorkerError> {
+    let Some(source) = source else { return Ok(()) };
+    if !again && thread.status.held().contains(id) {
+        return Ok(());
+    }
+    if source.deleted.load(Ordering::SeqCst) {
+        return Err(WorkerError::SceneNotFound(id.to_owned()));
+    }
+    let started = Instant::now();
+    guarded(|| backend.add_scene(id, source.scene.clone(), source.environment.clone()))?;
+    thread.status.held().insert(id.to_owned());
+    tracing::info!(worker = thread.index, scene = %id, ms = started.elapsed().as_secs_f64() * 1e3, "scene uploaded");
+    Ok(())
 }
 
 /// `result`, or [`WorkerError::DeviceLost`] when it failed because the device was lost (the
-/// backend has recovered by the time this returns).
-fn lost_or<T>(backend: &mut impl Backend, result: Result<T, WorkerError>) -> Result<T, WorkerError> {
+/// backend has recovered by the time this returns; the loss is reported to the router).
+fn lost_or<T>(backend: &mut impl Backend, thread: &Thread, result: Result<T, WorkerError>) -> Result<T, WorkerError> {
     match result {
         Err(error) if backend.recover() => {
-            tracing::warn!("a job failed with the device lost: {error}");
+            tracing::warn!(worker = thread.index, "a job failed with the device lost: {error}");
+            *thread.status.lost_at() = Some(Instant::now());
+            thread.status.device_losses.fetch_add(1, Ordering::SeqCst);
             Err(WorkerError::DeviceLost)
         }
         result => result,
@@ -357,6 +533,8 @@ fn lost_or<T>(backend: &mut impl Backend, result: Result<T, WorkerError>) -> Res
 /// loaded, so that a lost device is replaced and every renderer rebuilt without the clients.
 pub struct GpuBackend {
     gpu: Gpu,
+    /// The adapter of [`Gpu::adapters`] a lost device is reopened on (`None`: wgpu's choice).
+    adapter: Option<usize>,
     scenes: HashMap<String, Loaded>,
     /// Set by the device's lost callback.
     lost: Arc<AtomicBool>,
@@ -367,7 +545,16 @@ pub struct GpuBackend {
 impl GpuBackend {
     pub fn new(gpu: Gpu) -> GpuBackend {
         let lost = watch_for_loss(&gpu);
-        GpuBackend { gpu, scenes: HashMap::new(), lost, lose_during_next_render: false }
+        GpuBackend { gpu, adapter: None, scenes: HashMap::new(), lost, lose_during_next_render: false }
+    }
+
+    /// A device on adapter `adapter` of [`Gpu::adapters`] (`None`: wgpu's choice).
+    pub fn on(adapter: Option<usize>) -> Result<GpuBackend, WorkerError> {
+        let gpu = match adapter {
+            Some(index) => Gpu::on_adapter(index)?,
+            None => Gpu::new()?,
+        };
+        Ok(GpuBackend { adapter, ..GpuBackend::new(gpu) })
     }
 
     /// Gives back the memory that no scene holds any more. wgpu keeps the staging copy of
@@ -445,7 +632,11 @@ impl Backend for GpuBackend {
         if !self.lost.load(Ordering::SeqCst) {
             return false;
         }
-        let gpu = match Gpu::new() {
+        let reopened = match self.adapter {
+            Some(index) => Gpu::on_adapter(index),
+            None => Gpu::new(),
+        };
+        let gpu = match reopened {
             Ok(gpu) => gpu,
             Err(error) => {
                 // Still lost: the next job tries again.
@@ -500,16 +691,17 @@ struct Loaded {
     mr: MrPipeline,
 }
 
-/// Runs `f` (a render) behind [`guarded`], timing it and recording the frame's metrics.
+/// Runs `f` (a render) behind [`guarded`], timing it from `started` (an upload before it
+/// included) and recording the frame's metrics.
 fn timed(
-    metrics: &Metrics,
+    thread: &Thread,
     queue_ms: f64,
+    started: Instant,
     f: impl FnOnce() -> Result<Frame, WorkerError>,
 ) -> Result<RenderOutput, WorkerError> {
-    let started = Instant::now();
     let (frame, composited) = guarded(f)?;
     let gpu_ms = started.elapsed().as_secs_f64() * 1e3;
-    metrics.record_frame(gpu_ms / 1e3, &frame.timings);
+    thread.metrics.record_worker_frame(thread.index, gpu_ms / 1e3, &frame.timings);
     Ok(RenderOutput { frame, composited, queue_ms, gpu_ms })
 }
 

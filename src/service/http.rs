@@ -27,9 +27,8 @@ use super::api::{Health, ImageFormat, RenderRequest, SceneInfo, SceneRequest};
 use super::config::limit;
 use super::error::{ApiError, Code, ErrorBody};
 use super::gpu_worker::{RenderJob, RenderOutput, WorkerError};
-use super::scenes::{self, SceneEntry};
 use super::schedule::ClientId;
-use super::{recordings, stream, tickets, viewer};
+use super::{ready, recordings, store, stream, tickets, viewer};
 
 #[derive(OpenApi)]
 #[openapi(
@@ -119,6 +118,7 @@ pub fn router(state: Arc<AppState>) -> Router {
     let api = Arc::new(api);
     router
         .merge(viewer::routes())
+        .route("/readyz", axum::routing::get(ready::readyz))
         .route(
             "/openapi.json",
             axum::routing::get(move || {
@@ -314,9 +314,9 @@ async fn healthz(State(state): State<Arc<AppState>>) -> (StatusCode, Json<Health
     let stopping = state.shutting_down();
     let health = Health {
         status: if stopping { "shutting_down" } else { "ok" }.to_owned(),
-        adapter: state.worker.adapter().to_owned(),
+        adapter: state.workers.adapter(),
         scenes: state.scenes.len(),
-        queue_depth: state.worker.queue_depth(),
+        queue_depth: state.workers.queue_depth(),
         limits: state.config.limits,
     };
     (if stopping { StatusCode::SERVICE_UNAVAILABLE } else { StatusCode::OK }, Json(health))
@@ -334,7 +334,7 @@ async fn healthz(State(state): State<Arc<AppState>>) -> (StatusCode, Json<Health
         content_type = "text/plain; version=0.0.4"))
 )]
 async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
-    let text = state.metrics.render(&state.gauges());
+    let text = state.metrics_text();
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], text)
 }
 
@@ -369,27 +369,7 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
     let bytes = read_body(&state, body).await?;
     let reservation = state.scenes.reserve()?;
     let id = reservation.id.clone();
-    let loader = state.clone();
-    let loaded = tokio::task::spawn_blocking(move || -> Result<scenes::Loaded, ApiError> {
-        scenes::load(utf8(&bytes)?, &loader.assets, &loader.config.limits)
-    })
-    .await
-    .map_err(ApiError::internal)?;
-    let (description, scene, environment) = loaded?;
-    let info = SceneInfo::new(&id, &scene, description.camera.clone(), description.light.clone());
-    let entry = SceneEntry {
-        camera: description.camera,
-        light: description.light,
-        exposure: description.settings.exposure,
-        mesh_count: scene.meshes.len(),
-        settings: scene.settings,
-        described: description.settings.clone(),
-        origin: scene.origin,
-        info: info.clone(),
-    };
-    state.worker.add_scene(&id, scene, environment).await?;
-    reservation.commit(entry);
-    tracing::info!(scene = %id, triangles = info.triangles, sparse_points = info.sparse_points, "scene created");
+    let info = store::load_scene(&state, reservation, bytes, true).await?.info.clone();
     let location = HeaderValue::from_str(&format!("/v1/scenes/{id}")).map_err(ApiError::internal)?;
     Ok((StatusCode::CREATED, [(header::LOCATION, location)], Json(info)).into_response())
 }
@@ -412,7 +392,7 @@ async fn get_scene(
     id: Result<Path<String>, PathRejection>,
 ) -> Result<Json<SceneInfo>, ApiError> {
     let id = scene_id(id)?;
-    let entry = state.scenes.get(&id).ok_or_else(|| unknown_scene(&id))?;
+    let entry = store::scene(&state, &id).await?.ok_or_else(|| unknown_scene(&id))?;
     Ok(Json(entry.info.clone()))
 }
 
@@ -436,8 +416,11 @@ async fn delete_scene(
     id: Result<Path<String>, PathRejection>,
 ) -> Result<StatusCode, ApiError> {
     let id = scene_id(id)?;
-    state.scenes.remove(&id).ok_or_else(|| unknown_scene(&id))?;
-    state.worker.remove_scene(&id).await?;
+    let stored = state.store.as_ref().map(|store| store.remove(&id)).transpose().map_err(ApiError::internal)?;
+    if state.scenes.remove(&id).is_none() && stored != Some(true) {
+        return Err(unknown_scene(&id));
+    }
+    state.workers.remove_scene(&id).await?;
     tracing::info!(scene = %id, "scene deleted");
     Ok(StatusCode::NO_CONTENT)
 }
@@ -500,7 +483,7 @@ async fn render_scene(
     if state.shutting_down() {
         return Err(ApiError::shutting_down());
     }
-    let entry = state.scenes.get(&id).ok_or_else(|| unknown_scene(&id))?;
+    let entry = store::scene(&state, &id).await?.ok_or_else(|| unknown_scene(&id))?;
     let bytes = read_body(&state, body).await?;
     let text = utf8(&bytes)?;
     let request: RenderRequest = if text.trim().is_empty() {
@@ -539,12 +522,11 @@ async fn render_scene(
         occlusion: parameters.occlusion,
         near_field: parameters.near_field,
     };
-    let answer = state.worker.try_render(client, &id, job).inspect_err(|error| {
+    let output = state.workers.render(client, &id, job).await.inspect_err(|error| {
         if matches!(error, WorkerError::QueueFull { .. }) {
             state.metrics.record_rejected_render();
         }
     })?;
-    let output = answer.await.map_err(|_| WorkerError::Stopped)??;
     let met = budget_ms.map(|ms| output.gpu_ms <= f64::from(ms));
     let estimate = output.frame.error_estimate;
     state.metrics.record_frame_quality(estimate.map(|e| e.rel_rmse), &parameters, met.map(|m| !m));

@@ -25,7 +25,7 @@ use serde_json::json;
 
 use crate::rgbd::RgbdFrame;
 use crate::rgbd::recording::{Recording, RecordingOptions};
-use crate::service::client::{Connection, asset_description, describe_error, quantile, upload_description};
+use crate::service::client::{Backoff, Connection, asset_description, describe_error, quantile, upload_description};
 use crate::service::wire::proto;
 use crate::service::wire::proto::envelope::Body;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -54,6 +54,10 @@ pub struct LoadOptions {
     /// Run [`soak`] instead: one normal stream and HTTP client, alone then beside the hostile
     /// mix, each phase `duration` long (`streams` and `http_clients` are not used).
     pub chaos: bool,
+    /// How long a client tries to get its stream back, or its renders answered, after the
+    /// server went away (through a load balancer: after a backend stopped or died); zero: a
+    /// stream that ends or a render that fails ends the run. The soak does not reconnect.
+    pub reconnect: Duration,
 }
 
 /// The figures of one run.
@@ -69,6 +73,10 @@ pub struct LoadReport {
     pub frames_dropped: u64,
     /// Answered with an error.
     pub frame_errors: u64,
+    /// Sent but never answered because their stream ended (in flight when a backend went
+    /// away), and the streams opened again.
+    pub frames_lost: u64,
+    pub stream_reconnects: u64,
     pub frames_per_second: f64,
     /// From sending a frame to receiving its relit image, ms.
     pub frame_latency_p50_ms: f64,
@@ -76,6 +84,9 @@ pub struct LoadReport {
     pub renders_ok: u64,
     /// Answered 503 (queue full); the client waits for `Retry-After` before its next request.
     pub renders_refused: u64,
+    /// Failed otherwise: no answer (connection refused or reset) or a 502/504 from a load
+    /// balancer; the client waits and tries again while `reconnect` allows.
+    pub renders_failed: u64,
     pub renders_per_second: f64,
     pub render_latency_p50_ms: f64,
     pub render_latency_p99_ms: f64,
@@ -91,6 +102,8 @@ struct StreamTally {
     rendered: u64,
     dropped: u64,
     errors: u64,
+    lost: u64,
+    reconnects: u64,
     latency_ms: Vec<f64>,
 }
 
@@ -98,7 +111,16 @@ struct StreamTally {
 struct HttpTally {
     ok: u64,
     refused: u64,
+    failed: u64,
     latency_ms: Vec<f64>,
+}
+
+/// How a client gets going again after the server went away: for `give_up` (zero: never),
+/// creating its scene again from `description` when the server no longer knows it.
+#[derive(Clone)]
+struct Recover {
+    give_up: Duration,
+    description: serde_json::Value,
 }
 
 /// Runs the benchmark; the server it starts (if any) is stopped before this returns.
@@ -132,22 +154,31 @@ pub async fn run(options: &LoadOptions) -> anyhow::Result<LoadReport> {
     for _ in 0..options.streams {
         stream_ids.push(connection.create_scene(&stream_scene).await?);
     }
+    let http_scene = match options.http_clients {
+        0 => serde_json::Value::Null,
+        _ => asset_description(&options.http_scene, &options.assets)?,
+    };
     let http_id = match options.http_clients {
         0 => None,
-        _ => Some(connection.create_scene(&asset_description(&options.http_scene, &options.assets)?).await?),
+        _ => Some(connection.create_scene(&http_scene).await?),
     };
+    let stream_recover = Recover { give_up: options.reconnect, description: stream_scene };
+    let http_recover = Recover { give_up: options.reconnect, description: http_scene };
 
     let started = Instant::now();
     let deadline = tokio::time::Instant::now() + options.duration;
     let mut streams = Vec::new();
     for id in &stream_ids {
         let (connection, id, frames, fps) = (connection.clone(), id.clone(), frames.clone(), options.fps);
-        streams.push(tokio::spawn(async move { drive_stream(&connection, &id, &frames, fps, deadline).await }));
+        let recover = stream_recover.clone();
+        streams
+            .push(tokio::spawn(async move { drive_stream(&connection, id, &frames, fps, deadline, &recover).await }));
     }
     let mut renders = Vec::new();
     for _ in 0..options.http_clients {
         let (connection, id) = (connection.clone(), http_id.clone().expect("a scene"));
-        renders.push(tokio::spawn(async move { drive_renders(&connection, &id, deadline).await }));
+        let recover = http_recover.clone();
+        renders.push(tokio::spawn(async move { drive_renders(&connection, id, deadline, &recover).await }));
     }
     let mut report = LoadReport {
         streams: options.streams,
@@ -157,8 +188,12 @@ pub async fn run(options: &LoadOptions) -> anyhow::Result<LoadReport> {
         ..LoadReport::default()
     };
     let mut frame_latency = Vec::new();
+    let mut final_ids = Vec::new();
     for task in streams {
-        let tally = task.await.context("a stream client panicked")??;
+        let (tally, id) = task.await.context("a stream client panicked")??;
+        final_ids.push(id);
+        report.frames_lost += tally.lost;
+        report.stream_reconnects += tally.reconnects;
         report.frames_sent += tally.sent;
         report.frames_rendered += tally.rendered;
         report.frames_dropped += tally.dropped;
@@ -167,7 +202,11 @@ pub async fn run(options: &LoadOptions) -> anyhow::Result<LoadReport> {
     }
     let mut render_latency = Vec::new();
     for task in renders {
-        let tally = task.await.context("an HTTP client panicked")??;
+        let (tally, id) = task.await.context("an HTTP client panicked")??;
+        if !final_ids.contains(&id) {
+            final_ids.push(id);
+        }
+        report.renders_failed += tally.failed;
         report.renders_ok += tally.ok;
         report.renders_refused += tally.refused;
         render_latency.extend(tally.latency_ms);
@@ -179,7 +218,7 @@ pub async fn run(options: &LoadOptions) -> anyhow::Result<LoadReport> {
     report.frame_latency_p99_ms = quantile(&frame_latency, 0.99);
     report.render_latency_p50_ms = quantile(&render_latency, 0.5);
     report.render_latency_p99_ms = quantile(&render_latency, 0.99);
-    for id in stream_ids.iter().chain(&http_id) {
+    for id in &final_ids {
         connection.delete_scene(id).await?;
     }
     report.peak_rss_mib = peak_rss_mib();
@@ -192,84 +231,139 @@ pub async fn run(options: &LoadOptions) -> anyhow::Result<LoadReport> {
 
 /// Sends a frame every `1 / fps` s until `deadline`, then waits (at most 60 s) for the answers
 /// still owed. The server renders one frame per stream at a time and drops the older of two
-/// waiting ones, so latency is measured per answered frame.
+/// waiting ones, so latency is measured per answered frame. When the stream ends (its backend
+/// went away), the frames owed are lost and the stream is opened again ([`Recover`]); the
+/// answer is the tally and the scene's id at the end (new if it was created again).
 async fn drive_stream(
     connection: &Connection,
-    id: &str,
+    mut id: String,
     frames: &[RgbdFrame],
     fps: f64,
     deadline: tokio::time::Instant,
-) -> anyhow::Result<StreamTally> {
-    let mut stream = connection.open_stream(id).await?;
+    recover: &Recover,
+) -> anyhow::Result<(StreamTally, String)> {
+    let mut stream = connection.open_stream(&id).await?;
     let mut tally = StreamTally::default();
     let mut sent_at: HashMap<u64, Instant> = HashMap::new();
     let mut ticker = tokio::time::interval(Duration::from_secs_f64(1.0 / fps));
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut sending = true;
     let mut drain_until = None;
+    // Dropped frames counted by the streams closed before this one.
+    let mut dropped_before = 0;
     loop {
         if sending && tokio::time::Instant::now() >= deadline {
             sending = false;
             drain_until = Some(tokio::time::Instant::now() + Duration::from_secs(60));
         }
-        let owed = tally.sent.saturating_sub(tally.rendered + tally.errors + tally.dropped);
+        let owed = tally.sent.saturating_sub(tally.rendered + tally.errors + tally.dropped + tally.lost);
         if !sending && owed == 0 {
             break;
         }
-        tokio::select! {
+        let ended = tokio::select! {
             _ = ticker.tick(), if sending => {
                 let frame_id = tally.sent;
-                stream.send_frame(frame_id, &frames[frame_id as usize % frames.len()]).await?;
+                let sent = stream.send_frame(frame_id, &frames[frame_id as usize % frames.len()]).await;
                 sent_at.insert(frame_id, Instant::now());
                 tally.sent += 1;
+                sent.err()
             }
             _ = tokio::time::sleep_until(drain_until.unwrap_or(deadline)), if !sending => {
-                tracing::warn!(stream = id, owed, "answers still owed after 60 s");
+                tracing::warn!(stream = %id, owed, "answers still owed after 60 s");
                 break;
             }
-            message = stream.next() => match message? {
-                Some(Body::RenderedFrame(f)) => {
+            message = stream.next() => match message {
+                Ok(Some(Body::RenderedFrame(f))) => {
                     if let Some(sent) = sent_at.remove(&f.frame_id) {
                         tally.latency_ms.push(sent.elapsed().as_secs_f64() * 1e3);
                     }
                     tally.rendered += 1;
-                    tally.dropped = f.dropped_frames;
+                    tally.dropped = dropped_before + f.dropped_frames;
+                    None
                 }
-                Some(Body::Error(e)) => {
-                    tracing::warn!(stream = id, "{}", describe_error(&e));
+                Ok(Some(Body::Error(e))) if e.code() == proto::ErrorCode::ShuttingDown => {
+                    Some(anyhow::anyhow!("{}", describe_error(&e)))
+                }
+                Ok(Some(Body::Error(e))) => {
+                    tracing::warn!(stream = %id, "{}", describe_error(&e));
                     tally.errors += 1;
+                    None
                 }
-                Some(_) => {}
-                None => anyhow::bail!("stream {id}: the server closed the stream"),
+                Ok(Some(_)) => None,
+                Ok(None) => Some(anyhow::anyhow!("stream {id}: the server closed the stream")),
+                Err(error) => Some(error),
             },
+        };
+        let Some(error) = ended else { continue };
+        if recover.give_up.is_zero() {
+            return Err(error);
         }
+        // Every frame sent and not answered was in flight on the stream that ended.
+        let owed = tally.sent.saturating_sub(tally.rendered + tally.errors + tally.dropped + tally.lost);
+        tracing::warn!(stream = %id, lost = owed, "the stream ended ({error:#}); reconnecting");
+        tally.lost += owed;
+        sent_at.clear();
+        dropped_before = tally.dropped;
+        (stream, _) = connection.reopen_stream(&mut id, &recover.description, recover.give_up).await?;
+        tally.reconnects += 1;
     }
     stream.close().await;
-    Ok(tally)
+    Ok((tally, id))
 }
 
 /// Renders the scene back to back until `deadline`; a 503 waits its `Retry-After` (capped at
-/// 1 s) before the next request.
-async fn drive_renders(connection: &Connection, id: &str, deadline: tokio::time::Instant) -> anyhow::Result<HttpTally> {
+/// 1 s) before the next request. With [`Recover`], a render without an answer or answered
+/// 502/504 (a load balancer without a backend) counts as failed and is tried again after a
+/// [`Backoff`] wait, and a 404 (a backend that does not know the scene) creates it again; the
+/// answer is the tally and the scene's id at the end.
+async fn drive_renders(
+    connection: &Connection,
+    mut id: String,
+    deadline: tokio::time::Instant,
+    recover: &Recover,
+) -> anyhow::Result<(HttpTally, String)> {
     let mut tally = HttpTally::default();
-    let path = format!("/v1/scenes/{id}/render");
     let body = json!({}).to_string();
+    let mut backoff = Backoff::new(recover.give_up);
     while tokio::time::Instant::now() < deadline {
         let sent = Instant::now();
-        let (status, answer) = connection.request(Method::POST, &path, body.clone().into()).await?;
-        match status {
-            StatusCode::OK => {
+        let path = format!("/v1/scenes/{id}/render");
+        let answer = connection.request(Method::POST, &path, body.clone().into()).await;
+        let failure = match answer {
+            Ok((StatusCode::OK, _)) => {
                 tally.ok += 1;
                 tally.latency_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+                backoff = Backoff::new(recover.give_up);
+                continue;
             }
-            StatusCode::SERVICE_UNAVAILABLE => {
+            Ok((StatusCode::SERVICE_UNAVAILABLE, _)) => {
                 tally.refused += 1;
                 tokio::time::sleep(Duration::from_millis(1000)).await;
+                continue;
             }
-            other => anyhow::bail!("render of scene {id}: {other}: {}", String::from_utf8_lossy(&answer)),
+            Ok((StatusCode::NOT_FOUND, answer)) if !recover.give_up.is_zero() => {
+                tracing::warn!(scene = %id, "render: 404 ({}); creating the scene again", String::from_utf8_lossy(&answer));
+                id = connection.create_scene(&recover.description).await?;
+                continue;
+            }
+            Ok((status @ (StatusCode::BAD_GATEWAY | StatusCode::GATEWAY_TIMEOUT), answer)) => {
+                anyhow::anyhow!("{status}: {}", String::from_utf8_lossy(&answer))
+            }
+            Ok((other, answer)) => {
+                anyhow::bail!("render of scene {id}: {other}: {}", String::from_utf8_lossy(&answer))
+            }
+            Err(error) => error,
+        };
+        tally.failed += 1;
+        tracing::warn!(scene = %id, "render failed: {failure:#}");
+        if recover.give_up.is_zero() {
+            return Err(failure.context(format!("render of scene {id}")));
+        }
+        if !backoff.wait().await {
+            return Err(failure.context(format!("render of scene {id}: no answer within {:?}", recover.give_up)));
         }
     }
-    Ok(tally)
+    Ok((tally, id))
 }
 
 /// `VmHWM` (peak resident memory) of /proc/self/status in MiB.
@@ -294,18 +388,26 @@ pub fn table(r: &LoadReport) -> String {
             r.server, r.seconds, r.streams, r.fps_per_stream, r.http_clients
         ),
         format!(
-            "stream frames: {} sent, {} rendered ({:.2}/s), {} dropped, {} errors; latency p50 {:.0} ms, p99 {:.0} ms",
+            "stream frames: {} sent, {} rendered ({:.2}/s), {} dropped, {} errors, {} lost in flight ({} reconnects); \
+             latency p50 {:.0} ms, p99 {:.0} ms",
             r.frames_sent,
             r.frames_rendered,
             r.frames_per_second,
             r.frames_dropped,
             r.frame_errors,
+            r.frames_lost,
+            r.stream_reconnects,
             r.frame_latency_p50_ms,
             r.frame_latency_p99_ms
         ),
         format!(
-            "HTTP renders: {} ok ({:.2}/s), {} refused (503); latency p50 {:.0} ms, p99 {:.0} ms",
-            r.renders_ok, r.renders_per_second, r.renders_refused, r.render_latency_p50_ms, r.render_latency_p99_ms
+            "HTTP renders: {} ok ({:.2}/s), {} refused (503), {} failed; latency p50 {:.0} ms, p99 {:.0} ms",
+            r.renders_ok,
+            r.renders_per_second,
+            r.renders_refused,
+            r.renders_failed,
+            r.render_latency_p50_ms,
+            r.render_latency_p99_ms
         ),
         format!("peak memory (this process): {mib}"),
     ]
@@ -448,12 +550,16 @@ async fn normal_phase(
         let addr: SocketAddr = connection.authority().parse().context("the server's address")?;
         hostile_tasks = hostile.start(connection.from_source(HOSTILE), addr, http_id, deadline);
     }
+    // The soak's clients do not reconnect: a stream that ends or a render that fails is a
+    // finding.
+    let no_recover = Recover { give_up: Duration::ZERO, description: serde_json::Value::Null };
     let stream = {
         let (connection, id, frames, fps) = (connection.clone(), stream_id.to_owned(), frames.clone(), options.fps);
-        tokio::spawn(async move { drive_stream(&connection, &id, &frames, fps, deadline).await })
+        let recover = no_recover.clone();
+        tokio::spawn(async move { drive_stream(&connection, id, &frames, fps, deadline, &recover).await })
     };
-    let renders = drive_renders(connection, http_id, deadline).await?;
-    let stream = stream.await.context("the stream client panicked")??;
+    let (renders, _) = drive_renders(connection, http_id.to_owned(), deadline, &no_recover).await?;
+    let (stream, _) = stream.await.context("the stream client panicked")??;
     for task in hostile_tasks {
         // Every hostile loop ends at the deadline; a stuck one is a finding, not a hang.
         match tokio::time::timeout(Duration::from_secs(30), task).await {

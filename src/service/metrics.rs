@@ -115,6 +115,32 @@ pub struct GpuMemory {
 #[derive(Default)]
 pub struct Metrics {
     inner: Mutex<Inner>,
+    /// What each GPU worker counts, by its number (the `worker` label).
+    workers: Mutex<BTreeMap<usize, WorkerCounts>>,
+}
+
+/// The counters of one GPU worker.
+#[derive(Clone, Copy, Debug, Default)]
+struct WorkerCounts {
+    frames: u64,
+    frame_seconds: f64,
+    gpu_memory: Option<GpuMemory>,
+}
+
+/// A per-worker metric family: name, type, help, and its value for one worker.
+type WorkerFamily = (&'static str, &'static str, &'static str, fn(&WorkerGauges, &WorkerCounts) -> String);
+
+/// One GPU worker's gauges, read when the metrics are scraped.
+pub struct WorkerGauges {
+    /// Its number: the `worker` label.
+    pub worker: usize,
+    pub adapter: String,
+    /// 0 while it gets no new work after its device was lost.
+    pub up: bool,
+    pub queue_depth: usize,
+    pub scenes: usize,
+    pub streams: usize,
+    pub device_losses: u64,
 }
 
 /// Values read when the metrics are scraped.
@@ -172,6 +198,66 @@ impl Metrics {
             Some(true) => q.over_budget += 1,
             Some(false) => q.within_budget += 1,
             None => {}
+        }
+    }
+
+    /// A frame rendered by GPU worker `worker`: [`Metrics::record_frame`], and its own count.
+    pub fn record_worker_frame(&self, worker: usize, seconds: f64, timings: &StageTimings) {
+        self.record_frame(seconds, timings);
+        let mut workers = self.workers.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let counts = workers.entry(worker).or_default();
+        counts.frames += 1;
+        counts.frame_seconds += seconds;
+    }
+
+    /// What worker `worker`'s device holds now; the unlabelled gauges are the sum over the
+    /// workers.
+    pub fn set_worker_gpu_memory(&self, worker: usize, memory: Option<GpuMemory>) {
+        let mut workers = self.workers.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        workers.entry(worker).or_default().gpu_memory = memory;
+        let total = workers.values().filter_map(|w| w.gpu_memory).reduce(|a, b| GpuMemory {
+            buffers: a.buffers + b.buffers,
+            textures: a.textures + b.textures,
+            buffer_bytes: a.buffer_bytes + b.buffer_bytes,
+            texture_bytes: a.texture_bytes + b.texture_bytes,
+            allocations: a.allocations + b.allocations,
+        });
+        drop(workers);
+        self.set_gpu_memory(total);
+    }
+
+    /// The per-worker families (label `worker`), appended to `out` (text from
+    /// [`Metrics::render`]).
+    pub fn render_workers(&self, workers: &[WorkerGauges], out: &mut String) {
+        let counts = self.workers.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).clone();
+        let header = |out: &mut String, name: &str, kind: &str, help: &str| {
+            let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} {kind}");
+        };
+        let count = |w: &WorkerGauges| counts.get(&w.worker).copied().unwrap_or_default();
+        header(out, "relume_worker_info", "gauge", "GPU workers, one per device: the adapter (always 1).");
+        for w in workers {
+            let _ = writeln!(out, "relume_worker_info{{worker=\"{}\",adapter=\"{}\"}} 1", w.worker, escape(&w.adapter));
+        }
+        let families: [WorkerFamily; 7] = [
+            ("relume_worker_up", "gauge", "1 when the worker takes new work, 0 after its device was lost.", |w, _| {
+                u8::from(w.up).to_string()
+            }),
+            ("relume_worker_queue_depth", "gauge", "Renders waiting for the worker.", |w, _| w.queue_depth.to_string()),
+            ("relume_worker_scenes", "gauge", "Scenes uploaded to the worker.", |w, _| w.scenes.to_string()),
+            ("relume_worker_streams", "gauge", "Streams pinned to the worker.", |w, _| w.streams.to_string()),
+            ("relume_worker_device_losses_total", "counter", "Devices the worker lost.", |w, _| {
+                w.device_losses.to_string()
+            }),
+            ("relume_worker_frames_total", "counter", "Frames the worker rendered.", |_, c| c.frames.to_string()),
+            ("relume_worker_frame_seconds_total", "counter", "Wall time of the worker's frames.", |_, c| {
+                c.frame_seconds.to_string()
+            }),
+        ];
+        for (name, kind, help, value) in families {
+            header(out, name, kind, help);
+            for w in workers {
+                let _ = writeln!(out, "{name}{{worker=\"{}\"}} {}", w.worker, value(w, &count(w)));
+            }
         }
     }
 

@@ -10,8 +10,12 @@
 //! - [`recordings`]: `/v1/recordings`, the RGB-D recordings under the asset directory, frame by
 //!   frame as stream messages; [`viewer`]: the browser viewer at `/`, files built into the
 //!   binary.
-//! - [`gpu_worker`]: the one thread that owns the GPU; handlers send it jobs through the
-//!   [`schedule`] queue, fair between clients, and a full queue is a 503.
+//! - [`gpu_worker`]: a thread that owns one GPU device; handlers send it jobs through the
+//!   [`schedule`] queue, fair between clients, and a full queue is a 503. [`workers`]: one
+//!   such worker per GPU (`--adapters`) and the routing of scenes, renders and streams
+//!   between them.
+//! - [`store`]: the scene store shared by backends behind a load balancer (`--scene-store`);
+//!   [`ready`]: `/readyz`, whether a load balancer should send this process new work.
 //! - [`listen`]: the connection loop: header and body timeouts, the connection cap.
 //! - [`scenes`]: admitting scene descriptions (limits, paths confined to the asset directory)
 //!   and the registry of scenes held.
@@ -19,10 +23,11 @@
 //! - [`client`]: a client of the service (`relume replay --server`); [`load`]: its load
 //!   benchmark (`relume load`).
 //!
-//! Shutdown (SIGINT, SIGTERM, or the future given to [`Server::run`]): the server stops
+//! Shutdown (SIGINT, SIGTERM, or the future given to [`Server::run`]): `/readyz` answers 503
+//! `draining` at once; after `drain_delay_seconds` (0 by default) the server stops
 //! accepting connections, answers new work with 503 `shutting_down`, lets in-flight requests
 //! and queued renders finish, closes streams with 1001 (going away) after an `Error` of code
-//! `SHUTTING_DOWN`, then stops the GPU thread. After `shutdown_grace_seconds` whatever is
+//! `SHUTTING_DOWN`, then stops the GPU threads. After `shutdown_grace_seconds` whatever is
 //! left is dropped.
 
 pub mod api;
@@ -34,13 +39,16 @@ pub mod http;
 pub mod listen;
 pub mod load;
 pub mod metrics;
+pub mod ready;
 pub mod recordings;
 pub mod scenes;
 pub mod schedule;
+pub mod store;
 pub mod stream;
 pub mod tickets;
 pub mod viewer;
 pub mod wire;
+pub mod workers;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -55,6 +63,7 @@ pub use config::{Config, LimitExceeded, Limits, Timeouts};
 pub use gpu_worker::{Backend, GpuWorker, WorkerError};
 pub use http::{openapi, openapi_json, router};
 pub use metrics::Metrics;
+pub use workers::Workers;
 
 /// Why the service could not start or stopped with an error.
 #[derive(Debug, thiserror::Error)]
@@ -63,6 +72,8 @@ pub enum ServeError {
     Assets { path: PathBuf, source: std::io::Error },
     #[error("asset directory {}: not a directory", .0.display())]
     AssetsNotADirectory(PathBuf),
+    #[error("scene store {}: {source}", path.display())]
+    Store { path: PathBuf, source: std::io::Error },
     #[error("starting the GPU thread: {0}")]
     Gpu(#[from] WorkerError),
     #[error("listening on {addr}: {source}")]
@@ -80,9 +91,16 @@ pub struct AppState {
     pub recordings: recordings::Recordings,
     /// Tickets issued by `POST /v1/tickets` and not yet used.
     pub tickets: tickets::Tickets,
-    pub worker: GpuWorker,
+    /// The GPU workers, one per device.
+    pub workers: Workers,
+    /// The scene store shared with other backends (`--scene-store`).
+    pub store: Option<store::SceneStore>,
+    /// Held while a scene is loaded from the store.
+    store_loads: tokio::sync::Mutex<()>,
     pub metrics: Arc<Metrics>,
     shutdown: watch::Sender<bool>,
+    /// A signal came: `/readyz` says `draining` (shutdown begins `drain_delay_seconds` later).
+    draining: std::sync::atomic::AtomicBool,
     streams: AtomicUsize,
     streams_closed: Notify,
     connections: listen::Connections,
@@ -98,6 +116,21 @@ impl AppState {
         config: Config,
         start: impl FnOnce(Arc<Metrics>) -> Result<GpuWorker, WorkerError> + Send + 'static,
     ) -> Result<Arc<AppState>, ServeError> {
+        let quarantine = Duration::from_secs(config.worker_quarantine_seconds);
+        AppState::start_workers(config, move |metrics| Ok(Workers::new(vec![start(metrics)?], quarantine))).await
+    }
+
+    /// [`AppState::start`] with the workers `start` makes (on a blocking thread).
+    pub async fn start_workers(
+        config: Config,
+        start: impl FnOnce(Arc<Metrics>) -> Result<Workers, WorkerError> + Send + 'static,
+    ) -> Result<Arc<AppState>, ServeError> {
+        let store = match &config.scene_store {
+            Some(dir) => {
+                Some(store::SceneStore::open(dir).map_err(|source| ServeError::Store { path: dir.clone(), source })?)
+            }
+            None => None,
+        };
         let assets = std::fs::canonicalize(&config.assets)
             .map_err(|source| ServeError::Assets { path: config.assets.clone(), source })?;
         if !assets.is_dir() {
@@ -105,7 +138,7 @@ impl AppState {
         }
         let metrics = Arc::new(Metrics::default());
         let worker_metrics = metrics.clone();
-        let worker = tokio::task::spawn_blocking(move || start(worker_metrics))
+        let workers = tokio::task::spawn_blocking(move || start(worker_metrics))
             .await
             .map_err(|e| WorkerError::Panicked(e.to_string()))??;
         let max_connections = config.limits.max_connections;
@@ -115,9 +148,12 @@ impl AppState {
             tickets: tickets::Tickets::new(config.ticket_seconds, config.limits.max_tickets),
             config,
             assets,
-            worker,
+            workers,
+            store,
+            store_loads: tokio::sync::Mutex::new(()),
             metrics,
             shutdown: watch::Sender::new(false),
+            draining: std::sync::atomic::AtomicBool::new(false),
             streams: AtomicUsize::new(0),
             streams_closed: Notify::new(),
             connections: listen::Connections::new(max_connections),
@@ -132,6 +168,11 @@ impl AppState {
     /// Becomes `true` when shutdown begins.
     pub fn shutdown_receiver(&self) -> watch::Receiver<bool> {
         self.shutdown.subscribe()
+    }
+
+    /// Whether a signal came: from then on the process is draining, shut down or not yet.
+    pub fn draining(&self) -> bool {
+        self.draining.load(Ordering::SeqCst) || self.shutting_down()
     }
 
     fn begin_shutdown(&self) {
@@ -162,11 +203,23 @@ impl AppState {
         }
     }
 
+    /// Open streams.
+    pub fn streams(&self) -> usize {
+        self.streams.load(Ordering::SeqCst)
+    }
+
+    /// The metrics' text: [`Metrics::render`] and the per-worker families.
+    pub fn metrics_text(&self) -> String {
+        let mut text = self.metrics.render(&self.gauges());
+        self.metrics.render_workers(&self.workers.gauges(), &mut text);
+        text
+    }
+
     /// The metrics' gauges, read now.
     pub fn gauges(&self) -> metrics::Gauges {
         metrics::Gauges {
-            queue_depth: self.worker.queue_depth(),
-            queue_capacity: self.worker.queue_capacity(),
+            queue_depth: self.workers.queue_depth(),
+            queue_capacity: self.workers.queue_capacity(),
             scenes: self.scenes.len(),
             streams: self.streams.load(Ordering::SeqCst),
             connections: self.connections.open(),
@@ -191,10 +244,11 @@ pub struct Server {
 }
 
 impl Server {
-    /// Checks the asset directory, starts the GPU thread and binds `config.addr`.
+    /// Checks the asset directory, starts the GPU workers (`config.adapters`) and binds
+    /// `config.addr`.
     pub async fn bind(config: Config) -> Result<Server, ServeError> {
-        let limits = config.limits;
-        Server::bind_with(config, move |metrics| GpuWorker::start(&limits, metrics)).await
+        let workers_config = config.clone();
+        Server::bind_workers(config, move |metrics| Workers::start(&workers_config, metrics)).await
     }
 
     /// [`Server::bind`] with the worker `start` makes (on a blocking thread), e.g. one on
@@ -205,6 +259,17 @@ impl Server {
     ) -> Result<Server, ServeError> {
         let addr = config.addr;
         let state = AppState::start(config, start).await?;
+        let listener = tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
+        Ok(Server { listener, state })
+    }
+
+    /// [`Server::bind`] with the workers `start` makes (on a blocking thread).
+    pub async fn bind_workers(
+        config: Config,
+        start: impl FnOnce(Arc<Metrics>) -> Result<Workers, WorkerError> + Send + 'static,
+    ) -> Result<Server, ServeError> {
+        let addr = config.addr;
+        let state = AppState::start_workers(config, start).await?;
         let listener = tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
         Ok(Server { listener, state })
     }
@@ -225,13 +290,24 @@ impl Server {
         tracing::info!(
             addr = %listener.local_addr()?,
             assets = %state.assets.display(),
-            adapter = state.worker.adapter(),
+            adapter = state.workers.adapter(),
+            workers = state.workers.len(),
+            scene_store = state.store.is_some(),
             token = state.config.token.is_some(),
             "serving"
         );
         let signalled = state.clone();
+        let drain_delay = Duration::from_secs(state.config.drain_delay_seconds);
         let graceful = async move {
             shutdown.await;
+            signalled.draining.store(true, Ordering::SeqCst);
+            if !drain_delay.is_zero() {
+                tracing::info!(
+                    ?drain_delay,
+                    "draining: /readyz answers 503, serving as before until the delay is over"
+                );
+                tokio::time::sleep(drain_delay).await;
+            }
             tracing::info!("shutting down: refusing new work, finishing in-flight requests and queued renders");
             signalled.begin_shutdown();
         };
@@ -256,7 +332,7 @@ impl Server {
         } else {
             tracing::warn!(?grace, "grace period over: dropping the requests still in flight");
         }
-        state.worker.stop().await;
+        state.workers.stop().await;
         tracing::info!("stopped");
         Ok(())
     }

@@ -279,6 +279,14 @@ impl SceneRegistry {
 
     /// Holds a slot for a new scene, or refuses when `max_scenes` are held or loading.
     pub fn reserve(&self) -> Result<Reservation, ApiError> {
+        // Unguessable ids: a per-process random key hashes a counter.
+        let id = format!("{:016x}", self.ids.hash_one(self.next.fetch_add(1, Ordering::Relaxed)));
+        self.reserve_as(id)
+    }
+
+    /// [`SceneRegistry::reserve`] for a scene whose id is given (one read from the scene
+    /// store).
+    pub fn reserve_as(&self, id: String) -> Result<Reservation, ApiError> {
         let mut inner = self.lock();
         if inner.scenes.len() + inner.reserved >= self.max_scenes {
             return Err(ApiError::limit(
@@ -288,8 +296,6 @@ impl SceneRegistry {
             ));
         }
         inner.reserved += 1;
-        // Unguessable ids: a per-process random key hashes a counter.
-        let id = format!("{:016x}", self.ids.hash_one(self.next.fetch_add(1, Ordering::Relaxed)));
         Ok(Reservation { inner: self.inner.clone(), id, committed: false })
     }
 

@@ -88,7 +88,9 @@ pub async fn open_stream(
     if state.shutting_down() {
         return Err(ApiError::shutting_down());
     }
-    let scene = state.scenes.get(&id).ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
+    let scene = super::store::scene(&state, &id)
+        .await?
+        .ok_or_else(|| ApiError::not_found(format!("no scene with id `{id}`")))?;
     let start = stream_start(&uri).map_err(|e| ApiError::scene(&e, &state.assets))?;
     let upgrade = upgrade.map_err(|rejection| {
         ApiError::new(rejection.status(), super::error::Code::UpgradeRequired, rejection.body_text())
@@ -182,6 +184,8 @@ struct Session {
     state: Arc<AppState>,
     /// Whose queue the stream's frames wait in.
     client: ClientId,
+    /// The GPU worker the stream's frames go to.
+    pin: super::workers::StreamPin,
     scene_id: String,
     mesh_count: usize,
     /// The scene's floating origin: the stream's cameras and lights are made relative to it.
@@ -210,6 +214,7 @@ impl Session {
     ) -> Session {
         let resolved = &scene.info.resolved;
         let mut session = Session {
+            pin: state.workers.pin(&scene_id),
             state,
             client,
             scene_id,
@@ -417,7 +422,7 @@ impl Session {
             glossy: s.glossy,
         };
         let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);
-        match self.state.worker.try_render_stream_frame(self.client, &self.scene_id, job) {
+        match self.state.workers.try_render_stream_frame(&mut self.pin, self.client, &self.scene_id, job) {
             Ok(answer) => {
                 let budget_ms = s.budget_ms;
                 self.in_flight = Some(InFlight {

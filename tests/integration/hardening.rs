@@ -467,7 +467,7 @@ async fn a_lost_device_is_recreated_and_its_scenes_re_uploaded() {
     let before = server.post(&path, &json!({})).await;
     assert_eq!(before.status, StatusCode::OK);
     // The device is destroyed under the next render: that render is answered 503...
-    server.state.worker.lose_device().expect("the hook is queued");
+    server.state.workers.lose_device().expect("the hook is queued");
     let lost = server.post(&path, &json!({})).await;
     lost.error(503, "device_lost");
     assert_eq!(lost.header("retry-after"), "1");

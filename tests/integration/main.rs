@@ -35,6 +35,7 @@ mod stream_visibility;
 mod synthetic;
 mod textures;
 mod twins;
+mod workers;
 
 use relume::gpu::Gpu;
 use relume::scene::Scene;

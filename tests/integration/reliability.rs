@@ -144,7 +144,7 @@ async fn frames_rendered(server: &TestServer) -> u64 {
 /// Waits (up to `within`) until the render queue holds `depth` renders; whether it did.
 async fn queue_reaches(server: &TestServer, depth: usize, within: Duration) -> bool {
     let deadline = Instant::now() + within;
-    while server.state.worker.queue_depth() != depth {
+    while server.state.workers.queue_depth() != depth {
         if Instant::now() > deadline {
             return false;
         }

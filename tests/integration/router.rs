@@ -77,7 +77,7 @@ impl App {
     }
 
     async fn stop(self) {
-        self.state.worker.stop().await;
+        self.state.workers.stop().await;
     }
 }
 

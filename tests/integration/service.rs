@@ -1039,6 +1039,7 @@ async fn a_recording_replays_through_the_server_as_offline() {
         frames: Some(2),
         exposure: None,
         progress: false,
+        reconnect: Duration::ZERO,
     };
     let summary = replay_remote(&options).await.expect("the replay runs");
     assert_eq!((summary.frames, summary.width, summary.height, summary.dropped_frames), (2, 640, 480, 0));
