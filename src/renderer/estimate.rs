@@ -125,10 +125,7 @@ impl Estimator {
         let receivers: Vec<Option<Receiver>> = picked
             .iter()
             .map(|&i| {
-                hits[i].map(|h| {
-                    let (p, n, s) = flat.surface_at(h.triangle, h.barycentrics);
-                    Receiver::new(p, n, s, eye)
-                })
+                hits[i].map(|h| flat.receiver_at(h.triangle, h.barycentrics, eye))
             })
             .collect();
         let scene = cpu::ExactScene { bvh, vals: &vals, glossy: renderer.glossy() };
