@@ -527,6 +527,7 @@ fn exact_comparison(
     let brute_force_vs_exact = ModeVsExact::against(&exact, exact_sum, "brute_force", brute, 0.0, 0.0);
     if let Some(dir) = images {
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
+        write_exr(exact.indirect(), &dir.join("indirect_exact.exr"))?;
     }
     let mut modes = Vec::new();
     for (key, occlusion, rule) in [

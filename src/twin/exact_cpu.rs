@@ -277,7 +277,8 @@ impl Frame<'_> {
         ws: &mut Workspace,
         rays: &mut u64,
     ) -> Halves {
-        let term = |val: &Val| val_radiance_sided(r.position, r.normal, r.geometric, &r.surface, r.view, val, self.glossy);
+        let term =
+            |val: &Val| val_radiance_sided(r.position, r.normal, r.geometric, &r.surface, r.view, val, self.glossy);
         // Pushed off the surface along its geometric normal: the shading normal may point
         // along the surface, or into it (docs/design.md §3, shading and geometric normals).
         let origin = r.position + r.geometric * RAY_OFFSET;
@@ -659,7 +660,8 @@ mod tests {
             }
             let want = 0.5 / std::f64::consts::PI * above;
             let r = Receiver::sided(Vec3::ZERO, bent, Vec3::Y, matte, eye);
-            let brute = crate::twin::shade_brute_force_sided(r.position, r.normal, r.geometric, &matte, eye, &vals, false);
+            let brute =
+                crate::twin::shade_brute_force_sided(r.position, r.normal, r.geometric, &matte, eye, &vals, false);
             let scene = ExactScene { bvh: &trace, vals: &vals, glossy: false };
             let exact = render(&scene, &Receivers::Hits(&[Some(r)]), 1, 1, ValSampling::All).image.rgb(0);
             for (name, got) in [("brute force", brute), ("exact", exact)] {
