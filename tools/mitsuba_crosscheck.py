@@ -155,7 +155,8 @@ def main():
     parser.add_argument("--height", type=int, default=64)
     parser.add_argument("--spp", type=int, default=256, help="samples per pixel of each of the two halves")
     parser.add_argument("--variant", default="llvm_ad_rgb")
-    parser.add_argument("--out", help="directory for mitsuba_indirect.exr")
+    parser.add_argument("--out", help="directory for mitsuba_indirect.exr and mitsuba_variance.exr")
+    parser.add_argument("--reuse", help="a directory an earlier run wrote with --out: compare with its images, render nothing")
     args = parser.parse_args()
 
     import mitsuba as mi
@@ -166,19 +167,26 @@ def main():
     if args.relume:
         relume = np.array(mi.Bitmap(args.relume), dtype=np.float64)
         height, width = relume.shape[:2]
-    scene = mi.load_dict(scene_dict(mi, args.scene, width, height))
-    a = render_indirect(mi, scene, args.spp, seed=1).astype(np.float64)
-    b = render_indirect(mi, scene, args.spp, seed=2).astype(np.float64)
-    mean = 0.5 * (a + b)
-    variance = 0.25 * (a - b) ** 2
+    if args.reuse:
+        mean = np.array(mi.Bitmap(os.path.join(args.reuse, "mitsuba_indirect.exr")), dtype=np.float64)[..., :3]
+        variance = np.array(mi.Bitmap(os.path.join(args.reuse, "mitsuba_variance.exr")), dtype=np.float64)[..., :3]
+        if mean.shape[:2] != (height, width):
+            fail(f"--reuse holds {mean.shape[1]}x{mean.shape[0]} images, relume's is {width}x{height}")
+    else:
+        scene = mi.load_dict(scene_dict(mi, args.scene, width, height))
+        a = render_indirect(mi, scene, args.spp, seed=1).astype(np.float64)
+        b = render_indirect(mi, scene, args.spp, seed=2).astype(np.float64)
+        mean = 0.5 * (a + b)
+        variance = 0.25 * (a - b) ** 2
     if args.out:
         os.makedirs(args.out, exist_ok=True)
         mi.Bitmap(mean.astype(np.float32)).write(os.path.join(args.out, "mitsuba_indirect.exr"))
+        mi.Bitmap(variance.astype(np.float32)).write(os.path.join(args.out, "mitsuba_variance.exr"))
     report = {
         "scene": args.scene,
         "width": width,
         "height": height,
-        "spp": 2 * args.spp,
+        "spp": None if args.reuse else 2 * args.spp,
         "variant": args.variant,
         "mitsuba_rel_stderr": float(np.sqrt(variance.sum() / (mean**2).sum())),
     }

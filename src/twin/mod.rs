@@ -316,7 +316,7 @@ pub fn interpolation_weights(kernel: InterpolationKernel, n_v: Vec3, offsets: &[
             let facing = facing(n_v, *n);
             match kernel {
                 InterpolationKernel::Paper => paper_weight(o.length(), d_max) * facing,
-                InterpolationKernel::Smooth => smooth_weight(n_v, o, d_max) * facing,
+                InterpolationKernel::Smooth => smooth_weight(n_v, *n, o, d_max) * facing,
             }
         })
         .collect();
@@ -350,21 +350,28 @@ pub fn paper_weight(d: f32, d_max: f32) -> f32 {
     if d_max > 0.0 { (1.0 - d / d_max).max(0.0) } else { 1.0 }
 }
 
-/// Depth behind a vertex's tangent plane, as a fraction of `d_max`, at which the smooth
-/// kernel's weight reaches zero: points there lie on the other side of thin geometry (a
-/// pillar's other faces), not on this surface curving away.
+/// Depth behind the smooth surface through a vertex and a neighbour, as a fraction of `d_max`,
+/// at which the smooth kernel's weight reaches zero: points there lie on the other side of thin
+/// geometry or on a parallel surface, not on this surface curving away.
 pub const PLANE_FALLOFF: f32 = 0.25;
 
-/// The smooth kernel's weight of a neighbour at `offset` from a vertex with normal `n_v`:
-/// `(1 - (d / d_max)^2)^2` (zero with zero slope at the support radius `d_max`, so the value
-/// and its gradient are continuous as the neighbour set changes), times
-/// `clamp(1 + dot(n_v, offset) / (PLANE_FALLOFF d_max), 0, 1)`.
-pub fn smooth_weight(n_v: Vec3, offset: Vec3, d_max: f32) -> f32 {
+/// The smooth kernel's weight of a neighbour at `offset` with normal `n_j` from a vertex with
+/// normal `n_v`: `(1 - (d / d_max)^2)^2` (zero with zero slope at the support radius `d_max`, so
+/// the value and its gradient are continuous as the neighbour set changes), times
+/// `clamp(1 + dot((n_v + n_j) / 2, offset) / (PLANE_FALLOFF d_max), 0, 1)`.
+///
+/// `dot((n_v + n_j) / 2, offset)` is the neighbour's depth behind the smooth surface the two
+/// normals describe: on a circle of any radius it is exactly 0 (the tangent plane's depth
+/// `dot(n_v, offset) = -R (1 - cos phi)` is what the curvature `dot(n_v - n_j, offset) / 2`
+/// predicts), so a round pillar's vertex takes the light of the points around its curve, as
+/// the vertex normals round it, instead of its facet's alone; a parallel surface behind (equal
+/// normals) is as far behind it as behind the tangent plane.
+pub fn smooth_weight(n_v: Vec3, n_j: Vec3, offset: Vec3, d_max: f32) -> f32 {
     if d_max <= 0.0 {
         return 1.0;
     }
     let q = (1.0 - offset.length_squared() / (d_max * d_max)).max(0.0);
-    let plane = (1.0 + n_v.dot(offset) / (PLANE_FALLOFF * d_max)).clamp(0.0, 1.0);
+    let plane = (1.0 + 0.5 * (n_v + n_j).dot(offset) / (PLANE_FALLOFF * d_max)).clamp(0.0, 1.0);
     q * q * plane
 }
 
