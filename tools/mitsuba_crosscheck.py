@@ -156,8 +156,11 @@ def main():
     parser.add_argument("--spp", type=int, default=256, help="samples per pixel of each of the two halves")
     parser.add_argument("--variant", default="llvm_ad_rgb")
     parser.add_argument("--out", help="directory for mitsuba_indirect.exr and mitsuba_variance.exr")
-    parser.add_argument("--reuse", help="a directory an earlier run wrote with --out: compare with its images, render nothing")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the first half (the second takes seed + 1)")
+    parser.add_argument("--reuse", nargs="+", help="directories earlier runs wrote with --out (independent seeds): "
+                        "compare with their mean, render nothing")
     args = parser.parse_args()
+    args.width_given = any(a.startswith(("--width", "--height")) for a in sys.argv[1:])
 
     import mitsuba as mi
 
@@ -166,16 +169,19 @@ def main():
     width, height = args.width, args.height
     if args.relume:
         relume = np.array(mi.Bitmap(args.relume), dtype=np.float64)
-        height, width = relume.shape[:2]
+        if not (args.width_given or args.reuse):
+            height, width = relume.shape[:2]
     if args.reuse:
-        mean = np.array(mi.Bitmap(os.path.join(args.reuse, "mitsuba_indirect.exr")), dtype=np.float64)[..., :3]
-        variance = np.array(mi.Bitmap(os.path.join(args.reuse, "mitsuba_variance.exr")), dtype=np.float64)[..., :3]
-        if mean.shape[:2] != (height, width):
-            fail(f"--reuse holds {mean.shape[1]}x{mean.shape[0]} images, relume's is {width}x{height}")
+        read = lambda d, name: np.array(mi.Bitmap(os.path.join(d, name)), dtype=np.float64)[..., :3]
+        means = [read(d, "mitsuba_indirect.exr") for d in args.reuse]
+        # Independent runs: the mean's variance is the runs' summed variances over n².
+        variance = sum(read(d, "mitsuba_variance.exr") for d in args.reuse) / len(args.reuse) ** 2
+        mean = sum(means) / len(means)
+        height, width = mean.shape[:2]
     else:
         scene = mi.load_dict(scene_dict(mi, args.scene, width, height))
-        a = render_indirect(mi, scene, args.spp, seed=1).astype(np.float64)
-        b = render_indirect(mi, scene, args.spp, seed=2).astype(np.float64)
+        a = render_indirect(mi, scene, args.spp, seed=args.seed).astype(np.float64)
+        b = render_indirect(mi, scene, args.spp, seed=args.seed + 1).astype(np.float64)
         mean = 0.5 * (a + b)
         variance = 0.25 * (a - b) ** 2
     if args.out:
@@ -191,6 +197,13 @@ def main():
         "mitsuba_rel_stderr": float(np.sqrt(variance.sum() / (mean**2).sum())),
     }
     if relume is not None:
+        # A relume image k times the size is averaged over k x k blocks: the pixel's area, as
+        # Mitsuba's box filter integrates it (relume's exact reference samples pixel centres).
+        k = relume.shape[0] // height
+        if relume.shape[:2] != (k * height, k * width) or k < 1:
+            fail(f"--relume is {relume.shape[1]}x{relume.shape[0]}, not a multiple of {width}x{height}")
+        relume = relume.reshape(height, k, width, k, relume.shape[-1]).mean(axis=(1, 3))
+        report["relume_supersampling"] = k * k
         rgb = relume[..., :3]
         covered = relume[..., 3] > 0 if relume.shape[-1] > 3 else np.ones(rgb.shape[:2], bool)
         report["relume_vs_mitsuba"] = compare(rgb, mean, variance, covered)
