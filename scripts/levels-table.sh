@@ -13,7 +13,7 @@ while [ $# -gt 0 ]; do
         *) echo "levels-table: unknown argument $1" >&2; exit 2 ;;
     esac
 done
-scenes="cornell_bunny cornell_bunny_small cornell_bunny_ears cornell_glossy_open cornell_bunny_two_bounces cornell_gltf_small sponza_bunny sponza_lights"
+scenes="cornell_bunny cornell_bunny_small cornell_bunny_ears cornell_glossy_open cornell_bunny_two_bounces cornell_gltf_small sponza_bunny sponza_lights sponza_gallery"
 if [ "${LEVELS_SKIP_RUN:-0}" != 1 ]; then
     for n in $scenes; do
         "$bin" bench --levels "fixtures/scenes/$n.json" --width "$size" --height "$size" --out "$out/$n"

@@ -236,10 +236,7 @@ pub fn exact_reference_seeded(
     let flat = &renderer.scene.flat;
     let eye = renderer.view().eye();
     let bvh = flat.trace_bvh();
-    let surface = |t: u32, b: glam::Vec2| {
-        let (p, n, s) = flat.surface_at(t, b);
-        Receiver::new(p, n, s, eye)
-    };
+    let surface = |t: u32, b: glam::Vec2| flat.receiver_at(t, b, eye);
     let camera = CameraRays::new(renderer.camera_to_clip(width, height), width, height);
     let resolved: Vec<Option<Receiver>> = hits.iter().map(|h| h.map(|h| surface(h.triangle, h.barycentrics))).collect();
     let receivers = if options.spp == 1 {
@@ -530,6 +527,7 @@ fn exact_comparison(
     let brute_force_vs_exact = ModeVsExact::against(&exact, exact_sum, "brute_force", brute, 0.0, 0.0);
     if let Some(dir) = images {
         write_png(exact.indirect(), &dir.join("indirect_exact.png"), exposure)?;
+        write_exr(exact.indirect(), &dir.join("indirect_exact.exr"))?;
     }
     let mut modes = Vec::new();
     for (key, occlusion, rule) in [

@@ -137,15 +137,8 @@ impl Estimator {
         }
         let bvh = &self.bvh.as_ref().expect("built above").1;
         let eye = renderer.view().eye();
-        let receivers: Vec<Option<Receiver>> = picked
-            .iter()
-            .map(|&i| {
-                hits[i].map(|h| {
-                    let (p, n, s) = flat.surface_at(h.triangle, h.barycentrics);
-                    Receiver::new(p, n, s, eye)
-                })
-            })
-            .collect();
+        let receivers: Vec<Option<Receiver>> =
+            picked.iter().map(|&i| hits[i].map(|h| flat.receiver_at(h.triangle, h.barycentrics, eye))).collect();
         let scene = cpu::ExactScene { bvh, vals: &vals, glossy: renderer.glossy() };
         let sampling = ValSampling::Importance { samples: options.samples, seed: options.seed };
         let n = picked.len() as u32;

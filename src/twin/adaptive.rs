@@ -113,7 +113,7 @@ pub fn candidate_weights(
             }
             let spatial = match kernel {
                 InterpolationKernel::Paper => super::paper_weight(o.length(), radius),
-                InterpolationKernel::Smooth => super::smooth_weight(n_v, o, radius),
+                InterpolationKernel::Smooth => super::smooth_weight(n_v, n, o, radius),
             };
             spatial * super::facing(n_v, n)
         })

@@ -1,7 +1,7 @@
 //! The exact-visibility reference on the CPU (docs/design.md §5): the same physics as
 //! `shaders/exact.wgsl` (every VAL at every receiver, the disc form factor and Phong of
-//! [`val_radiance`], one shadow ray per receiver-VAL pair from `p + n RAY_OFFSET` to
-//! `l + n_l RAY_OFFSET`), over rayon's threads, through [`TraceBvh`] (obvhs's CWBVH): each
+//! [`val_radiance_sided`], one shadow ray per receiver-VAL pair from `p + n_g RAY_OFFSET`, `n_g`
+//! the receiver's geometric normal, to `l + n_l RAY_OFFSET`), over rayon's threads, through [`TraceBvh`] (obvhs's CWBVH): each
 //! receiver's shadow rays go to the VALs in Morton order, as packets or one by one
 //! ([`ShadowTraversal`], chosen per frame by timing both on a few pixels: the image is the same
 //! either way). For CPU adapters and CI, where the GPU pass runs on lavapipe.
@@ -18,7 +18,7 @@
 //! otherwise.
 
 use super::bvh::{ShadowTraversal, TraceBvh};
-use super::{Material, Val, luminance, val_radiance, view_direction};
+use super::{Material, Val, luminance, val_radiance_sided, view_direction};
 use crate::image::LinearImage;
 use glam::{Mat4, Vec3, Vec4};
 use rand::{Rng, SeedableRng};
@@ -38,19 +38,29 @@ pub const MAX_SPP: u32 = 256;
 /// distribution over the VALs whatever the count.
 pub const MAX_VAL_SAMPLES: u32 = 1 << 20;
 
-/// A point that receives indirect light: position (m), unit normal, material and the unit
-/// direction toward the eye.
+/// A point that receives indirect light: position (m), unit shading normal, unit geometric
+/// normal (its triangle's, on the shading normal's side; both facing the eye), material and the
+/// unit direction toward the eye.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Receiver {
     pub position: Vec3,
     pub normal: Vec3,
+    pub geometric: Vec3,
     pub surface: Material,
     pub view: Vec3,
 }
 
 impl Receiver {
+    /// A receiver on a flat surface (shading normal = geometric normal), seen from `eye`.
     pub fn new(position: Vec3, normal: Vec3, surface: Material, eye: Vec3) -> Self {
-        Self { position, normal, surface, view: view_direction(position, normal, eye) }
+        Self::sided(position, normal, normal, surface, eye)
+    }
+
+    /// A receiver with shading normal `normal` and geometric normal `geometric`, both turned to
+    /// face `eye` ([`super::facing_viewer`]).
+    pub fn sided(position: Vec3, normal: Vec3, geometric: Vec3, surface: Material, eye: Vec3) -> Self {
+        let (normal, geometric) = super::facing_viewer(position, normal, geometric, eye);
+        Self { position, normal, geometric, surface, view: view_direction(position, normal, eye) }
     }
 }
 
@@ -145,7 +155,7 @@ pub const PILOT_MIN_PIXELS: usize = 4096;
 pub const PILOT_PIXELS: usize = 64;
 
 /// Render the exact-visibility reference: `width` x `height` pixels from `receivers`, each
-/// summing (or estimating, per `vals`) the visible VALs' [`val_radiance`], with the faster
+/// summing (or estimating, per `vals`) the visible VALs' [`val_radiance_sided`], with the faster
 /// shadow-ray traversal for the scene (a pilot on a few pixels times both).
 pub fn render(scene: &ExactScene, receivers: &Receivers, width: u32, height: u32, sampling: ValSampling) -> ExactImage {
     render_with(scene, receivers, width, height, sampling, None)
@@ -267,8 +277,11 @@ impl Frame<'_> {
         ws: &mut Workspace,
         rays: &mut u64,
     ) -> Halves {
-        let term = |val: &Val| val_radiance(r.position, r.normal, &r.surface, r.view, val, self.glossy);
-        let origin = r.position + r.normal * RAY_OFFSET;
+        let term =
+            |val: &Val| val_radiance_sided(r.position, r.normal, r.geometric, &r.surface, r.view, val, self.glossy);
+        // Pushed off the surface along its geometric normal: the shading normal may point
+        // along the surface, or into it (docs/design.md §3, shading and geometric normals).
+        let origin = r.position + r.geometric * RAY_OFFSET;
         match self.sampling {
             ValSampling::All | ValSampling::Stride(_) => {
                 ws.terms.clear();
@@ -588,6 +601,79 @@ mod tests {
             }
         }
         assert!(runs[0].shadow_rays <= 16 * n as u64, "one shadow ray per draw at most");
+    }
+
+    /// Shading and geometric normals (docs/design.md §3), in closed form: a receiver on a floor
+    /// (y = 0, geometric normal +Y) whose shading normal is bent by 60 and by 90 degrees toward a
+    /// Lambertian wall (x = 1, y and z in [-1, 1], facing -X, radiance `L_e`) that reaches below
+    /// the floor. The irradiance is `L_e` times the integral over the wall of
+    /// `cos_wall max(0, n_s . w) / d²` over the part above the floor only: light from below the
+    /// geometric surface does not count, though the bent shading normal faces it. That integral
+    /// by midpoint quadrature (600 x 300 cells on the upper half) must equal the brute force's
+    /// sum over the wall as 40 x 40 VALs (no visibility) and the exact reference's (shadow rays
+    /// through the floor, from the receiver pushed along its geometric normal) within 1 %; a
+    /// receiver that took the lower half too, as the shading normal alone would, is 20-100 % over.
+    #[test]
+    fn bent_shading_normals_take_light_from_above_the_geometric_surface_only() {
+        let l_e = 2.0f32;
+        let n = 40;
+        let side = 2.0 / n as f32;
+        let vals: Vec<Val> = (0..n * n)
+            .map(|k| {
+                let (i, j) = ((k % n) as f32, (k / n) as f32);
+                Val {
+                    position: Vec3::new(1.0, -1.0 + (j + 0.5) * side, -1.0 + (i + 0.5) * side),
+                    normal: Vec3::NEG_X,
+                    area: side * side,
+                    flux: Vec3::splat(std::f32::consts::PI * l_e * side * side),
+                }
+            })
+            .collect();
+        let positions = vec![
+            Vec3::new(-4.0, 0.0, -4.0),
+            Vec3::new(4.0, 0.0, -4.0),
+            Vec3::new(4.0, 0.0, 4.0),
+            Vec3::new(-4.0, 0.0, 4.0),
+        ];
+        let trace = TraceBvh::build(&positions, &[[0, 2, 1], [0, 3, 2]]);
+        let matte = Material { diffuse: Vec3::splat(0.5), specular: Vec3::ZERO, exponent: 1.0, diffuse_texture: None };
+        let eye = Vec3::new(-1.0, 2.0, 0.3);
+        for degrees in [60.0f32, 90.0] {
+            let bent = Vec3::new(degrees.to_radians().sin(), degrees.to_radians().cos(), 0.0);
+            // The quadrature, in f64: the wall's upper half, where d is at least 1 m.
+            let (cells_z, cells_y) = (600, 300);
+            let (dz, dy) = (2.0 / cells_z as f64, 1.0 / cells_y as f64);
+            let mut above = 0.0f64;
+            let mut below = 0.0f64;
+            for iy in 0..2 * cells_y {
+                for iz in 0..cells_z {
+                    let y = -1.0 + (iy as f64 + 0.5) * dy;
+                    let z = -1.0 + (iz as f64 + 0.5) * dz;
+                    let (vx, vy, vz) = (1.0f64, y, z);
+                    let d2 = vx * vx + vy * vy + vz * vz;
+                    let d = d2.sqrt();
+                    let cos_wall = vx / d;
+                    let cos_shading = ((bent.x as f64) * vx + (bent.y as f64) * vy) / d;
+                    let term = l_e as f64 * cos_wall * cos_shading.max(0.0) / d2 * dy * dz;
+                    if y > 0.0 { above += term } else { below += term }
+                }
+            }
+            let want = 0.5 / std::f64::consts::PI * above;
+            let r = Receiver::sided(Vec3::ZERO, bent, Vec3::Y, matte, eye);
+            let brute =
+                crate::twin::shade_brute_force_sided(r.position, r.normal, r.geometric, &matte, eye, &vals, false);
+            let scene = ExactScene { bvh: &trace, vals: &vals, glossy: false };
+            let exact = render(&scene, &Receivers::Hits(&[Some(r)]), 1, 1, ValSampling::All).image.rgb(0);
+            for (name, got) in [("brute force", brute), ("exact", exact)] {
+                let ratio = got.x as f64 / want;
+                assert!((ratio - 1.0).abs() < 0.01, "{degrees} degrees, {name}: {} vs quadrature {want}", got.x);
+            }
+            // The test can fail: the shading normal alone (the flat surface's sum, `n_g = n_s`)
+            // adds the lower half.
+            assert!(below > 0.2 * above, "{degrees} degrees: the lower half must matter ({below} vs {above})");
+            let unsided = crate::twin::shade_brute_force(r.position, r.normal, &matte, eye, &vals, false);
+            assert!(unsided.x as f64 > 1.15 * want, "{degrees} degrees: {} vs {want}", unsided.x);
+        }
     }
 
     /// Primary rays: at one sample per pixel through the pixel centre (the analytic ray-plane

@@ -213,6 +213,23 @@ impl FlatScene {
         (twin::barycentric(b, p[0], p[1], p[2]), normal, surface)
     }
 
+    /// The unit face normal of `triangle` turned to the side of `shading` (the geometric normal
+    /// of `shader/scene.wgsl`'s `surface_at`; docs/design.md §3, shading and geometric normals).
+    pub fn geometric_normal(&self, triangle: u32, shading: Vec3) -> Vec3 {
+        let t = 3 * triangle as usize;
+        let p = [0, 1, 2].map(|k| Vec3::from(self.vertices[self.indices[t + k] as usize].position));
+        twin::oriented_face_normal((p[1] - p[0]).cross(p[2] - p[0]).normalize(), shading)
+    }
+
+    /// The receiver a viewer at `eye` sees at barycentrics `b` of `triangle`: [`Self::surface_at`]
+    /// with its geometric normal, both normals facing the viewer (`facing_viewer` of
+    /// `surface_at` in the per-pixel passes).
+    pub fn receiver_at(&self, triangle: u32, b: glam::Vec2, eye: Vec3) -> twin::exact_cpu::Receiver {
+        let (p, n, m) = self.surface_at(triangle, b);
+        let geometric = self.geometric_normal(triangle, n);
+        twin::exact_cpu::Receiver::sided(p, n, geometric, m, eye)
+    }
+
     /// Centre and radius of a sphere bounding every vertex (m).
     pub fn bounding_sphere(&self) -> (Vec3, f32) {
         let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));

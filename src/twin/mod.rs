@@ -122,6 +122,42 @@ pub fn val_geometry(x: Vec3, n_x: Vec3, val_position: Vec3, val_normal: Vec3, va
     ValGeometry { direction: w, cos_receiver, weight: cos_val / (PI * d2 + val_area.max(0.0)) }
 }
 
+/// The unit face normal `face` turned to the side of the shading normal `shading` (WGSL
+/// `oriented_face_normal`): the vertex normals decide which side of a triangle is its front
+/// (docs/design.md §3, shading and geometric normals).
+pub fn oriented_face_normal(face: Vec3, shading: Vec3) -> Vec3 {
+    if face.dot(shading) < 0.0 { -face } else { face }
+}
+
+/// A surface point's (shading, geometric) normals as a viewer at `eye` sees it (WGSL
+/// `facing_viewer`): seen from behind its geometric normal, both are flipped (the back is shaded
+/// as a surface of its own).
+pub fn facing_viewer(position: Vec3, normal: Vec3, geometric: Vec3, eye: Vec3) -> (Vec3, Vec3) {
+    if geometric.dot(eye - position) < 0.0 { (-normal, -geometric) } else { (normal, geometric) }
+}
+
+/// 1 where direction `w` leaves the surface on its geometric normal `n_g`'s side, else 0 (WGSL
+/// `above_surface`): light from below the geometric surface would pass through it.
+pub fn above_surface(n_g: Vec3, w: Vec3) -> f32 {
+    if n_g.dot(w) > 0.0 { 1.0 } else { 0.0 }
+}
+
+/// [`val_geometry`] at a receiver with shading normal `n_x` and geometric normal `n_g` (WGSL
+/// `val_geometry_sided`): the cosine is the shading normal's, and 0 for a VAL below the
+/// geometric surface. Equal to [`val_geometry`] on a flat surface (`n_g = n_x`).
+pub fn val_geometry_sided(
+    x: Vec3,
+    n_x: Vec3,
+    n_g: Vec3,
+    val_position: Vec3,
+    val_normal: Vec3,
+    val_area: f32,
+) -> ValGeometry {
+    let mut geo = val_geometry(x, n_x, val_position, val_normal, val_area);
+    geo.cos_receiver *= above_surface(n_g, geo.direction);
+    geo
+}
+
 /// Irradiance (W/m²) at `x` from one Lambertian disc VAL of flux `flux` (W).
 pub fn val_irradiance(x: Vec3, n_x: Vec3, val: &Val) -> Vec3 {
     let g = val_geometry(x, n_x, val.position, val.normal, val.area);
@@ -280,7 +316,7 @@ pub fn interpolation_weights(kernel: InterpolationKernel, n_v: Vec3, offsets: &[
             let facing = facing(n_v, *n);
             match kernel {
                 InterpolationKernel::Paper => paper_weight(o.length(), d_max) * facing,
-                InterpolationKernel::Smooth => smooth_weight(n_v, o, d_max) * facing,
+                InterpolationKernel::Smooth => smooth_weight(n_v, *n, o, d_max) * facing,
             }
         })
         .collect();
@@ -314,21 +350,28 @@ pub fn paper_weight(d: f32, d_max: f32) -> f32 {
     if d_max > 0.0 { (1.0 - d / d_max).max(0.0) } else { 1.0 }
 }
 
-/// Depth behind a vertex's tangent plane, as a fraction of `d_max`, at which the smooth
-/// kernel's weight reaches zero: points there lie on the other side of thin geometry (a
-/// pillar's other faces), not on this surface curving away.
+/// Depth behind the smooth surface through a vertex and a neighbour, as a fraction of `d_max`,
+/// at which the smooth kernel's weight reaches zero: points there lie on the other side of thin
+/// geometry or on a parallel surface, not on this surface curving away.
 pub const PLANE_FALLOFF: f32 = 0.25;
 
-/// The smooth kernel's weight of a neighbour at `offset` from a vertex with normal `n_v`:
-/// `(1 - (d / d_max)^2)^2` (zero with zero slope at the support radius `d_max`, so the value
-/// and its gradient are continuous as the neighbour set changes), times
-/// `clamp(1 + dot(n_v, offset) / (PLANE_FALLOFF d_max), 0, 1)`.
-pub fn smooth_weight(n_v: Vec3, offset: Vec3, d_max: f32) -> f32 {
+/// The smooth kernel's weight of a neighbour at `offset` with normal `n_j` from a vertex with
+/// normal `n_v`: `(1 - (d / d_max)^2)^2` (zero with zero slope at the support radius `d_max`, so
+/// the value and its gradient are continuous as the neighbour set changes), times
+/// `clamp(1 + dot((n_v + n_j) / 2, offset) / (PLANE_FALLOFF d_max), 0, 1)`.
+///
+/// `dot((n_v + n_j) / 2, offset)` is the neighbour's depth behind the smooth surface the two
+/// normals describe: on a circle of any radius it is exactly 0 (the tangent plane's depth
+/// `dot(n_v, offset) = -R (1 - cos phi)` is what the curvature `dot(n_v - n_j, offset) / 2`
+/// predicts), so a round pillar's vertex takes the light of the points around its curve, as
+/// the vertex normals round it, instead of its facet's alone; a parallel surface behind (equal
+/// normals) is as far behind it as behind the tangent plane.
+pub fn smooth_weight(n_v: Vec3, n_j: Vec3, offset: Vec3, d_max: f32) -> f32 {
     if d_max <= 0.0 {
         return 1.0;
     }
     let q = (1.0 - offset.length_squared() / (d_max * d_max)).max(0.0);
-    let plane = (1.0 + n_v.dot(offset) / (PLANE_FALLOFF * d_max)).clamp(0.0, 1.0);
+    let plane = (1.0 + 0.5 * (n_v + n_j).dot(offset) / (PLANE_FALLOFF * d_max)).clamp(0.0, 1.0);
     q * q * plane
 }
 
@@ -440,8 +483,22 @@ pub fn glossy_from_radiance(surface: &Material, g: Vec3) -> Vec3 {
 
 /// Brute-force indirect radiance at a pixel: every VAL through §3, no interpolation.
 pub fn shade_brute_force(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, vals: &[Val], glossy: bool) -> Vec3 {
+    shade_brute_force_sided(p, n, n, surface, eye, vals, glossy)
+}
+
+/// [`shade_brute_force`] at a receiver with geometric normal `n_g` (both normals already facing
+/// the viewer, [`facing_viewer`]): the brute-force pass's sum ([`val_radiance_sided`]).
+pub fn shade_brute_force_sided(
+    p: Vec3,
+    n: Vec3,
+    n_g: Vec3,
+    surface: &Material,
+    eye: Vec3,
+    vals: &[Val],
+    glossy: bool,
+) -> Vec3 {
     let w_o = view_direction(p, n, eye);
-    vals.iter().map(|val| val_radiance(p, n, surface, w_o, val, glossy)).sum()
+    vals.iter().map(|val| val_radiance_sided(p, n, n_g, surface, w_o, val, glossy)).sum()
 }
 
 /// [`shade_brute_force`] with per-pixel group visibility (WGSL `visibility/group.wgsl`, the
@@ -467,13 +524,15 @@ pub fn shade_brute_force_grouped(
         .sum()
 }
 
-/// The sparse method's near-field radiance at a pixel (`p`, `n`): every VAL through §3 scaled
+/// The sparse method's near-field radiance at a pixel (`p`, shading normal `n`, geometric
+/// normal `n_g`, both facing the viewer): every VAL through §3 scaled
 /// by `near_field_weight(distance to centre, near_radius)`, the part [`gather_far_field`] left
 /// out at the sparse points the pixel interpolates, whose weighted mean position is `centre`
 /// ([`near_field::vertex_centre`] at the pixel's corners, interpolated).
 pub fn shade_near_field<'a>(
     p: Vec3,
     n: Vec3,
+    n_g: Vec3,
     surface: &Material,
     eye: Vec3,
     centre: Vec3,
@@ -484,7 +543,7 @@ pub fn shade_near_field<'a>(
     let w_o = view_direction(p, n, eye);
     vals.into_iter()
         .map(|val| {
-            val_radiance(p, n, surface, w_o, val, glossy)
+            val_radiance_sided(p, n, n_g, surface, w_o, val, glossy)
                 * near_field_weight(val.position.distance(centre), near_radius)
         })
         .sum()
@@ -494,7 +553,13 @@ pub fn shade_near_field<'a>(
 /// at receiver (`p`, `n`): docs/design.md §3's diffuse term plus, when `glossy`, the Phong term. The
 /// term every brute-force and exact-visibility pixel sums over its (visible) VALs.
 pub fn val_radiance(p: Vec3, n: Vec3, surface: &Material, w_o: Vec3, val: &Val, glossy: bool) -> Vec3 {
-    let geo = val_geometry(p, n, val.position, val.normal, val.area);
+    val_radiance_sided(p, n, n, surface, w_o, val, glossy)
+}
+
+/// [`val_radiance`] at a receiver whose geometric normal `n_g` differs from its shading normal
+/// `n` ([`val_geometry_sided`]): what the brute force and the exact reference sum per pixel.
+pub fn val_radiance_sided(p: Vec3, n: Vec3, n_g: Vec3, surface: &Material, w_o: Vec3, val: &Val, glossy: bool) -> Vec3 {
+    let geo = val_geometry_sided(p, n, n_g, val.position, val.normal, val.area);
     reflected_radiance(n, surface, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver), glossy)
 }
 

@@ -116,8 +116,17 @@ impl ValGrid {
 
     /// The near field at a pixel (`near_field_shade.wgsl`): [`super::shade_near_field`] over
     /// the buckets around its `centre` only.
-    pub fn shade(&self, p: Vec3, n: Vec3, surface: &Material, eye: Vec3, centre: Vec3, glossy: bool) -> Vec3 {
-        super::shade_near_field(p, n, surface, eye, centre, self.near_vals(centre), glossy, self.radius)
+    pub fn shade(
+        &self,
+        p: Vec3,
+        n: Vec3,
+        n_g: Vec3,
+        surface: &Material,
+        eye: Vec3,
+        centre: Vec3,
+        glossy: bool,
+    ) -> Vec3 {
+        super::shade_near_field(p, n, n_g, surface, eye, centre, self.near_vals(centre), glossy, self.radius)
     }
 }
 
@@ -173,8 +182,8 @@ mod tests {
                 let eye = Vec3::new(0.0, -3.0, 0.0);
                 // The centre up to a third of the radius away from the pixel, as at a corner.
                 let centre = p + (Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5) * 0.2;
-                let all = shade_near_field(p, n, &surface, eye, centre, &vals, true, grid.radius);
-                let near = grid.shade(p, n, &surface, eye, centre, true);
+                let all = shade_near_field(p, n, n, &surface, eye, centre, &vals, true, grid.radius);
+                let near = grid.shade(p, n, n, &surface, eye, centre, true);
                 assert!((all - near).abs().max_element() <= 1e-4 * all.max_element() + 1e-12, "{all} vs {near}");
                 lit += usize::from(all.max_element() > 0.0);
             }

@@ -487,6 +487,34 @@ fn smooth_kernel_ignores_points_behind_the_surface() {
     assert!(paper[1] > 0.0, "the paper's weights do not see the plane: {paper:?}");
 }
 
+/// The smooth kernel follows a curved surface as its normals describe it: on a cylinder of
+/// radius 0.3 m (a round pillar), a vertex's neighbours 20 to 50 degrees around the curve, with
+/// the cylinder's normals, lie on the smooth surface through both points, so each weighs exactly
+/// the radial kernel times its facing, though the 40-degree one lies deeper behind the vertex's
+/// tangent plane than `PLANE_FALLOFF` of the support radius (which took all its weight: the
+/// facet look); the same point on a parallel surface (the vertex's own normal) weighs nothing.
+#[test]
+fn smooth_kernel_follows_curved_surfaces() {
+    let r = 0.3f32;
+    let at = |deg: f32| {
+        let a = deg.to_radians();
+        (Vec3::new(r * a.cos(), r * a.sin(), 0.0), Vec3::new(a.cos(), a.sin(), 0.0))
+    };
+    let (v, n_v) = at(0.0);
+    let angles = [20.0f32, -30.0, 40.0, -50.0];
+    let offsets: Vec<Vec3> = angles.iter().map(|&a| at(a).0 - v).collect();
+    let normals: Vec<Vec3> = angles.iter().map(|&a| at(a).1).collect();
+    let d_max = offsets.iter().map(|o| o.length()).fold(0.0f32, f32::max);
+    let w = interpolation_weights(InterpolationKernel::Smooth, n_v, &offsets, &normals);
+    for k in 0..3 {
+        let q = 1.0 - offsets[k].length_squared() / (d_max * d_max);
+        let want = q * q * facing(n_v, normals[k]);
+        assert!(want > 0.05 && (w[k] - want).abs() < 1e-5, "point {k}: {} vs {want}", w[k]);
+    }
+    assert!(n_v.dot(offsets[2]) < -PLANE_FALLOFF * d_max, "the 40-degree point lies behind the tangent plane");
+    assert_eq!(smooth_weight(n_v, n_v, offsets[2], d_max), 0.0, "a parallel surface behind weighs nothing");
+}
+
 /// Bounded renormalisation: a light that would deliver more irradiance than its bound is scaled to the
 /// bound exactly; one within it, or unbounded, is untouched; and a renormalised light applied
 /// at its own sparse point is within its bound (it reproduces the gathered irradiance).

@@ -82,6 +82,17 @@ pub fn local_lights(scene: &relume::scene::Scene, lights: Vec<relume::scene::Lig
         .collect()
 }
 
+/// CPU twin values at every visibility texel that hit geometry, from the receiver a viewer at
+/// `eye` sees there (`FlatScene::receiver_at`: shading and geometric normals, facing the eye).
+pub fn per_receiver(
+    flat: &relume::gpu::scene::FlatScene,
+    hits: &[Option<relume::gpu::raster::Hit>],
+    eye: glam::Vec3,
+    f: impl Fn(&relume::twin::exact_cpu::Receiver) -> glam::Vec3,
+) -> Vec<Option<glam::Vec3>> {
+    hits.iter().map(|hit| hit.map(|h| f(&flat.receiver_at(h.triangle, h.barycentrics, eye)))).collect()
+}
+
 /// CPU twin values at every visibility texel that hit geometry: `f(position, normal, surface)`.
 pub fn per_hit(
     flat: &relume::gpu::scene::FlatScene,

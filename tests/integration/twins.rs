@@ -348,10 +348,10 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
         .iter()
         .map(|hit| {
             hit.map(|h| {
-                let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+                let r = flat.receiver_at(h.triangle, h.barycentrics, eye);
                 let c = [0, 1, 2].map(|k| centres[flat.indices[3 * h.triangle as usize + k] as usize]);
                 let centre = twin::barycentric(h.barycentrics, c[0], c[1], c[2]);
-                twin::shade_near_field(p, n, &surface, eye, centre, &vals, true, radius)
+                twin::shade_near_field(r.position, r.normal, r.geometric, &r.surface, eye, centre, &vals, true, radius)
             })
         })
         .collect();
@@ -419,8 +419,8 @@ fn brute_force_matches_twin(rsm_resolution: Option<u32>, (w, h): (u32, u32)) {
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let flat = &renderer.scene.flat;
     let eye = renderer.view().eye();
-    let expected = super::per_hit(flat, &hits, |p, n, surface| {
-        twin::shade_brute_force(p, n, surface, eye, &vals, renderer.glossy())
+    let expected = super::per_receiver(flat, &hits, eye, |r| {
+        twin::shade_brute_force_sided(r.position, r.normal, r.geometric, &r.surface, eye, &vals, renderer.glossy())
     });
     if rsm_resolution.is_some() {
         assert!(vals.len() as u32 > relume::gpu::Gpu::CPU_MAX_GATHERED_VALS, "{} VALs", vals.len());
@@ -692,20 +692,21 @@ fn exact_matches_cpu_twin(scene: &str, stride: u32, (w, h): (u32, u32)) {
         .take(vals.len() / stride as usize)
         .map(|v| Val { flux: v.flux * stride as f32, ..*v })
         .collect();
-    let expected = super::per_hit(flat, &hits, |p, n, surface| {
+    let expected = super::per_receiver(flat, &hits, eye, |r| {
+        let origin = r.position + r.geometric * RAY_OFFSET;
         let visible: Vec<Val> = subsample
             .iter()
-            .filter(|v| !bvh.occluded(&positions, &triangles, p + n * RAY_OFFSET, v.position + v.normal * RAY_OFFSET))
+            .filter(|v| !bvh.occluded(&positions, &triangles, origin, v.position + v.normal * RAY_OFFSET))
             .copied()
             .collect();
-        twin::shade_brute_force(p, n, surface, eye, &visible, renderer.glossy())
+        twin::shade_brute_force_sided(r.position, r.normal, r.geometric, &r.surface, eye, &visible, renderer.glossy())
     });
     // The occluders must take a visible share of the light of the same VALs. The VAL buffer's
     // order comes from atomic appends, so which VALs a stride keeps changes from run to run: the
     // unoccluded sum is the twin's over the same subsample, not the brute-force frame over every
     // VAL (against which a 1-in-16 subsample's own noise alone moved the ratio 0.90-0.96).
-    let unoccluded = super::per_hit(flat, &hits, |p, n, surface| {
-        twin::shade_brute_force(p, n, surface, eye, &subsample, renderer.glossy())
+    let unoccluded = super::per_receiver(flat, &hits, eye, |r| {
+        twin::shade_brute_force_sided(r.position, r.normal, r.geometric, &r.surface, eye, &subsample, renderer.glossy())
     });
     let scale = max_of(expected.iter().flatten().copied());
     let mut differing = 0;

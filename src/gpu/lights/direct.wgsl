@@ -1,5 +1,6 @@
 // Direct light (docs/design.md §4 step 6): the spot light through the Phong BRDF, shadowed by the
-// RSM's distance-to-light map. Rust twin (without the shadow test): `twin::rsm::direct_radiance`.
+// RSM's distance-to-light map. Rust twin (without the shadow test): `twin::rsm::direct_radiance`
+// times `twin::above_surface`.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> direct: array<vec4<f32>>;
@@ -36,7 +37,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         direct[pixel] = vec4<f32>(0.0);
         return;
     }
-    let s = surface_at(hit.triangle, hit.barycentrics);
-    let l = direct_radiance(s.position, s.normal, s.material, frame.eye, frame_spot(frame)) * lit(s.position, s.normal);
+    // The light's cosine is the shading normal's; light from below the geometric surface is
+    // rejected, and the shadow bias follows the geometric surface (docs/design.md §3, shading
+    // and geometric normals).
+    let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
+    let above = above_surface(s.geometric, frame.light_position - s.position);
+    let l = direct_radiance(s.position, s.normal, s.material, frame.eye, frame_spot(frame)) * (above * lit(s.position, s.geometric));
     direct[pixel] = vec4<f32>(l, 1.0);
 }

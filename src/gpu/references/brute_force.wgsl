@@ -29,9 +29,9 @@ fn receiver(x: u32, y: u32) -> Receiver {
     if inside {
         hit = decode_visibility(textureLoad(visibility, vec2<i32>(vec2<u32>(x, y)), 0));
     }
-    var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1));
+    var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1), vec3<f32>(0.0, 1.0, 0.0));
     if hit.covered {
-        s = surface_at(hit.triangle, hit.barycentrics);
+        s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
     }
     let w_o = view_direction(s.position, s.normal, frame.eye);
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
@@ -41,7 +41,7 @@ fn receiver(x: u32, y: u32) -> Receiver {
 // `l` plus the radiance VAL `val` (the `val_index`-th) reflects at pixel `r`.
 fn add_val(l: vec3<f32>, r: Receiver, val: Val, val_index: u32, glossy: bool) -> vec3<f32> {
     let s = r.surface;
-    let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
+    let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
     let f = geo.weight * geo.cos_receiver * val_visibility(r.pixel, val_index);
     return l + reflected_radiance(s, r.spec, r.w_o, geo.direction, val.flux * f, glossy);
 }

@@ -1,5 +1,6 @@
 // Exact-visibility reference (docs/design.md §5): the brute force of `brute_force.wgsl` with a
-// shadow ray per pixel and VAL through the BVH (`bvh.wgsl`). Every VAL_STRIDE-th VAL is used,
+// shadow ray per pixel and VAL through the BVH (`bvh.wgsl`), from the pixel pushed along its
+// geometric normal (docs/design.md §3, shading and geometric normals). Every VAL_STRIDE-th VAL is used,
 // its flux scaled by VAL_STRIDE: an unbiased subsample, since the VAL list is in no spatial
 // order. Unlike the brute force it does not tile VALs through workgroup memory (an earlier tiled
 // version lost writes on lavapipe; the culprit was probably the traversal's nested loops, since
@@ -42,10 +43,10 @@ fn exact(id: vec2<u32>, glossy: bool) {
         progress[pixel] = EXACT_DONE;
         return;
     }
-    let s = surface_at(hit.triangle, hit.barycentrics);
+    let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
     let w_o = view_direction(s.position, s.normal, frame.eye);
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
-    let origin = s.position + s.normal * RAY_OFFSET;
+    let origin = s.position + s.geometric * RAY_OFFSET;
     var l = vec3<f32>(0.0);
     if start > 0u {
         l = indirect[pixel].xyz;
@@ -56,7 +57,7 @@ fn exact(id: vec2<u32>, glossy: bool) {
     while j < count && steps < EXACT_LOOP_BUDGET {
         steps += 1u;
         let val = vals[j * VAL_STRIDE];
-        let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
+        let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
         let f = geo.weight * geo.cos_receiver;
         if f > 0.0 {
             let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, EXACT_LOOP_BUDGET - steps);

@@ -100,10 +100,14 @@ struct ValGeometry {
     weight: f32,
 }
 
+// A point of a surface: `normal` is the shading normal (the vertex normals interpolated),
+// `geometric` its triangle's face normal turned to the shading normal's side (docs/design.md §3,
+// shading and geometric normals).
 struct Surface {
     position: vec3<f32>,
     normal: vec3<f32>,
     material: Material,
+    geometric: vec3<f32>,
 }
 
 fn luminance(c: vec3<f32>) -> f32 {
@@ -150,6 +154,38 @@ fn val_geometry(x: vec3<f32>, n_x: vec3<f32>, val_position: vec3<f32>, val_norma
     let cos_receiver = max(dot(n_x, w), 0.0);
     let cos_val = max(-dot(val_normal, w), 0.0);
     return ValGeometry(w, cos_receiver, cos_val / (PI * d2 + max(val_area, 0.0)));
+}
+
+// `twin::oriented_face_normal`: the unit face normal `face` turned to the side of the shading
+// normal `shading` (the vertex normals decide which side is the front).
+fn oriented_face_normal(face: vec3<f32>, shading: vec3<f32>) -> vec3<f32> {
+    return select(face, -face, dot(face, shading) < 0.0);
+}
+
+// `twin::facing_viewer`: `s` as a viewer at `eye` sees it: a surface seen from behind its
+// geometric normal is shaded as a surface of its own, both normals flipped (two-sided).
+fn facing_viewer(s: Surface, eye: vec3<f32>) -> Surface {
+    var out = s;
+    if dot(s.geometric, eye - s.position) < 0.0 {
+        out.normal = -s.normal;
+        out.geometric = -s.geometric;
+    }
+    return out;
+}
+
+// `twin::above_surface`: 1 where unit direction `w` leaves the surface on its geometric normal's
+// side, else 0: light from below the geometric surface would have to pass through it.
+fn above_surface(n_g: vec3<f32>, w: vec3<f32>) -> f32 {
+    return select(0.0, 1.0, dot(n_g, w) > 0.0);
+}
+
+// `twin::val_geometry_sided`: `val_geometry` at a receiver with shading normal `n_x` and
+// geometric normal `n_g`: the cosine is the shading normal's, and 0 for a VAL below the
+// geometric surface.
+fn val_geometry_sided(x: vec3<f32>, n_x: vec3<f32>, n_g: vec3<f32>, val_position: vec3<f32>, val_normal: vec3<f32>, val_area: f32) -> ValGeometry {
+    var geo = val_geometry(x, n_x, val_position, val_normal, val_area);
+    geo.cos_receiver *= above_surface(n_g, geo.direction);
+    return geo;
 }
 
 fn view_direction(x: vec3<f32>, n_x: vec3<f32>, eye: vec3<f32>) -> vec3<f32> {

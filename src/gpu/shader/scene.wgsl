@@ -7,7 +7,8 @@
 @group(1) @binding(3) var<storage, read> triangle_materials: array<u32>;
 @group(1) @binding(4) var<storage, read> materials: array<Material>;
 
-// Interpolated surface of `triangle` at barycentrics `b` (of corners 1 and 2).
+// Interpolated surface of `triangle` at barycentrics `b` (of corners 1 and 2), with its
+// triangle's face normal on the shading normal's side.
 fn surface_at(triangle: u32, b: vec2<f32>) -> Surface {
     let v0 = vertices[indices[3u * triangle]];
     let v1 = vertices[indices[3u * triangle + 1u]];
@@ -15,14 +16,15 @@ fn surface_at(triangle: u32, b: vec2<f32>) -> Surface {
     let position = barycentric(b, v0.position, v1.position, v2.position);
     let n = barycentric(b, v0.normal, v1.normal, v2.normal);
     let len2 = dot(n, n);
-    var normal = normalize(cross(v1.position - v0.position, v2.position - v0.position));
+    let face = normalize(cross(v1.position - v0.position, v2.position - v0.position));
+    var normal = face;
     if len2 > 1e-20 {
         normal = n * inverseSqrt(len2);
     }
     var material = materials[triangle_materials[triangle]];
     let st = barycentric(b, vec3<f32>(v0.s, v0.t, 0.0), vec3<f32>(v1.s, v1.t, 0.0), vec3<f32>(v2.s, v2.t, 0.0)).xy;
     material.diffuse = diffuse_albedo(material, st);
-    return Surface(position, normal, material);
+    return Surface(position, normal, material, oriented_face_normal(face, normal));
 }
 
 // A texel of a visibility buffer: triangle + 1 (0 = nothing), then the barycentrics' bits.

@@ -33,7 +33,7 @@ fn adaptive_candidates(v: u32, nb: VertexNeighbourhood, d_max: f32) -> VertexNei
             continue;
         }
         let p = sparse_points[ids[j]];
-        let w = spatial_weight(vertex.normal, p.position - vertex.position, radius) * facing(vertex.normal, p.normal);
+        let w = spatial_weight(vertex.normal, p.normal, p.position - vertex.position, radius) * facing(vertex.normal, p.normal);
         if w > 0.0 {
             out.ids[out.count] = ids[j];
             out.weights[out.count] = w;

@@ -4,8 +4,8 @@
 // PLANE_FALLOFF and FACING_EPSILON are prepended (`interpolate::weights_head`). Rust twins:
 // `twin::interpolation_weights`, `twin::paper_weight`, `twin::smooth_weight`, `twin::facing`.
 
-// `twin::paper_weight` and `twin::smooth_weight`.
-fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
+// `twin::paper_weight` and `twin::smooth_weight` of a neighbour at `offset` with normal `n_j`.
+fn spatial_weight(n_v: vec3<f32>, n_j: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
     if d_max <= 0.0 {
         return 1.0;
     }
@@ -13,7 +13,9 @@ fn spatial_weight(n_v: vec3<f32>, offset: vec3<f32>, d_max: f32) -> f32 {
         return max(1.0 - length(offset) / d_max, 0.0);
     }
     let q = max(1.0 - dot(offset, offset) / (d_max * d_max), 0.0);
-    let plane = clamp(1.0 + dot(n_v, offset) / (PLANE_FALLOFF * d_max), 0.0, 1.0);
+    // Depth behind the smooth surface through both points (their normals' mean), not behind
+    // the vertex's tangent plane: a curved surface's own points stay in.
+    let plane = clamp(1.0 + 0.5 * dot(n_v + n_j, offset) / (PLANE_FALLOFF * d_max), 0.0, 1.0);
     return q * q * plane;
 }
 
@@ -31,7 +33,7 @@ fn interpolation_weights(n_v: vec3<f32>, offsets: array<vec3<f32>, NEIGHBOURS>, 
     var w: array<f32, NEIGHBOURS>;
     var total = 0.0;
     for (var j = 0u; j < count; j++) {
-        w[j] = spatial_weight(n_v, offsets[j], d_max) * facing(n_v, normals[j]);
+        w[j] = spatial_weight(n_v, normals[j], offsets[j], d_max) * facing(n_v, normals[j]);
         total += w[j];
     }
     if total <= 0.0 && count > 0u {

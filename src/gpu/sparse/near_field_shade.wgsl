@@ -51,7 +51,7 @@ fn near_field(s: Surface, centre: vec3<f32>, glossy: bool) -> vec3<f32> {
             if weight <= 0.0 {
                 continue;
             }
-            let geo = val_geometry(s.position, s.normal, val.position, val.normal, val.area);
+            let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
             l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver * weight), glossy);
         }
     }
@@ -71,7 +71,7 @@ fn shade(id: vec2<u32>, glossy: bool) {
     let c = vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]);
     let centre = barycentric(hit.barycentrics, vertex_centres[c.x].xyz, vertex_centres[c.y].xyz, vertex_centres[c.z].xyz);
     let before = indirect[i];
-    indirect[i] = vec4<f32>(before.rgb + near_field(surface_at(hit.triangle, hit.barycentrics), centre, glossy), before.a);
+    indirect[i] = vec4<f32>(before.rgb + near_field(facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye), centre, glossy), before.a);
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)

@@ -46,7 +46,7 @@ fn pixel_at(id: vec2<u32>) -> Pixel {
     let index = id.y * frame.width + id.x;
     let hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
     let t = 3u * hit.triangle;
-    return Pixel(index, hit.covered, surface_at(hit.triangle, hit.barycentrics), vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]), hit.barycentrics);
+    return Pixel(index, hit.covered, facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye), vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]), hit.barycentrics);
 }
 
 fn diffuse_radiance(p: Pixel) -> vec3<f32> {
