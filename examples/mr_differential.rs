@@ -55,7 +55,9 @@ fn main() -> anyhow::Result<()> {
     let gpu_scene = GpuScene::new(&gpu, FlatScene::from_scene(&scene))?;
     let mut pass = Differential::on(&gpu, &gpu_scene, scene.settings.mr.device)?;
     println!("adapter: {}; fast pass on the {:?}", gpu.adapter_name(), pass.device());
-    println!("| frame | receivers | exact ms | fast parameters | computed | fast ms | change rel RMSE | E rel RMSE | darkest exact | darkest fast |");
+    println!(
+        "| frame | receivers | exact ms | fast parameters | computed | fast ms | change rel RMSE | E rel RMSE | darkest exact | darkest fast |"
+    );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     let mut rows: Vec<Vec<(f64, f64, Agreement)>> = vec![Vec::new(); variants.len()];
     for i in frames {
@@ -67,7 +69,8 @@ fn main() -> anyhow::Result<()> {
         let exact_ms = e.timings.stages.iter().find(|(s, _)| s == DIFFERENTIAL_STAGE).map_or(0.0, |(_, ms)| *ms);
         for (v, fast) in variants.iter().enumerate() {
             let start = Instant::now();
-            let (light, counts) = fast_light(&mut pass, &gpu, &gpu_scene, &d.grid, &d.vals, d.real_count, d.bounds, fast)?;
+            let (light, counts) =
+                fast_light(&mut pass, &gpu, &gpu_scene, &d.grid, &d.vals, d.real_count, d.bounds, fast)?;
             let fast_ms = start.elapsed().as_secs_f64() * 1e3;
             let a = Agreement::of(&d.light, &light, &d.visible);
             println!(
@@ -84,6 +87,9 @@ fn main() -> anyhow::Result<()> {
                 a.darkest_exact,
                 a.darkest_fast
             );
+            if std::env::var("COUNTS").is_ok() {
+                println!("  {counts:?}");
+            }
             rows[v].push((exact_ms, fast_ms, a));
         }
     }

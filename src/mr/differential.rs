@@ -22,9 +22,9 @@ use crate::gpu::differential::twin::ContentSphere;
 use crate::gpu::differential::{Differential, Receiver, ReceiverLight};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::{Gpu, GpuError};
-use crate::scene::settings::DifferentialMethod;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
+use crate::scene::settings::DifferentialMethod;
 use crate::twin::Val;
 use crate::twin::rgbd::{grid_size, srgb_to_linear};
 use glam::{Affine3A, Mat4, UVec2, Vec3};
@@ -178,7 +178,7 @@ pub fn receiver_light(
     match method {
         DifferentialMethod::Exact => {
             let (light, _) = pass.run(gpu, scene, &grid.receivers, vals, real_count)?;
-            let counts = AdaptiveCounts { computed: light.len(), interpolated: 0 };
+            let counts = AdaptiveCounts { computed: light.len(), ..Default::default() };
             Ok((light, counts))
         }
         DifferentialMethod::Fast => {
@@ -285,18 +285,22 @@ pub fn net_change(l: &ReceiverLight) -> f32 {
 /// `ADAPTIVE_SPACING`-th cell in each direction is computed, then cells at half that spacing, and
 /// so on down to every cell, each computed only where its neighbours at the spacing above
 /// disagree ([`adaptive_light`]).
-pub const ADAPTIVE_SPACING: u32 = 4;
+pub const ADAPTIVE_SPACING: u32 = 8;
 
 /// Largest spread, over the corners a cell would be interpolated from, of the share of their
 /// unoccluded irradiance that the content blocks or adds (luminance): beyond it the cell is
 /// computed.
-pub const ADAPTIVE_CHANGE_SPREAD: f32 = 0.02;
+pub const ADAPTIVE_CHANGE_SPREAD: f32 = 0.03;
 
 /// Largest ratio between the corners' unoccluded irradiances (luminance) for interpolation.
 pub const ADAPTIVE_IRRADIANCE_RATIO: f32 = 1.1;
 
-/// Smallest cosine between a cell's normal and a corner's for interpolation (about 18°).
-const ADAPTIVE_NORMAL_COS: f32 = 0.95;
+/// Smallest cosine between a cell's normal and a corner's for interpolation (about 32°: the
+/// receivers' normals come from noisy depth).
+const ADAPTIVE_NORMAL_COS: f32 = 0.85;
+
+/// Largest distance of a corner from a cell's plane for interpolation, per metre between them.
+const ADAPTIVE_PLANE_SLOPE: f32 = 0.3;
 
 /// How the fast pass filled one frame's receivers.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -305,13 +309,25 @@ pub struct AdaptiveCounts {
     pub computed: usize,
     /// Receivers interpolated from computed (or interpolated) neighbours.
     pub interpolated: usize,
+    /// Receivers computed below the coarsest level because a corner had no receiver (or lay
+    /// off the grid), lay on another surface, or disagreed.
+    pub missing: usize,
+    pub surface: usize,
+    pub changing: usize,
+}
+
+/// Why a receiver could not be interpolated.
+enum Refusal {
+    Missing,
+    Surface,
+    Changing,
 }
 
 /// The receivers' light on the grid, most of it interpolated: cells on a grid of spacing
 /// [`ADAPTIVE_SPACING`] are computed by `compute` (which sums the light at the receivers it is
 /// given), then, halving the spacing down to 1, each cell not yet filled is interpolated
 /// bilinearly from the filled cells at the spacing above that surround it when they lie on its
-/// surface (normals within about 18°, within a fifth of their distance of its plane) and agree
+/// surface (normals within about 32°, within 0.3 of their distance of its plane) and agree
 /// (their unoccluded irradiance within [`ADAPTIVE_IRRADIANCE_RATIO`], the share of it blocked
 /// and added within [`ADAPTIVE_CHANGE_SPREAD`] of each other); otherwise it is computed. The
 /// content's effect is smooth away from its contact, so far from it most cells are
@@ -352,8 +368,15 @@ pub fn adaptive_light<E>(
                     continue;
                 }
                 match interpolate(grid, &light, r, x, y, spacing, fast) {
-                    Some(l) => interpolated.push((r, l)),
-                    None => todo.push(r),
+                    Ok(l) => interpolated.push((r, l)),
+                    Err(why) => {
+                        todo.push(r);
+                        match why {
+                            Refusal::Missing => counts.missing += 1,
+                            Refusal::Surface => counts.surface += 1,
+                            Refusal::Changing => counts.changing += 1,
+                        }
+                    }
                 }
             }
         }
@@ -369,7 +392,7 @@ pub fn adaptive_light<E>(
 }
 
 /// The light of receiver `r` at cell (`x`, `y`) interpolated from the filled cells of the grid
-/// of `spacing` around it ([`adaptive_light`]), or `None` when they do not allow it.
+/// of `spacing` around it ([`adaptive_light`]), or why they do not allow it.
 fn interpolate(
     grid: &ReceiverGrid,
     light: &[Option<ReceiverLight>],
@@ -378,7 +401,7 @@ fn interpolate(
     y: u32,
     spacing: u32,
     fast: &FastSettings,
-) -> Option<ReceiverLight> {
+) -> Result<ReceiverLight, Refusal> {
     let here = grid.receivers[r as usize];
     let (x0, y0) = (x / spacing * spacing, y / spacing * spacing);
     let (fx, fy) = ((x - x0) as f32 / spacing as f32, (y - y0) as f32 / spacing as f32);
@@ -389,14 +412,16 @@ fn interpolate(
     for &(cx, wx) in xs {
         for &(cy, wy) in ys {
             if cx >= grid.size.x || cy >= grid.size.y {
-                return None;
+                return Err(Refusal::Missing);
             }
-            let c = grid.cells[(cy * grid.size.x + cx) as usize]?;
+            let c = grid.cells[(cy * grid.size.x + cx) as usize].ok_or(Refusal::Missing)?;
             let corner = grid.receivers[c as usize];
-            let l = light[c as usize]?;
+            let l = light[c as usize].ok_or(Refusal::Missing)?;
             let d = corner.position - here.position;
-            if here.normal.dot(corner.normal) < ADAPTIVE_NORMAL_COS || here.normal.dot(d).abs() > 0.2 * d.length() {
-                return None;
+            if here.normal.dot(corner.normal) < ADAPTIVE_NORMAL_COS
+                || here.normal.dot(d).abs() > ADAPTIVE_PLANE_SLOPE * d.length()
+            {
+                return Err(Refusal::Surface);
             }
             let e = luminance(l.unoccluded);
             let shares = [e, luminance(l.blocked) / e.max(1e-12), luminance(l.added) / e.max(1e-12)];
@@ -414,11 +439,10 @@ fn interpolate(
     let smooth = hi[0] <= fast.irradiance_ratio * lo[0]
         && hi[1] - lo[1] <= fast.change_spread
         && hi[2] - lo[2] <= fast.change_spread;
-    (smooth && weight > 0.0).then(|| ReceiverLight {
-        unoccluded: sum.unoccluded / weight,
-        blocked: sum.blocked / weight,
-        added: sum.added / weight,
-    })
+    if !(smooth && weight > 0.0) {
+        return Err(Refusal::Changing);
+    }
+    Ok(ReceiverLight { unoccluded: sum.unoccluded / weight, blocked: sum.blocked / weight, added: sum.added / weight })
 }
 
 /// Rec. 709 luminance.

@@ -420,7 +420,7 @@ impl MrPipeline {
                     d.bounds,
                     method,
                 )?;
-                tracing::debug!(?method, computed = counts.computed, interpolated = counts.interpolated, "differential receivers");
+                tracing::debug!(?method, ?counts, "differential receivers");
                 let visible = visible_receivers(&grid, frame, &virtual_depth, w, h);
                 log_differential(&light, &visible);
                 let field = LightField { grid: &grid, light: &light };

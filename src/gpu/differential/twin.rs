@@ -124,7 +124,18 @@ pub fn receiver_light_fast(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
 ) -> ReceiverLight {
-    let blocked = |origin: Vec3, target: Vec3| bvh.occluded(positions, triangles, origin, target);
+    receiver_light_fast_with(receiver, grouped, content, |origin, target| {
+        bvh.occluded(positions, triangles, origin, target)
+    })
+}
+
+/// [`receiver_light_fast`] with `blocked(from, to)` deciding each shadow ray.
+fn receiver_light_fast_with(
+    receiver: &Receiver,
+    grouped: &GroupedVals,
+    content: &ContentSphere,
+    blocked: impl Fn(Vec3, Vec3) -> bool + Copy,
+) -> ReceiverLight {
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
     let mut sums = ReceiverLight::default();
     for (k, group) in grouped.groups.iter().enumerate() {
