@@ -219,6 +219,6 @@ fn mr_differential_fast_structs_match_wgsl() {
         m,
         "ValGroup",
         RawValGroup,
-        [position, area, normal, radius, flux, reach, first, count, representative, _pad0]
+        [position, area, normal, radius, flux, reach, first, count, representative, shadow_reach]
     );
 }

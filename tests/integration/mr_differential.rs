@@ -427,7 +427,13 @@ fn mr_auto_distribution_against_known_light() {
 /// frames of `recording` with `scene` (its `settings.mr.differential_method` set to each): per
 /// frame, the change of irradiance over the receivers within 10 % rel RMSE and the darkest
 /// visible net change (the contact shadow) within 10 % of the exact one's.
-fn fast_against_exact(name: &str, scene: &Scene, recording: &relume::rgbd::recording::Recording, frames: &[usize]) {
+fn fast_against_exact(
+    name: &str,
+    scene: &Scene,
+    environment: Option<relume::mr::environment::Environment>,
+    recording: &relume::rgbd::recording::Recording,
+    frames: &[usize],
+) {
     use relume::mr::differential::Agreement;
     use relume::mr::{MrOptions, MrRenderer};
     use relume::scene::settings::DifferentialMethod;
@@ -441,6 +447,10 @@ fn fast_against_exact(name: &str, scene: &Scene, recording: &relume::rgbd::recor
         MrRenderer::new(&gpu, &scene, options).unwrap()
     };
     let (mut exact, mut fast) = (renderer(DifferentialMethod::Exact), renderer(DifferentialMethod::Fast));
+    if let Some(environment) = environment {
+        exact.set_environment(environment.clone());
+        fast.set_environment(environment);
+    }
     for &i in frames {
         let frame = recording.frame(i).unwrap();
         let (e, f) = (exact.render_frame(&gpu, &frame).unwrap(), fast.render_frame(&gpu, &frame).unwrap());
@@ -460,16 +470,21 @@ fn fast_against_exact(name: &str, scene: &Scene, recording: &relume::rgbd::recor
     }
 }
 
-/// The default job's scene on the bundled TUM recording, its first, middle and last frames.
+/// The default job's scene on the bundled TUM recording (with its `auto` environment, as
+/// `relume replay` reads it), its first, middle and last frames.
 #[test]
 fn mr_differential_fast_against_exact_on_tum() {
     let scene = super::load_scene("mr_bunny_differential");
+    let path = super::fixture("scenes/mr_bunny_differential.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let settings = relume::scene::SceneDescription::from_json_str(&text).unwrap().settings.environment;
+    let environment = relume::mr::environment::Environment::from_settings(&settings, path.parent().unwrap()).unwrap();
     let recording = relume::rgbd::recording::Recording::open(
         &super::fixture("recordings/tum_fr1_xyz"),
         &relume::rgbd::recording::RecordingOptions::default(),
     )
     .unwrap();
-    fast_against_exact("tum", &scene, &recording, &[0, 18, 36]);
+    fast_against_exact("tum", &scene, Some(environment), &recording, &[0, 18, 36]);
 }
 
 /// A synthetic closed-loop recording (`relume record-synthetic`: the Cornell room of
@@ -504,5 +519,5 @@ fn mr_differential_fast_against_exact_on_synthetic() {
     bunny["settings"]["mr"] = serde_json::json!({ "differential": true, "receiver_step": 2 });
     let recording =
         relume::rgbd::recording::Recording::open(&dir, &relume::rgbd::recording::RecordingOptions::default()).unwrap();
-    fast_against_exact("synthetic", &scene_of(&bunny), &recording, &[0, 1, 2]);
+    fast_against_exact("synthetic", &scene_of(&bunny), None, &recording, &[0, 1, 2]);
 }

@@ -1,10 +1,10 @@
 // The fast differential pass (`settings.mr.differential_method: "fast"`): the sums of
 // `differential.wgsl` over VAL groups (`gpu::differential::groups`). A group beyond its reach is
-// summed as its aggregate: a real one adds it to `unoccluded`, and to `blocked` when its cone may
-// meet the virtual content's bounding sphere and the shadow ray to its representative member is
-// blocked (a cone that misses the content casts no ray); a re-emitter group adds it to `added`
-// when that ray is free. Every group within its reach has its members summed one by one, a
-// shadow ray each, as the exact pass sums them. Twin:
+// summed as its aggregate: a real one adds it to `unoccluded` without a ray when its cone misses
+// the virtual content's bounding sphere; a re-emitter group adds it to `added` when the shadow ray
+// to its representative member is free. A real group the content may block is summed as one only
+// beyond its `shadow_reach`, blocked as a whole when the ray to its representative is. Every other
+// group has its members summed one by one, a shadow ray each, as the exact pass sums them. Twin:
 // `gpu::differential::twin::receiver_light_fast`.
 //
 // Resumable in rounds, as `differential.wgsl`: the state between rounds is the group and the
@@ -42,7 +42,7 @@ struct ValGroup {
     first: u32,
     count: u32,
     representative: u32,
-    _pad0: u32,
+    shadow_reach: f32,
 }
 
 @group(0) @binding(0) var<storage, read> params: FastParams;
@@ -121,9 +121,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                     }
                 }
                 g += 1u;
-            } else if far {
-                // A real group the content may block: its aggregate, blocked as a whole when the
-                // ray to its representative member is.
+            } else if length(group.position - r.position) > group.shadow_reach {
+                // A real group the content may block, far enough: its aggregate, blocked as a
+                // whole when the ray to its representative member is.
                 let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);
                 let f = geo.weight * geo.cos_receiver;
                 if f > 0.0 {

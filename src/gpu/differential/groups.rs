@@ -35,6 +35,11 @@ pub struct ValGroup {
     /// [`REACH`] times `radius`; `f32::MAX` (never) for a group of one member or of members
     /// whose normals disagree ([`MIN_COHERENCE`]).
     pub reach: f32,
+    /// Receivers farther than this may sum the aggregate of a group the content may block, with
+    /// one shadow ray for the whole group: twice `reach`, so that a group whose visibility is
+    /// decided at once subtends at most half the angle (a bright patch, such as a spot light's,
+    /// would otherwise be shadowed all or nothing).
+    pub shadow_reach: f32,
     pub first: u32,
     pub count: u32,
     /// The member nearest the centroid: the target of the group's one shadow ray (the centroid
@@ -136,6 +141,7 @@ fn aggregate(members: &[Val], first: u32, reach: f32) -> ValGroup {
         aggregate: Val { position: centre, normal, area, flux },
         radius,
         reach,
+        shadow_reach: if reach == f32::MAX { f32::MAX } else { 2.0 * reach },
         first,
         count: members.len() as u32,
         representative: first + representative,

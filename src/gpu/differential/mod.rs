@@ -97,7 +97,7 @@ pub struct RawValGroup {
     pub first: u32,
     pub count: u32,
     pub representative: u32,
-    pub _pad0: u32,
+    pub shadow_reach: f32,
 }
 
 impl From<&ValGroup> for RawValGroup {
@@ -113,7 +113,7 @@ impl From<&ValGroup> for RawValGroup {
             first: g.first,
             count: g.count,
             representative: g.representative,
-            _pad0: 0,
+            shadow_reach: g.shadow_reach,
         }
     }
 }

@@ -111,11 +111,12 @@ impl ContentSphere {
 }
 
 /// The sums of `fast.wgsl` at `receiver` over `grouped` (real VALs and re-emitters in groups).
-/// A group beyond its reach is summed as its aggregate: a real one adds it to `unoccluded`,
-/// and to `blocked` when its cone may meet `content` and the shadow ray to its representative
-/// member is blocked (a cone that misses the content casts no ray: nothing can block it); a
-/// re-emitter group adds it to `added` when that ray is free. Every group within its reach has
-/// its members summed as [`receiver_light`] sums them, a shadow ray each.
+/// A group beyond its reach is summed as its aggregate: a real one adds it to `unoccluded`
+/// without a shadow ray when its cone misses `content` (nothing can block it); a re-emitter
+/// group adds it to `added` when the shadow ray to its representative member is free. A real
+/// group whose cone may meet the content is summed as one only beyond its `shadow_reach`, and
+/// blocked as a whole when the ray to its representative is. Every other group has its members
+/// summed as [`receiver_light`] sums them, a shadow ray each.
 pub fn receiver_light_fast(
     receiver: &Receiver,
     grouped: &GroupedVals,
@@ -159,9 +160,9 @@ fn receiver_light_fast_with(
             }
             continue;
         }
-        if far {
-            // A real group that the content may block: its aggregate, blocked as a whole when
-            // the ray to its representative member is.
+        if (a.position - receiver.position).length() > group.shadow_reach {
+            // A real group that the content may block, far enough: its aggregate, blocked as a
+            // whole when the ray to its representative member is.
             let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
             let f = g.weight * g.cos_receiver;
             if f <= 0.0 {
