@@ -66,6 +66,7 @@ pub const PASSES: &[&pass::PassDesc] = &[
     &lights::direct::PASS,
     &lights::many::PASS,
     &differential::PASS,
+    &differential::FAST_PASS,
 ];
 
 /// Errors from the device and from pipeline creation.

@@ -17,9 +17,14 @@
 //!    explains (lit by light no VAL stands for) from darkening more than a white surface would.
 //!    Receiver values are interpolated bilinearly to pixels.
 
-use crate::gpu::differential::{Receiver, ReceiverLight};
+use crate::gpu::differential::groups::{GROUP_SIZE, REACH, group_vals};
+use crate::gpu::differential::twin::ContentSphere;
+use crate::gpu::differential::{Differential, Receiver, ReceiverLight};
+use crate::gpu::scene::GpuScene;
+use crate::gpu::{Gpu, GpuError};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
+use crate::scene::settings::DifferentialMethod;
 use crate::twin::Val;
 use crate::twin::rgbd::{grid_size, srgb_to_linear};
 use glam::{Affine3A, Mat4, UVec2, Vec3};
@@ -153,6 +158,296 @@ pub fn relight_camera(
             [out.x, out.y, out.z].map(crate::image::encode_srgb)
         })
         .collect()
+}
+
+/// The light at every receiver of `grid` by `method`: `vals[.. real_count]` the real VALs, the
+/// rest the content's re-emitters, `bounds` the content's box. `exact` sums every VAL at every
+/// receiver ([`Differential::run`]); `fast` groups the VALs ([`group_vals`]), sums them with
+/// [`Differential::run_fast`] and computes only the receivers [`adaptive_light`] asks for.
+#[allow(clippy::too_many_arguments)]
+pub fn receiver_light(
+    pass: &mut Differential,
+    gpu: &Gpu,
+    scene: &GpuScene,
+    grid: &ReceiverGrid,
+    vals: &[Val],
+    real_count: usize,
+    bounds: (Vec3, Vec3),
+    method: DifferentialMethod,
+) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), GpuError> {
+    match method {
+        DifferentialMethod::Exact => {
+            let (light, _) = pass.run(gpu, scene, &grid.receivers, vals, real_count)?;
+            let counts = AdaptiveCounts { computed: light.len(), ..Default::default() };
+            Ok((light, counts))
+        }
+        DifferentialMethod::Fast => {
+            fast_light(pass, gpu, scene, grid, vals, real_count, bounds, &FastSettings::default())
+        }
+    }
+}
+
+/// The fast pass's parameters; the default is what `settings.mr.differential_method: "fast"`
+/// runs (`examples/mr_differential.rs` varies them).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastSettings {
+    /// VALs per group at most ([`GROUP_SIZE`]).
+    pub group_size: usize,
+    /// Group radii beyond which a group is summed as one ([`REACH`]).
+    pub reach: f32,
+    /// [`ADAPTIVE_SPACING`].
+    pub spacing: u32,
+    /// [`ADAPTIVE_CHANGE_SPREAD`].
+    pub change_spread: f32,
+    /// [`ADAPTIVE_IRRADIANCE_RATIO`].
+    pub irradiance_ratio: f32,
+}
+
+impl Default for FastSettings {
+    fn default() -> Self {
+        Self {
+            group_size: GROUP_SIZE,
+            reach: REACH,
+            spacing: ADAPTIVE_SPACING,
+            change_spread: ADAPTIVE_CHANGE_SPREAD,
+            irradiance_ratio: ADAPTIVE_IRRADIANCE_RATIO,
+        }
+    }
+}
+
+/// The fast pass with `fast`'s parameters ([`receiver_light`]).
+#[allow(clippy::too_many_arguments)]
+pub fn fast_light(
+    pass: &mut Differential,
+    gpu: &Gpu,
+    scene: &GpuScene,
+    grid: &ReceiverGrid,
+    vals: &[Val],
+    real_count: usize,
+    bounds: (Vec3, Vec3),
+    fast: &FastSettings,
+) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), GpuError> {
+    let grouped = group_vals(vals, real_count, fast.group_size, fast.reach);
+    let content = ContentSphere::around(bounds);
+    adaptive_light(grid, fast, |receivers| pass.run_fast(gpu, scene, receivers, &grouped, &content).map(|l| l.0))
+}
+
+/// How one frame's fast sums agree with the exact ones at the same receivers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Agreement {
+    /// `sqrt(sum |dE_fast - dE_exact|² / sum |dE_exact|²)` over the receivers (RGB), `dE` the
+    /// change of irradiance `added - blocked`.
+    pub change_rel_rmse: f64,
+    /// The same of the unoccluded irradiance `E`.
+    pub unoccluded_rel_rmse: f64,
+    /// The darkest net change `sum dE / sum E` (over the channels) among the receivers the
+    /// composite shows: the contact shadow's darkest value, exact and fast.
+    pub darkest_exact: f32,
+    pub darkest_fast: f32,
+}
+
+impl Agreement {
+    /// Compare `fast` with `exact` at the same receivers, the darkest value over the receivers
+    /// `visible` marks.
+    pub fn of(exact: &[ReceiverLight], fast: &[ReceiverLight], visible: &[bool]) -> Self {
+        let rel = |f: fn(&ReceiverLight) -> Vec3| {
+            let (mut e, mut n) = (0.0f64, 0.0f64);
+            for (a, b) in fast.iter().zip(exact) {
+                e += f64::from((f(a) - f(b)).length_squared());
+                n += f64::from(f(b).length_squared());
+            }
+            if n > 0.0 { (e / n).sqrt() } else { 0.0 }
+        };
+        let darkest = |light: &[ReceiverLight]| {
+            light.iter().zip(visible).filter(|(_, v)| **v).map(|(l, _)| net_change(l)).fold(0.0f32, f32::min)
+        };
+        Self {
+            change_rel_rmse: rel(ReceiverLight::change),
+            unoccluded_rel_rmse: rel(|l| l.unoccluded),
+            darkest_exact: darkest(exact),
+            darkest_fast: darkest(fast),
+        }
+    }
+
+    /// `|darkest_fast - darkest_exact| / |darkest_exact|` (0 when both are 0).
+    pub fn darkest_rel_error(&self) -> f32 {
+        let d = (self.darkest_fast - self.darkest_exact).abs();
+        if d == 0.0 { 0.0 } else { d / self.darkest_exact.abs().max(1e-12) }
+    }
+}
+
+/// A receiver's net relative change of irradiance, `sum dE / sum E` over the channels.
+pub fn net_change(l: &ReceiverLight) -> f32 {
+    l.change().element_sum() / l.unoccluded.element_sum().max(1e-12)
+}
+
+/// Coarsest spacing (in receiver cells) of the fast pass's adaptive receivers: every
+/// `ADAPTIVE_SPACING`-th cell in each direction is computed, then cells at half that spacing, and
+/// so on down to every cell, each computed only where its neighbours at the spacing above
+/// disagree ([`adaptive_light`]).
+pub const ADAPTIVE_SPACING: u32 = 8;
+
+/// Largest spread, over the corners a cell would be interpolated from, of the share of their
+/// unoccluded irradiance that the content blocks or adds (luminance): beyond it the cell is
+/// computed.
+pub const ADAPTIVE_CHANGE_SPREAD: f32 = 0.03;
+
+/// Largest ratio between the corners' unoccluded irradiances (luminance) for interpolation.
+pub const ADAPTIVE_IRRADIANCE_RATIO: f32 = 1.1;
+
+/// Smallest cosine between a cell's normal and a corner's for interpolation (about 32°: the
+/// receivers' normals come from noisy depth).
+const ADAPTIVE_NORMAL_COS: f32 = 0.85;
+
+/// Largest distance of a corner from a cell's plane for interpolation, per metre between them.
+const ADAPTIVE_PLANE_SLOPE: f32 = 0.3;
+
+/// How the fast pass filled one frame's receivers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct AdaptiveCounts {
+    /// Receivers whose sums were computed.
+    pub computed: usize,
+    /// Receivers interpolated from computed (or interpolated) neighbours.
+    pub interpolated: usize,
+    /// Receivers computed below the coarsest level because a corner had no receiver (or lay
+    /// off the grid), lay on another surface, or disagreed.
+    pub missing: usize,
+    pub surface: usize,
+    pub changing: usize,
+}
+
+/// Why a receiver could not be interpolated.
+enum Refusal {
+    Missing,
+    Surface,
+    Changing,
+}
+
+/// The receivers' light on the grid, most of it interpolated: cells on a grid of spacing
+/// [`ADAPTIVE_SPACING`] are computed by `compute` (which sums the light at the receivers it is
+/// given), then, halving the spacing down to 1, each cell not yet filled is interpolated
+/// bilinearly from the filled cells at the spacing above that surround it when they lie on its
+/// surface (normals within about 32°, within 0.3 of their distance of its plane) and agree
+/// (their unoccluded irradiance within [`ADAPTIVE_IRRADIANCE_RATIO`], the share of it blocked
+/// and added within [`ADAPTIVE_CHANGE_SPREAD`] of each other); otherwise it is computed. The
+/// content's effect is smooth away from its contact, so far from it most cells are
+/// interpolated and near it most are computed.
+pub fn adaptive_light<E>(
+    grid: &ReceiverGrid,
+    fast: &FastSettings,
+    mut compute: impl FnMut(&[Receiver]) -> Result<Vec<ReceiverLight>, E>,
+) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), E> {
+    let (w, h) = (grid.size.x, grid.size.y);
+    let mut light: Vec<Option<ReceiverLight>> = vec![None; grid.receivers.len()];
+    let mut counts = AdaptiveCounts::default();
+    let receiver_at = |x: u32, y: u32| if x < w && y < h { grid.cells[(y * w + x) as usize] } else { None };
+    let mut spacing = fast.spacing.max(1).next_power_of_two();
+    // The coarsest level: every cell on the grid of `spacing`.
+    let mut todo: Vec<u32> = Vec::new();
+    for y in (0..h).step_by(spacing as usize) {
+        for x in (0..w).step_by(spacing as usize) {
+            todo.extend(receiver_at(x, y));
+        }
+    }
+    let mut fill = |todo: &[u32], light: &mut Vec<Option<ReceiverLight>>| -> Result<usize, E> {
+        let receivers: Vec<Receiver> = todo.iter().map(|r| grid.receivers[*r as usize]).collect();
+        for (r, l) in todo.iter().zip(compute(&receivers)?) {
+            light[*r as usize] = Some(l);
+        }
+        Ok(todo.len())
+    };
+    counts.computed += fill(&todo, &mut light)?;
+    while spacing > 1 {
+        let half = spacing / 2;
+        todo.clear();
+        let mut interpolated = Vec::new();
+        for y in (0..h).step_by(half as usize) {
+            for x in (0..w).step_by(half as usize) {
+                let Some(r) = receiver_at(x, y) else { continue };
+                if light[r as usize].is_some() {
+                    continue;
+                }
+                match interpolate(grid, &light, r, x, y, spacing, fast) {
+                    Ok(l) => interpolated.push((r, l)),
+                    Err(why) => {
+                        todo.push(r);
+                        match why {
+                            Refusal::Missing => counts.missing += 1,
+                            Refusal::Surface => counts.surface += 1,
+                            Refusal::Changing => counts.changing += 1,
+                        }
+                    }
+                }
+            }
+        }
+        // Written after the level's decisions: a cell is interpolated from the level above only.
+        counts.interpolated += interpolated.len();
+        for (r, l) in interpolated {
+            light[r as usize] = Some(l);
+        }
+        counts.computed += fill(&todo, &mut light)?;
+        spacing = half;
+    }
+    Ok((light.into_iter().map(Option::unwrap_or_default).collect(), counts))
+}
+
+/// The light of receiver `r` at cell (`x`, `y`) interpolated from the filled cells of the grid
+/// of `spacing` around it ([`adaptive_light`]), or why they do not allow it.
+fn interpolate(
+    grid: &ReceiverGrid,
+    light: &[Option<ReceiverLight>],
+    r: u32,
+    x: u32,
+    y: u32,
+    spacing: u32,
+    fast: &FastSettings,
+) -> Result<ReceiverLight, Refusal> {
+    let here = grid.receivers[r as usize];
+    let (x0, y0) = (x / spacing * spacing, y / spacing * spacing);
+    let (fx, fy) = ((x - x0) as f32 / spacing as f32, (y - y0) as f32 / spacing as f32);
+    let xs: &[(u32, f32)] = if fx == 0.0 { &[(x0, 1.0)] } else { &[(x0, 1.0 - fx), (x0 + spacing, fx)] };
+    let ys: &[(u32, f32)] = if fy == 0.0 { &[(y0, 1.0)] } else { &[(y0, 1.0 - fy), (y0 + spacing, fy)] };
+    let (mut sum, mut weight) = (ReceiverLight::default(), 0.0);
+    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    for &(cx, wx) in xs {
+        for &(cy, wy) in ys {
+            if cx >= grid.size.x || cy >= grid.size.y {
+                return Err(Refusal::Missing);
+            }
+            let c = grid.cells[(cy * grid.size.x + cx) as usize].ok_or(Refusal::Missing)?;
+            let corner = grid.receivers[c as usize];
+            let l = light[c as usize].ok_or(Refusal::Missing)?;
+            let d = corner.position - here.position;
+            if here.normal.dot(corner.normal) < ADAPTIVE_NORMAL_COS
+                || here.normal.dot(d).abs() > ADAPTIVE_PLANE_SLOPE * d.length()
+            {
+                return Err(Refusal::Surface);
+            }
+            let e = luminance(l.unoccluded);
+            let shares = [e, luminance(l.blocked) / e.max(1e-12), luminance(l.added) / e.max(1e-12)];
+            for k in 0..3 {
+                lo[k] = lo[k].min(shares[k]);
+                hi[k] = hi[k].max(shares[k]);
+            }
+            let w = wx * wy;
+            sum.unoccluded += l.unoccluded * w;
+            sum.blocked += l.blocked * w;
+            sum.added += l.added * w;
+            weight += w;
+        }
+    }
+    let smooth = hi[0] <= fast.irradiance_ratio * lo[0]
+        && hi[1] - lo[1] <= fast.change_spread
+        && hi[2] - lo[2] <= fast.change_spread;
+    if !(smooth && weight > 0.0) {
+        return Err(Refusal::Changing);
+    }
+    Ok(ReceiverLight { unoccluded: sum.unoccluded / weight, blocked: sum.blocked / weight, added: sum.added / weight })
+}
+
+/// Rec. 709 luminance.
+fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
 /// One sparse point as a re-emitter: where it is and what share of its mesh it stands for.

@@ -76,6 +76,23 @@ pub struct MrFrame {
     /// The frame's estimated indirect error, when the renderer estimates it
     /// (`Renderer::set_error_estimate`).
     pub error_estimate: Option<crate::renderer::estimate::ErrorEstimate>,
+    /// The differential pass's receivers and their light, when it ran.
+    pub differential: Option<DifferentialFrame>,
+}
+
+/// One frame's differential pass: its receivers, their light and how much of it was computed.
+#[derive(Clone, Debug)]
+pub struct DifferentialFrame {
+    pub grid: ReceiverGrid,
+    pub light: Vec<crate::gpu::differential::ReceiverLight>,
+    pub counts: differential::AdaptiveCounts,
+    /// Per receiver, whether the composite shows it (the virtual content does not hide it).
+    pub visible: Vec<bool>,
+    /// The VALs it summed: `vals[.. real_count]` the real ones, the rest the re-emitters.
+    pub vals: Vec<Val>,
+    pub real_count: usize,
+    /// The virtual content's box (min, max corners, the scene's frame).
+    pub bounds: (Vec3, Vec3),
 }
 
 /// `relume replay`'s renderer: one scene's [`Renderer`] and [`MrPipeline`], the replay's
@@ -139,6 +156,7 @@ impl MrRenderer {
             val_count: relit.rendered.val_count,
             sparse_irradiance: relit.sparse_irradiance,
             error_estimate: relit.rendered.error_estimate,
+            differential: relit.differential,
         })
     }
 
@@ -252,6 +270,8 @@ pub struct Relit {
     /// Diffuse irradiance (W/m²) at each sparse point ([`MrFrame::sparse_irradiance`]); empty
     /// with a method other than the sparse one.
     pub sparse_irradiance: Vec<Vec3>,
+    /// The differential pass's receivers and their light, when it ran.
+    pub differential: Option<DifferentialFrame>,
 }
 
 impl MrPipeline {
@@ -398,20 +418,33 @@ impl MrPipeline {
         };
         let build_ms = std::mem::take(&mut self.build_ms);
         let differential = self.placed.as_mut().filter(|p| p.is_for(renderer)).and_then(|p| p.differential.as_mut());
-        let background = match (differential, &lighting.real_vals, &lighting.grid) {
+        let (background, differential) = match (differential, &lighting.real_vals, lighting.grid) {
             (Some(d), Some(vals), Some(grid)) => {
                 let start = Instant::now();
                 let mut all = vals.clone();
                 all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
-                let (light, _) = d.pass.run(gpu, &renderer.scene, &grid.receivers, &all, vals.len())?;
-                log_differential(&light, || visible_receivers(grid, frame, &virtual_depth, w, h));
-                let field = LightField { grid, light: &light };
+                let method = self.mr.differential_method;
+                let (light, counts) = differential::receiver_light(
+                    &mut d.pass,
+                    gpu,
+                    &renderer.scene,
+                    &grid,
+                    &all,
+                    vals.len(),
+                    d.bounds,
+                    method,
+                )?;
+                tracing::debug!(?method, ?counts, "differential receivers");
+                let visible = visible_receivers(&grid, frame, &virtual_depth, w, h);
+                log_differential(&light, &visible);
+                let field = LightField { grid: &grid, light: &light };
                 let background = differential::relight_camera(frame, &field, w, h, settings.rgbd.radiance_scale);
                 let ms = build_ms + lighting.receivers_ms + start.elapsed().as_secs_f64() * 1e3;
                 rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), ms));
-                Some(background)
+                let (vals, real_count, bounds) = (all, vals.len(), d.bounds);
+                (Some(background), Some(DifferentialFrame { grid, light, counts, visible, vals, real_count, bounds }))
             }
-            _ => None,
+            _ => (None, None),
         };
         let start = Instant::now();
         let virtual_rgb = rendered.direct.add(&rendered.indirect);
@@ -423,13 +456,13 @@ impl MrPipeline {
             display_scale(settings.exposure, settings.rgbd.radiance_scale),
         );
         let composite_ms = depth_ms + start.elapsed().as_secs_f64() * 1e3;
-        Ok(Relit { rendered, composited, composite_ms, sparse_irradiance })
+        Ok(Relit { rendered, composited, composite_ms, sparse_irradiance, differential })
     }
 }
 
 /// At debug level: how many receivers the virtual content shadows and darkens, over all of them
 /// and over those the composite shows (`shown`, per receiver: the shadow one can see).
-fn log_differential(light: &[crate::gpu::differential::ReceiverLight], shown: impl FnOnce() -> Vec<bool>) {
+fn log_differential(light: &[crate::gpu::differential::ReceiverLight], shown: &[bool]) {
     if !tracing::enabled!(tracing::Level::DEBUG) {
         return;
     }
@@ -441,8 +474,7 @@ fn log_differential(light: &[crate::gpu::differential::ReceiverLight], shown: im
     let darkened = light.iter().filter(|l| net(l) < -0.1).count();
     let most = light.iter().map(fraction).fold(0.0f32, f32::max);
     let darkest = light.iter().map(net).fold(0.0f32, f32::min);
-    let shown = shown();
-    let visible = light.iter().zip(&shown).filter(|(_, v)| **v).map(|(l, _)| l);
+    let visible = light.iter().zip(shown).filter(|(_, v)| **v).map(|(l, _)| l);
     let visible_darkened = visible.clone().filter(|l| net(l) < -0.1).count();
     let visible_darkest = visible.map(net).fold(0.0f32, f32::min);
     tracing::debug!(

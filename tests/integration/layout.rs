@@ -207,3 +207,18 @@ fn mr_differential_structs_match_wgsl() {
     check!(m, "Receiver", RawReceiver, [position, _pad0, normal, _pad1]);
     check!(m, "ReceiverLight", RawReceiverLight, [unoccluded, blocked, added]);
 }
+
+#[test]
+fn mr_differential_fast_structs_match_wgsl() {
+    use relume::gpu::differential::{RawFastParams, RawReceiver, RawReceiverLight, RawValGroup};
+    let m = module_of("differential_fast");
+    check!(m, "FastParams", RawFastParams, [receiver_count, group_count, real_groups, _pad0, content]);
+    check!(m, "Receiver", RawReceiver, [position, _pad0, normal, _pad1]);
+    check!(m, "ReceiverLight", RawReceiverLight, [unoccluded, blocked, added]);
+    check!(
+        m,
+        "ValGroup",
+        RawValGroup,
+        [position, area, normal, radius, flux, reach, first, count, representative, shadow_reach]
+    );
+}

@@ -1,6 +1,7 @@
-//! Differential rendering onto real surfaces: the GPU pass against its CPU twin, and
-//! a real plate under a virtual box against the exact reference rendered with and without the
-//! box.
+//! Differential rendering onto real surfaces: the GPU passes (exact and fast) against their CPU
+//! twins, a real plate under a virtual box against the exact reference rendered with and without
+//! the box, and the fast pass against the exact one on the bundled TUM recording and on a
+//! synthetic closed-loop recording.
 
 use super::gpu;
 use glam::Vec3;
@@ -110,6 +111,72 @@ fn mr_differential_gpu_matches_twin() {
         }
         eprintln!("{device:?}: {} receivers, {rounds} rounds: {blocked} shadowed, {added} lit", receivers.len());
         assert!(blocked > 50 && added > 50, "the test must exercise both sums: {blocked} shadowed, {added} lit");
+    }
+}
+
+/// The fast kernel (`fast.wgsl`) and its twin agree at every receiver, on the GPU and on the
+/// CPU backend, with the VALs grouped as the fast pass groups them: lamps in groups of 4 (so
+/// that the plate's receivers sum some groups as one and open others) and the box's re-emitters
+/// in groups of 8. The kernel decides a group's reach and cone with the GPU's `length`, `asin`
+/// and `cos`, which may round a receiver exactly at a threshold the other way: the sums then
+/// differ by the aggregate's error, under 5 %; at most 1 % of the receivers may.
+#[test]
+fn mr_differential_fast_gpu_matches_twin() {
+    use relume::gpu::differential::groups::group_vals;
+    use relume::gpu::differential::twin::ContentSphere;
+    let gpu = gpu();
+    let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
+    let origin = scene.origin.as_vec3();
+    let mut vals: Vec<Val> = lights_above().into_iter().map(|v| Val { position: v.position - origin, ..v }).collect();
+    let real_count = vals.len();
+    let emitters = relume::mr::differential::emitters(&scene);
+    let lit: Vec<Vec3> = emitters.iter().map(|e| Vec3::splat(5.0) * (0.5 + 0.5 * e.normal.z.abs())).collect();
+    vals.extend(relume::mr::differential::emitter_vals(&emitters, &lit));
+    let receivers: Vec<Receiver> =
+        plate_receivers().into_iter().map(|r| Receiver { position: r.position - origin, ..r }).collect();
+    let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
+    let bounds = relume::mr::differential::bounds(positions.iter().copied());
+    let content = ContentSphere::around(bounds);
+    let mut grouped = group_vals(&vals[..real_count], real_count, 4, relume::gpu::differential::groups::REACH);
+    let emitter_groups = group_vals(&vals[real_count..], 0, 8, relume::gpu::differential::groups::REACH);
+    let shift = grouped.vals.len() as u32;
+    grouped.vals.extend(&emitter_groups.vals);
+    grouped.groups.extend(emitter_groups.groups.iter().map(|g| relume::gpu::differential::groups::ValGroup {
+        first: g.first + shift,
+        representative: g.representative + shift,
+        ..*g
+    }));
+    let twins: Vec<_> = receivers
+        .iter()
+        .map(|r| twin::receiver_light_fast(r, &grouped, &content, &bvh, &positions, &triangles))
+        .collect();
+    let (mut summed, mut blocked) = (0, 0);
+    for (r, fast) in receivers.iter().zip(&twins) {
+        let exact = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
+        let tol = 1e-4 * exact.unoccluded.max_element() + 1e-6;
+        summed += usize::from((fast.unoccluded - exact.unoccluded).abs().max_element() > tol);
+        blocked += usize::from(exact.blocked.x > 0.0);
+    }
+    eprintln!("{} receivers: {summed} sum some lamp group as one, {blocked} shadowed", receivers.len());
+    assert!(summed > 100 && blocked > 50, "the test must exercise both paths: {summed} summed, {blocked} shadowed");
+    for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
+        let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
+        let (light, rounds) = pass.run_fast(&gpu, &gpu_scene, &receivers, &grouped, &content).unwrap();
+        let mut off = 0;
+        for (r, (got, want)) in receivers.iter().zip(light.iter().zip(&twins)) {
+            let scale = (want.unoccluded + want.added).max_element();
+            let tol = 1e-4 * scale + 1e-6;
+            let worst = [(got.unoccluded, want.unoccluded), (got.blocked, want.blocked), (got.added, want.added)]
+                .iter()
+                .map(|(g, w)| (*g - *w).abs().max_element())
+                .fold(0.0f32, f32::max);
+            if worst > tol {
+                off += 1;
+                assert!(worst <= 0.05 * scale, "{device:?} at {}: {got:?} vs twin {want:?}", r.position);
+            }
+        }
+        eprintln!("{device:?}: {rounds} rounds, {off} receivers off the twin by over 1e-4");
+        assert!(off * 100 <= receivers.len(), "{device:?}: {off} receivers off the twin");
     }
 }
 
@@ -354,4 +421,103 @@ fn mr_auto_distribution_against_known_light() {
             assert!(uniform.error < overcast.error, "{name}: {uniform:?} vs {overcast:?}");
         }
     }
+}
+
+/// The fast pass against the exact one, each replayed by its own `MrRenderer` on the same
+/// frames of `recording` with `scene` (its `settings.mr.differential_method` set to each): per
+/// frame, the change of irradiance over the receivers within 10 % rel RMSE and the darkest
+/// visible net change (the contact shadow) within 10 % of the exact one's.
+fn fast_against_exact(
+    name: &str,
+    scene: &Scene,
+    environment: Option<relume::mr::environment::Environment>,
+    recording: &relume::rgbd::recording::Recording,
+    frames: &[usize],
+) {
+    use relume::mr::differential::Agreement;
+    use relume::mr::{MrOptions, MrRenderer};
+    use relume::scene::settings::DifferentialMethod;
+    let gpu = gpu();
+    let k = recording.intrinsics();
+    // The receivers are the depth frame's; the output size only sets the composite's.
+    let options = MrOptions { width: k.width / 4, height: k.height / 4, exposure: 1.0, accumulate: None };
+    let renderer = |method| {
+        let mut scene = scene.clone();
+        scene.settings.mr.differential_method = method;
+        MrRenderer::new(&gpu, &scene, options).unwrap()
+    };
+    let (mut exact, mut fast) = (renderer(DifferentialMethod::Exact), renderer(DifferentialMethod::Fast));
+    if let Some(environment) = environment {
+        exact.set_environment(environment.clone());
+        fast.set_environment(environment);
+    }
+    for &i in frames {
+        let frame = recording.frame(i).unwrap();
+        let (e, f) = (exact.render_frame(&gpu, &frame).unwrap(), fast.render_frame(&gpu, &frame).unwrap());
+        let (de, df) = (e.differential.expect("exact pass ran"), f.differential.expect("fast pass ran"));
+        assert_eq!(de.grid.receivers, df.grid.receivers, "{name} frame {i}: the same receivers");
+        let a = Agreement::of(&de.light, &df.light, &de.visible);
+        eprintln!(
+            "{name} frame {i}: {} receivers, fast computed {} ({} interpolated): {a:?}",
+            de.light.len(),
+            df.counts.computed,
+            df.counts.interpolated
+        );
+        assert!(de.light.len() >= 100, "{name} frame {i}: too few receivers to tell ({})", de.light.len());
+        assert!(a.darkest_exact < -0.1, "{name} frame {i}: no contact shadow to compare ({a:?})");
+        assert!(a.change_rel_rmse <= 0.10, "{name} frame {i}: change of irradiance off by {a:?}");
+        assert!(a.darkest_rel_error() <= 0.10, "{name} frame {i}: darkest value off by {a:?}");
+    }
+}
+
+/// The default job's scene on the bundled TUM recording (with its `auto` environment, as
+/// `relume replay` reads it), its first, middle and last frames.
+#[test]
+fn mr_differential_fast_against_exact_on_tum() {
+    let scene = super::load_scene("mr_bunny_differential");
+    let path = super::fixture("scenes/mr_bunny_differential.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let settings = relume::scene::SceneDescription::from_json_str(&text).unwrap().settings.environment;
+    let environment = relume::mr::environment::Environment::from_settings(&settings, path.parent().unwrap()).unwrap();
+    let recording = relume::rgbd::recording::Recording::open(
+        &super::fixture("recordings/tum_fr1_xyz"),
+        &relume::rgbd::recording::RecordingOptions::default(),
+    )
+    .unwrap();
+    fast_against_exact("tum", &scene, Some(environment), &recording, &[0, 18, 36]);
+}
+
+/// A synthetic closed-loop recording (`relume record-synthetic`: the Cornell room of
+/// `cornell_bunny_small.json` without the bunny, lit by its spot light) replayed with the bunny
+/// as virtual content, the differential pass on, every frame.
+#[test]
+fn mr_differential_fast_against_exact_on_synthetic() {
+    use relume::mr::synthetic::{SyntheticOptions, record};
+    let text = std::fs::read_to_string(super::fixture("scenes/cornell_bunny_small.json")).unwrap();
+    let fixture: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let with_meshes = |indices: &[usize]| {
+        let mut v = fixture.clone();
+        v["meshes"] = serde_json::Value::Array(indices.iter().map(|&i| v["meshes"][i].clone()).collect());
+        v
+    };
+    let scene_of = |v: &serde_json::Value| Scene::from_json_str(&v.to_string(), &super::fixture("scenes")).unwrap();
+    let gpu = gpu();
+    let dir = super::scratch("mr_differential_fast_synthetic");
+    let options = SyntheticOptions {
+        out: dir.clone(),
+        frames: 3,
+        width: 192,
+        height: 192,
+        arc_deg: 60.0,
+        turn_deg: 0.0,
+        radiance_scale: None,
+    };
+    let metadata = record(&gpu, &scene_of(&with_meshes(&[0])), &options).unwrap();
+    let mut bunny = with_meshes(&[1]);
+    bunny.as_object_mut().unwrap().remove("light");
+    bunny["settings"]["rgbd"] = serde_json::json!({ "grid_step": 4, "radiance_scale": metadata.radiance_scale });
+    bunny["settings"]["mr"] = serde_json::json!({ "differential": true, "receiver_step": 2 });
+    let recording =
+        relume::rgbd::recording::Recording::open(&dir, &relume::rgbd::recording::RecordingOptions::default()).unwrap();
+    fast_against_exact("synthetic", &scene_of(&bunny), None, &recording, &[0, 1, 2]);
 }

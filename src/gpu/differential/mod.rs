@@ -5,11 +5,20 @@
 //! makes the receivers from a depth frame and turns these sums into the composite. Rust twin:
 //! [`twin::receiver_light`].
 //!
-//! Runs in rounds, like the exact reference (see `differential.wgsl`): the host dispatches until
-//! every receiver has seen every VAL. On CPU adapters it runs on the CPU instead
-//! ([`DifferentialDevice`]): the twin's sums over rayon's threads.
+//! Two kernels: `differential.wgsl` sums every VAL at every receiver with a shadow ray each (the
+//! exact pass, [`Differential::run`]); `fast.wgsl` sums the VALs in groups ([`groups`]), a far
+//! group as one VAL and without a ray where its cone misses the content (the fast pass,
+//! [`Differential::run_fast`], twin [`twin::receiver_light_fast`]).
+//!
+//! Both run in rounds, like the exact reference (see `differential.wgsl`): the host dispatches
+//! until every receiver has seen every VAL. On CPU adapters they run on the CPU instead
+//! ([`DifferentialDevice`]): the twins' sums over rayon's threads.
 
+pub mod groups;
 pub mod twin;
+
+use groups::{GroupedVals, ValGroup};
+use twin::ContentSphere;
 
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write};
 use crate::gpu::raw::RawVal;
@@ -25,6 +34,7 @@ use glam::Vec3;
 pub use twin::{Receiver, ReceiverLight};
 
 pub const WGSL: &str = include_str!("differential.wgsl");
+pub const FAST_WGSL: &str = include_str!("fast.wgsl");
 const BVH: &str = include_str!("../references/bvh.wgsl");
 
 /// Loop iterations (VAL loop and BVH traversal together) one invocation runs per round: below
@@ -35,6 +45,77 @@ const _: () = assert!(DIFFERENTIAL_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 /// The pass's own WGSL: its constant, the BVH traversal, then `differential.wgsl`.
 pub fn body() -> String {
     Wgsl::new().u32("DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET).include(BVH).include(WGSL).finish()
+}
+
+/// The fast pass's WGSL: its constant, the BVH traversal, then `fast.wgsl`.
+pub fn fast_body() -> String {
+    Wgsl::new().u32("FAST_DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET).include(BVH).include(FAST_WGSL).finish()
+}
+
+/// The fast pass: [`PASS`]'s bindings (two progress words per receiver) and the groups.
+pub const FAST_PASS: PassDesc = PassDesc {
+    label: "differential_fast",
+    bindings: &[
+        read("params"),
+        read("receivers"),
+        read("vals"),
+        read_write("light"),
+        read("bvh_nodes"),
+        read("bvh_triangles"),
+        read_write("progress"),
+        read_write("status"),
+        read("groups"),
+    ],
+    entries: &[Entry::first("main", 9)],
+    workgroup: [WORKGROUP_SIZE, 1, 1],
+    default_source: |textured| FAST_PASS.source(&fast_body(), textured),
+};
+
+/// WGSL `FastParams`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawFastParams {
+    pub receiver_count: u32,
+    pub group_count: u32,
+    /// `groups[.. real_groups]` hold real VALs, the rest re-emitters.
+    pub real_groups: u32,
+    pub _pad0: u32,
+    /// The content's bounding sphere ([`ContentSphere`]): centre and radius.
+    pub content: [f32; 4],
+}
+
+/// WGSL `ValGroup` ([`ValGroup`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct RawValGroup {
+    pub position: [f32; 3],
+    pub area: f32,
+    pub normal: [f32; 3],
+    pub radius: f32,
+    pub flux: [f32; 3],
+    pub reach: f32,
+    pub first: u32,
+    pub count: u32,
+    pub representative: u32,
+    pub shadow_reach: f32,
+}
+
+impl From<&ValGroup> for RawValGroup {
+    fn from(g: &ValGroup) -> Self {
+        let a = &g.aggregate;
+        Self {
+            position: a.position.into(),
+            area: a.area,
+            normal: a.normal.into(),
+            radius: g.radius,
+            flux: a.flux.into(),
+            reach: g.reach,
+            first: g.first,
+            count: g.count,
+            representative: g.representative,
+            shadow_reach: g.shadow_reach,
+        }
+    }
 }
 
 /// One invocation per receiver; `bvh_nodes` and `bvh_triangles` sit at bindings 4 and 5, where
@@ -182,23 +263,52 @@ impl Differential {
             }
         }
     }
+
+    /// The sums of [`twin::receiver_light_fast`] at every receiver over `grouped` (real VALs
+    /// and re-emitters in groups), with `content` the virtual content's bounding sphere.
+    /// Returns them and the GPU rounds it took (0 on the CPU). Submits and waits.
+    pub fn run_fast(
+        &mut self,
+        gpu: &Gpu,
+        scene: &GpuScene,
+        receivers: &[Receiver],
+        grouped: &GroupedVals,
+        content: &ContentSphere,
+    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
+        match &mut self.backend {
+            Backend::Gpu(pass) => pass.run_fast(gpu, scene, receivers, grouped, content),
+            Backend::Cpu { positions, triangles, bvh } => {
+                use rayon::prelude::*;
+                let light = receivers
+                    .par_iter()
+                    .map(|r| twin::receiver_light_fast(r, grouped, content, bvh, positions, triangles))
+                    .collect();
+                Ok((light, 0))
+            }
+        }
+    }
 }
 
-/// The GPU pass for one scene placement: its BVH and buffers grown to the largest frame so far.
+/// The GPU passes for one scene placement: the BVH, the exact kernel, the fast one (built on its
+/// first use) and buffers grown to the largest frame so far.
 struct GpuPass {
     kernel: Kernel,
+    fast: Option<Kernel>,
     nodes: wgpu::Buffer,
     order: wgpu::Buffer,
     params: wgpu::Buffer,
+    fast_params: wgpu::Buffer,
     status: wgpu::Buffer,
-    /// (receivers, light, progress) and their capacity in receivers.
+    /// (receivers, light, progress with two words per receiver) and their capacity in receivers.
     per_receiver: Option<(wgpu::Buffer, wgpu::Buffer, wgpu::Buffer, usize)>,
     /// VAL buffer and its capacity.
     vals: Option<(wgpu::Buffer, usize)>,
+    /// Group buffer and its capacity.
+    groups: Option<(wgpu::Buffer, usize)>,
 }
 
 impl GpuPass {
-    /// Build the BVH of `scene`'s triangles as placed now and the pass.
+    /// Build the BVH of `scene`'s triangles as placed now and the exact pass.
     fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
         let (_, _, bvh) = scene_bvh(scene);
         let none = wgpu::BufferUsages::empty();
@@ -207,13 +317,48 @@ impl GpuPass {
         let order = if bvh.order.is_empty() { vec![0] } else { bvh.order };
         let nodes = gpu.storage_buffer("differential.bvh_nodes", &nodes, none)?;
         let order = gpu.storage_buffer("differential.bvh_triangles", &order, none)?;
-        let workgroup = workgroup(gpu);
-        let source = PASS.source_with(&body(), scene.textured(), workgroup, TILE_SIZE);
-        let module = module_from_source(gpu, PASS.label, source)?;
-        let kernel = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("main"), &[], workgroup)?;
+        let kernel = build_kernel(gpu, scene, &PASS, &body())?;
         let params = gpu.storage_buffer("differential.params", &[RawDifferentialParams::default()], none)?;
+        let fast_params = gpu.storage_buffer("differential.fast_params", &[RawFastParams::default()], none)?;
         let status = gpu.storage_buffer_sized::<u32>("differential.status", 2)?;
-        Ok(Self { kernel, nodes, order, params, status, per_receiver: None, vals: None })
+        Ok(Self {
+            kernel,
+            fast: None,
+            nodes,
+            order,
+            params,
+            fast_params,
+            status,
+            per_receiver: None,
+            vals: None,
+            groups: None,
+        })
+    }
+
+    /// Size the per-receiver buffers for `receivers` and the VAL buffer for `vals`, and upload
+    /// both.
+    fn upload(&mut self, gpu: &Gpu, receivers: &[Receiver], vals: &[Val]) -> Result<(), GpuError> {
+        let n = receivers.len();
+        if self.per_receiver.as_ref().is_none_or(|p| p.3 < n) {
+            let receivers = gpu.storage_buffer_sized::<RawReceiver>("differential.receivers", n)?;
+            let light = gpu.storage_buffer_sized::<RawReceiverLight>("differential.light", n)?;
+            let progress = gpu.storage_buffer_sized::<u32>("differential.progress", 2 * n)?;
+            self.per_receiver = Some((receivers, light, progress, n));
+        }
+        let val_slots = vals.len().max(1);
+        if self.vals.as_ref().is_none_or(|v| v.1 < val_slots) {
+            self.vals = Some((gpu.storage_buffer_sized::<RawVal>("differential.vals", val_slots)?, val_slots));
+        }
+        let raw: Vec<RawReceiver> = receivers
+            .iter()
+            .map(|r| RawReceiver { position: r.position.into(), normal: r.normal.into(), ..Default::default() })
+            .collect();
+        gpu.queue.write_buffer(&self.per_receiver.as_ref().expect("made above").0, 0, bytemuck::cast_slice(&raw));
+        if !vals.is_empty() {
+            let raw: Vec<RawVal> = vals.iter().map(RawVal::from).collect();
+            gpu.queue.write_buffer(&self.vals.as_ref().expect("made above").0, 0, bytemuck::cast_slice(&raw));
+        }
+        Ok(())
     }
 
     /// [`Differential::run`] on the GPU.
@@ -228,41 +373,21 @@ impl GpuPass {
         if receivers.is_empty() {
             return Ok((Vec::new(), 0));
         }
-        let n = receivers.len();
-        if self.per_receiver.as_ref().is_none_or(|p| p.3 < n) {
-            let receivers = gpu.storage_buffer_sized::<RawReceiver>("differential.receivers", n)?;
-            let light = gpu.storage_buffer_sized::<RawReceiverLight>("differential.light", n)?;
-            let progress = gpu.storage_buffer_sized::<u32>("differential.progress", n)?;
-            self.per_receiver = Some((receivers, light, progress, n));
-        }
-        let val_slots = vals.len().max(1);
-        if self.vals.as_ref().is_none_or(|v| v.1 < val_slots) {
-            self.vals = Some((gpu.storage_buffer_sized::<RawVal>("differential.vals", val_slots)?, val_slots));
-        }
-        let (receiver_buffer, light, progress, _) = self.per_receiver.as_ref().expect("made above");
-        let val_buffer = &self.vals.as_ref().expect("made above").0;
-        let raw: Vec<RawReceiver> = receivers
-            .iter()
-            .map(|r| RawReceiver { position: r.position.into(), normal: r.normal.into(), ..Default::default() })
-            .collect();
-        gpu.queue.write_buffer(receiver_buffer, 0, bytemuck::cast_slice(&raw));
-        if !vals.is_empty() {
-            let raw: Vec<RawVal> = vals.iter().map(RawVal::from).collect();
-            gpu.queue.write_buffer(val_buffer, 0, bytemuck::cast_slice(&raw));
-        }
+        self.upload(gpu, receivers, vals)?;
         let params = RawDifferentialParams {
-            receiver_count: n as u32,
+            receiver_count: receivers.len() as u32,
             real_count: real_count.min(vals.len()) as u32,
             val_count: vals.len() as u32,
             _pad0: 0,
         };
         gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let (receiver_buffer, light, progress, _) = self.per_receiver.as_ref().expect("uploaded");
         let group = self.kernel.bind(
             gpu,
             &[
                 buffer("params", &self.params),
                 buffer("receivers", receiver_buffer),
-                buffer("vals", val_buffer),
+                buffer("vals", &self.vals.as_ref().expect("uploaded").0),
                 buffer("light", light),
                 buffer("bvh_nodes", &self.nodes),
                 buffer("bvh_triangles", &self.order),
@@ -270,16 +395,81 @@ impl GpuPass {
                 buffer("status", &self.status),
             ],
         );
+        self.rounds(gpu, scene, &self.kernel, &group, receivers.len())
+    }
+
+    /// [`Differential::run_fast`] on the GPU.
+    fn run_fast(
+        &mut self,
+        gpu: &Gpu,
+        scene: &GpuScene,
+        receivers: &[Receiver],
+        grouped: &GroupedVals,
+        content: &ContentSphere,
+    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
+        if receivers.is_empty() {
+            return Ok((Vec::new(), 0));
+        }
+        if self.fast.is_none() {
+            self.fast = Some(build_kernel(gpu, scene, &FAST_PASS, &fast_body())?);
+        }
+        self.upload(gpu, receivers, &grouped.vals)?;
+        let slots = grouped.groups.len().max(1);
+        if self.groups.as_ref().is_none_or(|g| g.1 < slots) {
+            self.groups = Some((gpu.storage_buffer_sized::<RawValGroup>("differential.groups", slots)?, slots));
+        }
+        let groups = &self.groups.as_ref().expect("made above").0;
+        if !grouped.groups.is_empty() {
+            let raw: Vec<RawValGroup> = grouped.groups.iter().map(RawValGroup::from).collect();
+            gpu.queue.write_buffer(groups, 0, bytemuck::cast_slice(&raw));
+        }
+        let params = RawFastParams {
+            receiver_count: receivers.len() as u32,
+            group_count: grouped.groups.len() as u32,
+            real_groups: grouped.real_groups as u32,
+            _pad0: 0,
+            content: content.centre.extend(content.radius).into(),
+        };
+        gpu.queue.write_buffer(&self.fast_params, 0, bytemuck::bytes_of(&params));
+        let (receiver_buffer, light, progress, _) = self.per_receiver.as_ref().expect("uploaded");
+        let kernel = self.fast.as_ref().expect("built above");
+        let group = kernel.bind(
+            gpu,
+            &[
+                buffer("params", &self.fast_params),
+                buffer("receivers", receiver_buffer),
+                buffer("vals", &self.vals.as_ref().expect("uploaded").0),
+                buffer("light", light),
+                buffer("bvh_nodes", &self.nodes),
+                buffer("bvh_triangles", &self.order),
+                buffer("progress", progress),
+                buffer("status", &self.status),
+                buffer("groups", groups),
+            ],
+        );
+        self.rounds(gpu, scene, kernel, &group, receivers.len())
+    }
+
+    /// Dispatch `kernel` over `n` receivers until every one is done, then read their sums.
+    fn rounds(
+        &self,
+        gpu: &Gpu,
+        scene: &GpuScene,
+        kernel: &Kernel,
+        group: &wgpu::BindGroup,
+        n: usize,
+    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
+        let (_, light, progress, _) = self.per_receiver.as_ref().expect("uploaded");
         let mut rounds = 0;
         loop {
             let mut encoder = gpu
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("differential.round") });
             if rounds == 0 {
-                encoder.clear_buffer(progress, 0, Some(4 * n as u64));
+                encoder.clear_buffer(progress, 0, Some(8 * n as u64));
             }
             encoder.clear_buffer(&self.status, 0, None);
-            self.kernel.dispatch(&mut encoder, &group, scene, [n as u32, 1, 1], None);
+            kernel.dispatch(&mut encoder, group, scene, [n as u32, 1, 1], None);
             gpu.submit_and_wait(encoder)?;
             rounds += 1;
             if crate::gpu::rounds_done(gpu, &self.status, rounds, "differential: receivers", DIFFERENTIAL_LOOP_BUDGET)?
@@ -290,4 +480,12 @@ impl GpuPass {
         let out = gpu.read_buffer::<RawReceiverLight>(light, n)?;
         Ok((out.iter().map(ReceiverLight::from).collect(), rounds))
     }
+}
+
+/// The kernel of `desc` with its WGSL `body`, at this adapter's workgroup size.
+fn build_kernel(gpu: &Gpu, scene: &GpuScene, desc: &PassDesc, body: &str) -> Result<Kernel, GpuError> {
+    let workgroup = workgroup(gpu);
+    let source = desc.source_with(body, scene.textured(), workgroup, TILE_SIZE);
+    let module = module_from_source(gpu, desc.label, source)?;
+    Kernel::build(gpu, scene, desc, &module, desc.entry("main"), &[], workgroup)
 }

@@ -1,7 +1,8 @@
-//! CPU twin of `differential.wgsl`: what one receiver's sums are, with the same shadow rays
-//! (`twin::bvh::Bvh::occluded`, the GPU traversal's twin, from `p + n RAY_OFFSET` to
+//! CPU twins of `differential.wgsl` and `fast.wgsl`: what one receiver's sums are, with the same
+//! shadow rays (`twin::bvh::Bvh::occluded`, the GPU traversal's twin, from `p + n RAY_OFFSET` to
 //! `l + n_l RAY_OFFSET`).
 
+use super::groups::GroupedVals;
 use crate::twin::bvh::Bvh;
 use crate::twin::exact_cpu::RAY_OFFSET;
 use crate::twin::{Val, val_geometry};
@@ -72,6 +73,114 @@ fn receiver_light_with(
         } else if !blocked {
             sums.added += e;
         }
+    }
+    sums
+}
+
+/// The virtual content's bounding sphere for the fast pass's cull: centre and radius (m), padded
+/// so that it holds every shadow ray's end offsets too.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContentSphere {
+    pub centre: Vec3,
+    pub radius: f32,
+}
+
+impl ContentSphere {
+    /// The sphere about the box `bounds` (min, max corners), padded by a few ray offsets.
+    pub fn around(bounds: (Vec3, Vec3)) -> Self {
+        let centre = (bounds.0 + bounds.1) * 0.5;
+        Self { centre, radius: (bounds.1 - bounds.0).length() * 0.5 + 4.0 * RAY_OFFSET }
+    }
+
+    /// Whether a segment from `origin` to a point of the sphere (`centre`, `radius`) can cross
+    /// this sphere: false only when the cone from `origin` around that sphere and the cone
+    /// around this one are apart, or this one lies wholly beyond the other. Twin of
+    /// `may_be_blocked` in `fast.wgsl`.
+    pub fn may_block(&self, origin: Vec3, centre: Vec3, radius: f32) -> bool {
+        let (to_content, to_group) = (self.centre - origin, centre - origin);
+        let (dc, dg) = (to_content.length(), to_group.length());
+        if dc <= self.radius || dg <= radius {
+            return true;
+        }
+        if dc - self.radius >= dg + radius {
+            return false;
+        }
+        let spread = (self.radius / dc).asin() + (radius / dg).min(1.0).asin();
+        spread >= std::f32::consts::FRAC_PI_2 || to_content.dot(to_group) > dc * dg * spread.cos()
+    }
+}
+
+/// The sums of `fast.wgsl` at `receiver` over `grouped` (real VALs and re-emitters in groups).
+/// A group beyond its reach is summed as its aggregate: a real one adds it to `unoccluded`
+/// without a shadow ray when its cone misses `content` (nothing can block it); a re-emitter
+/// group adds it to `added` when the shadow ray to its representative member is free. A real
+/// group whose cone may meet the content is summed as one only beyond its `shadow_reach`, and
+/// blocked as a whole when the ray to its representative is. Every other group has its members
+/// summed as [`receiver_light`] sums them, a shadow ray each.
+pub fn receiver_light_fast(
+    receiver: &Receiver,
+    grouped: &GroupedVals,
+    content: &ContentSphere,
+    bvh: &Bvh,
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+) -> ReceiverLight {
+    receiver_light_fast_with(receiver, grouped, content, |origin, target| {
+        bvh.occluded(positions, triangles, origin, target)
+    })
+}
+
+/// [`receiver_light_fast`] with `blocked(from, to)` deciding each shadow ray.
+fn receiver_light_fast_with(
+    receiver: &Receiver,
+    grouped: &GroupedVals,
+    content: &ContentSphere,
+    blocked: impl Fn(Vec3, Vec3) -> bool + Copy,
+) -> ReceiverLight {
+    let origin = receiver.position + receiver.normal * RAY_OFFSET;
+    let mut sums = ReceiverLight::default();
+    for (k, group) in grouped.groups.iter().enumerate() {
+        let real = k < grouped.real_groups;
+        let a = &group.aggregate;
+        let far = (a.position - receiver.position).length() > group.reach;
+        if far && (!real || !content.may_block(origin, a.position, group.radius)) {
+            let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
+            let f = g.weight * g.cos_receiver;
+            if f <= 0.0 {
+                continue;
+            }
+            let e = a.flux * f;
+            if real {
+                sums.unoccluded += e;
+            } else {
+                let target = &grouped.vals[group.representative as usize];
+                if !blocked(origin, target.position + target.normal * RAY_OFFSET) {
+                    sums.added += e;
+                }
+            }
+            continue;
+        }
+        if (a.position - receiver.position).length() > group.shadow_reach {
+            // A real group that the content may block, far enough: its aggregate, blocked as a
+            // whole when the ray to its representative member is.
+            let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
+            let f = g.weight * g.cos_receiver;
+            if f <= 0.0 {
+                continue;
+            }
+            let e = a.flux * f;
+            sums.unoccluded += e;
+            let target = &grouped.vals[group.representative as usize];
+            if blocked(origin, target.position + target.normal * RAY_OFFSET) {
+                sums.blocked += e;
+            }
+            continue;
+        }
+        let members = &grouped.vals[group.first as usize..(group.first + group.count) as usize];
+        let part = receiver_light_with(receiver, members, if real { members.len() } else { 0 }, blocked);
+        sums.unoccluded += part.unoccluded;
+        sums.blocked += part.blocked;
+        sums.added += part.added;
     }
     sums
 }

@@ -19,7 +19,7 @@ mod visibility;
 pub use bounce::{DEFAULT_BOUNCES, MAX_SECOND_BOUNCE_POINTS, MAX_SECOND_BOUNCE_VALS, SecondBounceSettings};
 pub use direct::{DirectSettings, DirectShadows, MAX_DIRECT_LIGHTS, MAX_LIGHTS_VAL_BUDGET, POINT_VIEWS, SPOT_VIEWS};
 pub use environment::{EnvironmentDistribution, EnvironmentSettings, EnvironmentSource, MAX_ENVIRONMENT_ROWS};
-pub use mr::{DifferentialDevice, MAX_RECEIVER_MARGIN, MrSettings};
+pub use mr::{DifferentialDevice, DifferentialMethod, MAX_RECEIVER_MARGIN, MrSettings};
 pub use quality::{
     BUDGET_RANGE_MS, Choice, Quality, ResolvedConfig, SceneAnalysis, Technique, resolve, validate_budget_ms,
 };

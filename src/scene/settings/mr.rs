@@ -24,11 +24,21 @@ pub struct MrSettings {
     /// Where the differential pass runs: `auto` (default: the CPU on CPU adapters such as
     /// lavapipe, the GPU otherwise), `gpu` or `cpu`. Both give the same sums.
     pub device: DifferentialDevice,
+    /// How the differential pass computes its sums: `fast` (default: the VALs in groups, a far
+    /// group summed as one, receivers interpolated where the content's effect is smooth) or
+    /// `exact` (every receiver sums every VAL with a shadow ray: the reference).
+    pub differential_method: DifferentialMethod,
 }
 
 impl Default for MrSettings {
     fn default() -> Self {
-        Self { differential: true, receiver_margin: 0.3, receiver_step: 4, device: DifferentialDevice::Auto }
+        Self {
+            differential: true,
+            receiver_margin: 0.3,
+            receiver_step: 4,
+            device: DifferentialDevice::Auto,
+            differential_method: DifferentialMethod::Fast,
+        }
     }
 }
 
@@ -49,6 +59,20 @@ pub enum DifferentialDevice {
     /// CPU exact reference's, decides rays that graze a triangle's edge or a node's box
     /// otherwise: on the plate-and-box test one receiver in 1,089 differed).
     Cpu,
+}
+
+/// How the differential pass computes its sums (`settings.mr.differential_method`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum DifferentialMethod {
+    /// The VALs in groups, a group far from a receiver summed as one VAL with one shadow ray
+    /// (none where its cone misses the content), receivers computed on a coarse grid and refined
+    /// where the content's effect changes (docs/techniques/differential.md).
+    #[default]
+    Fast,
+    /// Every receiver sums every VAL and every re-emitter with a shadow ray through the virtual
+    /// meshes: the reference.
+    Exact,
 }
 
 impl MrSettings {

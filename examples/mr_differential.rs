@@ -1,0 +1,112 @@
+//! The fast differential pass against the exact one on a recording: per frame, the exact
+//! pass's time (the replay's `differential` stage), then the fast pass's time on the same
+//! receivers and VALs and how its sums agree with the exact ones
+//! (`mr::differential::Agreement`), for the default parameters and any others asked for.
+//!
+//! `cargo run --release --example mr_differential -- [SCENE] [RECORDING] [FRAME ...]`
+//! (default: `fixtures/scenes/mr_bunny_differential.json` on `fixtures/recordings/tum_fr1_xyz`,
+//! every frame). `FAST="16,4,4,0.02,1.1;32,4,4,0.05,1.1"` adds parameter sets (group size,
+//! reach, adaptive spacing, change spread, irradiance ratio: `mr::differential::FastSettings`).
+//! The fast pass runs where `settings.mr.device` puts it (the CPU on CPU adapters).
+
+use relume::gpu::Gpu;
+use relume::gpu::differential::Differential;
+use relume::gpu::scene::{FlatScene, GpuScene};
+use relume::mr::differential::{Agreement, FastSettings, fast_light};
+use relume::mr::environment::Environment;
+use relume::mr::{DIFFERENTIAL_STAGE, MrOptions, MrRenderer};
+use relume::rgbd::recording::{Recording, RecordingOptions};
+use relume::scene::settings::DifferentialMethod;
+use relume::scene::{Scene, SceneDescription};
+use std::path::Path;
+use std::time::Instant;
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let scene_path = Path::new(args.first().map_or("fixtures/scenes/mr_bunny_differential.json", String::as_str));
+    let recording = args.get(1).map_or("fixtures/recordings/tum_fr1_xyz", String::as_str);
+    let recording = Recording::open(Path::new(recording), &RecordingOptions::default())?;
+    let frames: Vec<usize> = match args.len() > 2 {
+        true => args[2..].iter().map(|s| s.parse()).collect::<Result<_, _>>()?,
+        false => (0..recording.len()).collect(),
+    };
+    let mut variants = vec![FastSettings::default()];
+    for v in std::env::var("FAST").unwrap_or_default().split(';').filter(|v| !v.is_empty()) {
+        let f: Vec<f32> = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
+        anyhow::ensure!(f.len() == 5, "FAST: five numbers per set, got {v}");
+        variants.push(FastSettings {
+            group_size: f[0] as usize,
+            reach: f[1],
+            spacing: f[2] as u32,
+            change_spread: f[3],
+            irradiance_ratio: f[4],
+        });
+    }
+    let gpu = Gpu::new()?;
+    let mut scene = Scene::load(scene_path)?;
+    scene.settings.mr.differential_method = DifferentialMethod::Exact;
+    let text = std::fs::read_to_string(scene_path)?;
+    let environment = SceneDescription::from_json_str(&text)?.settings.environment;
+    let environment = Environment::from_settings(&environment, scene_path.parent().unwrap_or(Path::new(".")))?;
+    let k = recording.intrinsics();
+    let options = MrOptions { width: k.width, height: k.height, exposure: 1.0, accumulate: None };
+    let mut exact = MrRenderer::new(&gpu, &scene, options)?;
+    exact.set_environment(environment);
+    let gpu_scene = GpuScene::new(&gpu, FlatScene::from_scene(&scene))?;
+    let mut pass = Differential::on(&gpu, &gpu_scene, scene.settings.mr.device)?;
+    println!("adapter: {}; fast pass on the {:?}", gpu.adapter_name(), pass.device());
+    println!(
+        "| frame | receivers | exact ms | fast parameters | computed | fast ms | change rel RMSE | E rel RMSE | darkest exact | darkest fast |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let mut rows: Vec<Vec<(f64, f64, Agreement)>> = vec![Vec::new(); variants.len()];
+    for i in frames {
+        let frame = recording.frame(i)?;
+        let e = exact.render_frame(&gpu, &frame)?;
+        let Some(d) = &e.differential else {
+            anyhow::bail!("frame {i}: the differential pass did not run (is settings.mr.differential on?)");
+        };
+        let exact_ms = e.timings.stages.iter().find(|(s, _)| s == DIFFERENTIAL_STAGE).map_or(0.0, |(_, ms)| *ms);
+        for (v, fast) in variants.iter().enumerate() {
+            let start = Instant::now();
+            let (light, counts) =
+                fast_light(&mut pass, &gpu, &gpu_scene, &d.grid, &d.vals, d.real_count, d.bounds, fast)?;
+            let fast_ms = start.elapsed().as_secs_f64() * 1e3;
+            let a = Agreement::of(&d.light, &light, &d.visible);
+            println!(
+                "| {i} | {} | {exact_ms:.0} | {},{},{},{},{} | {} | {fast_ms:.0} | {:.4} | {:.4} | {:.3} | {:.3} |",
+                d.light.len(),
+                fast.group_size,
+                fast.reach,
+                fast.spacing,
+                fast.change_spread,
+                fast.irradiance_ratio,
+                counts.computed,
+                a.change_rel_rmse,
+                a.unoccluded_rel_rmse,
+                a.darkest_exact,
+                a.darkest_fast
+            );
+            if std::env::var("COUNTS").is_ok() {
+                println!("  {counts:?}");
+            }
+            rows[v].push((exact_ms, fast_ms, a));
+        }
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    println!();
+    for (fast, rows) in variants.iter().zip(&rows) {
+        let (e, f) = (median(rows.iter().map(|r| r.0).collect()), median(rows.iter().map(|r| r.1).collect()));
+        let worst_change = rows.iter().map(|r| r.2.change_rel_rmse).fold(0.0, f64::max);
+        let worst_darkest = rows.iter().map(|r| r.2.darkest_rel_error()).fold(0.0f32, f32::max);
+        println!(
+            "{fast:?}: median exact {e:.0} ms, fast {f:.0} ms ({:.1}x less); worst change rel RMSE {worst_change:.4}, \
+             worst darkest rel error {worst_darkest:.4}",
+            e / f.max(1e-9)
+        );
+    }
+    Ok(())
+}

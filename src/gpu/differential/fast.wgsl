@@ -1,0 +1,184 @@
+// The fast differential pass (`settings.mr.differential_method: "fast"`): the sums of
+// `differential.wgsl` over VAL groups (`gpu::differential::groups`). A group beyond its reach is
+// summed as its aggregate: a real one adds it to `unoccluded` without a ray when its cone misses
+// the virtual content's bounding sphere; a re-emitter group adds it to `added` when the shadow ray
+// to its representative member is free. A real group the content may block is summed as one only
+// beyond its `shadow_reach`, blocked as a whole when the ray to its representative is. Every other
+// group has its members summed one by one, a shadow ray each, as the exact pass sums them. Twin:
+// `gpu::differential::twin::receiver_light_fast`.
+//
+// Resumable in rounds, as `differential.wgsl`: the state between rounds is the group and the
+// member (1-based, 0 at the group's own test) in `progress[2 i]` and `progress[2 i + 1]`.
+
+struct FastParams {
+    receiver_count: u32,
+    group_count: u32,
+    real_groups: u32,
+    _pad0: u32,
+    // The virtual content's bounding sphere: centre and radius (m).
+    content: vec4<f32>,
+}
+
+struct Receiver {
+    position: vec3<f32>,
+    _pad0: f32,
+    normal: vec3<f32>,
+    _pad1: f32,
+}
+
+struct ReceiverLight {
+    unoccluded: vec4<f32>,
+    blocked: vec4<f32>,
+    added: vec4<f32>,
+}
+
+struct ValGroup {
+    position: vec3<f32>,
+    area: f32,
+    normal: vec3<f32>,
+    radius: f32,
+    flux: vec3<f32>,
+    reach: f32,
+    first: u32,
+    count: u32,
+    representative: u32,
+    shadow_reach: f32,
+}
+
+@group(0) @binding(0) var<storage, read> params: FastParams;
+@group(0) @binding(1) var<storage, read> receivers: array<Receiver>;
+@group(0) @binding(2) var<storage, read> vals: array<Val>;
+@group(0) @binding(3) var<storage, read_write> light: array<ReceiverLight>;
+@group(0) @binding(6) var<storage, read_write> progress: array<u32>;
+@group(0) @binding(7) var<storage, read_write> status: array<atomic<u32>, 2>;
+@group(0) @binding(8) var<storage, read> groups: array<ValGroup>;
+
+const FAST_DONE: u32 = 0xffffffffu;
+const HALF_PI: f32 = 1.5707963;
+
+// Twin of `ContentSphere::may_block`: whether a segment from `origin` to a point of the sphere
+// (`centre`, `radius`) can cross the content's bounding sphere.
+fn may_be_blocked(origin: vec3<f32>, centre: vec3<f32>, radius: f32) -> bool {
+    let to_content = params.content.xyz - origin;
+    let to_group = centre - origin;
+    let dc = length(to_content);
+    let dg = length(to_group);
+    let rc = params.content.w;
+    if dc <= rc || dg <= radius {
+        return true;
+    }
+    if dc - rc >= dg + radius {
+        return false;
+    }
+    let spread = asin(rc / dc) + asin(min(radius / dg, 1.0));
+    return spread >= HALF_PI || dot(to_content, to_group) > dc * dg * cos(spread);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y, WORKGROUP_Z)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.receiver_count {
+        return;
+    }
+    var g = progress[2u * i];
+    var m = progress[2u * i + 1u];
+    if g == FAST_DONE {
+        return;
+    }
+    let start_g = g;
+    let start_m = m;
+    var sums = ReceiverLight(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
+    if g > 0u || m > 0u {
+        sums = light[i];
+    }
+    let r = receivers[i];
+    let origin = r.position + r.normal * RAY_OFFSET;
+    let count = min(params.group_count, arrayLength(&groups));
+    var steps = 0u;
+    while g < count && steps < FAST_DIFFERENTIAL_LOOP_BUDGET {
+        steps += 1u;
+        let group = groups[g];
+        let real = g < params.real_groups;
+        if m == 0u {
+            let far = length(group.position - r.position) > group.reach;
+            if far && (!real || !may_be_blocked(origin, group.position, group.radius)) {
+                let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);
+                let f = geo.weight * geo.cos_receiver;
+                if f > 0.0 {
+                    let e = vec4<f32>(group.flux * f, 0.0);
+                    if real {
+                        sums.unoccluded += e;
+                    } else {
+                        let t = vals[group.representative];
+                        let ray = occluded(origin, t.position + t.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                        steps += ray.steps;
+                        if !ray.complete {
+                            break;
+                        }
+                        if !ray.hit {
+                            sums.added += e;
+                        }
+                    }
+                }
+                g += 1u;
+            } else if length(group.position - r.position) > group.shadow_reach {
+                // A real group the content may block, far enough: its aggregate, blocked as a
+                // whole when the ray to its representative member is.
+                let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);
+                let f = geo.weight * geo.cos_receiver;
+                if f > 0.0 {
+                    let t = vals[group.representative];
+                    let ray = occluded(origin, t.position + t.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                    steps += ray.steps;
+                    if !ray.complete {
+                        break;
+                    }
+                    let e = vec4<f32>(group.flux * f, 0.0);
+                    sums.unoccluded += e;
+                    if ray.hit {
+                        sums.blocked += e;
+                    }
+                }
+                g += 1u;
+            } else {
+                m = 1u;
+            }
+        } else {
+            let val = vals[group.first + m - 1u];
+            let geo = val_geometry(r.position, r.normal, val.position, val.normal, val.area);
+            let f = geo.weight * geo.cos_receiver;
+            if f > 0.0 {
+                let e = vec4<f32>(val.flux * f, 0.0);
+                let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                steps += ray.steps;
+                if !ray.complete {
+                    break;
+                }
+                if real {
+                    sums.unoccluded += e;
+                    if ray.hit {
+                        sums.blocked += e;
+                    }
+                } else if !ray.hit {
+                    sums.added += e;
+                }
+            }
+            m += 1u;
+            if m > group.count {
+                m = 0u;
+                g += 1u;
+            }
+        }
+    }
+    light[i] = sums;
+    if g < count {
+        progress[2u * i] = g;
+        progress[2u * i + 1u] = m;
+        atomicAdd(&status[0], 1u);
+        if g == start_g && m == start_m {
+            atomicAdd(&status[1], 1u);
+        }
+    } else {
+        progress[2u * i] = FAST_DONE;
+    }
+}
