@@ -160,7 +160,7 @@ function showSettings() {
 
 // The frame's error estimate, the level and parameters it ran at, and the budget it ran under.
 // With a budget, the controller may have moved the frame off the stream's level: below it
-// (a cheaper level, or the cheapest level with fewer VALs) or back up to it.
+// (a cheaper level, or the cheapest level with fewer VALs) or above it.
 function showFrameQuality(frame) {
   const e = frame.errorEstimate;
   const error = $("frame-error");
