@@ -3,10 +3,13 @@
 // checks that a page without the token asks for it and connects once it is entered, that the
 // page given the token in its URL fragment opens its streams with tickets (offered as a
 // WebSocket subprotocol, out of the URL); and
-// that frames arrive with their stage timings, that the page's protobuf codec (protobuf.js,
-// served by relume) and the server's (prost) agree both ways, that the indirect-only view and the sliders
-// change the next frames and the settings the page reports, that dropped frames, stream
-// errors and a server that goes away are shown; and it takes the README's screenshot.
+// that frames arrive with their stage timings and error estimate, that the page's protobuf
+// codec (protobuf.js, served by relume) and the server's (prost) agree both ways, that the
+// indirect-only view, the quality level and the frame budget change the next frames and what
+// the page reports (a level changed mid-stream, a budget the frames report and are lowered to
+// hold, a budget the server refuses, the budget removed), that a closed stream reconnects with
+// a new ticket and the page's settings, that dropped frames, stream errors and a server that
+// goes away are shown; and it takes the README's screenshot.
 //
 // Run by scripts/test.sh after `cargo test` (which builds the binary). Environment:
 // RELUME_BIN (default $CARGO_TARGET_DIR/debug/relume or target/debug/relume), CHROMIUM
@@ -124,13 +127,20 @@ async function main() {
       return { framesShown: s.framesShown, applied: { ...s.applied }, connection: s.connection, errors: [...s.errors],
         scene: s.scene, lastFrame: s.lastFrame && { frameId: s.lastFrame.frameId, width: s.lastFrame.width,
           height: s.lastFrame.height, valCount: s.lastFrame.valCount, stages: s.lastFrame.timings.map((t) => t.stage),
-          png: s.lastFrame.png ? Array.from(s.lastFrame.png.subarray(0, 4)) : null } };
+          png: s.lastFrame.png ? Array.from(s.lastFrame.png.subarray(0, 4)) : null,
+          quality: s.lastFrame.quality, budgetMs: s.lastFrame.budgetMs, errorEstimate: s.lastFrame.errorEstimate,
+          parameters: Object.fromEntries(s.lastFrame.parameters.map((p) => [p.name, p.value])) } };
     });
     const framesAfter = async (n) => {
       await page.waitForFunction((n) => window.relumeViewer?.framesShown >= n, n);
       return viewer();
     };
     const setting = (name) => page.locator(`#settings dd[data-setting="${name}"]`).textContent();
+    const text = (id) => page.locator(`#${id}`).textContent();
+    // The frames after the one that may have been on the server when a setting was applied.
+    const nextFrames = async () => framesAfter((await viewer()).framesShown + 2);
+    // What a frame's error estimate shows: "error estimate 3.1 % ± 0.42 % rel RMSE".
+    const ERROR_SHOWN = /^error estimate \d[\d.e+-]* % ± \d[\d.e+-]* % rel RMSE$/;
 
     // Frames arrive, composited, with every stage timed; the status says live.
     let v = await framesAfter(2);
@@ -149,8 +159,9 @@ async function main() {
 
     // The codec both ways: the page's Control (encoded in JS) was decoded and acknowledged by
     // the server, and the server's RgbdFrame (encoded by prost) decodes in the page.
-    assert(v.applied.gridStep === 8 && v.applied.component === 1 && v.applied.occlusion !== undefined
-      && v.applied.glossy === true, `the first control was acknowledged: ${JSON.stringify(v.applied)}`);
+    // The first controls: the view, glossy, and the scene's level and (no) budget.
+    assert(v.applied.component === 1 && v.applied.glossy === true && v.applied.level === 2 && v.applied.budgetMs === 0,
+      `the first controls were acknowledged: ${JSON.stringify(v.applied)}`);
     const decoded = await page.evaluate(async (token) => {
       const { decodeEnvelope, encodeControl } = await import("/proto.js");
       const response = await fetch("/v1/recordings/tum_fr1_xyz/frames/5?downscale=8",
@@ -187,41 +198,62 @@ async function main() {
     await page.getByRole("button", { name: "Composited" }).click();
     await page.waitForFunction(() => window.relumeViewer.applied.component === 1);
 
-    // The VAL grid slider: acknowledged, reported, and the next frames have fewer VALs.
-    v = await framesAfter((await viewer()).framesShown + 1);
-    const before = { vals: v.lastFrame.valCount, grid: await setting("VAL grid step") };
-    assert(before.grid === "8", `grid step 8 reported, got ${before.grid}`);
-    await page.locator("#grid").fill("16");
-    await page.waitForFunction(() => window.relumeViewer.applied.gridStep === 16);
-    v = await framesAfter((await viewer()).framesShown + 2);
-    const after = { vals: v.lastFrame.valCount, grid: await setting("VAL grid step") };
-    step(`grid 8 -> 16: ${before.vals} -> ${after.vals} VALs`);
-    assert(after.grid === "16", `grid step 16 reported, got ${after.grid}`);
-    assert(after.vals < before.vals / 2, `a coarser grid, fewer VALs: ${before.vals} -> ${after.vals}`);
+    // The scene's level (balanced) and no budget: each frame says so, with its error estimate.
+    v = await nextFrames();
+    assert(v.lastFrame.quality === 2 && v.lastFrame.parameters.level === "balanced" && v.lastFrame.budgetMs === 0,
+      `a balanced frame without a budget: ${JSON.stringify(v.lastFrame)}`);
+    const estimate = v.lastFrame.errorEstimate;
+    assert(estimate && Number.isFinite(estimate.relRmse) && estimate.relRmse >= 0 && estimate.spread >= 0 && estimate.pixels > 0,
+      `a composited frame has an error estimate: ${JSON.stringify(estimate)}`);
+    assert(ERROR_SHOWN.test(await text("frame-error")), `the error estimate is shown: ${await text("frame-error")}`);
+    assert((await text("frame-level")) === "ran at balanced" && (await text("frame-budget")) === "no budget",
+      `level and budget shown: ${await text("frame-level")} / ${await text("frame-budget")}`);
+    assert((await text("frame-parameters")).includes("visibility "), `parameters shown: ${await text("frame-parameters")}`);
+    const balancedVals = v.lastFrame.valCount;
 
-    // Occlusion and glossy: acknowledged, frames keep coming.
-    await page.locator("#occlusion").fill("0");
+    // The level mid-stream: one click, acknowledged, and the next frames run at it and say so.
+    await page.getByRole("button", { name: "fast", exact: true }).click();
+    await page.waitForFunction(() => window.relumeViewer.applied.level === 1);
+    v = await nextFrames();
+    assert(v.lastFrame.quality === 1 && v.lastFrame.parameters.level === "fast", `a fast frame: ${JSON.stringify(v.lastFrame)}`);
+    assert((await text("frame-level")) === "ran at fast", `the frame's level shown: ${await text("frame-level")}`);
+    assert((await setting("quality level")) === "fast", "the settings show the level");
+    assert(v.lastFrame.errorEstimate && ERROR_SHOWN.test(await text("frame-error")),
+      `the fast frame's error estimate is shown: ${await text("frame-error")}`);
+    step(`level balanced -> fast; error estimate ${await text("frame-error")}`);
+
+    // A budget no frame can hold (0.1 ms): the frames report it and the controller lowers their
+    // parameters below the level's own (fewer VALs: a coarser grid), which the page shows.
+    await page.locator("#budget").fill("0.1");
+    await page.getByRole("button", { name: "Set", exact: true }).click();
+    await page.waitForFunction(() => window.relumeViewer.applied.budgetMs === 0.1);
+    v = await nextFrames();
+    assert(Math.abs(v.lastFrame.budgetMs - 0.1) < 1e-6, `the frame reports the budget: ${v.lastFrame.budgetMs}`);
+    assert((await text("frame-budget")) === "budget 0.1 ms", `the budget shown: ${await text("frame-budget")}`);
+    assert((await setting("frame budget")) === "0.1 ms", "the settings show the budget");
+    await page.waitForFunction(() => Number(window.relumeViewer.lastFrame.parameters.find((p) => p.name === "vals_step")?.value) >= 2);
+    v = await viewer();
+    const lowered = await text("frame-level");
+    assert(lowered === "ran below fast, lowered by the budget", `the lowered frame shown: ${lowered}`);
+    assert(v.lastFrame.valCount < balancedVals / 2, `vals_step ${v.lastFrame.parameters.vals_step}: fewer VALs, ${balancedVals} -> ${v.lastFrame.valCount}`);
+    step(`budget 0.1 ms: ${balancedVals} -> ${v.lastFrame.valCount} VALs, ${await text("frame-parameters")}`);
+
+    // The budget removed (empty field): the frames report none and run at the level again.
+    await page.locator("#budget").fill("");
+    await page.getByRole("button", { name: "Set", exact: true }).click();
+    await page.waitForFunction(() => window.relumeViewer.applied.budgetMs === 0);
+    v = await nextFrames();
+    assert(v.lastFrame.budgetMs === 0 && v.lastFrame.parameters.vals_step === "1" && v.lastFrame.quality === 1,
+      `no budget, the level's parameters: ${JSON.stringify(v.lastFrame)}`);
+    assert((await text("frame-budget")) === "no budget" && (await text("frame-level")) === "ran at fast",
+      `shown: ${await text("frame-budget")} / ${await text("frame-level")}`);
+    step("budget removed");
+
+    // Glossy: acknowledged, frames keep coming.
     await page.locator("#glossy").fill("0");
-    await page.waitForFunction(() => window.relumeViewer.applied.occlusion === false
-      && window.relumeViewer.applied.glossy === false);
+    await page.waitForFunction(() => window.relumeViewer.applied.glossy === false);
     v = await framesAfter((await viewer()).framesShown + 1);
-    assert((await setting("occlusion")) === "off", "occlusion off reported");
-    await page.locator("#occlusion").fill("1");
-    await page.waitForFunction(() => window.relumeViewer.applied.occlusion === true);
-    step("occlusion and glossy");
-
-    // Sparse points: the scene is re-created with the new count and frames resume on it, on a
-    // stream opened with a new ticket.
-    const oldScene = v.scene;
-    await page.locator("#sparse").fill("10");
-    await page.waitForFunction((id) => window.relumeViewer.scene?.id !== id && window.relumeViewer.connection === "live"
-      && window.relumeViewer.applied.gridStep === 16, oldScene.id);
-    v = await framesAfter((await viewer()).framesShown + 2);
-    assert(v.scene.sparse_points < oldScene.sparse_points, `fewer sparse points: ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
-    assert((await setting("sparse points")) === String(v.scene.sparse_points), "sparse points reported");
-    const reopened = await streamOpening(page);
-    assert(ticketed(reopened) && reopened.ticket !== opened.ticket, `a new ticket: ${JSON.stringify(reopened)}`);
-    step(`sparse points ${oldScene.sparse_points} -> ${v.scene.sparse_points}`);
+    assert((await setting("glossy")).startsWith("off"), "glossy off reported");
 
     // Real time: frames sent at 30 fps, faster than lavapipe renders them; the server drops
     // the ones it cannot keep up with and the page shows the count. (A burst of one frame sent
@@ -239,7 +271,7 @@ async function main() {
     assert(/dropped frames: [1-9]/.test(dropped), `dropped frames shown: ${dropped}`);
     step(dropped);
 
-    // The README's picture: composited, grid 16, real time.
+    // The README's picture: composited, level fast, real time (before the errors below).
     mkdirSync(path.dirname(screenshot), { recursive: true });
     await page.screenshot({ path: screenshot });
     if (process.env.BLESS) {
@@ -247,6 +279,33 @@ async function main() {
       copyFileSync(screenshot, readmeScreenshot);
       step(`screenshot written to ${path.relative(root, readmeScreenshot)}`);
     }
+
+    // A budget the server refuses: its Error, naming the field, is listed and the field goes
+    // back to the budget in effect (none).
+    await page.locator("#budget").fill("fast please");
+    await page.getByRole("button", { name: "Set", exact: true }).click();
+    await page.waitForFunction(() => window.relumeViewer.errors.some((e) => e.includes("control.render.budget_ms")));
+    assert((await page.locator("#budget").inputValue()) === "", `the field shows the budget in effect: ${await page.locator("#budget").inputValue()}`);
+    assert((await setting("frame budget")) === "none", "the budget in effect is unchanged");
+    v = await nextFrames();
+    assert(v.lastFrame.budgetMs === 0, `the frames still have no budget: ${v.lastFrame.budgetMs}`);
+    await page.evaluate(() => { window.relumeViewer.errors.length = 0; });
+
+    // A stream that closes: the status says so; a click reconnects, on a new scene and a stream
+    // opened with a new ticket, with the page's level and glossy setting sent again.
+    const oldScene = v.scene;
+    await page.evaluate(() => window.relumeViewer.socket.close(4000, "closed by the test"));
+    await page.waitForFunction(() => window.relumeViewer.connection === "closed");
+    assert((await text("status")).includes("disconnected"), `closed status: ${await text("status")}`);
+    await page.locator("#status").click();
+    await page.waitForFunction((id) => window.relumeViewer.scene?.id !== id && window.relumeViewer.connection === "live"
+      && window.relumeViewer.applied.level === 1 && window.relumeViewer.applied.glossy === false, oldScene.id);
+    v = await nextFrames();
+    assert(v.lastFrame.quality === 1, `the reconnected stream runs at the page's level: ${v.lastFrame.quality}`);
+    const reopened = await streamOpening(page);
+    assert(ticketed(reopened) && reopened.ticket !== opened.ticket, `a new ticket: ${JSON.stringify(reopened)}`);
+    await page.evaluate(() => { window.relumeViewer.errors.length = 0; });
+    step("reconnected");
 
     // A stream error is shown, not swallowed: a message that is not an Envelope.
     await page.evaluate(() => window.relumeViewer.socket.send(new Uint8Array([0xff, 0xff, 0xff])));

@@ -23,6 +23,8 @@ export const PROTOCOL_VERSION = 1;
 export const Component = enumNames("Component", "COMPONENT_");
 export const Occlusion = { SCENE: 0, ...enumNames("Occlusion", "OCCLUSION_") };
 export const ImageFormat = enumNames("ImageFormat", "IMAGE_FORMAT_");
+// The quality levels by name ({FAST: 1, ...}); UNSPECIFIED (0) is "the scene's level".
+export const QualityLevel = { SCENE: 0, ...enumNames("QualityLevel", "QUALITY_LEVEL_") };
 // Names by number: ErrorCode[1] is "MALFORMED".
 export const ErrorCode = Object.fromEntries(Object.entries(root.lookupEnum("relume.v1.ErrorCode").valuesById)
   .map(([value, key]) => [value, key.slice("ERROR_CODE_".length)]));
@@ -48,8 +50,9 @@ function canonical(type, object) {
 }
 
 // An Envelope holding a Control. `control` may hold `requestId`, `quality {component, exposure,
-// format}`, `rgbd {gridStep, radianceScale}` and `render {occlusion, glossy}`; absent parts
-// are not sent (the server keeps their values).
+// format}`, `rgbd {gridStep, radianceScale}` and `render {occlusion, glossy, quality,
+// budgetMs}`; absent parts are not sent (the server keeps their values). `render.quality` and
+// `render.budgetMs` have presence, so 0 (back to the scene's level; no budget) is sent.
 export function encodeControl(control) {
   const { quality, rgbd, render } = control;
   return Envelope.encode(canonical(Envelope, {
@@ -58,7 +61,8 @@ export function encodeControl(control) {
       request_id: control.requestId,
       quality: quality && { component: quality.component, exposure: quality.exposure, format: quality.format },
       rgbd: rgbd && { grid_step: rgbd.gridStep, radiance_scale: rgbd.radianceScale },
-      render: render && { occlusion: render.occlusion, glossy: render.glossy },
+      render: render && { occlusion: render.occlusion, glossy: render.glossy, quality: render.quality,
+        budget_ms: render.budgetMs },
     },
   })).finish();
 }
@@ -83,6 +87,12 @@ const bodies = {
     timings: f.timings.map((t) => ({ stage: t.stage, ms: t.ms })),
     valCount: f.val_count,
     droppedFrames: f.dropped_frames,
+    // Unset when the frame has no indirect light to estimate.
+    errorEstimate: f.error_estimate ? { relRmse: f.error_estimate.rel_rmse, spread: f.error_estimate.spread,
+      pixels: f.error_estimate.pixels, ms: f.error_estimate.ms } : undefined,
+    quality: f.quality,
+    parameters: f.parameters.map((p) => ({ name: p.name, value: p.value })),
+    budgetMs: f.budget_ms,
   })],
   error: ["error", (e) => ({
     code: ErrorCode[e.code] ?? `code ${e.code}`,

@@ -1,11 +1,13 @@
 // The relume viewer: creates a scene, opens its WebSocket stream and plays a server-side
 // recording on it, one frame after the other (or at the recording's rate, letting the server
-// drop frames), showing each relit frame, its per-stage timings and the settings in effect.
+// drop frames), showing each relit frame, its per-stage timings, its error estimate, the quality
+// level and parameters it ran at, and the settings in effect.
 // Everything goes through the public API: POST /v1/scenes, GET /v1/recordings/..., and the
 // protobuf stream of proto/relume.proto (encoded by ./proto.js).
 //
 // URL parameters (all optional): scene=<URL of a scene file> (default /default-scene.json),
-// recording=<name>, downscale=<1..8>, grid=<VAL grid step>.
+// recording=<name>, downscale=<1..8>, quality=<fast|balanced|accurate|reference> and
+// budget_ms=<ms> (default: the scene's settings.quality and settings.budget_ms).
 //
 // A server run with --token: the page takes the token from the URL fragment (#token=<token>,
 // which the browser never sends to the server) or, after a 401, from the field it then shows.
@@ -13,7 +15,7 @@
 // WebSocket's headers, opens each stream with a single-use ticket (POST /v1/tickets) offered
 // as the subprotocol `relume.ticket.<ticket>` beside `relume.v1`, which keeps it out of URLs.
 
-import { Component, ImageFormat, Occlusion, decodeEnvelope, encodeControl } from "./proto.js";
+import { Component, ImageFormat, QualityLevel, decodeEnvelope, encodeControl } from "./proto.js";
 
 const params = new URLSearchParams(location.search);
 const fragment = new URLSearchParams(location.hash.slice(1));
@@ -21,16 +23,26 @@ const $ = (id) => document.getElementById(id);
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 const COMPONENT_NAMES = { [Component.FULL]: "composited", [Component.DIRECT]: "direct only", [Component.INDIRECT]: "indirect only" };
 const FRAME_ANSWER_TIMEOUT_MS = 60_000;
+// Level names by number ({1: "fast", ...}), as a scene file writes them.
+const LEVEL_NAMES = Object.fromEntries(Object.entries(QualityLevel).filter(([, v]) => v !== 0)
+  .map(([name, v]) => [v, name.toLowerCase()]));
+const levelNumber = (name) => QualityLevel[String(name).toUpperCase()] || undefined;
+// A float32 from the wire (0.1 arrives as 0.10000000149) as the number the user typed.
+const formatMs = (ms) => String(Number(ms.toPrecision(6)));
+const formatBudget = (ms) => (ms === undefined ? undefined : ms ? `${formatMs(ms)} ms` : "none");
+// A relative error as a percentage, two significant digits.
+const percent = (x) => `${Number((100 * x).toPrecision(2))} %`;
 
 // Everything the page knows; exposed as `window.relumeViewer` for tests and the curious.
 const state = {
   // What the controls ask for.
   wanted: {
     component: Component.FULL,
-    gridStep: Number(params.get("grid") ?? 8),
-    occlusion: true,
+    // The quality level (a QualityLevel number) and the frame budget in ms (0: none); both
+    // start at the URL's or, once the scene is created, the scene's.
+    level: params.has("quality") ? levelNumber(params.get("quality")) : undefined,
+    budgetMs: params.has("budget_ms") ? Number(params.get("budget_ms")) : undefined,
     glossy: true,
-    sparseLog2: 11,
     downscale: Number(params.get("downscale") ?? 2),
   },
   // What the server acknowledged on the current stream (SettingsAck), and requests in flight.
@@ -114,8 +126,8 @@ function showSettings() {
   const onOff = (v) => (v ? "on" : "off");
   const rows = [
     ["view", COMPONENT_NAMES[a.component], COMPONENT_NAMES[w.component]],
-    ["VAL grid step", a.gridStep, w.gridStep],
-    ["occlusion", a.occlusion === undefined ? undefined : onOff(a.occlusion), onOff(w.occlusion)],
+    ["quality level", LEVEL_NAMES[a.level], LEVEL_NAMES[w.level]],
+    ["frame budget", formatBudget(a.budgetMs), formatBudget(w.budgetMs)],
     ["glossy", a.glossy === undefined ? undefined : onOff(a.glossy) + (state.scene?.glossy ? "" : " (no glossy material)"),
       onOff(w.glossy) + (state.scene?.glossy ? "" : " (no glossy material)")],
     ["sparse points", state.scene?.sparse_points, undefined],
@@ -136,14 +148,43 @@ function showSettings() {
     if (pending) dd.classList.add("pending");
     list.append(dt, dd);
   }
-  $("grid-value").textContent = w.gridStep;
-  $("sparse-value").textContent = 2 ** w.sparseLog2;
-  $("occlusion-value").textContent = onOff(w.occlusion);
   $("glossy-value").textContent = onOff(w.glossy);
   $("downscale-value").textContent = w.downscale === 1 ? "full" : `1/${w.downscale}`;
   for (const button of document.querySelectorAll("[data-component]")) {
     button.classList.toggle("active", Number(button.dataset.component) === w.component);
   }
+  for (const button of document.querySelectorAll("[data-level]")) {
+    button.classList.toggle("active", Number(button.dataset.level) === w.level);
+  }
+}
+
+// The frame's error estimate, the level and parameters it ran at, and the budget it ran under.
+// With a budget, the controller may have moved the frame off the stream's level: below it
+// (a cheaper level, or the cheapest level with fewer VALs) or above it.
+function showFrameQuality(frame) {
+  const e = frame.errorEstimate;
+  const error = $("frame-error");
+  error.textContent = e ? `error estimate ${percent(e.relRmse)} ± ${percent(e.spread)} rel RMSE` : "error estimate – (no indirect light)";
+  error.dataset.relRmse = e ? String(e.relRmse) : "";
+  const parameters = Object.fromEntries(frame.parameters.map((p) => [p.name, p.value]));
+  const level = LEVEL_NAMES[frame.quality] ?? `level ${frame.quality}`;
+  const streamLevel = state.applied.level;
+  const rank = (l) => (l === QualityLevel.REFERENCE ? QualityLevel.ACCURATE : l);
+  // Cheaper than any level's own parameters: fewer VALs or a smaller render.
+  const cheaper = Number(parameters.vals_step) > 1 || Number(parameters.resolution_scale) < 1;
+  let moved = "";
+  if (frame.budgetMs > 0 && streamLevel !== undefined) {
+    const from = rank(frame.quality) !== rank(streamLevel) ? ` from ${LEVEL_NAMES[streamLevel]}` : "";
+    if (cheaper || rank(frame.quality) < rank(streamLevel)) moved = `, lowered by the budget${from}`;
+    else if (rank(frame.quality) > rank(streamLevel)) moved = `, raised by the budget${from}`;
+  }
+  const levelText = $("frame-level");
+  levelText.textContent = `ran ${cheaper ? "below" : "at"} ${level}${moved}`;
+  levelText.dataset.level = level;
+  levelText.classList.toggle("moved", moved !== "");
+  $("frame-parameters").textContent = frame.parameters.filter((p) => p.name !== "level")
+    .map((p) => `${p.name.replace(/_/g, " ")} ${p.value}`).join(" · ");
+  $("frame-budget").textContent = frame.budgetMs > 0 ? `budget ${formatMs(frame.budgetMs)} ms` : "no budget";
 }
 
 let frameUrl = null;
@@ -170,6 +211,7 @@ function showFrame(frame, sent) {
   dropped.dataset.dropped = String(frame.droppedFrames);
   dropped.textContent = `dropped frames: ${frame.droppedFrames}`;
   showTimings(frame.timings);
+  showFrameQuality(frame);
   showSettings();
 }
 
@@ -202,14 +244,12 @@ async function fetchOk(url, options) {
   return response;
 }
 
-// Creates the scene with 2^sparseLog2 sparse points per mesh; deletes the previous one.
+// Creates the scene; deletes the previous one.
 async function createScene() {
-  const scene = JSON.parse(state.sceneText);
-  for (const mesh of scene.meshes) mesh.sparse_points = 2 ** state.wanted.sparseLog2;
   const response = await fetchOk("/v1/scenes", {
     method: "POST",
     headers: { "content-type": "application/json" },
-    body: JSON.stringify(scene),
+    body: state.sceneText,
   });
   const previous = state.scene;
   state.scene = await response.json();
@@ -217,7 +257,9 @@ async function createScene() {
     const url = `/v1/scenes/${previous.id}`;
     fetch(url, withToken(url, { method: "DELETE" })).catch(() => {});
   }
-  log("info", `scene ${state.scene.id}: ${state.scene.triangles} triangles, ${state.scene.sparse_points} sparse points`);
+  const budget = state.scene.resolved.budget_ms;
+  log("info", `scene ${state.scene.id}: ${state.scene.triangles} triangles, ${state.scene.sparse_points} sparse points, `
+    + `level ${state.scene.resolved.quality}${budget ? `, budget ${budget} ms` : ""}`);
 }
 
 async function fetchFrame(index) {
@@ -236,12 +278,8 @@ function sendControl(parts) {
   state.pending.set(requestId, parts);
   const control = { requestId };
   if (parts.component !== undefined) control.quality = { component: parts.component, format: ImageFormat.PNG };
-  if (parts.gridStep !== undefined) control.rgbd = { gridStep: parts.gridStep };
-  if (parts.occlusion !== undefined || parts.glossy !== undefined) {
-    control.render = {
-      occlusion: parts.occlusion === undefined ? undefined : parts.occlusion ? Occlusion.DISKS : Occlusion.OFF,
-      glossy: parts.glossy,
-    };
+  if (parts.glossy !== undefined || parts.level !== undefined || parts.budgetMs !== undefined) {
+    control.render = { glossy: parts.glossy, quality: parts.level, budgetMs: parts.budgetMs };
   }
   socket.send(encodeControl(control));
   showSettings();
@@ -249,7 +287,9 @@ function sendControl(parts) {
 
 function sendAllSettings() {
   const w = state.wanted;
-  sendControl({ component: w.component, gridStep: w.gridStep, occlusion: w.occlusion, glossy: w.glossy });
+  sendControl({ component: w.component, glossy: w.glossy, level: w.level });
+  // Apart: the server refuses a control as a whole, and a budget from the URL may be refused.
+  sendControl({ budgetMs: w.budgetMs });
 }
 
 function onMessage(event, socket) {
@@ -275,7 +315,14 @@ function onMessage(event, socket) {
   } else if (kind === "error") {
     const about = body.frameId !== undefined ? ` (frame ${body.frameId})` : body.requestId !== undefined ? ` (settings request ${body.requestId})` : "";
     log("error", `stream error ${body.code}${about}: ${body.message}${body.field ? ` [${body.field}]` : ""}`);
-    if (body.requestId !== undefined) state.pending.delete(body.requestId);
+    if (body.requestId !== undefined) {
+      // Refused as a whole: the controls go back to what is in effect.
+      const parts = state.pending.get(body.requestId) ?? {};
+      state.pending.delete(body.requestId);
+      const scenes = { level: levelNumber(state.scene?.resolved.quality), budgetMs: state.scene?.resolved.budget_ms ?? 0 };
+      for (const name of Object.keys(parts)) state.wanted[name] = state.applied[name] ?? scenes[name] ?? state.wanted[name];
+      syncSliders();
+    }
     if (body.frameId !== undefined) answered(body.frameId);
     showSettings();
   }
@@ -371,7 +418,13 @@ async function connect() {
     }
     const first = state.scene === null;
     await createScene();
-    if (first) state.wanted.occlusion = state.scene.occlusion === "disks";
+    if (first) {
+      if (params.has("quality") && state.wanted.level === undefined) {
+        log("error", `?quality=${params.get("quality")} is not a level (${Object.values(LEVEL_NAMES).join(", ")}): the scene's is used`);
+      }
+      state.wanted.level ??= levelNumber(state.scene.resolved.quality);
+      state.wanted.budgetMs ??= state.scene.resolved.budget_ms ?? 0;
+    }
     if (generation !== state.generation) return;
     await openStream(generation);
   } catch (error) {
@@ -398,6 +451,20 @@ function bind() {
       sendControl({ component: state.wanted.component });
     });
   }
+  for (const button of document.querySelectorAll("[data-level]")) {
+    button.addEventListener("click", () => {
+      state.wanted.level = Number(button.dataset.level);
+      sendControl({ level: state.wanted.level });
+    });
+  }
+  // The budget as typed (empty: none), checked by the server: a value it refuses comes back
+  // as an Error naming control.render.budget_ms, listed under Messages.
+  $("budget-form").addEventListener("submit", (event) => {
+    event.preventDefault();
+    const text = $("budget").value.trim();
+    state.wanted.budgetMs = text === "" ? 0 : Number(text);
+    sendControl({ budgetMs: state.wanted.budgetMs });
+  });
   $("play").addEventListener("click", () => {
     state.playing = !state.playing;
     $("play").textContent = state.playing ? "Pause" : "Play";
@@ -423,18 +490,13 @@ function bind() {
     if (state.connection === "closed" || state.connection === "error") connect();
   });
   const slider = (id, apply) => $(id).addEventListener("change", (event) => apply(Number(event.target.value)));
-  slider("grid", (v) => { state.wanted.gridStep = v; sendControl({ gridStep: v }); });
-  slider("occlusion", (v) => { state.wanted.occlusion = v === 1; sendControl({ occlusion: v === 1 }); });
   slider("glossy", (v) => { state.wanted.glossy = v === 1; sendControl({ glossy: v === 1 }); });
   slider("downscale", (v) => { state.wanted.downscale = v; showSettings(); });
-  slider("sparse", (v) => { state.wanted.sparseLog2 = v; connect(); });
 }
 
 function syncSliders() {
   const w = state.wanted;
-  $("grid").value = w.gridStep;
-  $("sparse").value = w.sparseLog2;
-  $("occlusion").value = w.occlusion ? 1 : 0;
+  $("budget").value = w.budgetMs ? formatMs(w.budgetMs) : "";
   $("glossy").value = w.glossy ? 1 : 0;
   $("downscale").value = w.downscale;
 }
