@@ -5,8 +5,9 @@
 //!
 //! `cargo run --release --example mr_differential -- [SCENE] [RECORDING] [FRAME ...]`
 //! (default: `fixtures/scenes/mr_bunny_differential.json` on `fixtures/recordings/tum_fr1_xyz`,
-//! every frame). `FAST="16,4,4,0.02,1.1;32,4,4,0.05,1.1"` adds parameter sets (group size,
-//! reach, adaptive spacing, change spread, irradiance ratio: `mr::differential::FastSettings`).
+//! every frame). `FAST="16,4,8,0.03,1.1,4;32,4,4,0.05,1.1,16"` adds parameter sets (group size,
+//! reach, adaptive spacing, change spread, irradiance ratio, re-emitter group size:
+//! `mr::differential::FastSettings`).
 //! The fast pass runs where `settings.mr.device` puts it (the CPU on CPU adapters).
 
 use relume::gpu::Gpu;
@@ -33,8 +34,9 @@ fn main() -> anyhow::Result<()> {
     let mut variants = vec![FastSettings::default()];
     for v in std::env::var("FAST").unwrap_or_default().split(';').filter(|v| !v.is_empty()) {
         let f: Vec<f32> = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
-        anyhow::ensure!(f.len() == 5, "FAST: five numbers per set, got {v}");
+        anyhow::ensure!(f.len() == 6, "FAST: six numbers per set, got {v}");
         variants.push(FastSettings {
+            emitter_group_size: f[5] as usize,
             group_size: f[0] as usize,
             reach: f[1],
             spacing: f[2] as u32,
@@ -74,13 +76,14 @@ fn main() -> anyhow::Result<()> {
             let fast_ms = start.elapsed().as_secs_f64() * 1e3;
             let a = Agreement::of(&d.light, &light, &d.visible);
             println!(
-                "| {i} | {} | {exact_ms:.0} | {},{},{},{},{} | {} | {fast_ms:.0} | {:.4} | {:.4} | {:.3} | {:.3} |",
+                "| {i} | {} | {exact_ms:.0} | {},{},{},{},{},{} | {} | {fast_ms:.0} | {:.4} | {:.4} | {:.3} | {:.3} |",
                 d.light.len(),
                 fast.group_size,
                 fast.reach,
                 fast.spacing,
                 fast.change_spread,
                 fast.irradiance_ratio,
+                fast.emitter_group_size,
                 counts.computed,
                 a.change_rel_rmse,
                 a.unoccluded_rel_rmse,

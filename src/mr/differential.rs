@@ -17,7 +17,7 @@
 //!    explains (lit by light no VAL stands for) from darkening more than a white surface would.
 //!    Receiver values are interpolated bilinearly to pixels.
 
-use crate::gpu::differential::groups::{GROUP_SIZE, REACH, group_vals};
+use crate::gpu::differential::groups::{EMITTER_GROUP_SIZE, GROUP_SIZE, REACH, group_vals};
 use crate::gpu::differential::twin::ContentSphere;
 use crate::gpu::differential::{Differential, Receiver, ReceiverLight};
 use crate::gpu::scene::GpuScene;
@@ -191,8 +191,10 @@ pub fn receiver_light(
 /// runs (`examples/mr_differential.rs` varies them).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FastSettings {
-    /// VALs per group at most ([`GROUP_SIZE`]).
+    /// Real VALs per group at most ([`GROUP_SIZE`]).
     pub group_size: usize,
+    /// Re-emitters per group at most ([`EMITTER_GROUP_SIZE`]).
+    pub emitter_group_size: usize,
     /// Group radii beyond which a group is summed as one ([`REACH`]).
     pub reach: f32,
     /// [`ADAPTIVE_SPACING`].
@@ -207,6 +209,7 @@ impl Default for FastSettings {
     fn default() -> Self {
         Self {
             group_size: GROUP_SIZE,
+            emitter_group_size: EMITTER_GROUP_SIZE,
             reach: REACH,
             spacing: ADAPTIVE_SPACING,
             change_spread: ADAPTIVE_CHANGE_SPREAD,
@@ -227,7 +230,7 @@ pub fn fast_light(
     bounds: (Vec3, Vec3),
     fast: &FastSettings,
 ) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), GpuError> {
-    let grouped = group_vals(vals, real_count, fast.group_size, fast.reach);
+    let grouped = group_vals(vals, real_count, (fast.group_size, fast.emitter_group_size), fast.reach);
     let content = ContentSphere::around(bounds);
     adaptive_light(grid, fast, |receivers| pass.run_fast(gpu, scene, receivers, &grouped, &content).map(|l| l.0))
 }

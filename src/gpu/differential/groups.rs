@@ -14,8 +14,12 @@
 use crate::twin::Val;
 use glam::Vec3;
 
-/// Members per group at most (the median split stops at this size).
+/// Real VALs per group at most (the median split stops at this size).
 pub const GROUP_SIZE: usize = 16;
+
+/// Re-emitters per group at most: smaller than the real VALs' groups, since a receiver at the
+/// content's contact sees its nearest re-emitters at a few group radii.
+pub const EMITTER_GROUP_SIZE: usize = 4;
 
 /// A receiver sums a group as its aggregate only beyond `REACH` times the group's radius.
 pub const REACH: f32 = 4.0;
@@ -58,14 +62,14 @@ pub struct GroupedVals {
 }
 
 /// Group `vals` (`vals[.. real_count]` real, the rest re-emitters) into groups of at most
-/// `size` members by recursive median splits along the longest axis of their positions' box,
-/// each summed as one beyond `reach` times its radius ([`REACH`] and [`GROUP_SIZE`] are the
-/// fast pass's).
-pub fn group_vals(vals: &[Val], real_count: usize, size: usize, reach: f32) -> GroupedVals {
+/// `sizes.0` real VALs or `sizes.1` re-emitters by recursive median splits along the longest
+/// axis of their positions' box, each summed as one beyond `reach` times its radius
+/// ([`REACH`], [`GROUP_SIZE`] and [`EMITTER_GROUP_SIZE`] are the fast pass's).
+pub fn group_vals(vals: &[Val], real_count: usize, sizes: (usize, usize), reach: f32) -> GroupedVals {
     let real_count = real_count.min(vals.len());
-    let size = size.max(1);
     let mut out = GroupedVals { real_count, ..Default::default() };
     for (range, real) in [(0..real_count, true), (real_count..vals.len(), false)] {
+        let size = if real { sizes.0 } else { sizes.1 }.max(1);
         let mut members: Vec<Val> = vals[range].to_vec();
         let mut ranges = Vec::new();
         split(&mut members, 0, size, &mut ranges);
@@ -161,7 +165,7 @@ mod tests {
     #[test]
     fn groups_cover_every_val_once() {
         let vals: Vec<Val> = (0..100).map(|i| val((i % 10) as f32, (i / 10) as f32, Vec3::Z, 1.0 + i as f32)).collect();
-        let g = group_vals(&vals, 70, 8, REACH);
+        let g = group_vals(&vals, 70, (8, 8), REACH);
         assert_eq!(g.vals.len(), 100);
         assert_eq!(g.real_count, 70);
         let mut seen = vec![0; 100];
@@ -187,12 +191,12 @@ mod tests {
     /// `REACH` radii.
     #[test]
     fn only_coherent_groups_are_summed_as_one() {
-        let g = group_vals(&[val(0.0, 0.0, Vec3::Z, 1.0), val(0.1, 0.0, -Vec3::Z, 1.0)], 2, 4, REACH);
+        let g = group_vals(&[val(0.0, 0.0, Vec3::Z, 1.0), val(0.1, 0.0, -Vec3::Z, 1.0)], 2, (4, 4), REACH);
         assert_eq!(g.groups.len(), 1);
         assert_eq!(g.groups[0].reach, f32::MAX);
-        let g = group_vals(&[val(0.0, 0.0, Vec3::Z, 1.0), val(0.1, 0.0, Vec3::Z, 3.0)], 2, 4, REACH);
+        let g = group_vals(&[val(0.0, 0.0, Vec3::Z, 1.0), val(0.1, 0.0, Vec3::Z, 3.0)], 2, (4, 4), REACH);
         assert!((g.groups[0].aggregate.position.x - 0.075).abs() < 1e-6, "weighted by power");
         assert!((g.groups[0].reach - REACH * 0.075).abs() < 1e-6);
-        assert_eq!(group_vals(&[val(0.0, 0.0, Vec3::Z, 1.0)], 1, 4, REACH).groups[0].reach, f32::MAX);
+        assert_eq!(group_vals(&[val(0.0, 0.0, Vec3::Z, 1.0)], 1, (4, 4), REACH).groups[0].reach, f32::MAX);
     }
 }
