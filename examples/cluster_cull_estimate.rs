@@ -33,7 +33,7 @@ fn main() -> anyhow::Result<()> {
     let height: u32 = args.get(3).map_or(Ok(128), |s| s.parse())?;
     anyhow::ensure!((1..=1024).contains(&width) && (1..=1024).contains(&height), "sides: 1..=1024");
     let mut scene = Scene::load(std::path::Path::new(path))?;
-    scene.settings.occlusion = Occlusion::Clusters;
+    scene.settings.visibility.mode = Occlusion::Clusters;
     let gpu = Gpu::new()?;
     let mut renderer = Renderer::new(&gpu, &scene)?;
     let frame = renderer.render(&gpu, Method::Sparse, width, height)?;

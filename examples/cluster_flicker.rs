@@ -37,7 +37,7 @@ fn main() -> anyhow::Result<()> {
     anyhow::ensure!((2..=MAX_FRAMES).contains(&frames), "frames: must be in 2..={MAX_FRAMES}, got {frames}");
     anyhow::ensure!((1..=MAX_SIDE).contains(&side), "side: must be in 1..={MAX_SIDE}, got {side}");
     let mut scene = Scene::load(std::path::Path::new(path))?;
-    scene.settings.occlusion = Occlusion::Clusters;
+    scene.settings.visibility.mode = Occlusion::Clusters;
     let light = scene.light.ok_or_else(|| anyhow::anyhow!("{path}: the scene has no spot light to move"))?;
     let gpu = Gpu::new()?;
     let mut coherent = Renderer::new(&gpu, &scene)?;
@@ -86,7 +86,7 @@ fn main() -> anyhow::Result<()> {
     let exact_change = mean_change(&exact);
     println!(
         "{path}: {frames} frames at {side}x{side}, the spot light {step:.4} m sideways a frame, clusters {:?}",
-        scene.settings.clusters
+        scene.settings.visibility.clusters
     );
     println!("exact (every VAL):       image change {exact_change:.4}");
     for (name, images) in [("coherent (relume)", &kept), ("reseeded each frame", &reseeded)] {

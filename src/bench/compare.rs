@@ -462,7 +462,7 @@ pub fn compare(
     let setup_ms = start.elapsed().as_secs_f64() * 1e3;
     // The brute force has no visibility, so it is compared with sparse without occlusion;
     // `exact` measures occlusion.
-    renderer.set_occlusion(Occlusion::Off, scene.settings.occlusion_rule);
+    renderer.set_occlusion(Occlusion::Off, scene.settings.visibility.rule);
     let sparse = sparse_frame(gpu, &mut renderer, w, h)?;
     let brute = brute_force_frame(gpu, &mut renderer, w, h)?;
     let error = indirect_error(&sparse.indirect, &brute.indirect);
@@ -492,8 +492,8 @@ pub fn compare(
         triangles: scene.triangle_count(),
         vertices: scene.vertex_count(),
         glossy: renderer.glossy(),
-        occlusion_setting: scene.settings.occlusion,
-        occlusion_rule_setting: scene.settings.occlusion_rule,
+        occlusion_setting: scene.settings.visibility.mode,
+        occlusion_rule_setting: scene.settings.visibility.rule,
         sparse_ms,
         brute_force_ms,
         speedup: brute_force_ms / sparse_ms,
@@ -530,13 +530,19 @@ fn exact_comparison(
         write_exr(exact.indirect(), &dir.join("indirect_exact.exr"))?;
     }
     let mut modes = Vec::new();
-    for (key, occlusion, rule) in [
+    // Every mode of the registry; the disks under both rules.
+    let mut runs = vec![
         ("off", Occlusion::Off, OcclusionRule::Sum),
         ("sum", Occlusion::Disks, OcclusionRule::Sum),
         ("product", Occlusion::Disks, OcclusionRule::Product),
-        ("clusters", Occlusion::Clusters, OcclusionRule::Product),
-        ("ism", Occlusion::Ism, OcclusionRule::Product),
-    ] {
+    ];
+    runs.extend(
+        Occlusion::ALL
+            .iter()
+            .filter(|m| !matches!(m, Occlusion::Off | Occlusion::Disks))
+            .map(|&m| (m.name(), m, OcclusionRule::Product)),
+    );
+    for (key, occlusion, rule) in runs {
         renderer.set_occlusion(occlusion, rule);
         let sparse = renderer.render(gpu, Method::Sparse, w, h)?;
         if let Some(dir) = images {
@@ -565,7 +571,7 @@ fn exact_comparison(
         Err(e @ GpuError::TooLarge { .. }) => (None, Some(format!("skipped: {e}"))),
         Err(e) => return Err(e.into()),
     };
-    renderer.set_occlusion(scene.settings.occlusion, scene.settings.occlusion_rule);
+    renderer.set_occlusion(scene.settings.visibility.mode, scene.settings.visibility.rule);
     let default = renderer.render(gpu, Method::Sparse, w, h)?;
     let estimate = crate::renderer::estimate::Estimator::new().estimate(
         gpu,
@@ -573,7 +579,7 @@ fn exact_comparison(
         &default,
         &crate::renderer::estimate::EstimateOptions::default(),
     )?;
-    let default_vs_exact = default_vs_exact(&exact, scene.settings.occlusion, &default, estimate);
+    let default_vs_exact = default_vs_exact(&exact, scene.settings.visibility.mode, &default, estimate);
     Ok(ExactComparison {
         exact_ms: exact.ms(),
         exact_device: exact.device,

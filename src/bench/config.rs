@@ -180,12 +180,7 @@ pub fn describe(c: &Config) -> String {
     format!(
         "sparse/mesh {sparse}{neighbours}{near}{adaptive}{kernel}{bound}{subdivision}{glossy_interpolation}, R {}, occlusion {}, glossy {}, {}x{}",
         c.rsm_resolution,
-        match c.occlusion {
-            Occlusion::Off => "off",
-            Occlusion::Disks => "disks",
-            Occlusion::Clusters => "clusters",
-            Occlusion::Ism => "ism",
-        },
+        c.occlusion.name(),
         if c.glossy { "on" } else { "off" },
         c.width,
         c.height

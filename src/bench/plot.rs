@@ -83,8 +83,6 @@ fn short_label(r: &ConfigResult) -> String {
     let c = &r.config;
     let visibility = match c.occlusion {
         Occlusion::Off => String::new(),
-        Occlusion::Disks => " disks".to_owned(),
-        Occlusion::Clusters => " clusters".to_owned(),
         Occlusion::Ism => {
             let part = |prefix: &str, v: Option<u32>| v.map_or(String::new(), |n| format!(" {prefix}{n}"));
             format!(
@@ -95,6 +93,7 @@ fn short_label(r: &ConfigResult) -> String {
                 part("pp", c.ism_pull_push_levels)
             )
         }
+        mode => format!(" {}", mode.name()),
     };
     format!(
         "s{} R{}{}{} {}x{}",

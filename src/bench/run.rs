@@ -56,7 +56,7 @@ impl BenchOptions {
     pub fn configs(&self, description: &SceneDescription, scene: &Scene) -> Vec<Config> {
         let mut base = Config::new(
             scene.settings.rsm_resolution,
-            scene.settings.occlusion,
+            scene.settings.visibility.mode,
             scene.settings.glossy,
             description.camera.width,
             description.camera.height,
@@ -279,7 +279,7 @@ fn run_job(
         if let Some(b) = bound {
             scene.settings.sparse.bound = b;
         }
-        scene.settings.occlusion = group[0].occlusion;
+        scene.settings.visibility.mode = group[0].occlusion;
         base_scene.get_or_insert_with(|| scene.clone());
         let mut renderer = Renderer::new(gpu, &scene)?;
         let mut sizes: Vec<(u32, u32)> = group.iter().map(|c| (c.width, c.height)).collect();
@@ -288,15 +288,15 @@ fn run_job(
             let mut sparse_frames = Vec::new();
             for c in group.iter().filter(|c| (c.width, c.height) == (w, h)) {
                 progress(&format!("{}: {}", job.variant, describe(c)));
-                let ism = c.ism_settings(&scene.settings.ism);
+                let ism = c.ism_settings(&scene.settings.visibility.ism);
                 ism.validate("settings.ism").map_err(|e| flag_error("--sweep", format!("{}: {e}", describe(c))))?;
-                let clusters = c.clusters.apply(&scene.settings.clusters);
+                let clusters = c.clusters.apply(&scene.settings.visibility.clusters);
                 clusters
                     .validate("settings.clusters")
                     .map_err(|e| flag_error("--sweep", format!("{}: {e}", describe(c))))?;
                 renderer.set_visibility(VisibilitySettings {
                     mode: c.occlusion,
-                    rule: scene.settings.occlusion_rule,
+                    rule: scene.settings.visibility.rule,
                     clusters,
                     ism,
                 });
@@ -316,7 +316,7 @@ fn run_job(
             if options.references {
                 let mut seen: Vec<IsmSettings> = Vec::new();
                 for c in group.iter().filter(|c| (c.width, c.height) == (w, h) && c.occlusion == Occlusion::Ism) {
-                    let ism = c.ism_settings(&scene.settings.ism);
+                    let ism = c.ism_settings(&scene.settings.visibility.ism);
                     if seen.contains(&ism) {
                         continue;
                     }

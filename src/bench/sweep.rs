@@ -95,12 +95,12 @@ impl Sweep {
                 }
                 "occlusion" => {
                     duplicate(sweep.occlusion.is_some())?;
-                    sweep.occlusion = Some(parse_each(&flag, &values, |v| match v {
-                        "off" => Ok(Occlusion::Off),
-                        "disks" => Ok(Occlusion::Disks),
-                        "clusters" => Ok(Occlusion::Clusters),
-                        "ism" => Ok(Occlusion::Ism),
-                        _ => Err("expected `off`, `disks`, `clusters` or `ism`".to_owned()),
+                    sweep.occlusion = Some(parse_each(&flag, &values, |v| {
+                        Occlusion::from_name(v).ok_or_else(|| {
+                            let names: Vec<String> = Occlusion::ALL.iter().map(|m| format!("`{}`", m.name())).collect();
+                            let (last, rest) = names.split_last().expect("the off mode at least");
+                            format!("expected {} or {last}", rest.join(", "))
+                        })
                     })?);
                 }
                 "glossy" => {

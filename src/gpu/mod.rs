@@ -29,8 +29,17 @@ pub mod visibility;
 use bytemuck::Pod;
 
 /// Every compute pass's declaration, in frame order: what the naga layout test checks against
-/// the WGSL (`tests/integration/layout.rs`) and the shaders the compilation test builds.
-pub const PASSES: &[&pass::PassDesc] = &[
+/// the WGSL (`tests/integration/layout.rs`) and the shaders the compilation test builds. The
+/// visibility modes' come from their folders, through the registry of modes.
+pub fn passes() -> Vec<&'static pass::PassDesc> {
+    let mut passes = LIGHT_PASSES.to_vec();
+    passes.extend(visibility::passes());
+    passes.extend(SHADING_PASSES);
+    passes
+}
+
+/// The passes making VALs and the second bounce's points.
+const LIGHT_PASSES: &[&pass::PassDesc] = &[
     &lights::rsm::PASS,
     &lights::light_rsms::PASS,
     &lights::rgbd::PASS,
@@ -41,18 +50,15 @@ pub const PASSES: &[&pass::PassDesc] = &[
     &lights::bounce::VISIBILITY,
     &lights::bounce::ISM_VISIBILITY,
     &lights::bounce::DRAW,
-    &visibility::clusters::CLUSTERING,
-    &visibility::clusters::VISIBILITY,
-    &visibility::ism::SAMPLING,
-    &visibility::ism::SPLAT,
-    &visibility::ism::PULL_PUSH,
-    &visibility::ism::VISIBILITY,
+];
+
+/// The passes shading receivers and the references'.
+const SHADING_PASSES: &[&pass::PassDesc] = &[
     &sparse::gather::PASS,
     &sparse::gather::GROUPED_PASS,
     &sparse::gather::CHOSEN_PASS,
     &sparse::gather::CHOSEN_GROUPED_PASS,
     &sparse::adaptive::PASS,
-    &visibility::disks::PASS,
     &sparse::renormalise::PASS,
     &sparse::interpolate::PASS,
     &sparse::interpolate::ADAPTIVE_PASS,

@@ -6,7 +6,7 @@
 //! workgroup size reaches the shader as `WORKGROUP_X/Y/Z` in the generated header, the layout is
 //! built from the bindings, and every dispatch names the resources it binds
 //! ([`Kernel::run`]), so a resource cannot land at the wrong binding. A naga test
-//! (`tests/integration/layout.rs`) checks every [`PassDesc`] of [`crate::gpu::PASSES`] against
+//! (`tests/integration/layout.rs`) checks every [`PassDesc`] of [`crate::gpu::passes`] against
 //! what each entry point of its WGSL really uses.
 
 use super::scene::GpuScene;

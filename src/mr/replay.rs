@@ -190,7 +190,7 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
 /// grid (the scene's `grid_step` times `vals_step`, at most 64) and the render size.
 fn apply(mr: &mut MrRenderer, p: &FrameParameters, scene: &Scene, rgbd: crate::rgbd::RgbdSettings, size: (u32, u32)) {
     let renderer = mr.renderer_mut();
-    renderer.set_occlusion(p.occlusion, scene.settings.occlusion_rule);
+    renderer.set_occlusion(p.occlusion, scene.settings.visibility.rule);
     renderer.set_near_field(p.near_field);
     let settings = mr.frame_settings_mut();
     settings.rgbd = crate::rgbd::RgbdSettings { grid_step: (rgbd.grid_step * p.vals_step).min(64), ..rgbd };

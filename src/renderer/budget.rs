@@ -60,7 +60,7 @@ impl FrameParameters {
     pub fn of(level: Quality, settings: &Settings) -> FrameParameters {
         FrameParameters {
             level,
-            occlusion: settings.occlusion,
+            occlusion: settings.visibility.mode,
             near_field: settings.sparse.near_field,
             vals_step: 1,
             resolution_scale: 1.0,

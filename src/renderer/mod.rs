@@ -167,7 +167,7 @@ impl Renderer {
             spot,
             glossy,
             view: View::Scene(scene.camera),
-            visibility: VisibilitySettings::of(&scene.settings),
+            visibility: scene.settings.visibility,
             sparse_shading: scene.settings.sparse,
             near_radius: scene.settings.sparse.near_field * scene.sparse_spacing(),
             sparse_spacing: scene.sparse_spacing(),

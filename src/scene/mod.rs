@@ -48,7 +48,7 @@ pub(crate) mod test_util;
 #[cfg(test)]
 mod tests;
 mod texture;
-mod validate;
+pub(crate) mod validate;
 
 use std::path::PathBuf;
 
@@ -72,7 +72,7 @@ pub use settings::{
     MAX_DIRECT_LIGHTS, MAX_ENVIRONMENT_ROWS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
     MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MrSettings, NEAR_FIELD_RANGE, Occlusion, OcclusionRule,
     OcclusionSetting, POINT_VIEWS, Quality, ResolvedConfig, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE,
-    SecondBounceSettings, ShadowMapSource, SoftShadows, SparseShading, Technique,
+    SecondBounceSettings, ShadowMapSource, SoftShadows, SparseShading, Technique, VisibilitySettings,
 };
 pub use texture::MAX_TEXTURE_SIDE;
 
@@ -288,19 +288,14 @@ pub struct Settings {
     pub exposure: Option<f32>,
     /// Sparse points each vertex interpolates from, 1..=[`MAX_NEIGHBOURS`].
     pub interpolation_neighbours: u32,
-    /// Indirect occlusion by disc occluders (docs/design.md §4 step 3).
-    pub occlusion: Occlusion,
-    pub occlusion_rule: OcclusionRule,
+    /// Indirect visibility: the mode (docs/design.md §4 step 3) and every mode's settings.
+    pub visibility: VisibilitySettings,
     /// How RGB-D frames become VALs.
     pub rgbd: RgbdSettings,
     /// Mixed-reality compositing (differential rendering).
     pub mr: MrSettings,
     /// The sparse method's interpolation kernel, light bound and subdivision.
     pub sparse: SparseShading,
-    /// The `Clusters` visibility mode's settings.
-    pub clusters: ClusterSettings,
-    /// The `Ism` visibility mode's settings.
-    pub ism: IsmSettings,
     /// Shadows of the direct light from [`Scene::lights`].
     pub direct: DirectSettings,
     /// Bounces of indirect light: 1, or 2 with a second bounce as `second_bounce` says.

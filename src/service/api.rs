@@ -88,7 +88,7 @@ impl SceneInfo {
                 parts.iter().map(|(_, n)| *n).sum::<u64>().min(u64::from(u32::MAX)) as u32
             },
             glossy: scene.needs_glossy(),
-            occlusion: scene.settings.occlusion,
+            occlusion: scene.settings.visibility.mode,
             camera,
             light,
             resolved: scene.resolved.clone(),

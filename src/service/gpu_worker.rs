@@ -709,7 +709,7 @@ fn timed(
 fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, WorkerError> {
     let Loaded { scene, renderer, .. } = loaded;
     renderer.place_meshes(gpu, scene, &placement(scene, &[]));
-    renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);
+    renderer.set_occlusion(job.occlusion, scene.settings.visibility.rule);
     renderer.set_near_field(job.near_field);
     renderer.set_glossy(scene.settings.glossy);
     renderer.clear_vals();
@@ -743,7 +743,7 @@ fn placement(scene: &Scene, transforms: &[(u32, glam::DMat4)]) -> Vec<Mat4> {
 fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> Result<Frame, WorkerError> {
     let Loaded { scene, renderer, mr } = loaded;
     mr.place(gpu, renderer, scene, &placement(scene, &job.model_transforms))?;
-    renderer.set_occlusion(job.occlusion, scene.settings.occlusion_rule);
+    renderer.set_occlusion(job.occlusion, scene.settings.visibility.rule);
     renderer.set_near_field(job.near_field);
     renderer.set_glossy(job.glossy);
     if let Some(light) = job.light.as_ref().or(scene.light.as_ref()) {

@@ -82,7 +82,7 @@ fn auto_occlusion_follows_the_scene() {
     let auto = json.replace(r#", "visibility": "off""#, "");
     assert_ne!(auto, json, "the fixture names its occlusion setting");
     let scene = Scene::from_json_str(&auto, &dir).unwrap();
-    assert_eq!(scene.settings.occlusion, Occlusion::Disks);
+    assert_eq!(scene.settings.visibility.mode, Occlusion::Disks);
     assert!(scene.meshes[1].may_occlude_itself(), "the bunny has concave parts (ears, legs)");
 }
 

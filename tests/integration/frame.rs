@@ -17,7 +17,7 @@ fn stage_names(frame: &relume::renderer::Rendered) -> Vec<&str> {
 fn a_direct_only_frame_runs_no_indirect_stage() {
     let gpu = gpu();
     let mut scene = load_scene("cornell_bunny_small");
-    scene.settings.occlusion = relume::scene::Occlusion::Disks;
+    scene.settings.visibility.mode = relume::scene::Occlusion::Disks;
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     for method in [Method::Sparse, Method::BruteForce] {
         let direct = renderer.render_components(&gpu, method, 32, 24, Components::DIRECT).unwrap();
@@ -57,16 +57,16 @@ fn settings_round_trips_give_the_same_frame() {
     let gpu = gpu();
     let scene = load_scene("cornell_bunny_small");
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-    renderer.set_occlusion(relume::scene::Occlusion::Off, scene.settings.occlusion_rule);
+    renderer.set_occlusion(relume::scene::Occlusion::Off, scene.settings.visibility.rule);
     let first = renderer.render(&gpu, Method::Sparse, 24, 24).unwrap();
     assert!(!stage_names(&first).contains(&stage::OCCLUSION));
-    renderer.set_occlusion(relume::scene::Occlusion::Disks, scene.settings.occlusion_rule);
+    renderer.set_occlusion(relume::scene::Occlusion::Disks, scene.settings.visibility.rule);
     let disks = renderer.render(&gpu, Method::Sparse, 24, 24).unwrap();
     assert!(stage_names(&disks).contains(&stage::OCCLUSION));
     renderer.set_glossy(false);
     renderer.render(&gpu, Method::Sparse, 24, 24).unwrap();
     renderer.set_glossy(true);
-    renderer.set_occlusion(relume::scene::Occlusion::Off, scene.settings.occlusion_rule);
+    renderer.set_occlusion(relume::scene::Occlusion::Off, scene.settings.visibility.rule);
     let again = renderer.render(&gpu, Method::Sparse, 24, 24).unwrap();
     // Same techniques, same inputs; only the RSM's atomic VAL order may differ, which moves the
     // gather's float sums in their last bits: 1e-4 relative.

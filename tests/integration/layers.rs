@@ -17,12 +17,13 @@ use std::path::Path;
 /// The layers, lowest first. A file's layer comes from the first row whose module its path is
 /// in (`src/<module>.rs` or `src/<module>/…`), except that every twin file is layer 1 wherever
 /// it lies: `src/twin/**`, and a `twin.rs` or a file under a `twin/` folder inside a GPU
-/// technique's folder (a technique keeps its CPU twin beside it). A new top-level module must be
-/// added here, or the test fails.
+/// technique's folder (a technique keeps its CPU twin beside it), and every `settings.rs` inside
+/// `gpu` is layer 0 (a visibility mode keeps its settings in its folder). A new top-level module
+/// must be added here, or the test fails.
 ///
 /// | layer | modules | what |
 /// |---|---|---|
-/// | 0 | `scene`, `rgbd`, `image`, `val` | data: scenes, recordings and frames, images, the VAL |
+/// | 0 | `scene`, `rgbd`, `image`, `val` + `gpu/**/settings.rs` | data: scenes, recordings and frames, images, the VAL, settings |
 /// | 1 | `twin` + twin files | the CPU twins: data and twin files only |
 /// | 2 | `gpu` | the GPU techniques |
 /// | 3 | `renderer` | a frame: the list of techniques |
@@ -57,6 +58,9 @@ fn layer_of(path: &str) -> Option<Result<u8, String>> {
     let components: Vec<&str> = rest.split('/').collect();
     let top = components[0].trim_end_matches(".rs");
     let twin_inside = components.iter().any(|c| *c == "twin" || *c == "twin.rs");
+    if top == "gpu" && settings_file(&components) {
+        return Some(Ok(0));
+    }
     if top == "gpu" && twin_inside {
         return Some(Ok(1));
     }
@@ -68,6 +72,13 @@ fn layer_of(path: &str) -> Option<Result<u8, String>> {
     })
 }
 
+/// Whether a file inside `gpu` is a technique's settings (`settings.rs`: data, layer 0, held by
+/// the scene description; the visibility modes keep theirs, and the registry of modes, in
+/// their folders).
+fn settings_file(components: &[&str]) -> bool {
+    components.last() == Some(&"settings.rs")
+}
+
 /// The unit of the cycle check: the top-level module, except that a twin file inside `gpu`
 /// belongs to `twin` (the twin layer is one unit spread over the techniques' folders, so
 /// `twin::bounce` using `gpu::visibility::disks::twin` is not `twin` -> `gpu`).
@@ -75,6 +86,9 @@ fn unit_of(path: &str) -> String {
     let rest = path.strip_prefix("src/").unwrap_or(path);
     let components: Vec<&str> = rest.split('/').collect();
     let top = components[0].trim_end_matches(".rs");
+    if top == "gpu" && settings_file(&components) {
+        return "scene".to_owned();
+    }
     if top == "gpu" && components.iter().any(|c| *c == "twin" || *c == "twin.rs") {
         return "twin".to_owned();
     }

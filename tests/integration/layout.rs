@@ -157,7 +157,7 @@ fn slot_of(module: &naga::Module, global: &naga::GlobalVariable) -> relume::gpu:
 /// the Rust side binds by these names, so a renamed, moved or retyped WGSL binding fails here.
 #[test]
 fn pass_declarations_match_wgsl() {
-    for pass in relume::gpu::PASSES {
+    for pass in relume::gpu::passes() {
         for textured in [false, true] {
             let source = (pass.default_source)(textured);
             let module = naga::front::wgsl::parse_str(&source)

@@ -69,11 +69,11 @@ pub fn prelude(first: Wgsl, textured: bool, tile_size: u32) -> Wgsl {
 }
 
 /// Every shader's complete source, by pass label: the compute passes of
-/// [`crate::gpu::PASSES`] at their default parameters and the rasters (visibility, cluster shadow maps) (for the
+/// [`crate::gpu::passes`] at their default parameters and the rasters (visibility, cluster shadow maps) (for the
 /// layout and compilation tests).
 pub fn all_sources(textured: bool) -> Vec<(&'static str, String)> {
-    crate::gpu::PASSES
-        .iter()
+    crate::gpu::passes()
+        .into_iter()
         .map(|p| (p.label, (p.default_source)(textured)))
         .chain([
             ("visibility", crate::gpu::raster::source(textured)),

@@ -17,21 +17,51 @@
 //! bounce through the sparse method's `ism` or `clusters` maps) and the camera's pixels
 //! (`gpu::references::brute_force`'s `brute_force_ism`: ISM visibility per pixel).
 //!
-//! A mode is a folder here holding its Rust, its WGSL and its CPU twin (`disks/`: `mod.rs`,
-//! `disks.wgsl`, `twin.rs`), a type that implements one of the traits, its settings as a field
-//! of [`VisibilitySettings`], and one line in [`for_settings`], where the scene's setting picks it. Its stages appear in the timings under
+//! A mode is a folder here and one line in the registry, `settings.rs`'s `visibility_modes!`.
+//! The folder holds its settings (`settings.rs`, data, if it has any), its technique (`mod.rs`:
+//! a type implementing one of the traits below and `pub fn mode(gpu, scene, settings, glossy)`
+//! making it), its WGSL, its CPU twin (`twin.rs`) and its tests. The registry line declares the
+//! folder's module, names the mode in scene files, on the service and in benchmarks, puts its
+//! settings in [`VisibilitySettings`] and their overrides in `settings.tuning`, and routes the
+//! scene's setting to its `mode` ([`for_settings`]). Its stages appear in the timings under
 //! their names.
 
-pub mod clusters;
-pub mod disks;
-pub mod ism;
+pub mod settings;
 
+/// Every mode's folder, from the registry.
+macro_rules! declare_modes {
+    ($($(#[$doc:meta])* $variant:ident $name:literal $module:ident $({ $field:ident: $settings:ty, $tuning:ty })?,)*) => {
+        $(pub mod $module;)*
+
+        /// Every mode's compute passes, in the registry's order.
+        pub fn passes() -> Vec<&'static PassDesc> {
+            [$($module::PASSES,)*].concat()
+        }
+
+        /// The mode the settings ask for; `None` when visibility is off (no stage, no buffer).
+        pub fn for_settings(
+            gpu: &Gpu,
+            scene: &GpuScene,
+            settings: &VisibilitySettings,
+            glossy: bool,
+        ) -> Result<Option<Mode>, GpuError> {
+            Ok(match settings.mode {
+                Occlusion::Off => None,
+                $(Occlusion::$variant => Some($module::mode(gpu, scene, settings, glossy)?),)*
+            })
+        }
+    };
+}
+settings::visibility_modes!(declare_modes);
+
+use crate::gpu::pass::PassDesc;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::Wgsl;
 use crate::gpu::technique::Frame;
 use crate::gpu::timing::{Recorder, Span};
 use crate::gpu::{Gpu, GpuError, Lobes};
-use crate::scene::{ClusterSettings, IsmSettings, Occlusion, OcclusionRule, Settings};
+use crate::scene::Occlusion;
+pub use crate::scene::VisibilitySettings;
 
 /// A visibility mode that scales the gathered sums, as the sparse technique runs it.
 pub trait SparseVisibility {
@@ -107,40 +137,4 @@ impl Mode {
             Mode::Groups(g) => g.stages(),
         }
     }
-}
-
-/// Everything that picks and parametrises the visibility mode: a mode's settings live here,
-/// so a new mode adds its field and its line in [`for_settings`], nothing else on the way.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct VisibilitySettings {
-    pub mode: Occlusion,
-    /// How the disks' occluders combine.
-    pub rule: OcclusionRule,
-    pub clusters: ClusterSettings,
-    pub ism: IsmSettings,
-}
-
-impl VisibilitySettings {
-    pub fn of(settings: &Settings) -> Self {
-        Self { mode: settings.occlusion, rule: settings.occlusion_rule, clusters: settings.clusters, ism: settings.ism }
-    }
-}
-
-/// The mode the settings ask for; `None` when visibility is off (no stage, no buffer).
-pub fn for_settings(
-    gpu: &Gpu,
-    scene: &GpuScene,
-    settings: &VisibilitySettings,
-    glossy: bool,
-) -> Result<Option<Mode>, GpuError> {
-    Ok(match settings.mode {
-        Occlusion::Off => None,
-        Occlusion::Disks => {
-            Some(Mode::Scale(Box::new(disks::Disks::new(gpu, scene, glossy, settings.rule == OcclusionRule::Product)?)))
-        }
-        Occlusion::Clusters => {
-            Some(Mode::Groups(Box::new(clusters::Clusters::new(gpu, scene, &settings.clusters, &settings.ism)?)))
-        }
-        Occlusion::Ism => Some(Mode::Groups(Box::new(ism::mode(gpu, scene, &settings.ism)?))),
-    })
 }

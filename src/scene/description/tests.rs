@@ -291,13 +291,10 @@ fn settings_are_checked() {
             seed: 7,
             exposure: Some(2.5),
             interpolation_neighbours: 8,
-            occlusion: Occlusion::Off,
-            occlusion_rule: OcclusionRule::Product,
+            visibility: VisibilitySettings { mode: Occlusion::Off, rule: OcclusionRule::Product, ..Default::default() },
             rgbd: RgbdSettings::default(),
             mr: MrSettings::default(),
             sparse: SparseShading::default(),
-            clusters: ClusterSettings::default(),
-            ism: IsmSettings::default(),
             direct: DirectSettings::default(),
             bounces: 1,
             second_bounce: SecondBounceSettings::default(),
@@ -368,8 +365,11 @@ fn settings_are_checked() {
         let d = SceneDescription::from_json_str(&text).expect("parses");
         d.validate().expect("valid");
         let s = to_settings(&d.settings, true);
-        assert_eq!(s.occlusion, Occlusion::Clusters, "{key}");
-        assert_eq!(s.clusters, ClusterSettings { count: 8, soft: SoftShadows::Pcf, ..ClusterSettings::default() });
+        assert_eq!(s.visibility.mode, Occlusion::Clusters, "{key}");
+        assert_eq!(
+            s.visibility.clusters,
+            ClusterSettings { count: 8, soft: SoftShadows::Pcf, ..ClusterSettings::default() }
+        );
     }
     assert!(SceneDescription::from_json_str(&with_tuning(r#"{"visibility": "off", "occlusion": "off"}"#)).is_err());
     let message = error_of(&with_tuning(r#"{"clusters": {"count": 0}}"#));
@@ -391,8 +391,11 @@ fn settings_are_checked() {
     let d = SceneDescription::from_json_str(&text).expect("parses");
     d.validate().expect("valid");
     let s = to_settings(&d.settings, false);
-    assert_eq!(s.occlusion, Occlusion::Ism);
-    assert_eq!(s.ism, IsmSettings { count: 16, resolution: 32, points: Some(100), ..IsmSettings::default() });
+    assert_eq!(s.visibility.mode, Occlusion::Ism);
+    assert_eq!(
+        s.visibility.ism,
+        IsmSettings { count: 16, resolution: 32, points: Some(100), ..IsmSettings::default() }
+    );
     // The paper's rule: a quarter of the pi/4 * 128^2 texels of a 128x128 map.
     assert_eq!(IsmSettings::default().points_per_map(), 3217);
     for (ism, want) in [

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::scene::SceneError;
 use crate::scene::validate::{int_in, positive};
 
-use super::visibility::MAX_CLUSTER_ATLAS_SIDE;
+use super::MAX_CLUSTER_ATLAS_SIDE;
 
 /// Views of a point light's RSM (a cube's faces) and of a spot's.
 pub const POINT_VIEWS: u32 = 6;

@@ -14,7 +14,6 @@ mod sparse;
 #[cfg(test)]
 mod tests;
 mod tuning;
-mod visibility;
 
 pub use bounce::{DEFAULT_BOUNCES, MAX_SECOND_BOUNCE_POINTS, MAX_SECOND_BOUNCE_VALS, SecondBounceSettings};
 pub use direct::{DirectSettings, DirectShadows, MAX_DIRECT_LIGHTS, MAX_LIGHTS_VAL_BUDGET, POINT_VIEWS, SPOT_VIEWS};
@@ -29,9 +28,18 @@ pub use sparse::{
     ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION,
     GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, SUBDIVISION_RANGE, SparseShading,
 };
-pub use tuning::{ClusterTuning, DirectTuning, IsmTuning, SecondBounceTuning, SparseTuning, Tuning};
-pub use visibility::{
-    ClusterMethod, ClusterSettings, IsmSettings, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_ISM_POINTS, MAX_ISM_SPLATS,
-    MAX_ISM_TEXELS, MAX_ISMS, MAX_KMEANS_ITERATIONS, Occlusion, OcclusionRule, OcclusionSetting, ShadowMapSource,
-    SoftShadows,
+pub use tuning::{DirectTuning, SecondBounceTuning, SparseTuning, Tuning};
+pub(crate) use tuning::{SetField, json_value, overrides};
+
+// The visibility modes' settings live in their folders under `gpu/visibility/` (data files
+// there, with the registry of modes): re-exported here beside the others.
+pub use crate::gpu::visibility::clusters::settings::{
+    ClusterMethod, ClusterSettings, ClusterTuning, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_KMEANS_ITERATIONS,
+    ShadowMapSource,
+};
+pub use crate::gpu::visibility::ism::settings::{
+    IsmSettings, IsmTuning, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
+};
+pub use crate::gpu::visibility::settings::{
+    Occlusion, OcclusionRule, OcclusionSetting, SoftShadows, VisibilitySettings,
 };

@@ -26,8 +26,8 @@ use serde::{Deserialize, Serialize};
 
 use super::tuning::{SetField, json_value};
 use super::{
-    ClusterSettings, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION, IsmSettings, Occlusion, OcclusionRule, OcclusionSetting,
-    SettingsDescription, SparseShading,
+    DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION, Occlusion, OcclusionRule, OcclusionSetting, SettingsDescription,
+    SparseShading,
 };
 use crate::scene::{DEFAULT_NEIGHBOURS, Settings};
 
@@ -334,13 +334,7 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
             ),
         ),
     };
-    let occlusion = match tuning.visibility.unwrap_or(OcclusionSetting::Auto) {
-        OcclusionSetting::Auto => level_visibility.0,
-        OcclusionSetting::Off => Occlusion::Off,
-        OcclusionSetting::Disks => Occlusion::Disks,
-        OcclusionSetting::Clusters => Occlusion::Clusters,
-        OcclusionSetting::Ism => Occlusion::Ism,
-    };
+    let occlusion = tuning.visibility.unwrap_or(OcclusionSetting::Auto).or(level_visibility.0);
     choices.level("visibility", level_visibility.0, level_visibility.1);
     let occlusion_rule = tuning.occlusion_rule.unwrap_or(OcclusionRule::Product);
     if occlusion == Occlusion::Disks {
@@ -391,13 +385,10 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
         seed: settings.seed,
         exposure: settings.exposure,
         interpolation_neighbours: tuning.interpolation_neighbours.unwrap_or(DEFAULT_NEIGHBOURS),
-        occlusion,
-        occlusion_rule,
+        visibility: tuning.visibility_settings(occlusion, occlusion_rule),
         rgbd: settings.rgbd,
         mr: settings.mr,
         sparse,
-        clusters: tuning.clusters.map_or(ClusterSettings::default(), |t| t.apply(ClusterSettings::default())),
-        ism: tuning.ism.map_or(IsmSettings::default(), |t| t.apply(IsmSettings::default())),
         direct: tuning.direct.map_or(Default::default(), |t| t.apply(Default::default())),
         bounces: settings.bounces,
         second_bounce: tuning.second_bounce.map_or(Default::default(), |t| t.apply(Default::default())),

@@ -197,8 +197,7 @@ impl SettingsDescription {
         int_in(s.rsm_resolution, lo, hi, &format!("{tuning}.rsm_resolution"))?;
         int_in(s.interpolation_neighbours, 1, MAX_NEIGHBOURS, &format!("{tuning}.interpolation_neighbours"))?;
         s.sparse.validate(&format!("{tuning}.sparse"))?;
-        s.clusters.validate(&format!("{tuning}.clusters"))?;
-        s.ism.validate(&format!("{tuning}.ism"))?;
+        s.visibility.validate(&tuning)?;
         s.direct.validate(&format!("{tuning}.direct"))?;
         s.second_bounce.validate(&format!("{tuning}.second_bounce"))
     }

@@ -41,7 +41,7 @@ fn a_convex_room_needs_no_visibility_at_any_level() {
     for quality in ["fast", "balanced", "accurate", "reference"] {
         let scene = load(&[ROOM], &format!(r#"{{"quality": "{quality}"}}"#));
         assert!(!scene.resolved.analysis.self_occluding());
-        assert_eq!(scene.settings.occlusion, Occlusion::Off, "{quality}");
+        assert_eq!(scene.settings.visibility.mode, Occlusion::Off, "{quality}");
         let visibility = choice(&scene, "visibility");
         assert_eq!(visibility.value, "\"off\"");
         assert!(visibility.reason.contains("cannot occlude itself"), "{}", visibility.reason);
@@ -51,14 +51,14 @@ fn a_convex_room_needs_no_visibility_at_any_level() {
 #[test]
 fn a_scene_that_can_occlude_itself_gets_the_levels_visibility() {
     let scene = load(&[ROOM, CUBE], "{}");
-    assert_eq!(scene.settings.occlusion, Occlusion::Disks, "balanced: disks, as `auto` always was");
+    assert_eq!(scene.settings.visibility.mode, Occlusion::Disks, "balanced: disks, as `auto` always was");
     assert_eq!(choice(&scene, "visibility").to_string().split(':').next(), Some("visibility = \"disks\""));
     assert!(choice(&scene, "visibility").reason.starts_with("the scene can occlude itself (2 meshes)"));
     let accurate = load(&[ROOM, CUBE], r#"{"quality": "accurate"}"#);
-    assert_eq!(accurate.settings.occlusion, Occlusion::Clusters);
+    assert_eq!(accurate.settings.visibility.mode, Occlusion::Clusters);
     assert_eq!(accurate.settings.sparse.near_field, 4.0);
     let fast = load(&[ROOM, CUBE], r#"{"quality": "fast"}"#);
-    assert_eq!(fast.settings.occlusion, Occlusion::Disks);
+    assert_eq!(fast.settings.visibility.mode, Occlusion::Disks);
     assert_eq!((fast.settings.rsm_resolution, fast.settings.sparse.subdivision), (64, 4.0));
 }
 
@@ -83,7 +83,7 @@ fn an_explicit_tuning_value_wins_over_the_level() {
                        "sparse": {"near_field": 2}}}"#;
     let scene = load(&[ROOM, CUBE], settings);
     assert_eq!(scene.settings.rsm_resolution, 160);
-    assert_eq!(scene.settings.occlusion, Occlusion::Ism);
+    assert_eq!(scene.settings.visibility.mode, Occlusion::Ism);
     // The level keeps what the tuning does not set.
     assert_eq!((scene.settings.sparse.near_field, scene.settings.sparse.subdivision), (2.0, 4.0));
     let rsm = choice(&scene, "tuning.rsm_resolution");
@@ -157,19 +157,15 @@ fn balanced_is_the_old_defaults_on_every_fixture() {
                 seed: s.seed,
                 exposure: s.exposure,
                 interpolation_neighbours: t.interpolation_neighbours.unwrap_or(DEFAULT_NEIGHBOURS),
-                occlusion: match t.visibility.unwrap_or_default() {
-                    OcclusionSetting::Auto => auto,
-                    OcclusionSetting::Off => Occlusion::Off,
-                    OcclusionSetting::Disks => Occlusion::Disks,
-                    OcclusionSetting::Clusters => Occlusion::Clusters,
-                    OcclusionSetting::Ism => Occlusion::Ism,
+                visibility: VisibilitySettings {
+                    mode: t.visibility.unwrap_or_default().or(auto),
+                    rule: t.occlusion_rule.unwrap_or(OcclusionRule::Product),
+                    clusters: t.clusters.map_or(ClusterSettings::default(), |o| o.apply(ClusterSettings::default())),
+                    ism: t.ism.map_or(IsmSettings::default(), |o| o.apply(IsmSettings::default())),
                 },
-                occlusion_rule: t.occlusion_rule.unwrap_or(OcclusionRule::Product),
                 rgbd: s.rgbd,
                 mr: s.mr,
                 sparse: t.sparse.map_or(SparseShading::default(), |o| o.apply(SparseShading::default())),
-                clusters: t.clusters.map_or(ClusterSettings::default(), |o| o.apply(ClusterSettings::default())),
-                ism: t.ism.map_or(IsmSettings::default(), |o| o.apply(IsmSettings::default())),
                 direct: t.direct.map_or(DirectSettings::default(), |o| o.apply(DirectSettings::default())),
                 bounces: s.bounces,
                 second_bounce: t

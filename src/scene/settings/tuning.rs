@@ -5,10 +5,10 @@
 use serde::{Deserialize, Serialize};
 
 use super::{
-    ClusterMethod, ClusterSettings, DirectSettings, DirectShadows, GlossyInterpolation, InterpolationKernel,
-    IsmSettings, LightBound, OcclusionRule, OcclusionSetting, SecondBounceSettings, ShadowMapSource, SoftShadows,
-    SparseShading,
+    DirectSettings, DirectShadows, GlossyInterpolation, InterpolationKernel, LightBound, Occlusion, OcclusionRule,
+    OcclusionSetting, SecondBounceSettings, SparseShading, VisibilitySettings,
 };
+use crate::gpu::visibility::settings::visibility_modes;
 
 /// One overridden value: its path under `settings.tuning` and the value as the scene file wrote it.
 pub type SetField = (String, String);
@@ -25,7 +25,7 @@ macro_rules! overrides {
         }
     ) => {
         $(#[$meta])*
-        #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, ::serde::Serialize, ::serde::Deserialize, utoipa::ToSchema)]
         #[serde(deny_unknown_fields)]
         pub struct $name {
             $($(#[$pmeta])* #[serde(default, skip_serializing_if = "Option::is_none")] pub $plain: Option<$pty>,)*
@@ -42,19 +42,20 @@ macro_rules! overrides {
             }
 
             /// The given fields, as `(prefix.field, value)`.
-            pub fn set_fields(&self, prefix: &str) -> Vec<SetField> {
+            pub fn set_fields(&self, prefix: &str) -> Vec<$crate::scene::settings::SetField> {
                 let mut set = Vec::new();
                 $(if let Some(value) = &self.$plain {
-                    set.push((format!("{prefix}.{}", stringify!($plain)), json_value(value)));
+                    set.push((format!("{prefix}.{}", stringify!($plain)), $crate::scene::settings::json_value(value)));
                 })*
                 $(if let Some(value) = &self.$opt {
-                    set.push((format!("{prefix}.{}", stringify!($opt)), json_value(value)));
+                    set.push((format!("{prefix}.{}", stringify!($opt)), $crate::scene::settings::json_value(value)));
                 })*
                 set
             }
         }
     };
 }
+pub(crate) use overrides;
 
 /// A value as JSON text (`"disks"`, `4`, `0.5`), for the reasons of the resolved configuration.
 pub(crate) fn json_value<T: Serialize>(value: &T) -> String {
@@ -80,51 +81,6 @@ overrides! {
             adaptive: f32,
         }
         optional {}
-    }
-}
-
-overrides! {
-    /// Overrides of the `"clusters"` visibility mode ([`ClusterSettings`]).
-    ClusterTuning for ClusterSettings {
-        plain {
-            method: ClusterMethod,
-            /// Clusters (shadow maps), in 1..=256.
-            count: u32,
-            /// Side of each cluster's shadow map, texels, in 16..=1024.
-            shadow_map_resolution: u32,
-            soft: SoftShadows,
-            /// In [0, 100].
-            normal_weight: f32,
-            /// k-means iterations per frame, in 1..=32.
-            iterations: u32,
-            shadow_maps: ShadowMapSource,
-        }
-        optional {}
-    }
-}
-
-overrides! {
-    /// Overrides of the `"ism"` visibility mode ([`IsmSettings`]).
-    IsmTuning for IsmSettings {
-        plain {
-            /// Shadow maps per frame, in 1..=4096.
-            count: u32,
-            /// Side of each map, a power of two in 16..=512.
-            resolution: u32,
-            /// Pull-push levels, in 0..=4.
-            pull_push_levels: u32,
-            /// In (0, 1].
-            pull_threshold: f32,
-            /// In (0, 1].
-            push_threshold: f32,
-            soft: SoftShadows,
-            /// Texels, in [0, 16].
-            slope_bias: f32,
-        }
-        optional {
-            /// Points splatted into each map, in 16..=65536; default the paper's rule.
-            points: u32,
-        }
     }
 }
 
@@ -162,37 +118,64 @@ overrides! {
     }
 }
 
-/// `settings.tuning`: research knobs. Each is optional: absent, the scene's `quality` level
-/// chooses it (the resolved configuration says what it chose and why); given, it wins.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct Tuning {
-    /// RSM side, texels, in 8..=2048 (the spot `light`'s VALs are its square).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub rsm_resolution: Option<u32>,
-    /// Sparse points each vertex interpolates from (paper eqs. 12-13), in 1..=16.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub interpolation_neighbours: Option<u32>,
-    /// Indirect visibility: `"off"`, `"disks"` (docs/design.md §4 step 3), `"clusters"` (shadow
-    /// maps of k-means clusters of the VALs, `clusters`) or `"ism"` (imperfect shadow maps,
-    /// `ism`); `"auto"` is the level's choice, as absent. `occlusion` is this key's deprecated
-    /// alias (accepted, not both at once).
-    #[serde(default, rename = "visibility", alias = "occlusion", skip_serializing_if = "Option::is_none")]
-    pub visibility: Option<OcclusionSetting>,
-    /// How disc occluders combine: `"product"` or `"sum"` (the paper's).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub occlusion_rule: Option<OcclusionRule>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub sparse: Option<SparseTuning>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub clusters: Option<ClusterTuning>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub ism: Option<IsmTuning>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub direct: Option<DirectTuning>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub second_bounce: Option<SecondBounceTuning>,
+/// `settings.tuning` (its struct names a field per visibility mode with settings: the list in
+/// `gpu/visibility/settings.rs`).
+macro_rules! define_tuning {
+    ($($(#[$doc:meta])* $variant:ident $name:literal $module:ident $({ $field:ident: $settings:ty, $tuning:ty })?,)*) => {
+        /// `settings.tuning`: research knobs. Each is optional: absent, the scene's `quality` level
+        /// chooses it (the resolved configuration says what it chose and why); given, it wins.
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+        #[serde(deny_unknown_fields)]
+        pub struct Tuning {
+            /// RSM side, texels, in 8..=2048 (the spot `light`'s VALs are its square).
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub rsm_resolution: Option<u32>,
+            /// Sparse points each vertex interpolates from (paper eqs. 12-13), in 1..=16.
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub interpolation_neighbours: Option<u32>,
+            /// Indirect visibility: `"off"`, `"disks"` (docs/design.md §4 step 3), `"clusters"` (shadow
+            /// maps of k-means clusters of the VALs, `clusters`) or `"ism"` (imperfect shadow maps,
+            /// `ism`); `"auto"` is the level's choice, as absent. `occlusion` is this key's deprecated
+            /// alias (accepted, not both at once).
+            #[serde(default, rename = "visibility", alias = "occlusion", skip_serializing_if = "Option::is_none")]
+            pub visibility: Option<OcclusionSetting>,
+            /// How disc occluders combine: `"product"` or `"sum"` (the paper's).
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub occlusion_rule: Option<OcclusionRule>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub sparse: Option<SparseTuning>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub direct: Option<DirectTuning>,
+            #[serde(default, skip_serializing_if = "Option::is_none")]
+            pub second_bounce: Option<SecondBounceTuning>,
+            $($(
+                #[doc = concat!("Overrides of the `\"", $name, "\"` visibility mode.")]
+                #[serde(default, skip_serializing_if = "Option::is_none")]
+                pub $field: Option<$tuning>,
+            )?)*
+        }
+
+        impl Tuning {
+            /// The visibility settings: `mode` and `rule` with every mode's settings overridden
+            /// as given.
+            pub fn visibility_settings(&self, mode: Occlusion, rule: OcclusionRule) -> VisibilitySettings {
+                VisibilitySettings {
+                    mode,
+                    rule,
+                    $($($field: self.$field.map_or(<$settings>::default(), |t| t.apply(<$settings>::default())),)?)*
+                }
+            }
+
+            /// The given overrides of the modes' settings, as `(at.field.path, value)`.
+            fn visibility_set_fields(&self, at: &str) -> Vec<SetField> {
+                let mut set = Vec::new();
+                $($(set.extend(self.$field.map(|t| t.set_fields(&format!("{at}.{}", stringify!($field)))).unwrap_or_default());)?)*
+                set
+            }
+        }
+    };
 }
+visibility_modes!(define_tuning);
 
 impl Tuning {
     /// Every field the scene file gives, as `(settings.tuning.path, value)`, in field order.
@@ -212,8 +195,7 @@ impl Tuning {
             set.push((format!("{AT}.occlusion_rule"), json_value(&rule)));
         }
         set.extend(self.sparse.map(|t| t.set_fields(&format!("{AT}.sparse"))).unwrap_or_default());
-        set.extend(self.clusters.map(|t| t.set_fields(&format!("{AT}.clusters"))).unwrap_or_default());
-        set.extend(self.ism.map(|t| t.set_fields(&format!("{AT}.ism"))).unwrap_or_default());
+        set.extend(self.visibility_set_fields(AT));
         set.extend(self.direct.map(|t| t.set_fields(&format!("{AT}.direct"))).unwrap_or_default());
         set.extend(self.second_bounce.map(|t| t.set_fields(&format!("{AT}.second_bounce"))).unwrap_or_default());
         set

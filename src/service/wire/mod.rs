@@ -715,26 +715,18 @@ pub fn encode_rgbd_frame(frame_id: u64, frame: &RgbdFrame) -> Vec<u8> {
     proto::Envelope { version: PROTOCOL_VERSION, body: Some(body) }.encode_to_vec()
 }
 
-/// A stream's visibility mode (`None`: back to the scene's setting).
+/// A stream's visibility mode (`None`: back to the scene's setting, and for a protobuf value
+/// no mode of the registry is named by). The protobuf value `OCCLUSION_<NAME>` is the mode
+/// named `<name>` in scene files (`gpu/visibility/settings.rs`): matched by name, so the list
+/// of modes is the registry's, and `tests.rs` checks that `relume.proto` offers every one.
 pub fn occlusion_from_proto(mode: proto::Occlusion) -> Option<Occlusion> {
-    match mode {
-        proto::Occlusion::Unspecified => None,
-        proto::Occlusion::Off => Some(Occlusion::Off),
-        proto::Occlusion::Disks => Some(Occlusion::Disks),
-        proto::Occlusion::Clusters => Some(Occlusion::Clusters),
-        proto::Occlusion::Ism => Some(Occlusion::Ism),
-    }
+    let name = mode.as_str_name().strip_prefix("OCCLUSION_")?.to_ascii_lowercase();
+    Occlusion::from_name(&name)
 }
 
-/// The protobuf value of every visibility mode: exhaustive, so a mode added to the scene's
-/// settings without one in `relume.proto` does not compile.
-pub fn occlusion_to_proto(mode: Occlusion) -> proto::Occlusion {
-    match mode {
-        Occlusion::Off => proto::Occlusion::Off,
-        Occlusion::Disks => proto::Occlusion::Disks,
-        Occlusion::Clusters => proto::Occlusion::Clusters,
-        Occlusion::Ism => proto::Occlusion::Ism,
-    }
+/// The protobuf value of a visibility mode, if `relume.proto` has one.
+pub fn occlusion_to_proto(mode: Occlusion) -> Option<proto::Occlusion> {
+    proto::Occlusion::from_str_name(&format!("OCCLUSION_{}", mode.name().to_ascii_uppercase()))
 }
 
 /// A stream's quality level (`None`: back to the scene's).

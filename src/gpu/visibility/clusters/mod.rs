@@ -10,10 +10,11 @@
 //! instances other techniques build ([`Receivers`]) the second bounce's points or the camera's
 //! pixels; each instance names its stages ([`StageNames`]) so that two can run in one frame.
 
+pub mod settings;
 pub mod twin;
 
 use super::ism;
-use super::{GroupTable, GroupVisibility};
+use super::{GroupTable, GroupVisibility, Mode, VisibilitySettings};
 use crate::gpu::lights::bounce;
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, depth_texture, module_from_source, read, read_write, view};
 use crate::gpu::references::brute_force;
@@ -146,6 +147,9 @@ pub fn header_focused(settings: &ClusterSettings, scale: SceneScale, slope_bias_
 fn default_header() -> String {
     header(&ClusterSettings::default(), SceneScale { diagonal: 1.0 })
 }
+
+/// Every compute pass of the mode, for the layout test (`crate::gpu::passes`).
+pub const PASSES: &[&PassDesc] = &[&CLUSTERING, &VISIBILITY];
 
 /// k-means: four entry points over one set of bindings.
 pub const CLUSTERING: PassDesc = PassDesc {
@@ -350,6 +354,11 @@ pub struct Clusters {
     capacity: u32,
     /// `array<f32>`, receivers (sparse or bounce points) x clusters.
     group_visibility: wgpu::Buffer,
+}
+
+/// The `"clusters"` visibility mode for a scene (see [`Clusters::new`]).
+pub fn mode(gpu: &Gpu, scene: &GpuScene, settings: &VisibilitySettings, _glossy: bool) -> Result<Mode, GpuError> {
+    Ok(Mode::Groups(Box::new(Clusters::new(gpu, scene, &settings.clusters, &settings.ism)?)))
 }
 
 impl Clusters {

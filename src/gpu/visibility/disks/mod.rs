@@ -4,7 +4,8 @@
 
 pub mod twin;
 
-use super::SparseVisibility;
+use super::{Mode, SparseVisibility, VisibilitySettings};
+use crate::scene::OcclusionRule;
 use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, with_lobes};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::TILE_SIZE;
@@ -26,6 +27,9 @@ pub fn body(product: bool) -> String {
     Wgsl::new().include(&lookup(product)).include(WGSL).finish()
 }
 
+/// Every compute pass of the mode, for the layout test (`crate::gpu::passes`).
+pub const PASSES: &[&PassDesc] = &[&PASS];
+
 /// One invocation per sparse point; occluders stream through workgroup memory in tiles.
 pub const PASS: PassDesc = PassDesc {
     label: "occlusion",
@@ -34,6 +38,11 @@ pub const PASS: PassDesc = PassDesc {
     workgroup: [TILE_SIZE, 1, 1],
     default_source: |textured| PASS.source(&body(false), textured),
 };
+
+/// The `"disks"` visibility mode for a scene: disc occluders combined as `settings.rule` says.
+pub fn mode(gpu: &Gpu, scene: &GpuScene, settings: &VisibilitySettings, glossy: bool) -> Result<Mode, GpuError> {
+    Ok(Mode::Scale(Box::new(Disks::new(gpu, scene, glossy, settings.rule == OcclusionRule::Product)?)))
+}
 
 pub struct Disks {
     kernel: Kernels,

@@ -13,9 +13,11 @@
 //! (`../clusters/cluster_visibility.wgsl`) reading these maps (`ism_lookup.wgsl`). Rust twin:
 //! [`twin`].
 
+pub mod settings;
 pub mod twin;
 
 use super::clusters::{self, Clusters, SceneScale, StageNames};
+use super::{Mode, VisibilitySettings};
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::WORKGROUP_SIZE;
@@ -108,6 +110,9 @@ fn default_header() -> String {
     header(&IsmSettings::default(), SceneScale { diagonal: 1.0 })
 }
 
+/// Every compute pass of the mode, for the layout test (`crate::gpu::passes`).
+pub const PASSES: &[&PassDesc] = &[&SAMPLING, &SPLAT, &PULL_PUSH, &VISIBILITY];
+
 /// Drawing the VALs by flux: three entry points over one set of bindings.
 pub const SAMPLING: PassDesc = PassDesc {
     label: SAMPLING_STAGE,
@@ -158,9 +163,9 @@ pub fn visibility_body(head: &str) -> String {
     Wgsl::new().include(head).include(LOOKUP_WGSL).include(clusters::VISIBILITY_WGSL).finish()
 }
 
-/// The `"ism"` visibility mode for a scene.
-pub fn mode(gpu: &Gpu, scene: &GpuScene, ism: &IsmSettings) -> Result<Clusters, GpuError> {
-    Clusters::imperfect(gpu, scene, ism)
+/// The `"ism"` visibility mode for a scene: imperfect shadow maps of VALs drawn by flux.
+pub fn mode(gpu: &Gpu, scene: &GpuScene, settings: &VisibilitySettings, _glossy: bool) -> Result<Mode, GpuError> {
+    Ok(Mode::Groups(Box::new(Clusters::imperfect(gpu, scene, &settings.ism)?)))
 }
 
 /// The flux draw's kernels and its running sums.
