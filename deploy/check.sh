@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Checks the deployment files offline (docs/deploy.md): checkov (from PyPI, pinned, in its own
-# virtual environment, installed once) on the Kubernetes manifests and the Dockerfile, and
+# virtual environment, installed once) on the Kubernetes manifests and both Dockerfiles (relume's
+# and the balancer's, deploy/haproxy/Dockerfile), and
 # HAProxy's own parser (`haproxy -c`) on both balancer configurations. Every checkov finding is
 # fixed or skipped in the file with its reason. Run by scripts/test.sh.
 set -euo pipefail
@@ -20,7 +21,8 @@ if ! command -v haproxy >/dev/null; then
 fi
 # --skip-download: offline, no policy updates; --quiet: failures only.
 "$venv/bin/checkov" --skip-download --quiet --compact --framework kubernetes -d deploy/k8s
-"$venv/bin/checkov" --skip-download --quiet --compact --framework dockerfile -f Dockerfile
+"$venv/bin/checkov" --skip-download --quiet --compact --framework dockerfile -f Dockerfile \
+    -f deploy/haproxy/Dockerfile
 RELUME_LB_BIND=127.0.0.1:8080 RELUME_BACKEND_1=127.0.0.1:8081 RELUME_BACKEND_2=127.0.0.1:8082 \
     RELUME_BACKEND_3=127.0.0.1:8083 haproxy -c -q -f deploy/haproxy/haproxy.cfg
 config=$(mktemp)
@@ -31,4 +33,4 @@ for doc in yaml.safe_load_all(open("deploy/k8s/haproxy.yaml")):
     if doc and doc.get("kind") == "ConfigMap":
         sys.stdout.write(doc["data"]["haproxy.cfg"])' >"$config"
 haproxy -c -q -f "$config"
-echo "deploy/check.sh: manifests, Dockerfile and HAProxy configurations pass"
+echo "deploy/check.sh: manifests, Dockerfiles and HAProxy configurations pass"

@@ -4,13 +4,17 @@
 # render latency straight to one backend and through the balancer, then replays the fixture
 # recording through the balancer (`relume replay --server`) beside two HTTP render clients
 # (`relume load`) while the backend holding the stream is killed (SIGKILL) and restarted.
+# Between the two, it asks the balancer for stream tickets and opens a stream through it with
+# each (the backends share a ticket key, --ticket-key-file, and the store), then uses one again.
 #
 # It prints what it saw and ends with one JSON line:
 #   frames_delivered, frames_lost, reconnects, requests_failed, renders_refused,
-#   scene_renderable_after_kill, p50/p99 direct and balanced (ms), seconds.
+#   scene_renderable_after_kill, tickets_opened, tickets_tried, p50/p99 direct and balanced
+#   (ms), seconds.
 # It exits non-zero when a target is missed: no HTTP render fails while a backend is up; the
 # stream comes back losing only the frame in flight (one per kill); every scene created before
-# the kill renders through the balancer while the killed backend is down.
+# the kill renders through the balancer while the killed backend is down; every ticket opens a
+# stream through the balancer, whichever backend issued it, and a used one is refused (401).
 #
 # Usage: scripts/cluster-test.sh [--bin PATH] [--out DIR] [--frames N]
 #        scripts/cluster-test.sh --scaling [--seconds S] [--bin PATH]
@@ -51,6 +55,8 @@ done
 
 rm -rf "$OUT"
 mkdir -p "$OUT/scenes"
+# The secret the backends share, so that any of them accepts a ticket another issued.
+python3 -c 'import secrets; print(secrets.token_urlsafe(48))' >"$OUT/ticket.key"
 # Four free loopback ports: the balancer's and three backends'.
 read -r LB P1 P2 P3 < <(python3 -c '
 import socket
@@ -70,7 +76,7 @@ trap cleanup EXIT
 
 start_backend() {  # index 0..2
     "$BIN" serve --addr "127.0.0.1:${PORTS[$1]}" --assets . --scene-store "$OUT/scenes" \
-        --max-client-queue 8 >>"$OUT/backend$1.log" 2>&1 &
+        --ticket-key-file "$OUT/ticket.key" --max-client-queue 8 >>"$OUT/backend$1.log" 2>&1 &
     PIDS[$1]=$!
 }
 wait_ready() {  # url
@@ -144,6 +150,41 @@ echo "cluster-test: HAProxy on $LB, backends on ${PORTS[*]}"
 "$BIN" load --server "http://127.0.0.1:$P1" --streams 0 --http 1 --seconds 8 --json >"$OUT/direct.json"
 "$BIN" load --server "$BALANCER" --streams 0 --http 1 --seconds 8 --json >"$OUT/balanced.json"
 
+# Tickets: a scene created through the balancer, TICKETS requested through it (spread over the
+# backends, leastconn), then a browser-style handshake (no token) with each through the
+# balancer, to the backend the scene hashes to; then the first again, which must be refused.
+TICKETS=6
+python3 - "$LB" "$TICKETS" >"$OUT/tickets.json" <<'PYTHON'
+import base64, json, os, socket, sys, urllib.request
+port, count = int(sys.argv[1]), int(sys.argv[2])
+description = json.load(open("fixtures/scenes/cornell_bunny_small.json"))
+for mesh in description["meshes"]:  # paths relative to the server's assets (the repository)
+    mesh["obj"] = os.path.normpath(os.path.join("fixtures/scenes", mesh["obj"]))
+request = urllib.request.Request(f"http://127.0.0.1:{port}/v1/scenes", data=json.dumps(description).encode(),
+                                 method="POST", headers={"Content-Type": "application/json"})
+scene = json.load(urllib.request.urlopen(request, timeout=60))["id"]
+def ticket():
+    request = urllib.request.Request(f"http://127.0.0.1:{port}/v1/tickets", data=b"", method="POST")
+    return json.load(urllib.request.urlopen(request, timeout=10))["ticket"]
+def handshake(ticket):
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        key = base64.b64encode(os.urandom(16)).decode()
+        s.sendall((f"GET /v1/scenes/{scene}/stream?ticket={ticket} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                   f"Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                   "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+        return int(s.recv(4096).split(b"\r\n", 1)[0].split()[1])
+tickets = [ticket() for _ in range(count)]
+statuses = [handshake(t) for t in tickets]
+print(json.dumps({"scene": scene, "tried": count, "opened": statuses.count(101), "statuses": statuses,
+                  "reused_status": handshake(tickets[0])}))
+PYTHON
+tickets_tried=$(jq .tried "$OUT/tickets.json")
+tickets_opened=$(jq .opened "$OUT/tickets.json")
+reused_status=$(jq .reused_status "$OUT/tickets.json")
+scene=$(jq -r .scene "$OUT/tickets.json")
+issuers=$(grep -o 'relume_any/relume[0-9]* .*"POST /v1/tickets' "$OUT/haproxy.log" | cut -d' ' -f1 | sort -u | tr '\n' ' ')
+echo "cluster-test: tickets: $tickets_opened of $tickets_tried opened a stream of scene $scene (issued by ${issuers:-?}); reused: $reused_status"
+
 # The failure: a replay through the balancer beside two HTTP clients (for 30 s); once a few
 # frames are back, the backend holding the stream is killed, and restarted 5 s later.
 "$BIN" load --server "$BALANCER" --streams 0 --http 2 --seconds 30 --json >"$OUT/load.json" 2>"$OUT/load.log" &
@@ -207,12 +248,15 @@ ok=true
 [ "$failed" -eq 0 ] || ok=false
 [ "$delivered" -gt 0 ] && [ "$reconnects" -ge 1 ] && [ "$frames_lost" -le "$reconnects" ] || ok=false
 [ "$renderable" = true ] || ok=false
+[ "$tickets_opened" -eq "$tickets_tried" ] && [ "$reused_status" -eq 401 ] || ok=false
 jq -cn --argjson delivered "$delivered" --argjson lost "$frames_lost" --argjson reconnects "$reconnects" \
     --argjson failed "$failed" --argjson refused "$refused" --argjson renderable "$renderable" \
+    --argjson tickets_opened "$tickets_opened" --argjson tickets_tried "$tickets_tried" \
     --argjson ok "$ok" --argjson seconds "$(( $(date +%s) - started_at ))" \
     --slurpfile direct "$OUT/direct.json" --slurpfile balanced "$OUT/balanced.json" \
     '{frames_delivered: $delivered, frames_lost: $lost, reconnects: $reconnects, requests_failed: $failed,
       renders_refused: $refused, scene_renderable_after_kill: $renderable,
+      tickets_opened: $tickets_opened, tickets_tried: $tickets_tried,
       direct_p50_ms: $direct[0].render_latency_p50_ms, direct_p99_ms: $direct[0].render_latency_p99_ms,
       balanced_p50_ms: $balanced[0].render_latency_p50_ms, balanced_p99_ms: $balanced[0].render_latency_p99_ms,
       targets_met: $ok, seconds: $seconds}'

@@ -3,7 +3,9 @@
 //! that names the setting.
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+use super::tickets::TicketKey;
 
 /// The default of [`Config::ticket_seconds`].
 pub const DEFAULT_TICKET_SECONDS: u64 = 30;
@@ -25,6 +27,12 @@ pub const DEFAULT_QUARANTINE_SECONDS: u64 = 30;
 
 /// The most workers `--adapters N` starts.
 pub const MAX_WORKERS: usize = 64;
+
+/// `--ticket-key-file`: the key derived from the file's secret, or why there is none (the
+/// file unreadable, or under [`super::tickets::MIN_KEY_FILE_BYTES`]).
+fn ticket_key_file(path: &str) -> Result<TicketKey, String> {
+    TicketKey::from_file(Path::new(path))
+}
 
 /// Which GPU adapters get a worker (`--adapters`).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -111,6 +119,14 @@ pub struct Config {
     #[arg(long, env = "RELUME_TICKET_SECONDS", default_value_t = DEFAULT_TICKET_SECONDS,
         value_parser = clap::value_parser!(u64).range(1..=MAX_TICKET_SECONDS))]
     pub ticket_seconds: u64,
+    /// A file holding a secret (at least 32 bytes; surrounding whitespace ignored) shared by
+    /// the backends behind one load balancer: tickets are signed with a key derived from it,
+    /// so a ticket one backend issued opens a stream on another that shares the key and the
+    /// `--scene-store` (once in all). Without it the key comes from `--token`, else it is
+    /// random per process. Read and checked when the command line is parsed.
+    #[arg(long = "ticket-key-file", env = "RELUME_TICKET_KEY_FILE", value_name = "PATH",
+        value_parser = ticket_key_file)]
+    pub ticket_key: Option<TicketKey>,
     /// Seconds that in-flight requests, queued renders and open streams get to finish after
     /// SIGINT or SIGTERM before they are dropped.
     #[arg(long, env = "RELUME_SHUTDOWN_GRACE_SECONDS", default_value_t = 30)]
@@ -152,6 +168,7 @@ impl Config {
             assets: assets.into(),
             token: None,
             ticket_seconds: DEFAULT_TICKET_SECONDS,
+            ticket_key: None,
             shutdown_grace_seconds: 30,
             drain_delay_seconds: 0,
             adapters: AdapterSelection::Count(1),

@@ -74,6 +74,8 @@ pub enum ServeError {
     AssetsNotADirectory(PathBuf),
     #[error("scene store {}: {source}", path.display())]
     Store { path: PathBuf, source: std::io::Error },
+    #[error("stream tickets: {0}")]
+    Tickets(String),
     #[error("starting the GPU thread: {0}")]
     Gpu(#[from] WorkerError),
     #[error("listening on {addr}: {source}")]
@@ -89,7 +91,8 @@ pub struct AppState {
     pub assets: PathBuf,
     pub scenes: scenes::SceneRegistry,
     pub recordings: recordings::Recordings,
-    /// Tickets issued by `POST /v1/tickets` and not yet used.
+    /// Tickets issued by `POST /v1/tickets`: their key, those outstanding, where used ones
+    /// are marked.
     pub tickets: tickets::Tickets,
     /// The GPU workers, one per device.
     pub workers: Workers,
@@ -104,6 +107,26 @@ pub struct AppState {
     streams: AtomicUsize,
     streams_closed: Notify,
     connections: listen::Connections,
+}
+
+/// The tickets of `config`: keyed by `--ticket-key-file`, else `--token`, else a random key;
+/// single use across the processes sharing `store` when there is one.
+fn start_tickets(config: &Config, store: Option<&store::SceneStore>) -> Result<tickets::Tickets, ServeError> {
+    let (key, source) = match (&config.ticket_key, &config.token) {
+        (Some(key), _) => (key.clone(), tickets::KeySource::File),
+        (None, Some(token)) => (tickets::TicketKey::from_secret(token.as_bytes()), tickets::KeySource::Token),
+        (None, None) => (
+            tickets::TicketKey::random().map_err(|e| ServeError::Tickets(format!("no random key: {e}")))?,
+            tickets::KeySource::Random,
+        ),
+    };
+    let spent = match store {
+        Some(store) => {
+            Some(store.open_tickets().map_err(|source| ServeError::Store { path: store.dir().to_owned(), source })?)
+        }
+        None => None,
+    };
+    Ok(tickets::Tickets::with_key(config.ticket_seconds, config.limits.max_tickets, key, spent).keyed_by(source))
 }
 
 impl AppState {
@@ -136,6 +159,7 @@ impl AppState {
         if !assets.is_dir() {
             return Err(ServeError::AssetsNotADirectory(assets));
         }
+        let tickets = start_tickets(&config, store.as_ref())?;
         let metrics = Arc::new(Metrics::default());
         let worker_metrics = metrics.clone();
         let workers = tokio::task::spawn_blocking(move || start(worker_metrics))
@@ -145,7 +169,7 @@ impl AppState {
         Ok(Arc::new(AppState {
             scenes: scenes::SceneRegistry::new(config.limits.max_scenes),
             recordings: recordings::Recordings::new(&assets),
-            tickets: tickets::Tickets::new(config.ticket_seconds, config.limits.max_tickets),
+            tickets,
             config,
             assets,
             workers,
@@ -294,6 +318,8 @@ impl Server {
             workers = state.workers.len(),
             scene_store = state.store.is_some(),
             token = state.config.token.is_some(),
+            ticket_key = state.tickets.key_source().as_str(),
+            tickets_shared = state.tickets.shared(),
             "serving"
         );
         let signalled = state.clone();

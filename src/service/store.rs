@@ -10,7 +10,8 @@
 //! the backends must share the asset directory too (inline OBJ text travels in the file).
 //!
 //! Ids are 16 lowercase hexadecimal digits (random per process, so two backends do not make
-//! the same one); anything else is never looked up on disk.
+//! the same one); anything else is never looked up on disk. The subdirectory `tickets/` holds
+//! the marks of spent stream tickets (`src/service/tickets.rs`).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -35,6 +36,19 @@ impl SceneStore {
     pub fn open(dir: &Path) -> std::io::Result<SceneStore> {
         std::fs::create_dir_all(dir)?;
         Ok(SceneStore { dir: std::fs::canonicalize(dir)? })
+    }
+
+    /// The store's directory, canonical.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The directory where the backends mark spent stream tickets
+    /// (`DIR/tickets`, `src/service/tickets.rs`), created if missing.
+    pub fn open_tickets(&self) -> std::io::Result<PathBuf> {
+        let dir = self.dir.join(super::tickets::SPENT_DIRECTORY);
+        std::fs::create_dir_all(&dir)?;
+        Ok(dir)
     }
 
     fn path(&self, id: &str) -> Option<PathBuf> {

@@ -1,12 +1,14 @@
 //! Scaling out: several GPU workers in one process (`--adapters 2`: two lavapipe devices on its
-//! one adapter), the scene store shared by backends (`--scene-store`), and `/readyz` with the
-//! drain.
+//! one adapter), the scene store shared by backends (`--scene-store`), stream tickets good on
+//! every backend sharing the store and the ticket key (`--ticket-key-file`), and `/readyz` with
+//! the drain.
 
 use std::time::Duration;
 
 use hyper::StatusCode;
 use relume::service::client::Connection;
 use relume::service::config::AdapterSelection;
+use relume::service::tickets::TicketKey;
 use relume::service::wire::proto::envelope::Body;
 use relume::service::{Config, GpuWorker, Server, WorkerError, Workers};
 use serde_json::{Value, json};
@@ -164,6 +166,81 @@ async fn a_scene_outlives_its_backend_through_the_shared_store() {
     second.get("/v1/scenes/..%2F..%2Fetc%2Fpasswd").await.error(404, "not_found");
     second.stop().await;
     third.stop().await;
+}
+
+/// The status of a browser-style stream handshake (no `Authorization`) with `?ticket=`: 101
+/// when it opened (the stream is then dropped), else the refusal's.
+async fn open_with_ticket(server: &TestServer, id: &str, ticket: &str) -> StatusCode {
+    let url = format!("ws://{}/v1/scenes/{id}/stream?ticket={ticket}", server.addr);
+    match tokio_tungstenite::connect_async(&url).await {
+        Ok((_, response)) => response.status(),
+        Err(tokio_tungstenite::tungstenite::Error::Http(response)) => response.status(),
+        Err(other) => panic!("the handshake failed: {other}"),
+    }
+}
+
+/// A ticket from `POST /v1/tickets` on `server`.
+async fn issue(server: &TestServer) -> String {
+    let reply = server.request(hyper::Method::POST, "/v1/tickets", "").await;
+    assert_eq!(reply.status, StatusCode::OK, "{}", reply.json());
+    reply.json()["ticket"].as_str().expect("a ticket").to_owned()
+}
+
+/// Behind a balancer a ticket's request and its stream may land on different backends: with
+/// the ticket key (`--ticket-key-file`) and the scene store shared, a ticket issued by one
+/// opens a stream on the other, and only once, whichever backend sees it again. A backend with
+/// another key file (the same token) or without the store refuses it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_ticket_from_one_backend_opens_one_stream_on_another_sharing_key_and_store() {
+    let scratch = super::scratch("workers-tickets");
+    let store = scratch.join("store");
+    let key_file = |name: &str, secret: &str| {
+        let path = scratch.join(name);
+        std::fs::write(&path, format!("{secret}\n")).expect("key file written");
+        TicketKey::from_file(&path).expect("a key")
+    };
+    let key = key_file("key", "the secret every backend of this deployment shares");
+    let other_key = key_file("other-key", "a secret of another deployment, as long as that");
+    let backend = |key: &TicketKey, store: Option<&std::path::PathBuf>| {
+        let (key, store) = (key.clone(), store.cloned());
+        move |config: &mut Config| {
+            config.token = Some("s3cret".to_owned());
+            config.ticket_key = Some(key);
+            config.scene_store = store;
+        }
+    };
+    let first = fake_server(1, Duration::ZERO, backend(&key, Some(&store))).await;
+    let second = fake_server(1, Duration::ZERO, backend(&key, Some(&store))).await;
+    let stranger = fake_server(1, Duration::ZERO, backend(&other_key, Some(&store))).await;
+    let storeless = fake_server(1, Duration::ZERO, backend(&key, None)).await;
+    let id = first.create(&inline_scene()).await;
+    // Issued by the first, used on the second (which loads the scene from the store), then
+    // refused on both, and on the others.
+    let ticket = issue(&first).await;
+    assert_eq!(open_with_ticket(&second, &id, &ticket).await, StatusCode::SWITCHING_PROTOCOLS);
+    for server in [&second, &first, &stranger] {
+        assert_eq!(open_with_ticket(server, &id, &ticket).await, StatusCode::UNAUTHORIZED);
+    }
+    // The other way round, and on its own issuer.
+    let ticket = issue(&second).await;
+    assert_eq!(open_with_ticket(&first, &id, &ticket).await, StatusCode::SWITCHING_PROTOCOLS);
+    assert_eq!(open_with_ticket(&second, &id, &ticket).await, StatusCode::UNAUTHORIZED);
+    let ticket = issue(&first).await;
+    assert_eq!(open_with_ticket(&first, &id, &ticket).await, StatusCode::SWITCHING_PROTOCOLS);
+    assert_eq!(open_with_ticket(&second, &id, &ticket).await, StatusCode::UNAUTHORIZED);
+    // Another key refuses it (and spends nothing); so does a backend without the store, which
+    // takes only its own tickets; the second still opens it.
+    let ticket = issue(&first).await;
+    assert_eq!(open_with_ticket(&stranger, &id, &ticket).await, StatusCode::UNAUTHORIZED);
+    let stranger_ticket = issue(&stranger).await;
+    assert_eq!(open_with_ticket(&first, &id, &stranger_ticket).await, StatusCode::UNAUTHORIZED);
+    let storeless_id = storeless.create(&inline_scene()).await;
+    assert_eq!(open_with_ticket(&storeless, &storeless_id, &ticket).await, StatusCode::UNAUTHORIZED);
+    assert_eq!(open_with_ticket(&second, &id, &ticket).await, StatusCode::SWITCHING_PROTOCOLS);
+    assert_eq!(std::fs::read_dir(store.join("tickets")).expect("the marks").count(), 4, "one per use");
+    for server in [first, second, stranger, storeless] {
+        server.stop().await;
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
