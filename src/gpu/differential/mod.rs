@@ -14,8 +14,10 @@
 //! until every receiver has seen every VAL. On CPU adapters they run on the CPU instead
 //! ([`DifferentialDevice`]): the twins' sums over rayon's threads.
 
-pub mod groups;
 pub mod twin;
+
+/// The VAL groups live with the twins (plain CPU data, which the twins sum).
+pub use twin::groups;
 
 use groups::{GroupedVals, ValGroup};
 use twin::ContentSphere;
