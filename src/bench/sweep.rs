@@ -269,69 +269,35 @@ impl Sweep {
             return out;
         }
         push(*base);
-        for &v in self.sparse_points.iter().flatten() {
-            push(Config { sparse_points_per_mesh: Some(v), ..*base });
-        }
-        for &v in self.neighbours.iter().flatten() {
-            push(Config { neighbours: Some(v), ..*base });
-        }
-        for &v in self.near_field.iter().flatten() {
-            push(Config { near_field: Some(v), ..*base });
-        }
-        for &v in self.glossy_interpolation.iter().flatten() {
-            push(Config { glossy_interpolation: Some(v), ..*base });
-        }
-        for &v in self.adaptive.iter().flatten() {
-            push(Config { adaptive_percent: Some(v), ..*base });
-        }
-        for &v in self.kernel.iter().flatten() {
-            push(Config { kernel: Some(v), ..*base });
-        }
-        for &v in self.bound.iter().flatten() {
-            push(Config { bound: Some(v), ..*base });
-        }
-        for &v in self.subdivision.iter().flatten() {
-            push(Config { subdivision: Some(v), ..*base });
-        }
-        for &v in self.rsm_resolution.iter().flatten() {
-            push(Config { rsm_resolution: v, ..*base });
-        }
-        for &v in self.occlusion.iter().flatten() {
-            push(Config { occlusion: v, ..*base });
-        }
-        for &v in self.glossy.iter().flatten() {
-            push(Config { glossy: v, ..*base });
-        }
-        for &(width, height) in self.resolution.iter().flatten() {
-            push(Config { width, height, ..*base });
-        }
         let ism = Config { occlusion: Occlusion::Ism, ..*base };
-        for &v in self.ism_count.iter().flatten() {
-            push(Config { ism_count: Some(v), ..ism });
-        }
-        for &v in self.ism_resolution.iter().flatten() {
-            push(Config { ism_resolution: Some(v), ..ism });
-        }
-        for &v in self.ism_points.iter().flatten() {
-            push(Config { ism_points: Some(v), ..ism });
-        }
-        for &v in self.ism_pull_push_levels.iter().flatten() {
-            push(Config { ism_pull_push_levels: Some(v), ..ism });
-        }
         let clusters = Config { occlusion: Occlusion::Clusters, ..*base };
         let with = |o: ClusterOverrides| Config { clusters: o, ..clusters };
-        for &v in self.cluster_count.iter().flatten() {
-            push(with(ClusterOverrides { count: Some(v), ..base.clusters }));
-        }
-        for &v in self.cluster_resolution.iter().flatten() {
-            push(with(ClusterOverrides { shadow_map_resolution: Some(v), ..base.clusters }));
-        }
-        for &v in self.cluster_soft.iter().flatten() {
-            push(with(ClusterOverrides { soft: Some(v), ..base.clusters }));
-        }
-        for &v in self.cluster_maps.iter().flatten() {
-            push(with(ClusterOverrides { shadow_maps: Some(v), ..base.clusters }));
-        }
+        // Each axis alone around `base`.
+        let alone = [
+            each(&self.sparse_points, |v| Config { sparse_points_per_mesh: Some(v), ..*base }),
+            each(&self.neighbours, |v| Config { neighbours: Some(v), ..*base }),
+            each(&self.near_field, |v| Config { near_field: Some(v), ..*base }),
+            each(&self.glossy_interpolation, |v| Config { glossy_interpolation: Some(v), ..*base }),
+            each(&self.adaptive, |v| Config { adaptive_percent: Some(v), ..*base }),
+            each(&self.kernel, |v| Config { kernel: Some(v), ..*base }),
+            each(&self.bound, |v| Config { bound: Some(v), ..*base }),
+            each(&self.subdivision, |v| Config { subdivision: Some(v), ..*base }),
+            each(&self.rsm_resolution, |v| Config { rsm_resolution: v, ..*base }),
+            each(&self.occlusion, |v| Config { occlusion: v, ..*base }),
+            each(&self.glossy, |v| Config { glossy: v, ..*base }),
+            each(&self.resolution, |(width, height)| Config { width, height, ..*base }),
+            each(&self.ism_count, |v| Config { ism_count: Some(v), ..ism }),
+            each(&self.ism_resolution, |v| Config { ism_resolution: Some(v), ..ism }),
+            each(&self.ism_points, |v| Config { ism_points: Some(v), ..ism }),
+            each(&self.ism_pull_push_levels, |v| Config { ism_pull_push_levels: Some(v), ..ism }),
+            each(&self.cluster_count, |v| with(ClusterOverrides { count: Some(v), ..base.clusters })),
+            each(&self.cluster_resolution, |v| {
+                with(ClusterOverrides { shadow_map_resolution: Some(v), ..base.clusters })
+            }),
+            each(&self.cluster_soft, |v| with(ClusterOverrides { soft: Some(v), ..base.clusters })),
+            each(&self.cluster_maps, |v| with(ClusterOverrides { shadow_maps: Some(v), ..base.clusters })),
+        ];
+        alone.into_iter().flatten().for_each(push);
         out
     }
 
@@ -378,6 +344,11 @@ impl Sweep {
 /// The values of an override axis as overrides, or the base override alone when it is not swept.
 fn opts<T: Copy>(values: &Option<Vec<T>>, base: Option<T>) -> Vec<Option<T>> {
     values.as_ref().map_or(vec![base], |v| v.iter().copied().map(Some).collect())
+}
+
+/// `config(v)` for each value of an axis (none when it is not swept).
+fn each<T: Copy>(values: &Option<Vec<T>>, config: impl Fn(T) -> Config) -> Vec<Config> {
+    values.iter().flatten().map(|&v| config(v)).collect()
 }
 
 /// The values of an axis, or the base value alone when it is not swept.

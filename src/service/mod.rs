@@ -281,10 +281,8 @@ impl Server {
         config: Config,
         start: impl FnOnce(Arc<Metrics>) -> Result<GpuWorker, WorkerError> + Send + 'static,
     ) -> Result<Server, ServeError> {
-        let addr = config.addr;
-        let state = AppState::start(config, start).await?;
-        let listener = tokio::net::TcpListener::bind(addr).await.map_err(|source| ServeError::Bind { addr, source })?;
-        Ok(Server { listener, state })
+        let quarantine = Duration::from_secs(config.worker_quarantine_seconds);
+        Server::bind_workers(config, move |metrics| Ok(Workers::new(vec![start(metrics)?], quarantine))).await
     }
 
     /// [`Server::bind`] with the workers `start` makes (on a blocking thread).

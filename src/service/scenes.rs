@@ -186,10 +186,12 @@ fn check_file_bytes(bytes: u64, field: &str, what: &str, limits: &Limits) -> Res
 /// `..` that climbs above `root` and links that lead out of it, before looking at the file
 /// system, so the answer does not reveal whether a file outside exists.
 pub fn confine(root: &Path, relative: &str, field: &str) -> Result<PathBuf, ApiError> {
-    let outside = || ApiError {
+    let refused = |code: Code, message: String| ApiError {
         field: Some(field.to_owned()),
-        ..ApiError::new(
-            StatusCode::BAD_REQUEST,
+        ..ApiError::new(StatusCode::BAD_REQUEST, code, message)
+    };
+    let outside = || {
+        refused(
             Code::PathOutsideAssets,
             format!("{field}: `{relative}` is outside the asset directory; paths are relative to it"),
         )
@@ -203,14 +205,7 @@ pub fn confine(root: &Path, relative: &str, field: &str) -> Result<PathBuf, ApiE
             Component::CurDir => {}
         }
     }
-    let missing = || ApiError {
-        field: Some(field.to_owned()),
-        ..ApiError::new(
-            StatusCode::BAD_REQUEST,
-            Code::InvalidScene,
-            format!("{field}: no file `{relative}` in the asset directory"),
-        )
-    };
+    let missing = || refused(Code::InvalidScene, format!("{field}: no file `{relative}` in the asset directory"));
     let canonical = std::fs::canonicalize(root.join(relative)).map_err(|_| missing())?;
     if !canonical.starts_with(root) {
         return Err(outside());

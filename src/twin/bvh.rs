@@ -494,23 +494,36 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
+    /// `count` random triangles from the generator seeded with `seed`, each with its corners
+    /// within `size` (per axis) of a centre in the cube `[-extent, extent]³`: the generator (for
+    /// the test's other draws), the positions and the triangles.
+    fn triangle_soup(
+        seed: u64,
+        count: u32,
+        extent: f32,
+        size: f32,
+    ) -> (rand_chacha::ChaCha8Rng, Vec<Vec3>, Vec<[u32; 3]>) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
+        let (mut positions, mut triangles) = (Vec::new(), Vec::new());
+        for i in 0..count {
+            let c = Vec3::new(r(-extent, extent), r(-extent, extent), r(-extent, extent));
+            for _ in 0..3 {
+                positions.push(c + Vec3::new(r(-size, size), r(-size, size), r(-size, size)));
+            }
+            triangles.push([3 * i, 3 * i + 1, 3 * i + 2]);
+        }
+        (rng, positions, triangles)
+    }
+
     /// Both traversals (the GPU layout's twin and obvhs's CWBVH with early exit) agree with testing every
     /// triangle, on random segments through a soup of random triangles, and the closest hit with
     /// the nearest of all triangles (exact agreement: every path uses the same intersection
     /// routine, so only a traversal or flattening bug can make them differ).
     #[test]
     fn traversals_agree_with_brute_force_loop() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let (mut rng, positions, triangles) = triangle_soup(5, 2000, 5.0, 0.3);
         let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
-        let mut positions = Vec::new();
-        let mut triangles = Vec::new();
-        for i in 0..2000u32 {
-            let c = Vec3::new(r(-5.0, 5.0), r(-5.0, 5.0), r(-5.0, 5.0));
-            for _ in 0..3 {
-                positions.push(c + Vec3::new(r(-0.3, 0.3), r(-0.3, 0.3), r(-0.3, 0.3)));
-            }
-            triangles.push([3 * i, 3 * i + 1, 3 * i + 2]);
-        }
         let bvh = Bvh::build(&positions, &triangles);
         let wide = TraceBvh::build(&positions, &triangles);
         assert!(bvh.nodes.len() > 200, "a tree, not a list: {} nodes", bvh.nodes.len());
@@ -566,16 +579,8 @@ mod tests {
     /// the interval test bounds nothing) and a target at the origin itself.
     #[test]
     fn shadow_ray_packets_agree_with_brute_force_loop() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let (mut rng, positions, triangles) = triangle_soup(9, 3000, 4.0, 0.15);
         let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
-        let (mut positions, mut triangles) = (Vec::new(), Vec::new());
-        for i in 0..3000u32 {
-            let c = Vec3::new(r(-4.0, 4.0), r(-4.0, 4.0), r(-4.0, 4.0));
-            for _ in 0..3 {
-                positions.push(c + Vec3::new(r(-0.15, 0.15), r(-0.15, 0.15), r(-0.15, 0.15)));
-            }
-            triangles.push([3 * i, 3 * i + 1, 3 * i + 2]);
-        }
         let wide = TraceBvh::build(&positions, &triangles);
         let brute = |o: Vec3, t: Vec3| {
             triangles.iter().any(|tri| {

@@ -82,14 +82,8 @@ pub const GATHER_LOBE_CUTOFF_LOG2: f32 = -64.0;
 /// than 2^-64 of its irradiance, far under float rounding, and keeps the GPU's products of a
 /// tiny lobe with a small irradiance out of the subnormal range (slow on CPU adapters).
 pub fn gather_lobe(cos_r: f32, k: f32) -> f32 {
-    if k <= 0.0 {
-        1.0
-    } else if cos_r <= 0.0 {
-        0.0
-    } else {
-        let x = k * cos_r.log2();
-        if x < GATHER_LOBE_CUTOFF_LOG2 { 0.0 } else { x.exp2() }
-    }
+    let below_cutoff = k > 0.0 && cos_r > 0.0 && k * cos_r.log2() < GATHER_LOBE_CUTOFF_LOG2;
+    if below_cutoff { 0.0 } else { phong_lobe(cos_r, k) }
 }
 
 /// Normalised modified-Phong specular factor `(k + 2) / (2 pi)` (1/sr).

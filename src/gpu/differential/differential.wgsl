@@ -20,27 +20,9 @@ struct DifferentialParams {
     _pad0: u32,
 }
 
-struct Receiver {
-    position: vec3<f32>,
-    _pad0: f32,
-    normal: vec3<f32>,
-    _pad1: f32,
-}
-
-struct ReceiverLight {
-    unoccluded: vec4<f32>,
-    blocked: vec4<f32>,
-    added: vec4<f32>,
-}
-
 @group(0) @binding(0) var<storage, read> params: DifferentialParams;
-@group(0) @binding(1) var<storage, read> receivers: array<Receiver>;
-@group(0) @binding(2) var<storage, read> vals: array<Val>;
-@group(0) @binding(3) var<storage, read_write> light: array<ReceiverLight>;
-// Per receiver: the next VAL, DIFFERENTIAL_DONE when finished; zeroed before the first round.
-@group(0) @binding(6) var<storage, read_write> progress: array<u32>;
-// [receivers not finished after this round, receivers that made no progress in it]
-@group(0) @binding(7) var<storage, read_write> status: array<atomic<u32>, 2>;
+// Bindings 1 to 3, 6 and 7 (`progress`: per receiver, the next VAL, DIFFERENTIAL_DONE when
+// finished) and the `Receiver` and `ReceiverLight` structs: `receivers.wgsl`.
 
 const DIFFERENTIAL_DONE: u32 = 0xffffffffu;
 

@@ -19,19 +19,6 @@ struct FastParams {
     content: vec4<f32>,
 }
 
-struct Receiver {
-    position: vec3<f32>,
-    _pad0: f32,
-    normal: vec3<f32>,
-    _pad1: f32,
-}
-
-struct ReceiverLight {
-    unoccluded: vec4<f32>,
-    blocked: vec4<f32>,
-    added: vec4<f32>,
-}
-
 struct ValGroup {
     position: vec3<f32>,
     area: f32,
@@ -46,11 +33,7 @@ struct ValGroup {
 }
 
 @group(0) @binding(0) var<storage, read> params: FastParams;
-@group(0) @binding(1) var<storage, read> receivers: array<Receiver>;
-@group(0) @binding(2) var<storage, read> vals: array<Val>;
-@group(0) @binding(3) var<storage, read_write> light: array<ReceiverLight>;
-@group(0) @binding(6) var<storage, read_write> progress: array<u32>;
-@group(0) @binding(7) var<storage, read_write> status: array<atomic<u32>, 2>;
+// Bindings 1 to 3, 6 and 7 and the `Receiver` and `ReceiverLight` structs: `receivers.wgsl`.
 @group(0) @binding(8) var<storage, read> groups: array<ValGroup>;
 
 const FAST_DONE: u32 = 0xffffffffu;

@@ -14,13 +14,15 @@
 //! until every receiver has seen every VAL. On CPU adapters they run on the CPU instead
 //! ([`DifferentialDevice`]): the twins' sums over rayon's threads.
 
-pub mod groups;
 pub mod twin;
+
+/// The VAL groups live with the twins (plain CPU data, which the twins sum).
+pub use twin::groups;
 
 use groups::{GroupedVals, ValGroup};
 use twin::ContentSphere;
 
-use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write};
+use crate::gpu::pass::{Entry, Kernel, PassDesc, Res, buffer, module_from_source, read, read_write};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::Wgsl;
@@ -35,6 +37,8 @@ pub use twin::{Receiver, ReceiverLight};
 
 pub const WGSL: &str = include_str!("differential.wgsl");
 pub const FAST_WGSL: &str = include_str!("fast.wgsl");
+/// What both passes' WGSL share: the receivers, their sums and most bindings.
+const RECEIVERS: &str = include_str!("receivers.wgsl");
 const BVH: &str = include_str!("../references/bvh.wgsl");
 
 /// Loop iterations (VAL loop and BVH traversal together) one invocation runs per round: below
@@ -42,14 +46,25 @@ const BVH: &str = include_str!("../references/bvh.wgsl");
 pub const DIFFERENTIAL_LOOP_BUDGET: u32 = 60_000;
 const _: () = assert!(DIFFERENTIAL_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 
-/// The pass's own WGSL: its constant, the BVH traversal, then `differential.wgsl`.
+/// The pass's own WGSL: its constant, the BVH traversal, the shared receivers, then
+/// `differential.wgsl`.
 pub fn body() -> String {
-    Wgsl::new().u32("DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET).include(BVH).include(WGSL).finish()
+    Wgsl::new()
+        .u32("DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET)
+        .include(BVH)
+        .include(RECEIVERS)
+        .include(WGSL)
+        .finish()
 }
 
-/// The fast pass's WGSL: its constant, the BVH traversal, then `fast.wgsl`.
+/// The fast pass's WGSL: its constant, the BVH traversal, the shared receivers, then `fast.wgsl`.
 pub fn fast_body() -> String {
-    Wgsl::new().u32("FAST_DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET).include(BVH).include(FAST_WGSL).finish()
+    Wgsl::new()
+        .u32("FAST_DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET)
+        .include(BVH)
+        .include(RECEIVERS)
+        .include(FAST_WGSL)
+        .finish()
 }
 
 /// The fast pass: [`PASS`]'s bindings (two progress words per receiver) and the groups.
@@ -118,23 +133,14 @@ impl From<&ValGroup> for RawValGroup {
     }
 }
 
-/// One invocation per receiver; `bvh_nodes` and `bvh_triangles` sit at bindings 4 and 5, where
-/// `bvh.wgsl` declares them.
+/// One invocation per receiver: [`FAST_PASS`]'s bindings but the groups; `bvh_nodes` and
+/// `bvh_triangles` sit at bindings 4 and 5, where `bvh.wgsl` declares them.
 pub const PASS: PassDesc = PassDesc {
     label: "differential",
-    bindings: &[
-        read("params"),
-        read("receivers"),
-        read("vals"),
-        read_write("light"),
-        read("bvh_nodes"),
-        read("bvh_triangles"),
-        read_write("progress"),
-        read_write("status"),
-    ],
+    bindings: FAST_PASS.bindings.split_at(8).0,
     entries: &[Entry::first("main", 8)],
-    workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| PASS.source(&body(), textured),
+    ..FAST_PASS
 };
 
 /// WGSL `DifferentialParams`.
@@ -381,20 +387,7 @@ impl GpuPass {
             _pad0: 0,
         };
         gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let (receiver_buffer, light, progress, _) = self.per_receiver.as_ref().expect("uploaded");
-        let group = self.kernel.bind(
-            gpu,
-            &[
-                buffer("params", &self.params),
-                buffer("receivers", receiver_buffer),
-                buffer("vals", &self.vals.as_ref().expect("uploaded").0),
-                buffer("light", light),
-                buffer("bvh_nodes", &self.nodes),
-                buffer("bvh_triangles", &self.order),
-                buffer("progress", progress),
-                buffer("status", &self.status),
-            ],
-        );
+        let group = self.kernel.bind(gpu, &self.resources(&self.params));
         self.rounds(gpu, scene, &self.kernel, &group, receivers.len())
     }
 
@@ -431,23 +424,27 @@ impl GpuPass {
             content: content.centre.extend(content.radius).into(),
         };
         gpu.queue.write_buffer(&self.fast_params, 0, bytemuck::bytes_of(&params));
-        let (receiver_buffer, light, progress, _) = self.per_receiver.as_ref().expect("uploaded");
         let kernel = self.fast.as_ref().expect("built above");
-        let group = kernel.bind(
-            gpu,
-            &[
-                buffer("params", &self.fast_params),
-                buffer("receivers", receiver_buffer),
-                buffer("vals", &self.vals.as_ref().expect("uploaded").0),
-                buffer("light", light),
-                buffer("bvh_nodes", &self.nodes),
-                buffer("bvh_triangles", &self.order),
-                buffer("progress", progress),
-                buffer("status", &self.status),
-                buffer("groups", groups),
-            ],
-        );
+        let mut resources = self.resources(&self.fast_params);
+        resources.push(buffer("groups", groups));
+        let group = kernel.bind(gpu, &resources);
         self.rounds(gpu, scene, kernel, &group, receivers.len())
+    }
+
+    /// The resources both passes bind (all of [`PASS`]'s, the fast pass's groups aside), with
+    /// `params` at binding 0; after an upload.
+    fn resources<'a>(&'a self, params: &'a wgpu::Buffer) -> Vec<Res<'a>> {
+        let (receivers, light, progress, _) = self.per_receiver.as_ref().expect("uploaded");
+        vec![
+            buffer("params", params),
+            buffer("receivers", receivers),
+            buffer("vals", &self.vals.as_ref().expect("uploaded").0),
+            buffer("light", light),
+            buffer("bvh_nodes", &self.nodes),
+            buffer("bvh_triangles", &self.order),
+            buffer("progress", progress),
+            buffer("status", &self.status),
+        ]
     }
 
     /// Dispatch `kernel` over `n` receivers until every one is done, then read their sums.

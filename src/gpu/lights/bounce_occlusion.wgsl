@@ -18,8 +18,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     var normal = vec3<f32>(0.0, 0.0, 1.0);
     var g = Gathered(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
     if inside {
-        let p = bounce_points[index];
-        let s = surface_at(p.triangle, vec2<f32>(p.u, p.v));
+        let s = bounce_surface(index);
         position = s.position;
         normal = s.normal;
         g = bounce_moments[index];

@@ -6,3 +6,9 @@ struct BouncePoint {
     v: f32,
     area: f32,
 }
+
+// The surface at bounce point `index` (every pass that includes this file binds `bounce_points`).
+fn bounce_surface(index: u32) -> Surface {
+    let p = bounce_points[index];
+    return surface_at(p.triangle, vec2<f32>(p.u, p.v));
+}

@@ -25,12 +25,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     var albedo = vec3<f32>(0.0);
     var area = 0.0;
     if inside {
-        let p = bounce_points[index];
-        let s = surface_at(p.triangle, vec2<f32>(p.u, p.v));
+        let s = bounce_surface(index);
         position = s.position;
         normal = s.normal;
         albedo = s.material.diffuse;
-        area = p.area;
+        area = bounce_points[index].area;
     }
     var e = vec3<f32>(0.0);
     // The light sphere's moments, weighted as the gather weighs them (`store_moments` keeps

@@ -16,8 +16,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= arrayLength(&bounce_points) || k >= CLUSTER_COUNT {
         return;
     }
-    let p = bounce_points[i];
-    let s = surface_at(p.triangle, vec2<f32>(p.u, p.v));
+    let s = bounce_surface(i);
     let c = clusters[k];
     group_visibility[i * CLUSTER_COUNT + k] = cluster_visibility(k, c, s.position - c.position, s.normal);
 }

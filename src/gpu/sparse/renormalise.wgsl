@@ -9,14 +9,21 @@
 @group(0) @binding(3) var<storage, read> gathered_glossy: array<Gathered>;
 @group(0) @binding(4) var<storage, read_write> sparse_glossy: array<PointLight>;
 
+// Sparse point `i`'s diffuse light, stored; its gathered diffuse irradiance returned (the bound
+// of its glossy light).
+fn store_diffuse(i: u32) -> vec3<f32> {
+    let p = sparse_points[i];
+    let g = gathered_diffuse[i];
+    sparse_diffuse[i] = renormalise_diffuse(p.position, p.normal, g.irradiance, g.position);
+    return g.irradiance;
+}
+
 @compute @workgroup_size(WORKGROUP_X)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= frame.sparse_count {
         return;
     }
-    let p = sparse_points[id.x];
-    let g = gathered_diffuse[id.x];
-    sparse_diffuse[id.x] = renormalise_diffuse(p.position, p.normal, g.irradiance, g.position);
+    store_diffuse(id.x);
 }
 
 @compute @workgroup_size(WORKGROUP_X)
@@ -24,11 +31,10 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= frame.sparse_count {
         return;
     }
+    let irradiance = store_diffuse(id.x);
     let p = sparse_points[id.x];
-    let g = gathered_diffuse[id.x];
-    sparse_diffuse[id.x] = renormalise_diffuse(p.position, p.normal, g.irradiance, g.position);
     let s = gathered_glossy[id.x];
     var glossy = renormalise_glossy(p.position, p.normal, p.exponent, frame.eye, s.irradiance, s.position);
-    glossy.bound = max(luminance(g.irradiance), 0.0);
+    glossy.bound = max(luminance(irradiance), 0.0);
     sparse_glossy[id.x] = glossy;
 }

@@ -2,11 +2,13 @@
 //! shadow rays (`twin::bvh::Bvh::occluded`, the GPU traversal's twin, from `p + n RAY_OFFSET` to
 //! `l + n_l RAY_OFFSET`).
 
-use super::groups::GroupedVals;
+pub mod groups;
+
 use crate::twin::bvh::Bvh;
 use crate::twin::exact_cpu::RAY_OFFSET;
 use crate::twin::{Val, val_geometry};
 use glam::Vec3;
+use groups::GroupedVals;
 
 /// A real surface point that receives light: world position (m) and unit normal.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,5 +1,5 @@
 //! The VAL groups of the fast differential pass (`fast.wgsl`, twin
-//! [`super::twin::receiver_light_fast`]): the real VALs and the re-emitters, each split
+//! [`super::receiver_light_fast`]): the real VALs and the re-emitters, each split
 //! separately into groups of nearby VALs, each group summed as one VAL where a receiver is far
 //! enough from it.
 //!
