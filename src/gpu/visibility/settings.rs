@@ -18,7 +18,8 @@ use crate::scene::SceneError;
 /// `Variant "json name" folder { settings_field: SettingsType, TuningType }`
 ///
 /// - `Variant` becomes a variant of [`Occlusion`] and [`OcclusionSetting`]; `"json name"` its
-///   name in scene files, on the service and in benchmarks; `folder` the module in
+///   name in scene files, on the service and in benchmarks, the variant's in snake case (the
+///   enums' serde and OpenAPI names are derived from the variant: a test checks they agree); `folder` the module in
 ///   `src/gpu/visibility/` holding the mode (its `settings.rs`, its technique with
 ///   `pub fn mode(gpu, scene, &VisibilitySettings, glossy)` in `mod.rs`, its twin, its WGSL and
 ///   its tests);
@@ -48,27 +49,26 @@ macro_rules! define_settings {
     ($($(#[$doc:meta])* $variant:ident $name:literal $module:ident $({ $field:ident: $settings:ty, $tuning:ty })?,)*) => {
         /// Indirect visibility mode, as resolved.
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Deserialize, Serialize, utoipa::ToSchema)]
+        #[serde(rename_all = "snake_case")]
         pub enum Occlusion {
             /// No indirect visibility: every VAL reaches every receiver.
             #[default]
-            #[serde(rename = "off")]
             Off,
-            $($(#[$doc])* #[serde(rename = $name)] $variant,)*
+            $($(#[$doc])* $variant,)*
         }
 
         /// Indirect visibility as a scene file asks for it: a mode, or `"auto"`, the quality
         /// level's choice.
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
+        #[serde(rename_all = "snake_case")]
         pub enum OcclusionSetting {
             /// The level's choice (disks when the scene can occlude itself, else off, at the
             /// default level).
             #[default]
-            #[serde(rename = "auto")]
             Auto,
             /// No indirect visibility.
-            #[serde(rename = "off")]
             Off,
-            $($(#[$doc])* #[serde(rename = $name)] $variant,)*
+            $($(#[$doc])* $variant,)*
         }
 
         impl Occlusion {
