@@ -296,9 +296,9 @@ fn run_job(
                     .map_err(|e| flag_error("--sweep", format!("{}: {e}", describe(c))))?;
                 renderer.set_visibility(VisibilitySettings {
                     mode: c.occlusion,
-                    rule: scene.settings.visibility.rule,
                     clusters,
                     ism,
+                    ..scene.settings.visibility
                 });
                 let frame = compare::sparse_frame(gpu, &mut renderer, w, h)?;
                 sparse_frames.push((*c, frame, gpu.memory_in_use()));

@@ -141,12 +141,7 @@ impl BruteForce {
     pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool, ism: Option<&IsmSettings>) -> Result<Self, GpuError> {
         let groups = match ism {
             Some(ism) => {
-                let settings = VisibilitySettings {
-                    mode: Occlusion::Ism,
-                    rule: Default::default(),
-                    clusters: Default::default(),
-                    ism: *ism,
-                };
+                let settings = VisibilitySettings { mode: Occlusion::Ism, ism: *ism, ..Default::default() };
                 Clusters::for_receivers(gpu, scene, &settings, Receivers::Pixels, ISM_STAGES)?
             }
             None => None,

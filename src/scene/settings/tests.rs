@@ -151,18 +151,19 @@ fn balanced_is_the_old_defaults_on_every_fixture() {
         for self_occluding in [false, true] {
             let analysis = SceneAnalysis { meshes: if self_occluding { 2 } else { 1 }, ..SceneAnalysis::default() };
             let auto = if self_occluding { Occlusion::Disks } else { Occlusion::Off };
+            let mut old_visibility = VisibilitySettings::default();
+            old_visibility.mode = t.visibility.unwrap_or_default().or(auto);
+            old_visibility.rule = t.occlusion_rule.unwrap_or(OcclusionRule::Product);
+            old_visibility.clusters =
+                t.clusters.map_or(ClusterSettings::default(), |o| o.apply(ClusterSettings::default()));
+            old_visibility.ism = t.ism.map_or(IsmSettings::default(), |o| o.apply(IsmSettings::default()));
             let old = Settings {
                 rsm_resolution: t.rsm_resolution.unwrap_or(128),
                 glossy: s.glossy,
                 seed: s.seed,
                 exposure: s.exposure,
                 interpolation_neighbours: t.interpolation_neighbours.unwrap_or(DEFAULT_NEIGHBOURS),
-                visibility: VisibilitySettings {
-                    mode: t.visibility.unwrap_or_default().or(auto),
-                    rule: t.occlusion_rule.unwrap_or(OcclusionRule::Product),
-                    clusters: t.clusters.map_or(ClusterSettings::default(), |o| o.apply(ClusterSettings::default())),
-                    ism: t.ism.map_or(IsmSettings::default(), |o| o.apply(IsmSettings::default())),
-                },
+                visibility: old_visibility,
                 rgbd: s.rgbd,
                 mr: s.mr,
                 sparse: t.sparse.map_or(SparseShading::default(), |o| o.apply(SparseShading::default())),

@@ -394,7 +394,8 @@ impl Clusters {
                 let c = ism::cluster_settings(&settings.ism);
                 Some(Self::build(gpu, scene, &c, true, Some(&settings.ism), receivers, names)?)
             }
-            Occlusion::Off | Occlusion::Disks => None,
+            // Every other mode has no groups.
+            _ => None,
         })
     }
 
