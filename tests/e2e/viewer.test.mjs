@@ -51,10 +51,11 @@ function streamOpening(page) {
 }
 
 // A stream opened with a ticket as a subprotocol: none in the URL, `relume.v1` selected, a
-// ticket of 43 base64url characters offered. (The server wants its token, so the frames that
-// arrived on it are the proof that the server took the ticket.)
+// ticket of 75 base64url characters offered (expiry, nonce and MAC: src/service/tickets.rs).
+// (The server wants its token, so the frames that arrived on it are the proof that the server
+// took the ticket.)
 function ticketed({ url, protocol, ticket }) {
-  return /\/stream$/.test(url) && protocol === "relume.v1" && /^[A-Za-z0-9_-]{43}$/.test(ticket ?? "");
+  return /\/stream$/.test(url) && protocol === "relume.v1" && /^[A-Za-z0-9_-]{75}$/.test(ticket ?? "");
 }
 
 // Starts the server; resolves with its address once it logs "serving".
