@@ -10,10 +10,10 @@
 //! - over the budget (smoothed): one rung down, two when over 1.5x the budget, or straight to
 //!   the richest lower rung already measured under [`TARGET`] x budget;
 //! - under [`TARGET`] x budget for [`HOLD_FRAMES`] frames in a row: one rung up when that rung
-//!   was measured under the target, or, not yet measured, when this one is under
-//!   [`PROBE_HEADROOM`] x the target (a probe). A probe that lands over the budget goes back
-//!   down and that rung is not tried again for [`BACKOFF_FRAMES`] frames, doubled at each
-//!   failure;
+//!   was measured under the target, or, not yet measured or measured over it (a cost that may
+//!   be stale: a first frame building its pipelines), when this one is under
+//!   [`PROBE_HEADROOM`] x the target (a probe). A rung left for being over the budget is not
+//!   tried again for [`BACKOFF_FRAMES`] frames, doubled at each failed probe;
 //! - otherwise it holds.
 //!
 //! The hold, the target below the budget and the back-off are the hysteresis: rungs change
@@ -222,8 +222,10 @@ impl BudgetController {
         self.cost[r] = Some(smoothed);
         let target = self.budget_ms * TARGET;
         if smoothed > self.budget_ms && r > 0 {
+            // The rung left is not tried again for its back-off; the back-off doubles when a
+            // probe failed.
+            self.blocked_until[r] = self.frames + self.backoff[r];
             if self.probing {
-                self.blocked_until[r] = self.frames + self.backoff[r];
                 self.backoff[r] = self.backoff[r].saturating_mul(2);
             }
             let measured = (0..r).rev().find(|&i| self.cost[i].is_some_and(|c| c <= target));
@@ -249,14 +251,14 @@ impl BudgetController {
         if self.under < HOLD_FRAMES || self.frames < self.blocked_until[r + 1] {
             return Move::Hold;
         }
-        let up = match self.cost[r + 1] {
-            Some(cost) => cost <= target,
-            None => smoothed <= target * PROBE_HEADROOM,
-        };
-        if !up {
+        // A rung measured under the target is taken; one not measured, or measured over it
+        // (its cost may be stale: a first frame's pipeline builds, a passing load), is probed
+        // when this one has the headroom, its back-off over.
+        let measured_fits = self.cost[r + 1].is_some_and(|cost| cost <= target);
+        if !measured_fits && smoothed > target * PROBE_HEADROOM {
             return Move::Hold;
         }
-        self.probing = self.cost[r + 1].is_none();
+        self.probing = !measured_fits;
         self.rung = r + 1;
         self.under = 0;
         Move::Up
@@ -367,6 +369,23 @@ mod tests {
         let (times, rungs, _) = run(1000.0, cost, 0.05, 60);
         assert_eq!(*rungs.last().unwrap(), 9, "{rungs:?}");
         assert!(times.iter().all(|&t| t < 1000.0));
+    }
+
+    #[test]
+    fn a_slow_first_frame_does_not_keep_a_loose_budget_low() {
+        // The first frame at the starting rung takes 10x (pipelines built): the controller
+        // falls, then must come back once the rung's later frames would fit.
+        let mut c = BudgetController::new(1000.0, rungs(10), 7);
+        let mut first = true;
+        let mut rungs_seen = Vec::new();
+        for _ in 0..120 {
+            let ms = if first { 5000.0 } else { 100.0 + 20.0 * c.rung() as f64 };
+            first = false;
+            rungs_seen.push(c.rung());
+            c.observe(ms);
+        }
+        assert!(rungs_seen[1] < 7, "it fell after the slow frame: {rungs_seen:?}");
+        assert_eq!(*rungs_seen.last().unwrap(), 9, "it rose to the top again: {rungs_seen:?}");
     }
 
     #[test]
