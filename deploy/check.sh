@@ -12,13 +12,7 @@ if [ ! -x "$venv/bin/checkov" ]; then
     python3 -m venv "$venv"
     "$venv/bin/pip" install --quiet "checkov==$CHECKOV_VERSION"
 fi
-if ! command -v haproxy >/dev/null; then
-    sudo=""
-    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-    export DEBIAN_FRONTEND=noninteractive
-    $sudo apt-get update -qq
-    $sudo apt-get install -y -qq haproxy >/dev/null
-fi
+command -v haproxy >/dev/null || scripts/apt-install.sh haproxy
 # --skip-download: offline, no policy updates; --quiet: failures only.
 "$venv/bin/checkov" --skip-download --quiet --compact --framework kubernetes -d deploy/k8s
 "$venv/bin/checkov" --skip-download --quiet --compact --framework dockerfile -f Dockerfile \

@@ -20,7 +20,7 @@
 #        scripts/cluster-test.sh --scaling [--seconds S] [--bin PATH]
 # --scaling instead runs `relume load` (3 streams, 3 HTTP clients, S s, default 20) through
 # the balancer with 1, 2 and 3 backends and writes docs/measurements/cluster-scaling.md.
-# Installs only Debian's `haproxy` when missing (as scripts/setup.sh installs packages).
+# Installs only Debian's `haproxy` when missing (through scripts/apt-install.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN="${CARGO_TARGET_DIR:-target}/debug/relume"
@@ -40,13 +40,7 @@ while [ $# -gt 0 ]; do
 done
 started_at=$(date +%s)
 
-if ! command -v haproxy >/dev/null; then
-    sudo=""
-    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-    export DEBIAN_FRONTEND=noninteractive
-    $sudo apt-get update -qq
-    $sudo apt-get install -y -qq haproxy >/dev/null
-fi
+command -v haproxy >/dev/null || scripts/apt-install.sh haproxy
 source scripts/setup.sh
 [ -x "$BIN" ] || cargo build --quiet
 for tool in curl jq python3; do

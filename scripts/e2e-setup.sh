@@ -9,14 +9,8 @@ e2e_packages=""
 [ -x /usr/bin/chromium ] || e2e_packages="chromium"
 command -v node >/dev/null || e2e_packages="$e2e_packages nodejs"
 command -v npm >/dev/null || e2e_packages="$e2e_packages npm"
-if [ -n "$e2e_packages" ]; then
-    e2e_sudo=""
-    if [ "$(id -u)" -ne 0 ]; then e2e_sudo="sudo"; fi
-    export DEBIAN_FRONTEND=noninteractive
-    $e2e_sudo apt-get update -qq
-    # shellcheck disable=SC2086
-    $e2e_sudo apt-get install -y -qq $e2e_packages >/dev/null
-fi
+# shellcheck disable=SC2086
+bash "$(dirname "${BASH_SOURCE[0]}")/apt-install.sh" $e2e_packages
 e2e_dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/../tests/e2e" && pwd)"
 # `npm ci` again only when the lock file changed since the last install.
 if ! cmp -s "$e2e_dir/package-lock.json" "$e2e_dir/node_modules/.package-lock.json.installed" 2>/dev/null; then

@@ -18,14 +18,8 @@ have_gl || packages="$packages libegl1 libegl-mesa0 libgl1-mesa-dri"
 command -v c++ >/dev/null || packages="$packages g++"
 # scripts/device-bench.sh writes its summary with python3 (standard library only).
 command -v python3 >/dev/null || packages="$packages python3"
-if [ -n "$packages" ]; then
-    sudo=""
-    if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-    export DEBIAN_FRONTEND=noninteractive
-    $sudo apt-get update -qq
-    # shellcheck disable=SC2086
-    $sudo apt-get install -y -qq $packages >/dev/null
-fi
+# shellcheck disable=SC2086
+bash "$(dirname "${BASH_SOURCE[0]}")/apt-install.sh" $packages
 command -v cargo >/dev/null || { echo "setup: cargo not found; install Rust (https://rustup.rs)" >&2; exit 1; }
 # Mesa warns twice without a runtime dir; give it one.
 if [ -z "${XDG_RUNTIME_DIR:-}" ]; then
