@@ -62,6 +62,21 @@ fn plate_receivers() -> Vec<Receiver> {
         .collect()
 }
 
+/// The lamps above and the box's re-emitters lit (`vals`, the first `real_count` real) and the
+/// plate's receivers, in the scene's frame: the pass works relative to the scene's floating
+/// origin (the box's centre), so the real lights and receivers, given in world coordinates, are
+/// moved into it.
+fn lit_plate(scene: &Scene) -> (Vec<Val>, usize, Vec<Receiver>) {
+    let origin = scene.origin.as_vec3();
+    let mut vals: Vec<Val> = lights_above().into_iter().map(|v| Val { position: v.position - origin, ..v }).collect();
+    let real_count = vals.len();
+    let emitters = relume::mr::differential::emitters(scene);
+    let lit: Vec<Vec3> = emitters.iter().map(|e| Vec3::splat(5.0) * (0.5 + 0.5 * e.normal.z.abs())).collect();
+    vals.extend(relume::mr::differential::emitter_vals(&emitters, &lit));
+    let receivers = plate_receivers().into_iter().map(|r| Receiver { position: r.position - origin, ..r }).collect();
+    (vals, real_count, receivers)
+}
+
 fn gpu_box(gpu: &relume::gpu::Gpu, albedo: f32) -> (Scene, GpuScene) {
     let scene = box_scene(albedo);
     let flat = FlatScene::from_scene(&scene);
@@ -79,16 +94,7 @@ fn gpu_box(gpu: &relume::gpu::Gpu, albedo: f32) -> (Scene, GpuScene) {
 fn mr_differential_gpu_matches_twin() {
     let gpu = gpu();
     let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
-    // The pass works in the scene's frame, relative to its floating origin (the box's centre):
-    // the real lights and receivers, given in world coordinates, are moved into it.
-    let origin = scene.origin.as_vec3();
-    let mut vals: Vec<Val> = lights_above().into_iter().map(|v| Val { position: v.position - origin, ..v }).collect();
-    let real_count = vals.len();
-    let emitters = relume::mr::differential::emitters(&scene);
-    let lit: Vec<Vec3> = emitters.iter().map(|e| Vec3::splat(5.0) * (0.5 + 0.5 * e.normal.z.abs())).collect();
-    vals.extend(relume::mr::differential::emitter_vals(&emitters, &lit));
-    let receivers: Vec<Receiver> =
-        plate_receivers().into_iter().map(|r| Receiver { position: r.position - origin, ..r }).collect();
+    let (vals, real_count, receivers) = lit_plate(&scene);
     let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
     for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
         let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
@@ -126,14 +132,7 @@ fn mr_differential_fast_gpu_matches_twin() {
     use relume::gpu::differential::twin::ContentSphere;
     let gpu = gpu();
     let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
-    let origin = scene.origin.as_vec3();
-    let mut vals: Vec<Val> = lights_above().into_iter().map(|v| Val { position: v.position - origin, ..v }).collect();
-    let real_count = vals.len();
-    let emitters = relume::mr::differential::emitters(&scene);
-    let lit: Vec<Vec3> = emitters.iter().map(|e| Vec3::splat(5.0) * (0.5 + 0.5 * e.normal.z.abs())).collect();
-    vals.extend(relume::mr::differential::emitter_vals(&emitters, &lit));
-    let receivers: Vec<Receiver> =
-        plate_receivers().into_iter().map(|r| Receiver { position: r.position - origin, ..r }).collect();
+    let (vals, real_count, receivers) = lit_plate(&scene);
     let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
     let bounds = relume::mr::differential::bounds(positions.iter().copied());
     let content = ContentSphere::around(bounds);
