@@ -7,7 +7,7 @@ use crate::bench::compare;
 use crate::gpu::pass::module_from_source;
 use crate::gpu::raw::RawGathered;
 use crate::gpu::shader::Wgsl;
-use crate::gpu::sparse::gather::{Gather, GatherLobes};
+use crate::gpu::sparse::gather::{Gather, GatherInput, GatherLobes};
 use crate::gpu::timing::{Recorder, TimingSource};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::renderer::Renderer;
@@ -88,13 +88,20 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
             continue;
         }
         let gathered = Lobes::new::<RawGathered>(gpu, "bench.gathered", n, lobe.glossy())?;
-        let mut pass = Gather::variant(gpu, &renderer.scene, lobe, None, 0.0, tile_size, receivers)?;
+        let mut pass = Gather::variant(gpu, &renderer.scene, lobe, tile_size, receivers)?;
         pass.fit(gpu, &renderer.scene, renderer.val_capacity())?;
         let mut best = f64::INFINITY;
         // One warm-up dispatch, then the timed ones.
         for i in 0..=repeats {
             let mut rec = Recorder::new(gpu, "bench.gather", 1);
-            rec.stage("gather", |e, s| pass.record(gpu, e, &renderer.scene, &renderer.vals, &gathered, None, s))?;
+            rec.stage("gather", |e, s| {
+                pass.record(
+                    gpu,
+                    e,
+                    &GatherInput { scene: &renderer.scene, vals: &renderer.vals, gathered: &gathered, groups: None },
+                    s,
+                )
+            })?;
             let ms = rec.finish()?.stages[0].1;
             if i > 0 {
                 best = best.min(ms);

@@ -354,7 +354,7 @@ impl Kernels {
     }
 
     /// Bind `resources` and dispatch over `invocations` (every range in order), timed by
-    /// `span` as one stage: one call per dispatch.
+    /// `span` as one stage (or its share of one: [`Span::share`]): one call per dispatch.
     pub fn run(
         &self,
         gpu: &Gpu,
@@ -364,7 +364,11 @@ impl Kernels {
         invocations: [u32; 3],
         span: Option<Span<'_>>,
     ) {
-        self.run_parts(gpu, encoder, scene, resources, invocations, span, (0, self.kernels.len()));
+        for (part, kernel) in self.kernels.iter().enumerate() {
+            let group = kernel.bind(gpu, resources);
+            let timestamps = span.as_ref().and_then(|s| s.compute_part(part, self.kernels.len()));
+            kernel.dispatch(encoder, &group, scene, invocations, timestamps);
+        }
     }
 
     /// How many dispatches [`Kernels::run`] makes.
@@ -375,25 +379,5 @@ impl Kernels {
     /// Whether it has no kernel (never: every constructor builds one).
     pub fn is_empty(&self) -> bool {
         self.kernels.is_empty()
-    }
-
-    /// [`Kernels::run`] as the dispatches `first..` of `parts` of a stage timed by `span`, so
-    /// that two passes can share one stage's timestamps.
-    #[allow(clippy::too_many_arguments)]
-    pub fn run_parts(
-        &self,
-        gpu: &Gpu,
-        encoder: &mut wgpu::CommandEncoder,
-        scene: &GpuScene,
-        resources: &[Res<'_>],
-        invocations: [u32; 3],
-        span: Option<Span<'_>>,
-        (first, parts): (usize, usize),
-    ) {
-        for (part, kernel) in self.kernels.iter().enumerate() {
-            let group = kernel.bind(gpu, resources);
-            let timestamps = span.as_ref().and_then(|s| s.compute_part(first + part, parts));
-            kernel.dispatch(encoder, &group, scene, invocations, timestamps);
-        }
     }
 }

@@ -48,6 +48,8 @@ impl StageTimings {
 pub struct Span<'a> {
     query_set: &'a wgpu::QuerySet,
     index: u32,
+    /// With [`Span::share`]: this pass's first part, and the stage's parts in all.
+    shared: Option<(usize, usize)>,
 }
 
 impl<'a> Span<'a> {
@@ -59,10 +61,18 @@ impl<'a> Span<'a> {
         }
     }
 
-    /// Pass `part` of `parts` compute passes that make one stage: the first writes the
-    /// beginning timestamp, the last the end, and a pass in between none (`None`: wgpu refuses
-    /// timestamp writes with neither index).
+    /// The span of a pass whose compute passes are parts `first..` of the `parts` that make
+    /// the stage (two passes in one stage): its [`Span::compute_part`] counts from `first`
+    /// and ends the stage at part `parts - 1` only.
+    pub fn share(self, first: usize, parts: usize) -> Self {
+        Self { shared: Some((first, parts)), ..self }
+    }
+
+    /// Pass `part` of `parts` compute passes that make one stage (of the stage's parts, with
+    /// [`Span::share`]): the first writes the beginning timestamp, the last the end, and a pass
+    /// in between none (`None`: wgpu refuses timestamp writes with neither index).
     pub fn compute_part(&self, part: usize, parts: usize) -> Option<wgpu::ComputePassTimestampWrites<'a>> {
+        let (part, parts) = self.shared.map_or((part, parts), |(first, all)| (first + part, all));
         let begin = (part == 0).then_some(2 * self.index);
         let end = (part + 1 == parts).then_some(2 * self.index + 1);
         (begin.is_some() || end.is_some()).then_some(wgpu::ComputePassTimestampWrites {
@@ -129,7 +139,7 @@ impl<'g> Recorder<'g> {
         self.encoder.push_debug_group(name);
         match &self.queries {
             Some((set, _)) => {
-                let r = f(&mut self.encoder, Some(Span { query_set: set, index }));
+                let r = f(&mut self.encoder, Some(Span { query_set: set, index, shared: None }));
                 self.encoder.pop_debug_group();
                 Ok(r)
             }

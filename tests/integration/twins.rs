@@ -231,7 +231,7 @@ fn gather_takes_every_val_past_the_cpu_loop_limit() {
 #[test]
 fn gather_variants_match_cpu_twin() {
     use relume::gpu::raw::RawGathered;
-    use relume::gpu::sparse::gather::{Gather, GatherLobes};
+    use relume::gpu::sparse::gather::{Gather, GatherInput, GatherLobes};
     use relume::gpu::timing::Recorder;
     let gpu = gpu();
     let scene = load_scene("cornell_bunny_small");
@@ -242,11 +242,11 @@ fn gather_variants_match_cpu_twin() {
     assert!(renderer.glossy() && !n.is_multiple_of(5) && !n.is_multiple_of(7), "{n} points");
     for receivers in [1, 5, 7] {
         let gathered = relume::gpu::Lobes::new::<RawGathered>(&gpu, "test.gathered", n, true).unwrap();
-        let mut pass =
-            Gather::variant(&gpu, &renderer.scene, GatherLobes::GlossyLights, None, 0.0, 64, receivers).unwrap();
+        let mut pass = Gather::variant(&gpu, &renderer.scene, GatherLobes::GlossyLights, 64, receivers).unwrap();
         pass.fit(&gpu, &renderer.scene, renderer.val_capacity()).unwrap();
         let mut rec = Recorder::new(&gpu, "test.gather", 1);
-        rec.stage("gather", |e, s| pass.record(&gpu, e, &renderer.scene, &renderer.vals, &gathered, None, s)).unwrap();
+        let input = GatherInput { scene: &renderer.scene, vals: &renderer.vals, gathered: &gathered, groups: None };
+        rec.stage("gather", |e, s| pass.record(&gpu, e, &input, s)).unwrap();
         rec.finish().unwrap();
         let mid = relume::renderer::SparseIntermediates {
             gathered_diffuse: gpu.read_buffer(&gathered.diffuse, n).unwrap(),

@@ -190,6 +190,27 @@ pub struct Gather {
     glossy: bool,
 }
 
+/// How a gather is built: what it sums ([`Gather::new`]), its tile and points per invocation.
+#[derive(Clone, Copy)]
+struct Shape {
+    lobes: GatherLobes,
+    groups: Option<u32>,
+    near_radius: f32,
+    tile_size: u32,
+    receivers: u32,
+    slots: Receivers,
+}
+
+/// What a gather reads and writes: the scene's sparse points, the frame's VALs, the sums it
+/// adds to, and a group visibility mode's table.
+#[derive(Clone, Copy)]
+pub struct GatherInput<'a> {
+    pub scene: &'a GpuScene,
+    pub vals: &'a Vals,
+    pub gathered: &'a Lobes,
+    pub groups: Option<&'a GroupTable<'a>>,
+}
+
 /// The chosen adaptive candidates' list and count (`adaptive.wgsl`'s `compact`), and how many
 /// slots the list has (the frame's budget).
 pub struct ChosenList<'a> {
@@ -213,37 +234,28 @@ impl Gather {
         near_radius: f32,
         slots: Receivers,
     ) -> Result<Self, GpuError> {
-        Self::build(gpu, scene, lobes, groups, near_radius, TILE_SIZE, receivers_for(gpu), slots)
+        let receivers = receivers_for(gpu);
+        Self::build(gpu, scene, Shape { lobes, groups, near_radius, tile_size: TILE_SIZE, receivers, slots })
     }
 
     /// The pass with `tile_size` VALs per tile and threads per workgroup instead of
     /// [`TILE_SIZE`], and `receivers` (1..=[`MAX_RECEIVERS`]) sparse points per invocation
-    /// instead of [`receivers_for`]'s (the bench compares them; the device must allow the
-    /// workgroup size).
+    /// instead of [`receivers_for`]'s, at every point gathered every frame, without visibility
+    /// groups or near field (the bench compares them; the device must allow the workgroup size).
     pub fn variant(
         gpu: &Gpu,
         scene: &GpuScene,
         lobes: GatherLobes,
-        groups: Option<u32>,
-        near_radius: f32,
         tile_size: u32,
         receivers: u32,
     ) -> Result<Self, GpuError> {
         let slots = Receivers::Span { first: 0, end: scene.flat.base_sparse_count() };
-        Self::build(gpu, scene, lobes, groups, near_radius, tile_size, receivers, slots)
+        let shape = Shape { lobes, groups: None, near_radius: 0.0, tile_size, receivers, slots };
+        Self::build(gpu, scene, shape)
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn build(
-        gpu: &Gpu,
-        scene: &GpuScene,
-        lobes: GatherLobes,
-        groups: Option<u32>,
-        near_radius: f32,
-        tile_size: u32,
-        receivers: u32,
-        slots: Receivers,
-    ) -> Result<Self, GpuError> {
+    fn build(gpu: &Gpu, scene: &GpuScene, shape: Shape) -> Result<Self, GpuError> {
+        let Shape { lobes, groups, near_radius, tile_size, receivers, slots } = shape;
         assert!((1..=MAX_RECEIVERS).contains(&receivers), "{receivers} receivers per invocation");
         let workgroup = [tile_size, 1, 1];
         let desc = match (groups.is_some(), slots) {
@@ -264,19 +276,17 @@ impl Gather {
         self.kernels.fit(gpu, scene, max_vals)
     }
 
-    /// Gather `vals` at its points (by default every point gathered every frame) into
-    /// `gathered`, with `groups'` visibility when built for a group visibility mode.
-    pub fn record(
-        &self,
-        gpu: &Gpu,
-        e: &mut wgpu::CommandEncoder,
-        scene: &GpuScene,
-        vals: &Vals,
-        gathered: &Lobes,
-        groups: Option<&GroupTable<'_>>,
-        span: Option<Span<'_>>,
-    ) {
-        self.record_parts(gpu, e, scene, vals, gathered, groups, span, (0, self.kernels.len()));
+    /// Gather `input.vals` at its points (by default every point gathered every frame) into
+    /// `input.gathered`, with the input's group visibility when built for a group visibility
+    /// mode; timed by `span` (or its share of a stage: [`Span::share`], with [`Gather::parts`]
+    /// dispatches).
+    pub fn record(&self, gpu: &Gpu, e: &mut wgpu::CommandEncoder, input: &GatherInput<'_>, span: Option<Span<'_>>) {
+        let Receivers::Span { first, end } = self.slots else {
+            panic!("the chosen candidates' gather needs their list");
+        };
+        let resources = self.resources(input);
+        let n = (end.min(input.scene.flat.base_sparse_count()) - first).div_ceil(self.receivers);
+        self.kernels.run(gpu, e, input.scene, &resources, [n, 1, 1], span);
     }
 
     /// How many dispatches [`Gather::record`] makes (its VAL ranges).
@@ -284,56 +294,25 @@ impl Gather {
         self.kernels.len()
     }
 
-    /// [`Gather::record`] as dispatches `parts.0..` of `parts.1` of a stage timed by `span`
-    /// (two gathers in one stage).
-    #[allow(clippy::too_many_arguments)]
-    pub fn record_parts(
-        &self,
-        gpu: &Gpu,
-        e: &mut wgpu::CommandEncoder,
-        scene: &GpuScene,
-        vals: &Vals,
-        gathered: &Lobes,
-        groups: Option<&GroupTable<'_>>,
-        span: Option<Span<'_>>,
-        parts: (usize, usize),
-    ) {
-        let Receivers::Span { first, end } = self.slots else {
-            panic!("the chosen candidates' gather needs their list");
-        };
-        let resources = self.resources(scene, vals, gathered, groups);
-        let n = (end.min(scene.flat.base_sparse_count()) - first).div_ceil(self.receivers);
-        self.kernels.run_parts(gpu, e, scene, &resources, [n, 1, 1], span, parts);
-    }
-
-    /// Gather `vals` at the adaptive candidates in `chosen`'s list into their entries of
-    /// `gathered` (one slot per entry of the budget; slots past the frame's count do nothing).
-    #[allow(clippy::too_many_arguments)]
+    /// Gather at the adaptive candidates in `chosen`'s list into their entries of
+    /// `input.gathered` (one slot per entry of the budget; slots past the frame's count do
+    /// nothing).
     pub fn record_chosen(
         &self,
         gpu: &Gpu,
         e: &mut wgpu::CommandEncoder,
-        scene: &GpuScene,
-        vals: &Vals,
-        gathered: &Lobes,
-        groups: Option<&GroupTable<'_>>,
-        chosen: &ChosenList<'_>,
+        (input, chosen): (&GatherInput<'_>, &ChosenList<'_>),
         span: Option<Span<'_>>,
     ) {
         assert_eq!(self.slots, Receivers::Chosen, "the gather of the points gathered every frame takes no list");
-        let mut resources = self.resources(scene, vals, gathered, groups);
+        let mut resources = self.resources(input);
         resources.extend([buffer("receiver_list", chosen.list), buffer("receiver_count", chosen.count)]);
         let n = chosen.slots.div_ceil(self.receivers);
-        self.kernels.run(gpu, e, scene, &resources, [n, 1, 1], span);
+        self.kernels.run(gpu, e, input.scene, &resources, [n, 1, 1], span);
     }
 
-    fn resources<'a>(
-        &self,
-        scene: &'a GpuScene,
-        vals: &'a Vals,
-        gathered: &'a Lobes,
-        groups: Option<&GroupTable<'a>>,
-    ) -> Vec<crate::gpu::pass::Res<'a>> {
+    fn resources<'a>(&self, input: &GatherInput<'a>) -> Vec<crate::gpu::pass::Res<'a>> {
+        let GatherInput { scene, vals, gathered, groups } = *input;
         let fixed = vec![
             buffer("sparse_points", &scene.sparse_points),
             buffer("vals", &vals.buffer),

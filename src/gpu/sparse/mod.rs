@@ -18,7 +18,7 @@ use crate::gpu::visibility::{self, Mode, VisibilitySettings};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use crate::scene::{GlossyInterpolation, InterpolationKernel, LightBound};
 use adaptive::Adaptive;
-use gather::{Gather, GatherLobes, Receivers};
+use gather::{Gather, GatherInput, GatherLobes, Receivers};
 use near_field::NearField;
 
 /// What the sparse technique is built for: a change rebuilds it.
@@ -186,21 +186,19 @@ impl Technique for SparseMethod {
             }
             _ => None,
         };
+        let input = GatherInput { scene, vals, gathered: &self.gathered, groups: table.as_ref() };
         rec.stage(gather::PASS.label, |e, s| {
             let first = self.gather.parts();
             let parts = first + self.plain_gather.as_ref().map_or(0, Gather::parts);
-            let gathered = &self.gathered;
-            self.gather.record_parts(gpu, e, scene, vals, gathered, table.as_ref(), s, (0, parts));
+            self.gather.record(gpu, e, &input, s.map(|s| s.share(0, parts)));
             if let Some(plain) = &self.plain_gather {
-                plain.record_parts(gpu, e, scene, vals, gathered, table.as_ref(), s, (first, parts));
+                plain.record(gpu, e, &input, s.map(|s| s.share(first, parts)));
             }
         })?;
         if let Some((adaptive, gather)) = &self.adaptive {
             adaptive.record_select(gpu, scene, &self.gathered, rec)?;
             let chosen = adaptive.chosen_list();
-            rec.stage(adaptive::GATHER_STAGE, |e, s| {
-                gather.record_chosen(gpu, e, scene, vals, &self.gathered, table.as_ref(), &chosen, s)
-            })?;
+            rec.stage(adaptive::GATHER_STAGE, |e, s| gather.record_chosen(gpu, e, (&input, &chosen), s))?;
         }
         if let Some(Mode::Scale(v)) = &self.visibility {
             rec.stage(v.stage(), |e, s| v.record(gpu, e, scene, &self.gathered, s))?;
