@@ -13,7 +13,7 @@
 use relume::gpu::Gpu;
 use relume::gpu::differential::Differential;
 use relume::gpu::scene::{FlatScene, GpuScene};
-use relume::mr::differential::{Agreement, FastSettings, fast_light};
+use relume::mr::differential::{Agreement, FastSettings, receiver_light};
 use relume::mr::environment::Environment;
 use relume::mr::{DIFFERENTIAL_STAGE, MrOptions, MrRenderer};
 use relume::rgbd::recording::{Recording, RecordingOptions};
@@ -71,8 +71,9 @@ fn main() -> anyhow::Result<()> {
         let exact_ms = e.timings.stages.iter().find(|(s, _)| s == DIFFERENTIAL_STAGE).map_or(0.0, |(_, ms)| *ms);
         for (v, fast) in variants.iter().enumerate() {
             let start = Instant::now();
+            let method = (DifferentialMethod::Fast, fast);
             let (light, counts) =
-                fast_light(&mut pass, &gpu, &gpu_scene, &d.grid, &d.vals, d.real_count, d.bounds, fast)?;
+                receiver_light(&mut pass, &gpu, &gpu_scene, &d.grid, &d.vals, d.real_count, d.bounds, method)?;
             let fast_ms = start.elapsed().as_secs_f64() * 1e3;
             let a = Agreement::of(&d.light, &light, &d.visible);
             println!(

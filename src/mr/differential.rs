@@ -19,7 +19,7 @@
 
 use crate::gpu::differential::groups::{EMITTER_GROUP_SIZE, GROUP_SIZE, REACH, group_vals};
 use crate::gpu::differential::twin::ContentSphere;
-use crate::gpu::differential::{Differential, Receiver, ReceiverLight};
+use crate::gpu::differential::{Differential, Receiver, ReceiverLight, Sums};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::{Gpu, GpuError};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
@@ -162,8 +162,9 @@ pub fn relight_camera(
 
 /// The light at every receiver of `grid` by `method`: `vals[.. real_count]` the real VALs, the
 /// rest the content's re-emitters, `bounds` the content's box. `exact` sums every VAL at every
-/// receiver ([`Differential::run`]); `fast` groups the VALs ([`group_vals`]), sums them with
-/// [`Differential::run_fast`] and computes only the receivers [`adaptive_light`] asks for.
+/// receiver ([`Differential::run`]); `fast` groups the VALs ([`group_vals`]) with `fast`'s
+/// parameters, sums them with [`Differential::run`] and computes only the receivers
+/// [`adaptive_light`] asks for.
 #[allow(clippy::too_many_arguments)]
 pub fn receiver_light(
     pass: &mut Differential,
@@ -173,16 +174,19 @@ pub fn receiver_light(
     vals: &[Val],
     real_count: usize,
     bounds: (Vec3, Vec3),
-    method: DifferentialMethod,
+    (method, fast): (DifferentialMethod, &FastSettings),
 ) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), GpuError> {
     match method {
         DifferentialMethod::Exact => {
-            let (light, _) = pass.run(gpu, scene, &grid.receivers, vals, real_count)?;
+            let (light, _) = pass.run(gpu, scene, &grid.receivers, Sums::Exact { vals, real_count })?;
             let counts = AdaptiveCounts { computed: light.len(), ..Default::default() };
             Ok((light, counts))
         }
         DifferentialMethod::Fast => {
-            fast_light(pass, gpu, scene, grid, vals, real_count, bounds, &FastSettings::default())
+            let grouped = group_vals(vals, real_count, (fast.group_size, fast.emitter_group_size), fast.reach);
+            let content = ContentSphere::around(bounds);
+            let sums = Sums::Fast { grouped: &grouped, content: &content };
+            adaptive_light(grid, fast, |receivers| pass.run(gpu, scene, receivers, sums).map(|l| l.0))
         }
     }
 }
@@ -216,23 +220,6 @@ impl Default for FastSettings {
             irradiance_ratio: ADAPTIVE_IRRADIANCE_RATIO,
         }
     }
-}
-
-/// The fast pass with `fast`'s parameters ([`receiver_light`]).
-#[allow(clippy::too_many_arguments)]
-pub fn fast_light(
-    pass: &mut Differential,
-    gpu: &Gpu,
-    scene: &GpuScene,
-    grid: &ReceiverGrid,
-    vals: &[Val],
-    real_count: usize,
-    bounds: (Vec3, Vec3),
-    fast: &FastSettings,
-) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), GpuError> {
-    let grouped = group_vals(vals, real_count, (fast.group_size, fast.emitter_group_size), fast.reach);
-    let content = ContentSphere::around(bounds);
-    adaptive_light(grid, fast, |receivers| pass.run_fast(gpu, scene, receivers, &grouped, &content).map(|l| l.0))
 }
 
 /// How one frame's fast sums agree with the exact ones at the same receivers.

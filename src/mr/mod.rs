@@ -432,7 +432,7 @@ impl MrPipeline {
                     &all,
                     vals.len(),
                     d.bounds,
-                    method,
+                    (method, &differential::FastSettings::default()),
                 )?;
                 tracing::debug!(?method, ?counts, "differential receivers");
                 let visible = visible_receivers(&grid, frame, &virtual_depth, w, h);

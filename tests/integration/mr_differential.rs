@@ -5,7 +5,7 @@
 
 use super::gpu;
 use glam::Vec3;
-use relume::gpu::differential::{Differential, DifferentialDevice, Receiver, scene_bvh, twin};
+use relume::gpu::differential::{Differential, DifferentialDevice, Receiver, Sums, scene_bvh, twin};
 use relume::gpu::scene::{FlatScene, GpuScene};
 use relume::mr::differential::relit_radiance;
 use relume::scene::{Material, Scene};
@@ -99,7 +99,7 @@ fn mr_differential_gpu_matches_twin() {
     for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
         let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
         assert_eq!(pass.device(), device);
-        let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, &vals, real_count).unwrap();
+        let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, Sums::Exact { vals: &vals, real_count }).unwrap();
         let (mut blocked, mut added) = (0, 0);
         for (r, got) in receivers.iter().zip(&light) {
             let want = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
@@ -160,7 +160,8 @@ fn mr_differential_fast_gpu_matches_twin() {
     assert!(summed > 100 && blocked > 50, "the test must exercise both paths: {summed} summed, {blocked} shadowed");
     for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
         let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
-        let (light, rounds) = pass.run_fast(&gpu, &gpu_scene, &receivers, &grouped, &content).unwrap();
+        let (light, rounds) =
+            pass.run(&gpu, &gpu_scene, &receivers, Sums::Fast { grouped: &grouped, content: &content }).unwrap();
         let mut off = 0;
         for (r, (got, want)) in receivers.iter().zip(light.iter().zip(&twins)) {
             let scale = (want.unoccluded + want.added).max_element();
@@ -195,7 +196,8 @@ fn mr_differential_plate_darkens_as_exact_predicts() {
     // On this machine's CPU adapter `new` picks the CPU backend; `mr_differential_gpu_matches_twin`
     // holds the GPU pass to the same sums.
     let mut pass = Differential::new(&gpu, &gpu_scene).unwrap();
-    let (light, _) = pass.run(&gpu, &gpu_scene, &receivers, &vals, vals.len()).unwrap();
+    let (light, _) =
+        pass.run(&gpu, &gpu_scene, &receivers, Sums::Exact { vals: &vals, real_count: vals.len() }).unwrap();
 
     // The exact reference of the plate alone and of the plate with the box.
     let plate_positions = vec![

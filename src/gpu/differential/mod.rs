@@ -8,7 +8,7 @@
 //! Two kernels: `differential.wgsl` sums every VAL at every receiver with a shadow ray each (the
 //! exact pass, [`Differential::run`]); `fast.wgsl` sums the VALs in groups ([`groups`]), a far
 //! group as one VAL and without a ray where its cone misses the content (the fast pass,
-//! [`Differential::run_fast`], twin [`twin::receiver_light_fast`]).
+//! [`Differential::run`] with [`Sums::Fast`], twin [`twin::receiver_light_fast`]).
 //!
 //! Both run in rounds, like the exact reference (see `differential.wgsl`): the host dispatches
 //! until every receiver has seen every VAL. On CPU adapters they run on the CPU instead
@@ -245,54 +245,44 @@ impl Differential {
         }
     }
 
-    /// The sums of [`twin::receiver_light`] at every receiver: `vals[.. real_count]` are the
-    /// real VALs, the rest the virtual content's re-emitters. Returns them and the GPU rounds
-    /// it took (0 on the CPU). Submits and waits.
+    /// The sums of `sums` at every receiver (see [`Sums`]). Returns them and the GPU rounds it
+    /// took (0 on the CPU). Submits and waits.
     pub fn run(
         &mut self,
         gpu: &Gpu,
         scene: &GpuScene,
         receivers: &[Receiver],
-        vals: &[Val],
-        real_count: usize,
+        sums: Sums<'_>,
     ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
-        match &mut self.backend {
-            Backend::Gpu(pass) => pass.run(gpu, scene, receivers, vals, real_count),
-            Backend::Cpu { positions, triangles, bvh } => {
-                use rayon::prelude::*;
+        use rayon::prelude::*;
+        let (positions, triangles, bvh) = match &mut self.backend {
+            Backend::Gpu(pass) => return pass.run(gpu, scene, receivers, sums),
+            Backend::Cpu { positions, triangles, bvh } => (&*positions, &*triangles, &*bvh),
+        };
+        let light = match sums {
+            Sums::Exact { vals, real_count } => {
                 let real_count = real_count.min(vals.len());
-                let light = receivers
-                    .par_iter()
-                    .map(|r| twin::receiver_light(r, vals, real_count, bvh, positions, triangles))
-                    .collect();
-                Ok((light, 0))
+                let light = |r| twin::receiver_light(r, vals, real_count, bvh, positions, triangles);
+                receivers.par_iter().map(light).collect()
             }
-        }
+            Sums::Fast { grouped, content } => {
+                let light = |r| twin::receiver_light_fast(r, grouped, content, bvh, positions, triangles);
+                receivers.par_iter().map(light).collect()
+            }
+        };
+        Ok((light, 0))
     }
+}
 
-    /// The sums of [`twin::receiver_light_fast`] at every receiver over `grouped` (real VALs
-    /// and re-emitters in groups), with `content` the virtual content's bounding sphere.
-    /// Returns them and the GPU rounds it took (0 on the CPU). Submits and waits.
-    pub fn run_fast(
-        &mut self,
-        gpu: &Gpu,
-        scene: &GpuScene,
-        receivers: &[Receiver],
-        grouped: &GroupedVals,
-        content: &ContentSphere,
-    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
-        match &mut self.backend {
-            Backend::Gpu(pass) => pass.run_fast(gpu, scene, receivers, grouped, content),
-            Backend::Cpu { positions, triangles, bvh } => {
-                use rayon::prelude::*;
-                let light = receivers
-                    .par_iter()
-                    .map(|r| twin::receiver_light_fast(r, grouped, content, bvh, positions, triangles))
-                    .collect();
-                Ok((light, 0))
-            }
-        }
-    }
+/// What the differential pass sums at each receiver.
+#[derive(Clone, Copy)]
+pub enum Sums<'a> {
+    /// Every VAL ([`twin::receiver_light`]): `vals[.. real_count]` are the real VALs, the rest
+    /// the virtual content's re-emitters.
+    Exact { vals: &'a [Val], real_count: usize },
+    /// The VALs in groups ([`twin::receiver_light_fast`]), real VALs and re-emitters, with
+    /// `content` the virtual content's bounding sphere.
+    Fast { grouped: &'a GroupedVals, content: &'a ContentSphere },
 }
 
 /// The GPU passes for one scene placement: the BVH, the exact kernel, the fast one (built on its
@@ -373,36 +363,26 @@ impl GpuPass {
         gpu: &Gpu,
         scene: &GpuScene,
         receivers: &[Receiver],
-        vals: &[Val],
-        real_count: usize,
+        sums: Sums<'_>,
     ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
         if receivers.is_empty() {
             return Ok((Vec::new(), 0));
         }
-        self.upload(gpu, receivers, vals)?;
-        let params = RawDifferentialParams {
-            receiver_count: receivers.len() as u32,
-            real_count: real_count.min(vals.len()) as u32,
-            val_count: vals.len() as u32,
-            _pad0: 0,
+        let (grouped, content) = match sums {
+            Sums::Exact { vals, real_count } => {
+                self.upload(gpu, receivers, vals)?;
+                let params = RawDifferentialParams {
+                    receiver_count: receivers.len() as u32,
+                    real_count: real_count.min(vals.len()) as u32,
+                    val_count: vals.len() as u32,
+                    _pad0: 0,
+                };
+                gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+                let group = self.kernel.bind(gpu, &self.resources(&self.params));
+                return self.rounds(gpu, scene, &self.kernel, &group, receivers.len());
+            }
+            Sums::Fast { grouped, content } => (grouped, content),
         };
-        gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let group = self.kernel.bind(gpu, &self.resources(&self.params));
-        self.rounds(gpu, scene, &self.kernel, &group, receivers.len())
-    }
-
-    /// [`Differential::run_fast`] on the GPU.
-    fn run_fast(
-        &mut self,
-        gpu: &Gpu,
-        scene: &GpuScene,
-        receivers: &[Receiver],
-        grouped: &GroupedVals,
-        content: &ContentSphere,
-    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
-        if receivers.is_empty() {
-            return Ok((Vec::new(), 0));
-        }
         if self.fast.is_none() {
             self.fast = Some(build_kernel(gpu, scene, &FAST_PASS, &fast_body())?);
         }
