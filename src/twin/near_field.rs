@@ -7,7 +7,7 @@
 use glam::{IVec3, Vec3};
 
 use super::Val;
-use crate::scene::{InterpolationKernel, Material};
+use crate::scene::InterpolationKernel;
 
 /// Fewest and most buckets: the scan's workgroup (64) splits them into runs, and the most keeps
 /// each run (2^20 / 64 = 16,384 buckets, two loops) under llvmpipe's loop limit.
@@ -113,26 +113,12 @@ impl ValGrid {
             &self.vals[start..start + self.counts[b as usize] as usize]
         })
     }
-
-    /// The near field at a pixel (`near_field_shade.wgsl`): [`super::shade_near_field`] over
-    /// the buckets around its `centre` only.
-    pub fn shade(
-        &self,
-        p: Vec3,
-        n: Vec3,
-        n_g: Vec3,
-        surface: &Material,
-        eye: Vec3,
-        centre: Vec3,
-        glossy: bool,
-    ) -> Vec3 {
-        super::shade_near_field(p, n, n_g, surface, eye, centre, self.near_vals(centre), glossy, self.radius)
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::Material;
     use crate::twin::shade_near_field;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -183,7 +169,7 @@ mod tests {
                 // The centre up to a third of the radius away from the pixel, as at a corner.
                 let centre = p + (Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5) * 0.2;
                 let all = shade_near_field(p, n, n, &surface, eye, centre, &vals, true, grid.radius);
-                let near = grid.shade(p, n, n, &surface, eye, centre, true);
+                let near = shade_near_field(p, n, n, &surface, eye, centre, grid.near_vals(centre), true, grid.radius);
                 assert!((all - near).abs().max_element() <= 1e-4 * all.max_element() + 1e-12, "{all} vs {near}");
                 lit += usize::from(all.max_element() > 0.0);
             }

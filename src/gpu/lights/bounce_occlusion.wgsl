@@ -14,16 +14,12 @@
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let index = id.x;
     let inside = index < arrayLength(&bounce_points);
-    var position = vec3<f32>(0.0);
-    var normal = vec3<f32>(0.0, 0.0, 1.0);
+    let s = bounce_surface_or_placeholder(index);
     var g = Gathered(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
     if inside {
-        let s = bounce_surface(index);
-        position = s.position;
-        normal = s.normal;
         g = bounce_moments[index];
     }
-    let visible = disc_visibility(position, normal, g.position, g.second_moment, 0xffffffffu, inside, local);
+    let visible = disc_visibility(s.position, s.normal, g.position, g.second_moment, 0xffffffffu, inside, local);
     if inside {
         candidates[index].flux *= visible;
     }

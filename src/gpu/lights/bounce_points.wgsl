@@ -20,15 +20,12 @@
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let index = id.x;
     let inside = index < arrayLength(&bounce_points);
-    var position = vec3<f32>(0.0);
-    var normal = vec3<f32>(0.0, 0.0, 1.0);
-    var albedo = vec3<f32>(0.0);
+    let s = bounce_surface_or_placeholder(index);
+    let position = s.position;
+    let normal = s.normal;
+    let albedo = s.material.diffuse;
     var area = 0.0;
     if inside {
-        let s = bounce_surface(index);
-        position = s.position;
-        normal = s.normal;
-        albedo = s.material.diffuse;
         area = bounce_points[index].area;
     }
     var e = vec3<f32>(0.0);

@@ -5,7 +5,8 @@
 // a VAL the gather left out at those points is the one added here: at a corner, where all of a
 // pixel's sparse points lie on one side of it, the pixel's own distance would count some VALs
 // twice and others not at all. The light is the pixel's own: its position, normal, material.
-// Rust twin: `twin::near_field::ValGrid::shade`.
+// Rust twin: `twin::shade_near_field` over `twin::near_field::ValGrid::near_vals` (the buckets
+// around the centre).
 
 override VAL_BEGIN: u32 = 0u;
 override VAL_SPAN: u32 = 0xffffffffu;

@@ -7,7 +7,7 @@
 // nearer than CLUSTER_NEAR_FRACTION x the group's radius (its own surface) are skipped, as in
 // the rasterised maps. No far plane: a group's centre is its VALs' and may lie metres from the
 // meshes, and a distance of any size is stored as its float's bits (`ism.wgsl`). Rust twin:
-// `twin::splat`.
+// `twin::splat_in`.
 
 @group(0) @binding(0) var<storage, read> clusters: array<Cluster>;
 @group(0) @binding(1) var<storage, read> triangle_cdf: array<f32>;

@@ -160,21 +160,10 @@ pub fn ism_point(k: u32, j: u32, points: u32, cdf: &[f32], positions: &[Vec3], i
     p0 + (p1 - p0) * u + (p2 - p0) * v
 }
 
-/// Map `k` of group `cluster` before pull-push (WGSL `splat`): each of its points in the front
-/// hemisphere lands in one texel, the nearest kept.
-pub fn splat(
-    cluster: &Cluster,
-    k: u32,
-    params: &IsmParams,
-    cdf: &[f32],
-    positions: &[Vec3],
-    indices: &[u32],
-) -> Vec<f32> {
-    splat_in(cluster, &MapFrame::hemisphere(cluster.normal), k, params, cdf, positions, indices)
-}
-
-/// [`splat`] into a map of `frame` ([`map_frame`](super::super::clusters::twin::map_frame)):
-/// the points in the front hemisphere of its axis.
+/// Map `k` of group `cluster` before pull-push (WGSL `splat`) in `frame`: each of its points in
+/// the front hemisphere of the frame's axis lands in one texel, the nearest kept (the ISM's maps
+/// take `MapFrame::hemisphere(cluster.normal)`, the clusters' a frame of
+/// [`map_frame`](super::super::clusters::twin::map_frame)).
 pub fn splat_in(
     cluster: &Cluster,
     frame: &MapFrame,
@@ -416,7 +405,7 @@ mod tests {
         // only mismatch is where in its texel that point lies (under one texel).
         let shadowed = |slope_bias_texels: f32| {
             let p = IsmParams { slope_bias_texels, ..params(64, 200_000, 0) };
-            let map = splat(&light, 0, &p, &cdf, &positions, &indices);
+            let map = splat_in(&light, &MapFrame::hemisphere(light.normal), 0, &p, &cdf, &positions, &indices);
             let tile = DepthTile { resolution: 64, depths: &map, slope_bias_texels };
             receivers.iter().filter(|r| cluster_visibility(&tile, &light, r, SoftShadows::Pcf) < 1.0).count()
         };
@@ -451,7 +440,7 @@ mod tests {
             .collect();
         let lit_fraction = |points: u32, levels: u32| {
             let p = params(64, points, levels);
-            let mut map = splat(&light, 0, &p, &cdf, &positions, &indices);
+            let mut map = splat_in(&light, &MapFrame::hemisphere(light.normal), 0, &p, &cdf, &positions, &indices);
             pull_push(&mut map, 64, &p);
             let tile = DepthTile { resolution: 64, depths: &map, slope_bias_texels: p.slope_bias_texels };
             receivers.iter().map(|r| cluster_visibility(&tile, &light, r, SoftShadows::Hard)).sum::<f32>()
@@ -465,7 +454,7 @@ mod tests {
         assert!(filled < 0.02, "pull-push closes the leak: {filled} lit (without: {sparse_leak})");
         // And the plate never shadows what is beside it.
         let p = params(64, 300, 2);
-        let mut map = splat(&light, 0, &p, &cdf, &positions, &indices);
+        let mut map = splat_in(&light, &MapFrame::hemisphere(light.normal), 0, &p, &cdf, &positions, &indices);
         pull_push(&mut map, 64, &p);
         let tile = DepthTile { resolution: 64, depths: &map, slope_bias_texels: p.slope_bias_texels };
         let beside = ShadowReceiver { offset: Vec3::new(2.0, 0.3, 2.0), normal: -Vec3::Z };
