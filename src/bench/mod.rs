@@ -26,7 +26,7 @@ pub use results::{
     BenchResults, BruteForceIsmResult, ConfigResult, GPU_MEMORY_NOTE, brute_force_ism_csv, csv, write_results,
 };
 pub use run::{BenchOptions, Job, run};
-pub use sweep::{AXES, Sweep};
+pub use sweep::{SCENE_AXES, Sweep, TUNING_AXES};
 
 use crate::gpu::GpuError;
 use crate::scene::SceneError;

@@ -189,6 +189,29 @@ pub fn brute_force_ism_csv(results: &BenchResults) -> String {
     out
 }
 
+/// The CSV's values of the research knobs `c` overrides, in [`super::TUNING_AXES`]' order (empty
+/// where it keeps the level's value).
+fn tuning_values(c: &Config) -> [String; 14] {
+    let n = |o: Option<u32>| o.map_or(String::new(), |n| n.to_string());
+    let o = &c.clusters;
+    [
+        n(c.ism_count),
+        n(c.ism_resolution),
+        n(c.ism_points),
+        n(c.ism_pull_push_levels),
+        n(o.count),
+        n(o.shadow_map_resolution),
+        o.soft.map_or(String::new(), |s| soft_name(s).to_owned()),
+        o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
+        n(c.near_field),
+        c.glossy_interpolation.map_or(String::new(), |g| glossy_interpolation_name(g).to_owned()),
+        c.adaptive_percent.map_or(String::new(), |a| (f64::from(a) / 100.0).to_string()),
+        c.kernel.map_or(String::new(), |k| kernel_name(k).to_owned()),
+        c.bound.map_or(String::new(), |b| bound_name(b).to_owned()),
+        n(c.subdivision),
+    ]
+}
+
 /// The CSV table: fixed columns, then `<stage>_ms` for every stage any configuration ran.
 pub fn csv(results: &BenchResults) -> String {
     let mut stages: Vec<&str> = Vec::new();
@@ -234,24 +257,11 @@ pub fn csv(results: &BenchResults) -> String {
         "speedup_at_equal_error",
         "equal_error_extrapolated",
         "paper_fps",
-        "ism_count",
-        "ism_resolution",
-        "ism_points",
-        "ism_pull_push_levels",
-        "cluster_count",
-        "cluster_resolution",
-        "cluster_soft",
-        "cluster_maps",
-        "near_field",
-        "glossy_interpolation",
-        "adaptive",
-        "kernel",
-        "bound",
-        "subdivision",
     ]
     .iter()
     .map(|s| s.to_string())
     .collect();
+    header.extend(super::TUNING_AXES.map(str::to_owned));
     header.extend(stages.iter().map(|s| format!("{s}_ms")));
     let mut out = header.join(",") + "\n";
     let opt = |v: Option<f64>| v.map_or(String::new(), |x| x.to_string());
@@ -293,21 +303,7 @@ pub fn csv(results: &BenchResults) -> String {
             r.at_equal_error.map_or(String::new(), |a| a.extrapolated.to_string()),
             r.paper_fps.map_or(String::new(), |f| f.to_string()),
         ];
-        let ism = |o: Option<u32>| o.map_or(String::new(), |n| n.to_string());
-        row.extend([ism(c.ism_count), ism(c.ism_resolution), ism(c.ism_points), ism(c.ism_pull_push_levels)]);
-        let o = &c.clusters;
-        row.extend([
-            ism(o.count),
-            ism(o.shadow_map_resolution),
-            o.soft.map_or(String::new(), |s| soft_name(s).to_owned()),
-            o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
-            ism(c.near_field),
-            c.glossy_interpolation.map_or(String::new(), |g| glossy_interpolation_name(g).to_owned()),
-            c.adaptive_percent.map_or(String::new(), |a| (f64::from(a) / 100.0).to_string()),
-            c.kernel.map_or(String::new(), |k| kernel_name(k).to_owned()),
-            c.bound.map_or(String::new(), |b| bound_name(b).to_owned()),
-            ism(c.subdivision),
-        ]);
+        row.extend(tuning_values(c));
         row.extend(stages.iter().map(|s| opt(r.stages_ms.iter().find(|(n, _)| n == s).map(|(_, ms)| *ms))));
         out += &(row.join(",") + "\n");
     }

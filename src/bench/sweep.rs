@@ -42,20 +42,9 @@ pub struct Sweep {
     pub cluster_maps: Option<Vec<ShadowMapSource>>,
 }
 
-/// The axis names `--sweep` accepts.
-pub const AXES: &[&str] = &[
-    "sparse_points",
-    "neighbours",
-    "near_field",
-    "glossy_interpolation",
-    "adaptive",
-    "kernel",
-    "bound",
-    "subdivision",
-    "rsm_resolution",
-    "occlusion",
-    "glossy",
-    "resolution",
+/// The axes `--sweep` accepts that override one of the level's research knobs (`tuning`); the
+/// bench's CSV has a column of each, named as the axis, in this order.
+pub const TUNING_AXES: [&str; 14] = [
     "ism_count",
     "ism_resolution",
     "ism_points",
@@ -64,7 +53,18 @@ pub const AXES: &[&str] = &[
     "cluster_resolution",
     "cluster_soft",
     "cluster_maps",
+    "near_field",
+    "glossy_interpolation",
+    "adaptive",
+    "kernel",
+    "bound",
+    "subdivision",
 ];
+
+/// The other axes `--sweep` accepts: the scene's sparse points, the RSM, visibility, glossy and
+/// image size.
+pub const SCENE_AXES: [&str; 6] =
+    ["sparse_points", "neighbours", "rsm_resolution", "occlusion", "glossy", "resolution"];
 
 impl Sweep {
     /// Parse `--sweep axis=v1,v2,...` arguments; each axis at most once.
@@ -189,7 +189,13 @@ impl Sweep {
                     sweep.neighbours = Some(parse_each(&flag, &values, |v| int_in(v, 1, max))?);
                 }
                 _ => {
-                    return Err(flag_error(&flag, format!("unknown axis; the axes are {}", AXES.join(", "))));
+                    return Err(flag_error(
+                        &flag,
+                        format!(
+                            "unknown axis; the axes are {}",
+                            [&SCENE_AXES[..], &TUNING_AXES[..]].concat().join(", ")
+                        ),
+                    ));
                 }
             }
         }

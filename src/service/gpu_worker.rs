@@ -207,19 +207,19 @@ enum Job {
         id: String,
         reply: oneshot::Sender<bool>,
     },
-    Render {
+    Frame {
         id: String,
-        job: RenderJob,
-        source: Option<Arc<SceneSource>>,
-        reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
-    },
-    StreamFrame {
-        id: String,
-        job: Box<StreamFrameJob>,
+        job: FrameJob,
         source: Option<Arc<SceneSource>>,
         reply: oneshot::Sender<Result<RenderOutput, WorkerError>>,
     },
     LoseDevice,
+}
+
+/// A frame to render: an HTTP render or a stream frame.
+pub enum FrameJob {
+    Render(RenderJob),
+    Stream(Box<StreamFrameJob>),
 }
 
 impl Job {
@@ -227,7 +227,7 @@ impl Job {
     /// handler, holding the receiver, was dropped) or the stream closed.
     fn abandoned(&self) -> bool {
         match self {
-            Job::Render { reply, .. } | Job::StreamFrame { reply, .. } => reply.is_closed(),
+            Job::Frame { reply, .. } => reply.is_closed(),
             Job::AddScene { .. } | Job::RemoveScene { .. } | Job::LoseDevice => false,
         }
     }
@@ -372,31 +372,18 @@ impl GpuWorker {
         answer.await.map_err(|_| WorkerError::Stopped)
     }
 
-    /// Queues a render of `client`, or refuses at once when its queue or the whole queue is
-    /// full.
-    /// With `source`, a worker that does not hold the scene uploads it first.
+    /// Queues a render or stream frame of `client`, or refuses at once when its queue or the
+    /// whole queue is full. With `source`, a worker that does not hold the scene uploads it
+    /// first.
     pub fn try_render(
         &self,
         client: ClientId,
         id: &str,
-        job: RenderJob,
+        job: FrameJob,
         source: Option<Arc<SceneSource>>,
     ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
         let (reply, answer) = oneshot::channel();
-        self.queue.push(client, Job::Render { id: id.to_owned(), job, source, reply })?;
-        Ok(answer)
-    }
-
-    /// Queues a stream frame of `client`, as [`GpuWorker::try_render`] does.
-    pub fn try_render_stream_frame(
-        &self,
-        client: ClientId,
-        id: &str,
-        job: StreamFrameJob,
-        source: Option<Arc<SceneSource>>,
-    ) -> Result<oneshot::Receiver<Result<RenderOutput, WorkerError>>, WorkerError> {
-        let (reply, answer) = oneshot::channel();
-        self.queue.push(client, Job::StreamFrame { id: id.to_owned(), job: Box::new(job), source, reply })?;
+        self.queue.push(client, Job::Frame { id: id.to_owned(), job, source, reply })?;
         Ok(answer)
     }
 
@@ -444,21 +431,14 @@ fn run(mut backend: impl Backend, queue: &FairQueue<Job>, thread: &Thread) {
                 thread.status.held().remove(&id);
                 let _ = reply.send(backend.remove_scene(&id));
             }
-            Job::Render { id, job, source, reply } => {
+            Job::Frame { id, job, source, reply } => {
                 if reply.is_closed() {
-                    tracing::debug!(scene = %id, "render skipped: the client has gone");
+                    tracing::debug!(scene = %id, "frame skipped: the client has gone");
                     continue;
                 }
-                let result =
-                    render_held(&mut backend, thread, &id, source.as_deref(), queue_ms, |b| b.render(&id, &job));
-                let _ = reply.send(result);
-            }
-            Job::StreamFrame { id, job, source, reply } => {
-                if reply.is_closed() {
-                    continue;
-                }
-                let result = render_held(&mut backend, thread, &id, source.as_deref(), queue_ms, |b| {
-                    b.render_stream_frame(&id, &job)
+                let result = render_held(&mut backend, thread, &id, source.as_deref(), queue_ms, |b| match &job {
+                    FrameJob::Render(job) => b.render(&id, job),
+                    FrameJob::Stream(job) => b.render_stream_frame(&id, job),
                 });
                 let _ = reply.send(result);
             }

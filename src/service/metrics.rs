@@ -352,22 +352,45 @@ impl Metrics {
         for (stage, seconds) in &inner.gpu_seconds {
             let _ = writeln!(out, "relume_gpu_seconds_total{{stage=\"{}\"}} {seconds}", escape(stage));
         }
-        header(&mut out, "relume_render_queue_depth", "gauge", "Renders waiting for the GPU thread.");
-        let _ = writeln!(out, "relume_render_queue_depth {}", gauges.queue_depth);
-        header(&mut out, "relume_render_queue_capacity", "gauge", "Most renders that may wait (max_queue).");
-        let _ = writeln!(out, "relume_render_queue_capacity {}", gauges.queue_capacity);
-        header(&mut out, "relume_renders_rejected_total", "counter", "Renders refused because the queue was full.");
-        let _ = writeln!(out, "relume_renders_rejected_total {}", inner.renders_rejected);
-        header(&mut out, "relume_dropped_frames_total", "counter", "Stream frames dropped before rendering.");
-        let _ = writeln!(out, "relume_dropped_frames_total {}", inner.dropped_frames);
-        header(&mut out, "relume_scenes", "gauge", "Scenes held.");
-        let _ = writeln!(out, "relume_scenes {}", gauges.scenes);
-        header(&mut out, "relume_streams", "gauge", "Open WebSocket streams.");
-        let _ = writeln!(out, "relume_streams {}", gauges.streams);
-        header(&mut out, "relume_connections", "gauge", "HTTP connections open (upgraded streams not included).");
-        let _ = writeln!(out, "relume_connections {}", gauges.connections);
-        header(&mut out, "relume_connections_refused_total", "counter", "Connections refused at max_connections.");
-        let _ = writeln!(out, "relume_connections_refused_total {}", inner.connections_refused);
+        let counts: [(&str, &str, &str, &dyn std::fmt::Display); 8] = [
+            ("relume_render_queue_depth", "gauge", "Renders waiting for the GPU thread.", &gauges.queue_depth),
+            (
+                "relume_render_queue_capacity",
+                "gauge",
+                "Most renders that may wait (max_queue).",
+                &gauges.queue_capacity,
+            ),
+            (
+                "relume_renders_rejected_total",
+                "counter",
+                "Renders refused because the queue was full.",
+                &inner.renders_rejected,
+            ),
+            (
+                "relume_dropped_frames_total",
+                "counter",
+                "Stream frames dropped before rendering.",
+                &inner.dropped_frames,
+            ),
+            ("relume_scenes", "gauge", "Scenes held.", &gauges.scenes),
+            ("relume_streams", "gauge", "Open WebSocket streams.", &gauges.streams),
+            (
+                "relume_connections",
+                "gauge",
+                "HTTP connections open (upgraded streams not included).",
+                &gauges.connections,
+            ),
+            (
+                "relume_connections_refused_total",
+                "counter",
+                "Connections refused at max_connections.",
+                &inner.connections_refused,
+            ),
+        ];
+        for (name, kind, help, value) in counts {
+            header(&mut out, name, kind, help);
+            let _ = writeln!(out, "{name} {value}");
+        }
         header(&mut out, "relume_stream_messages_total", "counter", "Stream messages received, by kind.");
         for (kind, count) in &inner.stream_messages {
             let _ = writeln!(out, "relume_stream_messages_total{{kind=\"{}\"}} {count}", escape(kind));

@@ -29,7 +29,9 @@ use crate::mr::environment::Environment;
 use crate::scene::Scene;
 
 use super::config::{AdapterSelection, Config};
-use super::gpu_worker::{GpuWorker, RenderJob, RenderOutput, SceneSource, StreamFrameJob, WorkerError, WorkerStatus};
+use super::gpu_worker::{
+    FrameJob, GpuWorker, RenderJob, RenderOutput, SceneSource, StreamFrameJob, WorkerError, WorkerStatus,
+};
 use super::metrics::{Metrics, WorkerGauges};
 use super::schedule::ClientId;
 
@@ -204,7 +206,8 @@ impl Workers {
                 break;
             }
             tried.push(index);
-            let answer = match self.workers[index].try_render(client, id, job.clone(), source.clone()) {
+            let answer = match self.workers[index].try_render(client, id, FrameJob::Render(job.clone()), source.clone())
+            {
                 Ok(answer) => answer,
                 Err(error @ WorkerError::QueueFull { .. }) => {
                     refused.get_or_insert(error);
@@ -244,7 +247,7 @@ impl Workers {
                 *pin = StreamPin::new(&self.workers[best]);
             }
         }
-        self.workers[pin.worker].try_render_stream_frame(client, id, job, self.source(id))
+        self.workers[pin.worker].try_render(client, id, FrameJob::Stream(Box::new(job)), self.source(id))
     }
 
     /// Test hook: worker 0 loses its device during its next render ([`GpuWorker::lose_device`]).

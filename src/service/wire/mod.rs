@@ -523,24 +523,10 @@ fn decode_control(c: proto::Control, limits: &Limits) -> Result<ControlMessage, 
     let render = match c.render {
         None => None,
         Some(r) => {
-            let occlusion = match r.occlusion {
-                None => None,
-                Some(value) => match proto::Occlusion::try_from(value) {
-                    Ok(mode) => Some(occlusion_from_proto(mode)),
-                    Err(_) => {
-                        return Err(WireError::invalid("control.render.occlusion", format!("unknown value {value}")));
-                    }
-                },
-            };
-            let quality = match r.quality {
-                None => None,
-                Some(value) => match proto::QualityLevel::try_from(value) {
-                    Ok(level) => Some(quality_from_proto(level)),
-                    Err(_) => {
-                        return Err(WireError::invalid("control.render.quality", format!("unknown value {value}")));
-                    }
-                },
-            };
+            let occlusion =
+                r.occlusion.map(|v| proto_enum(v, "control.render.occlusion").map(occlusion_from_proto)).transpose()?;
+            let quality =
+                r.quality.map(|v| proto_enum(v, "control.render.quality").map(quality_from_proto)).transpose()?;
             let budget_ms = match r.budget_ms {
                 None => None,
                 Some(0.0) => Some(None),
@@ -573,21 +559,24 @@ fn decode_camera(c: proto::Camera, limits: &Limits) -> Result<CameraDescription,
     Ok(camera)
 }
 
+/// A protobuf enum's `value`, or an error naming `field` when the enum has no such value.
+fn proto_enum<E: TryFrom<i32>>(value: i32, field: &str) -> Result<E, WireError> {
+    E::try_from(value).map_err(|_| WireError::invalid(field, format!("unknown value {value}")))
+}
+
 fn decode_quality(q: proto::Quality) -> Result<StreamQuality, WireError> {
     let field = "control.quality";
-    let unknown =
-        |name: &str, value: i32| WireError::invalid(format!("{field}.{name}"), format!("unknown value {value}"));
-    let method = match proto::Method::try_from(q.method).map_err(|_| unknown("method", q.method))? {
+    let method = match proto_enum(q.method, &format!("{field}.method"))? {
         proto::Method::Unspecified | proto::Method::Sparse => Method::Sparse,
         proto::Method::BruteForce => Method::BruteForce,
         proto::Method::BruteForceIsm => Method::BruteForceIsm,
     };
-    let component = match proto::Component::try_from(q.component).map_err(|_| unknown("component", q.component))? {
+    let component = match proto_enum(q.component, &format!("{field}.component"))? {
         proto::Component::Unspecified | proto::Component::Full => Component::Full,
         proto::Component::Direct => Component::Direct,
         proto::Component::Indirect => Component::Indirect,
     };
-    let format = match proto::ImageFormat::try_from(q.format).map_err(|_| unknown("format", q.format))? {
+    let format = match proto_enum(q.format, &format!("{field}.format"))? {
         proto::ImageFormat::Unspecified | proto::ImageFormat::Png => StreamImageFormat::Png,
         proto::ImageFormat::Rgba8 => StreamImageFormat::Rgba8,
     };

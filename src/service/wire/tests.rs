@@ -430,62 +430,63 @@ fn server_messages_encode_as_version_1_envelopes() {
     assert_eq!((a.request_id, a.applied), (8, vec!["camera".to_owned()]));
 }
 
-/// The protobuf schema, the scene file's JSON names and the OpenAPI document list the same
-/// visibility modes: every protobuf value but `UNSPECIFIED` is a mode, and back; its name is the
-/// JSON name; the OpenAPI document's `Occlusion` schema lists exactly those names.
-#[test]
-fn visibility_modes_agree_between_proto_json_and_openapi() {
-    let mut json_names = Vec::new();
+/// The JSON names of a protobuf enum's values but `UNSPECIFIED` (0), in the protobuf's order:
+/// each value decodes to a value of the scene file's type (`from_proto`) which encodes back to it
+/// (`to_proto`), and its protobuf name (`proto_name`) is `prefix` and the JSON name in capitals.
+fn proto_json_names<E, S>(
+    prefix: &str,
+    proto_name: fn(&E) -> &'static str,
+    from_proto: impl Fn(E) -> Option<S>,
+    to_proto: impl Fn(S) -> E,
+) -> Vec<String>
+where
+    E: TryFrom<i32> + Copy + PartialEq + std::fmt::Debug,
+    S: serde::Serialize + Copy,
+{
+    let mut names = Vec::new();
     for value in 1..64 {
-        let Ok(mode) = proto::Occlusion::try_from(value) else { continue };
-        let scene = occlusion_from_proto(mode).expect("a mode of the registry");
-        assert_eq!(occlusion_to_proto(scene), Some(mode));
-        let json = serde_json::to_value(scene).unwrap();
-        let name = json.as_str().unwrap().to_owned();
-        assert_eq!(mode.as_str_name(), format!("OCCLUSION_{}", name.to_uppercase()));
-        json_names.push(name);
+        let Ok(proto) = E::try_from(value) else { continue };
+        let scene = from_proto(proto).unwrap_or_else(|| panic!("{proto:?} has no value in the scene file"));
+        assert_eq!(to_proto(scene), proto);
+        let name = serde_json::to_value(scene).unwrap().as_str().expect("a JSON name").to_owned();
+        assert_eq!(proto_name(&proto), format!("{prefix}{}", name.to_uppercase()));
+        names.push(name);
     }
-    let registry: Vec<&str> = Occlusion::ALL.iter().map(|m| m.name()).collect();
-    assert_eq!(json_names, registry, "relume.proto's Occlusion values and the registry of modes differ");
+    names
+}
+
+/// The names the OpenAPI document's `schema` enum lists, in its order.
+fn openapi_enum(schema: &str) -> Vec<String> {
     let openapi: serde_json::Value =
         serde_json::from_str(include_str!("../../../proto/openapi.json")).expect("the OpenAPI document");
-    let listed: Vec<&str> = openapi["components"]["schemas"]["Occlusion"]["enum"]
-        .as_array()
-        .expect("an Occlusion enum in the OpenAPI document")
-        .iter()
-        .map(|v| v.as_str().unwrap())
-        .collect();
-    assert_eq!(listed, json_names);
+    let values = openapi["components"]["schemas"][schema]["enum"].as_array();
+    let values = values.unwrap_or_else(|| panic!("no {schema} enum in the OpenAPI document"));
+    values.iter().map(|v| v.as_str().expect("a name").to_owned()).collect()
+}
+
+/// The protobuf schema, the scene file's JSON names and the OpenAPI document list the same
+/// visibility modes: every protobuf value but `UNSPECIFIED` is a mode, and back; its name is the
+/// JSON name; the registry and the OpenAPI document's `Occlusion` schema list exactly those names.
+#[test]
+fn visibility_modes_agree_between_proto_json_and_openapi() {
+    let to_proto = |mode| occlusion_to_proto(mode).expect("every mode has a protobuf value");
+    let json_names = proto_json_names("OCCLUSION_", proto::Occlusion::as_str_name, occlusion_from_proto, to_proto);
+    let registry: Vec<&str> = Occlusion::ALL.iter().map(|m| m.name()).collect();
+    assert_eq!(json_names, registry, "relume.proto's Occlusion values and the registry of modes differ");
+    assert_eq!(openapi_enum("Occlusion"), json_names);
 }
 
 /// The protobuf schema, the scene file's JSON names and the OpenAPI document list the same
 /// quality levels: every protobuf value but `UNSPECIFIED` is a level, and back; its name is
-/// the JSON name; the OpenAPI document's `QualityLevel` schema lists exactly those names, cheapest
-/// first, as `Quality::ALL` does.
+/// the JSON name; `Quality::ALL` and the OpenAPI document's `QualityLevel` schema list exactly
+/// those names, cheapest first.
 #[test]
 fn quality_levels_agree_between_proto_json_and_openapi() {
-    let mut json_names = Vec::new();
-    for value in 1..64 {
-        let Ok(level) = proto::QualityLevel::try_from(value) else { continue };
-        let scene = quality_from_proto(level).expect("a level");
-        assert_eq!(quality_to_proto(scene), level);
-        let json = serde_json::to_value(scene).unwrap();
-        let name = json.as_str().unwrap().to_owned();
-        assert_eq!(name, scene.name());
-        assert_eq!(level.as_str_name(), format!("QUALITY_LEVEL_{}", name.to_uppercase()));
-        json_names.push(name);
-    }
+    let json_names =
+        proto_json_names("QUALITY_LEVEL_", proto::QualityLevel::as_str_name, quality_from_proto, quality_to_proto);
     let all: Vec<&str> = crate::scene::Quality::ALL.iter().map(|q| q.name()).collect();
     assert_eq!(json_names, all);
-    let openapi: serde_json::Value =
-        serde_json::from_str(include_str!("../../../proto/openapi.json")).expect("the OpenAPI document");
-    let listed: Vec<&str> = openapi["components"]["schemas"]["QualityLevel"]["enum"]
-        .as_array()
-        .expect("a QualityLevel enum in the OpenAPI document")
-        .iter()
-        .map(|v| v.as_str().unwrap())
-        .collect();
-    assert_eq!(listed, json_names);
+    assert_eq!(openapi_enum("QualityLevel"), json_names);
 }
 
 /// A control message's level and budget: a level, back to the scene's (0), a budget, no
