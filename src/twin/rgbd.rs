@@ -288,7 +288,7 @@ pub fn rgbd_vals(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<Val> {
     rgbd_vals_by_cell(frame, settings).into_iter().map(|(_, v)| v).collect()
 }
 
-/// [`rgbd_vals`] with each VAL's grid cell (to match the GPU's output, whose order differs).
+/// [`rgbd_vals`] with each VAL's grid cell, in the grid's row-major order (the GPU's order too).
 /// The frame's pose is rounded to f32 as it is (relative to the user's origin).
 pub fn rgbd_vals_by_cell(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<(UVec2, Val)> {
     let camera_to_world = crate::scene::local_pose(glam::DVec3::ZERO, &frame.camera_to_world);

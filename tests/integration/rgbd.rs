@@ -171,6 +171,9 @@ fn rgbd_vals_match_the_cpu_twin() {
         assert_eq!(count as usize, twin.len(), "step {step}");
         let (cells, errors) = match_twin(&out[..count as usize], &frame, &settings);
         assert_eq!(cells.len(), twin.len());
+        // In the twin's (row-major) cell order, so a frame's VALs are the same from run to run.
+        let twin_cells: Vec<UVec2> = twin.iter().map(|(cell, _)| *cell).collect();
+        assert_eq!(cells, twin_cells, "step {step}: the GPU's VALs are not in the cells' order");
         eprintln!("rgbd twin, step {step}, {} VALs, largest errors: {errors:?}", cells.len());
     }
 }
@@ -209,14 +212,15 @@ fn rgbd_appends_after_existing_vals_within_capacity() {
     match_twin(&out[k..k + made], &frame, &settings);
     assert!(out[k + made..].iter().all(|v| *v == SENTINEL));
 
-    // Room for 10 more: exactly 10 are written, the counter stops at the capacity and nothing
+    // Room for 10 more: exactly 10 are written (the first 10 cells'), the counter stops at the capacity and nothing
     // past it is touched, even though the buffer is longer.
     let capacity = k + 10;
     let (count, out) = run(&f, &pass, &frame, &existing, len, capacity as u32);
     assert_eq!(count as usize, capacity);
     assert_eq!(&out[..k], &existing[..]);
     let (cells, _) = match_twin(&out[k..capacity], &frame, &settings);
-    assert_eq!(cells.len(), 10);
+    let first: Vec<UVec2> = rgbd_vals_by_cell(&frame, &settings).iter().take(10).map(|(cell, _)| *cell).collect();
+    assert_eq!(cells, first, "the first 10 cells in order");
     assert!(out[capacity..].iter().all(|v| *v == SENTINEL));
 
     // A capacity past the buffer's end is the buffer's end.

@@ -1,9 +1,10 @@
 //! Every visibility mode on a mixed-reality stream: a stream switches the indirect light's
 //! visibility (protobuf `Occlusion`: off, discs, clusters, imperfect shadow maps) between frames,
 //! and each frame is relit as the offline replay relights it with the scene file's
-//! `settings.tuning.visibility` set to that mode, within 1 level, where two offline runs of the
-//! mode agree within 1 level (checked). The clusters mode does not yet ([`NOT_REPRODUCIBLE`]):
-//! its figures are printed. The scene and frames are those of
+//! `settings.tuning.visibility` set to that mode, to the level, and two offline runs of the mode
+//! are identical (checked: the RGB-D VALs come in their cells' order, so every sum over them,
+//! the clusters' k-means seeds and the flux draw are the same from run to run; with an atomic
+//! append the clusters mode's runs were 14-39 levels apart). The scene and frames are those of
 //! `stream_mr.rs` (a 160x120 TUM frame, the bunny with 256 sparse points, the differential pass
 //! on).
 //!
@@ -35,11 +36,6 @@ const MODES: [(proto::Occlusion, &str, Option<&str>); 4] = [
 ];
 
 /// Mean of the luminance (Rec. 709 weights) of the sparse points' diffuse irradiance (W/m²).
-/// Modes whose offline replay is not yet the same from run to run on lavapipe (the clusters
-/// mode: two runs of one frame differed by 14-39 levels on 60-120 pixels): printed, not held to
-/// the streamed frame, until that is found and fixed.
-const NOT_REPRODUCIBLE: &[&str] = &["clusters"];
-
 fn mean_irradiance(irradiance: &[glam::Vec3]) -> f64 {
     let sum: f64 = irradiance.iter().map(|e| f64::from(e.dot(glam::Vec3::new(0.2126, 0.7152, 0.0722)))).sum();
     sum / irradiance.len().max(1) as f64
@@ -73,9 +69,8 @@ fn exact_reference(scene: &Value, frame: &RgbdFrame) -> (f64, f64) {
 }
 
 /// A stream renders frame 0 in every mode, chosen by a control message: the mode's own stage
-/// runs (and no other mode's), the composite is the offline replay's with that mode within one
-/// 8-bit level (the tolerance `stream_mr.rs` explains: the VALs' order, and with it float sums,
-/// varies between runs), and the light is sane: the bunny's irradiance is finite and positive in
+/// runs (and no other mode's), the composite is the offline replay's with that mode exactly,
+/// and the light is sane: the bunny's irradiance is finite and positive in
 /// every mode, and a mode that blocks light never gives more than no visibility.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stream_renders_every_visibility_mode_as_the_offline_replay() {
@@ -104,8 +99,7 @@ async fn a_stream_renders_every_visibility_mode_as_the_offline_replay() {
     server.stop().await;
 
     let (expected, (unoccluded, exact)) = tokio::task::spawn_blocking(move || {
-        // Each mode replayed twice: how far two offline runs of one mode land apart is the
-        // spread the stream is held to (at least 1 level).
+        // Each mode replayed twice: two offline runs of one mode are identical.
         let replays = MODES
             .iter()
             .map(|(_, name, _)| {
@@ -137,11 +131,8 @@ async fn a_stream_renders_every_visibility_mode_as_the_offline_replay() {
             "{name}: streamed vs offline composite worst {worst} levels ({over} pixels over 1); two offline runs \
              {spread} levels apart ({spread_over} pixels over 1); bunny irradiance {e:.7} W/m²"
         );
-        if NOT_REPRODUCIBLE.contains(name) {
-            continue;
-        }
-        assert!(spread <= 1, "{name}: two offline runs differ by {spread} levels");
-        assert!(worst <= 1, "{name}: the streamed composite differs from the offline one by {worst} levels");
+        assert_eq!(spread, 0, "{name}: two offline runs differ by {spread} levels");
+        assert_eq!(worst, 0, "{name}: the streamed composite differs from the offline one by {worst} levels");
         assert!(e.is_finite() && *e > 0.0, "{name}: bunny irradiance {e}");
     }
     let off = irradiance[2];

@@ -3,9 +3,11 @@
 //! whatever is already there (the RSM's spot-light VALs). Rust twin:
 //! `twin::rgbd::rgbd_vals`, whose module docs state the rules.
 //!
-//! Two dispatches, one thread per grid cell: `filter_grid` (bilateral depth at each cell's
-//! centre pixel into `rgbd.grid_depth`), then `main` (position, normal from the neighbouring
-//! cells, footprint area, flux; `atomicAdd` append).
+//! Three dispatches: `filter_grid` (one thread per grid cell: bilateral depth at each cell's
+//! centre pixel into `rgbd.grid_depth`), `main` (one thread per cell: position, normal from the
+//! neighbouring cells, footprint area, flux, into the cell's slot of `rgbd.candidates`), then
+//! `compact` (one workgroup, `compact_vals.wgsl`: the cells' VALs appended in the twin's cell
+//! order, so that a frame's VALs are the same from run to run, order included).
 
 use crate::gpu::pass::{Entry, Kernel, PassDesc, Res, buffer, module_from_source, read, read_write};
 use crate::gpu::raw::RawVal;
@@ -21,13 +23,19 @@ use glam::{Mat4, UVec2};
 
 pub const WGSL: &str = include_str!("rgbd.wgsl");
 
-/// The pass's own WGSL: its constants from Rust, then `rgbd.wgsl`.
+/// The in-order append of candidate VALs (`compact_vals.wgsl`).
+pub const COMPACT_WGSL: &str = include_str!("compact_vals.wgsl");
+
+/// Invocations of `compact`'s one workgroup (`COMPACT_THREADS` in `compact_vals.wgsl`).
+const COMPACT_THREADS: u32 = 256;
+
+/// The pass's own WGSL: its constants from Rust, then `rgbd.wgsl` and `compact_vals.wgsl`.
 pub fn body() -> String {
-    Wgsl::new().f32("MIN_FOOTPRINT_COSINE", MIN_FOOTPRINT_COSINE).include(WGSL).finish()
+    Wgsl::new().f32("MIN_FOOTPRINT_COSINE", MIN_FOOTPRINT_COSINE).include(WGSL).include(COMPACT_WGSL).finish()
 }
 
-/// One invocation per grid cell: `filter_grid` takes the first three bindings, `main` all but
-/// the depth image (it reads the filtered `grid_depth`).
+/// `filter_grid` takes the first three bindings; `main` the frame and the filtered
+/// `grid_depth`, writing `candidates`; `compact` the candidates and the VALs.
 pub const PASS: PassDesc = PassDesc {
     label: "rgbd",
     bindings: &[
@@ -37,8 +45,13 @@ pub const PASS: PassDesc = PassDesc {
         read("color"),
         read_write("vals"),
         read_write("val_count"),
+        read_write("candidates"),
     ],
-    entries: &[Entry::first("filter_grid", 3), Entry { name: "main", bindings: 6, except: &["depth"] }],
+    entries: &[
+        Entry::first("filter_grid", 3),
+        Entry { name: "main", bindings: 7, except: &["depth", "vals", "val_count"] },
+        Entry { name: "compact", bindings: 7, except: &["params", "depth", "grid_depth", "color"] },
+    ],
     workgroup: crate::gpu::shader::IMAGE_TILE,
     default_source: |textured| PASS.source(&body(), textured),
 };
@@ -77,14 +90,16 @@ impl RawRgbdParams {
 pub struct RgbdVals {
     filter: Kernel,
     append: Kernel,
+    compact: Kernel,
     intrinsics: Intrinsics,
     settings: RgbdSettings,
     grid: UVec2,
     params: wgpu::Buffer,
     depth: wgpu::Buffer,
     color: wgpu::Buffer,
-    grid_depth: wgpu::Buffer,
+    candidates: wgpu::Buffer,
     filter_group: wgpu::BindGroup,
+    append_group: wgpu::BindGroup,
 }
 
 impl RgbdVals {
@@ -94,6 +109,8 @@ impl RgbdVals {
         let module = module_from_source(gpu, PASS.label, PASS.source(&body(), scene.textured()))?;
         let filter = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("filter_grid"), &[], PASS.workgroup)?;
         let append = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("main"), &[], PASS.workgroup)?;
+        let compact_workgroup = [COMPACT_THREADS, 1, 1];
+        let compact = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("compact"), &[], compact_workgroup)?;
         let pixels = intrinsics.width as usize * intrinsics.height as usize;
         let grid = grid_size(&intrinsics, settings);
         let params = RawRgbdParams::new(&intrinsics, settings, &glam::Affine3A::IDENTITY);
@@ -101,19 +118,31 @@ impl RgbdVals {
         let depth = gpu.storage_buffer_sized::<f32>("rgbd.depth", pixels)?;
         let color = gpu.storage_buffer_sized::<u32>("rgbd.color", pixels)?;
         let grid_depth = gpu.storage_buffer_sized::<f32>("rgbd.grid_depth", (grid.x * grid.y) as usize)?;
+        let candidates = gpu.storage_buffer_sized::<RawVal>("rgbd.candidates", (grid.x * grid.y).max(1) as usize)?;
         let filter_group =
             filter.bind(gpu, &[buffer("params", &params), buffer("depth", &depth), buffer("grid_depth", &grid_depth)]);
+        let append_group = append.bind(
+            gpu,
+            &[
+                buffer("params", &params),
+                buffer("grid_depth", &grid_depth),
+                buffer("color", &color),
+                buffer("candidates", &candidates),
+            ],
+        );
         Ok(Self {
             filter,
             append,
+            compact,
             intrinsics,
             settings: *settings,
             grid,
             params,
             depth,
             color,
-            grid_depth,
+            candidates,
             filter_group,
+            append_group,
         })
     }
 
@@ -168,27 +197,18 @@ impl RgbdVals {
         let stride = std::mem::size_of::<RawVal>() as u64;
         let capacity = (capacity as u64).min(vals.size() / stride);
         let cells = [self.grid.x, self.grid.y, 1];
-        let writes = span.as_ref().map(Span::compute);
         if capacity == 0 {
             // Nothing can be appended (and an empty binding is not allowed): the filter alone
             // carries the span.
-            self.filter.dispatch(encoder, &self.filter_group, scene, cells, writes);
+            self.filter.dispatch(encoder, &self.filter_group, scene, cells, span.as_ref().map(Span::compute));
             return;
         }
-        let (first, second) = match writes {
-            Some(w) => (
-                Some(wgpu::ComputePassTimestampWrites { end_of_pass_write_index: None, ..w.clone() }),
-                Some(wgpu::ComputePassTimestampWrites { beginning_of_pass_write_index: None, ..w }),
-            ),
-            None => (None, None),
-        };
-        self.filter.dispatch(encoder, &self.filter_group, scene, cells, first);
-        let group = self.append.bind(
+        let part = |i| span.as_ref().and_then(|s| s.compute_part(i, 3));
+        self.filter.dispatch(encoder, &self.filter_group, scene, cells, part(0));
+        self.append.dispatch(encoder, &self.append_group, scene, cells, part(1));
+        let group = self.compact.bind(
             gpu,
             &[
-                buffer("params", &self.params),
-                buffer("grid_depth", &self.grid_depth),
-                buffer("color", &self.color),
                 Res {
                     name: "vals",
                     resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -198,9 +218,10 @@ impl RgbdVals {
                     }),
                 },
                 buffer("val_count", val_count),
+                buffer("candidates", &self.candidates),
             ],
         );
-        self.append.dispatch(encoder, &group, scene, cells, second);
+        self.compact.dispatch(encoder, &group, scene, [COMPACT_THREADS, 1, 1], part(2));
     }
 }
 

@@ -1,6 +1,7 @@
 // RGB-D frame to VALs (docs/design.md §2 "RGB-D frames"), two dispatches over the grid of
 // `grid_step`-pixel cells: `filter_grid` writes each cell's bilateral-filtered depth (0 = no
-// VAL), then `main` turns every cell with depth into a VAL and appends it to `vals`. The rules
+// VAL), then `main` turns every cell with depth into a candidate VAL, and `compact`
+// (`compact_vals.wgsl`) appends them to `vals` in the cells' order. The rules
 // (grid, filter, normals, footprint area, colour) are stated once, in the Rust twins of
 // `src/twin/rgbd.rs`, whose functions have these names and argument order; the images
 // (`depth`, `color`, `grid_depth`) are read from the bindings here instead of passed in, and
@@ -54,6 +55,9 @@ struct CellVal {
 // Bound with exactly the caller's capacity, so `arrayLength(&vals)` is the capacity.
 @group(0) @binding(4) var<storage, read_write> vals: array<Val>;
 @group(0) @binding(5) var<storage, read_write> val_count: atomic<u32>;
+// One candidate per grid cell, row-major, written by `main` (area -1: none) and appended in
+// that order by `compact` (`compact_vals.wgsl`).
+@group(0) @binding(6) var<storage, read_write> candidates: array<Val>;
 
 fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
     return select(pow((c + 0.055) / 1.055, vec3<f32>(2.4)), c / 12.92, c <= vec3<f32>(0.04045));
@@ -261,15 +265,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let cell = grid_cell_val(params.intrinsics, params.camera_to_world, params.settings, id.xy);
+    var val = cell.val;
     if !cell.valid {
-        return;
+        val.area = -1.0;
     }
-    // Append; a VAL past the capacity is dropped and its slot given back, so the count ends at
-    // min(count + appended, capacity) and never names an unwritten VAL.
-    let index = atomicAdd(&val_count, 1u);
-    if index < arrayLength(&vals) {
-        vals[index] = cell.val;
-    } else {
-        atomicSub(&val_count, 1u);
-    }
+    candidates[id.y * g.x + id.x] = val;
 }
