@@ -7,6 +7,7 @@ mod bench;
 mod bounce;
 mod cli;
 mod clusters;
+mod compact;
 mod docs;
 mod fake_backend;
 mod frame;

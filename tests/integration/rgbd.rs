@@ -2,9 +2,9 @@
 //! "RGB-D frames") on a small synthetic frame, and its append contract: after what is already
 //! in the VAL buffer, never past the capacity.
 //!
-//! The GPU appends in whatever order its threads reach the atomic counter, so VALs are matched
-//! by grid cell: each GPU VAL is projected back into the camera, which lands on its cell's
-//! centre pixel (to ~1e-4 px), and compared with the twin's VAL of that cell.
+//! Each GPU VAL is matched to its grid cell: projected back into the camera, it lands on its
+//! cell's centre pixel (to ~1e-4 px), and is compared with the twin's VAL of that cell; the
+//! cells come in the twin's (row-major) order.
 //!
 //! Tolerances: both sides run the same f32 operations except `exp` (filter weights), `pow`
 //! (sRGB), `sqrt` and possibly fused multiply-adds, which lavapipe evaluates within a few ulp.

@@ -13,7 +13,8 @@
 //! The VALs are the same as without the cull: what it drops makes no fragment in the view, or
 //! (beyond the range) only texels whose VAL has no flux, and those are never appended.
 
-use crate::gpu::pass::{Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
+use super::compact::{self, Compact};
+use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write, texture, view};
 use crate::gpu::raster::cull::TriangleChunks;
 use crate::gpu::raster::{self, Hit, begin_visibility_pass};
 use crate::gpu::scene::{GpuScene, depth_range_around};
@@ -36,18 +37,29 @@ pub const VIEW_WGSL: &str = include_str!("light_rsms_view.wgsl");
 pub const RASTER_STAGE: &str = "lights_rsm_raster";
 pub const VALS_STAGE: &str = "lights_rsm_vals";
 
-/// One invocation per texel of every view; `vals` appends stop at its capacity.
+/// `main`: one invocation per texel of every view, writing the texel's candidate; `compact`
+/// appends the candidates to `vals` (stopping at its capacity) after the `val_count` already
+/// there.
 pub const PASS: PassDesc = PassDesc {
     label: VALS_STAGE,
-    bindings: &[texture("atlas"), read("rsm_views"), read_write("vals"), read_write("val_count")],
-    entries: &[Entry::first("main", 4)],
+    bindings: &[
+        texture("atlas"),
+        read("rsm_views"),
+        read_write("vals"),
+        read_write("val_count"),
+        read_write("candidates"),
+    ],
+    entries: &[
+        Entry { name: "main", bindings: 5, except: &["vals", "val_count"] },
+        Entry { name: "compact", bindings: 5, except: &["atlas", "rsm_views"] },
+    ],
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| PASS.source(&body(), textured),
 };
 
 /// The VAL pass's WGSL after the shader prelude.
 fn body() -> String {
-    Wgsl::new().include(VIEW_WGSL).include(WGSL).finish()
+    Wgsl::new().include(VIEW_WGSL).include(WGSL).include(compact::WGSL).finish()
 }
 
 /// The raster's complete WGSL (a render pipeline: vertex and fragment stages).
@@ -124,7 +136,8 @@ pub struct LightRsms {
     rsm_views: wgpu::Buffer,
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
-    vals: Kernels,
+    vals: Kernel,
+    compact: Compact,
     /// Whether each view draws only what its cull keeps (on unless a test or benchmark turns it
     /// off to compare).
     culling: bool,
@@ -187,6 +200,7 @@ impl LightRsms {
                 raster::scene_raster_pipeline(gpu, RASTER_STAGE, &module, &layout, &scene.layout, &[Some(target)]);
             (layout, pipeline)
         })?;
+        let vals_module = module_from_source(gpu, VALS_STAGE, PASS.source(&body(), scene.textured()))?;
         Ok(Some(Self {
             resolutions,
             views,
@@ -198,7 +212,8 @@ impl LightRsms {
             rsm_views,
             layout,
             pipeline,
-            vals: Kernels::lobes(gpu, scene, &PASS, &body(), false)?,
+            vals: Kernel::build(gpu, scene, &PASS, &vals_module, PASS.entry("main"), &[], PASS.workgroup)?,
+            compact: Compact::new(gpu, scene, &PASS, &vals_module, texels)?,
             culling: true,
         }))
     }
@@ -295,13 +310,26 @@ impl Technique for LightRsms {
                 }
             }
         })?;
-        let resources = [
-            view("atlas", &self.atlas_view),
-            buffer("rsm_views", &self.rsm_views),
-            buffer("vals", &frame.vals.buffer),
-            buffer("val_count", &frame.vals.count),
-        ];
-        rec.stage(VALS_STAGE, |e, s| self.vals.run(gpu, e, scene, &resources, [self.texels, 1, 1], s))
+        rec.stage(VALS_STAGE, |e, s| {
+            let group = self.vals.bind(
+                gpu,
+                &[
+                    view("atlas", &self.atlas_view),
+                    buffer("rsm_views", &self.rsm_views),
+                    buffer("candidates", &self.compact.candidates),
+                ],
+            );
+            let parts = 1 + self.compact.parts();
+            self.vals.dispatch(
+                e,
+                &group,
+                scene,
+                [self.texels, 1, 1],
+                s.as_ref().and_then(|s| s.compute_part(0, parts)),
+            );
+            let vals = (buffer("vals", &frame.vals.buffer), &frame.vals.count);
+            self.compact.record(gpu, e, scene, vals, s.map(|s| s.share(1, parts)));
+        })
     }
 }
 

@@ -1,13 +1,16 @@
 // The lights' RSMs to VALs (docs/design.md §2, docs/measurements/many-lights.md): one invocation per
 // texel of every view (the views' texels numbered one after the other, `first_texel`); a texel
 // that sees a surface becomes a Lambertian disc VAL re-emitting the diffuse part of the flux
-// its light sends into the texel's solid angle. Texels with no flux are not appended. Rust
-// twin: `twin::light_rsms::view_texel_val`.
+// its light sends into the texel's solid angle: a candidate in the texel's slot, which
+// `compact` (`compact_vals.wgsl`) appends in the texels' order. Texels with no flux are not
+// appended. Rust twin: `twin::light_rsms::view_texel_val`.
 
 @group(0) @binding(0) var atlas: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read> rsm_views: array<RsmView>;
 @group(0) @binding(2) var<storage, read_write> vals: array<Val>;
 @group(0) @binding(3) var<storage, read_write> val_count: atomic<u32>;
+// One candidate per texel of every view, in the flat numbering (area -1: none).
+@group(0) @binding(4) var<storage, read_write> candidates: array<Val>;
 
 // `twin::light_rsms::view_texel_solid_angle`: (solid angle in sr, cosine off the axis).
 fn view_texel_solid_angle(ndc: vec2<f32>, view: RsmView) -> vec2<f32> {
@@ -57,17 +60,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let texel = vec2<u32>(local % r, local / r);
     let hit = decode_visibility(textureLoad(atlas, vec2<i32>(view.origin + texel), 0));
-    if !hit.covered {
-        return;
-    }
-    let s = surface_at(hit.triangle, hit.barycentrics);
-    let val = view_texel_val(rsm_texel_ndc(texel.x, texel.y, r), view, s.position, s.normal, s.material.diffuse);
-    if max(val.flux.x, max(val.flux.y, val.flux.z)) > 0.0 {
-        // Appends after whatever an earlier source wrote; the count may pass the capacity,
-        // which every reader clamps (`live_val_count`).
-        let index = atomicAdd(&val_count, 1u);
-        if index < arrayLength(&vals) {
-            vals[index] = val;
+    var val = Val(vec3<f32>(0.0), -1.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    if hit.covered {
+        let s = surface_at(hit.triangle, hit.barycentrics);
+        let lit = view_texel_val(rsm_texel_ndc(texel.x, texel.y, r), view, s.position, s.normal, s.material.diffuse);
+        if max(lit.flux.x, max(lit.flux.y, lit.flux.z)) > 0.0 {
+            val = lit;
         }
     }
+    candidates[i] = val;
 }

@@ -3,6 +3,7 @@
 //! frame becomes VALs.
 
 pub mod bounce;
+pub mod compact;
 pub mod direct;
 pub mod light_rsms;
 pub mod many;

@@ -9,6 +9,7 @@
 //! `compact` (one workgroup, `compact_vals.wgsl`: the cells' VALs appended in the twin's cell
 //! order, so that a frame's VALs are the same from run to run, order included).
 
+use super::compact::{self, Compact};
 use crate::gpu::pass::{Entry, Kernel, PassDesc, Res, buffer, module_from_source, read, read_write};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
@@ -23,15 +24,9 @@ use glam::{Mat4, UVec2};
 
 pub const WGSL: &str = include_str!("rgbd.wgsl");
 
-/// The in-order append of candidate VALs (`compact_vals.wgsl`).
-pub const COMPACT_WGSL: &str = include_str!("compact_vals.wgsl");
-
-/// Invocations of `compact`'s one workgroup (`COMPACT_THREADS` in `compact_vals.wgsl`).
-const COMPACT_THREADS: u32 = 256;
-
 /// The pass's own WGSL: its constants from Rust, then `rgbd.wgsl` and `compact_vals.wgsl`.
 pub fn body() -> String {
-    Wgsl::new().f32("MIN_FOOTPRINT_COSINE", MIN_FOOTPRINT_COSINE).include(WGSL).include(COMPACT_WGSL).finish()
+    Wgsl::new().f32("MIN_FOOTPRINT_COSINE", MIN_FOOTPRINT_COSINE).include(WGSL).include(compact::WGSL).finish()
 }
 
 /// `filter_grid` takes the first three bindings; `main` the frame and the filtered
@@ -90,14 +85,13 @@ impl RawRgbdParams {
 pub struct RgbdVals {
     filter: Kernel,
     append: Kernel,
-    compact: Kernel,
+    compact: Compact,
     intrinsics: Intrinsics,
     settings: RgbdSettings,
     grid: UVec2,
     params: wgpu::Buffer,
     depth: wgpu::Buffer,
     color: wgpu::Buffer,
-    candidates: wgpu::Buffer,
     filter_group: wgpu::BindGroup,
     append_group: wgpu::BindGroup,
 }
@@ -109,8 +103,6 @@ impl RgbdVals {
         let module = module_from_source(gpu, PASS.label, PASS.source(&body(), scene.textured()))?;
         let filter = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("filter_grid"), &[], PASS.workgroup)?;
         let append = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("main"), &[], PASS.workgroup)?;
-        let compact_workgroup = [COMPACT_THREADS, 1, 1];
-        let compact = Kernel::build(gpu, scene, &PASS, &module, PASS.entry("compact"), &[], compact_workgroup)?;
         let pixels = intrinsics.width as usize * intrinsics.height as usize;
         let grid = grid_size(&intrinsics, settings);
         let params = RawRgbdParams::new(&intrinsics, settings, &glam::Affine3A::IDENTITY);
@@ -118,7 +110,7 @@ impl RgbdVals {
         let depth = gpu.storage_buffer_sized::<f32>("rgbd.depth", pixels)?;
         let color = gpu.storage_buffer_sized::<u32>("rgbd.color", pixels)?;
         let grid_depth = gpu.storage_buffer_sized::<f32>("rgbd.grid_depth", (grid.x * grid.y) as usize)?;
-        let candidates = gpu.storage_buffer_sized::<RawVal>("rgbd.candidates", (grid.x * grid.y).max(1) as usize)?;
+        let compact = Compact::new(gpu, scene, &PASS, &module, grid.x * grid.y)?;
         let filter_group =
             filter.bind(gpu, &[buffer("params", &params), buffer("depth", &depth), buffer("grid_depth", &grid_depth)]);
         let append_group = append.bind(
@@ -127,7 +119,7 @@ impl RgbdVals {
                 buffer("params", &params),
                 buffer("grid_depth", &grid_depth),
                 buffer("color", &color),
-                buffer("candidates", &candidates),
+                buffer("candidates", &compact.candidates),
             ],
         );
         Ok(Self {
@@ -140,7 +132,6 @@ impl RgbdVals {
             params,
             depth,
             color,
-            candidates,
             filter_group,
             append_group,
         })
@@ -203,25 +194,19 @@ impl RgbdVals {
             self.filter.dispatch(encoder, &self.filter_group, scene, cells, span.as_ref().map(Span::compute));
             return;
         }
-        let part = |i| span.as_ref().and_then(|s| s.compute_part(i, 3));
+        let parts = 2 + self.compact.parts();
+        let part = |i| span.as_ref().and_then(|s| s.compute_part(i, parts));
         self.filter.dispatch(encoder, &self.filter_group, scene, cells, part(0));
         self.append.dispatch(encoder, &self.append_group, scene, cells, part(1));
-        let group = self.compact.bind(
-            gpu,
-            &[
-                Res {
-                    name: "vals",
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: vals,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(capacity * stride),
-                    }),
-                },
-                buffer("val_count", val_count),
-                buffer("candidates", &self.candidates),
-            ],
-        );
-        self.compact.dispatch(encoder, &group, scene, [COMPACT_THREADS, 1, 1], part(2));
+        let vals = Res {
+            name: "vals",
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: vals,
+                offset: 0,
+                size: wgpu::BufferSize::new(capacity * stride),
+            }),
+        };
+        self.compact.record(gpu, encoder, scene, (vals, val_count), span.map(|s| s.share(2, parts)));
     }
 }
 

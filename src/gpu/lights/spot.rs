@@ -3,8 +3,9 @@
 //! light-distance shadow map; [`DirectLight`] shades the camera's pixels with the light through
 //! that shadow map.
 
+use super::compact::Compact;
 use super::{direct, rsm};
-use crate::gpu::pass::{Kernels, buffer, view};
+use crate::gpu::pass::{Kernel, Kernels, buffer, module_from_source, view};
 use crate::gpu::raster::{Visibility, VisibilityTarget};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::technique::{Frame, Technique};
@@ -24,7 +25,8 @@ pub struct SpotVals {
     /// RSM texels per side.
     pub resolution: u32,
     raster: Visibility,
-    rsm: Kernels,
+    rsm: Kernel,
+    compact: Compact,
     /// The light's visibility buffer (the RSM).
     pub view: VisibilityTarget,
     /// Distance from the light to the surface each RSM texel sees: [`DirectLight`]'s shadow map.
@@ -40,11 +42,14 @@ impl SpotVals {
         resolution: u32,
     ) -> Result<Self, GpuError> {
         let r = resolution;
+        let module = module_from_source(gpu, rsm::PASS.label, rsm::PASS.source(&rsm::body(), scene.textured()))?;
+        let desc = &rsm::PASS;
         Ok(Self {
             light,
             resolution,
             raster: raster.clone(),
-            rsm: Kernels::lobes(gpu, scene, &rsm::PASS, rsm::WGSL, false)?,
+            rsm: Kernel::build(gpu, scene, desc, &module, desc.entry("main"), &[], desc.workgroup)?,
+            compact: Compact::new(gpu, scene, desc, &module, r * r)?,
             view: raster.target(gpu, "rsm", r, r),
             light_distance: gpu.storage_buffer_sized::<f32>("rsm.light_distance", (r * r) as usize)?,
         })
@@ -68,14 +73,21 @@ impl Technique for SpotVals {
         let scene = frame.scene;
         let light_to_clip = self.light_to_clip(scene);
         rec.stage(RSM_RASTER, |e, s| self.raster.record(gpu, e, scene, &self.view, light_to_clip, s))?;
-        let resources = [
-            view("visibility", &self.view.view),
-            buffer("vals", &frame.vals.buffer),
-            buffer("val_count", &frame.vals.count),
-            buffer("light_distance", &self.light_distance),
-        ];
         let texels = [self.resolution, self.resolution, 1];
-        rec.stage(RSM_VALS, |e, s| self.rsm.run(gpu, e, scene, &resources, texels, s))
+        rec.stage(RSM_VALS, |e, s| {
+            let group = self.rsm.bind(
+                gpu,
+                &[
+                    view("visibility", &self.view.view),
+                    buffer("light_distance", &self.light_distance),
+                    buffer("candidates", &self.compact.candidates),
+                ],
+            );
+            let parts = 1 + self.compact.parts();
+            self.rsm.dispatch(e, &group, scene, texels, s.as_ref().and_then(|s| s.compute_part(0, parts)));
+            let vals = (buffer("vals", &frame.vals.buffer), &frame.vals.count);
+            self.compact.record(gpu, e, scene, vals, s.map(|s| s.share(1, parts)));
+        })
     }
 }
 
