@@ -83,7 +83,7 @@ fn main() -> anyhow::Result<()> {
     let hits = renderer.camera_view().expect("a frame was rendered").read(&gpu)?;
     let eye = renderer.view().eye();
     let start = Instant::now();
-    let exact = exact_image(&renderer.scene.flat, &hits, width, height, eye, &scene.lights);
+    let exact = exact_image(&renderer.scene.flat, &hits, (width, height), eye, &scene.lights);
     let exact_s = start.elapsed().as_secs_f64();
     let exposure = exact.auto_exposure();
     let save = |name: &str, image: &LinearImage| -> anyhow::Result<()> {

@@ -3,8 +3,9 @@
 //! direct radiance, the dual-paraboloid shadow-map lookup per group, and the reference: a
 //! shadow ray per receiver and light through the scene's BVH.
 
+use super::above_surface;
 use super::bvh::TraceBvh;
-use super::exact_cpu::RAY_OFFSET;
+use super::exact_cpu::{RAY_OFFSET, Receiver};
 use super::flat::{FlatScene, Hit};
 use super::rsm::direct_radiance;
 use crate::gpu::visibility::clusters::twin::{Cluster, DepthTile, ShadowReceiver, cluster_visibility};
@@ -160,17 +161,29 @@ pub fn light_radiance(p: Vec3, n: Vec3, surface: &Material, eye: Vec3, light: &L
     direct_radiance(p, n, surface, eye, &as_spot(light)) * window
 }
 
-/// The reference: every light through the Phong BRDF, each shadowed by one ray from
-/// `p + n RAY_OFFSET` to the light (the segment's end at the light itself).
-pub fn direct_exact(bvh: &TraceBvh, p: Vec3, n: Vec3, surface: &Material, eye: Vec3, lights: &[Light]) -> Vec3 {
-    let origin = p + n * RAY_OFFSET;
+/// The reference: every light through the Phong BRDF at receiver `r` (normals facing the viewer,
+/// [`Receiver::sided`]), none from below its geometric surface ([`above_surface`]), each shadowed
+/// by one ray from `r.position + r.geometric RAY_OFFSET` to the light (the segment's end at the
+/// light itself; docs/design.md §3, shading and geometric normals).
+pub fn direct_exact(bvh: &TraceBvh, r: &Receiver, eye: Vec3, lights: &[Light]) -> Vec3 {
+    let origin = r.position + r.geometric * RAY_OFFSET;
     lights
         .iter()
         .map(|light| {
-            let l = light_radiance(p, n, surface, eye, light);
+            let l = unshadowed_radiance(r, eye, light);
             if l == Vec3::ZERO || bvh.segment_blocked(origin, light.position()) { Vec3::ZERO } else { l }
         })
         .sum()
+}
+
+/// [`light_radiance`] at receiver `r`'s shading normal, 0 for a light below its geometric
+/// surface: one light's direct radiance before its shadow.
+pub fn unshadowed_radiance(r: &Receiver, eye: Vec3, light: &Light) -> Vec3 {
+    let above = above_surface(r.geometric, light.position() - r.position);
+    if above == 0.0 {
+        return Vec3::ZERO;
+    }
+    light_radiance(r.position, r.normal, &r.surface, eye, light)
 }
 
 /// The map (of a group's two) that sees a receiver `offset` from its centre: 0 (+[`AXIS`]) when
@@ -197,13 +210,13 @@ pub fn group_visibility(
     cluster_visibility(&tile, &clusters[m], &ShadowReceiver { offset, normal: n }, soft)
 }
 
-/// The shadow-mapped direct radiance: every light through the Phong BRDF, its visibility its
-/// group's ([`group_visibility`]: `soft` over the group's maps `maps`, `2k` and `2k + 1`).
+/// The shadow-mapped direct radiance at receiver `r`: every light through the Phong BRDF, none
+/// from below the geometric surface ([`unshadowed_radiance`]), its visibility its group's
+/// ([`group_visibility`] at the geometric normal: `soft` over the group's maps `maps`, `2k` and
+/// `2k + 1`).
 #[allow(clippy::too_many_arguments)]
 pub fn direct_shadow_mapped(
-    p: Vec3,
-    n: Vec3,
-    surface: &Material,
+    r: &Receiver,
     eye: Vec3,
     lights: &[Light],
     groups: &LightGroups,
@@ -213,32 +226,33 @@ pub fn direct_shadow_mapped(
 ) -> Vec3 {
     let positions: Vec<Vec3> = lights.iter().map(Light::position).collect();
     let clusters = groups.maps(&positions);
-    let visibility: Vec<f32> =
-        (0..groups.len()).map(|k| group_visibility(maps, resolution, &clusters, k, p, n, soft)).collect();
+    let visibility: Vec<f32> = (0..groups.len())
+        .map(|k| group_visibility(maps, resolution, &clusters, k, r.position, r.geometric, soft))
+        .collect();
     lights
         .iter()
         .enumerate()
-        .map(|(i, light)| light_radiance(p, n, surface, eye, light) * visibility[groups.group_of_light[i] as usize])
+        .map(|(i, light)| unshadowed_radiance(r, eye, light) * visibility[groups.group_of_light[i] as usize])
         .sum()
 }
 
-/// The direct radiance each pixel of a camera view sees (`hits`, row-major, from
-/// `VisibilityTarget::read`), `shade` giving it from the surface (position, normal, material);
-/// alpha is the coverage. Pixels in parallel (rayon).
+/// The direct radiance each pixel of a camera view from `eye` sees (`hits`, row-major, from
+/// `VisibilityTarget::read`), `shade` giving it from the pixel's receiver
+/// (`FlatScene::receiver_at`: position, both normals facing the viewer, material); alpha is the
+/// coverage. Pixels in parallel (rayon).
 pub fn image_of(
     flat: &FlatScene,
     hits: &[Option<Hit>],
-    width: u32,
-    height: u32,
-    shade: impl Fn(Vec3, Vec3, &Material) -> Vec3 + Sync,
+    (width, height): (u32, u32),
+    eye: Vec3,
+    shade: impl Fn(&Receiver) -> Vec3 + Sync,
 ) -> LinearImage {
     let pixels = hits
         .par_iter()
         .map(|hit| match hit {
             None => [0.0; 4],
             Some(h) => {
-                let (p, n, m) = flat.surface_at(h.triangle, h.barycentrics);
-                let l = shade(p, n, &m);
+                let l = shade(&flat.receiver_at(h.triangle, h.barycentrics, eye));
                 [l.x, l.y, l.z, 1.0]
             }
         })
@@ -251,13 +265,12 @@ pub fn image_of(
 pub fn exact_image(
     flat: &FlatScene,
     hits: &[Option<Hit>],
-    width: u32,
-    height: u32,
+    size: (u32, u32),
     eye: Vec3,
     lights: &[Light],
 ) -> LinearImage {
     let bvh = flat.trace_bvh();
-    image_of(flat, hits, width, height, |p, n, m| direct_exact(&bvh, p, n, m, eye, lights))
+    image_of(flat, hits, size, eye, |r| direct_exact(&bvh, r, eye, lights))
 }
 
 #[cfg(test)]
@@ -370,10 +383,34 @@ mod tests {
         });
         let m = Material { diffuse: Vec3::ONE, specular: Vec3::ZERO, exponent: 1.0, diffuse_texture: None };
         let eye = Vec3::new(0.0, 1.0, 3.0);
+        let r = Receiver::new(Vec3::ZERO, Vec3::Y, m, eye);
         let blocked = TraceBvh::build(&quad(1.0, -1.0), &triangles);
-        assert_eq!(direct_exact(&blocked, Vec3::ZERO, Vec3::Y, &m, eye, &[light]), Vec3::ZERO);
+        assert_eq!(direct_exact(&blocked, &r, eye, &[light]), Vec3::ZERO);
         let aside = TraceBvh::build(&quad(1.0, 5.0), &triangles);
-        let lit = direct_exact(&aside, Vec3::ZERO, Vec3::Y, &m, eye, &[light]);
+        let lit = direct_exact(&aside, &r, eye, &[light]);
         assert!((lit - Vec3::splat(0.25 / PI)).abs().max_element() < 1e-6, "{lit}");
+    }
+
+    /// A light below the geometric surface lights nothing, though the shading normal (tilted 45°
+    /// towards it) faces it; raised above the surface it lights the receiver through the shading
+    /// normal's cosine.
+    #[test]
+    fn a_light_below_the_geometric_surface_is_rejected() {
+        let m = Material { diffuse: Vec3::ONE, specular: Vec3::ZERO, exponent: 1.0, diffuse_texture: None };
+        let eye = Vec3::new(0.0, 3.0, 0.5);
+        let r = Receiver::sided(Vec3::ZERO, Vec3::new(1.0, 1.0, 0.0).normalize(), Vec3::Y, m, eye);
+        let point = |y: f32| {
+            Light::Point(crate::scene::PointLight {
+                position: Vec3::new(2.0, y, 0.0),
+                intensity: Vec3::ONE,
+                range: None,
+            })
+        };
+        assert_eq!(unshadowed_radiance(&r, eye, &point(-0.1)), Vec3::ZERO);
+        let above = unshadowed_radiance(&r, eye, &point(0.1));
+        let expected = light_radiance(r.position, r.normal, &r.surface, eye, &point(0.1));
+        assert!(above.max_element() > 0.0 && above == expected, "{above} vs {expected}");
+        // Without the rule the shading normal alone would take the light from below.
+        assert!(light_radiance(r.position, r.normal, &r.surface, eye, &point(-0.1)).max_element() > 0.0);
     }
 }

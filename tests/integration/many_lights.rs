@@ -66,8 +66,8 @@ fn many_lights_match_cpu_twins_in_both_modes() {
         let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
         let eye = renderer.view().eye();
         let (groups, resolution, soft) = (&many.groups, many.map_resolution(), many.soft());
-        let twin = image_of(&renderer.scene.flat, &hits, SIDE, SIDE, |p, n, m| {
-            direct_shadow_mapped(p, n, m, eye, &scene.lights, groups, &maps, resolution, soft)
+        let twin = image_of(&renderer.scene.flat, &hits, (SIDE, SIDE), eye, |r| {
+            direct_shadow_mapped(r, eye, &scene.lights, groups, &maps, resolution, soft)
         });
         let peak = (0..twin.pixels.len()).map(|i| twin.rgb(i).max_element()).fold(0.0f32, f32::max);
         assert!(peak > 0.0, "the lights reach the image");
@@ -86,9 +86,9 @@ fn many_lights_match_cpu_twins_in_both_modes() {
         assert!(off * 50 <= covered, "{shadows:?}: {off} of {covered} pixels differ from the twin");
         // The shadows are there: the exact reference is darker than no shadows at all, and
         // the shadow maps are nearer the reference than no shadows.
-        let exact = exact_image(&renderer.scene.flat, &hits, SIDE, SIDE, eye, &scene.lights);
-        let unshadowed = image_of(&renderer.scene.flat, &hits, SIDE, SIDE, |p, n, m| {
-            scene.lights.iter().map(|l| relume::twin::many_lights::light_radiance(p, n, m, eye, l)).sum()
+        let exact = exact_image(&renderer.scene.flat, &hits, (SIDE, SIDE), eye, &scene.lights);
+        let unshadowed = image_of(&renderer.scene.flat, &hits, (SIDE, SIDE), eye, |r| {
+            scene.lights.iter().map(|l| relume::twin::many_lights::unshadowed_radiance(r, eye, l)).sum()
         });
         let (e_maps, e_none) = (relative_rmse(&image, &exact), relative_rmse(&unshadowed, &exact));
         // Inside the box the bunny and the two boxes shadow the lights: 0.0495 without shadows

@@ -72,16 +72,20 @@ fn shade_lights(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         return;
     }
-    let s = surface_at(hit.triangle, hit.barycentrics);
+    // Each light's cosine is the shading normal's; a light below the geometric surface is
+    // rejected, and the maps are looked up at the geometric normal (docs/design.md §3, shading
+    // and geometric normals), as the spot light's direct pass does.
+    let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
     var l = vec3<f32>(0.0);
     for (var g = 0u; g < GROUP_COUNT; g++) {
         let range = group_lights[g];
         var lg = vec3<f32>(0.0);
         for (var i = range.x; i < range.x + range.y; i++) {
-            lg += light_radiance(s.position, s.normal, s.material, frame.eye, lights[i]);
+            let above = above_surface(s.geometric, lights[i].position - s.position);
+            lg += light_radiance(s.position, s.normal, s.material, frame.eye, lights[i]) * above;
         }
         if max(lg.x, max(lg.y, lg.z)) > 0.0 {
-            l += lg * light_group_visibility(g, s.position, s.normal);
+            l += lg * light_group_visibility(g, s.position, s.geometric);
         }
     }
     if ADD_TO_DIRECT {
