@@ -153,9 +153,23 @@ async fn queue_reaches(server: &TestServer, depth: usize, within: Duration) -> b
     true
 }
 
+/// Waits up to `within` for the (one) worker to run a render.
+async fn gpu_runs(server: &TestServer, within: Duration) -> bool {
+    let worker = server.state.workers.get(0).expect("a worker");
+    let deadline = Instant::now() + within;
+    // Its load counts the renders waiting and running and the streams pinned (none here).
+    while worker.load().saturating_sub(worker.queue_depth()) != 1 {
+        if Instant::now() > deadline {
+            return false;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    true
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn renders_whose_clients_have_gone_leave_the_queue() {
-    const RENDER_MS: u64 = 2000;
+    const RENDER_MS: u64 = 3000;
     let server = fake_server(RENDER_MS, |c| {
         c.limits.max_client_queue = 2;
         c.limits.max_queue = 16;
@@ -163,14 +177,19 @@ async fn renders_whose_clients_have_gone_leave_the_queue() {
     .await;
     let id = server.create(&inline_scene()).await;
     let path = format!("/v1/scenes/{id}/render");
-    // Three renders from this client: one goes to the GPU, two wait (its max_client_queue);
-    // then the client goes away.
-    let mut gone = Vec::new();
-    for _ in 0..3 {
+    let send = || async {
         let mut socket = TcpStream::connect(server.addr).await.expect("connects");
         let request = format!("POST {path} HTTP/1.1\r\nHost: x\r\nContent-Length: 2\r\n\r\n{{}}");
         socket.write_all(request.as_bytes()).await.expect("sent");
-        gone.push(socket);
+        socket
+    };
+    // Three renders from this client: one goes to the GPU, then two wait (its max_client_queue;
+    // sent once the first runs, so that none is refused however late the GPU thread takes the
+    // first on a loaded machine); then the client goes away.
+    let mut gone = vec![send().await];
+    assert!(gpu_runs(&server, Duration::from_secs(5)).await, "the first render runs");
+    for _ in 0..2 {
+        gone.push(send().await);
     }
     assert!(queue_reaches(&server, 2, Duration::from_secs(5)).await, "two renders wait");
     drop(gone);
