@@ -277,14 +277,7 @@ pub fn second_bounce_exact(
     bvh: &crate::twin::bvh::TraceBvh,
 ) -> Vec<crate::twin::Val> {
     use crate::twin::bounce as twin;
-    let surfaces: Vec<twin::BounceSurface> = bounce
-        .points
-        .iter()
-        .map(|p| {
-            let (position, normal, m) = flat.surface_at(p.triangle, p.barycentrics);
-            twin::BounceSurface { position, normal, albedo: m.diffuse, area: p.area }
-        })
-        .collect();
+    let surfaces: Vec<twin::BounceSurface> = bounce.points.iter().map(|p| twin::BounceSurface::at(flat, p)).collect();
     let candidates = twin::candidate_vals(&surfaces, vals, Some(bvh));
     twin::draw_vals(&candidates, bounce.settings.vals, bounce.drawn_area)
 }

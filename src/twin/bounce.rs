@@ -14,7 +14,7 @@
 
 use super::bvh::{ShadowTraversal, TraceBvh};
 use super::exact_cpu::RAY_OFFSET;
-use super::{Val, val_geometry};
+use super::{Val, val_geometry_sided};
 use crate::gpu::visibility::disks::twin::{Combine, Disc, light_sphere, visibility};
 use crate::gpu::visibility::ism::twin::{flux_picks, pcg_hash, val_weight};
 use glam::{Vec2, Vec3};
@@ -67,20 +67,37 @@ pub fn bounce_points(positions: &[Vec3], indices: &[u32], count: u32, seed: u64)
         .collect()
 }
 
-/// A bounce point on the surface this frame: position (m), unit normal, diffuse albedo and the
-/// area it stands for (m²).
+/// A bounce point on the surface this frame: position (m), unit shading normal, unit geometric
+/// normal (the face's, on the shading normal's side), diffuse albedo and the area it stands for
+/// (m²). It takes light through the shading normal's cosine and none from below its geometric
+/// surface (`twin::val_geometry_sided`; docs/design.md §3).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BounceSurface {
     pub position: Vec3,
     pub normal: Vec3,
+    pub geometric: Vec3,
     pub albedo: Vec3,
     pub area: f32,
+}
+
+impl BounceSurface {
+    /// Point `p` of `flat` as placed now (WGSL `bounce_surface`).
+    pub fn at(flat: &crate::twin::flat::FlatScene, p: &BouncePoint) -> Self {
+        let (position, normal, m) = flat.surface_at(p.triangle, p.barycentrics);
+        let geometric = flat.geometric_normal(p.triangle, normal);
+        BounceSurface { position, normal, geometric, albedo: m.diffuse, area: p.area }
+    }
+
+    /// VAL `v`'s geometry at the point (WGSL `val_geometry_sided`).
+    fn geometry(&self, v: &Val) -> super::ValGeometry {
+        val_geometry_sided(self.position, self.normal, self.geometric, v.position, v.normal, v.area)
+    }
 }
 
 /// Each point as a candidate VAL (WGSL `bounce_points.wgsl`): its irradiance from every VAL of
 /// `vals` that `bvh` (when given) lets through, re-emitted as a Lambertian disc of the point's
 /// area with flux `albedo * E * area`. Shadow rays run as the exact reference's, from
-/// `x + n RAY_OFFSET` to `l + n_l RAY_OFFSET`, and only for pairs with a non-zero term.
+/// `x + n_g RAY_OFFSET` to `l + n_l RAY_OFFSET`, and only for pairs with a non-zero term.
 pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&TraceBvh>) -> Vec<Val> {
     let targets: Vec<Vec3> = vals.iter().map(|v| v.position + v.normal * RAY_OFFSET).collect();
     points
@@ -92,7 +109,7 @@ pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&Trace
                 lit_targets.clear();
                 let mut e = Vec3::ZERO;
                 for (v, t) in vals.iter().zip(&targets) {
-                    let g = val_geometry(p.position, p.normal, v.position, v.normal, v.area);
+                    let g = p.geometry(v);
                     let term = v.flux * (g.weight * g.cos_receiver);
                     if bvh.is_none() {
                         e += term;
@@ -102,7 +119,7 @@ pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&Trace
                     }
                 }
                 if let Some(bvh) = bvh {
-                    let origin = p.position + p.normal * RAY_OFFSET;
+                    let origin = p.position + p.geometric * RAY_OFFSET;
                     bvh.shadow_rays(origin, lit_targets, ShadowTraversal::Single, blocked);
                     e = terms.iter().zip(blocked.iter()).filter(|(_, b)| !**b).map(|(t, _)| *t).sum();
                 }
@@ -112,11 +129,28 @@ pub fn candidate_vals(points: &[BounceSurface], vals: &[Val], bvh: Option<&Trace
         .collect()
 }
 
-/// Each point's gathered light (`twin::gather_point`: irradiance and the luminance-weighted
-/// moments of the VAL positions, as the gather weighs them) from every VAL of `vals`.
+/// Each point's gathered light from every VAL of `vals` (WGSL `bounce_points.wgsl`'s sums, kept
+/// by `store_moments`): irradiance and the luminance-weighted moments of the VAL positions, as
+/// the gather weighs them (`twin::gather_point`), at the point's two normals. No glossy lobe:
+/// the glossy fields are the diffuse ones.
 pub fn point_gathered(p: &BounceSurface, vals: &[Val]) -> super::Gathered {
-    // The glossy lobe (exponent, eye) does not enter the diffuse sums.
-    super::gather_point(p.position, p.normal, 1.0, p.position + p.normal, vals)
+    let (mut e, mut l, mut l2, mut w) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0f32);
+    for v in vals {
+        let geo = p.geometry(v);
+        let f = geo.weight * geo.cos_receiver;
+        e += v.flux * f;
+        let g = super::luminance(v.flux) * f + super::GATHER_EPSILON;
+        l += g * v.position;
+        l2 += g * v.position * v.position;
+        w += g;
+    }
+    super::Gathered {
+        irradiance: e,
+        diffuse_position: l / w,
+        diffuse_second_moment: l2 / w,
+        glossy_irradiance: e,
+        glossy_position: l / w,
+    }
 }
 
 /// Each point as a candidate VAL with `disks` visibility (WGSL `bounce_points.wgsl` with
@@ -162,7 +196,7 @@ pub fn grouped_candidate_vals(
                 .iter()
                 .zip(group_of_val)
                 .map(|(v, &g)| {
-                    let geo = val_geometry(p.position, p.normal, v.position, v.normal, v.area);
+                    let geo = p.geometry(v);
                     v.flux * (geo.weight * geo.cos_receiver * row[(g as usize).min(groups - 1)])
                 })
                 .sum();
@@ -262,6 +296,7 @@ mod tests {
         let point = |x: f32| BounceSurface {
             position: Vec3::new(x, 0.0, 0.0),
             normal: Vec3::Z,
+            geometric: Vec3::Z,
             albedo: Vec3::splat(0.5),
             area: 0.2,
         };
@@ -287,12 +322,41 @@ mod tests {
     #[test]
     fn candidates_see_the_vals_through_shadow_rays() {
         let light = Val { position: Vec3::new(0.0, 0.0, 2.0), normal: -Vec3::Z, area: 0.01, flux: Vec3::splat(4.0) };
-        let point = BounceSurface { position: Vec3::ZERO, normal: Vec3::Z, albedo: Vec3::splat(0.5), area: 0.2 };
+        let point = BounceSurface {
+            position: Vec3::ZERO,
+            normal: Vec3::Z,
+            geometric: Vec3::Z,
+            albedo: Vec3::splat(0.5),
+            area: 0.2,
+        };
         let plate = [Vec3::new(-1.0, -1.0, 1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(0.0, 1.0, 1.0)];
         let bvh = TraceBvh::build(&plate, &[[0, 1, 2]]);
         let open = candidate_vals(&[point], &[light], None)[0];
         let e = crate::twin::val_irradiance(point.position, point.normal, &light);
         assert!((open.flux - 0.5 * e * 0.2).abs().max_element() < 1e-7 && open.flux.x > 0.0);
         assert_eq!(candidate_vals(&[point], &[light], Some(&bvh))[0].flux, Vec3::ZERO);
+    }
+
+    /// A point whose shading normal is bent 45° toward a VAL just below its geometric surface
+    /// receives nothing from it (in its candidate and in its moments); raised above the
+    /// surface, the VAL lights it through the shading normal's cosine.
+    #[test]
+    fn a_bounce_point_takes_no_light_from_below_its_geometric_surface() {
+        let point = BounceSurface {
+            position: Vec3::ZERO,
+            normal: Vec3::new(1.0, 0.0, 1.0).normalize(),
+            geometric: Vec3::Z,
+            albedo: Vec3::splat(0.5),
+            area: 0.2,
+        };
+        let val =
+            |z: f32| Val { position: Vec3::new(2.0, 0.0, z), normal: -Vec3::X, area: 0.01, flux: Vec3::splat(4.0) };
+        assert_eq!(candidate_vals(&[point], &[val(-0.1)], None)[0].flux, Vec3::ZERO);
+        assert_eq!(point_gathered(&point, &[val(-0.1)]).irradiance, Vec3::ZERO);
+        let lit = candidate_vals(&[point], &[val(0.1)], None)[0].flux;
+        let e = crate::twin::val_irradiance(point.position, point.normal, &val(0.1));
+        assert!(lit.x > 0.0 && (lit - 0.5 * e * 0.2).abs().max_element() < 1e-7, "{lit} vs {}", 0.5 * e * 0.2);
+        // The shading normal alone would take the VAL below.
+        assert!(crate::twin::val_irradiance(point.position, point.normal, &val(-0.1)).x > 0.0);
     }
 }

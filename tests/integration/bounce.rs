@@ -12,13 +12,7 @@ use relume::twin::bounce::{self as twin, BounceSurface};
 
 fn surfaces(renderer: &Renderer) -> Vec<BounceSurface> {
     let b = renderer.second_bounce().expect("a second bounce");
-    b.points
-        .iter()
-        .map(|p| {
-            let (position, normal, m) = renderer.scene.flat.surface_at(p.triangle, p.barycentrics);
-            BounceSurface { position, normal, albedo: m.diffuse, area: p.area }
-        })
-        .collect()
+    b.points.iter().map(|p| BounceSurface::at(&renderer.scene.flat, p)).collect()
 }
 
 fn luminance_sum(vals: &[Val]) -> f32 {

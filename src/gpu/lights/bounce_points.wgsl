@@ -23,6 +23,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
     let s = bounce_surface_or_placeholder(index);
     let position = s.position;
     let normal = s.normal;
+    let geometric = s.geometric;
     let albedo = s.material.diffuse;
     var area = 0.0;
     if inside {
@@ -39,7 +40,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         let n = load_tile(base, local, end);
         for (var j = 0u; j < n; j++) {
             let val = tile[j];
-            let geo = val_geometry(position, normal, val.position, val.normal, val.area);
+            // The shading normal's cosine, none from below the geometric surface (docs/design.md §3).
+            let geo = val_geometry_sided(position, normal, geometric, val.position, val.normal, val.area);
             let f = geo.weight * geo.cos_receiver * val_visibility(index, base + j);
             e += val.flux * f;
             let g = luminance(val.flux) * f + GATHER_EPSILON;
