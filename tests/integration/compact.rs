@@ -55,7 +55,7 @@ fn append(slots: u32, before: u32, capacity: u32, span: u32) -> (u32, Vec<RawVal
         gpu.storage_buffer("test.vals", &vec![sentinel; capacity as usize], wgpu::BufferUsages::COPY_SRC).unwrap();
     let count = gpu.storage_buffer("test.val_count", &[before], wgpu::BufferUsages::COPY_SRC).unwrap();
     let mut encoder = gpu.device.create_command_encoder(&Default::default());
-    compact.record(&gpu, &mut encoder, &scene, (buffer("vals", &vals), &count), None);
+    compact.record_after(&gpu, &mut encoder, &scene, &[], (buffer("vals", &vals), &count), None);
     gpu.submit_and_wait(encoder).unwrap();
     let out = gpu.read_buffer::<RawVal>(&vals, capacity as usize).unwrap();
     (gpu.read_buffer::<u32>(&count, 1).unwrap()[0], out, compact.parts())

@@ -368,7 +368,7 @@ impl GpuPass {
         if receivers.is_empty() {
             return Ok((Vec::new(), 0));
         }
-        let (grouped, content) = match sums {
+        let (kernel, group) = match sums {
             Sums::Exact { vals, real_count } => {
                 self.upload(gpu, receivers, vals)?;
                 let params = RawDifferentialParams {
@@ -378,36 +378,37 @@ impl GpuPass {
                     _pad0: 0,
                 };
                 gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-                let group = self.kernel.bind(gpu, &self.resources(&self.params));
-                return self.rounds(gpu, scene, &self.kernel, &group, receivers.len());
+                (&self.kernel, self.kernel.bind(gpu, &self.resources(&self.params)))
             }
-            Sums::Fast { grouped, content } => (grouped, content),
+            Sums::Fast { grouped, content } => {
+                if self.fast.is_none() {
+                    self.fast = Some(build_kernel(gpu, scene, &FAST_PASS, &fast_body())?);
+                }
+                self.upload(gpu, receivers, &grouped.vals)?;
+                let slots = grouped.groups.len().max(1);
+                if self.groups.as_ref().is_none_or(|g| g.1 < slots) {
+                    let buffer = gpu.storage_buffer_sized::<RawValGroup>("differential.groups", slots)?;
+                    self.groups = Some((buffer, slots));
+                }
+                let groups = &self.groups.as_ref().expect("made above").0;
+                if !grouped.groups.is_empty() {
+                    let raw: Vec<RawValGroup> = grouped.groups.iter().map(RawValGroup::from).collect();
+                    gpu.queue.write_buffer(groups, 0, bytemuck::cast_slice(&raw));
+                }
+                let params = RawFastParams {
+                    receiver_count: receivers.len() as u32,
+                    group_count: grouped.groups.len() as u32,
+                    real_groups: grouped.real_groups as u32,
+                    _pad0: 0,
+                    content: content.centre.extend(content.radius).into(),
+                };
+                gpu.queue.write_buffer(&self.fast_params, 0, bytemuck::bytes_of(&params));
+                let kernel = self.fast.as_ref().expect("built above");
+                let mut resources = self.resources(&self.fast_params);
+                resources.push(buffer("groups", groups));
+                (kernel, kernel.bind(gpu, &resources))
+            }
         };
-        if self.fast.is_none() {
-            self.fast = Some(build_kernel(gpu, scene, &FAST_PASS, &fast_body())?);
-        }
-        self.upload(gpu, receivers, &grouped.vals)?;
-        let slots = grouped.groups.len().max(1);
-        if self.groups.as_ref().is_none_or(|g| g.1 < slots) {
-            self.groups = Some((gpu.storage_buffer_sized::<RawValGroup>("differential.groups", slots)?, slots));
-        }
-        let groups = &self.groups.as_ref().expect("made above").0;
-        if !grouped.groups.is_empty() {
-            let raw: Vec<RawValGroup> = grouped.groups.iter().map(RawValGroup::from).collect();
-            gpu.queue.write_buffer(groups, 0, bytemuck::cast_slice(&raw));
-        }
-        let params = RawFastParams {
-            receiver_count: receivers.len() as u32,
-            group_count: grouped.groups.len() as u32,
-            real_groups: grouped.real_groups as u32,
-            _pad0: 0,
-            content: content.centre.extend(content.radius).into(),
-        };
-        gpu.queue.write_buffer(&self.fast_params, 0, bytemuck::bytes_of(&params));
-        let kernel = self.fast.as_ref().expect("built above");
-        let mut resources = self.resources(&self.fast_params);
-        resources.push(buffer("groups", groups));
-        let group = kernel.bind(gpu, &resources);
         self.rounds(gpu, scene, kernel, &group, receivers.len())
     }
 

@@ -47,7 +47,8 @@ impl Compact {
         Self::with_span(gpu, scene, desc, module, slots, span)
     }
 
-    /// [`Compact::new`] appending `span` slots per dispatch (the tests' small spans).
+    /// [`Compact::new`] appending `span` slots per dispatch (the tests' small spans; `u32::MAX`:
+    /// all in one).
     pub fn with_span(
         gpu: &Gpu,
         scene: &GpuScene,
@@ -74,27 +75,33 @@ impl Compact {
         Ok(Self { kernels, candidates })
     }
 
-    /// How many dispatches [`Compact::record`] makes.
+    /// How many dispatches of its own [`Compact::record_after`] makes.
     pub fn parts(&self) -> usize {
         self.kernels.len()
     }
 
-    /// Append the candidates to `vals` (bound as its capacity) after `val_count`'s, timed by
-    /// `span` (or its share of a stage, [`Span::share`]).
-    pub fn record(
+    /// Record a VAL pass's stage: `before`, the pass's own dispatches in order (kernel, bind
+    /// group, invocations), which write the candidates, then their append to `vals` (bound as its
+    /// capacity) after `val_count`'s, all timed by `span` as one stage.
+    pub fn record_after(
         &self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
         scene: &GpuScene,
+        before: &[(&Kernel, &wgpu::BindGroup, [u32; 3])],
         (vals, val_count): (Res<'_>, &wgpu::Buffer),
         span: Option<Span<'_>>,
     ) {
+        let parts = before.len() + self.kernels.len();
+        let timestamps = |part| span.as_ref().and_then(|s| s.compute_part(part, parts));
+        for (part, (kernel, group, invocations)) in before.iter().enumerate() {
+            kernel.dispatch(encoder, group, scene, *invocations, timestamps(part));
+        }
         let resources = [vals, buffer("val_count", val_count), buffer("candidates", &self.candidates)];
-        for (part, kernel) in self.kernels.iter().enumerate() {
+        for (i, kernel) in self.kernels.iter().enumerate() {
             let group = kernel.bind(gpu, &resources);
-            let timestamps = span.as_ref().and_then(|s| s.compute_part(part, self.kernels.len()));
             // One workgroup.
-            kernel.dispatch(encoder, &group, scene, [1, 1, 1], timestamps);
+            kernel.dispatch(encoder, &group, scene, [1, 1, 1], timestamps(before.len() + i));
         }
     }
 }

@@ -137,6 +137,8 @@ pub struct LightRsms {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
     vals: Kernel,
+    /// `vals`' bindings: the atlas, the views and the candidates.
+    vals_group: wgpu::BindGroup,
     compact: Compact,
     /// Whether each view draws only what its cull keeps (on unless a test or benchmark turns it
     /// off to compare).
@@ -201,6 +203,12 @@ impl LightRsms {
             (layout, pipeline)
         })?;
         let vals_module = module_from_source(gpu, VALS_STAGE, PASS.source(&body(), scene.textured()))?;
+        let vals = Kernel::build(gpu, scene, &PASS, &vals_module, PASS.entry("main"), &[], PASS.workgroup)?;
+        let compact = Compact::new(gpu, scene, &PASS, &vals_module, texels)?;
+        let vals_group = vals.bind(
+            gpu,
+            &[view("atlas", &atlas_view), buffer("rsm_views", &rsm_views), buffer("candidates", &compact.candidates)],
+        );
         Ok(Some(Self {
             resolutions,
             views,
@@ -212,8 +220,9 @@ impl LightRsms {
             rsm_views,
             layout,
             pipeline,
-            vals: Kernel::build(gpu, scene, &PASS, &vals_module, PASS.entry("main"), &[], PASS.workgroup)?,
-            compact: Compact::new(gpu, scene, &PASS, &vals_module, texels)?,
+            vals,
+            vals_group,
+            compact,
             culling: true,
         }))
     }
@@ -310,25 +319,10 @@ impl Technique for LightRsms {
                 }
             }
         })?;
+        let vals = (buffer("vals", &frame.vals.buffer), &frame.vals.count);
+        let texels = [self.texels, 1, 1];
         rec.stage(VALS_STAGE, |e, s| {
-            let group = self.vals.bind(
-                gpu,
-                &[
-                    view("atlas", &self.atlas_view),
-                    buffer("rsm_views", &self.rsm_views),
-                    buffer("candidates", &self.compact.candidates),
-                ],
-            );
-            let parts = 1 + self.compact.parts();
-            self.vals.dispatch(
-                e,
-                &group,
-                scene,
-                [self.texels, 1, 1],
-                s.as_ref().and_then(|s| s.compute_part(0, parts)),
-            );
-            let vals = (buffer("vals", &frame.vals.buffer), &frame.vals.count);
-            self.compact.record(gpu, e, scene, vals, s.map(|s| s.share(1, parts)));
+            self.compact.record_after(gpu, e, scene, &[(&self.vals, &self.vals_group, texels)], vals, s)
         })
     }
 }

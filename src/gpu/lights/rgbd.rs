@@ -194,10 +194,6 @@ impl RgbdVals {
             self.filter.dispatch(encoder, &self.filter_group, scene, cells, span.as_ref().map(Span::compute));
             return;
         }
-        let parts = 2 + self.compact.parts();
-        let part = |i| span.as_ref().and_then(|s| s.compute_part(i, parts));
-        self.filter.dispatch(encoder, &self.filter_group, scene, cells, part(0));
-        self.append.dispatch(encoder, &self.append_group, scene, cells, part(1));
         let vals = Res {
             name: "vals",
             resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -206,7 +202,8 @@ impl RgbdVals {
                 size: wgpu::BufferSize::new(capacity * stride),
             }),
         };
-        self.compact.record(gpu, encoder, scene, (vals, val_count), span.map(|s| s.share(2, parts)));
+        let before = [(&self.filter, &self.filter_group, cells), (&self.append, &self.append_group, cells)];
+        self.compact.record_after(gpu, encoder, scene, &before, (vals, val_count), span);
     }
 }
 

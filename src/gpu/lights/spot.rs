@@ -26,6 +26,8 @@ pub struct SpotVals {
     pub resolution: u32,
     raster: Visibility,
     rsm: Kernel,
+    /// `rsm`'s bindings: the RSM, the shadow map and the candidates.
+    rsm_group: wgpu::BindGroup,
     compact: Compact,
     /// The light's visibility buffer (the RSM).
     pub view: VisibilityTarget,
@@ -42,17 +44,21 @@ impl SpotVals {
         resolution: u32,
     ) -> Result<Self, GpuError> {
         let r = resolution;
-        let module = module_from_source(gpu, rsm::PASS.label, rsm::PASS.source(&rsm::body(), scene.textured()))?;
         let desc = &rsm::PASS;
-        Ok(Self {
-            light,
-            resolution,
-            raster: raster.clone(),
-            rsm: Kernel::build(gpu, scene, desc, &module, desc.entry("main"), &[], desc.workgroup)?,
-            compact: Compact::new(gpu, scene, desc, &module, r * r)?,
-            view: raster.target(gpu, "rsm", r, r),
-            light_distance: gpu.storage_buffer_sized::<f32>("rsm.light_distance", (r * r) as usize)?,
-        })
+        let module = module_from_source(gpu, desc.label, desc.source(&rsm::body(), scene.textured()))?;
+        let rsm = Kernel::build(gpu, scene, desc, &module, desc.entry("main"), &[], desc.workgroup)?;
+        let compact = Compact::new(gpu, scene, desc, &module, r * r)?;
+        let target = raster.target(gpu, "rsm", r, r);
+        let light_distance = gpu.storage_buffer_sized::<f32>("rsm.light_distance", (r * r) as usize)?;
+        let rsm_group = rsm.bind(
+            gpu,
+            &[
+                view("visibility", &target.view),
+                buffer("light_distance", &light_distance),
+                buffer("candidates", &compact.candidates),
+            ],
+        );
+        Ok(Self { light, resolution, raster: raster.clone(), rsm, rsm_group, compact, view: target, light_distance })
     }
 
     /// World to the light's clip space: a square perspective over the outer cone, near and far
@@ -74,19 +80,9 @@ impl Technique for SpotVals {
         let light_to_clip = self.light_to_clip(scene);
         rec.stage(RSM_RASTER, |e, s| self.raster.record(gpu, e, scene, &self.view, light_to_clip, s))?;
         let texels = [self.resolution, self.resolution, 1];
+        let vals = (buffer("vals", &frame.vals.buffer), &frame.vals.count);
         rec.stage(RSM_VALS, |e, s| {
-            let group = self.rsm.bind(
-                gpu,
-                &[
-                    view("visibility", &self.view.view),
-                    buffer("light_distance", &self.light_distance),
-                    buffer("candidates", &self.compact.candidates),
-                ],
-            );
-            let parts = 1 + self.compact.parts();
-            self.rsm.dispatch(e, &group, scene, texels, s.as_ref().and_then(|s| s.compute_part(0, parts)));
-            let vals = (buffer("vals", &frame.vals.buffer), &frame.vals.count);
-            self.compact.record(gpu, e, scene, vals, s.map(|s| s.share(1, parts)));
+            self.compact.record_after(gpu, e, scene, &[(&self.rsm, &self.rsm_group, texels)], vals, s)
         })
     }
 }
