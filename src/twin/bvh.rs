@@ -242,12 +242,15 @@ impl TraceBvh {
         if let Some(k) = cached.filter(|&k| self.triangles[k].blocks(origin, d, d_length)) {
             return Some(k);
         }
-        let ray = Ray::new(origin.into(), d.into(), 0.0, 1.0);
+        if d_length == 0.0 {
+            return None;
+        }
+        let ray = traversal_ray(origin, d / d_length, d_length);
         let mut found = None;
         let miss = self.tree.ray_traverse_miss(ray, |_, k| {
             if self.triangles[k].blocks(origin, d, d_length) {
                 found = Some(k);
-                0.5
+                0.0
             } else {
                 f32::INFINITY
             }
@@ -264,6 +267,20 @@ impl TraceBvh {
     pub fn shadow_rays(&self, origin: Vec3, targets: &[Vec3], traversal: ShadowTraversal, blocked: &mut Vec<bool>) {
         blocked.clear();
         blocked.resize(targets.len(), false);
+        self.trace(origin, targets, traversal, |j| blocked[j] = true);
+    }
+
+    /// [`TraceBvh::shadow_rays`] for at most [`PACKET_RAYS`] targets, as a mask: bit `j` is set
+    /// when the segment to `targets[j]` is blocked.
+    pub fn blocked_mask(&self, origin: Vec3, targets: &[Vec3], traversal: ShadowTraversal) -> u32 {
+        assert!(targets.len() <= PACKET_RAYS, "{} targets in one mask", targets.len());
+        let mut mask = 0u32;
+        self.trace(origin, targets, traversal, |j| mask |= 1 << j);
+        mask
+    }
+
+    /// The shadow rays of [`TraceBvh::shadow_rays`]: `blocked(j)` for each blocked `targets[j]`.
+    fn trace(&self, origin: Vec3, targets: &[Vec3], traversal: ShadowTraversal, mut blocked: impl FnMut(usize)) {
         if self.triangles.is_empty() {
             return;
         }
@@ -275,16 +292,16 @@ impl TraceBvh {
                 ShadowTraversal::Packets => packet_end(origin, targets, i),
             };
             if end - i < PACKET_MIN_RAYS {
-                for j in i..end {
-                    let found = self.segment_blocker(origin, targets[j], cached);
-                    blocked[j] = found.is_some();
+                for (j, &target) in targets.iter().enumerate().take(end).skip(i) {
+                    let found = self.segment_blocker(origin, target, cached);
+                    if found.is_some() {
+                        blocked(j);
+                    }
                     cached = found.or(cached);
                 }
             } else {
                 let mask = self.packet_blocked(origin, &targets[i..end], &mut cached);
-                for (j, b) in blocked[i..end].iter_mut().enumerate() {
-                    *b = mask >> j & 1 == 1;
-                }
+                (0..end - i).filter(|j| mask >> j & 1 == 1).for_each(|j| blocked(i + j));
             }
             i = end;
         }
@@ -402,20 +419,40 @@ impl TraceBvh {
         if self.triangles.is_empty() {
             return None;
         }
-        let ray = Ray::new(origin.into(), direction.into(), 0.0, f32::INFINITY);
         let d_length = direction.length();
+        if d_length == 0.0 {
+            return None;
+        }
+        let ray = traversal_ray(origin, direction / d_length, f32::INFINITY);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best: Option<(f32, Vec2)> = None;
+        // The traversal prunes by distance along its own ray: `t d_length` past the origin,
+        // `TRAVERSAL_LEAD` past its start.
         self.tree.ray_traverse(ray, &mut hit, |_, k| match self.triangles[k].hit(origin, direction, d_length) {
             Some((t, uv)) if t > 0.0 && best.is_none_or(|(bt, _)| t < bt) => {
                 best = Some((t, uv));
-                t
+                t * d_length + TRAVERSAL_LEAD
             }
             _ => f32::INFINITY,
         });
         let (t, barycentrics) = best?;
         Some(TriangleHit { triangle: self.tree.primitive_indices[hit.primitive_id as usize], t, barycentrics })
     }
+}
+
+/// How far behind the origin [`traversal_ray`] starts (m): twice obvhs's node-test floor.
+const TRAVERSAL_LEAD: f32 = 2e-4;
+
+/// The ray obvhs's CWBVH traversal walks for a segment or ray from `origin` along the unit
+/// direction `u`, `reach` (m) long. obvhs's node test enters a child no nearer than t = 1e-4 (its
+/// `cwbvh::node::EPSILON`, whatever the ray's `tmin`), in units of the ray's direction: on the
+/// segment's own `d` it skipped the first 1e-4 |d| (10 cm of a shadow ray to an environment VAL
+/// 1 km away, so blockers there were missed). With a unit direction started [`TRAVERSAL_LEAD`]
+/// behind the origin, the part it skips lies behind the origin, and every node the segment meets
+/// is entered. Only the nodes visited depend on this ray; each triangle is still tested on the
+/// caller's own segment.
+fn traversal_ray(origin: Vec3, u: Vec3, reach: f32) -> Ray {
+    Ray::new((origin - u * TRAVERSAL_LEAD).into(), u.into(), 0.0, reach + TRAVERSAL_LEAD)
 }
 
 /// The end of the packet that starts at `targets[start]`: the following targets while their
@@ -554,6 +591,39 @@ mod tests {
             if brute { hits += 1 } else { misses += 1 }
         }
         assert!(hits > 300 && misses > 300, "both outcomes exercised: {hits} hits, {misses} misses");
+    }
+
+    /// A blocker near the start of a long segment (a receiver next to the content, a VAL of
+    /// the environment 1 km away): obvhs's node test skips the first 1e-4 of its ray's
+    /// direction, so a traversal on the segment's own `d` missed it (`traversal_ray`).
+    #[test]
+    fn a_blocker_near_the_start_of_a_long_segment_is_found() {
+        let (mut rng, mut positions, mut triangles) = triangle_soup(3, 500, 0.2, 0.02);
+        // A small triangle 5 cm in front of the origin, across the +x axis.
+        let n = positions.len() as u32;
+        positions.extend([Vec3::new(0.05, -0.01, -0.01), Vec3::new(0.05, 0.02, -0.01), Vec3::new(0.05, -0.01, 0.02)]);
+        triangles.push([n, n + 1, n + 2]);
+        let bvh = Bvh::build(&positions, &triangles);
+        let wide = TraceBvh::build(&positions, &triangles);
+        let origin = Vec3::ZERO;
+        for far in [1.0f32, 1e3, 1e5] {
+            let target = Vec3::new(far, 0.0, 0.0);
+            assert!(bvh.occluded(&positions, &triangles, origin, target), "GPU layout, {far} m");
+            assert!(wide.segment_blocked(origin, target), "CWBVH, {far} m");
+            let hit = wide.closest_hit(origin, target - origin).expect("a hit");
+            assert!((hit.t * far - 0.05).abs() < 1e-5, "closest hit at {} m, {far} m", hit.t * far);
+        }
+        // Random long segments from points among the soup, against every triangle.
+        let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
+        for _ in 0..2000 {
+            let o = Vec3::new(r(-0.2, 0.2), r(-0.2, 0.2), r(-0.2, 0.2));
+            let t = Vec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)).normalize() * 1e3;
+            let brute = triangles.iter().any(|tri| {
+                let [a, b, c] = tri.map(|i| positions[i as usize]);
+                ray_triangle(o, t - o, a, b, c).is_some_and(|s| s > 0.0 && s < 1.0)
+            });
+            assert_eq!(wide.segment_blocked(o, t), brute, "segment {o} -> {t}");
+        }
     }
 
     #[test]

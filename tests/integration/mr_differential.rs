@@ -85,24 +85,44 @@ fn gpu_box(gpu: &relume::gpu::Gpu, albedo: f32) -> (Scene, GpuScene) {
 }
 
 /// The GPU pass and its twin agree at every receiver, for real VALs (blocked light) and for the
-/// box's own sparse points re-emitting (added light), and so does the CPU backend (the twin
-/// over rayon). All cast the same shadow rays with the same arithmetic
-/// (`twin::bvh::Bvh::occluded` is the GPU traversal's twin), so they differ by the order of
-/// float sums only: 1e-4 of the receiver's total plus 1e-6 W/m² (one flipped ray toward a VAL
-/// of these fluxes would move a sum by over 1e-3 of it).
+/// box's own sparse points re-emitting (added light): both cast the same shadow rays with the
+/// same arithmetic (`twin::bvh::Bvh::occluded` is the GPU traversal's twin), so they differ by
+/// the order of float sums only: 1e-4 of the receiver's total plus 1e-6 W/m² (one flipped ray
+/// toward a VAL of these fluxes would move a sum by over 1e-3 of it).
+///
+/// The CPU backend walks another tree (obvhs's CWBVH) with the same triangle test. It is held
+/// to the sums with every ray decided by testing every triangle of the box, at all but 2 of the
+/// 1,089 receivers: the two at the middle of the box's foot (x or y = 0, on a side face's
+/// plane), whose rays start on the box's surface, where a hit lies at t = 0 to rounding and
+/// the node tests round too: each tree leaves out some triangles that block. Blocked light
+/// there: 0.73 W/m² through the GPU layout's tree, 0.82 through the CWBVH, 0.92 through every
+/// triangle. A tree only ever tests fewer triangles, so there the CPU backend must block no more
+/// than every triangle does.
 #[test]
 fn mr_differential_gpu_matches_twin() {
     let gpu = gpu();
     let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
     let (vals, real_count, receivers) = lit_plate(&scene);
     let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
+    let every_triangle = |origin: Vec3, targets: &[Vec3]| {
+        targets.iter().enumerate().fold(0u32, |mask, (j, &target)| {
+            let blocked = triangles.iter().any(|t| {
+                let [a, b, c] = t.map(|i| positions[i as usize]);
+                relume::twin::bvh::ray_triangle(origin, target - origin, a, b, c).is_some_and(|s| s > 0.0 && s < 1.0)
+            });
+            mask | u32::from(blocked) << j
+        })
+    };
     for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
         let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
         assert_eq!(pass.device(), device);
         let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, Sums::Exact { vals: &vals, real_count }).unwrap();
-        let (mut blocked, mut added) = (0, 0);
+        let (mut blocked, mut added, mut skipping) = (0, 0, 0);
         for (r, got) in receivers.iter().zip(&light) {
-            let want = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
+            let want = match device {
+                DifferentialDevice::Cpu => twin::receiver_light_with(r, &vals, real_count, every_triangle),
+                _ => twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles),
+            };
             let scale = (want.unoccluded + want.added).max_element();
             let tol = 1e-4 * scale + 1e-6;
             for (g, w, what) in [
@@ -110,13 +130,20 @@ fn mr_differential_gpu_matches_twin() {
                 (got.blocked, want.blocked, "blocked"),
                 (got.added, want.added, "added"),
             ] {
-                assert!((g - w).abs().max_element() <= tol, "{device:?} {what} at {}: {g} vs twin {w}", r.position);
+                let off = (g - w).abs().max_element() > tol;
+                if off && device == DifferentialDevice::Cpu && what == "blocked" && g.cmple(w + tol).all() {
+                    eprintln!("Cpu: blocked {g} at {}, every triangle {w}", r.position);
+                    skipping += 1;
+                    continue;
+                }
+                assert!(!off, "{device:?} {what} at {}: {g} vs {w}", r.position);
             }
             blocked += usize::from(want.blocked.x > 0.0);
             added += usize::from(want.added.x > 0.0);
         }
         eprintln!("{device:?}: {} receivers, {rounds} rounds: {blocked} shadowed, {added} lit", receivers.len());
         assert!(blocked > 50 && added > 50, "the test must exercise both sums: {blocked} shadowed, {added} lit");
+        assert!(skipping <= 2, "{device:?}: {skipping} receivers where the tree skips a blocker");
     }
 }
 

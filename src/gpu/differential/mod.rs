@@ -12,7 +12,9 @@
 //!
 //! Both run in rounds, like the exact reference (see `differential.wgsl`): the host dispatches
 //! until every receiver has seen every VAL. On CPU adapters they run on the CPU instead
-//! ([`DifferentialDevice`]): the twins' sums over rayon's threads.
+//! ([`DifferentialDevice`]): the twins' sums over rayon's threads, each shadow ray decided by
+//! obvhs's CWBVH traversal (`TraceBvh::blocked_mask`), which tests the same triangles with the
+//! same arithmetic as the GPU layout's traversal but visits fewer nodes.
 
 pub mod twin;
 
@@ -29,7 +31,7 @@ use crate::gpu::shader::Wgsl;
 use crate::gpu::shader::{TILE_SIZE, WORKGROUP_SIZE};
 use crate::gpu::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
 use crate::twin::Val;
-use crate::twin::bvh::Bvh;
+use crate::twin::bvh::{Bvh, ShadowTraversal, TraceBvh};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -187,11 +189,24 @@ fn workgroup(gpu: &Gpu) -> [u32; 3] {
     if gpu.is_cpu() { [1, 1, 1] } else { PASS.workgroup }
 }
 
-/// The BVH of `scene`'s triangles (the virtual meshes).
-pub fn scene_bvh(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>, Bvh) {
+/// How the CPU backend traces a receiver's shadow rays to a group's members: one at a time, the
+/// last blocker tested first. On the TUM replay (`examples/mr_differential.rs`, frames 0, 18
+/// and 36, side by side) packets took 1.5x the time of single rays; single rays took 0.66x the
+/// time of the GPU layout's traversal (`Bvh::occluded`, the backend before) in the exact pass and
+/// 0.84x in the fast one (docs/measurements/differential.md).
+const SHADOWS: ShadowTraversal = ShadowTraversal::Single;
+
+/// `scene`'s triangles (the virtual meshes): vertex positions and corner indices.
+fn scene_triangles(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     let flat = &scene.flat;
-    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
-    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let positions = flat.vertices.iter().map(|v| v.position.into()).collect();
+    let triangles = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    (positions, triangles)
+}
+
+/// The GPU layout's BVH of `scene`'s triangles (the virtual meshes).
+pub fn scene_bvh(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>, Bvh) {
+    let (positions, triangles) = scene_triangles(scene);
     let bvh = Bvh::build(&positions, &triangles);
     (positions, triangles, bvh)
 }
@@ -207,12 +222,9 @@ pub struct Differential {
 #[allow(clippy::large_enum_variant)]
 enum Backend {
     Gpu(GpuPass),
-    /// The virtual triangles and their BVH.
-    Cpu {
-        positions: Vec<Vec3>,
-        triangles: Vec<[u32; 3]>,
-        bvh: Bvh,
-    },
+    /// The virtual triangles' CPU hierarchy (obvhs's CWBVH), which decides each shadow ray as
+    /// `Bvh::occluded` does, by the same triangle test, faster.
+    Cpu(TraceBvh),
 }
 
 impl Differential {
@@ -229,8 +241,8 @@ impl Differential {
             DifferentialDevice::Cpu => true,
         };
         let backend = if cpu {
-            let (positions, triangles, bvh) = scene_bvh(scene);
-            Backend::Cpu { positions, triangles, bvh }
+            let (positions, triangles) = scene_triangles(scene);
+            Backend::Cpu(TraceBvh::build(&positions, &triangles))
         } else {
             Backend::Gpu(GpuPass::new(gpu, scene)?)
         };
@@ -241,7 +253,7 @@ impl Differential {
     pub fn device(&self) -> DifferentialDevice {
         match self.backend {
             Backend::Gpu(_) => DifferentialDevice::Gpu,
-            Backend::Cpu { .. } => DifferentialDevice::Cpu,
+            Backend::Cpu(_) => DifferentialDevice::Cpu,
         }
     }
 
@@ -255,18 +267,19 @@ impl Differential {
         sums: Sums<'_>,
     ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
         use rayon::prelude::*;
-        let (positions, triangles, bvh) = match &mut self.backend {
+        let bvh = match &mut self.backend {
             Backend::Gpu(pass) => return pass.run(gpu, scene, receivers, sums),
-            Backend::Cpu { positions, triangles, bvh } => (&*positions, &*triangles, &*bvh),
+            Backend::Cpu(bvh) => &*bvh,
         };
+        let blocked = |origin, targets: &[Vec3]| bvh.blocked_mask(origin, targets, SHADOWS);
         let light = match sums {
             Sums::Exact { vals, real_count } => {
                 let real_count = real_count.min(vals.len());
-                let light = |r| twin::receiver_light(r, vals, real_count, bvh, positions, triangles);
+                let light = |r| twin::receiver_light_with(r, vals, real_count, blocked);
                 receivers.par_iter().map(light).collect()
             }
             Sums::Fast { grouped, content } => {
-                let light = |r| twin::receiver_light_fast(r, grouped, content, bvh, positions, triangles);
+                let light = |r| twin::receiver_light_fast_with(r, grouped, content, blocked);
                 receivers.par_iter().map(light).collect()
             }
         };

@@ -54,10 +54,10 @@ pub enum DifferentialDevice {
     Auto,
     /// The GPU pass (`differential.wgsl`).
     Gpu,
-    /// The pass's CPU twin over rayon's threads, on the GPU traversal's twin (`Bvh::occluded`),
-    /// so every shadow ray is decided as the GPU pass decides it (obvhs's CWBVH traversal, the
-    /// CPU exact reference's, decides rays that graze a triangle's edge or a node's box
-    /// otherwise: on the plate-and-box test one receiver in 1,089 differed).
+    /// The pass's CPU twin over rayon's threads, each shadow ray decided through obvhs's CWBVH
+    /// (`TraceBvh`, the CPU exact reference's tree) by the GPU pass's triangle test. The trees
+    /// differ only in which triangles they test: on the plate-and-box test 2 receivers in 1,089,
+    /// whose rays start on the box's surface, differ from the GPU's.
     Cpu,
 }
 

@@ -47,33 +47,56 @@ pub fn receiver_light(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
 ) -> ReceiverLight {
-    receiver_light_with(receiver, vals, real_count, |origin, target| bvh.occluded(positions, triangles, origin, target))
+    receiver_light_with(receiver, vals, real_count, |origin, targets| {
+        targets
+            .iter()
+            .enumerate()
+            .fold(0, |mask, (j, &target)| mask | u32::from(bvh.occluded(positions, triangles, origin, target)) << j)
+    })
 }
 
-/// The sums at `receiver`, with `blocked(from, to)` deciding each shadow ray.
-fn receiver_light_with(
+/// Shadow rays at most this many at a time: the width of the mask `blocked` returns.
+pub const SHADOW_BATCH: usize = 32;
+
+/// The sums at `receiver`, with `blocked(from, targets)` deciding the shadow rays from `from` to
+/// at most [`SHADOW_BATCH`] targets at a time (bit `j` set when the segment to `targets[j]` is
+/// blocked). The sums are taken in the VALs' order, so they are the same however the rays are
+/// decided.
+pub fn receiver_light_with(
     receiver: &Receiver,
     vals: &[Val],
     real_count: usize,
-    blocked: impl Fn(Vec3, Vec3) -> bool,
+    blocked: impl Fn(Vec3, &[Vec3]) -> u32,
 ) -> ReceiverLight {
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
     let mut sums = ReceiverLight::default();
-    for (j, val) in vals.iter().enumerate() {
-        let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
-        let f = g.weight * g.cos_receiver;
-        if f <= 0.0 {
+    for (c, chunk) in vals.chunks(SHADOW_BATCH).enumerate() {
+        // The VALs of the chunk that light the receiver: their irradiance, ray target, index.
+        let mut lit = [(Vec3::ZERO, Vec3::ZERO, 0usize); SHADOW_BATCH];
+        let mut n = 0;
+        for (i, val) in chunk.iter().enumerate() {
+            let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
+            let f = g.weight * g.cos_receiver;
+            if f > 0.0 {
+                lit[n] = (val.flux * f, val.position + val.normal * RAY_OFFSET, c * SHADOW_BATCH + i);
+                n += 1;
+            }
+        }
+        if n == 0 {
             continue;
         }
-        let e = val.flux * f;
-        let blocked = blocked(origin, val.position + val.normal * RAY_OFFSET);
-        if j < real_count {
-            sums.unoccluded += e;
-            if blocked {
-                sums.blocked += e;
+        let targets: [Vec3; SHADOW_BATCH] = std::array::from_fn(|k| lit[k].1);
+        let mask = blocked(origin, &targets[..n]);
+        for (k, &(e, _, j)) in lit[..n].iter().enumerate() {
+            let blocked = mask >> k & 1 == 1;
+            if j < real_count {
+                sums.unoccluded += e;
+                if blocked {
+                    sums.blocked += e;
+                }
+            } else if !blocked {
+                sums.added += e;
             }
-        } else if !blocked {
-            sums.added += e;
         }
     }
     sums
@@ -127,19 +150,24 @@ pub fn receiver_light_fast(
     positions: &[Vec3],
     triangles: &[[u32; 3]],
 ) -> ReceiverLight {
-    receiver_light_fast_with(receiver, grouped, content, |origin, target| {
-        bvh.occluded(positions, triangles, origin, target)
+    receiver_light_fast_with(receiver, grouped, content, |origin, targets| {
+        targets
+            .iter()
+            .enumerate()
+            .fold(0, |mask, (j, &target)| mask | u32::from(bvh.occluded(positions, triangles, origin, target)) << j)
     })
 }
 
-/// [`receiver_light_fast`] with `blocked(from, to)` deciding each shadow ray.
-fn receiver_light_fast_with(
+/// [`receiver_light_fast`] with `blocked` deciding the shadow rays, as for
+/// [`receiver_light_with`].
+pub fn receiver_light_fast_with(
     receiver: &Receiver,
     grouped: &GroupedVals,
     content: &ContentSphere,
-    blocked: impl Fn(Vec3, Vec3) -> bool + Copy,
+    blocked: impl Fn(Vec3, &[Vec3]) -> u32 + Copy,
 ) -> ReceiverLight {
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
+    let one_blocked = |target: &Val| blocked(origin, &[target.position + target.normal * RAY_OFFSET]) & 1 == 1;
     let mut sums = ReceiverLight::default();
     for (k, group) in grouped.groups.iter().enumerate() {
         let real = k < grouped.real_groups;
@@ -155,8 +183,7 @@ fn receiver_light_fast_with(
             if real {
                 sums.unoccluded += e;
             } else {
-                let target = &grouped.vals[group.representative as usize];
-                if !blocked(origin, target.position + target.normal * RAY_OFFSET) {
+                if !one_blocked(&grouped.vals[group.representative as usize]) {
                     sums.added += e;
                 }
             }
@@ -172,8 +199,7 @@ fn receiver_light_fast_with(
             }
             let e = a.flux * f;
             sums.unoccluded += e;
-            let target = &grouped.vals[group.representative as usize];
-            if blocked(origin, target.position + target.normal * RAY_OFFSET) {
+            if one_blocked(&grouped.vals[group.representative as usize]) {
                 sums.blocked += e;
             }
             continue;
