@@ -4,7 +4,8 @@
 // the virtual content's bounding sphere; a re-emitter group adds it to `added` when the shadow ray
 // to its representative member is free. A real group the content may block is summed as one only
 // beyond its `shadow_reach`, blocked as a whole when the ray to its representative is. Every other
-// group has its members summed one by one, a shadow ray each, as the exact pass sums them. Twin:
+// group has its members summed one by one, a shadow ray each, as the exact pass sums them (none
+// for a real group whose cone misses the content). Twin:
 // `gpu::differential::twin::receiver_light_fast`.
 //
 // Resumable in rounds, as `differential.wgsl`: the state between rounds is the group and the
@@ -132,17 +133,23 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             let f = geo.weight * geo.cos_receiver;
             if f > 0.0 {
                 let e = vec4<f32>(val.flux * f, 0.0);
-                let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
-                steps += ray.steps;
-                if !ray.complete {
-                    break;
+                // A real group whose cone misses the content (its members' targets lie within
+                // its radius and a ray offset): no member's ray can be blocked, none is cast.
+                var hit = false;
+                if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
+                    let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                    steps += ray.steps;
+                    if !ray.complete {
+                        break;
+                    }
+                    hit = ray.hit;
                 }
                 if real {
                     sums.unoccluded += e;
-                    if ray.hit {
+                    if hit {
                         sums.blocked += e;
                     }
-                } else if !ray.hit {
+                } else if !hit {
                     sums.added += e;
                 }
             }

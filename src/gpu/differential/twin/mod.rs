@@ -141,7 +141,8 @@ impl ContentSphere {
 /// group adds it to `added` when the shadow ray to its representative member is free. A real
 /// group whose cone may meet the content is summed as one only beyond its `shadow_reach`, and
 /// blocked as a whole when the ray to its representative is. Every other group has its members
-/// summed as [`receiver_light`] sums them, a shadow ray each.
+/// summed as [`receiver_light`] sums them, a shadow ray each, but for a real group whose cone
+/// misses the content: its members are summed without rays.
 pub fn receiver_light_fast(
     receiver: &Receiver,
     grouped: &GroupedVals,
@@ -205,7 +206,14 @@ pub fn receiver_light_fast_with(
             continue;
         }
         let members = &grouped.vals[group.first as usize..(group.first + group.count) as usize];
-        let part = receiver_light_with(receiver, members, if real { members.len() } else { 0 }, blocked);
+        // A real group whose members' rays all pass clear of the content (their targets lie
+        // within the radius and a ray offset of the aggregate) is summed without rays: the same
+        // sums, in the same order, as with them.
+        let clear = real && !content.may_block(origin, a.position, group.radius + RAY_OFFSET);
+        let part = match clear {
+            true => receiver_light_with(receiver, members, members.len(), |_, _| 0),
+            false => receiver_light_with(receiver, members, if real { members.len() } else { 0 }, blocked),
+        };
         sums.unoccluded += part.unoccluded;
         sums.blocked += part.blocked;
         sums.added += part.added;
