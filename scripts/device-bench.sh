@@ -96,6 +96,16 @@ step() {
 }
 
 scenes=fixtures/scenes
+# The default job's scene with the differential pass on the CPU's cores (`settings.mr.device`),
+# beside the scene's own files so that its relative paths hold; removed on exit.
+mr_cpu="$scenes/.device-bench-mr-cpu.json"
+trap 'rm -f "$mr_cpu"' EXIT
+python3 - "$scenes/mr_bunny_differential.json" "$mr_cpu" <<'PY'
+import json, sys
+scene = json.load(open(sys.argv[1]))
+scene.setdefault("settings", {}).setdefault("mr", {})["device"] = "cpu"
+json.dump(scene, open(sys.argv[2], "w"), indent=2)
+PY
 if [ "$smoke" = 1 ]; then
     # Tiny sizes: checks every step's machinery on lavapipe in well under a minute.
     # GPU timestamps even on lavapipe, as on the device, so that their recording is checked too.
@@ -103,6 +113,7 @@ if [ "$smoke" = 1 ]; then
     step table1 120 "$bin" bench "$scenes/cornell_bunny_small.json" --table1 --quick --no-plots --no-temporal --out "$work/table1"
     step levels_1080 120 "$bin" bench "$scenes/cornell_bunny_small.json" --levels --width 24 --height 16 --out "$work/levels_1080"
     step mr_640 120 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$scenes/mr_bunny_differential.json" --frames 2 --width 64 --height 48 --out "$work/mr_640"
+    step mr_640_cpu 120 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$mr_cpu" --frames 2 --width 64 --height 48 --out "$work/mr_640_cpu"
     step sweep 120 "$bin" bench "$scenes/cornell_bunny_small.json" --quick --no-plots --no-temporal --out "$work/sweep"
     step sparse_vs_brute 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 32 --height 18
     step exact 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 16 --height 16 --reference exact
@@ -119,6 +130,9 @@ else
     # and 90 frames per second?
     step mr_640 60 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$scenes/mr_bunny_differential.json" --width 640 --height 480 --out "$work/mr_640"
     step mr_1280 60 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$scenes/mr_bunny_differential.json" --width 1280 --height 720 --out "$work/mr_1280"
+    # The same replay at 640x480 with the differential pass on the device's CPU cores instead
+    # (rayon over them; the GPU's fast pass waits on the host between its adaptive levels).
+    step mr_640_cpu 60 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$mr_cpu" --width 640 --height 480 --out "$work/mr_640_cpu"
     step sparse_vs_brute 45 "$bin" compare "$scenes/cornell_bunny.json" --width 1920 --height 1080
     # Sponza at 512 wide: the sparse frame against the brute force without visibility.
     step sponza_512 45 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288

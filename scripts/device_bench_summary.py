@@ -25,6 +25,7 @@ def step_output(work: Path, name: str):
         "sweep": work / "sweep" / "results.json",
         "mr_640": work / "mr_640" / "summary.json",
         "mr_1280": work / "mr_1280" / "summary.json",
+        "mr_640_cpu": work / "mr_640_cpu" / "summary.json",
         "levels_1080": work / "levels_1080" / "levels.json",
     }.get(name)
     if written is not None:
@@ -138,14 +139,14 @@ def main() -> int:
             + "."
         ]
 
-    for name in ("mr_640", "mr_1280"):
+    for name, where in (("mr_640", ""), ("mr_1280", ""), ("mr_640_cpu", ", the differential pass on the CPU")):
         replay = by_name.get(name)
         if isinstance(replay, dict) and replay.get("frame_ms"):
             frames = replay["frame_ms"]
             steady = sorted(frames[1:] or frames)
             median = steady[len(steady) // 2]
             shown.add(name)
-            md += ["", f"## Mixed-reality replay at {replay['width']}x{replay['height']} (targets: 30 and 90 fps)", ""]
+            md += ["", f"## Mixed-reality replay at {replay['width']}x{replay['height']}{where} (targets: 30 and 90 fps)", ""]
             md += [
                 f"{replay['frames']} frames: median frame {fmt(median)} ms ({fmt(fps(median))} fps) after the first "
                 f"(load to read-back, wall clock); stage means: "
