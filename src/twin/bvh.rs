@@ -613,17 +613,38 @@ mod tests {
             let hit = wide.closest_hit(origin, target - origin).expect("a hit");
             assert!((hit.t * far - 0.05).abs() < 1e-5, "closest hit at {} m, {far} m", hit.t * far);
         }
-        // Random long segments from points among the soup, against every triangle.
+        // Random long segments from points among the soup, against every triangle: one by one,
+        // and as bundles of 32 close directions (packets and single rays with the last blocker).
         let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
-        for _ in 0..2000 {
-            let o = Vec3::new(r(-0.2, 0.2), r(-0.2, 0.2), r(-0.2, 0.2));
-            let t = Vec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)).normalize() * 1e3;
-            let brute = triangles.iter().any(|tri| {
+        let brute = |o: Vec3, t: Vec3| {
+            triangles.iter().any(|tri| {
                 let [a, b, c] = tri.map(|i| positions[i as usize]);
                 ray_triangle(o, t - o, a, b, c).is_some_and(|s| s > 0.0 && s < 1.0)
-            });
-            assert_eq!(wide.segment_blocked(o, t), brute, "segment {o} -> {t}");
+            })
+        };
+        let mut blocked = 0;
+        for _ in 0..100 {
+            let o = Vec3::new(r(-0.2, 0.2), r(-0.2, 0.2), r(-0.2, 0.2));
+            let axis = Vec3::new(r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)).normalize();
+            let targets: Vec<Vec3> =
+                (0..32).map(|_| (axis + Vec3::new(r(-0.03, 0.03), r(-0.03, 0.03), r(-0.03, 0.03))) * 1e3).collect();
+            let want: Vec<bool> = targets.iter().map(|&t| brute(o, t)).collect();
+            for (t, w) in targets.iter().zip(&want) {
+                assert_eq!(wide.segment_blocked(o, *t), *w, "segment {o} -> {t}");
+            }
+            for traversal in [ShadowTraversal::Single, ShadowTraversal::Packets] {
+                let mut got = Vec::new();
+                wide.shadow_rays(o, &targets, traversal, &mut got);
+                assert_eq!(got, want, "{traversal:?} from {o}");
+                let mask = wide.blocked_mask(o, &targets, traversal);
+                assert!(
+                    want.iter().enumerate().all(|(j, w)| (mask >> j & 1 == 1) == *w),
+                    "{traversal:?} mask from {o}"
+                );
+            }
+            blocked += want.iter().filter(|b| **b).count();
         }
+        assert!((300..3000).contains(&blocked), "both outcomes: {blocked} of 3200 blocked");
     }
 
     #[test]
