@@ -309,42 +309,34 @@ impl Sweep {
 
     /// Every combination of the ISM and cluster axes' values as overrides on `base` (the grid).
     fn mode_variants(&self, base: &Config) -> Vec<Config> {
-        let mut out = Vec::new();
-        for ism_count in opts(&self.ism_count, base.ism_count) {
-            for ism_resolution in opts(&self.ism_resolution, base.ism_resolution) {
-                for ism_points in opts(&self.ism_points, base.ism_points) {
-                    for ism_pull_push_levels in opts(&self.ism_pull_push_levels, base.ism_pull_push_levels) {
-                        for clusters in self.cluster_variants(&base.clusters) {
-                            out.push(Config {
-                                ism_count,
-                                ism_resolution,
-                                ism_points,
-                                ism_pull_push_levels,
-                                clusters,
-                                ..*base
-                            });
-                        }
-                    }
-                }
-            }
-        }
+        let mut out = vec![*base];
+        vary(&mut out, self.ism_count.as_deref(), |c, v| c.ism_count = Some(v));
+        vary(&mut out, self.ism_resolution.as_deref(), |c, v| c.ism_resolution = Some(v));
+        vary(&mut out, self.ism_points.as_deref(), |c, v| c.ism_points = Some(v));
+        vary(&mut out, self.ism_pull_push_levels.as_deref(), |c, v| c.ism_pull_push_levels = Some(v));
+        vary(&mut out, self.cluster_count.as_deref(), |c, v| c.clusters.count = Some(v));
+        vary(&mut out, self.cluster_resolution.as_deref(), |c, v| c.clusters.shadow_map_resolution = Some(v));
+        vary(&mut out, self.cluster_soft.as_deref(), |c, v| c.clusters.soft = Some(v));
+        vary(&mut out, self.cluster_maps.as_deref(), |c, v| c.clusters.shadow_maps = Some(v));
         out
     }
+}
 
-    /// Every combination of the cluster axes' values as overrides on `base`.
-    fn cluster_variants(&self, base: &ClusterOverrides) -> Vec<ClusterOverrides> {
-        let mut out = Vec::new();
-        for count in opts(&self.cluster_count, base.count) {
-            for shadow_map_resolution in opts(&self.cluster_resolution, base.shadow_map_resolution) {
-                for soft in opts(&self.cluster_soft, base.soft) {
-                    for shadow_maps in opts(&self.cluster_maps, base.shadow_maps) {
-                        out.push(ClusterOverrides { count, shadow_map_resolution, soft, shadow_maps });
-                    }
-                }
-            }
-        }
-        out
-    }
+/// Each of `configs` once per value of a swept axis, set by `set` (the axis varying inside the
+/// earlier ones); unchanged when the axis is not swept.
+fn vary<T: Copy>(configs: &mut Vec<Config>, values: Option<&[T]>, set: impl Fn(&mut Config, T)) {
+    let Some(values) = values else { return };
+    let set = &set;
+    *configs = configs
+        .iter()
+        .flat_map(|&c| {
+            values.iter().map(move |&v| {
+                let mut c = c;
+                set(&mut c, v);
+                c
+            })
+        })
+        .collect();
 }
 
 /// The values of an override axis as overrides, or the base override alone when it is not swept.
