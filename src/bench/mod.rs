@@ -237,6 +237,15 @@ mod tests {
     }
 
     #[test]
+    fn grid_varies_the_later_mode_axes_inside_the_earlier() {
+        let s = Sweep::parse(&args(&["occlusion=clusters", "cluster_count=8,256", "cluster_soft=pcss,pcf"])).unwrap();
+        let c = s.configs(&BASE, true);
+        let axes: Vec<_> = c.iter().map(|c| (c.clusters.count, c.clusters.soft)).collect();
+        let (pcss, pcf) = (Some(SoftShadows::Pcss), Some(SoftShadows::Pcf));
+        assert_eq!(axes, [(Some(8), pcss), (Some(8), pcf), (Some(256), pcss), (Some(256), pcf)]);
+    }
+
+    #[test]
     fn grid_takes_every_combination() {
         let s = Sweep::parse(&args(&["sparse_points=16,32", "rsm_resolution=8,16,32", "glossy=on,off"])).unwrap();
         let c = s.configs(&BASE, true);

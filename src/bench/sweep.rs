@@ -80,113 +80,85 @@ impl Sweep {
             if values.iter().any(|v| v.is_empty()) {
                 return Err(flag_error(&flag, format!("empty value in `{arg}`")));
             }
-            let duplicate = |given: bool| {
-                if given { Err(flag_error(&flag, "given more than once")) } else { Ok(()) }
-            };
             match axis {
                 "sparse_points" => {
-                    duplicate(sweep.sparse_points.is_some())?;
-                    sweep.sparse_points = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_SPARSE_POINTS))?);
+                    set_axis(&mut sweep.sparse_points, &flag, &values, |v| int_in(v, 1, MAX_SPARSE_POINTS))?
                 }
                 "rsm_resolution" => {
-                    duplicate(sweep.rsm_resolution.is_some())?;
                     let (lo, hi) = RSM_RESOLUTION_RANGE;
-                    sweep.rsm_resolution = Some(parse_each(&flag, &values, |v| int_in(v, lo, hi))?);
+                    set_axis(&mut sweep.rsm_resolution, &flag, &values, |v| int_in(v, lo, hi))?;
                 }
                 "occlusion" => {
-                    duplicate(sweep.occlusion.is_some())?;
-                    sweep.occlusion = Some(parse_each(&flag, &values, |v| {
+                    set_axis(&mut sweep.occlusion, &flag, &values, |v| {
                         Occlusion::from_name(v).ok_or_else(|| {
                             let names: Vec<String> = Occlusion::ALL.iter().map(|m| format!("`{}`", m.name())).collect();
                             let (last, rest) = names.split_last().expect("the off mode at least");
                             format!("expected {} or {last}", rest.join(", "))
                         })
-                    })?);
+                    })?;
                 }
                 "glossy" => {
-                    duplicate(sweep.glossy.is_some())?;
-                    sweep.glossy = Some(parse_each(&flag, &values, |v| match v {
+                    set_axis(&mut sweep.glossy, &flag, &values, |v| match v {
                         "on" | "true" => Ok(true),
                         "off" | "false" => Ok(false),
                         _ => Err("expected `on` or `off`".to_owned()),
-                    })?);
+                    })?;
                 }
-                "resolution" => {
-                    duplicate(sweep.resolution.is_some())?;
-                    sweep.resolution = Some(parse_each(&flag, &values, parse_resolution)?);
-                }
+                "resolution" => set_axis(&mut sweep.resolution, &flag, &values, parse_resolution)?,
                 "ism_count" => {
-                    duplicate(sweep.ism_count.is_some())?;
-                    sweep.ism_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, crate::scene::MAX_ISMS))?);
+                    set_axis(&mut sweep.ism_count, &flag, &values, |v| int_in(v, 1, crate::scene::MAX_ISMS))?
                 }
                 "ism_resolution" => {
-                    duplicate(sweep.ism_resolution.is_some())?;
-                    sweep.ism_resolution = Some(parse_each(&flag, &values, |v| {
+                    set_axis(&mut sweep.ism_resolution, &flag, &values, |v| {
                         let n = int_in(v, 16, 512)?;
                         if n.is_power_of_two() { Ok(n) } else { Err("must be a power of two in 16..=512".to_owned()) }
-                    })?);
+                    })?;
                 }
                 "ism_points" => {
-                    duplicate(sweep.ism_points.is_some())?;
                     let max = crate::scene::MAX_ISM_POINTS;
-                    sweep.ism_points = Some(parse_each(&flag, &values, |v| int_in(v, 16, max))?);
+                    set_axis(&mut sweep.ism_points, &flag, &values, |v| int_in(v, 16, max))?;
                 }
                 "ism_pull_push_levels" => {
-                    duplicate(sweep.ism_pull_push_levels.is_some())?;
-                    sweep.ism_pull_push_levels = Some(parse_each(&flag, &values, |v| int_in(v, 0, 4))?);
+                    set_axis(&mut sweep.ism_pull_push_levels, &flag, &values, |v| int_in(v, 0, 4))?
                 }
                 "near_field" => {
-                    duplicate(sweep.near_field.is_some())?;
                     let max = crate::scene::NEAR_FIELD_RANGE.1 as u32;
-                    sweep.near_field = Some(parse_each(&flag, &values, |v| int_in(v, 0, max))?);
+                    set_axis(&mut sweep.near_field, &flag, &values, |v| int_in(v, 0, max))?;
                 }
-                "adaptive" => {
-                    duplicate(sweep.adaptive.is_some())?;
-                    sweep.adaptive = Some(parse_each(&flag, &values, hundredths)?);
-                }
+                "adaptive" => set_axis(&mut sweep.adaptive, &flag, &values, hundredths)?,
                 "kernel" => {
-                    duplicate(sweep.kernel.is_some())?;
                     let all = [InterpolationKernel::Paper, InterpolationKernel::Smooth];
-                    sweep.kernel = Some(parse_each(&flag, &values, |v| named(v, &all, kernel_name))?);
+                    set_axis(&mut sweep.kernel, &flag, &values, |v| named(v, &all, kernel_name))?;
                 }
                 "bound" => {
-                    duplicate(sweep.bound.is_some())?;
                     let all = [LightBound::Off, LightBound::Gathered];
-                    sweep.bound = Some(parse_each(&flag, &values, |v| named(v, &all, bound_name))?);
+                    set_axis(&mut sweep.bound, &flag, &values, |v| named(v, &all, bound_name))?;
                 }
                 "subdivision" => {
-                    duplicate(sweep.subdivision.is_some())?;
                     let (lo, hi) = crate::scene::SUBDIVISION_RANGE;
-                    sweep.subdivision = Some(parse_each(&flag, &values, |v| int_in(v, lo as u32, hi as u32))?);
+                    set_axis(&mut sweep.subdivision, &flag, &values, |v| int_in(v, lo as u32, hi as u32))?;
                 }
                 "glossy_interpolation" => {
-                    duplicate(sweep.glossy_interpolation.is_some())?;
                     let all = [GlossyInterpolation::Lights, GlossyInterpolation::Radiance];
-                    sweep.glossy_interpolation =
-                        Some(parse_each(&flag, &values, |v| named(v, &all, glossy_interpolation_name))?);
+                    set_axis(&mut sweep.glossy_interpolation, &flag, &values, |v| {
+                        named(v, &all, glossy_interpolation_name)
+                    })?;
                 }
-                "cluster_count" => {
-                    duplicate(sweep.cluster_count.is_some())?;
-                    sweep.cluster_count = Some(parse_each(&flag, &values, |v| int_in(v, 1, MAX_CLUSTERS))?);
-                }
+                "cluster_count" => set_axis(&mut sweep.cluster_count, &flag, &values, |v| int_in(v, 1, MAX_CLUSTERS))?,
                 "cluster_resolution" => {
-                    duplicate(sweep.cluster_resolution.is_some())?;
-                    sweep.cluster_resolution = Some(parse_each(&flag, &values, |v| int_in(v, 16, 1024))?);
+                    set_axis(&mut sweep.cluster_resolution, &flag, &values, |v| int_in(v, 16, 1024))?
                 }
                 "cluster_soft" => {
-                    duplicate(sweep.cluster_soft.is_some())?;
                     let all = [SoftShadows::Pcss, SoftShadows::Pcf, SoftShadows::Hard];
-                    sweep.cluster_soft = Some(parse_each(&flag, &values, |v| named(v, &all, soft_name))?);
+                    set_axis(&mut sweep.cluster_soft, &flag, &values, |v| named(v, &all, soft_name))?;
                 }
                 "cluster_maps" => {
-                    duplicate(sweep.cluster_maps.is_some())?;
                     let all = [ShadowMapSource::Raster, ShadowMapSource::Ism];
-                    sweep.cluster_maps = Some(parse_each(&flag, &values, |v| named(v, &all, maps_name))?);
+                    set_axis(&mut sweep.cluster_maps, &flag, &values, |v| named(v, &all, maps_name))?;
                 }
                 "neighbours" | "neighbors" => {
-                    duplicate(sweep.neighbours.is_some())?;
                     let max = crate::scene::MAX_NEIGHBOURS;
-                    sweep.neighbours = Some(parse_each(&flag, &values, |v| int_in(v, 1, max))?);
+                    set_axis(&mut sweep.neighbours, &flag, &values, |v| int_in(v, 1, max))?;
                 }
                 _ => {
                     return Err(flag_error(
@@ -309,42 +281,34 @@ impl Sweep {
 
     /// Every combination of the ISM and cluster axes' values as overrides on `base` (the grid).
     fn mode_variants(&self, base: &Config) -> Vec<Config> {
-        let mut out = Vec::new();
-        for ism_count in opts(&self.ism_count, base.ism_count) {
-            for ism_resolution in opts(&self.ism_resolution, base.ism_resolution) {
-                for ism_points in opts(&self.ism_points, base.ism_points) {
-                    for ism_pull_push_levels in opts(&self.ism_pull_push_levels, base.ism_pull_push_levels) {
-                        for clusters in self.cluster_variants(&base.clusters) {
-                            out.push(Config {
-                                ism_count,
-                                ism_resolution,
-                                ism_points,
-                                ism_pull_push_levels,
-                                clusters,
-                                ..*base
-                            });
-                        }
-                    }
-                }
-            }
-        }
+        let mut out = vec![*base];
+        vary(&mut out, self.ism_count.as_deref(), |c, v| c.ism_count = Some(v));
+        vary(&mut out, self.ism_resolution.as_deref(), |c, v| c.ism_resolution = Some(v));
+        vary(&mut out, self.ism_points.as_deref(), |c, v| c.ism_points = Some(v));
+        vary(&mut out, self.ism_pull_push_levels.as_deref(), |c, v| c.ism_pull_push_levels = Some(v));
+        vary(&mut out, self.cluster_count.as_deref(), |c, v| c.clusters.count = Some(v));
+        vary(&mut out, self.cluster_resolution.as_deref(), |c, v| c.clusters.shadow_map_resolution = Some(v));
+        vary(&mut out, self.cluster_soft.as_deref(), |c, v| c.clusters.soft = Some(v));
+        vary(&mut out, self.cluster_maps.as_deref(), |c, v| c.clusters.shadow_maps = Some(v));
         out
     }
+}
 
-    /// Every combination of the cluster axes' values as overrides on `base`.
-    fn cluster_variants(&self, base: &ClusterOverrides) -> Vec<ClusterOverrides> {
-        let mut out = Vec::new();
-        for count in opts(&self.cluster_count, base.count) {
-            for shadow_map_resolution in opts(&self.cluster_resolution, base.shadow_map_resolution) {
-                for soft in opts(&self.cluster_soft, base.soft) {
-                    for shadow_maps in opts(&self.cluster_maps, base.shadow_maps) {
-                        out.push(ClusterOverrides { count, shadow_map_resolution, soft, shadow_maps });
-                    }
-                }
-            }
-        }
-        out
-    }
+/// Each of `configs` once per value of a swept axis, set by `set` (the axis varying inside the
+/// earlier ones); unchanged when the axis is not swept.
+fn vary<T: Copy>(configs: &mut Vec<Config>, values: Option<&[T]>, set: impl Fn(&mut Config, T)) {
+    let Some(values) = values else { return };
+    let set = &set;
+    *configs = configs
+        .iter()
+        .flat_map(|&c| {
+            values.iter().map(move |&v| {
+                let mut c = c;
+                set(&mut c, v);
+                c
+            })
+        })
+        .collect();
 }
 
 /// The values of an override axis as overrides, or the base override alone when it is not swept.
@@ -362,8 +326,19 @@ fn one<T: Clone>(values: &Option<Vec<T>>, base: T) -> Vec<T> {
     values.clone().unwrap_or_else(|| vec![base])
 }
 
-fn parse_each<T>(flag: &str, values: &[&str], f: impl Fn(&str) -> Result<T, String>) -> Result<Vec<T>, BenchError> {
-    values.iter().map(|v| f(v).map_err(|m| flag_error(flag, format!("`{v}`: {m}")))).collect()
+/// `axis` set to `values` parsed by `f`, unless it was given before.
+fn set_axis<T>(
+    axis: &mut Option<Vec<T>>,
+    flag: &str,
+    values: &[&str],
+    f: impl Fn(&str) -> Result<T, String>,
+) -> Result<(), BenchError> {
+    if axis.is_some() {
+        return Err(flag_error(flag, "given more than once"));
+    }
+    let parsed = values.iter().map(|v| f(v).map_err(|m| flag_error(flag, format!("`{v}`: {m}"))));
+    *axis = Some(parsed.collect::<Result<_, _>>()?);
+    Ok(())
 }
 
 /// The one of `all` whose `name` is `v`; the error lists the names (`expected `a`, `b` or `c``).

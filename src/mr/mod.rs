@@ -146,7 +146,8 @@ impl MrRenderer {
     /// camera and composited over its colour, relit by the differential pass.
     pub fn render_frame(&mut self, gpu: &Gpu, frame: &RgbdFrame) -> Result<MrFrame, GpuError> {
         let accumulate = self.accumulator.as_mut().map(|a| (a, self.frames));
-        let relit = self.pipeline.render_frame(gpu, &mut self.renderer, frame, &self.settings, accumulate)?;
+        let input = FrameInput { frame, settings: &self.settings, accumulate };
+        let relit = self.pipeline.render_frame(gpu, &mut self.renderer, input)?;
         self.frames += 1;
         Ok(MrFrame {
             composited: relit.composited,
@@ -185,6 +186,14 @@ pub struct FrameSettings {
     /// gathered at the sparse points: with another method they add no light (the virtual
     /// content's shadow alone).
     pub method: Method,
+}
+
+/// One RGB-D frame for [`MrPipeline::light`] and [`MrPipeline::render_frame`]: the frame, how it
+/// is rendered, and with accumulation the accumulator and the frame's index in it.
+pub struct FrameInput<'a> {
+    pub frame: &'a RgbdFrame,
+    pub settings: &'a FrameSettings,
+    pub accumulate: Option<(&'a mut ValAccumulator, u64)>,
 }
 
 /// The mixed-reality pipeline of one scene (docs/design.md §6), shared by `relume replay`
@@ -340,14 +349,8 @@ impl MrPipeline {
     /// environment's VALs around the content, and with the differential pass, its receivers
     /// (which raise the `auto` environment's level). The spot light, occlusion and glossy
     /// settings are the renderer's.
-    pub fn light(
-        &mut self,
-        gpu: &Gpu,
-        renderer: &mut Renderer,
-        frame: &RgbdFrame,
-        settings: &FrameSettings,
-        accumulate: Option<(&mut ValAccumulator, u64)>,
-    ) -> Result<Lighting, GpuError> {
+    pub fn light(&mut self, gpu: &Gpu, renderer: &mut Renderer, input: FrameInput<'_>) -> Result<Lighting, GpuError> {
+        let FrameInput { frame, settings, accumulate } = input;
         let rgbd = settings.rgbd;
         let (centre, bounds) = match self.placed(renderer) {
             Some(p) => (p.centre, p.differential.as_ref().map(|d| d.bounds)),
@@ -400,11 +403,10 @@ impl MrPipeline {
         &mut self,
         gpu: &Gpu,
         renderer: &mut Renderer,
-        frame: &RgbdFrame,
-        settings: &FrameSettings,
-        accumulate: Option<(&mut ValAccumulator, u64)>,
+        input: FrameInput<'_>,
     ) -> Result<Relit, GpuError> {
-        let lighting = self.light(gpu, renderer, frame, settings, accumulate)?;
+        let (frame, settings) = (input.frame, input.settings);
+        let lighting = self.light(gpu, renderer, input)?;
         let (w, h) = (settings.width, settings.height);
         renderer.set_pinhole_view(frame.intrinsics, &frame.camera_to_world);
         let mut rendered = renderer.render(gpu, settings.method, w, h)?;

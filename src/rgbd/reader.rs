@@ -2,12 +2,14 @@
 //! options, the association statistics, the errors, and the parts a reader assembles into a
 //! `Recording`; the checks and text-line helpers they all use.
 
+use std::collections::HashSet;
 use std::io::ErrorKind;
 use std::path::{Path, PathBuf};
 
 use glam::DAffine3;
 
 use super::Intrinsics;
+use super::poses::nearest;
 
 /// Largest timestamp difference (s) for pairing depth with colour and with ground truth, as in
 /// TUM's `associate.py`.
@@ -152,8 +154,56 @@ pub(super) struct Parts<F> {
     pub layout: Layout,
 }
 
+/// The frames [`associate`] kept, in the depth frames' order, and how it paired them.
+pub(super) struct Associated<F> {
+    pub timestamps: Vec<f64>,
+    pub poses: Vec<DAffine3>,
+    pub frames: Vec<F>,
+    pub stats: AssociationStats,
+}
+
+/// Pairs each depth frame `(t, depth)` with the colour frame of nearest timestamp in the sorted
+/// `colour_times` and with the pose `pose_at(t)`, leaving out (and counting) one without a colour
+/// frame within `tolerance` s or without a pose; a kept frame is `frame(depth, colour index)`.
+/// Fails when no frame is left; warns of the frames left out of the recording at `path`.
+pub(super) fn associate<D, F>(
+    path: &Path,
+    depth: impl ExactSizeIterator<Item = (f64, D)>,
+    colour_times: &[f64],
+    tolerance: f64,
+    mut pose_at: impl FnMut(f64) -> Option<DAffine3>,
+    mut frame: impl FnMut(D, usize) -> F,
+) -> Result<Associated<F>, RecordingError> {
+    let mut stats =
+        AssociationStats { depth_frames: depth.len(), colour_frames: colour_times.len(), ..Default::default() };
+    let (mut timestamps, mut poses, mut frames) = (Vec::new(), Vec::new(), Vec::new());
+    let mut used_colour = HashSet::new();
+    for (t, depth) in depth {
+        let Some(c) = nearest(colour_times, t).filter(|&c| (colour_times[c] - t).abs() <= tolerance) else {
+            tracing::debug!("depth frame {t:.6}: no colour frame within {tolerance} s");
+            stats.without_colour += 1;
+            continue;
+        };
+        let Some(pose) = pose_at(t) else {
+            stats.without_pose += 1;
+            continue;
+        };
+        if !used_colour.insert(c) {
+            stats.shared_colour += 1;
+        }
+        timestamps.push(t);
+        poses.push(pose);
+        frames.push(frame(depth, c));
+    }
+    if timestamps.is_empty() {
+        return Err(RecordingError::NoFrames { stats });
+    }
+    warn_skipped(path, &stats, tolerance);
+    Ok(Associated { timestamps, poses, frames, stats })
+}
+
 /// Logs the depth frames that association left out, if any.
-pub(super) fn warn_skipped(path: &Path, stats: &AssociationStats, tolerance: f64) {
+fn warn_skipped(path: &Path, stats: &AssociationStats, tolerance: f64) {
     if stats.without_colour + stats.without_pose > 0 {
         tracing::warn!(
             "{}: skipped {} of {} depth frames ({} without a colour frame, {} without a pose within {tolerance} s)",

@@ -11,17 +11,16 @@
 //! [`open`] reads the text files, pairs each depth frame with the colour frame of nearest
 //! timestamp and interpolates its pose.
 
-use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 
 use glam::DAffine3;
 use serde::Deserialize;
 
 use super::Intrinsics;
-use super::poses::{PoseSample, interpolate_pose, nearest};
+use super::poses::{PoseSample, interpolate_pose};
 use super::reader::{
-    AssociationStats, FramePair, Layout, Parts, RecordingError, RecordingOptions, check_depth_scale, check_intrinsics,
-    check_tolerance, data_lines, line_error, parse_number, read_text, value_error, warn_skipped,
+    Associated, FramePair, Layout, Parts, RecordingError, RecordingOptions, associate, check_depth_scale,
+    check_intrinsics, check_tolerance, data_lines, line_error, parse_number, read_text, value_error,
 };
 
 /// TUM's depth scale: 16-bit depth units per metre.
@@ -44,7 +43,7 @@ pub fn detect(dir: &Path) -> bool {
 ///   `options.depth_scale`, [`TUM_DEPTH_SCALE`].
 /// - Each depth frame is paired with the colour frame of nearest timestamp; one without a
 ///   colour frame within `options.tolerance_s` is skipped. A colour frame may serve two
-///   depth frames ([`AssociationStats::shared_colour`]).
+///   depth frames ([`AssociationStats::shared_colour`](super::reader::AssociationStats::shared_colour)).
 /// - The pose at the depth timestamp is interpolated between the two bracketing ground-truth
 ///   samples (translation lerp, rotation slerp). A frame whose nearest sample is further than
 ///   the tolerance (outside the trajectory, or in a tracking gap) is skipped; just outside the
@@ -65,38 +64,20 @@ pub(super) fn open(dir: &Path, options: &RecordingOptions) -> Result<Parts<Vec<F
         Err(e) => return Err(e),
     };
     let colour_times: Vec<f64> = colour.iter().map(|entry| entry.timestamp).collect();
-
-    let mut stats = AssociationStats { depth_frames: depth.len(), colour_frames: colour.len(), ..Default::default() };
-    let (mut timestamps, mut poses, mut files) = (Vec::new(), Vec::new(), Vec::new());
-    let mut used_colour = HashSet::new();
-    for entry in &depth {
-        let t = entry.timestamp;
-        let Some(c) = nearest(&colour_times, t).filter(|&c| (colour_times[c] - t).abs() <= tolerance) else {
-            tracing::debug!("depth frame {t:.6}: no colour frame within {tolerance} s");
-            stats.without_colour += 1;
-            continue;
-        };
+    let pose_at = |t| {
         let pose = match &groundtruth {
             None => Some(DAffine3::IDENTITY),
             Some(samples) => interpolate_pose(samples, t, tolerance),
         };
-        let Some(pose) = pose else {
+        if pose.is_none() {
             tracing::debug!("depth frame {t:.6}: no ground-truth pose within {tolerance} s");
-            stats.without_pose += 1;
-            continue;
-        };
-        if !used_colour.insert(c) {
-            stats.shared_colour += 1;
         }
-        timestamps.push(t);
-        poses.push(pose);
-        files.push(FramePair { depth: entry.file.clone(), colour: colour[c].file.clone() });
-    }
-
-    if timestamps.is_empty() {
-        return Err(RecordingError::NoFrames { stats });
-    }
-    warn_skipped(dir, &stats, tolerance);
+        pose
+    };
+    let files = |entry: &FrameEntry, c: usize| FramePair { depth: entry.file.clone(), colour: colour[c].file.clone() };
+    let depth = depth.iter().map(|entry| (entry.timestamp, entry));
+    let Associated { timestamps, poses, frames, stats } =
+        associate(dir, depth, &colour_times, tolerance, pose_at, files)?;
     tracing::debug!("{}: {} frames, {stats:?}", dir.display(), timestamps.len());
     Ok(Parts {
         dir: dir.to_path_buf(),
@@ -105,7 +86,7 @@ pub(super) fn open(dir: &Path, options: &RecordingOptions) -> Result<Parts<Vec<F
         has_groundtruth: groundtruth.is_some(),
         timestamps,
         poses,
-        frames: files,
+        frames,
         stats,
         layout: Layout::Tum,
     })

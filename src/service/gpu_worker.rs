@@ -737,11 +737,12 @@ fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> 
         rgbd: job.rgbd,
         method: job.method,
     };
+    let input = mr::FrameInput { frame: &job.frame, settings: &settings, accumulate: None };
     if job.camera.is_none() && job.component == Component::Full {
-        let relit = mr.render_frame(gpu, renderer, &job.frame, &settings, None)?;
+        let relit = mr.render_frame(gpu, renderer, input)?;
         return Ok((relit.rendered, Some((relit.composited, relit.composite_ms))));
     }
-    let lighting = mr.light(gpu, renderer, &job.frame, &settings, None)?;
+    let lighting = mr.light(gpu, renderer, input)?;
     let (width, height) = match job.camera {
         Some(camera) => {
             renderer.set_camera(camera);

@@ -15,7 +15,7 @@
 //! away, large flux) and leaves the room's VALs in a handful of groups.
 
 use relume::mr::environment::Environment;
-use relume::mr::{FrameSettings, MrPipeline};
+use relume::mr::{FrameInput, FrameSettings, MrPipeline};
 use relume::renderer::{Method, Renderer};
 use relume::rgbd::RgbdFrame;
 use relume::scene::{Scene, SceneDescription};
@@ -63,7 +63,7 @@ fn exact_reference(scene: &Value, frame: &RgbdFrame) -> (f64, f64) {
         rgbd: loaded.settings.rgbd,
         method: Method::Sparse,
     };
-    mr.render_frame(&gpu, &mut renderer, frame, &settings, None).expect("render");
+    mr.render_frame(&gpu, &mut renderer, FrameInput { frame, settings: &settings, accumulate: None }).expect("render");
     let vals = renderer.read_vals(&gpu).expect("the frame's VALs");
     exact_sparse_irradiance(&renderer.scene.flat, &vals)
 }

@@ -21,10 +21,8 @@ struct DifferentialParams {
 }
 
 @group(0) @binding(0) var<storage, read> params: DifferentialParams;
-// Bindings 1 to 3, 6 and 7 (`progress`: per receiver, the next VAL, DIFFERENTIAL_DONE when
-// finished) and the `Receiver` and `ReceiverLight` structs: `receivers.wgsl`.
-
-const DIFFERENTIAL_DONE: u32 = 0xffffffffu;
+// Bindings 1 to 3 and the `Receiver` and `ReceiverLight` structs: `receivers.wgsl`; 6 and 7
+// (`progress`: per receiver, the next VAL): `shader/rounds.wgsl`.
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y, WORKGROUP_Z)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -33,7 +31,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let start = progress[i];
-    if start == DIFFERENTIAL_DONE {
+    if start == ROUND_DONE {
         return;
     }
     var sums = ReceiverLight(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
@@ -68,13 +66,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         j += 1u;
     }
     light[i] = sums;
-    if j < count {
-        progress[i] = j;
-        atomicAdd(&status[0], 1u);
-        if j == start {
-            atomicAdd(&status[1], 1u);
-        }
-    } else {
-        progress[i] = DIFFERENTIAL_DONE;
-    }
+    end_round(i, j, count, j == start);
 }

@@ -34,10 +34,10 @@ struct ValGroup {
 }
 
 @group(0) @binding(0) var<storage, read> params: FastParams;
-// Bindings 1 to 3, 6 and 7 and the `Receiver` and `ReceiverLight` structs: `receivers.wgsl`.
+// Bindings 1 to 3 and the `Receiver` and `ReceiverLight` structs: `receivers.wgsl`; 6 and 7:
+// `shader/rounds.wgsl`.
 @group(0) @binding(8) var<storage, read> groups: array<ValGroup>;
 
-const FAST_DONE: u32 = 0xffffffffu;
 const HALF_PI: f32 = 1.5707963;
 
 // Twin of `ContentSphere::may_block`: whether a segment from `origin` to a point of the sphere
@@ -66,7 +66,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var g = progress[2u * i];
     var m = progress[2u * i + 1u];
-    if g == FAST_DONE {
+    if g == ROUND_DONE {
         return;
     }
     let start_g = g;
@@ -161,14 +161,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     light[i] = sums;
-    if g < count {
-        progress[2u * i] = g;
-        progress[2u * i + 1u] = m;
-        atomicAdd(&status[0], 1u);
-        if g == start_g && m == start_m {
-            atomicAdd(&status[1], 1u);
-        }
-    } else {
-        progress[2u * i] = FAST_DONE;
-    }
+    // The member is read only while its group is not ROUND_DONE.
+    progress[2u * i + 1u] = m;
+    end_round(2u * i, g, count, g == start_g && m == start_m);
 }

@@ -28,7 +28,7 @@ use crate::gpu::pass::{Entry, Kernel, PassDesc, Res, buffer, module_from_source,
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::Wgsl;
-use crate::gpu::shader::{TILE_SIZE, WORKGROUP_SIZE};
+use crate::gpu::shader::{ROUNDS, TILE_SIZE, WORKGROUP_SIZE};
 use crate::gpu::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
 use crate::twin::Val;
 use crate::twin::bvh::{Bvh, ShadowTraversal, TraceBvh};
@@ -48,22 +48,25 @@ const BVH: &str = include_str!("../references/bvh.wgsl");
 pub const DIFFERENTIAL_LOOP_BUDGET: u32 = 60_000;
 const _: () = assert!(DIFFERENTIAL_LOOP_BUDGET < LLVMPIPE_LOOP_LIMIT);
 
-/// The pass's own WGSL: its constant, the BVH traversal, the shared receivers, then
-/// `differential.wgsl`.
+/// The pass's own WGSL: its constant, the BVH traversal, the rounds' state, the shared
+/// receivers, then `differential.wgsl`.
 pub fn body() -> String {
     Wgsl::new()
         .u32("DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET)
         .include(BVH)
+        .include(ROUNDS)
         .include(RECEIVERS)
         .include(WGSL)
         .finish()
 }
 
-/// The fast pass's WGSL: its constant, the BVH traversal, the shared receivers, then `fast.wgsl`.
+/// The fast pass's WGSL: its constant, the BVH traversal, the rounds' state, the shared receivers,
+/// then `fast.wgsl`.
 pub fn fast_body() -> String {
     Wgsl::new()
         .u32("FAST_DIFFERENTIAL_LOOP_BUDGET", DIFFERENTIAL_LOOP_BUDGET)
         .include(BVH)
+        .include(ROUNDS)
         .include(RECEIVERS)
         .include(FAST_WGSL)
         .finish()

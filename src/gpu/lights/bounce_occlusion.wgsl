@@ -5,7 +5,7 @@
 // A bounce point is not a sparse point, so no disc is skipped. One invocation per point.
 // Rust twin: `twin::bounce::disk_occluded_candidate_vals`.
 
-@group(0) @binding(0) var<storage, read> bounce_points: array<BouncePoint>;
+// Binding 0, `bounce_points`: `bounce_point.wgsl` (prepended).
 @group(0) @binding(1) var<storage, read> sparse_points: array<SparsePoint>;
 @group(0) @binding(2) var<storage, read> bounce_moments: array<Gathered>;
 @group(0) @binding(3) var<storage, read_write> candidates: array<Val>;

@@ -7,7 +7,10 @@ struct BouncePoint {
     area: f32,
 }
 
-// The surface at bounce point `index` (every pass that includes this file binds `bounce_points`).
+// Binding 0 of every pass that includes this file.
+@group(0) @binding(0) var<storage, read> bounce_points: array<BouncePoint>;
+
+// The surface at bounce point `index`.
 fn bounce_surface(index: u32) -> Surface {
     let p = bounce_points[index];
     return surface_at(p.triangle, vec2<f32>(p.u, p.v));

@@ -11,7 +11,7 @@
 // prepended), in ranges on CPU adapters, each range after the first adding its flux.
 // Rust twin: `twin::bounce::candidate_vals`.
 
-@group(0) @binding(0) var<storage, read> bounce_points: array<BouncePoint>;
+// Binding 0, `bounce_points`: `bounce_point.wgsl` (prepended).
 @group(0) @binding(1) var<storage, read> vals: array<Val>;
 @group(0) @binding(2) var<storage, read> val_count: u32;
 @group(0) @binding(3) var<storage, read_write> candidates: array<Val>;

@@ -5,7 +5,7 @@
 // the receivers differ. Writes `group_visibility[point * CLUSTER_COUNT + k]`. Rust twin:
 // `clusters::twin::cluster_visibility` at `twin::bounce`'s surfaces.
 
-@group(0) @binding(0) var<storage, read> bounce_points: array<BouncePoint>;
+// Binding 0, `bounce_points`: `bounce_point.wgsl` (prepended).
 @group(0) @binding(3) var<storage, read_write> group_visibility: array<f32>;
 
 // One invocation per (bounce point, group).

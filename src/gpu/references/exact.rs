@@ -5,7 +5,7 @@
 use crate::gpu::pass::{Entry, Kernel, PassDesc, buffer, module_from_source, read, read_write, texture, view};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::Wgsl;
-use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE};
+use crate::gpu::shader::{IMAGE_TILE, ROUNDS, TILE_SIZE};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::{Recorder, Span, StageTimings};
 use crate::gpu::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
@@ -28,6 +28,7 @@ pub fn body(val_stride: u32) -> String {
         .u32("VAL_STRIDE", val_stride)
         .u32("EXACT_LOOP_BUDGET", EXACT_LOOP_BUDGET)
         .include(BVH)
+        .include(ROUNDS)
         .include(WGSL)
         .finish()
 }

@@ -20,13 +20,8 @@
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> vals: array<Val>;
 @group(0) @binding(3) var<storage, read> val_count: u32;
-// Per pixel: the next (subsampled) VAL to cast toward, EXACT_DONE when finished; zeroed before
-// the first round.
-@group(0) @binding(6) var<storage, read_write> progress: array<u32>;
-// [pixels not finished after this round, pixels that made no progress in it]
-@group(0) @binding(7) var<storage, read_write> status: array<atomic<u32>, 2>;
-
-const EXACT_DONE: u32 = 0xffffffffu;
+// Bindings 6 and 7 (`progress`: per pixel, the next (subsampled) VAL to cast toward):
+// `shader/rounds.wgsl`.
 
 fn exact(id: vec2<u32>, glossy: bool) {
     if id.x >= frame.width || id.y >= frame.height {
@@ -34,13 +29,13 @@ fn exact(id: vec2<u32>, glossy: bool) {
     }
     let pixel = id.y * frame.width + id.x;
     let start = progress[pixel];
-    if start == EXACT_DONE {
+    if start == ROUND_DONE {
         return;
     }
     let hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
     if !hit.covered {
         indirect[pixel] = vec4<f32>(0.0);
-        progress[pixel] = EXACT_DONE;
+        progress[pixel] = ROUND_DONE;
         return;
     }
     let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
@@ -72,15 +67,7 @@ fn exact(id: vec2<u32>, glossy: bool) {
         j += 1u;
     }
     indirect[pixel] = vec4<f32>(l, 1.0);
-    if j < count {
-        progress[pixel] = j;
-        atomicAdd(&status[0], 1u);
-        if j == start {
-            atomicAdd(&status[1], 1u);
-        }
-    } else {
-        progress[pixel] = EXACT_DONE;
-    }
+    end_round(pixel, j, count, j == start);
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)

@@ -28,6 +28,10 @@ const COMMON: &str = include_str!("common.wgsl");
 /// VAL tiles in workgroup memory and per-dispatch VAL ranges, for the passes that loop over
 /// every VAL (the gather, the brute force): prepend to the pass's own WGSL.
 pub const VAL_TILES: &str = include_str!("val_tiles.wgsl");
+/// `progress` and `status` (bindings 6 and 7) and `end_round`, for the passes run in rounds
+/// (the exact reference, the differential passes; [`crate::gpu::rounds_done`]): prepend to the
+/// pass's own WGSL.
+pub const ROUNDS: &str = include_str!("rounds.wgsl");
 const SCENE: &str = include_str!("scene.wgsl");
 const SCENE_TEXTURES: &str = include_str!("scene_textures.wgsl");
 const SCENE_UNTEXTURED: &str = include_str!("scene_untextured.wgsl");

@@ -34,7 +34,7 @@
 //! [`MAX_MCAP_IMAGE_BYTES`], and are converted when a frame is asked for. Errors name the
 //! file, the record (topic, type, index on the topic) and the field.
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -42,10 +42,10 @@ use self::images::{ImagePayload, check_size, image_payload};
 use self::topics::{ChannelInfo, choose_topics};
 use self::transforms::{PoseSource, Transforms};
 use super::Intrinsics;
-use super::poses::{PoseSample, nearest};
+use super::poses::PoseSample;
 use super::reader::{
-    AssociationStats, Layout, Parts, RecordingError, RecordingOptions, check_depth_scale, check_intrinsics,
-    check_tolerance, io_error, value_error, warn_skipped,
+    Associated, Layout, Parts, RecordingError, RecordingOptions, associate, check_depth_scale, check_intrinsics,
+    check_tolerance, io_error, value_error,
 };
 
 /// ROS's depth scale for `16UC1` depth (REP 118: millimetres): units per metre.
@@ -240,37 +240,18 @@ pub(super) fn open(file: &Path, options: &RecordingOptions) -> Result<Parts<Vec<
         PoseSource::Tf(transforms)
     };
 
-    let mut stats = AssociationStats { depth_frames: depth.len(), colour_frames: colour.len(), ..Default::default() };
     let colour: Vec<Arc<ImagePayload>> = colour.into_iter().map(|(_, image)| Arc::new(image)).collect();
-    let (mut timestamps, mut kept_poses, mut frames) = (Vec::new(), Vec::new(), Vec::new());
-    let mut used_colour = HashSet::new();
-    for (t, image) in depth {
-        let Some(c) = nearest(&colour_times, t).filter(|&c| (colour_times[c] - t).abs() <= tolerance) else {
-            stats.without_colour += 1;
-            continue;
-        };
-        let Some(pose) = pose_source.at(&camera_frame, t, tolerance) else {
-            stats.without_pose += 1;
-            continue;
-        };
-        if !used_colour.insert(c) {
-            stats.shared_colour += 1;
-        }
-        timestamps.push(t);
-        kept_poses.push(pose);
-        frames.push(FrameImages { colour: colour[c].clone(), depth: Arc::new(image) });
-    }
-    if timestamps.is_empty() {
-        return Err(RecordingError::NoFrames { stats });
-    }
-    warn_skipped(file, &stats, tolerance);
+    let pose_at = |t| pose_source.at(&camera_frame, t, tolerance);
+    let images = |depth, c: usize| FrameImages { colour: colour[c].clone(), depth: Arc::new(depth) };
+    let Associated { timestamps, poses, frames, stats } =
+        associate(file, depth.into_iter(), &colour_times, tolerance, pose_at, images)?;
     Ok(Parts {
         dir: file.to_path_buf(),
         intrinsics,
         depth_scale,
         has_groundtruth: !matches!(pose_source, PoseSource::None),
         timestamps,
-        poses: kept_poses,
+        poses,
         frames,
         stats,
         layout: Layout::Mcap,
