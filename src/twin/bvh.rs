@@ -198,6 +198,32 @@ impl Bvh {
     }
 }
 
+/// Triangles with the GPU layout's tree over them: what the twins of the GPU passes trace their
+/// shadow rays against.
+#[derive(Clone, Default)]
+pub struct Occluders {
+    pub positions: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+    pub bvh: Bvh,
+}
+
+impl Occluders {
+    /// The tree over `triangles` (corner indices into `positions`).
+    pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Self {
+        let bvh = Bvh::build(&positions, &triangles);
+        Self { positions, triangles, bvh }
+    }
+
+    /// [`Bvh::occluded`] from `origin` to each of at most 32 `targets`: bit `j` is set when the
+    /// segment to `targets[j]` is blocked (the shape of [`TraceBvh::blocked_mask`]).
+    pub fn blocked_mask(&self, origin: Vec3, targets: &[Vec3]) -> u32 {
+        assert!(targets.len() <= 32, "{} targets in one mask", targets.len());
+        targets.iter().enumerate().fold(0, |mask, (j, &target)| {
+            mask | u32::from(self.bvh.occluded(&self.positions, &self.triangles, origin, target)) << j
+        })
+    }
+}
+
 impl TraceBvh {
     /// Build over `triangles` (corner indices into `positions`) with obvhs: large triangles
     /// pre-split, PLOC, reinsertion, then the BVH2-to-CWBVH conversion with at most 3 triangles

@@ -5,12 +5,12 @@
 
 use super::gpu;
 use glam::Vec3;
-use relume::gpu::differential::{Differential, DifferentialDevice, Receiver, Sums, scene_bvh, twin};
+use relume::gpu::differential::{Differential, DifferentialDevice, Receiver, Sums, scene_occluders, twin};
 use relume::gpu::scene::{FlatScene, GpuScene};
 use relume::mr::differential::relit_radiance;
 use relume::scene::{Material, Scene};
 use relume::twin::Val;
-use relume::twin::bvh::TraceBvh;
+use relume::twin::bvh::{Occluders, TraceBvh};
 use relume::twin::exact_cpu::{self, ExactScene, Receivers, ValSampling};
 
 /// A closed cube from `lo` to `hi` as OBJ text (outward faces).
@@ -103,11 +103,11 @@ fn mr_differential_gpu_matches_twin() {
     let gpu = gpu();
     let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
     let (vals, real_count, receivers) = lit_plate(&scene);
-    let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
+    let occluders = scene_occluders(&gpu_scene);
     let every_triangle = |origin: Vec3, targets: &[Vec3]| {
         targets.iter().enumerate().fold(0u32, |mask, (j, &target)| {
-            let blocked = triangles.iter().any(|t| {
-                let [a, b, c] = t.map(|i| positions[i as usize]);
+            let blocked = occluders.triangles.iter().any(|t| {
+                let [a, b, c] = t.map(|i| occluders.positions[i as usize]);
                 relume::twin::bvh::ray_triangle(origin, target - origin, a, b, c).is_some_and(|s| s > 0.0 && s < 1.0)
             });
             mask | u32::from(blocked) << j
@@ -121,7 +121,7 @@ fn mr_differential_gpu_matches_twin() {
         for (r, got) in receivers.iter().zip(&light) {
             let want = match device {
                 DifferentialDevice::Cpu => twin::receiver_light_with(r, &vals, real_count, every_triangle),
-                _ => twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles),
+                _ => twin::receiver_light(r, &vals, real_count, &occluders),
             };
             let scale = (want.unoccluded + want.added).max_element();
             let tol = 1e-4 * scale + 1e-6;
@@ -160,8 +160,8 @@ fn mr_differential_fast_gpu_matches_twin() {
     let gpu = gpu();
     let (scene, gpu_scene) = gpu_box(&gpu, 0.7);
     let (vals, real_count, receivers) = lit_plate(&scene);
-    let (positions, triangles, bvh) = scene_bvh(&gpu_scene);
-    let bounds = relume::mr::differential::bounds(positions.iter().copied());
+    let occluders = scene_occluders(&gpu_scene);
+    let bounds = relume::mr::differential::bounds(occluders.positions.iter().copied());
     let content = ContentSphere::around(bounds);
     let mut grouped = group_vals(&vals[..real_count], real_count, (4, 4), relume::gpu::differential::groups::REACH);
     let emitter_groups = group_vals(&vals[real_count..], 0, (8, 8), relume::gpu::differential::groups::REACH);
@@ -172,13 +172,11 @@ fn mr_differential_fast_gpu_matches_twin() {
         representative: g.representative + shift,
         ..*g
     }));
-    let twins: Vec<_> = receivers
-        .iter()
-        .map(|r| twin::receiver_light_fast(r, &grouped, &content, &bvh, &positions, &triangles))
-        .collect();
+    let twins: Vec<_> =
+        receivers.iter().map(|r| twin::receiver_light_fast(r, &grouped, &content, &occluders)).collect();
     let (mut summed, mut blocked) = (0, 0);
     for (r, fast) in receivers.iter().zip(&twins) {
-        let exact = twin::receiver_light(r, &vals, real_count, &bvh, &positions, &triangles);
+        let exact = twin::receiver_light(r, &vals, real_count, &occluders);
         let tol = 1e-4 * exact.unoccluded.max_element() + 1e-6;
         summed += usize::from((fast.unoccluded - exact.unoccluded).abs().max_element() > tol);
         blocked += usize::from(exact.blocked.x > 0.0);
@@ -234,7 +232,7 @@ fn mr_differential_plate_darkens_as_exact_predicts() {
         Vec3::new(-2.0, 2.0, 0.0),
     ];
     let plate_triangles = vec![[0, 1, 2], [0, 2, 3]];
-    let (box_positions, box_triangles, _) = scene_bvh(&gpu_scene);
+    let Occluders { positions: box_positions, triangles: box_triangles, .. } = scene_occluders(&gpu_scene);
     let mut positions = plate_positions.clone();
     positions.extend(&box_positions);
     let mut triangles = plate_triangles.clone();
@@ -295,9 +293,7 @@ struct PlateFigures {
 /// (z = 0), a virtual white box (albedo 0.8, 0.2 m wide and tall) resting on it,
 /// and the shadow rays' BVH of the box.
 struct RestingBox {
-    positions: Vec<Vec3>,
-    triangles: Vec<[u32; 3]>,
-    bvh: relume::twin::bvh::Bvh,
+    occluders: Occluders,
     emitters: Vec<relume::mr::differential::Emitter>,
 }
 
@@ -315,7 +311,6 @@ fn resting_box() -> RestingBox {
         .collect();
     let quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
     let triangles: Vec<[u32; 3]> = quads.iter().flat_map(|[a, b, c, d]| [[*a, *b, *c], [*a, *c, *d]]).collect();
-    let bvh = relume::twin::bvh::Bvh::build(&positions, &triangles);
     // 4 x 4 re-emitters on each face but the bottom (it lies on the plate).
     let mut emitters = Vec::new();
     let centre = (lo + hi) * 0.5;
@@ -327,7 +322,7 @@ fn resting_box() -> RestingBox {
             emitters.push(Emitter { position, normal, area: 0.04 / 16.0, albedo: Vec3::splat(0.8) });
         }
     }
-    RestingBox { positions, triangles, bvh, emitters }
+    RestingBox { occluders: Occluders::new(positions, triangles), emitters }
 }
 
 impl RestingBox {
@@ -341,10 +336,7 @@ impl RestingBox {
             .collect();
         let mut all = vals.to_vec();
         all.extend(relume::mr::differential::emitter_vals(&self.emitters, &gathered));
-        receivers
-            .iter()
-            .map(|r| twin::receiver_light(r, &all, vals.len(), &self.bvh, &self.positions, &self.triangles))
-            .collect()
+        receivers.iter().map(|r| twin::receiver_light(r, &all, vals.len(), &self.occluders)).collect()
     }
 }
 

@@ -31,7 +31,7 @@ use crate::gpu::shader::Wgsl;
 use crate::gpu::shader::{ROUNDS, TILE_SIZE, WORKGROUP_SIZE};
 use crate::gpu::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
 use crate::twin::Val;
-use crate::twin::bvh::{Bvh, ShadowTraversal, TraceBvh};
+use crate::twin::bvh::{Occluders, ShadowTraversal, TraceBvh};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
@@ -207,11 +207,10 @@ fn scene_triangles(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>) {
     (positions, triangles)
 }
 
-/// The GPU layout's BVH of `scene`'s triangles (the virtual meshes).
-pub fn scene_bvh(scene: &GpuScene) -> (Vec<Vec3>, Vec<[u32; 3]>, Bvh) {
+/// `scene`'s triangles (the virtual meshes) with the GPU layout's tree over them.
+pub fn scene_occluders(scene: &GpuScene) -> Occluders {
     let (positions, triangles) = scene_triangles(scene);
-    let bvh = Bvh::build(&positions, &triangles);
-    (positions, triangles, bvh)
+    Occluders::new(positions, triangles)
 }
 
 /// Where the differential pass runs (`settings.mr.device`), a setting of the scene.
@@ -322,7 +321,7 @@ struct GpuPass {
 impl GpuPass {
     /// Build the BVH of `scene`'s triangles as placed now and the exact pass.
     fn new(gpu: &Gpu, scene: &GpuScene) -> Result<Self, GpuError> {
-        let (_, _, bvh) = scene_bvh(scene);
+        let bvh = scene_occluders(scene).bvh;
         let none = wgpu::BufferUsages::empty();
         // A zero-filled node ends the traversal at once; a binding cannot be empty.
         let nodes = if bvh.nodes.is_empty() { vec![Default::default()] } else { bvh.nodes };

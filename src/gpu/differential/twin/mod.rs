@@ -1,10 +1,10 @@
 //! CPU twins of `differential.wgsl` and `fast.wgsl`: what one receiver's sums are, with the same
-//! shadow rays (`twin::bvh::Bvh::occluded`, the GPU traversal's twin, from `p + n RAY_OFFSET` to
+//! shadow rays (`twin::bvh::Bvh::occluded` through [`Occluders`], the GPU traversal's twin, from `p + n RAY_OFFSET` to
 //! `l + n_l RAY_OFFSET`).
 
 pub mod groups;
 
-use crate::twin::bvh::Bvh;
+use crate::twin::bvh::Occluders;
 use crate::twin::exact_cpu::RAY_OFFSET;
 use crate::twin::{Val, val_geometry};
 use glam::Vec3;
@@ -37,22 +37,9 @@ impl ReceiverLight {
 }
 
 /// The sums of `differential.wgsl` at `receiver`: `vals[.. real_count]` are real VALs, the
-/// rest the virtual content's re-emitters; `bvh` is over the virtual triangles
-/// (`positions`, `triangles`).
-pub fn receiver_light(
-    receiver: &Receiver,
-    vals: &[Val],
-    real_count: usize,
-    bvh: &Bvh,
-    positions: &[Vec3],
-    triangles: &[[u32; 3]],
-) -> ReceiverLight {
-    receiver_light_with(receiver, vals, real_count, |origin, targets| {
-        targets
-            .iter()
-            .enumerate()
-            .fold(0, |mask, (j, &target)| mask | u32::from(bvh.occluded(positions, triangles, origin, target)) << j)
-    })
+/// rest the virtual content's re-emitters; `content` is the virtual triangles.
+pub fn receiver_light(receiver: &Receiver, vals: &[Val], real_count: usize, content: &Occluders) -> ReceiverLight {
+    receiver_light_with(receiver, vals, real_count, |origin, targets| content.blocked_mask(origin, targets))
 }
 
 /// Shadow rays at most this many at a time: the width of the mask `blocked` returns.
@@ -137,26 +124,20 @@ impl ContentSphere {
 
 /// The sums of `fast.wgsl` at `receiver` over `grouped` (real VALs and re-emitters in groups).
 /// A group beyond its reach is summed as its aggregate: a real one adds it to `unoccluded`
-/// without a shadow ray when its cone misses `content` (nothing can block it); a re-emitter
+/// without a shadow ray when its cone misses `sphere`, the content's bounding sphere (nothing
+/// can block it); a re-emitter
 /// group adds it to `added` when the shadow ray to its representative member is free. A real
 /// group whose cone may meet the content is summed as one only beyond its `shadow_reach`, and
 /// blocked as a whole when the ray to its representative is. Every other group has its members
 /// summed as [`receiver_light`] sums them, a shadow ray each, but for a real group whose cone
-/// misses the content: its members are summed without rays.
+/// misses the content: its members are summed without rays. `content` is the virtual triangles.
 pub fn receiver_light_fast(
     receiver: &Receiver,
     grouped: &GroupedVals,
-    content: &ContentSphere,
-    bvh: &Bvh,
-    positions: &[Vec3],
-    triangles: &[[u32; 3]],
+    sphere: &ContentSphere,
+    content: &Occluders,
 ) -> ReceiverLight {
-    receiver_light_fast_with(receiver, grouped, content, |origin, targets| {
-        targets
-            .iter()
-            .enumerate()
-            .fold(0, |mask, (j, &target)| mask | u32::from(bvh.occluded(positions, triangles, origin, target)) << j)
-    })
+    receiver_light_fast_with(receiver, grouped, sphere, |origin, targets| content.blocked_mask(origin, targets))
 }
 
 /// [`receiver_light_fast`] with `blocked` deciding the shadow rays, as for
