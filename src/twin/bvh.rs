@@ -214,10 +214,10 @@ impl Occluders {
         Self { positions, triangles, bvh }
     }
 
-    /// [`Bvh::occluded`] from `origin` to each of at most 32 `targets`: bit `j` is set when the
-    /// segment to `targets[j]` is blocked (the shape of [`TraceBvh::blocked_mask`]).
+    /// [`Bvh::occluded`] from `origin` to each of at most [`PACKET_RAYS`] `targets`: bit `j` is
+    /// set when the segment to `targets[j]` is blocked (the shape of [`TraceBvh::blocked_mask`]).
     pub fn blocked_mask(&self, origin: Vec3, targets: &[Vec3]) -> u32 {
-        assert!(targets.len() <= 32, "{} targets in one mask", targets.len());
+        assert!(targets.len() <= PACKET_RAYS, "{} targets in one mask", targets.len());
         targets.iter().enumerate().fold(0, |mask, (j, &target)| {
             mask | u32::from(self.bvh.occluded(&self.positions, &self.triangles, origin, target)) << j
         })

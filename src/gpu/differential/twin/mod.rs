@@ -1,10 +1,10 @@
 //! CPU twins of `differential.wgsl` and `fast.wgsl`: what one receiver's sums are, with the same
-//! shadow rays (`twin::bvh::Bvh::occluded` through [`Occluders`], the GPU traversal's twin, from `p + n RAY_OFFSET` to
-//! `l + n_l RAY_OFFSET`).
+//! shadow rays (`twin::bvh::Bvh::occluded` through [`Occluders`], the GPU traversal's twin, from
+//! `p + n RAY_OFFSET` to `l + n_l RAY_OFFSET`).
 
 pub mod groups;
 
-use crate::twin::bvh::Occluders;
+use crate::twin::bvh::{Occluders, PACKET_RAYS};
 use crate::twin::exact_cpu::RAY_OFFSET;
 use crate::twin::{Val, val_geometry};
 use glam::Vec3;
@@ -42,8 +42,9 @@ pub fn receiver_light(receiver: &Receiver, vals: &[Val], real_count: usize, cont
     receiver_light_with(receiver, vals, real_count, |origin, targets| content.blocked_mask(origin, targets))
 }
 
-/// Shadow rays at most this many at a time: the width of the mask `blocked` returns.
-pub const SHADOW_BATCH: usize = 32;
+/// Shadow rays at most this many at a time: the width of the mask `blocked` returns (the
+/// trees' masks, `TraceBvh::blocked_mask` and `Occluders::blocked_mask`).
+pub const SHADOW_BATCH: usize = PACKET_RAYS;
 
 /// The sums at `receiver`, with `blocked(from, targets)` deciding the shadow rays from `from` to
 /// at most [`SHADOW_BATCH`] targets at a time (bit `j` set when the segment to `targets[j]` is
@@ -58,23 +59,25 @@ pub fn receiver_light_with(
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
     let mut sums = ReceiverLight::default();
     for (c, chunk) in vals.chunks(SHADOW_BATCH).enumerate() {
-        // The VALs of the chunk that light the receiver: their irradiance, ray target, index.
-        let mut lit = [(Vec3::ZERO, Vec3::ZERO, 0usize); SHADOW_BATCH];
+        // The VALs of the chunk that light the receiver: their ray targets, and their irradiance
+        // and index.
+        let mut targets = [Vec3::ZERO; SHADOW_BATCH];
+        let mut lit = [(Vec3::ZERO, 0usize); SHADOW_BATCH];
         let mut n = 0;
         for (i, val) in chunk.iter().enumerate() {
             let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
             let f = g.weight * g.cos_receiver;
             if f > 0.0 {
-                lit[n] = (val.flux * f, val.position + val.normal * RAY_OFFSET, c * SHADOW_BATCH + i);
+                targets[n] = val.position + val.normal * RAY_OFFSET;
+                lit[n] = (val.flux * f, c * SHADOW_BATCH + i);
                 n += 1;
             }
         }
         if n == 0 {
             continue;
         }
-        let targets: [Vec3; SHADOW_BATCH] = std::array::from_fn(|k| lit[k].1);
         let mask = blocked(origin, &targets[..n]);
-        for (k, &(e, _, j)) in lit[..n].iter().enumerate() {
+        for (k, &(e, j)) in lit[..n].iter().enumerate() {
             let blocked = mask >> k & 1 == 1;
             if j < real_count {
                 sums.unoccluded += e;
@@ -125,12 +128,12 @@ impl ContentSphere {
 /// The sums of `fast.wgsl` at `receiver` over `grouped` (real VALs and re-emitters in groups).
 /// A group beyond its reach is summed as its aggregate: a real one adds it to `unoccluded`
 /// without a shadow ray when its cone misses `sphere`, the content's bounding sphere (nothing
-/// can block it); a re-emitter
-/// group adds it to `added` when the shadow ray to its representative member is free. A real
-/// group whose cone may meet the content is summed as one only beyond its `shadow_reach`, and
-/// blocked as a whole when the ray to its representative is. Every other group has its members
-/// summed as [`receiver_light`] sums them, a shadow ray each, but for a real group whose cone
-/// misses the content: its members are summed without rays. `content` is the virtual triangles.
+/// can block it); a re-emitter group adds it to `added` when the shadow ray to its
+/// representative member is free. A real group whose cone may meet the content is summed as one
+/// only beyond its `shadow_reach`, and blocked as a whole when the ray to its representative is.
+/// Every other group has its members summed as [`receiver_light`] sums them, a shadow ray each,
+/// but for a real group whose cone misses the content: its members are summed without rays.
+/// `content` is the virtual triangles.
 pub fn receiver_light_fast(
     receiver: &Receiver,
     grouped: &GroupedVals,
@@ -145,7 +148,7 @@ pub fn receiver_light_fast(
 pub fn receiver_light_fast_with(
     receiver: &Receiver,
     grouped: &GroupedVals,
-    content: &ContentSphere,
+    sphere: &ContentSphere,
     blocked: impl Fn(Vec3, &[Vec3]) -> u32 + Copy,
 ) -> ReceiverLight {
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
@@ -155,7 +158,7 @@ pub fn receiver_light_fast_with(
         let real = k < grouped.real_groups;
         let a = &group.aggregate;
         let far = (a.position - receiver.position).length() > group.reach;
-        if far && (!real || !content.may_block(origin, a.position, group.radius)) {
+        if far && (!real || !sphere.may_block(origin, a.position, group.radius)) {
             let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
             let f = g.weight * g.cos_receiver;
             if f <= 0.0 {
@@ -190,7 +193,7 @@ pub fn receiver_light_fast_with(
         // A real group whose members' rays all pass clear of the content (their targets lie
         // within the radius and a ray offset of the aggregate) is summed without rays: the same
         // sums, in the same order, as with them.
-        let clear = real && !content.may_block(origin, a.position, group.radius + RAY_OFFSET);
+        let clear = real && !sphere.may_block(origin, a.position, group.radius + RAY_OFFSET);
         let part = match clear {
             true => receiver_light_with(receiver, members, members.len(), |_, _| 0),
             false => receiver_light_with(receiver, members, if real { members.len() } else { 0 }, blocked),
