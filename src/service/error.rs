@@ -88,6 +88,18 @@ pub struct ErrorBody {
     pub error: ErrorDetail,
 }
 
+/// The OpenAPI answer of every route behind the bearer token (`--token`) when it is missing or
+/// wrong: one definition, named in each route's `responses(...)`. A documentation type only.
+#[derive(utoipa::IntoResponses)]
+#[response(status = 401, description = "Missing or wrong bearer token")]
+pub struct Unauthorized(pub ErrorBody);
+
+/// The OpenAPI answer of every route under `/v1/scenes/{id}` when there is no such scene. A
+/// documentation type only.
+#[derive(utoipa::IntoResponses)]
+#[response(status = 404, description = "No such scene")]
+pub struct UnknownScene(pub ErrorBody);
+
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct ErrorDetail {
     pub code: Code,

@@ -25,7 +25,7 @@ use crate::scene::parse_json;
 use super::AppState;
 use super::api::{Health, ImageFormat, RenderRequest, SceneInfo, SceneRequest};
 use super::config::limit;
-use super::error::{ApiError, Code, ErrorBody};
+use super::error::{ApiError, Code, ErrorBody, Unauthorized, UnknownScene};
 use super::gpu_worker::{RenderJob, RenderOutput, WorkerError};
 use super::schedule::ClientId;
 use super::{ready, recordings, store, stream, tickets, viewer};
@@ -356,7 +356,7 @@ async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         (status = 400, description = "Invalid JSON, field, mesh or path (`field` names it), or over \
             max_vals, max_frame_side, max_pixels, max_sparse_points, max_triangles or max_scenes \
             (`limit` names it)", body = ErrorBody),
-        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
+        Unauthorized,
         (status = 413, description = "Over max_body_bytes or max_mesh_bytes", body = ErrorBody),
         (status = 503, description = "Shutting down", body = ErrorBody),
     ),
@@ -382,8 +382,8 @@ async fn create_scene(State(state): State<Arc<AppState>>, body: Body) -> Result<
     params(("id" = String, Path, description = "The scene's id")),
     responses(
         (status = 200, description = "The scene", body = SceneInfo),
-        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
-        (status = 404, description = "No such scene", body = ErrorBody),
+        Unauthorized,
+        UnknownScene,
     ),
     security((), ("bearer" = []))
 )]
@@ -406,8 +406,8 @@ async fn get_scene(
     params(("id" = String, Path, description = "The scene's id")),
     responses(
         (status = 204, description = "Deleted"),
-        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
-        (status = 404, description = "No such scene", body = ErrorBody),
+        Unauthorized,
+        UnknownScene,
     ),
     security((), ("bearer" = []))
 )]
@@ -461,8 +461,8 @@ async fn delete_scene(
             )),
         (status = 400, description = "Invalid JSON or field (`field` names it), or over max_frame_side or \
             max_pixels", body = ErrorBody),
-        (status = 401, description = "Missing or wrong bearer token", body = ErrorBody),
-        (status = 404, description = "No such scene", body = ErrorBody),
+        Unauthorized,
+        UnknownScene,
         (status = 413, description = "Over max_body_bytes", body = ErrorBody),
         (status = 408, description = "The body did not arrive within body_timeout_seconds", body = ErrorBody),
         (status = 503, description = "The client's queue (max_client_queue) or the whole render queue \

@@ -166,7 +166,7 @@ fn downscale(uri: &Uri) -> Result<u32, ApiError> {
     tag = "recordings",
     responses(
         (status = 200, description = "The recordings, by name", body = RecordingList),
-        (status = 401, description = "Missing or wrong bearer token", body = super::error::ErrorBody),
+        super::error::Unauthorized,
     ),
     security((), ("bearer" = []))
 )]
@@ -201,7 +201,7 @@ pub async fn list_recordings(State(state): State<Arc<AppState>>) -> Result<Json<
                 ("X-Relume-Height" = u32, description = "Frame height after downscaling, pixels"),
             )),
         (status = 400, description = "Invalid name, index or query (`field` names it)", body = super::error::ErrorBody),
-        (status = 401, description = "Missing or wrong bearer token", body = super::error::ErrorBody),
+        super::error::Unauthorized,
         (status = 404, description = "No such recording, or no such frame", body = super::error::ErrorBody),
         (status = 422, description = "The recording or this frame's images cannot be read", body = super::error::ErrorBody),
     ),

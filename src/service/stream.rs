@@ -72,7 +72,7 @@ use super::wire::{
             body = super::error::ErrorBody),
         (status = 401, description = "Missing or wrong bearer token, or an unknown, used or expired ticket",
             body = super::error::ErrorBody),
-        (status = 404, description = "No such scene", body = super::error::ErrorBody),
+        super::error::UnknownScene,
         (status = 503, description = "Shutting down, or max_streams streams are open (`limit` names it)",
             body = super::error::ErrorBody),
     ),

@@ -440,7 +440,7 @@ pub fn from_query(uri: &Uri) -> Result<Option<String>, ApiError> {
     responses(
         (status = 200, description = "A single-use ticket", body = TicketInfo,
             headers(("Cache-Control" = String, description = "`no-store`"))),
-        (status = 401, description = "Missing or wrong bearer token", body = super::error::ErrorBody),
+        super::error::Unauthorized,
         (status = 503, description = "max_tickets tickets are outstanding (`limit` names it), or the server is \
             shutting down", body = super::error::ErrorBody,
             headers(("Retry-After" = u32, description = "Seconds, when the tickets are all taken: until the \
