@@ -8,8 +8,8 @@ pub struct Args {
     /// A running server (http://host:port); default: one started in this process.
     #[arg(long)]
     server: Option<String>,
-    #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
-    token: Option<String>,
+    #[command(flatten)]
+    client: super::ServerClient,
     /// Concurrent streams (each on its own copy of --scene).
     #[arg(long, default_value_t = 2)]
     streams: usize,
@@ -45,12 +45,6 @@ pub struct Args {
     /// --seconds long, on loopback (docs/service.md "Load and soak tests").
     #[arg(long)]
     chaos: bool,
-    /// Seconds a client tries to get its stream back, or its renders answered, after the
-    /// server went away (a backend behind a load balancer stopped or died), waiting 0.1 s
-    /// doubling to 2 s; the frames in flight are counted lost. 0: the run fails instead.
-    #[arg(long, default_value_t = relume::service::client::DEFAULT_RECONNECT_SECONDS,
-        value_parser = clap::value_parser!(u64).range(0..=3600))]
-    reconnect_seconds: u64,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -58,7 +52,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     anyhow::ensure!(seconds.is_finite() && seconds > 0.0, "--seconds: must be a positive number, got {seconds}");
     let options = relume::service::load::LoadOptions {
         server: args.server,
-        token: args.token,
+        token: args.client.token.clone(),
         streams: args.streams,
         http_clients: args.http_clients,
         duration: std::time::Duration::from_secs_f64(seconds),
@@ -69,7 +63,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         assets: args.assets,
         frames: args.frames,
         chaos: args.chaos,
-        reconnect: std::time::Duration::from_secs(args.reconnect_seconds),
+        reconnect: args.client.reconnect(),
     };
     let runtime = tokio::runtime::Runtime::new().context("starting the async runtime")?;
     if args.chaos {

@@ -14,6 +14,29 @@ use relume::bench::compare::{ExactOptions, ReferenceDevice};
 use relume::scene::{Quality, Scene};
 use std::path::Path;
 
+/// How a client of a running server (`relume replay --server`, `relume load --server`) talks to
+/// it: the bearer token, and how long it tries to get its stream back.
+#[derive(clap::Args)]
+pub struct ServerClient {
+    /// The server's bearer token.
+    #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Seconds to try to get a stream back, or renders answered, after the server went away (a
+    /// backend behind a load balancer stopped or died; the new one may be another backend),
+    /// waiting 0.1 s doubling to 2 s between tries; the frames in flight are lost and counted.
+    /// 0: the run fails instead.
+    #[arg(long, default_value_t = relume::service::client::DEFAULT_RECONNECT_SECONDS,
+        value_parser = clap::value_parser!(u64).range(0..=3600))]
+    pub reconnect_seconds: u64,
+}
+
+impl ServerClient {
+    /// `--reconnect-seconds` as a duration.
+    pub fn reconnect(&self) -> std::time::Duration {
+        std::time::Duration::from_secs(self.reconnect_seconds)
+    }
+}
+
 #[derive(Parser)]
 #[command(name = "relume", version, about = "One-bounce global illumination from thousands of virtual area lights")]
 pub struct Cli {

@@ -52,21 +52,14 @@ pub struct Args {
     /// sent and its composite written to `composited/`.
     #[arg(long)]
     server: Option<String>,
+    #[command(flatten)]
+    client: super::ServerClient,
     /// Hold each frame's time under this many milliseconds: the replay moves frame by frame
     /// between the scene's level and cheaper or richer parameters (VAL grid, render size,
     /// visibility, near field), and reports what each frame ran at (default: the scene's
     /// `settings.budget_ms`, else none).
     #[arg(long)]
     budget_ms: Option<f32>,
-    /// With --server: the server's bearer token.
-    #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
-    token: Option<String>,
-    /// With --server: seconds to try to get a stream back after one ends (its backend stopped
-    /// or died; through a load balancer the new one may be on another backend), waiting 0.1 s
-    /// doubling to 2 s between tries; the frame in flight is lost and counted. 0: stop instead.
-    #[arg(long, default_value_t = relume::service::client::DEFAULT_RECONNECT_SECONDS,
-        value_parser = clap::value_parser!(u64).range(0..=3600))]
-    reconnect_seconds: u64,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -87,7 +80,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         let options = relume::service::client::RemoteReplayOptions {
             server,
-            token: args.token,
+            token: args.client.token.clone(),
             recording: args.recording,
             recording_options,
             scene: args.scene,
@@ -95,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             frames: args.frames,
             exposure: Some(exposure),
             progress: true,
-            reconnect: std::time::Duration::from_secs(args.reconnect_seconds),
+            reconnect: args.client.reconnect(),
         };
         return remote_replay_command(&options);
     }
