@@ -13,14 +13,13 @@
 @compute @workgroup_size(WORKGROUP_X)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let index = id.x;
-    let inside = index < arrayLength(&bounce_points);
-    let s = bounce_surface_or_placeholder(index);
+    let point = bounce_invocation(index);
     var g = Gathered(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
-    if inside {
+    if point.inside {
         g = bounce_moments[index];
     }
-    let visible = disc_visibility(s.position, s.normal, g.position, g.second_moment, 0xffffffffu, inside, local);
-    if inside {
+    let visible = disc_visibility(point.surface.position, point.surface.normal, g.position, g.second_moment, 0xffffffffu, point.inside, local);
+    if point.inside {
         candidates[index].flux *= visible;
     }
 }

@@ -16,12 +16,18 @@ fn bounce_surface(index: u32) -> Surface {
     return surface_at(p.triangle, vec2<f32>(p.u, p.v));
 }
 
-// `bounce_surface`, or for an invocation past the last point (which still takes part in its
-// workgroup's barriers) a black placeholder at the origin facing +z.
-fn bounce_surface_or_placeholder(index: u32) -> Surface {
+// The point invocation `index` takes: `inside` when there is one, and its surface; an invocation
+// past the last point (which still takes part in its workgroup's barriers) gets a black
+// placeholder at the origin facing +z.
+struct BounceInvocation {
+    inside: bool,
+    surface: Surface,
+}
+
+fn bounce_invocation(index: u32) -> BounceInvocation {
     if index >= arrayLength(&bounce_points) {
         let up = vec3<f32>(0.0, 0.0, 1.0);
-        return Surface(vec3<f32>(0.0), up, Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1), up);
+        return BounceInvocation(false, Surface(vec3<f32>(0.0), up, Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1), up));
     }
-    return bounce_surface(index);
+    return BounceInvocation(true, bounce_surface(index));
 }

@@ -19,12 +19,12 @@
 @compute @workgroup_size(WORKGROUP_X)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let index = id.x;
-    let inside = index < arrayLength(&bounce_points);
-    let s = bounce_surface_or_placeholder(index);
-    let position = s.position;
-    let normal = s.normal;
-    let geometric = s.geometric;
-    let albedo = s.material.diffuse;
+    let point = bounce_invocation(index);
+    let inside = point.inside;
+    let position = point.surface.position;
+    let normal = point.surface.normal;
+    let geometric = point.surface.geometric;
+    let albedo = point.surface.material.diffuse;
     var area = 0.0;
     if inside {
         area = bounce_points[index].area;
