@@ -268,24 +268,31 @@ impl Differential {
         receivers: &[Receiver],
         sums: Sums<'_>,
     ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
-        use rayon::prelude::*;
-        let bvh = match &mut self.backend {
-            Backend::Gpu(pass) => return pass.run(gpu, scene, receivers, sums),
-            Backend::Cpu(bvh) => &*bvh,
-        };
-        let blocked = |origin, targets: &[Vec3]| bvh.blocked_mask(origin, targets, SHADOWS);
-        let light = match sums {
-            Sums::Exact { vals, real_count } => {
-                let real_count = real_count.min(vals.len());
-                let light = |r| twin::receiver_light_with(r, vals, real_count, blocked);
-                receivers.par_iter().map(light).collect()
+        match &mut self.backend {
+            Backend::Gpu(_) if receivers.is_empty() => Ok((Vec::new(), 0)),
+            Backend::Gpu(pass) => {
+                let bound = pass.bind(gpu, scene, receivers, sums)?;
+                pass.rounds(gpu, scene, &bound, receivers.len())
             }
-            Sums::Fast { grouped, content } => {
-                let light = |r| twin::receiver_light_fast_with(r, grouped, content, blocked);
-                receivers.par_iter().map(light).collect()
-            }
-        };
-        Ok((light, 0))
+            Backend::Cpu(bvh) => Ok((cpu_sums(bvh, receivers, sums), 0)),
+        }
+    }
+}
+
+/// [`Differential::run`] on the CPU cores, a receiver per task.
+fn cpu_sums(bvh: &TraceBvh, receivers: &[Receiver], sums: Sums<'_>) -> Vec<ReceiverLight> {
+    use rayon::prelude::*;
+    let blocked = |origin, targets: &[Vec3]| bvh.blocked_mask(origin, targets, SHADOWS);
+    match sums {
+        Sums::Exact { vals, real_count } => {
+            let real_count = real_count.min(vals.len());
+            let light = |r| twin::receiver_light_with(r, vals, real_count, blocked);
+            receivers.par_iter().map(light).collect()
+        }
+        Sums::Fast { grouped, content } => {
+            let light = |r| twin::receiver_light_fast_with(r, grouped, content, blocked);
+            receivers.par_iter().map(light).collect()
+        }
     }
 }
 
@@ -298,6 +305,12 @@ pub enum Sums<'a> {
     /// The VALs in groups ([`twin::receiver_light_fast`]), real VALs and re-emitters, with
     /// `content` the virtual content's bounding sphere.
     Fast { grouped: &'a GroupedVals, content: &'a ContentSphere },
+}
+
+/// A frame's bind group, for the kernel it was bound to.
+enum Bound {
+    Exact(wgpu::BindGroup),
+    Fast(wgpu::BindGroup),
 }
 
 /// The GPU passes for one scene placement: the BVH, the exact kernel, the fast one (built on its
@@ -372,18 +385,10 @@ impl GpuPass {
         Ok(())
     }
 
-    /// [`Differential::run`] on the GPU.
-    fn run(
-        &mut self,
-        gpu: &Gpu,
-        scene: &GpuScene,
-        receivers: &[Receiver],
-        sums: Sums<'_>,
-    ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
-        if receivers.is_empty() {
-            return Ok((Vec::new(), 0));
-        }
-        let (kernel, group) = match sums {
+    /// Upload `receivers` and what `sums` sums, and bind the kernel that sums it (building the
+    /// fast one on its first use).
+    fn bind(&mut self, gpu: &Gpu, scene: &GpuScene, receivers: &[Receiver], sums: Sums<'_>) -> Result<Bound, GpuError> {
+        Ok(match sums {
             Sums::Exact { vals, real_count } => {
                 self.upload(gpu, receivers, vals)?;
                 let params = RawDifferentialParams {
@@ -393,7 +398,7 @@ impl GpuPass {
                     _pad0: 0,
                 };
                 gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-                (&self.kernel, self.kernel.bind(gpu, &self.resources(&self.params)))
+                Bound::Exact(self.kernel.bind(gpu, &self.resources(&self.params)))
             }
             Sums::Fast { grouped, content } => {
                 if self.fast.is_none() {
@@ -421,10 +426,9 @@ impl GpuPass {
                 let kernel = self.fast.as_ref().expect("built above");
                 let mut resources = self.resources(&self.fast_params);
                 resources.push(buffer("groups", groups));
-                (kernel, kernel.bind(gpu, &resources))
+                Bound::Fast(kernel.bind(gpu, &resources))
             }
-        };
-        self.rounds(gpu, scene, kernel, &group, receivers.len())
+        })
     }
 
     /// The resources both passes bind (all of [`PASS`]'s, the fast pass's groups aside), with
@@ -443,15 +447,19 @@ impl GpuPass {
         ]
     }
 
-    /// Dispatch `kernel` over `n` receivers until every one is done, then read their sums.
+    /// Dispatch the bound kernel over `n` receivers until every one is done, then read their
+    /// sums; the GPU rounds it took.
     fn rounds(
         &self,
         gpu: &Gpu,
         scene: &GpuScene,
-        kernel: &Kernel,
-        group: &wgpu::BindGroup,
+        bound: &Bound,
         n: usize,
     ) -> Result<(Vec<ReceiverLight>, u32), GpuError> {
+        let (kernel, group) = match bound {
+            Bound::Exact(group) => (&self.kernel, group),
+            Bound::Fast(group) => (self.fast.as_ref().expect("built by bind"), group),
+        };
         let (_, light, progress, _) = self.per_receiver.as_ref().expect("uploaded");
         let mut rounds = 0;
         loop {
