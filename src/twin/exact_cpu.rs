@@ -468,20 +468,23 @@ mod tests {
         let triangles = vec![[0, 2, 1], [0, 3, 2], [4, 6, 5], [4, 7, 6]];
         let bvh = Bvh::build(&positions, &triangles);
         let trace = TraceBvh::build(&positions, &triangles);
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        let vals = (0..300)
-            .map(|_| Val {
-                position: Vec3::new(
-                    rng.random_range(-1.5..1.5),
-                    rng.random_range(1.0..1.5),
-                    rng.random_range(-1.5..1.5),
-                ),
-                normal: Vec3::NEG_Y,
-                area: 1e-3,
-                flux: Vec3::new(rng.random_range(0.0..1.0), rng.random_range(0.0..1.0), rng.random_range(0.0..1.0)),
-            })
-            .collect();
+        let vals = vals_above(1, 300, 1.5, 1.0..1.5, 1e-3);
         Room { positions, triangles, bvh, trace, vals }
+    }
+
+    /// `n` VALs of `area` facing down, spread uniformly over `-half_width..half_width` in x and
+    /// z at `heights`, with random flux (seeded by `seed`).
+    fn vals_above(seed: u64, n: usize, half_width: f32, heights: std::ops::Range<f32>, area: f32) -> Vec<Val> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut random = |range: std::ops::Range<f32>| rng.random_range(range);
+        (0..n)
+            .map(|_| {
+                let (x, y, z) =
+                    (random(-half_width..half_width), random(heights.clone()), random(-half_width..half_width));
+                let flux = Vec3::new(random(0.0..1.0), random(0.0..1.0), random(0.0..1.0));
+                Val { position: Vec3::new(x, y, z), normal: Vec3::NEG_Y, area, flux }
+            })
+            .collect()
     }
 
     /// Floor receivers along a line through the occluder's shadow: lit, penumbra and umbra.
@@ -531,19 +534,7 @@ mod tests {
     #[test]
     fn packets_and_single_rays_give_the_same_image() {
         let mut room = room();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-        room.vals = (0..4000)
-            .map(|_| Val {
-                position: Vec3::new(
-                    rng.random_range(-0.6..0.6),
-                    rng.random_range(1.0..1.1),
-                    rng.random_range(-0.6..0.6),
-                ),
-                normal: Vec3::NEG_Y,
-                area: 1e-4,
-                flux: Vec3::new(rng.random_range(0.0..1.0), 0.5, 0.25),
-            })
-            .collect();
+        room.vals = vals_above(4, 4000, 0.6, 1.0..1.1, 1e-4);
         let hits = floor_receivers();
         let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true };
         let n = hits.len() as u32;
