@@ -62,6 +62,32 @@ fn a_scene_that_can_occlude_itself_gets_the_levels_visibility() {
     assert_eq!((fast.settings.rsm_resolution, fast.settings.sparse.subdivision), (64, 4.0));
 }
 
+/// A scene lit by RGB-D frames only (no light of its own, as a mixed-reality scene) keeps disc
+/// occluders at `accurate`: the group modes' maps do not serve the environment's distant VALs.
+#[test]
+fn a_scene_lit_by_rgbd_frames_keeps_disks_at_accurate() {
+    let dir = TempDir::new("quality-rgbd");
+    dir.write("cube.obj", CUBE_OBJ);
+    dir.write("room.obj", ROOM_OBJ);
+    let camera =
+        r#""camera": {"position": [0, 1, 3.5], "target": [0, 1, 0], "fov_y_deg": 40, "width": 64, "height": 64}"#;
+    for (quality, mode) in
+        [("balanced", Occlusion::Disks), ("accurate", Occlusion::Disks), ("reference", Occlusion::Disks)]
+    {
+        let json =
+            format!(r#"{{"meshes": [{{{ROOM}}}, {{{CUBE}}}], {camera}, "settings": {{"quality": "{quality}"}}}}"#);
+        let scene = Scene::from_json_str(&json, dir.path()).expect("scene loads");
+        assert!(scene.resolved.analysis.lit_by_rgbd_frames() && scene.resolved.analysis.self_occluding());
+        assert_eq!(scene.settings.visibility.mode, mode, "{quality}");
+        if quality != "balanced" {
+            assert!(choice(&scene, "visibility").reason.contains("lit by RGB-D frames"));
+        }
+    }
+    let lit = load(&[ROOM, CUBE], r#"{"quality": "accurate"}"#);
+    assert!(!lit.resolved.analysis.lit_by_rgbd_frames());
+    assert_eq!(lit.settings.visibility.mode, Occlusion::Clusters);
+}
+
 #[test]
 fn a_scene_without_glossy_material_needs_no_glossy_gather() {
     let scene = load(&[CUBE], "{}");
