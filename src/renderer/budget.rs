@@ -16,6 +16,9 @@
 //!   tried again for [`BACKOFF_FRAMES`] frames, doubled at each failed probe;
 //! - otherwise it holds.
 //!
+//! The stream's first frame (pipelines built, caches filled) moves it down when over the budget
+//! but is not kept as its rung's cost and blocks no rung.
+//!
 //! The hold, the target below the budget and the back-off are the hysteresis: rungs change
 //! seldom, so the image does not pop from one frame to the next (the change it adds is measured
 //! by `relume replay --budget-ms`, docs/measurements/budget.md).
@@ -215,16 +218,24 @@ impl BudgetController {
     pub fn observe(&mut self, frame_ms: f64) -> Move {
         self.frames += 1;
         let r = self.rung;
+        // The stream's first frame builds the pipelines and fills the caches: over the budget it
+        // moves the controller down, but it does not measure its rung (its time is not kept as
+        // the rung's cost, and the rung is not blocked).
+        let warm_up = self.frames == 1;
         let smoothed = match self.cost[r] {
             Some(previous) => SMOOTHING * frame_ms + (1.0 - SMOOTHING) * previous,
             None => frame_ms,
         };
-        self.cost[r] = Some(smoothed);
+        if !warm_up {
+            self.cost[r] = Some(smoothed);
+        }
         let target = self.budget_ms * TARGET;
         if smoothed > self.budget_ms && r > 0 {
             // The rung left is not tried again for its back-off; the back-off doubles when a
             // probe failed.
-            self.blocked_until[r] = self.frames + self.backoff[r];
+            if !warm_up {
+                self.blocked_until[r] = self.frames + self.backoff[r];
+            }
             if self.probing {
                 self.backoff[r] = self.backoff[r].saturating_mul(2);
             }
@@ -385,6 +396,10 @@ mod tests {
             c.observe(ms);
         }
         assert!(rungs_seen[1] < 7, "it fell after the slow frame: {rungs_seen:?}");
+        // The first frame measured nothing: the starting rung is not blocked for a back-off,
+        // so the controller climbs back one rung per hold.
+        let back = 1 + 2 * HOLD_FRAMES as usize + 1;
+        assert!(rungs_seen[back] >= 7, "back at the starting rung by frame {back}: {rungs_seen:?}");
         assert_eq!(*rungs_seen.last().unwrap(), 9, "it rose to the top again: {rungs_seen:?}");
     }
 
@@ -400,7 +415,7 @@ mod tests {
 
     #[test]
     fn the_ladder_is_cheapest_first_and_names_the_levels() {
-        let analysis = SceneAnalysis { meshes: 2, ..SceneAnalysis::default() };
+        let analysis = SceneAnalysis { meshes: 2, spot_light: true, ..SceneAnalysis::default() };
         let settings = SettingsDescription::default();
         let ladder = ladder(&analysis, &settings, true);
         assert_eq!(ladder.first().unwrap().occlusion, Occlusion::Off);
