@@ -46,7 +46,7 @@ fn main() -> anyhow::Result<()> {
     }
     let gpu = Gpu::new()?;
     let mut scene = Scene::load(scene_path)?;
-    scene.settings.mr.differential_method = DifferentialMethod::Exact;
+    scene.settings.mr.differential_method = Some(DifferentialMethod::Exact);
     let text = std::fs::read_to_string(scene_path)?;
     let environment = SceneDescription::from_json_str(&text)?.settings.environment;
     let environment = Environment::from_settings(&environment, scene_path.parent().unwrap_or(Path::new(".")))?;

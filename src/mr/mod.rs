@@ -20,6 +20,7 @@ use crate::renderer::{Method, Rendered, Renderer};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
+use crate::scene::settings::{DifferentialMethod, Technique};
 use crate::twin::Val;
 use differential::{Emitter, LightField, MrSettings, ReceiverGrid};
 use environment::Environment;
@@ -83,6 +84,9 @@ pub struct MrFrame {
 /// One frame's differential pass: its receivers, their light and how much of it was computed.
 #[derive(Clone, Debug)]
 pub struct DifferentialFrame {
+    /// How the pass summed: the scene's `settings.mr.differential_method`, else the frame's
+    /// ([`DifferentialMethod::for_frames`]).
+    pub method: DifferentialMethod,
     pub grid: ReceiverGrid,
     pub light: Vec<crate::gpu::differential::ReceiverLight>,
     pub counts: differential::AdaptiveCounts,
@@ -130,7 +134,10 @@ impl MrRenderer {
             height: options.height,
             exposure: options.exposure,
             rgbd: scene.settings.rgbd,
-            method: Method::Sparse,
+            method: match scene.resolved.method {
+                Technique::Exact => Method::Exact,
+                Technique::Sparse => Method::Sparse,
+            },
         };
         Ok(Self { renderer, pipeline, settings, accumulator, frames: 0 })
     }
@@ -425,7 +432,8 @@ impl MrPipeline {
                 let start = Instant::now();
                 let mut all = vals.clone();
                 all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
-                let method = self.mr.differential_method;
+                let method =
+                    DifferentialMethod::for_frames(self.mr.differential_method, settings.method == Method::Exact);
                 let (light, counts) = differential::receiver_light(
                     &mut d.pass,
                     gpu,
@@ -444,7 +452,8 @@ impl MrPipeline {
                 let ms = build_ms + lighting.receivers_ms + start.elapsed().as_secs_f64() * 1e3;
                 rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), ms));
                 let (vals, real_count, bounds) = (all, vals.len(), d.bounds);
-                (Some(background), Some(DifferentialFrame { grid, light, counts, visible, vals, real_count, bounds }))
+                let summed = DifferentialFrame { method, grid, light, counts, visible, vals, real_count, bounds };
+                (Some(background), Some(summed))
             }
             _ => (None, None),
         };

@@ -464,7 +464,7 @@ fn fast_against_exact(
     let options = MrOptions { width: k.width / 4, height: k.height / 4, exposure: 1.0, accumulate: None };
     let renderer = |method| {
         let mut scene = scene.clone();
-        scene.settings.mr.differential_method = method;
+        scene.settings.mr.differential_method = Some(method);
         MrRenderer::new(&gpu, &scene, options).unwrap()
     };
     let (mut exact, mut fast) = (renderer(DifferentialMethod::Exact), renderer(DifferentialMethod::Fast));

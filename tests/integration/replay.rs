@@ -254,3 +254,32 @@ fn mr_differential_replay_shades_the_desk() {
     // Far from the bunny (the top rows of the image, beyond the margin) nothing changes.
     assert_eq!(before.composited[..160 * 10], after.composited[..160 * 10]);
 }
+
+/// The differential pass follows the frame's level: a replay at `reference` renders the
+/// virtual content with the exact reference and relights the room with the exact differential
+/// pass; at the default level, the sparse method and the fast pass.
+#[test]
+fn replay_at_reference_runs_the_exact_differential_pass() {
+    use relume::scene::settings::DifferentialMethod;
+    let gpu = gpu();
+    let frame = recording().frame(0).unwrap();
+    let path = fixture("scenes/mr_bunny.json");
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let settings = &mut json["settings"];
+    settings["rgbd"]["grid_step"] = 32.into();
+    settings["mr"] = serde_json::json!({ "differential": true, "receiver_step": 16 });
+    let mut ran = Vec::new();
+    for quality in ["balanced", "reference"] {
+        json["settings"]["quality"] = quality.into();
+        let scene = Scene::from_json_str(&json.to_string(), path.parent().unwrap()).unwrap();
+        let options = MrOptions { width: 32, height: 24, ..options() };
+        let out = MrRenderer::new(&gpu, &scene, options).unwrap().render_frame(&gpu, &frame).unwrap();
+        let d = out.differential.expect("the differential pass ran");
+        assert!(d.light.len() >= 10, "{quality}: receivers near the bunny ({})", d.light.len());
+        assert!(
+            out.timings.stages.iter().any(|(s, _)| s == relume::renderer::stage::EXACT) == (quality == "reference")
+        );
+        ran.push(d.method);
+    }
+    assert_eq!(ran, [DifferentialMethod::Fast, DifferentialMethod::Exact]);
+}

@@ -24,10 +24,13 @@ pub struct MrSettings {
     /// Where the differential pass runs: `auto` (default: the CPU on CPU adapters such as
     /// lavapipe, the GPU otherwise), `gpu` or `cpu`. Both give the same sums.
     pub device: DifferentialDevice,
-    /// How the differential pass computes its sums: `fast` (default: the VALs in groups, a far
-    /// group summed as one, receivers interpolated where the content's effect is smooth) or
-    /// `exact` (every receiver sums every VAL with a shadow ray: the reference).
-    pub differential_method: DifferentialMethod,
+    /// How the differential pass computes its sums: `fast` (the VALs in groups, a far group
+    /// summed as one, receivers interpolated where the content's effect is smooth) or `exact`
+    /// (every receiver sums every VAL with a shadow ray: the reference). Unset (the default),
+    /// it follows the quality level: `exact` beside the exact reference (quality `reference`),
+    /// `fast` at the other levels.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub differential_method: Option<DifferentialMethod>,
 }
 
 impl Default for MrSettings {
@@ -37,7 +40,7 @@ impl Default for MrSettings {
             receiver_margin: 0.3,
             receiver_step: 4,
             device: DifferentialDevice::Auto,
-            differential_method: DifferentialMethod::Fast,
+            differential_method: None,
         }
     }
 }
@@ -73,6 +76,15 @@ pub enum DifferentialMethod {
     /// Every receiver sums every VAL and every re-emitter with a shadow ray through the virtual
     /// meshes: the reference.
     Exact,
+}
+
+impl DifferentialMethod {
+    /// The method of frames whose indirect light is the exact reference (`exact`) or not:
+    /// `setting` when the scene or the request chose one, else the exact pass beside the exact
+    /// reference (quality `reference`) and the fast one beside every other method.
+    pub fn for_frames(setting: Option<DifferentialMethod>, exact_reference: bool) -> DifferentialMethod {
+        setting.unwrap_or(if exact_reference { DifferentialMethod::Exact } else { DifferentialMethod::Fast })
+    }
 }
 
 impl MrSettings {

@@ -88,6 +88,39 @@ fn a_scene_lit_by_rgbd_frames_keeps_disks_at_accurate() {
     assert_eq!(lit.settings.visibility.mode, Occlusion::Clusters);
 }
 
+/// On a scene lit by RGB-D frames the differential pass follows the level: the exact pass at
+/// `reference` (beside the exact reference), the fast one below; a method the scene file sets
+/// wins at every level; a scene with a light of its own is given no such choice.
+#[test]
+fn the_differential_method_follows_the_level_unless_the_scene_file_sets_it() {
+    let dir = TempDir::new("quality-differential");
+    dir.write("cube.obj", CUBE_OBJ);
+    let camera =
+        r#""camera": {"position": [0, 1, 3.5], "target": [0, 1, 0], "fov_y_deg": 40, "width": 64, "height": 64}"#;
+    let scene = |settings: &str| {
+        let json = format!(r#"{{"meshes": [{{{CUBE}}}], {camera}, "settings": {settings}}}"#);
+        Scene::from_json_str(&json, dir.path()).expect("scene loads")
+    };
+    for (quality, method) in [("fast", "fast"), ("balanced", "fast"), ("accurate", "fast"), ("reference", "exact")] {
+        let s = scene(&format!(r#"{{"quality": "{quality}"}}"#));
+        let exact = s.resolved.method == Technique::Exact;
+        assert_eq!(s.settings.mr.differential_method, None, "{quality}: left to the frames");
+        let resolved = DifferentialMethod::for_frames(s.settings.mr.differential_method, exact);
+        assert_eq!(tuning::json_value(&resolved), format!("\"{method}\""), "{quality}");
+        assert_eq!(choice(&s, "mr.differential_method").value, format!("\"{method}\""), "{quality}");
+    }
+    let set = scene(r#"{"quality": "reference", "mr": {"differential_method": "fast"}}"#);
+    assert_eq!(set.settings.mr.differential_method, Some(DifferentialMethod::Fast));
+    assert_eq!(DifferentialMethod::for_frames(set.settings.mr.differential_method, true), DifferentialMethod::Fast);
+    let c = choice(&set, "mr.differential_method");
+    assert_eq!(
+        (c.value.as_str(), c.reason.as_str()),
+        ("\"fast\"", "set in the scene file (reference would choose \"exact\")")
+    );
+    let lit = load(&[CUBE], r#"{"quality": "reference"}"#);
+    assert!(lit.resolved.choices.iter().all(|c| c.parameter != "mr.differential_method"));
+}
+
 #[test]
 fn a_scene_without_glossy_material_needs_no_glossy_gather() {
     let scene = load(&[CUBE], "{}");
