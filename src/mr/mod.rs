@@ -117,6 +117,10 @@ pub const DIFFERENTIAL_STAGE: &str = "differential";
 /// Stage name of the environment's VALs (CPU: the `auto` estimate and the VALs' upload).
 pub const ENVIRONMENT_STAGE: &str = "environment";
 
+/// Stage name of the composite: the virtual content's depth read back, the relit real surfaces
+/// and the virtual image laid over the camera image (CPU).
+pub const COMPOSITE_STAGE: &str = "composite";
+
 impl MrRenderer {
     pub fn new(gpu: &Gpu, scene: &Scene, options: MrOptions) -> anyhow::Result<Self> {
         let accumulator = match options.accumulate {
@@ -156,11 +160,13 @@ impl MrRenderer {
         let input = FrameInput { frame, settings: &self.settings, accumulate };
         let relit = self.pipeline.render_frame(gpu, &mut self.renderer, input)?;
         self.frames += 1;
+        let mut timings = relit.rendered.timings;
+        timings.stages.push((COMPOSITE_STAGE.to_owned(), relit.composite_ms));
         Ok(MrFrame {
             composited: relit.composited,
             indirect: relit.rendered.indirect,
             direct: relit.rendered.direct,
-            timings: relit.rendered.timings,
+            timings,
             val_count: relit.rendered.val_count,
             sparse_irradiance: relit.sparse_irradiance,
             error_estimate: relit.rendered.error_estimate,

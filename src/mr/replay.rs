@@ -142,7 +142,12 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
         let start = Instant::now();
         let mut out = mr.render_frame(gpu, &frame)?;
         let (w, h) = parameters.scaled(width, height);
+        let upscale = Instant::now();
         out.composited = budget::upscale_rgb(&out.composited, w, h, width, height);
+        if let Some((_, ms)) = out.timings.stages.iter_mut().find(|(s, _)| s == crate::mr::COMPOSITE_STAGE) {
+            // The composite scaled back up to the output size (dynamic resolution) is part of it.
+            *ms += upscale.elapsed().as_secs_f64() * 1e3;
+        }
         let frame_ms = start.elapsed().as_secs_f64() * 1e3;
         summary.frame_ms.push(frame_ms);
         if let Some(c) = controller.as_mut() {

@@ -577,7 +577,7 @@ fn rendered_frame(in_flight: &InFlight, output: RenderOutput, dropped_frames: u6
     let mut timings = vec![("decode".to_owned(), in_flight.decode_ms), ("queue".to_owned(), output.queue_ms)];
     timings.extend(output.frame.timings.stages.iter().cloned());
     if let Some((_, composite_ms)) = output.composited {
-        timings.push(("composite".to_owned(), composite_ms));
+        timings.push((crate::mr::COMPOSITE_STAGE.to_owned(), composite_ms));
     }
     timings.push(("encode".to_owned(), started.elapsed().as_secs_f64() * 1e3));
     Ok(RenderedFrame {

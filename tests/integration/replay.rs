@@ -154,6 +154,11 @@ fn replay_command_writes_frames_and_summary() {
     assert_eq!(summary["vals_per_frame"].as_array().unwrap().len(), 2);
     assert_eq!(summary["irradiance_change"].as_array().unwrap().len(), 1);
     assert!(summary["stage_ms"]["rgbd_vals"].as_array().unwrap().iter().all(|v| v.as_f64().unwrap() >= 0.0));
+    // The composite (CPU) is a stage of its own, as on streams, so that the stages account
+    // for the frame.
+    let composite = summary["stage_ms"]["composite"].as_array().expect("a composite stage");
+    assert_eq!(composite.len(), 2);
+    assert!(composite.iter().all(|v| v.as_f64().unwrap() > 0.0));
 }
 
 /// `relume replay --budget-ms` with a budget no frame can meet falls, frame by frame, to the
