@@ -25,7 +25,7 @@ fn receiver_plane_depth(offset: vec3<f32>, normal: vec3<f32>, v: vec3<f32>) -> f
 // follows the clusters (`clusters/mod.rs`, written every frame).
 fn frame_of(c: Cluster) -> MapFrame {
     if FOCUS_BOUNDS == 0u {
-        return MapFrame(c.normal, 1.0);
+        return MapFrame(c.normal, 1.0, 0.0);
     }
     return cluster_map_frame(c, clusters[CLUSTER_COUNT]);
 }
@@ -39,7 +39,12 @@ fn blocker_at(k: u32, c: Cluster, offset: vec3<f32>, normal: vec3<f32>, texel: v
     let f = frame_of(c);
     let v = map_direction(texel_disc(texel), f);
     let zr = min(receiver_plane_depth(offset, normal, v), length(offset) * 4.0);
-    if z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(v, f, normal) * depth_spread(z)) {
+    // The relative bias is of the depth beyond the map's near distance (`MapFrame`: a cluster a
+    // kilometre away, an environment's VALs, sees a small object within centimetres of depth,
+    // which 2 % of the whole distance would leave unshadowed), the slope bias of the whole
+    // distance, as its texel angles are; `+ near * bias` adds exactly 0 for a hemisphere map.
+    let kept = 1.0 - SHADOW_RELATIVE_BIAS - slope_bias(v, f, normal) * depth_spread(z);
+    if z < zr * kept + f.near * SHADOW_RELATIVE_BIAS {
         return z;
     }
     return -1.0;

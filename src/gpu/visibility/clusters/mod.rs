@@ -604,12 +604,19 @@ impl Clusters {
         let mut clusters: Vec<RawCluster> = gpu.read_buffer(&self.clusters, m + 1)?;
         let bounds = clusters.pop().map(|b| (Vec3::from(b.position), b.radius));
         let clusters: Vec<twin::Cluster> = clusters.iter().map(Into::into).collect();
+        let frames: Vec<twin::MapFrame> = clusters.iter().map(|c| twin::map_frame(c, bounds)).collect();
         let maps = match &self.maps {
-            Maps::Raster(maps) => maps.read(gpu, &self.settings, self.scale)?,
+            // The atlas holds the depths beyond each map's near distance (`raster_depth.wgsl`).
+            Maps::Raster(maps) => maps
+                .read(gpu, &self.settings, self.scale)?
+                .into_iter()
+                .zip(&frames)
+                .map(|(map, f)| map.into_iter().map(|d| d + f.near).collect())
+                .collect(),
             Maps::Ism(maps) => maps.read(gpu)?,
         };
         Ok(ClusterReadback {
-            frames: clusters.iter().map(|c| twin::map_frame(c, bounds)).collect(),
+            frames,
             clusters,
             group_of_val: gpu.read_buffer(&self.group_of_val, vals.min(self.capacity as usize))?,
             visibility: gpu.read_buffer(&self.group_visibility, points * m)?,
@@ -625,7 +632,8 @@ impl Clusters {
 }
 
 impl ShadowMaps {
-    /// Every cluster's map: distances (m), `f32::INFINITY` where nothing was drawn.
+    /// Every cluster's map: distances (m) beyond its near distance (`twin::MapFrame::near`),
+    /// `f32::INFINITY` where nothing was drawn.
     pub(crate) fn read(
         &self,
         gpu: &Gpu,

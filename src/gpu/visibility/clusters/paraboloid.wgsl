@@ -32,10 +32,13 @@ fn paraboloid_direction(q: vec2<f32>, normal: vec3<f32>) -> vec3<f32> {
 }
 
 // A map's frame: its axis, and the disc's scale, tan of half the widest angle from the axis it
-// holds (1: the hemisphere, the paraboloid of paper 000).
+// holds (1: the hemisphere, the paraboloid of paper 000); and `near`, the distance before which
+// it holds nothing (0 for the hemisphere; for a map focused on the meshes' bounding sphere, the
+// distance to that sphere): the shadow test's relative bias is taken of the depth beyond it.
 struct MapFrame {
     axis: vec3<f32>,
     scale: f32,
+    near: f32,
 }
 
 // The frame of cluster `c`'s map: the hemisphere around its normal; or with FOCUS_BOUNDS, when
@@ -47,10 +50,10 @@ fn cluster_map_frame(c: Cluster, bounds: Cluster) -> MapFrame {
     let distance = length(d);
     let r = bounds.radius * FOCUS_MARGIN;
     if FOCUS_BOUNDS == 0u || !(distance > r) {
-        return MapFrame(c.normal, 1.0);
+        return MapFrame(c.normal, 1.0, 0.0);
     }
     let s = r / distance;
-    return MapFrame(d / distance, s / (1.0 + sqrt(max(1.0 - s * s, 0.0))));
+    return MapFrame(d / distance, s / (1.0 + sqrt(max(1.0 - s * s, 0.0))), distance - r);
 }
 
 // `paraboloid_project` around the frame's axis, scaled to its disc.

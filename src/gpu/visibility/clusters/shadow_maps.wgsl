@@ -2,8 +2,8 @@
 // draws every triangle into cluster k's tile (the viewport). Edges are straight in the disc
 // while the projection bends them, so the depth is not interpolated: each fragment casts its
 // texel's ray from the cluster centre against its triangle (corners passed flat) and writes
-// the exact distance, encoded by `encode_map_depth` (any distance below 1, so no far plane: a
-// cluster's centre may lie metres from the meshes); fragments whose ray misses the triangle (by more than
+// the exact distance beyond the map's near distance (`MapFrame`), encoded by `encode_map_depth`
+// (any distance below 1, so no far plane: a cluster's centre may lie metres from the meshes); fragments whose ray misses the triangle (by more than
 // SHADOW_RASTER_SLACK in barycentrics, which keeps neighbours watertight) or that lie nearer
 // than CLUSTER_NEAR_FRACTION x the radius (the cluster's own surface) are dropped.
 
@@ -13,7 +13,7 @@
 // (`clusters/mod.rs`, written every frame).
 fn frame_of(c: Cluster) -> MapFrame {
     if FOCUS_BOUNDS == 0u {
-        return MapFrame(c.normal, 1.0);
+        return MapFrame(c.normal, 1.0, 0.0);
     }
     return cluster_map_frame(c, clusters[CLUSTER_COUNT]);
 }
@@ -61,7 +61,8 @@ fn fs_main(in: ShadowVertex) -> @builtin(frag_depth) f32 {
     if dot(q, q) > 1.0 {
         discard;
     }
-    let v = map_direction(q, frame_of(c));
+    let f = frame_of(c);
+    let v = map_direction(q, f);
     // Möller-Trumbore from the centre along v.
     let e1 = in.p1 - in.p0;
     let e2 = in.p2 - in.p0;
@@ -80,5 +81,7 @@ fn fs_main(in: ShadowVertex) -> @builtin(frag_depth) f32 {
     if u < -slack || w < -slack || u + w > 1.0 + slack || !(t > c.radius * CLUSTER_NEAR_FRACTION) || !(t < NOTHING) {
         discard;
     }
-    return encode_map_depth(t);
+    // The depth beyond the map's near distance (0 for a hemisphere map): a focused map of a
+    // cluster a kilometre away keeps centimetres where the whole distance would keep decimetres.
+    return encode_map_depth(t - f.near);
 }

@@ -164,12 +164,16 @@ pub fn paraboloid_direction(q: Vec2, normal: Vec3) -> Vec3 {
 pub struct MapFrame {
     pub axis: Vec3,
     pub scale: f32,
+    /// Distance (m) before which the map holds nothing: 0 for the hemisphere, the distance to the
+    /// meshes' bounding sphere for a map focused on it. The shadow test's relative bias is taken
+    /// of the depth beyond it ([`SHADOW_RELATIVE_BIAS`]).
+    pub near: f32,
 }
 
 impl MapFrame {
     /// The hemisphere around `normal`.
     pub fn hemisphere(normal: Vec3) -> Self {
-        Self { axis: normal, scale: 1.0 }
+        Self { axis: normal, scale: 1.0, near: 0.0 }
     }
 }
 
@@ -194,7 +198,7 @@ pub fn map_frame(cluster: &Cluster, bounds: Option<(Vec3, f32)>) -> MapFrame {
         return MapFrame::hemisphere(cluster.normal);
     }
     let s = r / distance;
-    MapFrame { axis: d / distance, scale: s / (1.0 + (1.0 - s * s).max(0.0).sqrt()) }
+    MapFrame { axis: d / distance, scale: s / (1.0 + (1.0 - s * s).max(0.0).sqrt()), near: distance - r }
 }
 
 /// [`paraboloid_project`] around the frame's axis, scaled to its disc (WGSL `map_project`).
@@ -233,7 +237,8 @@ pub const CLUSTER_NEAR_FRACTION: f32 = 0.5;
 /// curved ones differ, and neighbours must still cover every texel between them.
 pub const SHADOW_RASTER_SLACK: f32 = 0.1;
 /// Relative depth bias of the shadow test (receiver-plane depths are exact for planes; this
-/// covers curved receivers and rounding).
+/// covers curved receivers and rounding), of the depth beyond the map's near distance
+/// ([`MapFrame::near`]).
 pub const SHADOW_RELATIVE_BIAS: f32 = 0.02;
 
 /// WGSL `encode_map_depth` (`shadow_maps.wgsl`): what the rasterised atlas stores for a distance
@@ -295,7 +300,12 @@ fn blocker_at(tile: &DepthTile<'_>, frame: &MapFrame, r: &ShadowReceiver, texel:
     }
     let v = map_direction(texel_disc(texel, tile.resolution), frame);
     let zr = receiver_plane_depth(r, v).min(r.offset.length() * 4.0);
-    (z < zr * (1.0 - SHADOW_RELATIVE_BIAS - slope_bias(tile, v, frame, r.normal) * depth_spread(z))).then_some(z)
+    // The relative bias is of the depth beyond the frame's near distance (a cluster a kilometre
+    // away sees a small object within centimetres of depth, which 2 % of the whole distance
+    // would miss), the slope bias of the whole distance, as its texel angles are: `zr - (zr -
+    // near) bias - zr slope`, which adds exactly 0 for a hemisphere map.
+    let kept = 1.0 - SHADOW_RELATIVE_BIAS - slope_bias(tile, v, frame, r.normal) * depth_spread(z);
+    (z < zr * kept + frame.near * SHADOW_RELATIVE_BIAS).then_some(z)
 }
 
 /// WGSL `depth_spread`: texels a stored depth stands for, `2^level` from its lowest 3 bits (an
@@ -557,6 +567,33 @@ mod tests {
                 if v.z > 0.0 && p.x.abs() <= h && p.y.abs() <= h { t } else { f32::INFINITY }
             })
             .collect()
+    }
+
+    /// A cluster a kilometre away (an environment's VALs) with its map focused on a small
+    /// object's bounding sphere: a 10 cm plate 10 cm in front of a receiver shadows it, a
+    /// receiver beside the plate and the plate's own surface stay lit. With the bias taken of
+    /// the whole distance (2 % of 1 km) the plate shadowed nothing.
+    #[test]
+    fn a_far_cluster_sees_a_small_blocker_through_its_focused_map() {
+        let (res, far, plate_z, h) = (64, 1000.0, 0.05, 0.05);
+        let cluster = Cluster { position: Vec3::new(0.0, 0.0, far), count: 10.0, normal: Vec3::NEG_Z, radius: 1.0 };
+        let frame = map_frame(&cluster, Some((Vec3::ZERO, 0.2)));
+        assert!(frame.near > far - 0.21 && frame.near < far - 0.2, "{frame:?}");
+        let depths: Vec<f32> = (0..res * res)
+            .map(|i| {
+                let v = map_direction(texel_disc(IVec2::new((i % res) as i32, (i / res) as i32), res), &frame);
+                let t = (plate_z - far) / v.z.min(-1e-9);
+                let p = cluster.position + v * t;
+                if p.x.abs() <= h && p.y.abs() <= h { t } else { f32::INFINITY }
+            })
+            .collect();
+        let tile = DepthTile { resolution: res, depths: &depths, slope_bias_texels: 0.0 };
+        let at = |x: f32, z: f32| ShadowReceiver { offset: Vec3::new(x, 0.0, z) - cluster.position, normal: Vec3::Z };
+        for soft in [Soft::Hard, Soft::Pcss] {
+            assert_eq!(cluster_visibility_in(&tile, &cluster, &frame, &at(0.0, -0.05), soft), 0.0, "{soft:?}");
+            assert_eq!(cluster_visibility_in(&tile, &cluster, &frame, &at(0.15, -0.05), soft), 1.0, "{soft:?}");
+            assert_eq!(cluster_visibility_in(&tile, &cluster, &frame, &at(0.0, plate_z), soft), 1.0, "{soft:?}");
+        }
     }
 
     /// A plate between a cluster and receivers on a parallel plane: visibility 0 in the
