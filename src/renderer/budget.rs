@@ -44,7 +44,8 @@ pub const BACKOFF_FRAMES: u64 = 16;
 /// to the next.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct FrameParameters {
-    /// The level these parameters are (or, below the lowest level's own, are cheaper than).
+    /// The level these parameters are, or, between two levels' own, the richer one they lead to
+    /// (below `fast`'s own, `fast`).
     pub level: Quality,
     /// The visibility mode of the indirect light.
     pub occlusion: Occlusion,
@@ -100,7 +101,9 @@ pub fn level_parameters(level: Quality, analysis: &SceneAnalysis, settings: &Set
 /// The ladder of a budgeted stream, cheapest first: below `fast`'s own parameters, the VALs of
 /// an RGB-D frame halved then thirded on each side and (with `scale`) the render size scaled
 /// down to half, visibility off last; then each level's own parameters, `fast`, `balanced`,
-/// `accurate`. Consecutive rungs with the same parameters are merged (the richer level's name
+/// `accurate`, with between the last two balanced's visibility and accurate's near field (on
+/// the TUM replay accurate's imperfect shadow maps cost about five times the disks' frame, the
+/// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take). Consecutive rungs with the same parameters are merged (the richer level's name
 /// kept). Without `scale` no rung changes the render size (a stream whose frames are not
 /// composited, or a render).
 pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: bool) -> Vec<FrameParameters> {
@@ -122,6 +125,7 @@ pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: b
         below(fast.occlusion, 1, 0.85),
         fast,
         balanced,
+        FrameParameters { level: Quality::Accurate, near_field: accurate.near_field, ..balanced },
         accurate,
     ];
     let same = |a: &FrameParameters, b: &FrameParameters| FrameParameters { level: b.level, ..*a } == *b;
@@ -421,6 +425,9 @@ mod tests {
         assert_eq!(ladder.first().unwrap().occlusion, Occlusion::Off);
         assert_eq!(ladder.last().unwrap().level, Quality::Accurate);
         assert_eq!(ladder.last().unwrap().occlusion, Occlusion::Clusters);
+        // Between balanced and accurate: balanced's visibility with accurate's near field.
+        let step = ladder[ladder.len() - 2];
+        assert_eq!((step.level, step.occlusion, step.near_field), (Quality::Accurate, Occlusion::Disks, 4.0));
         assert!(ladder.iter().any(|p| p.level == Quality::Balanced));
         let c = BudgetController::at_level(100.0, ladder.clone(), Quality::Balanced);
         assert_eq!(c.parameters().level, Quality::Balanced);

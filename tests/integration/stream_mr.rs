@@ -284,9 +284,8 @@ async fn a_stream_changes_its_level_mid_stream_and_falls_under_a_budget() {
     assert!(matches!(ws.exchange(level(accurate, None, 1)).await, Body::SettingsAck(_)));
     let (second, _) = streamed_png(ws.exchange(frames[1].0.clone()).await, 1);
     assert_eq!(second.quality(), proto::QualityLevel::Accurate);
-    // Lit by RGB-D frames only: accurate keeps disc occluders (the group modes do not serve the
-    // environment's distant VALs) and adds the near field.
-    assert_eq!(parameter(&second, "visibility"), "disks");
+    // Lit by RGB-D frames only: accurate takes imperfect shadow maps and adds the near field.
+    assert_eq!(parameter(&second, "visibility"), "ism");
     assert_eq!(parameter(&second, "near_field"), "4");
     assert!(second.error_estimate.is_some());
 
