@@ -112,10 +112,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let estimate = frame.error_estimate;
     match estimate {
-        Some(e) => eprintln!(
-            "error estimate: indirect rel RMSE {:.4} +- {:.4} against the exact reference ({} pixels x {} VALs, {:.1} ms)",
-            e.rel_rmse, e.spread, e.pixels, e.samples, e.ms
-        ),
+        Some(e) => eprintln!("error estimate: {}", e.summary()),
         None => eprintln!("error estimate: none (no indirect light computed, or the exact reference rendered it)"),
     }
     let summary = serde_json::json!({

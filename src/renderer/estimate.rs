@@ -95,6 +95,22 @@ pub struct ErrorEstimate {
     pub ms: f64,
 }
 
+impl ErrorEstimate {
+    /// The estimate in words, as `render` prints it. A noise-corrected error of exactly 0 means
+    /// the frame's difference from the sampled reference was within that reference's own
+    /// noise: it is said so, not printed as an error of 0.
+    pub fn summary(&self) -> String {
+        let error = match self.rel_rmse == 0.0 && self.reference_noise > 0.0 {
+            true => format!("below the estimate's own noise ({:.4})", self.reference_noise),
+            false => format!("{:.4} +- {:.4}", self.rel_rmse, self.spread),
+        };
+        format!(
+            "indirect rel RMSE {error} against the exact reference ({} pixels x {} VALs, {:.1} ms)",
+            self.pixels, self.samples, self.ms
+        )
+    }
+}
+
 /// Keeps the scene's BVH between frames.
 #[derive(Default)]
 pub struct Estimator {
@@ -188,6 +204,23 @@ fn stratified(items: &[usize], count: usize, seed: u64) -> Vec<usize> {
 
 #[cfg(test)]
 mod tests {
+    /// An error the sampled reference's noise swallows reads as such, not as 0.
+    #[test]
+    fn an_error_within_the_reference_noise_is_not_printed_as_zero() {
+        let e = super::ErrorEstimate {
+            rel_rmse: 0.0,
+            spread: 0.0346,
+            reference_noise: 0.1408,
+            pixels: 64,
+            samples: 32,
+            ms: 280.0,
+        };
+        let text = e.summary();
+        assert!(text.starts_with("indirect rel RMSE below the estimate's own noise (0.1408)"), "{text}");
+        let measured = super::ErrorEstimate { rel_rmse: 0.0512, ..e };
+        assert!(measured.summary().starts_with("indirect rel RMSE 0.0512 +- 0.0346"), "{}", measured.summary());
+    }
+
     use super::*;
 
     #[test]
