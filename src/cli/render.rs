@@ -5,7 +5,7 @@ use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
 use relume::gpu::Gpu;
 use relume::image::LinearImage;
 use relume::renderer::{Component, Components, Method, Renderer};
-use relume::scene::{Quality, Technique};
+use relume::scene::Quality;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
@@ -57,10 +57,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let scene = load_renderable(&args.scene, args.quality)?;
     // The scene's quality level asks for a technique; --method overrides it.
-    let method = args.method.unwrap_or(match scene.resolved.method {
-        Technique::Exact => Method::Exact,
-        Technique::Sparse => Method::Sparse,
-    });
+    let method = args.method.unwrap_or(scene.resolved.method.into());
     anyhow::ensure!(
         args.reference_device.is_none() || method == Method::Exact,
         "--reference-device: only with --method exact (or a scene at quality reference)"

@@ -20,7 +20,7 @@ use crate::renderer::{Method, Rendered, Renderer};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
-use crate::scene::settings::{DifferentialMethod, Technique};
+use crate::scene::settings::DifferentialMethod;
 use crate::twin::Val;
 use differential::{Emitter, LightField, MrSettings, ReceiverGrid};
 use environment::Environment;
@@ -138,10 +138,7 @@ impl MrRenderer {
             height: options.height,
             exposure: options.exposure,
             rgbd: scene.settings.rgbd,
-            method: match scene.resolved.method {
-                Technique::Exact => Method::Exact,
-                Technique::Sparse => Method::Sparse,
-            },
+            method: scene.resolved.method.into(),
         };
         Ok(Self { renderer, pipeline, settings, accumulator, frames: 0 })
     }

@@ -103,8 +103,8 @@ pub fn level_parameters(level: Quality, analysis: &SceneAnalysis, settings: &Set
 /// down to half, visibility off last; then each level's own parameters, `fast`, `balanced`,
 /// `accurate`, with between the last two balanced's visibility and accurate's near field (on
 /// the TUM replay accurate's imperfect shadow maps cost about five times the disks' frame, the
-/// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take). Consecutive rungs with the same parameters are merged (the richer level's name
-/// kept). Without `scale` no rung changes the render size (a stream whose frames are not
+/// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take).
+/// Consecutive rungs with the same parameters are merged (the richer level's name kept). Without `scale` no rung changes the render size (a stream whose frames are not
 /// composited, or a render).
 pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: bool) -> Vec<FrameParameters> {
     let [fast, balanced, accurate] =

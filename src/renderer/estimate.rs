@@ -204,10 +204,12 @@ fn stratified(items: &[usize], count: usize, seed: u64) -> Vec<usize> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     /// An error the sampled reference's noise swallows reads as such, not as 0.
     #[test]
     fn an_error_within_the_reference_noise_is_not_printed_as_zero() {
-        let e = super::ErrorEstimate {
+        let e = ErrorEstimate {
             rel_rmse: 0.0,
             spread: 0.0346,
             reference_noise: 0.1408,
@@ -217,11 +219,9 @@ mod tests {
         };
         let text = e.summary();
         assert!(text.starts_with("indirect rel RMSE below the estimate's own noise (0.1408)"), "{text}");
-        let measured = super::ErrorEstimate { rel_rmse: 0.0512, ..e };
+        let measured = ErrorEstimate { rel_rmse: 0.0512, ..e };
         assert!(measured.summary().starts_with("indirect rel RMSE 0.0512 +- 0.0346"), "{}", measured.summary());
     }
-
-    use super::*;
 
     #[test]
     fn stratified_picks_one_from_each_run_and_all_when_few() {

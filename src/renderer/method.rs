@@ -21,6 +21,17 @@ pub enum Method {
     Exact,
 }
 
+/// The method a scene's resolved technique asks for (`settings.quality`: the exact reference
+/// at `reference`, the sparse method otherwise).
+impl From<crate::scene::Technique> for Method {
+    fn from(technique: crate::scene::Technique) -> Method {
+        match technique {
+            crate::scene::Technique::Exact => Method::Exact,
+            crate::scene::Technique::Sparse => Method::Sparse,
+        }
+    }
+}
+
 /// Which light the image shows.
 #[derive(
     Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, utoipa::ToSchema, clap::ValueEnum,

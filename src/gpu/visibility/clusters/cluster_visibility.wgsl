@@ -25,7 +25,7 @@ fn receiver_plane_depth(offset: vec3<f32>, normal: vec3<f32>, v: vec3<f32>) -> f
 // follows the clusters (`clusters/mod.rs`, written every frame).
 fn frame_of(c: Cluster) -> MapFrame {
     if FOCUS_BOUNDS == 0u {
-        return MapFrame(c.normal, 1.0, 0.0);
+        return hemisphere_frame(c.normal);
     }
     return cluster_map_frame(c, clusters[CLUSTER_COUNT]);
 }

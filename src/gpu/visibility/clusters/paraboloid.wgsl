@@ -41,6 +41,11 @@ struct MapFrame {
     near: f32,
 }
 
+// The hemisphere around `normal` (Rust twin: `MapFrame::hemisphere`).
+fn hemisphere_frame(normal: vec3<f32>) -> MapFrame {
+    return MapFrame(normal, 1.0, 0.0);
+}
+
 // The frame of cluster `c`'s map: the hemisphere around its normal; or with FOCUS_BOUNDS, when
 // the centre lies outside the meshes' bounding sphere `bounds` (position and radius), the cone
 // around the direction to the sphere that just holds it, so the map's texels all go to the
@@ -50,7 +55,7 @@ fn cluster_map_frame(c: Cluster, bounds: Cluster) -> MapFrame {
     let distance = length(d);
     let r = bounds.radius * FOCUS_MARGIN;
     if FOCUS_BOUNDS == 0u || !(distance > r) {
-        return MapFrame(c.normal, 1.0, 0.0);
+        return hemisphere_frame(c.normal);
     }
     let s = r / distance;
     return MapFrame(d / distance, s / (1.0 + sqrt(max(1.0 - s * s, 0.0))), distance - r);

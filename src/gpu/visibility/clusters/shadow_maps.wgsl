@@ -3,9 +3,10 @@
 // while the projection bends them, so the depth is not interpolated: each fragment casts its
 // texel's ray from the cluster centre against its triangle (corners passed flat) and writes
 // the exact distance beyond the map's near distance (`MapFrame`), encoded by `encode_map_depth`
-// (any distance below 1, so no far plane: a cluster's centre may lie metres from the meshes); fragments whose ray misses the triangle (by more than
-// SHADOW_RASTER_SLACK in barycentrics, which keeps neighbours watertight) or that lie nearer
-// than CLUSTER_NEAR_FRACTION x the radius (the cluster's own surface) are dropped.
+// (any distance below 1, so no far plane: a cluster's centre may lie metres from the meshes);
+// fragments whose ray misses the triangle (by more than SHADOW_RASTER_SLACK in barycentrics,
+// which keeps neighbours watertight) or that lie nearer than CLUSTER_NEAR_FRACTION x the
+// radius (the cluster's own surface) are dropped.
 
 @group(0) @binding(0) var<storage, read> clusters: array<Cluster>;
 
@@ -13,7 +14,7 @@
 // (`clusters/mod.rs`, written every frame).
 fn frame_of(c: Cluster) -> MapFrame {
     if FOCUS_BOUNDS == 0u {
-        return MapFrame(c.normal, 1.0, 0.0);
+        return hemisphere_frame(c.normal);
     }
     return cluster_map_frame(c, clusters[CLUSTER_COUNT]);
 }

@@ -71,7 +71,7 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let v = d / distance;
-    var f = MapFrame(c.normal, 1.0, 0.0);
+    var f = hemisphere_frame(c.normal);
     if FOCUS_BOUNDS != 0u {
         f = cluster_map_frame(c, clusters[CLUSTER_COUNT]);
     }
