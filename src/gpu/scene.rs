@@ -20,6 +20,10 @@ pub struct GpuScene {
     pub vertex_neighbours: wgpu::Buffer,
     /// Only with adaptive candidates: [`FlatScene::vertex_candidates`].
     pub vertex_candidates: Option<wgpu::Buffer>,
+    /// The rest of group(1), for [`GpuScene::bind_group_with_indices`].
+    triangle_materials: wgpu::Buffer,
+    materials: wgpu::Buffer,
+    textures: Option<(wgpu::TextureView, wgpu::Sampler)>,
 }
 
 impl GpuScene {
@@ -56,14 +60,7 @@ impl GpuScene {
             entry(3, storage),
             entry(4, storage),
         ];
-        let mut entries = vec![
-            wgpu::BindGroupEntry { binding: 0, resource: frame.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 1, resource: vertices.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 2, resource: indices.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 3, resource: triangle_materials.as_entire_binding() },
-            wgpu::BindGroupEntry { binding: 4, resource: materials.as_entire_binding() },
-        ];
-        if let Some((view, sampler)) = &textures {
+        if textures.is_some() {
             layout_entries.push(entry(
                 5,
                 wgpu::BindingType::Texture {
@@ -73,13 +70,12 @@ impl GpuScene {
                 },
             ));
             layout_entries.push(entry(6, wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)));
-            entries.push(wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(view) });
-            entries.push(wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::Sampler(sampler) });
         }
         let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("scene.layout"),
             entries: &layout_entries,
         });
+        let entries = group_entries(&frame, &vertices, &indices, &triangle_materials, &materials, textures.as_ref());
         let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("scene.bind_group"),
             layout: &layout,
@@ -95,6 +91,28 @@ impl GpuScene {
             sparse_points,
             vertex_neighbours,
             vertex_candidates,
+            triangle_materials,
+            materials,
+            textures,
+        })
+    }
+
+    /// Group(1) with `indices` in place of the scene's triangles (three corner indices into
+    /// its vertices per triangle): a depth-only pass draws a simplified copy of the scene
+    /// through the same shader prelude.
+    pub fn bind_group_with_indices(&self, gpu: &Gpu, label: &str, indices: &wgpu::Buffer) -> wgpu::BindGroup {
+        let entries = group_entries(
+            &self.frame,
+            &self.vertices,
+            indices,
+            &self.triangle_materials,
+            &self.materials,
+            self.textures.as_ref(),
+        );
+        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &self.layout,
+            entries: &entries,
         })
     }
 
@@ -160,4 +178,27 @@ fn upload_textures(gpu: &Gpu, t: &TextureArray) -> Result<(wgpu::TextureView, wg
         ..Default::default()
     });
     Ok((view, sampler))
+}
+
+/// Group(1)'s entries (`shader/scene.wgsl`).
+fn group_entries<'a>(
+    frame: &'a wgpu::Buffer,
+    vertices: &'a wgpu::Buffer,
+    indices: &'a wgpu::Buffer,
+    triangle_materials: &'a wgpu::Buffer,
+    materials: &'a wgpu::Buffer,
+    textures: Option<&'a (wgpu::TextureView, wgpu::Sampler)>,
+) -> Vec<wgpu::BindGroupEntry<'a>> {
+    let mut entries = vec![
+        wgpu::BindGroupEntry { binding: 0, resource: frame.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 1, resource: vertices.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 2, resource: indices.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 3, resource: triangle_materials.as_entire_binding() },
+        wgpu::BindGroupEntry { binding: 4, resource: materials.as_entire_binding() },
+    ];
+    if let Some((view, sampler)) = textures {
+        entries.push(wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(view) });
+        entries.push(wgpu::BindGroupEntry { binding: 6, resource: wgpu::BindingResource::Sampler(sampler) });
+    }
+    entries
 }

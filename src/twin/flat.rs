@@ -68,6 +68,14 @@ impl TextureArray {
     }
 }
 
+/// Longest edge of a simplified triangle ([`FlatScene::simplified_indices`]), as a fraction of
+/// the scene's extent, unless the triangles it replaced were longer.
+pub const PROXY_LONGEST_EDGE: f32 = 0.02;
+
+/// Cosine of the largest angle between the triangles around a vertex that
+/// [`FlatScene::simplified_indices`] counts as flat (about 1°).
+const PROXY_FLAT_COS: f32 = 0.9998;
+
 impl FlatScene {
     /// The scene's triangles, where they are now, in the BVH the CPU references trace their
     /// shadow rays through.
@@ -183,6 +191,72 @@ impl FlatScene {
         self.triangle_materials.len() as u32
     }
 
+    /// The triangles simplified for depth-only use (shadow maps): corner indices into
+    /// `vertices`, three per triangle, of a surface about `error` from the meshes' at most (a
+    /// fraction of the largest side of all vertices' box; meshoptimizer's quadric measure, which
+    /// the unit test finds within twice the distance), and that fraction as reached.
+    /// Corners at the same position are welded first, so that seams of normals or texture
+    /// coordinates, which a depth map cannot see, do not hold the simplification back; mesh
+    /// borders stay where they are. No triangle comes out longer than [`PROXY_LONGEST_EDGE`] of
+    /// the extent unless it was already: a flat region of small triangles would otherwise merge
+    /// into a few large ones, which a paraboloid map's raster draws with straight edges where
+    /// the projection bends them. `error` 0 keeps every triangle.
+    pub fn simplified_indices(&self, error: f32) -> (Vec<u32>, f32) {
+        if error <= 0.0 || self.indices.is_empty() {
+            return (self.indices.clone(), 0.0);
+        }
+        let points: Vec<[f32; 3]> = self.vertices.iter().map(|v| v.position).collect();
+        let (count, remap) = meshopt::generate_vertex_remap(&points, Some(&self.indices));
+        let welded = meshopt::remap_vertex_buffer(&points, count, &remap);
+        let indices = meshopt::remap_index_buffer(Some(&self.indices), count, &remap);
+        // One original vertex per welded one (they share its position).
+        let mut original = vec![0u32; count];
+        for (i, &w) in remap.iter().enumerate() {
+            if w != u32::MAX {
+                original[w as usize] = i as u32;
+            }
+        }
+        let position = |i: u32| glam::Vec3::from(welded[i as usize]);
+        let (lo, hi) = welded.iter().fold((glam::Vec3::MAX, glam::Vec3::MIN), |(lo, hi), p| {
+            (lo.min(glam::Vec3::from(*p)), hi.max(glam::Vec3::from(*p)))
+        });
+        let longest = PROXY_LONGEST_EDGE * (hi - lo).max_element();
+        let edge = |t: &[u32]| {
+            let [a, b, c] = [t[0], t[1], t[2]].map(position);
+            a.distance(b).max(b.distance(c)).max(c.distance(a))
+        };
+        // Flat vertices stay (every triangle around them within about a degree of one plane,
+        // where merging costs no error at all and would make large triangles), and so do the
+        // corners of triangles already longer than the bound.
+        let normal = |t: &[u32]| {
+            let [a, b, c] = [t[0], t[1], t[2]].map(position);
+            (b - a).cross(c - a).normalize_or_zero()
+        };
+        let mut first_normal = vec![glam::Vec3::ZERO; count];
+        let mut lock = vec![true; count];
+        for t in indices.chunks_exact(3) {
+            let n = normal(t);
+            for &i in t {
+                let i = i as usize;
+                if first_normal[i] == glam::Vec3::ZERO {
+                    first_normal[i] = n;
+                } else if first_normal[i].dot(n) < PROXY_FLAT_COS {
+                    lock[i] = false;
+                }
+            }
+        }
+        for t in indices.chunks_exact(3) {
+            if edge(t) > longest {
+                t.iter().for_each(|&i| lock[i as usize] = true);
+            }
+        }
+        let options = meshopt::SimplifyOptions::LockBorder;
+        let mut reached = 0.0f32;
+        let kept =
+            meshopt::simplify_with_locks_decoder(&indices, &welded, &lock, 0, error, options, Some(&mut reached));
+        (kept.into_iter().map(|w| original[w as usize]).collect(), reached)
+    }
+
     pub fn sparse_count(&self) -> u32 {
         self.sparse_points.len() as u32
     }
@@ -261,4 +335,75 @@ pub fn depth_range_around(sphere: (Vec3, f32), eye: Vec3) -> (f32, f32) {
 pub struct Hit {
     pub triangle: u32,
     pub barycentrics: glam::Vec2,
+}
+
+#[cfg(test)]
+mod proxy_tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// A flat grid of `n`² quads on z = 0 (1 m square) and a UV sphere of radius 0.2 m at
+    /// height 0.5, in one scene.
+    fn plane_and_sphere(n: u32) -> FlatScene {
+        let mut positions = Vec::new();
+        let mut indices = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                positions.push(Vec3::new(i as f32 / n as f32, j as f32 / n as f32, 0.0));
+            }
+        }
+        for j in 0..n {
+            for i in 0..n {
+                let k = j * (n + 1) + i;
+                indices.extend([k, k + 1, k + n + 2, k, k + n + 2, k + n + 1]);
+            }
+        }
+        let (rings, segments) = (48u32, 96u32);
+        let first = positions.len() as u32;
+        for r in 0..=rings {
+            let theta = std::f32::consts::PI * r as f32 / rings as f32;
+            for s in 0..segments {
+                let phi = 2.0 * std::f32::consts::PI * s as f32 / segments as f32;
+                let d = Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+                positions.push(Vec3::new(0.5, 0.5, 0.5) + 0.2 * d);
+            }
+        }
+        for r in 0..rings {
+            for s in 0..segments {
+                let at = |r: u32, s: u32| first + r * segments + s % segments;
+                let (a, b, c, d) = (at(r, s), at(r, s + 1), at(r + 1, s), at(r + 1, s + 1));
+                indices.extend([a, c, b, b, c, d]);
+            }
+        }
+        let vertices = positions.iter().map(|p| RawVertex { position: p.to_array(), ..Default::default() }).collect();
+        let triangles = indices.len() / 3;
+        FlatScene { vertices, indices, triangle_materials: vec![0; triangles], ..Default::default() }
+    }
+
+    /// The sphere simplifies within the error it reports, the flat grid keeps every triangle
+    /// (merging it would make triangles the size of the plane), the indices name the scene's
+    /// own vertices, and error 0 keeps everything.
+    #[test]
+    fn the_simplified_copy_keeps_flat_regions_and_stays_within_its_error() {
+        let flat = plane_and_sphere(16);
+        let plane_triangles = 2 * 16 * 16;
+        let (kept, reached) = flat.simplified_indices(0.002);
+        assert!(reached <= 0.002 && reached > 0.0, "reached {reached}");
+        assert!(kept.iter().all(|&i| (i as usize) < flat.vertices.len()));
+        let at = |i: u32| Vec3::from(flat.vertices[i as usize].position);
+        let on_plane = kept.chunks_exact(3).filter(|t| t.iter().all(|&i| at(i).z == 0.0)).count();
+        assert_eq!(on_plane, plane_triangles, "the flat grid is kept whole");
+        let sphere = kept.len() / 3 - on_plane;
+        let full_sphere = flat.indices.len() / 3 - plane_triangles;
+        assert!(sphere * 4 < full_sphere, "the sphere simplifies: {sphere} of {full_sphere} triangles");
+        // Every face's centroid (the point of a face furthest inside the sphere) within twice
+        // the reached error (of the 1 m extent) of the sphere: meshoptimizer's error is a
+        // quadric's, close to the distance but not a bound on it.
+        for t in kept.chunks_exact(3).filter(|t| t.iter().any(|&i| at(i).z != 0.0)) {
+            let c = (at(t[0]) + at(t[1]) + at(t[2])) / 3.0;
+            let off = (c.distance(Vec3::splat(0.5)) - 0.2).abs();
+            assert!(off <= 2.0 * reached, "a face {off} m off the sphere (reached {reached})");
+        }
+        assert_eq!(flat.simplified_indices(0.0).0, flat.indices);
+    }
 }

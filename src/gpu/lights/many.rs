@@ -84,7 +84,14 @@ impl From<&Light> for RawManyLight {
 
 /// The clusters module's settings for `groups` groups' maps (two each).
 fn maps_settings(groups: u32, resolution: u32, soft: SoftShadows) -> ClusterSettings {
-    ClusterSettings { count: 2 * groups, shadow_map_resolution: resolution, soft, ..ClusterSettings::default() }
+    // Each map draws the triangle chunks its cull keeps, of the full meshes.
+    ClusterSettings {
+        count: 2 * groups,
+        shadow_map_resolution: resolution,
+        soft,
+        proxy_error: 0.0,
+        ..ClusterSettings::default()
+    }
 }
 
 /// The pass's WGSL after the shader prelude.

@@ -214,6 +214,9 @@ pub(crate) struct ShadowMaps {
     pipeline: wgpu::RenderPipeline,
     atlas: wgpu::Texture,
     pub(crate) atlas_view: wgpu::TextureView,
+    /// The simplified triangles drawn instead of the scene's when every map draws everything
+    /// (`ClusterSettings::proxy_error`): group(1) with their indices, and their count.
+    proxy: Option<(wgpu::BindGroup, u32)>,
 }
 
 impl ShadowMaps {
@@ -226,7 +229,8 @@ impl ShadowMaps {
         Self::after(gpu, scene, settings, &header(settings, scale))
     }
 
-    /// The maps with the constants `head` (e.g. focused on the meshes, [`header_focused`]).
+    /// The maps with the constants `head` (e.g. focused on the meshes, [`header_focused`]),
+    /// drawn from the scene's triangles simplified within `settings.proxy_error`.
     fn after(gpu: &Gpu, scene: &GpuScene, settings: &ClusterSettings, head: &str) -> Result<Self, GpuError> {
         let label = SHADOW_MAPS_STAGE;
         let module = module_from_source(gpu, label, shadow_maps_source_after(head, scene.textured()))?;
@@ -269,7 +273,16 @@ impl ShadowMaps {
             view_formats: &[],
         });
         let atlas_view = atlas.create_view(&Default::default());
-        Ok(Self { layout, pipeline, atlas, atlas_view })
+        let (indices, _) = scene.flat.simplified_indices(settings.proxy_error);
+        let proxy = if indices.len() < scene.flat.indices.len() {
+            let none = wgpu::BufferUsages::empty();
+            let buffer = gpu.storage_buffer(&format!("{label}.proxy_indices"), &indices, none)?;
+            let group = scene.bind_group_with_indices(gpu, &format!("{label}.proxy"), &buffer);
+            Some((group, (indices.len() / 3) as u32))
+        } else {
+            None
+        };
+        Ok(Self { layout, pipeline, atlas, atlas_view, proxy })
     }
 }
 
@@ -714,9 +727,14 @@ impl ShadowMaps {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.set_bind_group(1, &scene.bind_group, &[]);
+            // Every map draws everything: the simplified triangles where there are some.
+            let (group, triangles) = match (&self.proxy, draws) {
+                (Some((group, count)), None) => (group, *count),
+                _ => (&scene.bind_group, scene.flat.triangle_count()),
+            };
+            pass.set_bind_group(1, group, &[]);
             let (res, columns) = (settings.shadow_map_resolution, settings.atlas_columns());
-            let everything = 0..scene.flat.triangle_count();
+            let everything = 0..triangles;
             let all = std::slice::from_ref(&everything);
             for k in 0..m {
                 let ranges = draws.map_or(all, |d| &d[k as usize][..]);

@@ -36,7 +36,16 @@ pub struct ClusterSettings {
     /// from points with pull-push, as `settings.ism` says for points, pull-push and bias;
     /// `shadow_map_resolution` must then be a power of two up to 512).
     pub shadow_maps: ShadowMapSource,
+    /// The rasterised maps draw the meshes simplified (meshoptimizer's edge collapses, borders
+    /// kept) to a surface within this fraction of the scene's extent of the full one, in
+    /// [0, [`MAX_PROXY_ERROR`]]; 0 draws every triangle. Default [`DEFAULT_PROXY_ERROR`].
+    pub proxy_error: f32,
 }
+
+/// Default of [`ClusterSettings::proxy_error`].
+pub const DEFAULT_PROXY_ERROR: f32 = 0.001;
+/// Largest [`ClusterSettings::proxy_error`]: a twentieth of the scene.
+pub const MAX_PROXY_ERROR: f32 = 0.05;
 
 /// Where the `"clusters"` mode's shadow maps come from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize, utoipa::ToSchema)]
@@ -67,6 +76,7 @@ impl Default for ClusterSettings {
             normal_weight: 0.43,
             iterations: 4,
             shadow_maps: ShadowMapSource::Raster,
+            proxy_error: DEFAULT_PROXY_ERROR,
         }
     }
 }
@@ -83,6 +93,7 @@ impl ClusterSettings {
         int_in(self.shadow_map_resolution, 16, 1024, &format!("{field}.shadow_map_resolution"))?;
         in_closed(self.normal_weight, 0.0, 100.0, &format!("{field}.normal_weight"))?;
         int_in(self.iterations, 1, MAX_KMEANS_ITERATIONS, &format!("{field}.iterations"))?;
+        in_closed(self.proxy_error, 0.0, MAX_PROXY_ERROR, &format!("{field}.proxy_error"))?;
         if self.shadow_maps == ShadowMapSource::Ism {
             let r = self.shadow_map_resolution;
             let texels = u64::from(self.count) * u64::from(r) * u64::from(r);
@@ -134,6 +145,8 @@ overrides! {
             /// k-means iterations per frame, in 1..=32.
             iterations: u32,
             shadow_maps: ShadowMapSource,
+            /// In [0, 0.05]; 0 draws every triangle.
+            proxy_error: f32,
         }
         optional {}
     }

@@ -54,6 +54,8 @@ pub fn cluster_settings(ism: &IsmSettings) -> ClusterSettings {
         normal_weight: ClusterSettings::default().normal_weight,
         iterations: 1,
         shadow_maps: crate::scene::ShadowMapSource::Ism,
+        // Splatted from points: nothing rasterised.
+        proxy_error: 0.0,
     }
 }
 
