@@ -68,8 +68,8 @@ impl TextureArray {
     }
 }
 
-/// Longest edge of a simplified triangle ([`FlatScene::simplified_indices`]), as a fraction of
-/// the scene's extent, unless the triangles it replaced were longer.
+/// Triangles longer than this fraction of the scene's extent keep their corners in
+/// [`FlatScene::simplified_indices`]: nothing merges into them.
 pub const PROXY_LONGEST_EDGE: f32 = 0.02;
 
 /// Cosine of the largest angle between the triangles around a vertex that
@@ -197,10 +197,11 @@ impl FlatScene {
     /// the unit test finds within twice the distance), and that fraction as reached.
     /// Corners at the same position are welded first, so that seams of normals or texture
     /// coordinates, which a depth map cannot see, do not hold the simplification back; mesh
-    /// borders stay where they are. No triangle comes out longer than [`PROXY_LONGEST_EDGE`] of
-    /// the extent unless it was already: a flat region of small triangles would otherwise merge
-    /// into a few large ones, which a paraboloid map's raster draws with straight edges where
-    /// the projection bends them. `error` 0 keeps every triangle.
+    /// borders stay where they are, and so do flat vertices (every triangle around them within
+    /// about a degree of one plane) and the corners of triangles longer than
+    /// [`PROXY_LONGEST_EDGE`] of the extent: a flat region costs no error to merge and would
+    /// become a few large triangles, which a paraboloid map's raster draws with straight edges
+    /// where the projection bends them. `error` 0 keeps every triangle.
     pub fn simplified_indices(&self, error: f32) -> (Vec<u32>, f32) {
         if error <= 0.0 || self.indices.is_empty() {
             return (self.indices.clone(), 0.0);
@@ -217,17 +218,13 @@ impl FlatScene {
             }
         }
         let position = |i: u32| glam::Vec3::from(welded[i as usize]);
-        let (lo, hi) = welded.iter().fold((glam::Vec3::MAX, glam::Vec3::MIN), |(lo, hi), p| {
-            (lo.min(glam::Vec3::from(*p)), hi.max(glam::Vec3::from(*p)))
-        });
-        let longest = PROXY_LONGEST_EDGE * (hi - lo).max_element();
+        // The extent meshoptimizer measures `error` in: the largest side of the vertices' box.
+        let longest = PROXY_LONGEST_EDGE * meshopt::simplify_scale_decoder(&welded);
         let edge = |t: &[u32]| {
             let [a, b, c] = [t[0], t[1], t[2]].map(position);
             a.distance(b).max(b.distance(c)).max(c.distance(a))
         };
-        // Flat vertices stay (every triangle around them within about a degree of one plane,
-        // where merging costs no error at all and would make large triangles), and so do the
-        // corners of triangles already longer than the bound.
+        // Locked: flat vertices, and the corners of triangles longer than the bound.
         let normal = |t: &[u32]| {
             let [a, b, c] = [t[0], t[1], t[2]].map(position);
             (b - a).cross(c - a).normalize_or_zero()
