@@ -300,7 +300,7 @@ fn load_mesh(
             message: format!("the mesh has no usable surface area (total {area} square units)"),
         });
     }
-    let sparse_count = description.sparse_points as usize;
+    let sparse_count = settings.sparse.placed_points(description.sparse_points);
     let spacing = (area / sparse_count as f64).sqrt() as f32;
     let original_triangles = geometry.triangles.len();
     let normals_at = started.elapsed();

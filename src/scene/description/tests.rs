@@ -327,6 +327,10 @@ fn settings_are_checked() {
     assert_eq!(message, "settings.tuning.sparse.near_field: must be in [0, 8], got 9");
     let message = error_of(&with_tuning(r#"{"sparse": {"near_field": -0.5}}"#));
     assert_eq!(message, "settings.tuning.sparse.near_field: must be in [0, 8], got -0.5");
+    let message = error_of(&with_tuning(r#"{"sparse": {"points": 1.5}}"#));
+    assert_eq!(message, "settings.tuning.sparse.points: must be in [0.0625, 1], got 1.5");
+    let message = error_of(&with_tuning(r#"{"sparse": {"points": 0}}"#));
+    assert_eq!(message, "settings.tuning.sparse.points: must be in [0.0625, 1], got 0");
     let message = error_of(&with_tuning(r#"{"sparse": {"adaptive": 1.5}}"#));
     assert_eq!(message, "settings.tuning.sparse.adaptive: must be in [0, 1], got 1.5");
     let message = error_of(&with_tuning(r#"{"sparse": {"adaptive": -0.1}}"#));
@@ -347,6 +351,7 @@ fn settings_are_checked() {
             near_field: 0.0,
             glossy_interpolation: GlossyInterpolation::Lights,
             adaptive: 0.0,
+            points: 1.0,
         }
     );
     let radiance = r#"{"sparse": {"glossy_interpolation": "radiance"}}"#;

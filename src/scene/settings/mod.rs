@@ -25,8 +25,9 @@ pub use quality::{
 pub use rgbd::RgbdSettings;
 pub use scene_file::{SettingsDescription, validate_exposure};
 pub use sparse::{
-    ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION,
-    GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, SUBDIVISION_RANGE, SparseShading,
+    ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_POINTS, DEFAULT_SUBDIVISION,
+    GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, POINTS_RANGE, SUBDIVISION_RANGE,
+    SparseShading,
 };
 pub use tuning::{DirectTuning, SecondBounceTuning, SparseTuning, Tuning};
 pub(crate) use tuning::{SetField, json_value, overrides};

@@ -35,6 +35,21 @@ pub struct SparseShading {
     /// paper's). Each mesh holds [`ADAPTIVE_CANDIDATES`] candidates per extra point.
     #[serde(default = "default_adaptive")]
     pub adaptive: f32,
+    /// The fraction of each mesh's `sparse_points` placed at load, in [1/16, 1]; default
+    /// [`DEFAULT_POINTS`] (every one). Fewer points make the gather and the disc occluders
+    /// cheaper (the discs' cost grows with the square of the points) at a coarser interpolation.
+    #[serde(default = "default_points")]
+    pub points: f32,
+}
+
+/// Fraction of each mesh's sparse points placed unless a scene says otherwise: all.
+pub const DEFAULT_POINTS: f32 = 1.0;
+
+/// Range of [`SparseShading::points`].
+pub const POINTS_RANGE: (f32, f32) = (0.0625, 1.0);
+
+fn default_points() -> f32 {
+    DEFAULT_POINTS
 }
 
 /// Adaptive sparse points unless a scene says otherwise: none.
@@ -80,6 +95,7 @@ impl Default for SparseShading {
             near_field: DEFAULT_NEAR_FIELD,
             glossy_interpolation: GlossyInterpolation::default(),
             adaptive: DEFAULT_ADAPTIVE,
+            points: DEFAULT_POINTS,
         }
     }
 }
@@ -91,6 +107,7 @@ impl SparseShading {
             (self.subdivision, SUBDIVISION_RANGE, "subdivision"),
             (self.near_field, NEAR_FIELD_RANGE, "near_field"),
             (self.adaptive, ADAPTIVE_RANGE, "adaptive"),
+            (self.points, POINTS_RANGE, "points"),
         ] {
             if !(lo..=hi).contains(&value) {
                 return Err(SceneError::field(
@@ -100,6 +117,12 @@ impl SparseShading {
             }
         }
         Ok(())
+    }
+
+    /// The sparse points a mesh whose description asks for `sparse_points` places: `points`
+    /// of them, rounded, at least one.
+    pub fn placed_points(&self, sparse_points: u32) -> usize {
+        ((f64::from(sparse_points) * f64::from(self.points)).round() as usize).max(1)
     }
 }
 

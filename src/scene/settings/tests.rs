@@ -62,6 +62,23 @@ fn a_scene_that_can_occlude_itself_gets_the_levels_visibility() {
     assert_eq!((fast.settings.rsm_resolution, fast.settings.sparse.subdivision), (64, 4.0));
 }
 
+/// `fast` places half of each mesh's sparse points (rounded, at least one), the other levels
+/// all of them, and `tuning.sparse.points` wins over the level.
+#[test]
+fn fast_places_half_the_sparse_points_unless_the_tuning_says_otherwise() {
+    let placed =
+        |settings: &str| load(&[ROOM, CUBE], settings).meshes.iter().map(|m| m.sparse.base_len()).sum::<usize>();
+    assert_eq!(placed(r#"{"quality": "balanced"}"#), 32 + 16);
+    assert_eq!(placed(r#"{"quality": "accurate"}"#), 32 + 16);
+    assert_eq!(placed(r#"{"quality": "fast"}"#), 16 + 8);
+    assert_eq!(placed(r#"{"quality": "fast", "tuning": {"sparse": {"points": 1}}}"#), 32 + 16);
+    assert_eq!(placed(r#"{"tuning": {"sparse": {"points": 0.0625}}}"#), 2 + 1);
+    let fast = load(&[ROOM, CUBE], r#"{"quality": "fast"}"#);
+    assert_eq!(choice(&fast, "sparse.points").value, "0.5");
+    let one = SparseShading { points: 0.0625, ..SparseShading::default() };
+    assert_eq!((one.placed_points(1), one.placed_points(24), one.placed_points(40)), (1, 2, 3));
+}
+
 /// A scene lit by RGB-D frames only (no light of its own, as a mixed-reality scene) takes
 /// imperfect shadow maps at `accurate` (measured on the TUM replay), where a scene with a light
 /// of its own takes clustered shadow maps.

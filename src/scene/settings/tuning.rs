@@ -63,8 +63,8 @@ pub(crate) fn json_value<T: Serialize>(value: &T) -> String {
 }
 
 overrides! {
-    /// Overrides of the sparse method's interpolation, light bound, subdivision, near field and
-    /// adaptive points ([`SparseShading`], whose fields say what each does and its range).
+    /// Overrides of the sparse method's interpolation, light bound, subdivision, near field,
+    /// adaptive points and the fraction of sparse points placed ([`SparseShading`], whose fields say what each does and its range).
     SparseTuning for SparseShading {
         plain {
             /// `"smooth"` or `"paper"`.
@@ -79,6 +79,8 @@ overrides! {
             glossy_interpolation: GlossyInterpolation,
             /// Adaptive points as a fraction of each mesh's sparse points, in [0, 1].
             adaptive: f32,
+            /// Fraction of each mesh's sparse points placed, in [1/16, 1].
+            points: f32,
         }
         optional {}
     }
