@@ -3,8 +3,10 @@
 //! too and live with them (`twin::flat`).
 
 use super::raw::RawFrame;
+use super::visibility::disks::DiscOccluders;
 use super::{Gpu, GpuError};
 pub use crate::twin::flat::{FlatScene, TextureArray, depth_range_around};
+use crate::twin::raw::RawSparsePoint;
 
 /// The uploaded scene.
 pub struct GpuScene {
@@ -17,6 +19,10 @@ pub struct GpuScene {
     pub vertices: wgpu::Buffer,
     pub indices: wgpu::Buffer,
     pub sparse_points: wgpu::Buffer,
+    /// The sparse points as disc occluders in a Morton order, and their groups' bounds
+    /// ([`DiscOccluders`]: the `occlusion` pass reads them).
+    pub disc_occluders: wgpu::Buffer,
+    pub disc_groups: wgpu::Buffer,
     pub vertex_neighbours: wgpu::Buffer,
     /// Only with adaptive candidates: [`FlatScene::vertex_candidates`].
     pub vertex_candidates: Option<wgpu::Buffer>,
@@ -40,6 +46,9 @@ impl GpuScene {
         let triangle_materials = gpu.storage_buffer("scene.triangle_materials", &flat.triangle_materials, none)?;
         let materials = gpu.storage_buffer("scene.materials", &flat.materials, none)?;
         let sparse_points = gpu.storage_buffer("scene.sparse_points", &flat.sparse_points, none)?;
+        let discs = DiscOccluders::new(&flat.sparse_points);
+        let disc_occluders = gpu.storage_buffer("scene.disc_occluders", &discs.occluders, none)?;
+        let disc_groups = gpu.storage_buffer("scene.disc_groups", &discs.groups, none)?;
         let vertex_neighbours = gpu.storage_buffer("scene.vertex_neighbours", &flat.vertex_neighbours, none)?;
         let vertex_candidates = (flat.candidates > 0)
             .then(|| gpu.storage_buffer("scene.vertex_candidates", &flat.vertex_candidates, none))
@@ -89,12 +98,23 @@ impl GpuScene {
             vertices,
             indices,
             sparse_points,
+            disc_occluders,
+            disc_groups,
             vertex_neighbours,
             vertex_candidates,
             triangle_materials,
             materials,
             textures,
         })
+    }
+
+    /// Upload the sparse points placed anew (same count as at creation): the points, and the
+    /// occluders' order and groups made from them.
+    pub fn write_sparse_points(&self, gpu: &Gpu, points: &[RawSparsePoint]) {
+        gpu.queue.write_buffer(&self.sparse_points, 0, bytemuck::cast_slice(points));
+        let discs = DiscOccluders::new(points);
+        gpu.queue.write_buffer(&self.disc_occluders, 0, bytemuck::cast_slice(&discs.occluders));
+        gpu.queue.write_buffer(&self.disc_groups, 0, bytemuck::cast_slice(&discs.groups));
     }
 
     /// Group(1) with `indices` in place of the scene's triangles (three corner indices into

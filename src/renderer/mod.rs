@@ -198,7 +198,7 @@ impl Renderer {
             "place_meshes needs the scene the renderer was built from"
         );
         gpu.queue.write_buffer(&self.scene.vertices, 0, bytemuck::cast_slice(&flat.vertices));
-        gpu.queue.write_buffer(&self.scene.sparse_points, 0, bytemuck::cast_slice(&flat.sparse_points));
+        self.scene.write_sparse_points(gpu, &flat.sparse_points);
         flat.textures = self.scene.flat.textures.take();
         self.scene.flat = flat;
         self.placement = model_to_world.to_vec();

@@ -77,6 +77,10 @@ fn rust_structs_match_wgsl() {
         );
     }
     check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
+    use relume::gpu::visibility::disks::{RawDiscGroup, RawOccluder};
+    let occlusion = module_of("occlusion");
+    check!(occlusion, "Occluder", RawOccluder, [position, radius, normal, index]);
+    check!(occlusion, "DiscGroup", RawDiscGroup, [centre, radius, largest_disc]);
     check!(m, "Gathered", RawGathered, [irradiance, weight, position, _pad1, second_moment, _pad2]);
     check!(m, "PointLight", RawPointLight, [position, _pad0, intensity, bound]);
     use relume::gpu::lights::bounce::{POINTS_STAGE, RawBouncePoint};

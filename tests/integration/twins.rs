@@ -7,8 +7,9 @@
 //! still far below anything visible and far below the sparse method's own error.
 
 use super::{assert_close, gpu, load_scene};
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use relume::gpu::raw::RawPointLight;
+use relume::gpu::visibility::disks::twin::Combine;
 use relume::renderer::{Method, Renderer};
 use relume::twin::{self, PointLight, Val};
 
@@ -516,10 +517,12 @@ fn extreme_materials_render_finite_and_non_negative() {
 
 /// The occlusion pass against `gpu::visibility::disks::twin` for both combination rules: the GPU's
 /// gathered irradiance after occlusion equals the CPU gather times the CPU visibility of the
-/// GPU's own light sphere (same 1e-3 tolerance as the other twins).
+/// GPU's own light sphere, over every disc (same 1e-3 tolerance as the other twins). The pass
+/// skips groups of discs that cannot occlude a workgroup's receivers, so this also checks that
+/// none it skips would have. Then, with the bunny moved (`Renderer::place_meshes`), again: the
+/// discs' order and groups follow the sparse points.
 #[test]
 fn occlusion_matches_cpu_twin() {
-    use relume::gpu::visibility::disks::twin::{Combine, Disc, light_sphere, visibility};
     let dir = super::fixture("scenes");
     let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
     for (rule, combine) in [("sum", Combine::Sum), ("product", Combine::Product)] {
@@ -529,34 +532,45 @@ fn occlusion_matches_cpu_twin() {
         let scene = relume::scene::Scene::from_json_str(&json, &dir).unwrap();
         let gpu = gpu();
         let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-        let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
-        assert!(frame.timings.stages.iter().any(|(n, _)| n == "occlusion"));
-        let vals = renderer.read_vals(&gpu).unwrap();
-        let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
-        let flat = &renderer.scene.flat;
-        let eye = renderer.view().eye();
-        let discs: Vec<Disc> = flat
-            .sparse_points
-            .iter()
-            .map(|p| Disc { position: p.position.into(), normal: p.normal.into(), radius: p.occluder_radius })
-            .collect();
-        let mut expected = Vec::new();
-        let mut occluded = 0;
-        for (i, p) in flat.sparse_points.iter().enumerate() {
-            let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
-            let g = twin::gather_point(x, n, p.exponent, eye, &vals);
-            let gd = &mid.gathered_diffuse[i];
-            let sphere = light_sphere(gd.position.into(), gd.second_moment.into());
-            let others: Vec<Disc> = discs.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, d)| *d).collect();
-            let v = visibility(x, n, &sphere, &others, combine);
-            occluded += usize::from(v < 0.9);
-            expected.push(g.irradiance * v);
+        check_occlusion(&gpu, &mut renderer, combine, rule);
+        if combine == Combine::Product {
+            let mut placement = renderer.placement().to_vec();
+            placement[1] = Mat4::from_translation(Vec3::new(0.15, 0.0, -0.1)) * placement[1];
+            renderer.place_meshes(&gpu, &scene, &placement);
+            check_occlusion(&gpu, &mut renderer, combine, "product, the bunny moved");
         }
-        assert!(occluded > 10, "{rule}: some sparse points must be occluded, got {occluded}");
-        let scale = max_of(expected.iter().copied());
-        for (i, e) in expected.iter().enumerate() {
-            assert_close(mid.gathered_diffuse[i].irradiance.into(), *e, REL, scale, 1e-9, &format!("{rule}: E at {i}"));
-        }
+    }
+}
+
+fn check_occlusion(gpu: &relume::gpu::Gpu, renderer: &mut Renderer, combine: Combine, what: &str) {
+    use relume::gpu::visibility::disks::twin::{Disc, light_sphere, visibility};
+    let frame = renderer.render(gpu, Method::Sparse, 16, 16).unwrap();
+    assert!(frame.timings.stages.iter().any(|(n, _)| n == "occlusion"));
+    let vals = renderer.read_vals(gpu).unwrap();
+    let mid = renderer.read_sparse_intermediates(gpu).unwrap();
+    let flat = &renderer.scene.flat;
+    let eye = renderer.view().eye();
+    let discs: Vec<Disc> = flat
+        .sparse_points
+        .iter()
+        .map(|p| Disc { position: p.position.into(), normal: p.normal.into(), radius: p.occluder_radius })
+        .collect();
+    let mut expected = Vec::new();
+    let mut occluded = 0;
+    for (i, p) in flat.sparse_points.iter().enumerate() {
+        let (x, n) = (Vec3::from(p.position), Vec3::from(p.normal));
+        let g = twin::gather_point(x, n, p.exponent, eye, &vals);
+        let gd = &mid.gathered_diffuse[i];
+        let sphere = light_sphere(gd.position.into(), gd.second_moment.into());
+        let others: Vec<Disc> = discs.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, d)| *d).collect();
+        let v = visibility(x, n, &sphere, &others, combine);
+        occluded += usize::from(v < 0.9);
+        expected.push(g.irradiance * v);
+    }
+    assert!(occluded > 10, "{what}: some sparse points must be occluded, got {occluded}");
+    let scale = max_of(expected.iter().copied());
+    for (i, e) in expected.iter().enumerate() {
+        assert_close(mid.gathered_diffuse[i].irradiance.into(), *e, REL, scale, 1e-9, &format!("{what}: E at {i}"));
     }
 }
 

@@ -143,6 +143,93 @@ pub fn visibility(x: Vec3, n: Vec3, sphere: &LightSphere, discs: &[Disc], rule: 
     1.0 - occlusion
 }
 
+/// Relative slack of [`group_may_occlude`]'s bounds: they rule a group out only with this much
+/// room, so that float rounding in the bounds never drops a disc that occludes.
+pub const GROUP_CULL_SLACK: f32 = 1e-3;
+
+/// A group of disc occluders, bounded: every disc's centre within `radius` of `centre`, no disc
+/// larger than `largest_disc` (m).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DiscGroup {
+    pub centre: Vec3,
+    pub radius: f32,
+    pub largest_disc: f32,
+}
+
+/// The order that puts nearby points next to each other: along a Morton curve (10 bits an axis)
+/// over the points' bounding box, ties by index.
+pub fn morton_order(positions: &[Vec3]) -> Vec<u32> {
+    let (lo, hi) = positions.iter().fold((Vec3::MAX, Vec3::MIN), |(a, b), &p| (a.min(p), b.max(p)));
+    let scale = 1023.0 / (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
+    let spread = |v: f32| {
+        let mut x = (v.clamp(0.0, 1023.0) as u64) & 0x3ff;
+        x = (x | (x << 16)) & 0x0300_00ff;
+        x = (x | (x << 8)) & 0x0300_f00f;
+        x = (x | (x << 4)) & 0x030c_30c3;
+        (x | (x << 2)) & 0x0924_9249
+    };
+    let code = |p: Vec3| {
+        let q = (p - lo) * scale;
+        spread(q.x) | (spread(q.y) << 1) | (spread(q.z) << 2)
+    };
+    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+    order.sort_by_key(|&i| (code(positions[i as usize]), i));
+    order
+}
+
+/// The bounds of consecutive runs of `size` discs taken in `order` (the last run shorter).
+pub fn disc_groups(discs: &[Disc], order: &[u32], size: usize) -> Vec<DiscGroup> {
+    order
+        .chunks(size)
+        .map(|run| {
+            let run: Vec<&Disc> = run.iter().map(|&i| &discs[i as usize]).collect();
+            let (lo, hi) = run.iter().fold((Vec3::MAX, Vec3::MIN), |(a, b), d| (a.min(d.position), b.max(d.position)));
+            let centre = (lo + hi) * 0.5;
+            let radius = run.iter().map(|d| d.position.distance(centre)).fold(0.0, f32::max);
+            let largest_disc = run.iter().map(|d| d.radius).fold(0.0, f32::max);
+            DiscGroup { centre, radius, largest_disc }
+        })
+        .collect()
+}
+
+/// Whether any disc of `group` may occlude the light sphere of (`x`, `n`) (tangent frame `t`,
+/// `b`), whose projection is `s`: false only when no disc of the group can, for one of three
+/// reasons that hold for every disc within the group's bounds: all lie behind `x`'s tangent
+/// plane (no projection), all lie farther than the sphere's centre (depth scale 0), or all
+/// project farther from the sphere's square than the largest disc's square reaches (no
+/// overlap). A disc's direction from `x` is within the angle `asin(radius / distance)` of the
+/// group centre's, and its square's half side at most `sqrt(pi) / 2 * r / distance`
+/// ([`project`]'s form factor is below `r² / d²`). Conservative by [`GROUP_CULL_SLACK`]: the
+/// pass that skips the groups it rules out sums exactly the discs' non-zero terms.
+pub fn group_may_occlude(x: Vec3, n: Vec3, t: Vec3, b: Vec3, s: &Projected, group: &DiscGroup) -> bool {
+    let v = group.centre - x;
+    let d = v.length();
+    if n.dot(v) + group.radius < -GROUP_CULL_SLACK * (d + group.radius) {
+        return false;
+    }
+    let near = d - group.radius;
+    if near <= GROUP_CULL_SLACK * d {
+        return true;
+    }
+    if near > s.distance * (1.0 + GROUP_CULL_SLACK) {
+        return false;
+    }
+    let u = v / d;
+    let spread = (group.radius / d).min(1.0).asin();
+    let largest = PI.sqrt() * 0.5 * group.largest_disc / near;
+    let gap = (Vec2::new(u.dot(t), u.dot(b)) - s.centre).abs().max_element();
+    gap <= (s.side * 0.5 + spread + largest) * (1.0 + GROUP_CULL_SLACK) + GROUP_CULL_SLACK
+}
+
+/// The light sphere's projection seen from (`x`, `n`) with the tangent frame of [`disc_occlusion`],
+/// `None` where nothing can occlude it (behind the horizon, or a point).
+pub fn projected_sphere(x: Vec3, n: Vec3, sphere: &LightSphere) -> Option<(Vec3, Vec3, Projected)> {
+    let t = any_perpendicular(n);
+    let b = n.cross(t);
+    let s = project(x, n, t, b, sphere.centre, 1.0, PI * sphere.radius * sphere.radius)?;
+    (s.side > 0.0).then_some((t, b, s))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -242,6 +329,83 @@ mod tests {
         let in_front: Vec<Disc> = wall.iter().map(|d| Disc { position: d.position + Vec3::X * 0.3, ..*d }).collect();
         let v = visibility(x, n, &sphere, &in_front, Combine::Sum);
         assert!(v < 0.9, "discs between the ceiling and the light occlude: visibility {v}");
+    }
+
+    /// A group ruled out by [`group_may_occlude`] holds no disc that occludes: random groups of
+    /// discs (some a few disc radii from the receiver, some far), random receivers and light
+    /// spheres, every disc of every ruled-out group checked with [`disc_occlusion`]. Each of the
+    /// three reasons must rule out some groups, and some groups kept must occlude.
+    #[test]
+    fn a_group_ruled_out_holds_no_occluding_disc() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let unit = |rng: &mut rand_chacha::ChaCha8Rng| {
+            Vec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+                .normalize_or(Vec3::Y)
+        };
+        let (mut ruled_out, mut kept_occluding, mut checked) = (0, 0, 0);
+        let mut reasons = [0; 3];
+        for _ in 0..4000 {
+            let centre = unit(&mut rng) * rng.random_range(0.0..3.0);
+            let spread = rng.random_range(0.02..0.6);
+            let discs: Vec<Disc> = (0..16)
+                .map(|_| Disc {
+                    // Most near the bounds' surface, where the bounds are tight.
+                    position: centre + unit(&mut rng) * spread * rng.random_range(0.0f32..1.0).sqrt().sqrt(),
+                    normal: unit(&mut rng),
+                    radius: rng.random_range(0.005..0.3),
+                })
+                .collect();
+            let order: Vec<u32> = (0..discs.len() as u32).collect();
+            let group = disc_groups(&discs, &order, discs.len())[0];
+            for _ in 0..40 {
+                let x = unit(&mut rng) * rng.random_range(0.0..3.0);
+                let n = unit(&mut rng);
+                let sphere =
+                    LightSphere { centre: x + unit(&mut rng) * rng.random_range(0.05..4.0), radius: rng.random_range(0.0..1.0) };
+                let Some((t, b, s)) = projected_sphere(x, n, &sphere) else { continue };
+                checked += 1;
+                let occluding = discs.iter().filter(|d| disc_occlusion(x, n, &sphere, d) > 0.0).count();
+                if group_may_occlude(x, n, t, b, &s, &group) {
+                    kept_occluding += usize::from(occluding > 0);
+                    continue;
+                }
+                ruled_out += 1;
+                assert_eq!(occluding, 0, "a ruled-out group occludes: x {x}, n {n}, {sphere:?}, {group:?}");
+                let v = group.centre - x;
+                let d = v.length();
+                reasons[if n.dot(v) + group.radius < 0.0 {
+                    0
+                } else if d - group.radius > s.distance {
+                    1
+                } else {
+                    2
+                }] += 1;
+            }
+        }
+        assert!(kept_occluding > 100 && ruled_out > 1000, "checked {checked}: ruled out {ruled_out}, kept and occluding {kept_occluding}");
+        assert!(reasons.iter().all(|&r| r > 50), "ruled out behind, beyond, beside: {reasons:?}");
+    }
+
+    #[test]
+    fn morton_order_keeps_neighbours_together() {
+        // A 16 x 16 grid in shuffled order: each run of 16 in Morton order spans a 4 x 4 block.
+        let mut positions: Vec<Vec3> = (0..256).map(|k| Vec3::new((k % 16) as f32, 0.0, (k / 16) as f32)).collect();
+        positions.reverse();
+        let order = morton_order(&positions);
+        let mut sorted = order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..256).collect::<Vec<u32>>(), "a permutation");
+        for run in order.chunks(16) {
+            let (lo, hi) = run.iter().fold((Vec3::MAX, Vec3::MIN), |(a, b), &i| {
+                (a.min(positions[i as usize]), b.max(positions[i as usize]))
+            });
+            assert_eq!(hi - lo, Vec3::new(3.0, 0.0, 3.0), "run {run:?}");
+        }
+        let discs: Vec<Disc> = positions.iter().map(|&p| Disc { position: p, normal: Vec3::Y, radius: 0.1 }).collect();
+        let groups = disc_groups(&discs, &order, 16);
+        assert_eq!(groups.len(), 16);
+        assert!(groups.iter().all(|g| (g.radius - (4.5f32).sqrt()).abs() < 1e-5 && g.largest_disc == 0.1));
     }
 
     /// Inside the sphere the occlusion is scaled linearly with depth.
