@@ -4,9 +4,9 @@
 //! One exact reference serves every level: the scene loaded at `reference` (its VALs are the
 //! finest any level uses), rendered by the exact reference as `--reference-*` says (every VAL by
 //! default; an importance-sampled estimate states its noise, which is taken out of the errors).
-//! Each of `fast`, `balanced` and `accurate` is then loaded at its level, rendered twice (the
-//! first frame builds and warms its passes), and its second frame is compared with the
-//! reference: the relative RMSE (noise-corrected), the same without the worst 1 % of pixels,
+//! Each of `fast`, `balanced` and `accurate` is then loaded at its level and rendered four times
+//! (the first frame builds and warms its passes); of the other three, the frame of median
+//! indirect time is compared with the reference: the relative RMSE (noise-corrected), the same without the worst 1 % of pixels,
 //! its indirect time and stages, the frame's own error estimate ([`crate::renderer::estimate`])
 //! and, with `--equal-error`, the time the importance-sampled estimator needs to reach the
 //! same error ([`super::equal_error`]). The `reference` row is the reference itself.
@@ -32,8 +32,8 @@ pub struct LevelRow {
     pub error_estimate: Option<ErrorEstimate>,
     /// `error_estimate.rel_rmse / rel_rmse_vs_exact`.
     pub estimate_ratio: Option<f64>,
-    /// The indirect light's stages, ms (the second frame's; the reference's own time for
-    /// `reference`).
+    /// The indirect light's stages, ms (the frame of median time of three after the first; the
+    /// reference's own time for `reference`).
     pub ms: f64,
     pub stages_ms: Vec<(String, f64)>,
     /// The importance-sampled estimator's time to the same error, ms (with `--equal-error`).
@@ -108,6 +108,10 @@ pub fn levels(
     })
 }
 
+/// Frames timed per level after the warm-up frame: the row is the one of median indirect time
+/// (on a shared machine a single frame's time is at the mercy of whatever else runs).
+const TIMED_FRAMES: usize = 3;
+
 fn level_row(
     gpu: &Gpu,
     scene: &Scene,
@@ -118,7 +122,10 @@ fn level_row(
 ) -> Result<LevelRow, BenchError> {
     let mut renderer = Renderer::new(gpu, scene)?;
     renderer.render(gpu, Method::Sparse, w, h)?;
-    let frame = renderer.render(gpu, Method::Sparse, w, h)?;
+    let mut frames =
+        (0..TIMED_FRAMES).map(|_| renderer.render(gpu, Method::Sparse, w, h)).collect::<Result<Vec<_>, _>>()?;
+    frames.sort_by(|a, b| a.indirect_ms().total_cmp(&b.indirect_ms()));
+    let frame = frames.swap_remove(TIMED_FRAMES / 2);
     let error = reference
         .corrected_rel_rmse(&frame.indirect)
         .unwrap_or_else(|| crate::image::relative_rmse(&frame.indirect, reference.indirect()));
