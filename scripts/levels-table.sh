@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The quality levels' table (docs/measurements/levels.md): `relume bench --levels --equal-error`
 # on every fixture scene, each writing its levels.json and levels.md, concatenated under a
-# header. The issue's targets are at 256 pixels wide (`--size 256`, about half an hour on two
+# header. The issue's targets are at 256 pixels wide (`--size 256`, about 40 minutes on two
 # CPU cores); 64 is the quick look.
 #   scripts/levels-table.sh [--bin PATH] [--size N] [--out DIR]   (default: 64, out/levels)
 set -euo pipefail
@@ -29,8 +29,9 @@ page=docs/measurements/levels.md
     echo "--width $size --height $size\` on every fixture scene, each table as the bench wrote it). Each level of the"
     echo "scene is rendered against one exact reference (the scene at \`reference\`, every VAL), its"
     echo "error noise-free; \"estimate\" is the frame's own error estimate with its spread, the"
-    echo "ratio is estimate over measured. Times are wall clock on the machine named in each heading:"
-    echo "on lavapipe (a GPU emulated on the CPU) they rank the levels' cost at best roughly, and"
+    echo "ratio is estimate over measured. Times are wall clock on the machine named in each heading,"
+    echo "each level's the median of three frames after a warm-up one: on lavapipe (a GPU emulated on"
+    echo "the CPU) they rank the levels' cost at best roughly, and"
     echo "GPU figures come from \`scripts/device-bench.sh\`. \"estimator ms at equal error\" is the time"
     echo "relume's converging estimator (the CPU exact reference with N importance-sampled VALs per"
     echo "pixel, src/bench/equal_error.rs) needs to reach the level's error, from its curve measured"

@@ -241,10 +241,10 @@ fn level(quality: Quality) -> Level {
             adaptive: (0.0, ADAPTIVE_OFF),
             points: (
                 0.5,
-                "half of each mesh's sparse points: the disc occluders cost the square of the points and the \
-                 gather their number (cornell_bunny at 256x256: 262 against 688 ms, rel RMSE against exact \
-                 0.123 against 0.110; cornell_bunny_ears 259 against 824 ms, 0.168 against 0.156; \
-                 docs/measurements/levels.md)",
+                "half of each mesh's sparse points: the disc occluders cost up to the square of the points \
+                 and the gather their number (cornell_bunny at 256x256: 262 against 688 ms, rel RMSE against \
+                 exact 0.123 against 0.110; cornell_bunny_ears 259 against 824 ms, 0.168 against 0.156; \
+                 docs/measurements/level-parameters.md)",
             ),
         },
         Quality::Balanced => Level {
