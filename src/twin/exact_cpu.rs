@@ -217,7 +217,7 @@ pub fn sort_along_curve(vals: &mut [Val]) {
 }
 
 /// The 30-bit Morton code (obvhs's) of `p` on a 1024³ grid over the box `lo`..`hi`.
-fn morton_code(p: Vec3, lo: Vec3, hi: Vec3) -> u32 {
+pub(crate) fn morton_code(p: Vec3, lo: Vec3, hi: Vec3) -> u32 {
     let cell = ((p - lo) / (hi - lo).max(Vec3::splat(1e-12)) * 1023.0).clamp(Vec3::ZERO, Vec3::splat(1023.0));
     obvhs::ploc::morton::morton_encode_u32(cell.x as u16, cell.y as u16, cell.z as u16)
 }

@@ -32,12 +32,7 @@ const _: () = assert!(TILE_SIZE.is_multiple_of(DISC_GROUP) && TILE_SIZE / DISC_G
 
 /// The combination rule and the discs' terms.
 fn terms(product: bool) -> String {
-    Wgsl::new()
-        .bool("OCCLUSION_PRODUCT", product)
-        .f32("GROUP_CULL_SLACK", twin::GROUP_CULL_SLACK)
-        .u32("DISC_GROUP", DISC_GROUP)
-        .include(TERMS_WGSL)
-        .finish()
+    Wgsl::new().bool("OCCLUSION_PRODUCT", product).include(TERMS_WGSL).finish()
 }
 
 /// The combination rule and the discs' lookup, for a pass that binds `sparse_points`.
@@ -45,9 +40,14 @@ pub fn lookup(product: bool) -> String {
     Wgsl::new().include(&terms(product)).include(LOOKUP_WGSL).finish()
 }
 
-/// The pass's own WGSL with its combination rule.
+/// The pass's own WGSL with its combination rule and its groups' size and slack.
 pub fn body(product: bool) -> String {
-    Wgsl::new().include(&terms(product)).include(WGSL).finish()
+    Wgsl::new()
+        .f32("GROUP_CULL_SLACK", twin::GROUP_CULL_SLACK)
+        .u32("DISC_GROUP", DISC_GROUP)
+        .include(&terms(product))
+        .include(WGSL)
+        .finish()
 }
 
 /// WGSL `Occluder`: a sparse point as a disc, with its index.

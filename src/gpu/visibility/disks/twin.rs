@@ -18,6 +18,7 @@
 //! separates a receiver from a light inside the room, so walls no longer occlude; the faces of
 //! an object between the two (either side of it) still do.
 
+use crate::twin::exact_cpu::morton_code;
 use crate::twin::{COINCIDENT_DISTANCE_SQ, any_perpendicular};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -115,15 +116,9 @@ pub fn disc_occlusion(x: Vec3, n: Vec3, sphere: &LightSphere, disc: &Disc) -> f3
     if !separates(x, sphere.centre, disc) {
         return 0.0;
     }
-    let t = any_perpendicular(n);
-    let b = n.cross(t);
-    let sphere_area = PI * sphere.radius * sphere.radius;
-    let Some(s) = project(x, n, t, b, sphere.centre, 1.0, sphere_area) else {
+    let Some((t, b, s)) = projected_sphere(x, n, sphere) else {
         return 0.0;
     };
-    if s.side <= 0.0 {
-        return 0.0;
-    }
     let to_disc = (disc.position - x).normalize_or(n);
     let area = PI * disc.radius * disc.radius;
     let Some(o) = project(x, n, t, b, disc.position, disc.normal.dot(to_disc), area) else {
@@ -156,24 +151,12 @@ pub struct DiscGroup {
     pub largest_disc: f32,
 }
 
-/// The order that puts nearby points next to each other: along a Morton curve (10 bits an axis)
-/// over the points' bounding box, ties by index.
+/// The order that puts nearby points next to each other: along a Morton curve over the points'
+/// bounding box (the exact reference's code, `twin::exact_cpu::morton_code`), ties by index.
 pub fn morton_order(positions: &[Vec3]) -> Vec<u32> {
     let (lo, hi) = positions.iter().fold((Vec3::MAX, Vec3::MIN), |(a, b), &p| (a.min(p), b.max(p)));
-    let scale = 1023.0 / (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
-    let spread = |v: f32| {
-        let mut x = (v.clamp(0.0, 1023.0) as u64) & 0x3ff;
-        x = (x | (x << 16)) & 0x0300_00ff;
-        x = (x | (x << 8)) & 0x0300_f00f;
-        x = (x | (x << 4)) & 0x030c_30c3;
-        (x | (x << 2)) & 0x0924_9249
-    };
-    let code = |p: Vec3| {
-        let q = (p - lo) * scale;
-        spread(q.x) | (spread(q.y) << 1) | (spread(q.z) << 2)
-    };
     let mut order: Vec<u32> = (0..positions.len() as u32).collect();
-    order.sort_by_key(|&i| (code(positions[i as usize]), i));
+    order.sort_by_cached_key(|&i| (morton_code(positions[i as usize], lo, hi), i));
     order
 }
 
