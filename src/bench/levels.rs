@@ -10,14 +10,22 @@
 //! its indirect time and stages, the frame's own error estimate ([`crate::renderer::estimate`])
 //! and, with `--equal-error`, the time the importance-sampled estimator needs to reach the
 //! same error ([`super::equal_error`]). The `reference` row is the reference itself.
+//!
+//! With `--candidates` it also measures the configurations one parameter away from a level,
+//! each parameter taking a value another level takes on this scene ([`Knobs`]: visibility,
+//! the spot light's RSM, the fraction of sparse points, the near field; a parameter the scene
+//! file sets in its `tuning` is left as set), and says of each level which measured
+//! configuration **dominates** it: more accurate and at least [`DOMINANCE_SPEEDUP`] times
+//! faster. A level so dominated is a wrong choice for this scene.
 
 use super::BenchError;
 use super::compare::{ExactOptions, ExactReference, exact_reference, rel_rmse_without_worst};
 use super::equal_error::{self, AtEqualError, EqualErrorCurve};
 use crate::gpu::Gpu;
+use crate::renderer::Rendered;
 use crate::renderer::estimate::{ErrorEstimate, EstimateOptions, Estimator};
 use crate::renderer::{Method, Renderer};
-use crate::scene::{Quality, ResolvedConfig, Scene};
+use crate::scene::{Occlusion, Quality, ResolvedConfig, Scene};
 use std::path::Path;
 
 /// One level's row of the table.
@@ -41,6 +49,68 @@ pub struct LevelRow {
     pub at_equal_error: Option<AtEqualError>,
     /// What the level resolved to on this scene, with the reasons.
     pub resolved: ResolvedConfig,
+    /// The level's parameters that `--candidates` varies.
+    pub knobs: Knobs,
+    /// With `--candidates`: the measured configurations (other levels and candidates) that
+    /// dominate this level, by name; empty when none does.
+    pub dominated_by: Vec<String>,
+}
+
+/// A configuration is dominated by one both more accurate and at least this many times faster.
+pub const DOMINANCE_SPEEDUP: f64 = 1.2;
+
+/// The parameters a level sets that `--candidates` varies (and the subdivision, which it
+/// keeps: it is the base level's).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Knobs {
+    pub visibility: Occlusion,
+    pub rsm_resolution: u32,
+    /// `sparse.points`: the fraction of each mesh's sparse points placed.
+    pub points: f32,
+    /// `sparse.near_field`, in sparse point spacings (0: off).
+    pub near_field: f32,
+    pub subdivision: f32,
+}
+
+impl Knobs {
+    fn of(scene: &Scene) -> Knobs {
+        let s = &scene.settings;
+        Knobs {
+            visibility: s.visibility.mode,
+            rsm_resolution: s.rsm_resolution,
+            points: s.sparse.points,
+            near_field: s.sparse.near_field,
+            subdivision: s.sparse.subdivision,
+        }
+    }
+
+    /// The scene file's `settings.tuning` with these knobs set in it.
+    fn tuning(&self, mut tuning: serde_json::Value) -> serde_json::Value {
+        if !tuning.is_object() {
+            tuning = serde_json::json!({});
+        }
+        tuning["visibility"] = serde_json::to_value(self.visibility).unwrap_or_default();
+        tuning["rsm_resolution"] = self.rsm_resolution.into();
+        if !tuning["sparse"].is_object() {
+            tuning["sparse"] = serde_json::json!({});
+        }
+        tuning["sparse"]["points"] = self.points.into();
+        tuning["sparse"]["near_field"] = self.near_field.into();
+        tuning
+    }
+}
+
+/// One configuration `--candidates` measured: a level with one parameter changed.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CandidateRow {
+    /// The level it starts from, and the change, as `level + parameter=value`.
+    pub name: String,
+    pub knobs: Knobs,
+    pub rel_rmse_vs_exact: f64,
+    pub rel_rmse_without_worst_1pct: f64,
+    /// Indirect ms, the median of three frames after a warm-up one (as the levels').
+    pub ms: f64,
+    pub stages_ms: Vec<(String, f64)>,
 }
 
 /// `levels.json`: the rows and what they were measured against.
@@ -57,6 +127,8 @@ pub struct LevelsReport {
     pub reference_ms: f64,
     pub levels: Vec<LevelRow>,
     pub equal_error_curve: Option<EqualErrorCurve>,
+    /// With `--candidates`: the configurations one parameter away from a level.
+    pub candidates: Vec<CandidateRow>,
 }
 
 /// Measure every level of the scene at `path`, `width` x `height` (`None`: the camera's).
@@ -66,10 +138,10 @@ pub fn levels(
     size: Option<(u32, u32)>,
     exact: &ExactOptions,
     equal_error_samples: Option<&[u32]>,
+    candidates: bool,
 ) -> Result<LevelsReport, BenchError> {
-    let load = |quality| {
-        Scene::load_at(path, Some(quality)).map_err(|source| BenchError::Scene { path: path.to_owned(), source })
-    };
+    let scene_error = |source| BenchError::Scene { path: path.to_owned(), source };
+    let load = |quality| Scene::load_at(path, Some(quality)).map_err(scene_error);
     let finest = load(Quality::Reference)?;
     let (w, h) = size.unwrap_or((finest.camera.width, finest.camera.height));
     let mut renderer = Renderer::new(gpu, &finest)?;
@@ -94,7 +166,47 @@ pub fn levels(
         estimator_ms_at_equal_error: None,
         at_equal_error: None,
         resolved: finest.resolved.clone(),
+        knobs: Knobs::of(&finest),
+        dominated_by: Vec::new(),
     });
+    let mut measured = Vec::new();
+    if candidates {
+        let text =
+            std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.to_owned(), source })?;
+        let file: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| super::flag_error("--candidates", e.to_string()))?;
+        let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
+        let levels: Vec<(Quality, Knobs)> = rows[..3].iter().map(|r| (r.level, r.knobs)).collect();
+        for (base, name, knobs) in
+            candidate_knobs(&levels, &file["settings"]["tuning"], finest.resolved.analysis.spot_light)
+        {
+            let mut file = file.clone();
+            file["settings"]["tuning"] = knobs.tuning(file["settings"]["tuning"].take());
+            let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(base)).map_err(scene_error)?;
+            let m = measure(gpu, &scene, (w, h), &reference)?;
+            eprintln!("candidate {name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
+            measured.push(CandidateRow {
+                name,
+                knobs: Knobs::of(&scene),
+                rel_rmse_vs_exact: m.error,
+                rel_rmse_without_worst_1pct: m.without_worst,
+                ms: m.ms,
+                stages_ms: m.frame.timings.stages.clone(),
+            });
+        }
+        let all: Vec<(String, f64, f64)> = rows[..3]
+            .iter()
+            .map(|r| (r.level.name().to_owned(), r.rel_rmse_vs_exact, r.ms))
+            .chain(measured.iter().map(|c| (c.name.clone(), c.rel_rmse_vs_exact, c.ms)))
+            .collect();
+        for row in &mut rows[..3] {
+            row.dominated_by = all
+                .iter()
+                .filter(|(_, error, ms)| dominates((*error, *ms), (row.rel_rmse_vs_exact, row.ms)))
+                .map(|(name, _, _)| name.clone())
+                .collect();
+        }
+    }
     Ok(LevelsReport {
         scene: finest.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
         adapter: gpu.adapter_name(),
@@ -105,21 +217,86 @@ pub fn levels(
         reference_ms: reference.ms(),
         levels: rows,
         equal_error_curve: curve,
+        candidates: measured,
     })
+}
+
+/// Whether a configuration at `(error, ms)` dominates one at `(by_error, by_ms)`: more
+/// accurate and at least [`DOMINANCE_SPEEDUP`] times faster.
+pub fn dominates((error, ms): (f64, f64), (other_error, other_ms): (f64, f64)) -> bool {
+    error < other_error && ms * DOMINANCE_SPEEDUP <= other_ms
+}
+
+/// The configurations one parameter away from each of `levels` (fast, balanced, accurate with
+/// their knobs), each parameter taking the values the levels take (and visibility `off`), in
+/// the order of the levels, without repeats and without the levels' own. A parameter set in
+/// the scene file's `tuning` is not varied; nor is the RSM without a spot light.
+pub fn candidate_knobs(
+    levels: &[(Quality, Knobs)],
+    tuning: &serde_json::Value,
+    spot_light: bool,
+) -> Vec<(Quality, String, Knobs)> {
+    let set = |key: &str| tuning.get(key).is_some();
+    let set_sparse = |key: &str| tuning.get("sparse").and_then(|s| s.get(key)).is_some();
+    let values = |f: fn(&Knobs) -> f64| {
+        let mut v: Vec<f64> = levels.iter().map(|(_, k)| f(k)).collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v
+    };
+    let points = if set_sparse("points") { Vec::new() } else { values(|k| f64::from(k.points)) };
+    let near_field = if set_sparse("near_field") { Vec::new() } else { values(|k| f64::from(k.near_field)) };
+    let rsm = if set("rsm_resolution") || !spot_light { Vec::new() } else { values(|k| f64::from(k.rsm_resolution)) };
+    let mut visibility: Vec<Occlusion> = Vec::new();
+    if !(set("visibility") || set("occlusion")) {
+        for v in std::iter::once(Occlusion::Off).chain(levels.iter().map(|(_, k)| k.visibility)) {
+            if !visibility.contains(&v) {
+                visibility.push(v);
+            }
+        }
+    }
+    let mut out: Vec<(Quality, String, Knobs)> = Vec::new();
+    for &(level, knobs) in levels {
+        let mut changes: Vec<(String, Knobs)> = Vec::new();
+        for &v in &visibility {
+            let name = serde_json::to_value(v).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
+            changes.push((format!("visibility={name}"), Knobs { visibility: v, ..knobs }));
+        }
+        for &r in &rsm {
+            changes.push((format!("rsm_resolution={r}"), Knobs { rsm_resolution: r as u32, ..knobs }));
+        }
+        for &p in &points {
+            changes.push((format!("sparse.points={p}"), Knobs { points: p as f32, ..knobs }));
+        }
+        for &n in &near_field {
+            changes.push((format!("sparse.near_field={n}"), Knobs { near_field: n as f32, ..knobs }));
+        }
+        for (change, k) in changes {
+            let known = levels.iter().any(|(_, l)| *l == k) || out.iter().any(|(_, _, o)| *o == k);
+            if !known {
+                out.push((level, format!("{} + {change}", level.name()), k));
+            }
+        }
+    }
+    out
 }
 
 /// Frames timed per level after the warm-up frame: the row is the one of median indirect time
 /// (on a shared machine a single frame's time is at the mercy of whatever else runs).
 const TIMED_FRAMES: usize = 3;
 
-fn level_row(
-    gpu: &Gpu,
-    scene: &Scene,
-    level: Quality,
-    (w, h): (u32, u32),
-    reference: &ExactReference,
-    curve: Option<&EqualErrorCurve>,
-) -> Result<LevelRow, BenchError> {
+/// One configuration's frame against the reference.
+struct Measured {
+    frame: Rendered,
+    error: f64,
+    without_worst: f64,
+    ms: f64,
+    renderer: Renderer,
+}
+
+/// Render `scene` once to warm up, then [`TIMED_FRAMES`] times; the frame of median indirect
+/// time against `reference`.
+fn measure(gpu: &Gpu, scene: &Scene, (w, h): (u32, u32), reference: &ExactReference) -> Result<Measured, BenchError> {
     let mut renderer = Renderer::new(gpu, scene)?;
     renderer.render(gpu, Method::Sparse, w, h)?;
     let mut frames =
@@ -129,13 +306,25 @@ fn level_row(
     let error = reference
         .corrected_rel_rmse(&frame.indirect)
         .unwrap_or_else(|| crate::image::relative_rmse(&frame.indirect, reference.indirect()));
+    let without_worst = rel_rmse_without_worst(&frame.indirect, reference.indirect(), 0.01);
+    Ok(Measured { ms: frame.indirect_ms(), frame, error, without_worst, renderer })
+}
+
+fn level_row(
+    gpu: &Gpu,
+    scene: &Scene,
+    level: Quality,
+    size: (u32, u32),
+    reference: &ExactReference,
+    curve: Option<&EqualErrorCurve>,
+) -> Result<LevelRow, BenchError> {
+    let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference)?;
     let estimate = Estimator::new().estimate(gpu, &renderer, &frame, &EstimateOptions::default())?;
-    let ms = frame.indirect_ms();
     let at_equal_error = curve.and_then(|c| equal_error::at_error(&c.points, error, ms));
     Ok(LevelRow {
         level,
         rel_rmse_vs_exact: error,
-        rel_rmse_without_worst_1pct: rel_rmse_without_worst(&frame.indirect, reference.indirect(), 0.01),
+        rel_rmse_without_worst_1pct: without_worst,
         estimate_ratio: estimate.map(|e| e.rel_rmse / error),
         error_estimate: estimate,
         ms,
@@ -143,6 +332,8 @@ fn level_row(
         estimator_ms_at_equal_error: at_equal_error.map(|a| a.estimator_ms),
         at_equal_error,
         resolved: scene.resolved.clone(),
+        knobs: Knobs::of(scene),
+        dominated_by: Vec::new(),
     })
 }
 
@@ -174,5 +365,127 @@ pub fn markdown(report: &LevelsReport) -> String {
             r.ms,
         ));
     }
+    if !report.candidates.is_empty() {
+        out.push_str(&candidates_markdown(report));
+    }
     out
+}
+
+/// The candidates' table and, per level, what dominates it.
+fn candidates_markdown(report: &LevelsReport) -> String {
+    let name =
+        |v: Occlusion| serde_json::to_value(v).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
+    let mut out = String::from(
+        "\nOne parameter away from a level (`--candidates`), against the same reference; **bold**: a \
+         configuration that dominates a level (more accurate and at least 1.2x faster):\n\n\
+         | configuration | visibility | RSM | points | near field | subdivision | rel RMSE vs exact | without worst 1 % | indirect ms |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    let rows = report.levels[..3.min(report.levels.len())]
+        .iter()
+        .map(|r| (r.level.name().to_owned(), r.knobs, r.rel_rmse_vs_exact, r.rel_rmse_without_worst_1pct, r.ms))
+        .chain(
+            report
+                .candidates
+                .iter()
+                .map(|c| (c.name.clone(), c.knobs, c.rel_rmse_vs_exact, c.rel_rmse_without_worst_1pct, c.ms)),
+        );
+    for (label, k, error, without, ms) in rows {
+        let dominant = report.levels.iter().any(|l| l.dominated_by.contains(&label));
+        let label = if dominant { format!("**{label}**") } else { label };
+        out.push_str(&format!(
+            "| {label} | {} | {} | {} | {} | {} | {error:.4} | {without:.4} | {ms:.1} |\n",
+            name(k.visibility),
+            k.rsm_resolution,
+            k.points,
+            k.near_field,
+            k.subdivision,
+        ));
+    }
+    out.push('\n');
+    for l in report.levels.iter().filter(|l| l.level != Quality::Reference) {
+        match l.dominated_by.as_slice() {
+            [] => out.push_str(&format!("- `{}`: not dominated.\n", l.level.name())),
+            by => out.push_str(&format!(
+                "- `{}`: **dominated** by {}.\n",
+                l.level.name(),
+                by.iter().map(|b| format!("`{b}`")).collect::<Vec<_>>().join(", ")
+            )),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn knobs(visibility: Occlusion, rsm_resolution: u32, points: f32, near_field: f32, subdivision: f32) -> Knobs {
+        Knobs { visibility, rsm_resolution, points, near_field, subdivision }
+    }
+
+    fn levels() -> Vec<(Quality, Knobs)> {
+        vec![
+            (Quality::Fast, knobs(Occlusion::Disks, 64, 0.5, 0.0, 4.0)),
+            (Quality::Balanced, knobs(Occlusion::Disks, 128, 1.0, 0.0, 2.0)),
+            (Quality::Accurate, knobs(Occlusion::Clusters, 128, 1.0, 4.0, 2.0)),
+        ]
+    }
+
+    /// Each level's one-parameter neighbours over the values the levels take, without the
+    /// levels themselves and without repeats: accurate's disks are balanced with the near field,
+    /// its near field off is balanced with clusters, both already listed from balanced.
+    #[test]
+    fn candidates_are_one_parameter_from_a_level_and_never_repeat() {
+        let c = candidate_knobs(&levels(), &serde_json::json!({}), true);
+        let names: Vec<&str> = c.iter().map(|(_, n, _)| n.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "fast + visibility=off",
+                "fast + visibility=clusters",
+                "fast + rsm_resolution=128",
+                "fast + sparse.points=1",
+                "fast + sparse.near_field=4",
+                "balanced + visibility=off",
+                "balanced + visibility=clusters",
+                "balanced + rsm_resolution=64",
+                "balanced + sparse.points=0.5",
+                "balanced + sparse.near_field=4",
+                "accurate + visibility=off",
+                "accurate + rsm_resolution=64",
+                "accurate + sparse.points=0.5",
+            ]
+        );
+        for (base, _, k) in &c {
+            let (_, from) = levels().into_iter().find(|(l, _)| l == base).unwrap();
+            let differ = [
+                k.visibility != from.visibility,
+                k.rsm_resolution != from.rsm_resolution,
+                k.points != from.points,
+                k.near_field != from.near_field,
+                k.subdivision != from.subdivision,
+            ];
+            assert_eq!(differ.iter().filter(|d| **d).count(), 1, "{k:?} from {from:?}");
+        }
+    }
+
+    /// A parameter the scene file's tuning sets, or the RSM of a scene without a spot light,
+    /// is not varied.
+    #[test]
+    fn candidates_leave_what_the_scene_file_sets() {
+        let tuning = serde_json::json!({"rsm_resolution": 32, "visibility": "off", "sparse": {"near_field": 2}});
+        let c = candidate_knobs(&levels(), &tuning, true);
+        assert!(c.iter().all(|(_, n, _)| n.contains("sparse.points")), "{c:?}");
+        let c = candidate_knobs(&levels(), &serde_json::json!({}), false);
+        assert!(!c.iter().any(|(_, n, _)| n.contains("rsm_resolution")), "{c:?}");
+    }
+
+    #[test]
+    fn dominance_needs_both_lower_error_and_the_speedup() {
+        assert!(dominates((0.10, 100.0), (0.11, 120.0)));
+        assert!(!dominates((0.10, 100.0), (0.11, 119.0)), "not 1.2x faster");
+        assert!(!dominates((0.11, 10.0), (0.11, 120.0)), "not more accurate");
+        assert!(!dominates((0.10, 100.0), (0.10, 100.0)), "itself");
+    }
 }

@@ -257,17 +257,15 @@ fn levels_are_measured_and_the_estimate_is_within_1_5x_of_the_error() {
         let dir = scratch(&format!("bench_levels_{name}"));
         let scene = fixture(&format!("scenes/{name}.json"));
         let (w, h) = if name == "cornell_bunny_two_bounces" { ("48", "48") } else { ("64", "64") };
-        let o = relume(&[
-            "bench",
-            "--levels",
-            scene.to_str().unwrap(),
-            "--width",
-            w,
-            "--height",
-            h,
-            "--out",
-            dir.to_str().unwrap(),
-        ]);
+        let mut args = vec!["bench", "--levels", scene.to_str().unwrap(), "--width", w, "--height", h];
+        args.extend(["--out", dir.to_str().unwrap()]);
+        // The small room pins its RSM and visibility: the candidates vary the points and the
+        // near field only, a few frames at 64x64.
+        let candidates = name == "cornell_bunny_small";
+        if candidates {
+            args.push("--candidates");
+        }
+        let o = relume(&args);
         assert!(o.status.success(), "{name}: {}", stderr(&o));
         let report: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join("levels.json")).unwrap()).unwrap();
@@ -284,6 +282,45 @@ fn levels_are_measured_and_the_estimate_is_within_1_5x_of_the_error() {
             assert!(l["resolved"]["choices"].as_array().is_some_and(|c| !c.is_empty()), "{name}: {l}");
         }
         assert_eq!(levels[3]["resolved"]["method"].as_str(), Some("exact"));
-        assert!(std::fs::read_to_string(dir.join("levels.md")).unwrap().contains("| balanced | sparse |"));
+        let table = std::fs::read_to_string(dir.join("levels.md")).unwrap();
+        assert!(table.contains("| balanced | sparse |"));
+        if candidates {
+            assert_candidates(&report, &table);
+        }
+    }
+}
+
+/// `--candidates` on the small room: each candidate is a level with its points or near field
+/// changed (the scene file pins the rest), measured against the same reference; a level's
+/// `dominated_by` names exactly the measured configurations more accurate and 1.2x faster.
+fn assert_candidates(report: &serde_json::Value, table: &str) {
+    let levels = &report["levels"].as_array().unwrap()[..3];
+    let candidates = report["candidates"].as_array().unwrap();
+    assert!(candidates.len() >= 3, "{candidates:?}");
+    let mut all: Vec<(String, f64, f64)> = Vec::new();
+    for l in levels {
+        all.push((
+            l["level"].as_str().unwrap().to_owned(),
+            finite_non_negative(l, "rel_rmse_vs_exact"),
+            l["ms"].as_f64().unwrap(),
+        ));
+    }
+    for c in candidates {
+        let name = c["name"].as_str().unwrap();
+        let (base, change) = name.split_once(" + ").unwrap_or_else(|| panic!("{name}"));
+        let base = levels.iter().find(|l| l["level"] == base).unwrap_or_else(|| panic!("{name}"));
+        assert!(change.starts_with("sparse.points=") || change.starts_with("sparse.near_field="), "{name}");
+        assert_eq!(c["knobs"]["visibility"], base["knobs"]["visibility"], "{name}: the file pins visibility");
+        assert_eq!(c["knobs"]["rsm_resolution"], base["knobs"]["rsm_resolution"], "{name}: the file pins the RSM");
+        assert_ne!(c["knobs"], base["knobs"], "{name}");
+        assert!(table.contains(&format!("{name} |")), "{name} missing from the table");
+        all.push((name.to_owned(), finite_non_negative(c, "rel_rmse_vs_exact"), c["ms"].as_f64().unwrap()));
+    }
+    for l in levels {
+        let (error, ms) = (l["rel_rmse_vs_exact"].as_f64().unwrap(), l["ms"].as_f64().unwrap());
+        let expected: Vec<&str> =
+            all.iter().filter(|(_, e, m)| *e < error && m * 1.2 <= ms).map(|(n, _, _)| n.as_str()).collect();
+        let by: Vec<&str> = l["dominated_by"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect();
+        assert_eq!(by, expected, "{}", l["level"]);
     }
 }
