@@ -3,7 +3,7 @@
 # on every fixture scene, each writing its levels.json and levels.md, concatenated under a
 # header, with the configurations one parameter away from each level and which of them
 # dominate a level (`--candidates`). The targets are at 256 pixels wide (`--size 256`, about
-# 80 minutes on two CPU cores); 64 is the quick look.
+# 41 minutes on two CPU cores); 64 is the quick look.
 #   scripts/levels-table.sh [--bin PATH] [--size N] [--out DIR]   (default: 64, out/levels)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,6 +23,11 @@ if [ "${LEVELS_SKIP_RUN:-0}" != 1 ]; then
     done
 fi
 page=docs/measurements/levels.md
+for n in $scenes; do
+    # The plot, drawn again from levels.json when a run before the plots wrote it.
+    [ -f "$out/$n/levels.svg" ] || "$bin" bench --levels "fixtures/scenes/$n.json" --replot --out "$out/$n"
+    cp "$out/$n/levels.svg" "docs/images/levels_$n.svg"
+done
 {
     echo "# Quality levels"
     echo
@@ -43,12 +48,15 @@ page=docs/measurements/levels.md
     echo "light's RSM; the fraction of sparse points; the near field; a parameter the scene file sets"
     echo "in its \`tuning\` is not varied), measured the same way against the same reference"
     echo "(src/bench/levels.rs). A level is **dominated** when one of them, or another level, is more"
-    echo "accurate and at least 1.2x faster: on that scene the level is the wrong choice."
+    echo "accurate and at least 1.2x faster: on that scene the level is the wrong choice. Each"
+    echo "scene's plot shows the levels, the candidates, their Pareto front and the estimator's curve."
     echo
     for n in $scenes; do
         echo "## \`fixtures/scenes/$n.json\`"
         echo
         cat "$out/$n/levels.md"
+        echo
+        echo "![levels and candidates of $n: error against time](../images/levels_$n.svg)"
         echo
     done
 } > "$page"

@@ -221,6 +221,43 @@ pub fn levels(
     })
 }
 
+/// The levels' plot of a `levels.json` (as [`levels`] writes it): its levels (but
+/// `reference`) and candidates, and the estimator's curve. From the JSON, so that a report
+/// already written can be drawn again (`relume bench --levels --replot`).
+pub fn plot_points(report: &serde_json::Value) -> (String, Vec<super::plot::LevelPoint>, Vec<(f64, f64)>) {
+    let point = |name: &serde_json::Value, row: &serde_json::Value, level: bool| {
+        Some(super::plot::LevelPoint {
+            name: name.as_str()?.to_owned(),
+            rel_rmse: row["rel_rmse_vs_exact"].as_f64()?,
+            ms: row["ms"].as_f64()?,
+            level,
+        })
+    };
+    let empty = Vec::new();
+    let levels = report["levels"].as_array().unwrap_or(&empty);
+    let candidates = report["candidates"].as_array().unwrap_or(&empty);
+    let points = levels
+        .iter()
+        .filter(|l| l["level"] != "reference")
+        .filter_map(|l| point(&l["level"], l, true))
+        .chain(candidates.iter().filter_map(|c| point(&c["name"], c, false)))
+        .collect();
+    let curve = report["equal_error_curve"]["points"]
+        .as_array()
+        .unwrap_or(&empty)
+        .iter()
+        .filter_map(|p| Some((p["ms"].as_f64()?, p["rel_rmse"].as_f64()?)))
+        .collect();
+    let title = format!(
+        "{} at {}x{}: levels against exact ({})",
+        report["scene"].as_str().unwrap_or_default(),
+        report["width"],
+        report["height"],
+        report["adapter"].as_str().unwrap_or_default()
+    );
+    (title, points, curve)
+}
+
 /// Whether a configuration at `(error, ms)` dominates one at `(by_error, by_ms)`: more
 /// accurate and at least [`DOMINANCE_SPEEDUP`] times faster.
 pub fn dominates((error, ms): (f64, f64), (other_error, other_ms): (f64, f64)) -> bool {
@@ -479,6 +516,30 @@ mod tests {
         assert!(c.iter().all(|(_, n, _)| n.contains("sparse.points")), "{c:?}");
         let c = candidate_knobs(&levels(), &serde_json::json!({}), false);
         assert!(!c.iter().any(|(_, n, _)| n.contains("rsm_resolution")), "{c:?}");
+    }
+
+    /// The plot takes the levels but `reference`, every candidate, and the estimator's curve,
+    /// from the JSON the bench wrote.
+    #[test]
+    fn the_plot_takes_levels_candidates_and_the_curve_from_the_json() {
+        let report = serde_json::json!({
+            "scene": "room", "width": 64, "height": 48, "adapter": "cpu",
+            "levels": [
+                {"level": "fast", "rel_rmse_vs_exact": 0.2, "ms": 10.0},
+                {"level": "balanced", "rel_rmse_vs_exact": 0.1, "ms": 20.0},
+                {"level": "reference", "rel_rmse_vs_exact": 0.0, "ms": 900.0},
+            ],
+            "candidates": [{"name": "fast + sparse.points=1", "rel_rmse_vs_exact": 0.15, "ms": 15.0}],
+            "equal_error_curve": {"points": [{"ms": 100.0, "rel_rmse": 0.3}, {"ms": 200.0, "rel_rmse": 0.2}]},
+        });
+        let (title, points, curve) = plot_points(&report);
+        assert!(title.starts_with("room at 64x48"), "{title}");
+        let names: Vec<(&str, bool)> = points.iter().map(|p| (p.name.as_str(), p.level)).collect();
+        assert_eq!(names, [("fast", true), ("balanced", true), ("fast + sparse.points=1", false)]);
+        assert_eq!((points[2].rel_rmse, points[2].ms), (0.15, 15.0));
+        assert_eq!(curve, [(100.0, 0.3), (200.0, 0.2)]);
+        let (_, points, curve) = plot_points(&serde_json::json!({}));
+        assert!(points.is_empty() && curve.is_empty());
     }
 
     #[test]

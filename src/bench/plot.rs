@@ -450,3 +450,88 @@ mod tests {
         register_font().expect("DejaVu Sans parses");
     }
 }
+
+/// One configuration of the levels' plot: a level or a candidate one parameter from one.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelPoint {
+    pub name: String,
+    pub rel_rmse: f64,
+    pub ms: f64,
+    /// A level (labelled and drawn large) rather than a candidate.
+    pub level: bool,
+}
+
+/// The levels' plot (`relume bench --levels`): error against exact over indirect time, the
+/// levels and their candidates, the Pareto front of them all and the converging estimator's
+/// curve `(ms, rel RMSE)`, into `<dir>/levels.png` and `.svg`.
+pub fn write_levels(dir: &Path, title: &str, points: &[LevelPoint], curve: &[(f64, f64)]) -> Drawn {
+    register_font()?;
+    let data = (title, points, curve);
+    png_and_svg!(dir, "levels", (900, 600), draw_levels, &data);
+    Ok(())
+}
+
+fn draw_levels<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    (title, points, curve): &(&str, &[LevelPoint], &[(f64, f64)]),
+) -> Drawn {
+    root.fill(&WHITE).map_err(err)?;
+    let xy: Vec<(f64, f64)> = points.iter().map(|p| (p.ms, p.rel_rmse)).collect();
+    let y_max = xy.iter().map(|p| p.1).filter(|y| y.is_finite()).fold(0.0f64, f64::max).max(1e-3) * 1.15;
+    let curve: Vec<(f64, f64)> =
+        curve.iter().copied().filter(|p| p.0 > 0.0 && p.1.is_finite() && p.1 <= y_max).collect();
+    let x_range = log_range(xy.iter().chain(&curve).map(|p| p.0));
+    let mut chart = ChartBuilder::on(root)
+        .caption(*title, (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x_range.log_scale(), 0.0..y_max)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_labels(8)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .x_desc("indirect ms (log)")
+        .y_desc("relative RMSE against exact")
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(err)?;
+    let candidates: Vec<(f64, f64)> = points.iter().filter(|p| !p.level).map(|p| (p.ms, p.rel_rmse)).collect();
+    if !candidates.is_empty() {
+        chart
+            .draw_series(candidates.iter().map(|&p| Circle::new(p, 4, BLUE.mix(0.5).filled())))
+            .map_err(err)?
+            .label("one parameter from a level")
+            .legend(|(x, y)| Circle::new((x + 5, y), 4, BLUE.mix(0.5).filled()));
+    }
+    let front: Vec<(f64, f64)> = pareto_front(&xy).into_iter().map(|i| xy[i]).collect();
+    chart
+        .draw_series(LineSeries::new(front, RED.stroke_width(2)))
+        .map_err(err)?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 15, y)], RED.stroke_width(2)));
+    let levels: Vec<&LevelPoint> = points.iter().filter(|p| p.level).collect();
+    chart
+        .draw_series(levels.iter().map(|p| TriangleMarker::new((p.ms, p.rel_rmse), 8, BLACK.filled())))
+        .map_err(err)?
+        .label("quality level")
+        .legend(|(x, y)| TriangleMarker::new((x + 5, y), 8, BLACK.filled()));
+    chart
+        .draw_series(
+            levels.iter().map(|p| {
+                Text::new(format!("  {}", p.name), (p.ms, p.rel_rmse), (FAMILY, 14).into_font().color(&BLACK))
+            }),
+        )
+        .map_err(err)?;
+    if !curve.is_empty() {
+        let green = RGBColor(44, 160, 44);
+        chart
+            .draw_series(LineSeries::new(curve.clone(), green.stroke_width(2)))
+            .map_err(err)?
+            .label("converging estimator (exact, N importance-sampled VALs; CPU)")
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 15, y)], green.stroke_width(2)));
+        chart.draw_series(curve.iter().map(|&p| Cross::new(p, 4, green.stroke_width(2)))).map_err(err)?;
+    }
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight)
+}

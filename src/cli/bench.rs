@@ -44,6 +44,9 @@ pub struct Args {
     /// (more accurate and at least 1.2x faster).
     #[arg(long, requires = "levels")]
     candidates: bool,
+    /// With --levels: render nothing, draw the plot of the levels.json already in --out again.
+    #[arg(long, requires = "levels", conflicts_with_all = ["candidates", "equal_error"])]
+    replot: bool,
     /// With --levels: the image size (default: the scene camera's).
     #[command(flatten)]
     size: Size,
@@ -169,15 +172,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
 /// `relume bench --levels`: every quality level against one exact reference.
 fn levels(args: &Args, equal_error: Option<&[u32]>) -> anyhow::Result<()> {
-    let exact = args.exact.options(args.val_stride.unwrap_or(1))?;
-    let size = args.size.resolve_optional()?;
-    let gpu = Gpu::new()?;
-    let report = relume::bench::levels::levels(&gpu, &args.scene, size, &exact, equal_error, args.candidates)?;
-    std::fs::create_dir_all(&args.out)?;
-    std::fs::write(args.out.join("levels.json"), serde_json::to_string_pretty(&report)?)?;
-    let table = relume::bench::levels::markdown(&report);
-    std::fs::write(args.out.join("levels.md"), &table)?;
-    eprint!("{table}");
-    eprintln!("wrote {}", args.out.join("levels.json").display());
+    let json = args.out.join("levels.json");
+    if !args.replot {
+        let exact = args.exact.options(args.val_stride.unwrap_or(1))?;
+        let size = args.size.resolve_optional()?;
+        let gpu = Gpu::new()?;
+        let report = relume::bench::levels::levels(&gpu, &args.scene, size, &exact, equal_error, args.candidates)?;
+        std::fs::create_dir_all(&args.out)?;
+        std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
+        let table = relume::bench::levels::markdown(&report);
+        std::fs::write(args.out.join("levels.md"), &table)?;
+        eprint!("{table}");
+        eprintln!("wrote {}", json.display());
+    }
+    let text =
+        std::fs::read_to_string(&json).map_err(|e| anyhow::anyhow!("--replot: reading {}: {e}", json.display()))?;
+    let report: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("--replot: {}: {e}", json.display()))?;
+    let (title, points, curve) = relume::bench::levels::plot_points(&report);
+    relume::bench::plot::write_levels(&args.out, &title, &points, &curve).map_err(anyhow::Error::msg)?;
+    eprintln!("wrote {}", args.out.join("levels.svg").display());
     Ok(())
 }

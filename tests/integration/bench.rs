@@ -286,6 +286,17 @@ fn levels_are_measured_and_the_estimate_is_within_1_5x_of_the_error() {
         assert!(table.contains("| balanced | sparse |"));
         if candidates {
             assert_candidates(&report, &table);
+            // The plot, and drawn again from levels.json alone (`--replot` renders nothing).
+            let svg = dir.join("levels.svg");
+            assert!(std::fs::metadata(&svg).is_ok_and(|m| m.len() > 1000), "no levels.svg");
+            assert!(std::fs::metadata(dir.join("levels.png")).is_ok_and(|m| m.len() > 1000), "no levels.png");
+            std::fs::remove_file(&svg).unwrap();
+            let o = relume(&["bench", "--levels", scene.to_str().unwrap(), "--replot", "--out", dir.to_str().unwrap()]);
+            assert!(o.status.success(), "{name} --replot: {}", stderr(&o));
+            let drawn = std::fs::read_to_string(&svg).unwrap();
+            for l in ["fast", "balanced", "accurate"] {
+                assert!(drawn.contains(l), "{l} not labelled in the plot");
+            }
         }
     }
 }
