@@ -140,8 +140,9 @@ pub fn levels(
     equal_error_samples: Option<&[u32]>,
     candidates: bool,
 ) -> Result<LevelsReport, BenchError> {
-    let scene_error = |source| BenchError::Scene { path: path.to_owned(), source };
-    let load = |quality| Scene::load_at(path, Some(quality)).map_err(scene_error);
+    let load = |quality| {
+        Scene::load_at(path, Some(quality)).map_err(|source| BenchError::Scene { path: path.to_owned(), source })
+    };
     let finest = load(Quality::Reference)?;
     let (w, h) = size.unwrap_or((finest.camera.width, finest.camera.height));
     let mut renderer = Renderer::new(gpu, &finest)?;
@@ -169,44 +170,11 @@ pub fn levels(
         knobs: Knobs::of(&finest),
         dominated_by: Vec::new(),
     });
-    let mut measured = Vec::new();
-    if candidates {
-        let text =
-            std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.to_owned(), source })?;
-        let file: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| super::flag_error("--candidates", e.to_string()))?;
-        let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
-        let levels: Vec<(Quality, Knobs)> = rows[..3].iter().map(|r| (r.level, r.knobs)).collect();
-        for (base, name, knobs) in
-            candidate_knobs(&levels, &file["settings"]["tuning"], finest.resolved.analysis.spot_light)
-        {
-            let mut file = file.clone();
-            file["settings"]["tuning"] = knobs.tuning(file["settings"]["tuning"].take());
-            let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(base)).map_err(scene_error)?;
-            let m = measure(gpu, &scene, (w, h), &reference)?;
-            eprintln!("candidate {name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
-            measured.push(CandidateRow {
-                name,
-                knobs: Knobs::of(&scene),
-                rel_rmse_vs_exact: m.error,
-                rel_rmse_without_worst_1pct: m.without_worst,
-                ms: m.ms,
-                stages_ms: m.frame.timings.stages.clone(),
-            });
-        }
-        let all: Vec<(String, f64, f64)> = rows[..3]
-            .iter()
-            .map(|r| (r.level.name().to_owned(), r.rel_rmse_vs_exact, r.ms))
-            .chain(measured.iter().map(|c| (c.name.clone(), c.rel_rmse_vs_exact, c.ms)))
-            .collect();
-        for row in &mut rows[..3] {
-            row.dominated_by = all
-                .iter()
-                .filter(|(_, error, ms)| dominates((*error, *ms), (row.rel_rmse_vs_exact, row.ms)))
-                .map(|(name, _, _)| name.clone())
-                .collect();
-        }
-    }
+    let measured = match candidates {
+        true => measure_candidates(gpu, path, &finest, &rows[..3], (w, h), &reference)?,
+        false => Vec::new(),
+    };
+    mark_dominated(&mut rows[..3], &measured);
     Ok(LevelsReport {
         scene: finest.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
         adapter: gpu.adapter_name(),
@@ -256,6 +224,63 @@ pub fn plot_points(report: &serde_json::Value) -> (String, Vec<super::plot::Leve
         report["adapter"].as_str().unwrap_or_default()
     );
     (title, points, curve)
+}
+
+/// The configurations [`candidate_knobs`] makes around `levels` (the rows of fast, balanced and
+/// accurate), each the scene file at `path` with its knobs set in its `tuning`, loaded at its
+/// base level and measured as the levels are.
+fn measure_candidates(
+    gpu: &Gpu,
+    path: &Path,
+    finest: &Scene,
+    levels: &[LevelRow],
+    size: (u32, u32),
+    reference: &ExactReference,
+) -> Result<Vec<CandidateRow>, BenchError> {
+    let text = std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.to_owned(), source })?;
+    let file: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| super::flag_error("--candidates", e.to_string()))?;
+    let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
+    let knobs: Vec<(Quality, Knobs)> = levels.iter().map(|r| (r.level, r.knobs)).collect();
+    let mut measured = Vec::new();
+    for (base, name, knobs) in candidate_knobs(&knobs, &file["settings"]["tuning"], finest.resolved.analysis.spot_light)
+    {
+        let mut file = file.clone();
+        file["settings"]["tuning"] = knobs.tuning(file["settings"]["tuning"].take());
+        let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(base))
+            .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
+        let m = measure(gpu, &scene, size, reference)?;
+        eprintln!("candidate {name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
+        measured.push(CandidateRow {
+            name,
+            knobs: Knobs::of(&scene),
+            rel_rmse_vs_exact: m.error,
+            rel_rmse_without_worst_1pct: m.without_worst,
+            ms: m.ms,
+            stages_ms: m.frame.timings.stages.clone(),
+        });
+    }
+    Ok(measured)
+}
+
+/// Each level's `dominated_by`: the other levels and the candidates that dominate it (none
+/// without candidates).
+fn mark_dominated(levels: &mut [LevelRow], candidates: &[CandidateRow]) {
+    if candidates.is_empty() {
+        return;
+    }
+    let all: Vec<(String, f64, f64)> = levels
+        .iter()
+        .map(|r| (r.level.name().to_owned(), r.rel_rmse_vs_exact, r.ms))
+        .chain(candidates.iter().map(|c| (c.name.clone(), c.rel_rmse_vs_exact, c.ms)))
+        .collect();
+    for row in levels {
+        row.dominated_by = all
+            .iter()
+            .filter(|(_, error, ms)| dominates((*error, *ms), (row.rel_rmse_vs_exact, row.ms)))
+            .map(|(name, _, _)| name.clone())
+            .collect();
+    }
 }
 
 /// Whether a configuration at `(error, ms)` dominates one at `(by_error, by_ms)`: more
