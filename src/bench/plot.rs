@@ -8,6 +8,8 @@
 use super::{BenchResults, ConfigResult};
 use crate::scene::Occlusion;
 use plotters::coord::Shift;
+use plotters::coord::combinators::LogCoord;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -129,6 +131,34 @@ fn log_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     if hi <= 0.0 { 0.1..10.0 } else { lo / 1.5..hi * 1.5 }
 }
 
+/// A chart of an error (from 0 to `y_max`) over a time (`x_range`, ms, log axis), its mesh and
+/// axis labels drawn.
+fn error_over_time<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    (x_range, y_max): (std::ops::Range<f64>, f64),
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>, String> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(caption, (FAMILY, 18))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x_range.log_scale(), 0.0..y_max)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_labels(8)
+        .x_label_formatter(&|x| format!("{x:.0}"))
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style((FAMILY, 13))
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
 fn draw_error_vs_time<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, results: &BenchResults) -> Drawn {
     draw_error_vs_time_against(root, results, false)
 }
@@ -195,22 +225,13 @@ fn draw_error_vs_time_against<DB: DrawingBackend>(
         (true, _) => "exact visibility".to_owned(),
         (false, _) => "brute force".to_owned(),
     };
-    let mut chart = ChartBuilder::on(root)
-        .caption(format!("Indirect error against {reference} vs time ({})", results.adapter), (FAMILY, 18))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x_range.log_scale(), 0.0..y_max)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_labels(8)
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .x_desc(format!("indirect stages, ms ({}, log)", results.timing.as_str()))
-        .y_desc("relative RMSE of the indirect image")
-        .label_style((FAMILY, 13))
-        .draw()
-        .map_err(err)?;
+    let mut chart = error_over_time(
+        root,
+        &format!("Indirect error against {reference} vs time ({})", results.adapter),
+        (x_range, y_max),
+        &format!("indirect stages, ms ({}, log)", results.timing.as_str()),
+        "relative RMSE of the indirect image",
+    )?;
     chart
         .draw_series(points.iter().map(|&p| Circle::new(p, 4, BLUE.mix(0.6).filled())))
         .map_err(err)?
@@ -481,22 +502,7 @@ fn draw_levels<DB: DrawingBackend>(
     let curve: Vec<(f64, f64)> =
         curve.iter().copied().filter(|p| p.0 > 0.0 && p.1.is_finite() && p.1 <= y_max).collect();
     let x_range = log_range(xy.iter().chain(&curve).map(|p| p.0));
-    let mut chart = ChartBuilder::on(root)
-        .caption(*title, (FAMILY, 18))
-        .margin(15)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
-        .build_cartesian_2d(x_range.log_scale(), 0.0..y_max)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_labels(8)
-        .x_label_formatter(&|x| format!("{x:.0}"))
-        .x_desc("indirect ms (log)")
-        .y_desc("relative RMSE against exact")
-        .label_style((FAMILY, 13))
-        .draw()
-        .map_err(err)?;
+    let mut chart = error_over_time(root, title, (x_range, y_max), "indirect ms (log)", "relative RMSE against exact")?;
     let candidates: Vec<(f64, f64)> = points.iter().filter(|p| !p.level).map(|p| (p.ms, p.rel_rmse)).collect();
     if !candidates.is_empty() {
         chart
