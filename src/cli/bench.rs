@@ -173,7 +173,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// `relume bench --levels`: every quality level against one exact reference.
 fn levels(args: &Args, equal_error: Option<&[u32]>) -> anyhow::Result<()> {
     let json = args.out.join("levels.json");
-    if !args.replot {
+    let report: serde_json::Value = if args.replot {
+        let text =
+            std::fs::read_to_string(&json).map_err(|e| anyhow::anyhow!("--replot: reading {}: {e}", json.display()))?;
+        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("--replot: {}: {e}", json.display()))?
+    } else {
         let exact = args.exact.options(args.val_stride.unwrap_or(1))?;
         let size = args.size.resolve_optional()?;
         let gpu = Gpu::new()?;
@@ -184,11 +188,8 @@ fn levels(args: &Args, equal_error: Option<&[u32]>) -> anyhow::Result<()> {
         std::fs::write(args.out.join("levels.md"), &table)?;
         eprint!("{table}");
         eprintln!("wrote {}", json.display());
-    }
-    let text =
-        std::fs::read_to_string(&json).map_err(|e| anyhow::anyhow!("--replot: reading {}: {e}", json.display()))?;
-    let report: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("--replot: {}: {e}", json.display()))?;
+        serde_json::to_value(&report)?
+    };
     let (title, points, curve) = relume::bench::levels::plot_points(&report);
     relume::bench::plot::write_levels(&args.out, &title, &points, &curve).map_err(anyhow::Error::msg)?;
     eprintln!("wrote {}", args.out.join("levels.svg").display());
