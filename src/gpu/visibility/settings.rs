@@ -100,6 +100,16 @@ macro_rules! define_settings {
             }
         }
 
+        impl From<Occlusion> for OcclusionSetting {
+            /// The setting that asks for exactly `mode`.
+            fn from(mode: Occlusion) -> Self {
+                match mode {
+                    Occlusion::Off => OcclusionSetting::Off,
+                    $(Occlusion::$variant => OcclusionSetting::$variant,)*
+                }
+            }
+        }
+
         /// Everything that picks and parametrises the visibility mode: the mode, the disc
         /// occluders' rule, and every mode's settings.
         #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 use super::tuning::{SetField, json_value};
 use super::{
     DEFAULT_NEAR_FIELD, DEFAULT_SUBDIVISION, DifferentialMethod, Occlusion, OcclusionRule, OcclusionSetting,
-    SettingsDescription, SparseShading,
+    SettingsDescription, SparseShading, SparseTuning, Tuning,
 };
 use crate::scene::{DEFAULT_NEIGHBOURS, Settings};
 
@@ -102,6 +102,114 @@ pub struct Choice {
 impl std::fmt::Display for Choice {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{} = {}: {}", self.parameter, self.value, self.reason)
+    }
+}
+
+/// Characters at most in a measured level's `measured` text.
+pub const MAX_MEASURED_CHARS: usize = 1000;
+
+/// `settings.levels`: per level, parameters measured on this scene to beat what the level's
+/// rule chooses (`relume bench --levels --candidates` writes them as `suggested_levels`, from
+/// the configurations it measured both more accurate and faster). They apply to that level
+/// only, below `tuning` (which still wins), and their reason in the resolved configuration is
+/// the `measured` text. `reference` takes none: its VALs stay the finest.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MeasuredLevels {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fast: Option<MeasuredLevel>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub balanced: Option<MeasuredLevel>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accurate: Option<MeasuredLevel>,
+}
+
+impl MeasuredLevels {
+    /// The measured parameters of `quality` (none for `reference`).
+    pub fn get(&self, quality: Quality) -> Option<&MeasuredLevel> {
+        match quality {
+            Quality::Fast => self.fast.as_ref(),
+            Quality::Balanced => self.balanced.as_ref(),
+            Quality::Accurate => self.accurate.as_ref(),
+            Quality::Reference => None,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Checks each level's values as `tuning` would (the same ranges) and its text, naming
+    /// `{field}.{level}.{parameter}`.
+    pub(crate) fn validate(&self, field: &str) -> Result<(), crate::scene::SceneError> {
+        for quality in [Quality::Fast, Quality::Balanced, Quality::Accurate] {
+            let Some(m) = self.get(quality) else { continue };
+            let at = format!("{field}.{}", quality.name());
+            let chars = m.measured.trim().chars().count();
+            if chars == 0 || chars > MAX_MEASURED_CHARS {
+                return Err(crate::scene::SceneError::field(
+                    format!("{at}.measured"),
+                    format!("must say what was measured, in 1 to {MAX_MEASURED_CHARS} characters, got {chars}"),
+                ));
+            }
+            if let Some(r) = m.rsm_resolution {
+                let (lo, hi) = crate::scene::description::RSM_RESOLUTION_RANGE;
+                crate::scene::validate::int_in(r, lo, hi, &format!("{at}.rsm_resolution"))?;
+            }
+            if let Some(sparse) = m.sparse {
+                sparse.apply(SparseShading::default()).validate(&format!("{at}.sparse"))?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One level's measured parameters (`settings.levels.<level>`): each optional, each replacing
+/// the level's rule on this scene.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MeasuredLevel {
+    /// What was measured that makes these parameters the better choice (the adapter, the size,
+    /// the errors and times against the level's own), in 1 to 1000 characters: it becomes their
+    /// reason in the resolved configuration.
+    pub measured: String,
+    /// RSM side, texels, in 8..=2048.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rsm_resolution: Option<u32>,
+    /// Indirect visibility mode (not `"auto"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visibility: Option<Occlusion>,
+    /// The sparse method's parameters, with `tuning.sparse`'s fields and ranges.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sparse: Option<SparseTuning>,
+}
+
+impl MeasuredLevel {
+    /// The given fields, as `(parameter, value)` with the level's parameter names
+    /// (`rsm_resolution`, `visibility`, `sparse.points`).
+    fn set_fields(&self) -> Vec<SetField> {
+        let mut set = Vec::new();
+        if let Some(r) = self.rsm_resolution {
+            set.push(("rsm_resolution".to_owned(), r.to_string()));
+        }
+        if let Some(v) = self.visibility {
+            set.push(("visibility".to_owned(), json_value(&v)));
+        }
+        set.extend(self.sparse.map(|t| t.set_fields("sparse")).unwrap_or_default());
+        set
+    }
+
+    /// `tuning` with each of these values it does not set.
+    fn under(&self, mut tuning: Tuning) -> Tuning {
+        tuning.rsm_resolution = tuning.rsm_resolution.or(self.rsm_resolution);
+        if tuning.visibility.is_none_or(|v| v == OcclusionSetting::Auto) {
+            tuning.visibility = self.visibility.map(OcclusionSetting::from).or(tuning.visibility);
+        }
+        tuning.sparse = match (tuning.sparse, self.sparse) {
+            (Some(set), Some(measured)) => Some(set.or(measured)),
+            (set, measured) => set.or(measured),
+        };
+        tuning
     }
 }
 
@@ -276,6 +384,9 @@ fn level(quality: Quality) -> Level {
 /// The level's choices and the scene file's overrides, gathered in order.
 struct Choices {
     tuned: Vec<SetField>,
+    /// The level's measured parameters (`settings.levels`) not yet named, and what was measured.
+    measured: Vec<SetField>,
+    measured_text: String,
     choices: Vec<Choice>,
     level: &'static str,
 }
@@ -286,10 +397,15 @@ impl Choices {
     fn level<T: Serialize>(&mut self, parameter: &str, value: T, reason: impl Into<String>) {
         let value = json_value(&value);
         let tuned = format!("tuning.{parameter}");
+        let measured = self.measured.iter().position(|(path, _)| path == parameter).map(|i| self.measured.remove(i));
         if let Some(i) = self.tuned.iter().position(|(path, _)| *path == tuned) {
             let (path, set) = self.tuned.remove(i);
+            let value = measured.map_or(value, |(_, measured)| format!("{measured}, measured on this scene"));
             let reason = format!("set in the scene file ({} would choose {value})", self.level);
             self.choices.push(Choice { parameter: path, value: set, reason });
+        } else if let Some((path, set)) = measured {
+            let reason = format!("measured on this scene: {} (the rule would choose {value})", self.measured_text);
+            self.choices.push(Choice { parameter: format!("levels.{}.{path}", self.level), value: set, reason });
         } else {
             self.choices.push(Choice { parameter: parameter.to_owned(), value, reason: reason.into() });
         }
@@ -301,6 +417,10 @@ impl Choices {
 
     /// The choices, with every override no level choice named after them.
     fn finish(mut self) -> Vec<Choice> {
+        for (path, value) in std::mem::take(&mut self.measured) {
+            let reason = format!("measured on this scene: {}", self.measured_text);
+            self.choices.push(Choice { parameter: format!("levels.{}.{path}", self.level), value, reason });
+        }
         for (parameter, value) in self.tuned {
             self.choices.push(Choice { parameter, value, reason: "set in the scene file".to_owned() });
         }
@@ -312,8 +432,15 @@ impl Choices {
 /// `settings` (its user values, and its tuning, which wins over the level), with the reason for
 /// every choice. Pure: the same inputs give the same result.
 pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDescription) -> (Settings, Vec<Choice>) {
-    let tuning = &settings.tuning;
-    let mut choices = Choices { tuned: tuning.set_fields(), choices: Vec::new(), level: quality.name() };
+    let measured = settings.levels.get(quality);
+    let tuning = &measured.map_or(settings.tuning, |m| m.under(settings.tuning));
+    let mut choices = Choices {
+        tuned: settings.tuning.set_fields(),
+        measured: measured.map(MeasuredLevel::set_fields).unwrap_or_default(),
+        measured_text: measured.map(|m| m.measured.trim().to_owned()).unwrap_or_default(),
+        choices: Vec::new(),
+        level: quality.name(),
+    };
     let Level { rsm_resolution, subdivision, near_field, adaptive, points } = level(quality);
 
     match quality {

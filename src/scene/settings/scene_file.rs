@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Deserializer, Serialize};
 
-use super::quality::{Quality, SceneAnalysis, resolve};
+use super::quality::{MeasuredLevels, Quality, SceneAnalysis, resolve};
 use super::tuning::Tuning;
 use super::{DEFAULT_BOUNCES, EnvironmentSettings, MrSettings, RgbdSettings};
 use crate::scene::description::RSM_RESOLUTION_RANGE;
@@ -86,6 +86,11 @@ pub struct SettingsDescription {
     /// Research knobs; each optional, each overriding the level's choice.
     #[serde(default, skip_serializing_if = "is_default")]
     pub tuning: Tuning,
+    /// Per level (`fast`, `balanced`, `accurate`), parameters measured on this scene to beat
+    /// the level's rule, each with what was measured (`relume bench --levels --candidates`
+    /// suggests them); `tuning` still wins over them.
+    #[serde(default, skip_serializing_if = "MeasuredLevels::is_empty")]
+    pub levels: MeasuredLevels,
     #[serde(default, deserialize_with = "moved::rsm_resolution", skip_serializing)]
     #[schema(ignore)]
     rsm_resolution: Option<Moved>,
@@ -147,6 +152,7 @@ impl Default for SettingsDescription {
             mr: MrSettings::default(),
             environment: EnvironmentSettings::default(),
             tuning: Tuning::default(),
+            levels: MeasuredLevels::default(),
             rsm_resolution: None,
             interpolation_neighbours: None,
             visibility: None,
@@ -191,6 +197,7 @@ impl SettingsDescription {
         self.rgbd.validate(&format!("{field}.rgbd"))?;
         self.mr.validate(&format!("{field}.mr"))?;
         self.environment.validate(&format!("{field}.environment"))?;
+        self.levels.validate(&format!("{field}.levels"))?;
         let tuning = format!("{field}.tuning");
         let s = self.before_load();
         let (lo, hi) = RSM_RESOLUTION_RANGE;

@@ -208,9 +208,64 @@ fn the_loaders_parameters_depend_on_the_level_and_tuning_only() {
     }
 }
 
+/// A level's measured parameters (`settings.levels`) replace its rule on that level only, below
+/// `tuning`, and say what was measured as their reason; `reference` takes none.
+#[test]
+fn measured_parameters_replace_the_levels_rule_below_the_tuning() {
+    let settings = r#"{"levels": {"balanced": {"measured": "0.07 at 300 ms against 0.08 at 500 ms",
+        "rsm_resolution": 32, "visibility": "clusters", "sparse": {"points": 0.5, "subdivision": 4}}},
+        "tuning": {"sparse": {"subdivision": 3}}}"#;
+    let balanced = load(&[ROOM, CUBE], settings);
+    assert_eq!(balanced.settings.rsm_resolution, 32);
+    assert_eq!(balanced.settings.visibility.mode, Occlusion::Clusters);
+    assert_eq!((balanced.settings.sparse.points, balanced.settings.sparse.subdivision), (0.5, 3.0), "tuning wins");
+    let rsm = choice(&balanced, "levels.balanced.rsm_resolution");
+    assert_eq!(rsm.value, "32");
+    assert_eq!(rsm.reason, "measured on this scene: 0.07 at 300 ms against 0.08 at 500 ms (the rule would choose 128)");
+    assert!(choice(&balanced, "levels.balanced.visibility").reason.contains("(the rule would choose \"disks\")"));
+    assert!(choice(&balanced, "tuning.sparse.subdivision").reason.starts_with("set in the scene file"));
+    assert!(balanced.resolved.choices.iter().all(|c| c.parameter != "levels.balanced.sparse.subdivision"));
+    let levels = [
+        ("fast", 64, Occlusion::Disks),
+        ("accurate", 128, Occlusion::Clusters),
+        ("reference", 128, Occlusion::Clusters),
+    ];
+    for (quality, rsm, visibility) in levels {
+        let other = load(&[ROOM, CUBE], &settings.replacen('{', &format!(r#"{{"quality": "{quality}", "#), 1));
+        assert_eq!(other.settings.rsm_resolution, rsm, "{quality}");
+        assert_eq!(other.settings.sparse.subdivision, 3.0, "{quality}");
+        assert_eq!(other.settings.visibility.mode, visibility, "{quality}");
+        assert!(other.resolved.choices.iter().all(|c| !c.parameter.starts_with("levels.")), "{quality}");
+    }
+}
+
+/// A measured level is checked where the scene file is, each field named.
+#[test]
+fn measured_parameters_are_validated_naming_the_field() {
+    let error = |levels: &str| {
+        let json = format!(r#"{{"meshes": [], {LIGHT_AND_CAMERA}, "settings": {{"levels": {levels}}}}}"#);
+        match SceneDescription::from_json_str(&json) {
+            Ok(d) => d.settings.validate("settings").expect_err(levels).to_string(),
+            Err(e) => e.to_string(),
+        }
+    };
+    assert!(error(r#"{"balanced": {"measured": " "}}"#).contains("settings.levels.balanced.measured"));
+    let long = "x".repeat(MAX_MEASURED_CHARS + 1);
+    assert!(error(&format!(r#"{{"fast": {{"measured": "{long}"}}}}"#)).contains("settings.levels.fast.measured"));
+    assert!(
+        error(r#"{"fast": {"measured": "m", "rsm_resolution": 4}}"#).contains("settings.levels.fast.rsm_resolution")
+    );
+    let points = error(r#"{"accurate": {"measured": "m", "sparse": {"points": 2}}}"#);
+    assert!(points.contains("settings.levels.accurate.sparse.points"), "{points}");
+    assert!(error(r#"{"reference": {"measured": "m"}}"#).contains("reference"));
+    assert!(error(r#"{"fast": {"measured": "m", "visibility": "auto"}}"#).contains("auto"));
+    assert!(error(r#"{"fast": {"measured": "m", "near_field": 2}}"#).contains("near_field"));
+}
+
 /// `balanced` resolves to the defaults every image and figure was made with: each knob the
 /// scene file's or the old default, and `auto` visibility's rule. Checked on every fixture's
-/// settings, for a scene that can and one that cannot occlude itself.
+/// settings without their measured parameters (`settings.levels`, tested above), for a scene
+/// that can and one that cannot occlude itself.
 #[test]
 #[allow(clippy::field_reassign_with_default)]
 fn balanced_is_the_old_defaults_on_every_fixture() {
@@ -222,7 +277,9 @@ fn balanced_is_the_old_defaults_on_every_fixture() {
         let Ok(description) = SceneDescription::from_json_str(&text) else {
             continue; // a glTF scene form: its settings are checked through its description below
         };
-        let s = &description.settings;
+        let mut s = description.settings;
+        s.levels = MeasuredLevels::default();
+        let s = &s;
         assert_eq!(s.quality, Quality::Balanced, "{}", path.display());
         let t = &s.tuning;
         for self_occluding in [false, true] {

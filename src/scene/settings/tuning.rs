@@ -41,6 +41,14 @@ macro_rules! overrides {
                 }
             }
 
+            /// These overrides, each one not given taken from `other`.
+            pub fn or(self, other: Self) -> Self {
+                Self {
+                    $($plain: self.$plain.or(other.$plain),)*
+                    $($opt: self.$opt.or(other.$opt),)*
+                }
+            }
+
             /// The given fields, as `(prefix.field, value)`.
             pub fn set_fields(&self, prefix: &str) -> Vec<$crate::scene::settings::SetField> {
                 let mut set = Vec::new();
