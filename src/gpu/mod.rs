@@ -69,6 +69,7 @@ const SHADING_PASSES: &[&pass::PassDesc] = &[
     &references::brute_force::GROUPED_PASS,
     &references::brute_force::ISM_VISIBILITY,
     &references::exact::PASS,
+    &references::estimator::PASS,
     &lights::direct::PASS,
     &lights::many::PASS,
     &differential::PASS,

@@ -3,6 +3,7 @@
 
 use crate::gpu::GpuError;
 use crate::gpu::references::brute_force::BruteForce;
+use crate::gpu::references::estimator::Estimator;
 use crate::gpu::references::exact::Exact;
 use crate::gpu::sparse::{SparseMethod, SparseSettings};
 use crate::scene;
@@ -38,4 +39,6 @@ pub(super) struct Indirect {
     pub(super) brute_force_ism: Option<Built<(bool, scene::IsmSettings), BruteForce>>,
     /// Keyed by (`glossy`, VAL stride, placement generation: the BVH is the placed geometry's).
     pub(super) exact: Option<Built<(bool, u32, u64), Exact>>,
+    /// Keyed by (`glossy`, samples, seed, placement generation).
+    pub(super) estimator: Option<Built<(bool, u32, u32, u64), Estimator>>,
 }

@@ -19,6 +19,10 @@ pub enum Method {
     /// Brute force with a shadow ray per pixel and VAL through a BVH (docs/design.md §5); see
     /// [`super::Renderer::set_exact_val_stride`].
     Exact,
+    /// The exact reference estimated: per pixel, VALs drawn in proportion to their unoccluded
+    /// contribution, a shadow ray each (`gpu::references::estimator`); see
+    /// [`super::Renderer::set_estimator`].
+    Estimator,
 }
 
 /// The method a scene's resolved technique asks for (`settings.quality`: the exact reference

@@ -28,6 +28,7 @@ use crate::gpu::lights::spot::{DirectLight, SpotVals};
 use crate::gpu::raster::{CameraView, Visibility, VisibilityTarget};
 use crate::gpu::raw::{RawFrame, RawVal};
 use crate::gpu::references::brute_force::BruteForce;
+use crate::gpu::references::estimator::{self, Estimator};
 use crate::gpu::references::exact::Exact;
 use crate::gpu::scene::{FlatScene, GpuScene};
 use crate::gpu::sparse::{SparseMethod, SparseSettings};
@@ -79,6 +80,8 @@ pub struct Renderer {
     estimate: Option<(estimate::Estimator, estimate::EstimateOptions)>,
     estimated_frames: u64,
     exact_val_stride: u32,
+    /// [`Method::Estimator`]'s shadow rays per pixel and seed.
+    estimator: (u32, u32),
     spot: Option<Spot>,
     /// The scene's `lights` and their direct light (`gpu::lights::many`), when it has any.
     lights: Vec<scene::Light>,
@@ -174,6 +177,7 @@ impl Renderer {
             estimate: None,
             estimated_frames: 0,
             exact_val_stride: 1,
+            estimator: (estimator::DEFAULT_SAMPLES, scene.settings.seed as u32),
             scene: scene_gpu,
             indirect: Indirect::default(),
             target: None,
@@ -223,6 +227,12 @@ impl Renderer {
         self.exact_val_stride = stride.max(1);
     }
 
+    /// [`Method::Estimator`]'s shadow rays per pixel (1..=[`estimator::MAX_SAMPLES`]) and the
+    /// seed of its draws (the scene's `settings.seed` until set).
+    pub fn set_estimator(&mut self, samples: u32, seed: u32) {
+        self.estimator = (samples.clamp(1, estimator::MAX_SAMPLES), seed);
+    }
+
     /// Change the visibility mode and its settings from the next sparse frame on.
     pub fn set_visibility(&mut self, visibility: VisibilitySettings) {
         self.visibility = visibility;
@@ -270,6 +280,7 @@ impl Renderer {
         self.indirect.brute_force = None;
         self.indirect.brute_force_ism = None;
         self.indirect.exact = None;
+        self.indirect.estimator = None;
     }
 
     /// Whether the glossy stages run for this scene.
@@ -529,6 +540,7 @@ impl Renderer {
                 self.indirect.brute_force_ism.as_ref().map(|b| &b.technique as &dyn Technique)
             }
             (true, Method::Exact) => self.indirect.exact.as_ref().map(|b| &b.technique as &dyn Technique),
+            (true, Method::Estimator) => self.indirect.estimator.as_ref().map(|b| &b.technique as &dyn Technique),
         };
         let mut list: Vec<&dyn Technique> = Vec::new();
         // The spot light's RSM also makes the direct light's shadow map.
@@ -578,7 +590,7 @@ impl Renderer {
         }
         if components.indirect {
             if let Some(b) = &mut self.bounce {
-                if method == Method::Exact {
+                if matches!(method, Method::Exact | Method::Estimator) {
                     return Err(GpuError::Unsupported(
                         "settings.bounces: 2 has no GPU exact reference (its second bounce needs shadow rays from \
                          the bounce points); use the CPU one (--reference-device cpu)"
@@ -632,6 +644,13 @@ impl Renderer {
                         Exact::new(gpu, scene, glossy, stride)
                     })?
                     .fit(gpu, pixels)?;
+                }
+                Method::Estimator => {
+                    let ((samples, seed), generation) = (self.estimator, self.placement_generation);
+                    built_for(&mut self.indirect.estimator, (glossy, samples, seed, generation), || {
+                        Estimator::new(gpu, scene, glossy, samples, seed)
+                    })?
+                    .fit(gpu, scene, capacity, pixels)?;
                 }
             }
         }

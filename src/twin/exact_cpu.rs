@@ -98,6 +98,30 @@ pub enum ValSampling {
     /// probability proportional to the luminance of their unoccluded contribution (the brute
     /// force's own term); each draw weighted by 1 / probability, so the estimate is unbiased.
     Importance { samples: u32, seed: u64 },
+    /// `samples` VALs (1..) drawn systematically per receiver, in list order, with probability
+    /// proportional to the luminance of their unoccluded contribution: the thresholds
+    /// `(m + xi) total / samples` of the running sum, `xi` = [`pixel_offset`] (the GPU
+    /// estimator's draws, `gpu/references/estimator.wgsl`, in f32 as it adds them). Unbiased; its
+    /// noise is not estimated.
+    Systematic { samples: u32, seed: u32 },
+}
+
+/// The PCG hash of Jarzynski and Olano (2020), as `estimator.wgsl`'s `pcg_hash`.
+pub fn pcg_hash(v: u32) -> u32 {
+    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// Pixel `pixel`'s offset `xi` in [0, 1) of the systematic draws with `seed` (24 bits), as
+/// `estimator.wgsl`'s `pixel_offset`.
+pub fn pixel_offset(pixel: u32, seed: u32) -> f32 {
+    (pcg_hash(pixel ^ pcg_hash(seed)) >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
+/// Thresholds `(m + xi) step`, `m < samples`, below `sum` (`estimator.wgsl`'s).
+fn thresholds_below(sum: f32, step: f32, xi: f32, samples: u32) -> u32 {
+    (sum / step - xi).ceil().clamp(0.0, samples as f32) as u32
 }
 
 /// A camera as rays: world-to-clip (wgpu's clip space, z in [0, 1]) inverted.
@@ -186,7 +210,7 @@ pub fn render_with(
     let traversal = traversal.unwrap_or_else(|| frame.pilot(pixels));
     let results: Vec<(Pixel, u64)> =
         (0..pixels).into_par_iter().map_init(Workspace::default, |ws, i| frame.pixel(i, traversal, ws)).collect();
-    let deterministic = matches!(sampling, ValSampling::Stride(_));
+    let deterministic = matches!(sampling, ValSampling::Stride(_) | ValSampling::Systematic { .. });
     let image = LinearImage { width, height, pixels: results.iter().map(|(p, _)| p.rgba).collect() };
     let variance = (!deterministic).then(|| results.iter().map(|(p, _)| p.variance).collect());
     ExactImage { image, variance, shadow_rays: results.iter().map(|(_, r)| r).sum(), traversal }
@@ -203,6 +227,8 @@ fn summed_vals(vals: &[Val], sampling: ValSampling) -> (Vec<Val>, f32) {
             (vals.iter().step_by(s).take(vals.len() / s).copied().collect(), s as f32)
         }
         ValSampling::All | ValSampling::Importance { .. } => (vals.to_vec(), 1.0),
+        // Drawn from the running sum in list order, as the GPU walks them.
+        ValSampling::Systematic { .. } => return (vals.to_vec(), 1.0),
     };
     sort_along_curve(&mut selected);
     (selected, scale)
@@ -292,6 +318,39 @@ impl Frame<'_> {
                         ws.terms.push(f * self.scale);
                         ws.targets.push(target);
                     }
+                }
+                let l = ws.visible_sum(self.bvh, origin, traversal, rays);
+                Halves { a: l, b: l, n: (1, 0) }
+            }
+            ValSampling::Systematic { samples, seed } => {
+                let samples = samples.max(1);
+                ws.contributions.clear();
+                ws.contributions.extend(self.vals.iter().map(term));
+                let total = luminance(ws.contributions.iter().sum::<Vec3>());
+                if total.is_nan() || total <= 0.0 {
+                    return Halves { a: Vec3::ZERO, b: Vec3::ZERO, n: (1, 0) };
+                }
+                let step = total / samples as f32;
+                let xi = match k {
+                    0 => pixel_offset(pixel as u32, seed),
+                    k => pixel_offset(pcg_hash(pixel as u32 ^ pcg_hash(seed)).wrapping_add(k as u32), seed),
+                };
+                ws.terms.clear();
+                ws.targets.clear();
+                let (mut sum, mut passed) = (0.0f32, 0);
+                for (j, f) in ws.contributions.iter().enumerate() {
+                    if passed >= samples {
+                        break;
+                    }
+                    let lum = luminance(*f);
+                    let after = sum + lum;
+                    let draws = thresholds_below(after, step, xi, samples) - passed;
+                    if draws > 0 && lum > 0.0 {
+                        ws.terms.push(*f * (draws as f32 * step / lum));
+                        ws.targets.push(self.targets[j]);
+                    }
+                    sum = after;
+                    passed = thresholds_below(sum, step, xi, samples);
                 }
                 let l = ws.visible_sum(self.bvh, origin, traversal, rays);
                 Halves { a: l, b: l, n: (1, 0) }

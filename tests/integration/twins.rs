@@ -637,6 +637,78 @@ fn cpu_exact_reference_matches_gpu_exact() {
     }
 }
 
+/// The GPU estimator (`gpu/references/estimator.wgsl`: the brute force's sum as the total,
+/// then a systematic walk over the VALs and a shadow ray per draw) against its CPU twin
+/// (`twin::exact_cpu`, `ValSampling::Systematic`, the same draws from the same hash), on the
+/// same visibility buffer and VAL list, with few and with many draws. The two totals are sums
+/// of the same terms in different orders, so a threshold near a VAL's edge of the running sum
+/// may fall on the next VAL on one side: up to 2 % of pixels may differ beyond the twins' 1e-3
+/// of the largest pixel. The estimate must also be near the exact image (many draws), darker
+/// than the unoccluded one, and its draws must be what makes it differ from the exact image
+/// (few draws are further from it than many).
+#[test]
+fn gpu_estimator_matches_cpu_twin() {
+    let errors = estimator_matches_cpu_twin("cornell_bunny_small", (24, 20), &[4, 64]);
+    eprintln!("estimator against exact: rel RMSE {errors:?} at 4 and 64 draws");
+    assert!(errors[1] < 0.15, "64 draws: {} from exact", errors[1]);
+    assert!(errors[0] > errors[1], "more draws, closer to exact: {errors:?}");
+}
+
+/// The same on the README's scene, 16,384 VALs: where the exact pass, run in 8x8 workgroups on
+/// llvmpipe, showed wrong blocks (its nested loops; the estimator's one flat loop runs in 8x8
+/// workgroups everywhere).
+#[test]
+fn gpu_estimator_matches_cpu_twin_on_cornell_bunny() {
+    estimator_matches_cpu_twin("cornell_bunny", (40, 40), &[16]);
+}
+
+/// [`gpu_estimator_matches_cpu_twin`]'s comparison on `scene` at each count of draws; the
+/// GPU estimate's rel RMSE against the GPU's exact image at each.
+fn estimator_matches_cpu_twin(scene: &str, (w, h): (u32, u32), draws: &[u32]) -> Vec<f64> {
+    use relume::twin::exact_cpu::{self as cpu, Receivers, ValSampling};
+    let gpu = gpu();
+    let scene = load_scene(scene);
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let exact = renderer.render(&gpu, Method::Exact, w, h).unwrap().indirect;
+    let brute = renderer.render(&gpu, Method::BruteForce, w, h).unwrap().indirect;
+    let mut errors = Vec::new();
+    for &samples in draws {
+        renderer.set_estimator(samples, 7);
+        let on_gpu = renderer.render(&gpu, Method::Estimator, w, h).unwrap();
+        assert_eq!(on_gpu.indirect_stages, ["brute_force", "estimator"]);
+        let vals = renderer.read_vals(&gpu).unwrap();
+        let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+        let flat = &renderer.scene.flat;
+        let eye = renderer.view().eye();
+        let receivers: Vec<_> =
+            hits.iter().map(|h| h.map(|h| flat.receiver_at(h.triangle, h.barycentrics, eye))).collect();
+        let bvh = flat.trace_bvh();
+        let cpu_scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy() };
+        let sampling = ValSampling::Systematic { samples, seed: 7 };
+        let on_cpu = cpu::render(&cpu_scene, &Receivers::Hits(&receivers), w, h, sampling).image;
+        let scale = max_of((0..on_cpu.pixels.len()).map(|i| on_cpu.rgb(i)));
+        assert!(scale > 0.0);
+        let mut differing = 0;
+        for i in 0..on_cpu.pixels.len() {
+            assert_eq!(on_cpu.covered(i), on_gpu.indirect.covered(i), "coverage of pixel {i}");
+            let (c, g) = (on_cpu.rgb(i), on_gpu.indirect.rgb(i));
+            let bad = (c - g).abs().max_element() > REL * scale + 1e-9;
+            if bad && differing < 5 {
+                eprintln!("{samples} draws, pixel {i}: GPU {g} CPU {c}");
+            }
+            differing += usize::from(bad);
+        }
+        let covered = on_cpu.coverage();
+        assert!(differing * 50 <= covered, "{samples} draws: {differing} of {covered} pixels differ from the twin");
+        errors.push(relume::image::relative_rmse(&on_gpu.indirect, &exact));
+        let energy = |image: &relume::image::LinearImage| {
+            (0..image.pixels.len()).map(|i| image.rgb(i).element_sum()).sum::<f32>()
+        };
+        assert!(energy(&on_gpu.indirect) < 0.97 * energy(&brute), "{samples} draws: occlusion removes light");
+    }
+    errors
+}
+
 /// Primary rays through pixel centres in the obvhs BVH (the CPU reference's receivers with
 /// `--spp`) see what the rasteriser's visibility buffer sees: on at least 97 % of pixels both
 /// miss, or both hit the same surface point to 0.1 pixel on screen and 0.2 % of the distance in

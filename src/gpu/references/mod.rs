@@ -1,4 +1,6 @@
-//! The GPU references (docs/design.md §5): the brute force and exact visibility.
+//! The GPU references (docs/design.md §5): the brute force, exact visibility and its
+//! importance-sampled estimator.
 
 pub mod brute_force;
+pub mod estimator;
 pub mod exact;

@@ -1,0 +1,170 @@
+// The importance-sampled estimator of the exact reference (docs/design.md §5): per pixel,
+// SAMPLES of the VALs drawn in proportion to the luminance of their unoccluded contribution,
+// one shadow ray each through the BVH (`bvh.wgsl`), each visible draw weighted by 1 / its
+// probability: an unbiased estimate of the exact sum at a small part of its cost.
+//
+// The draws are systematic: with `total` the sum of every VAL's unoccluded luminance (the
+// brute force's image, which the pass before this one left in `indirect`) and `step` =
+// total / SAMPLES, the draws are the VALs whose interval of the running sum holds one of the
+// thresholds (m + xi) step, m = 0 .. SAMPLES - 1, xi one uniform number per pixel
+// (`pixel_offset`). Each VAL is drawn on average SAMPLES lum_i / total times, as with
+// independent draws, but the draws cover the distribution evenly. A VAL holding n thresholds
+// adds n step / lum_i times its radiance where its shadow ray is free. The walk stops at the
+// last threshold. Rust twin: `twin::exact_cpu` with `ValSampling::Systematic`.
+//
+// One flat loop per invocation, each iteration either one VAL of the walk or one step of the
+// current shadow ray (a node or a triangle): llvmpipe counts loop iterations per SIMD vector,
+// and nested loops whose lanes diverge use up its limit together, which a per-invocation budget
+// of one flat loop does not (see `exact.wgsl`). In rounds under that limit as the exact pass:
+// `progress` is 0 before the first round, then 1 + the next VAL; `walk` keeps the pixel's
+// total, running sum and thresholds passed, `indirect` its sum so far. A ray cut off by the
+// budget is cast again in the next round.
+
+@group(0) @binding(0) var visibility: texture_2d<u32>;
+@group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> vals: array<Val>;
+@group(0) @binding(3) var<storage, read> val_count: u32;
+// Bindings 4 and 5: `bvh.wgsl`; 6 and 7 (`progress`, `status`): `shader/rounds.wgsl`.
+// Per pixel: (total, running sum before the next VAL, thresholds passed, unused).
+@group(0) @binding(8) var<storage, read_write> walk: array<vec4<f32>>;
+
+// `twin::exact_cpu::pcg_hash`: the PCG hash of Jarzynski and Olano (2020).
+fn pcg_hash(v: u32) -> u32 {
+    let state = v * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// `twin::exact_cpu::pixel_offset`: the pixel's xi in [0, 1), 24 bits.
+fn pixel_offset(pixel: u32) -> f32 {
+    return f32(pcg_hash(pixel ^ pcg_hash(SEED)) >> 8u) * (1.0 / 16777216.0);
+}
+
+// Thresholds (m + xi) step, m < SAMPLES, below `sum`.
+fn thresholds_below(sum: f32, step: f32, xi: f32) -> u32 {
+    return u32(clamp(ceil(sum / step - xi), 0.0, f32(SAMPLES)));
+}
+
+fn estimate(id: vec2<u32>, glossy: bool) {
+    if id.x >= frame.width || id.y >= frame.height {
+        return;
+    }
+    let pixel = id.y * frame.width + id.x;
+    let start = progress[pixel];
+    if start == ROUND_DONE {
+        return;
+    }
+    let hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
+    if !hit.covered {
+        indirect[pixel] = vec4<f32>(0.0);
+        progress[pixel] = ROUND_DONE;
+        return;
+    }
+    var state = walk[pixel];
+    var l = indirect[pixel].xyz;
+    if start == 0u {
+        state = vec4<f32>(luminance(l), 0.0, 0.0, 0.0);
+        l = vec3<f32>(0.0);
+    }
+    let total = state.x;
+    if !(total > 0.0) {
+        indirect[pixel] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        progress[pixel] = ROUND_DONE;
+        return;
+    }
+    let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
+    let w_o = view_direction(s.position, s.normal, frame.eye);
+    let spec = s.material.specular * phong_normalisation(s.material.exponent);
+    let origin = s.position + s.geometric * RAY_OFFSET;
+    let step = total / f32(SAMPLES);
+    let xi = pixel_offset(pixel);
+    let count = min(val_count, arrayLength(&vals));
+    let nodes = arrayLength(&bvh_nodes);
+
+    var j = select(start - 1u, 0u, start == 0u);
+    var sum = state.y;
+    var passed = u32(state.z);
+    var steps = 0u;
+    // The ray in flight toward VAL j: what it adds when free, the sum after VAL j.
+    var tracing = false;
+    var add = vec3<f32>(0.0);
+    var sum_after = 0.0;
+    var d = vec3<f32>(0.0);
+    var inv = vec3<f32>(0.0);
+    var index = 0u;
+    var k = 0u;
+    var end = 0u;
+    var blocked = false;
+    while (tracing || (j < count && passed < SAMPLES)) && steps < EXACT_LOOP_BUDGET {
+        steps += 1u;
+        if tracing {
+            // One step of `bvh.wgsl`'s `occluded`.
+            if k < end {
+                let t = 3u * bvh_triangles[k];
+                let a = vertices[indices[t]].position;
+                let b = vertices[indices[t + 1u]].position;
+                let c = vertices[indices[t + 2u]].position;
+                let hit_at = ray_triangle(origin, d, a, b, c);
+                blocked = hit_at > 0.0 && hit_at < 1.0;
+                k += 1u;
+            } else {
+                let node = bvh_nodes[index];
+                let enter = segment_hits_box(origin, inv, node.min, node.max);
+                if enter && node.count > 0u {
+                    k = node.first;
+                    end = node.first + node.count;
+                }
+                index = select(max(node.first, index + 1u), index + 1u, enter || node.count > 0u);
+            }
+            if blocked || !(k < end || index < nodes) {
+                if !blocked {
+                    l += add;
+                }
+                tracing = false;
+                sum = sum_after;
+                passed = thresholds_below(sum, step, xi);
+                j += 1u;
+            }
+        } else {
+            let val = vals[j];
+            let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
+            let f = geo.weight * geo.cos_receiver;
+            var radiance = vec3<f32>(0.0);
+            if f > 0.0 {
+                radiance = reflected_radiance(s, spec, w_o, geo.direction, val.flux * f, glossy);
+            }
+            let lum = luminance(radiance);
+            let after = sum + lum;
+            let draws = thresholds_below(after, step, xi) - passed;
+            if draws > 0u && lum > 0.0 {
+                add = radiance * (f32(draws) * step / lum);
+                sum_after = after;
+                d = val.position + val.normal * RAY_OFFSET - origin;
+                inv = 1.0 / d;
+                index = 0u;
+                k = 0u;
+                end = 0u;
+                blocked = false;
+                tracing = true;
+            } else {
+                sum = after;
+                j += 1u;
+            }
+        }
+    }
+    indirect[pixel] = vec4<f32>(l, 1.0);
+    walk[pixel] = vec4<f32>(total, sum, f32(passed), 0.0);
+    // Done once every threshold is passed or every VAL walked.
+    let next = select(j + 1u, count + 1u, passed >= SAMPLES);
+    end_round(pixel, next, count + 1u, start != 0u && next == start);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    estimate(id.xy, false);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
+    estimate(id.xy, true);
+}
