@@ -4,21 +4,24 @@
 # header, with the configurations one parameter away from each level and which of them
 # dominate a level (`--candidates`). The targets are at 256 pixels wide (`--size 256`, about
 # 41 minutes on two CPU cores); 64 is the quick look.
-#   scripts/levels-table.sh [--bin PATH] [--size N] [--out DIR]   (default: 64, out/levels)
+#   scripts/levels-table.sh [--bin PATH] [--size N] [--out DIR] [--scenes "a b"]
+# (default: 64, out/levels, every fixture). With --scenes only those are run again; the page
+# still takes every fixture's tables from DIR, so the others must be there from a run before.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bin=target/release/relume; size=64; out=out/levels
+bin=target/release/relume; size=64; out=out/levels; run_scenes=
 while [ $# -gt 0 ]; do
     case "$1" in
         --bin) bin="$2"; shift 2 ;;
         --size) size="$2"; shift 2 ;;
         --out) out="$2"; shift 2 ;;
+        --scenes) run_scenes="$2"; shift 2 ;;
         *) echo "levels-table: unknown argument $1" >&2; exit 2 ;;
     esac
 done
 scenes="cornell_bunny cornell_bunny_small cornell_bunny_ears cornell_glossy_open cornell_bunny_two_bounces cornell_gltf_small sponza_bunny sponza_lights sponza_gallery"
 if [ "${LEVELS_SKIP_RUN:-0}" != 1 ]; then
-    for n in $scenes; do
+    for n in ${run_scenes:-$scenes}; do
         "$bin" bench --levels "fixtures/scenes/$n.json" --width "$size" --height "$size" --out "$out/$n" --equal-error --candidates
     done
 fi

@@ -24,7 +24,7 @@ use super::equal_error::{self, AtEqualError, EqualErrorCurve};
 use crate::gpu::Gpu;
 use crate::renderer::Rendered;
 use crate::renderer::estimate::{ErrorEstimate, EstimateOptions, Estimator};
-use crate::renderer::{Method, Renderer};
+use crate::renderer::{Method as RenderMethod, Renderer};
 use crate::scene::{Occlusion, Quality, ResolvedConfig, Scene};
 use std::path::Path;
 
@@ -105,7 +105,11 @@ impl Knobs {
 pub struct CandidateRow {
     /// The level it starts from, and the change, as `level + parameter=value`.
     pub name: String,
+    /// The parameters (the reference's, for the GPU estimator, which ignores them).
     pub knobs: Knobs,
+    /// How the indirect light was computed: the sparse method, or the GPU estimator of the
+    /// exact reference (`--gpu-estimator`).
+    pub method: crate::renderer::Method,
     pub rel_rmse_vs_exact: f64,
     pub rel_rmse_without_worst_1pct: f64,
     /// Indirect ms, the median of three frames after a warm-up one (as the levels').
@@ -129,6 +133,20 @@ pub struct LevelsReport {
     pub equal_error_curve: Option<EqualErrorCurve>,
     /// With `--candidates`: the configurations one parameter away from a level.
     pub candidates: Vec<CandidateRow>,
+    /// With `--candidates`: what to write as the scene file's `settings.levels`
+    /// ([`suggest_levels`]); an empty object when no level is dominated.
+    pub suggested_levels: serde_json::Value,
+}
+
+/// What `relume bench --levels` measures besides the levels.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LevelsOptions<'a> {
+    /// The converging CPU estimator's draws per pixel (`--equal-error`), if measured.
+    pub equal_error: Option<&'a [u32]>,
+    /// The configurations one parameter away from a level (`--candidates`).
+    pub candidates: bool,
+    /// The GPU estimator at each of these draws per pixel (`--gpu-estimator`).
+    pub gpu_estimator: &'a [u32],
 }
 
 /// Measure every level of the scene at `path`, `width` x `height` (`None`: the camera's).
@@ -137,9 +155,9 @@ pub fn levels(
     path: &Path,
     size: Option<(u32, u32)>,
     exact: &ExactOptions,
-    equal_error_samples: Option<&[u32]>,
-    candidates: bool,
+    options: &LevelsOptions<'_>,
 ) -> Result<LevelsReport, BenchError> {
+    let (equal_error_samples, candidates) = (options.equal_error, options.candidates);
     let load = |quality| {
         Scene::load_at(path, Some(quality)).map_err(|source| BenchError::Scene { path: path.to_owned(), source })
     };
@@ -170,11 +188,31 @@ pub fn levels(
         knobs: Knobs::of(&finest),
         dominated_by: Vec::new(),
     });
-    let measured = match candidates {
-        true => measure_candidates(gpu, path, &finest, &rows[..3], (w, h), &reference)?,
-        false => Vec::new(),
+    let (measured, existing) = match candidates {
+        true => {
+            let file = read_json(path)?;
+            let measured = measure_candidates(gpu, path, &file, &finest, &rows[..3], (w, h), &reference)?;
+            (measured, file["settings"]["levels"].clone())
+        }
+        false => (Vec::new(), serde_json::Value::Null),
     };
+    let mut measured = measured;
+    for &draws in options.gpu_estimator {
+        let m = measure(gpu, &finest, (w, h), &reference, Method::Estimator(draws))?;
+        eprintln!("GPU estimator, {draws} draws: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
+        measured.push(CandidateRow {
+            name: format!("GPU estimator, {draws} draws"),
+            knobs: Knobs::of(&finest),
+            method: crate::renderer::Method::Estimator,
+            rel_rmse_vs_exact: m.error,
+            rel_rmse_without_worst_1pct: m.without_worst,
+            ms: m.ms,
+            stages_ms: m.frame.timings.stages.clone(),
+        });
+    }
     mark_dominated(&mut rows[..3], &measured);
+    let at = format!("{w}x{h} on {}", gpu.adapter_name());
+    let suggested_levels = suggest_levels(&rows[..3], &measured, &existing, finest.resolved.analysis.spot_light, &at);
     Ok(LevelsReport {
         scene: finest.meshes.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join("+"),
         adapter: gpu.adapter_name(),
@@ -186,7 +224,76 @@ pub fn levels(
         levels: rows,
         equal_error_curve: curve,
         candidates: measured,
+        suggested_levels,
     })
+}
+
+/// The scene file at `path`, as JSON.
+fn read_json(path: &Path) -> Result<serde_json::Value, BenchError> {
+    let text = std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.to_owned(), source })?;
+    serde_json::from_str(&text).map_err(|e| super::flag_error("--candidates", e.to_string()))
+}
+
+/// The scene file's `settings.levels` the measurement suggests: for each level that a measured
+/// configuration dominates, the most accurate of those configurations, written as the
+/// parameters where it differs from the level as measured (over that level's entry in
+/// `existing`, the scene file's `settings.levels`, whose other parameters it keeps; the RSM
+/// only on a scene with a spot light), with what was measured (`at`: the size and adapter).
+/// Levels not dominated keep their entry in `existing`.
+pub fn suggest_levels(
+    levels: &[LevelRow],
+    candidates: &[CandidateRow],
+    existing: &serde_json::Value,
+    spot_light: bool,
+    at: &str,
+) -> serde_json::Value {
+    // The GPU estimator's rows are not parameters a level can take (yet): not suggested.
+    let measured: Vec<(&str, Knobs, f64, f64)> = levels
+        .iter()
+        .map(|r| (r.level.name(), r.knobs, r.rel_rmse_vs_exact, r.ms))
+        .chain(
+            candidates
+                .iter()
+                .filter(|c| c.method == RenderMethod::Sparse)
+                .map(|c| (c.name.as_str(), c.knobs, c.rel_rmse_vs_exact, c.ms)),
+        )
+        .collect();
+    let mut out = existing.as_object().cloned().unwrap_or_default();
+    for row in levels {
+        let best = measured
+            .iter()
+            .filter(|(name, ..)| row.dominated_by.iter().any(|d| d == name))
+            .min_by(|a, b| a.2.total_cmp(&b.2));
+        let Some(&(name, knobs, error, ms)) = best else { continue };
+        let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
+        let k = row.knobs;
+        if knobs.visibility != k.visibility {
+            entry["visibility"] = knobs.visibility.name().into();
+        }
+        if spot_light && knobs.rsm_resolution != k.rsm_resolution {
+            entry["rsm_resolution"] = knobs.rsm_resolution.into();
+        }
+        for (key, value, was) in [
+            ("points", knobs.points, k.points),
+            ("near_field", knobs.near_field, k.near_field),
+            ("subdivision", knobs.subdivision, k.subdivision),
+        ] {
+            if value != was {
+                if !entry["sparse"].is_object() {
+                    entry["sparse"] = serde_json::json!({});
+                }
+                entry["sparse"][key] = value.into();
+            }
+        }
+        entry["measured"] = format!(
+            "`{name}`: rel RMSE {error:.4} at {ms:.0} ms, the level's own {:.4} at {:.0} ms, at {at} (relume \
+             bench --levels --candidates)",
+            row.rel_rmse_vs_exact, row.ms
+        )
+        .into();
+        out.insert(row.level.name().to_owned(), entry);
+    }
+    serde_json::Value::Object(out)
 }
 
 /// The levels' plot of a `levels.json` (as [`levels`] writes it): its levels (but
@@ -232,14 +339,12 @@ pub fn plot_points(report: &serde_json::Value) -> (String, Vec<super::plot::Leve
 fn measure_candidates(
     gpu: &Gpu,
     path: &Path,
+    file: &serde_json::Value,
     finest: &Scene,
     levels: &[LevelRow],
     size: (u32, u32),
     reference: &ExactReference,
 ) -> Result<Vec<CandidateRow>, BenchError> {
-    let text = std::fs::read_to_string(path).map_err(|source| BenchError::Read { path: path.to_owned(), source })?;
-    let file: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| super::flag_error("--candidates", e.to_string()))?;
     let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
     let knobs: Vec<(Quality, Knobs)> = levels.iter().map(|r| (r.level, r.knobs)).collect();
     let mut measured = Vec::new();
@@ -249,11 +354,12 @@ fn measure_candidates(
         file["settings"]["tuning"] = knobs.tuning(file["settings"]["tuning"].take());
         let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(base))
             .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
-        let m = measure(gpu, &scene, size, reference)?;
+        let m = measure(gpu, &scene, size, reference, Method::Sparse)?;
         eprintln!("candidate {name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
         measured.push(CandidateRow {
             name,
             knobs: Knobs::of(&scene),
+            method: crate::renderer::Method::Sparse,
             rel_rmse_vs_exact: m.error,
             rel_rmse_without_worst_1pct: m.without_worst,
             ms: m.ms,
@@ -355,13 +461,33 @@ struct Measured {
     renderer: Renderer,
 }
 
+/// How a measured configuration computes its indirect light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Method {
+    Sparse,
+    /// The GPU estimator with this many draws per pixel.
+    Estimator(u32),
+}
+
 /// Render `scene` once to warm up, then [`TIMED_FRAMES`] times; the frame of median indirect
 /// time against `reference`.
-fn measure(gpu: &Gpu, scene: &Scene, (w, h): (u32, u32), reference: &ExactReference) -> Result<Measured, BenchError> {
+fn measure(
+    gpu: &Gpu,
+    scene: &Scene,
+    (w, h): (u32, u32),
+    reference: &ExactReference,
+    method: Method,
+) -> Result<Measured, BenchError> {
     let mut renderer = Renderer::new(gpu, scene)?;
-    renderer.render(gpu, Method::Sparse, w, h)?;
-    let mut frames =
-        (0..TIMED_FRAMES).map(|_| renderer.render(gpu, Method::Sparse, w, h)).collect::<Result<Vec<_>, _>>()?;
+    let method = match method {
+        Method::Sparse => RenderMethod::Sparse,
+        Method::Estimator(draws) => {
+            renderer.set_estimator(draws, scene.settings.seed as u32);
+            RenderMethod::Estimator
+        }
+    };
+    renderer.render(gpu, method, w, h)?;
+    let mut frames = (0..TIMED_FRAMES).map(|_| renderer.render(gpu, method, w, h)).collect::<Result<Vec<_>, _>>()?;
     frames.sort_by(|a, b| a.indirect_ms().total_cmp(&b.indirect_ms()));
     let frame = frames.swap_remove(TIMED_FRAMES / 2);
     let error = reference
@@ -379,7 +505,7 @@ fn level_row(
     reference: &ExactReference,
     curve: Option<&EqualErrorCurve>,
 ) -> Result<LevelRow, BenchError> {
-    let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference)?;
+    let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference, Method::Sparse)?;
     let estimate = Estimator::new().estimate(gpu, &renderer, &frame, &EstimateOptions::default())?;
     let at_equal_error = curve.and_then(|c| equal_error::at_error(&c.points, error, ms));
     Ok(LevelRow {
@@ -429,6 +555,13 @@ pub fn markdown(report: &LevelsReport) -> String {
     if !report.candidates.is_empty() {
         out.push_str(&candidates_markdown(report));
     }
+    if report.suggested_levels.as_object().is_some_and(|o| !o.is_empty()) {
+        let json = serde_json::to_string_pretty(&report.suggested_levels).unwrap_or_default();
+        out.push_str(&format!(
+            "\nThe scene file's `settings.levels` this run suggests (each dominated level as its most accurate \
+             dominating configuration):\n\n```json\n{json}\n```\n"
+        ));
+    }
     out
 }
 
@@ -440,26 +573,25 @@ fn candidates_markdown(report: &LevelsReport) -> String {
          | configuration | visibility | RSM | points | near field | subdivision | rel RMSE vs exact | without worst 1 % | indirect ms |\n\
          |---|---|---|---|---|---|---|---|---|\n",
     );
+    let knobs = |k: &Knobs| {
+        format!("{} | {} | {} | {} | {}", k.visibility.name(), k.rsm_resolution, k.points, k.near_field, k.subdivision)
+    };
     let rows = report.levels[..3.min(report.levels.len())]
         .iter()
-        .map(|r| (r.level.name().to_owned(), r.knobs, r.rel_rmse_vs_exact, r.rel_rmse_without_worst_1pct, r.ms))
-        .chain(
-            report
-                .candidates
-                .iter()
-                .map(|c| (c.name.clone(), c.knobs, c.rel_rmse_vs_exact, c.rel_rmse_without_worst_1pct, c.ms)),
-        );
+        .map(|r| (r.level.name().to_owned(), knobs(&r.knobs), r.rel_rmse_vs_exact, r.rel_rmse_without_worst_1pct, r.ms))
+        .chain(report.candidates.iter().map(|c| {
+            // The GPU estimator has none of the sparse method's parameters; its VALs are the
+            // reference's.
+            let k = match c.method {
+                RenderMethod::Sparse => knobs(&c.knobs),
+                _ => format!("exact | {} | – | – | –", c.knobs.rsm_resolution),
+            };
+            (c.name.clone(), k, c.rel_rmse_vs_exact, c.rel_rmse_without_worst_1pct, c.ms)
+        }));
     for (label, k, error, without, ms) in rows {
         let dominant = report.levels.iter().any(|l| l.dominated_by.contains(&label));
         let label = if dominant { format!("**{label}**") } else { label };
-        out.push_str(&format!(
-            "| {label} | {} | {} | {} | {} | {} | {error:.4} | {without:.4} | {ms:.1} |\n",
-            k.visibility.name(),
-            k.rsm_resolution,
-            k.points,
-            k.near_field,
-            k.subdivision,
-        ));
+        out.push_str(&format!("| {label} | {k} | {error:.4} | {without:.4} | {ms:.1} |\n"));
     }
     out.push('\n');
     for l in report.levels.iter().filter(|l| l.level != Quality::Reference) {
@@ -562,6 +694,88 @@ mod tests {
         assert_eq!(curve, [(100.0, 0.3), (200.0, 0.2)]);
         let (_, points, curve) = plot_points(&serde_json::json!({}));
         assert!(points.is_empty() && curve.is_empty());
+    }
+
+    fn row(level: Quality, knobs: Knobs, error: f64, ms: f64, dominated_by: &[&str]) -> LevelRow {
+        LevelRow {
+            level,
+            rel_rmse_vs_exact: error,
+            rel_rmse_without_worst_1pct: error,
+            error_estimate: None,
+            estimate_ratio: None,
+            ms,
+            stages_ms: Vec::new(),
+            estimator_ms_at_equal_error: None,
+            at_equal_error: None,
+            resolved: ResolvedConfig::default(),
+            knobs,
+            dominated_by: dominated_by.iter().map(|d| (*d).to_owned()).collect(),
+        }
+    }
+
+    fn candidate(name: &str, knobs: Knobs, error: f64, ms: f64) -> CandidateRow {
+        CandidateRow {
+            name: name.to_owned(),
+            knobs,
+            method: RenderMethod::Sparse,
+            rel_rmse_vs_exact: error,
+            rel_rmse_without_worst_1pct: error,
+            ms,
+            stages_ms: Vec::new(),
+        }
+    }
+
+    /// A dominated level is suggested as its most accurate dominating configuration, written as
+    /// what differs from the level (over the scene file's entry, whose other fields stay);
+    /// a level not dominated keeps its entry; a scene loaded with the suggestion is that
+    /// configuration at that level, and passes validation.
+    #[test]
+    fn a_dominated_level_is_suggested_as_its_most_accurate_dominating_configuration() {
+        let l = levels();
+        let rows = [
+            row(Quality::Fast, l[0].1, 0.20, 100.0, &[]),
+            row(
+                Quality::Balanced,
+                l[1].1,
+                0.10,
+                500.0,
+                &["fast + visibility=clusters", "balanced + rsm_resolution=64"],
+            ),
+            row(Quality::Accurate, l[2].1, 0.05, 2000.0, &[]),
+        ];
+        let candidates = [
+            candidate("fast + visibility=clusters", knobs(Occlusion::Clusters, 64, 0.5, 0.0, 4.0), 0.08, 400.0),
+            candidate("balanced + rsm_resolution=64", knobs(Occlusion::Disks, 64, 1.0, 0.0, 2.0), 0.099, 300.0),
+            candidate("balanced + sparse.points=0.5", knobs(Occlusion::Disks, 128, 0.5, 0.0, 2.0), 0.07, 450.0),
+        ];
+        let existing = serde_json::json!({"balanced": {"measured": "before", "sparse": {"kernel": "paper"}},
+            "accurate": {"measured": "kept", "rsm_resolution": 64}});
+        let s = suggest_levels(&rows, &candidates, &existing, true, "64x64 on cpu");
+        let balanced = &s["balanced"];
+        assert_eq!(balanced["visibility"], "clusters");
+        assert_eq!(balanced["rsm_resolution"], 64);
+        assert_eq!(balanced["sparse"], serde_json::json!({"kernel": "paper", "points": 0.5, "subdivision": 4.0}));
+        let text = balanced["measured"].as_str().unwrap();
+        assert!(
+            text.starts_with("`fast + visibility=clusters`: rel RMSE 0.0800 at 400 ms, the level's own 0.1000 at 500")
+        );
+        assert!(text.contains("64x64 on cpu"), "{text}");
+        assert_eq!(s["accurate"], existing["accurate"]);
+        assert!(s.get("fast").is_none());
+        // Without a spot light the RSM is left out.
+        let s = suggest_levels(&rows, &candidates, &serde_json::Value::Null, false, "here");
+        assert!(s["balanced"].get("rsm_resolution").is_none(), "{s}");
+        // Nothing dominated: nothing suggested.
+        let free = [row(Quality::Fast, l[0].1, 0.2, 100.0, &[])];
+        assert_eq!(suggest_levels(&free, &candidates, &serde_json::Value::Null, true, "here"), serde_json::json!({}));
+
+        let suggested = suggest_levels(&rows, &candidates, &existing, true, "64x64 on cpu");
+        let settings: crate::scene::SettingsDescription =
+            serde_json::from_value(serde_json::json!({"levels": suggested})).expect("the suggestion parses");
+        settings.validate("settings").expect("and is valid");
+        let (resolved, _) = crate::scene::settings::resolve(Quality::Balanced, &Default::default(), &settings);
+        assert_eq!((resolved.rsm_resolution, resolved.sparse.points, resolved.sparse.subdivision), (64, 0.5, 4.0));
+        assert_eq!(resolved.visibility.mode, Occlusion::Clusters);
     }
 
     #[test]

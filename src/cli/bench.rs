@@ -44,8 +44,13 @@ pub struct Args {
     /// (more accurate and at least 1.2x faster).
     #[arg(long, requires = "levels")]
     candidates: bool,
+    /// With --levels: also measure the GPU estimator of the exact reference (VALs drawn per
+    /// pixel by their unoccluded light, a shadow ray each) at each of these draws per pixel,
+    /// as configurations beside the candidates.
+    #[arg(long, requires = "levels", value_name = "N1,N2,...")]
+    gpu_estimator: Option<String>,
     /// With --levels: render nothing, draw the plot of the levels.json already in --out again.
-    #[arg(long, requires = "levels", conflicts_with_all = ["candidates", "equal_error"])]
+    #[arg(long, requires = "levels", conflicts_with_all = ["candidates", "equal_error", "gpu_estimator"])]
     replot: bool,
     /// With --levels: the image size (default: the scene camera's).
     #[command(flatten)]
@@ -181,7 +186,20 @@ fn levels(args: &Args, equal_error: Option<&[u32]>) -> anyhow::Result<()> {
         let exact = args.exact.options(args.val_stride.unwrap_or(1))?;
         let size = args.size.resolve_optional()?;
         let gpu = Gpu::new()?;
-        let report = relume::bench::levels::levels(&gpu, &args.scene, size, &exact, equal_error, args.candidates)?;
+        use relume::gpu::references::estimator::MAX_SAMPLES as MAX_DRAWS;
+        let draws = match args.gpu_estimator.as_deref() {
+            None => Vec::new(),
+            Some(list) => list
+                .split(',')
+                .map(|n| match n.trim().parse::<u32>() {
+                    Ok(n) if (1..=MAX_DRAWS).contains(&n) => Ok(n),
+                    _ => Err(anyhow::anyhow!("--gpu-estimator: {n:?} is not a count of draws in 1..={MAX_DRAWS}")),
+                })
+                .collect::<anyhow::Result<Vec<u32>>>()?,
+        };
+        let options =
+            relume::bench::levels::LevelsOptions { equal_error, candidates: args.candidates, gpu_estimator: &draws };
+        let report = relume::bench::levels::levels(&gpu, &args.scene, size, &exact, &options)?;
         std::fs::create_dir_all(&args.out)?;
         std::fs::write(&json, serde_json::to_string_pretty(&report)?)?;
         let table = relume::bench::levels::markdown(&report);

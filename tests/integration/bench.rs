@@ -335,5 +335,17 @@ fn assert_candidates(report: &serde_json::Value, table: &str) {
             all.iter().filter(|(_, e, m)| *e < error && m * 1.2 <= ms).map(|(n, _, _)| n.as_str()).collect();
         let by: Vec<&str> = l["dominated_by"].as_array().unwrap().iter().map(|n| n.as_str().unwrap()).collect();
         assert_eq!(by, expected, "{}", l["level"]);
+        // A dominated level, and only one, gets a suggested `settings.levels` entry naming the
+        // most accurate of what dominates it.
+        let suggested = &report["suggested_levels"][l["level"].as_str().unwrap()];
+        let best = all.iter().filter(|(n, ..)| by.contains(&n.as_str())).min_by(|a, b| a.1.total_cmp(&b.1));
+        match best {
+            Some((name, ..)) => {
+                let measured = suggested["measured"].as_str().unwrap_or_else(|| panic!("{suggested}"));
+                assert!(measured.starts_with(&format!("`{name}`: rel RMSE")), "{measured}");
+                assert!(table.contains("settings.levels"), "the table shows the suggestion");
+            }
+            None => assert!(suggested.is_null(), "{suggested}"),
+        }
     }
 }
