@@ -40,6 +40,10 @@ pub struct Args {
     /// With --method exact: use every N-th VAL (flux x N), for large scenes.
     #[arg(long, default_value_t = 1)]
     val_stride: u32,
+    /// With --method estimator: VALs drawn per pixel, each with a shadow ray (1..=256,
+    /// default 32).
+    #[arg(long)]
+    draws: Option<u32>,
     /// With --method exact: where the reference runs (auto: the CPU on CPU adapters, the GPU
     /// otherwise; as `compare --reference-device`).
     #[arg(long, value_enum)]
@@ -55,6 +59,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(e) = args.exposure {
         anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure: must be a positive number, got {e}");
     }
+    use relume::gpu::references::estimator::{DEFAULT_SAMPLES, MAX_SAMPLES};
+    let draws = args.draws.unwrap_or(DEFAULT_SAMPLES);
+    anyhow::ensure!(
+        (1..=MAX_SAMPLES).contains(&draws),
+        "--draws: must be a count of draws per pixel in 1..={MAX_SAMPLES}, got {draws}"
+    );
+    anyhow::ensure!(
+        args.draws.is_none() || args.method == Some(Method::Estimator),
+        "--draws: only with --method estimator"
+    );
     let scene = load_renderable(&args.scene, args.quality)?;
     // The scene's quality level asks for a technique; --method overrides it.
     let method = args.method.unwrap_or(scene.resolved.method.into());
@@ -66,6 +80,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let gpu = Gpu::new()?;
     let mut renderer = Renderer::new(&gpu, &scene)?;
     renderer.set_exact_val_stride(val_stride);
+    renderer.set_estimator(draws, scene.settings.seed as u32);
     renderer.set_error_estimate(Some(relume::renderer::estimate::PER_FRAME));
     let needs = if args.out_dir.is_some() { Components::ALL } else { args.component.needs() };
     let frame = match method {

@@ -238,6 +238,20 @@ fn exact_reference_flags_are_checked() {
         assert!(!o.status.success(), "{args:?} must fail");
         assert!(stderr(&o).contains(flag) && !stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
     }
+    // The GPU estimator's draws, on `render` and on `bench --levels`.
+    let out = super::scratch("cli-estimator-flags");
+    let out = out.to_str().unwrap();
+    for (command, args, flag) in [
+        ("render", &["--method", "estimator", "--draws", "0"][..], "--draws"),
+        ("render", &["--method", "estimator", "--draws", "257"][..], "--draws"),
+        ("render", &["--draws", "8"][..], "--draws"),
+        ("bench", &["--levels", "--gpu-estimator", "0,8"][..], "--gpu-estimator"),
+        ("bench", &["--levels", "--gpu-estimator", "8,x"][..], "--gpu-estimator"),
+    ] {
+        let o = relume(&[&[command, scene, "--width", "8", "--height", "8", "--out", out][..], args].concat());
+        assert!(!o.status.success(), "{command} {args:?} must fail");
+        assert!(stderr(&o).contains(flag) && !stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
+    }
 }
 
 /// `record-synthetic`: every out-of-range flag and a scene without a spot light are named, not

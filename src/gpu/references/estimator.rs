@@ -21,17 +21,24 @@ use std::time::Instant;
 pub const WGSL: &str = include_str!("estimator.wgsl");
 const BVH: &str = include_str!("bvh.wgsl");
 
-/// Shadow rays per pixel at most (`--estimator-samples`, `tuning.estimator_samples`).
-pub const MAX_SAMPLES: u32 = 4096;
+/// Draws (shadow rays) per pixel at most (`render --draws`): each invocation notes its draws
+/// in arrays of this many entries before it traces them.
+pub const MAX_SAMPLES: u32 = 256;
 /// Shadow rays per pixel unless set.
 pub const DEFAULT_SAMPLES: u32 = 32;
+
+/// VALs one invocation walks per round, and BVH steps it traces: together under llvmpipe's loop
+/// limit, as the exact pass's [`EXACT_LOOP_BUDGET`].
+const WALK_BUDGET: u32 = EXACT_LOOP_BUDGET / 2;
+const TRACE_BUDGET: u32 = EXACT_LOOP_BUDGET - WALK_BUDGET;
 
 /// The pass's own WGSL: `samples` draws per pixel, their offsets from `seed`.
 pub fn body(samples: u32, seed: u32) -> String {
     Wgsl::new()
         .u32("SAMPLES", samples.clamp(1, MAX_SAMPLES))
         .u32("SEED", seed)
-        .u32("EXACT_LOOP_BUDGET", EXACT_LOOP_BUDGET)
+        .u32("WALK_BUDGET", WALK_BUDGET)
+        .u32("TRACE_BUDGET", TRACE_BUDGET)
         .include(BVH)
         .include(ROUNDS)
         .include(WGSL)
@@ -59,9 +66,9 @@ pub const PASS: PassDesc = PassDesc {
 
 /// Workgroups: [`IMAGE_TILE`] everywhere. The exact pass runs 1x1 on CPU adapters because
 /// llvmpipe counts its loop limit per SIMD vector, which its nested loops with diverging lanes
-/// exceed; this pass's one flat loop runs at most the budget's iterations in every lane, so a
-/// vector runs at most that many too, and its lanes share the walk's VAL loads (1x1 was 92 s a
-/// frame on sponza_bunny at 256x256 with 8 draws).
+/// exceed; this pass's two flat loops run at most their budgets in every lane, so a vector
+/// does too, and its lanes share the walk's VAL loads (1x1 was 92 s a frame on sponza_bunny
+/// at 256x256 with 8 draws, 8x8 18 s).
 fn workgroup(_gpu: &Gpu) -> [u32; 3] {
     IMAGE_TILE
 }
@@ -177,7 +184,7 @@ impl Technique for Estimator {
         let group = self.bind(gpu, frame);
         let mut count = 1;
         loop {
-            if crate::gpu::rounds_done(gpu, &self.status, count, "estimator: pixels", EXACT_LOOP_BUDGET)? {
+            if crate::gpu::rounds_done(gpu, &self.status, count, "estimator: pixels", TRACE_BUDGET)? {
                 break;
             }
             let mut encoder =

@@ -12,13 +12,14 @@
 // adds n step / lum_i times its radiance where its shadow ray is free. The walk stops at the
 // last threshold. Rust twin: `twin::exact_cpu` with `ValSampling::Systematic`.
 //
-// One flat loop per invocation, each iteration either one VAL of the walk or one step of the
-// current shadow ray (a node or a triangle): llvmpipe counts loop iterations per SIMD vector,
-// and nested loops whose lanes diverge use up its limit together, which a per-invocation budget
-// of one flat loop does not (see `exact.wgsl`). In rounds under that limit as the exact pass:
-// `progress` is 0 before the first round, then 1 + the next VAL; `walk` keeps the pixel's
-// total, running sum and thresholds passed, `indirect` its sum so far. A ray cut off by the
-// budget is cast again in the next round.
+// Two flat loops per invocation and round: the walk (at most WALK_BUDGET VALs, noting the
+// VALs that hold thresholds, SAMPLES at most), then the picks' shadow rays (at most
+// TRACE_BUDGET BVH steps). Both budgets together stay under llvmpipe's loop limit, which it
+// counts per SIMD vector over every loop of the invocation: a lane runs each loop at most its
+// budget, so a vector does too, and the walk, with no traversal inside it, runs as plain SIMD
+// over the VALs. In rounds as the exact pass: `progress` is 0 before the first round, then
+// 1 + the next VAL to walk; `walk` keeps the pixel's total, running sum and thresholds passed,
+// `indirect` its sum so far. A ray cut off by the budget sends the walk back to its VAL.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
@@ -84,78 +85,96 @@ fn estimate(id: vec2<u32>, glossy: bool) {
     var j = select(start - 1u, 0u, start == 0u);
     var sum = state.y;
     var passed = u32(state.z);
+    // The walk: VALs from j until every threshold is passed, every VAL walked or half the
+    // round's budget used, each VAL holding thresholds noted with its draws and the running
+    // sum before it.
+    var picks: array<u32, SAMPLES>;
+    var draws_of: array<u32, SAMPLES>;
+    var sum_before: array<f32, SAMPLES>;
+    var n = 0u;
     var steps = 0u;
-    // The ray in flight toward VAL j: what it adds when free, the sum after VAL j.
-    var tracing = false;
-    var add = vec3<f32>(0.0);
-    var sum_after = 0.0;
-    var d = vec3<f32>(0.0);
-    var inv = vec3<f32>(0.0);
+    while j < count && passed < SAMPLES && steps < WALK_BUDGET {
+        steps += 1u;
+        let val = vals[j];
+        let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
+        let f = geo.weight * geo.cos_receiver;
+        var lum = 0.0;
+        if f > 0.0 {
+            lum = luminance(reflected_radiance(s, spec, w_o, geo.direction, val.flux * f, glossy));
+        }
+        let after = sum + lum;
+        let draws = thresholds_below(after, step, xi) - passed;
+        if draws > 0u && lum > 0.0 {
+            picks[n] = j;
+            draws_of[n] = draws;
+            sum_before[n] = sum;
+            n += 1u;
+        }
+        sum = after;
+        passed = thresholds_below(sum, step, xi);
+        j += 1u;
+    }
+    // The shadow rays of the picks, in order: one flat loop of BVH steps in the rest of the
+    // budget. A ray cut off by it sends the walk back to its VAL for the next round.
+    var p = 0u;
     var index = 0u;
     var k = 0u;
     var end = 0u;
     var blocked = false;
-    while (tracing || (j < count && passed < SAMPLES)) && steps < EXACT_LOOP_BUDGET {
+    var d = vec3<f32>(0.0);
+    var inv = vec3<f32>(0.0);
+    var add = vec3<f32>(0.0);
+    var started = false;
+    steps = 0u;
+    while p < n && steps < TRACE_BUDGET {
         steps += 1u;
-        if tracing {
-            // One step of `bvh.wgsl`'s `occluded`.
-            if k < end {
-                let t = 3u * bvh_triangles[k];
-                let a = vertices[indices[t]].position;
-                let b = vertices[indices[t + 1u]].position;
-                let c = vertices[indices[t + 2u]].position;
-                let hit_at = ray_triangle(origin, d, a, b, c);
-                blocked = hit_at > 0.0 && hit_at < 1.0;
-                k += 1u;
-            } else {
-                let node = bvh_nodes[index];
-                let enter = segment_hits_box(origin, inv, node.min, node.max);
-                if enter && node.count > 0u {
-                    k = node.first;
-                    end = node.first + node.count;
-                }
-                index = select(max(node.first, index + 1u), index + 1u, enter || node.count > 0u);
-            }
-            if blocked || !(k < end || index < nodes) {
-                if !blocked {
-                    l += add;
-                }
-                tracing = false;
-                sum = sum_after;
-                passed = thresholds_below(sum, step, xi);
-                j += 1u;
-            }
-        } else {
-            let val = vals[j];
+        if !started {
+            let val = vals[picks[p]];
             let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
-            let f = geo.weight * geo.cos_receiver;
-            var radiance = vec3<f32>(0.0);
-            if f > 0.0 {
-                radiance = reflected_radiance(s, spec, w_o, geo.direction, val.flux * f, glossy);
+            let radiance = reflected_radiance(s, spec, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver), glossy);
+            add = radiance * (f32(draws_of[p]) * step / luminance(radiance));
+            d = val.position + val.normal * RAY_OFFSET - origin;
+            inv = 1.0 / d;
+            index = 0u;
+            k = 0u;
+            end = 0u;
+            blocked = false;
+            started = true;
+        } else if k < end {
+            let t = 3u * bvh_triangles[k];
+            let a = vertices[indices[t]].position;
+            let b = vertices[indices[t + 1u]].position;
+            let c = vertices[indices[t + 2u]].position;
+            let hit_at = ray_triangle(origin, d, a, b, c);
+            blocked = hit_at > 0.0 && hit_at < 1.0;
+            k += 1u;
+        } else {
+            let node = bvh_nodes[index];
+            let enter = segment_hits_box(origin, inv, node.min, node.max);
+            if enter && node.count > 0u {
+                k = node.first;
+                end = node.first + node.count;
             }
-            let lum = luminance(radiance);
-            let after = sum + lum;
-            let draws = thresholds_below(after, step, xi) - passed;
-            if draws > 0u && lum > 0.0 {
-                add = radiance * (f32(draws) * step / lum);
-                sum_after = after;
-                d = val.position + val.normal * RAY_OFFSET - origin;
-                inv = 1.0 / d;
-                index = 0u;
-                k = 0u;
-                end = 0u;
-                blocked = false;
-                tracing = true;
-            } else {
-                sum = after;
-                j += 1u;
-            }
+            index = select(max(node.first, index + 1u), index + 1u, enter || node.count > 0u);
         }
+        if started && (blocked || !(k < end || index < nodes)) {
+            if !blocked {
+                l += add;
+            }
+            started = false;
+            p += 1u;
+        }
+    }
+    if p < n {
+        // Cut off at pick p: its VAL is walked again next round.
+        j = picks[p];
+        sum = sum_before[p];
+        passed = thresholds_below(sum, step, xi);
     }
     indirect[pixel] = vec4<f32>(l, 1.0);
     walk[pixel] = vec4<f32>(total, sum, f32(passed), 0.0);
-    // Done once every threshold is passed or every VAL walked.
-    let next = select(j + 1u, count + 1u, passed >= SAMPLES);
+    // Done once every threshold is passed or every VAL walked (and every pick traced).
+    let next = select(j + 1u, count + 1u, p >= n && (passed >= SAMPLES || j >= count));
     end_round(pixel, next, count + 1u, start != 0u && next == start);
 }
 
