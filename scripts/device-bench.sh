@@ -118,6 +118,7 @@ if [ "$smoke" = 1 ]; then
     step sparse_vs_brute 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 32 --height 18
     step exact 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 16 --height 16 --reference exact
     step sponza_512 120 "$bin" compare "$scenes/sponza_bunny.json" --width 32 --height 18
+    step levels_sponza 120 "$bin" bench "$scenes/cornell_bunny_small.json" --levels --width 16 --height 9 --gpu-estimator 4 --out "$work/levels_sponza"
     step load 60 "$bin" load --seconds 3 --streams 1 --http 1 --json
 else
     # Ordered by what a first device run must answer; --deadline cuts the tail if need be.
@@ -137,6 +138,10 @@ else
     # Sponza at 512 wide: the sparse frame against the brute force without visibility.
     step sponza_512 45 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288
     step exact 45 "$bin" compare "$scenes/cornell_bunny.json" --width 512 --height 512 --reference exact --reference-device gpu
+    # Sponza's levels against the GPU estimator of the exact reference (8 and 32 draws): on
+    # lavapipe accurate is 0.84-0.94 of the estimator's time at 8 draws for 1.6-2.7x its error;
+    # is the estimator the faster way to that error on a GPU?
+    step levels_sponza 60 "$bin" bench "$scenes/sponza_bunny.json" --levels --width 512 --height 288 --gpu-estimator 8,32 --out "$work/levels_sponza"
     step sweep 60 "$bin" bench "$scenes/cornell_bunny.json" --no-plots --out "$work/sweep" \
         --sweep sparse_points=1024,4096,16384 --sweep rsm_resolution=128,256,724 --sweep resolution=1920x1080
     # The service under load on one GPU: what one backend of a cluster delivers.

@@ -27,6 +27,7 @@ def step_output(work: Path, name: str):
         "mr_1280": work / "mr_1280" / "summary.json",
         "mr_640_cpu": work / "mr_640_cpu" / "summary.json",
         "levels_1080": work / "levels_1080" / "levels.json",
+        "levels_sponza": work / "levels_sponza" / "levels.json",
     }.get(name)
     if written is not None:
         return load_json(written)
@@ -166,6 +167,17 @@ def main() -> int:
                 f"| {row['level']} | {method} | {fmt(row['rel_rmse_vs_exact'])} | {fmt(estimate.get('rel_rmse'))} "
                 f"| {fmt(row['ms'])} | {fmt(fps(row['ms']))} |"
             )
+
+    est = by_name.get("levels_sponza")
+    if isinstance(est, dict) and est.get("levels"):
+        shown.add("levels_sponza")
+        md += ["", f"## Levels and the GPU estimator: {est.get('scene', '')} at {est['width']}x{est['height']}", ""]
+        md += ["| configuration | rel RMSE vs exact | indirect ms | dominated by |", "|---|---|---|---|"]
+        for row in est["levels"]:
+            by = ", ".join(row.get("dominated_by") or []) or "-"
+            md.append(f"| {row['level']} | {fmt(row['rel_rmse_vs_exact'])} | {fmt(row['ms'])} | {by} |")
+        for row in est.get("candidates") or []:
+            md.append(f"| {row['name']} | {fmt(row['rel_rmse_vs_exact'])} | {fmt(row['ms'])} | |")
 
     sponza = by_name.get("sponza_512")
     if isinstance(sponza, dict) and "speedup" in sponza:

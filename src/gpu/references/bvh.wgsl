@@ -54,39 +54,54 @@ struct Traversal {
     steps: u32,
 }
 
+// A shadow ray's place in the traversal: the next node, the leaf's triangles left (`k` to
+// `end`), and whether a triangle blocked it.
+struct RayWalk {
+    index: u32,
+    k: u32,
+    end: u32,
+    hit: bool,
+}
+
 // Stackless: nodes are depth-first, a leaf is followed by `index + 1` and an inner node's
-// `first` is its miss link (see `twin::bvh::BvhNode`). One flat loop over nodes and leaf
-// triangles, with no early exit from nested loops, of at most `budget` iterations (see
-// `EXACT_LOOP_BUDGET` in `exact.wgsl`).
+// `first` is its miss link (see `twin::bvh::BvhNode`). One step: a triangle of the current
+// leaf, else one node. `d` is the segment from `origin` to the target, `inv` its inverse.
+fn ray_step(origin: vec3<f32>, d: vec3<f32>, inv: vec3<f32>, w: ptr<function, RayWalk>) {
+    if (*w).k < (*w).end {
+        let t = 3u * bvh_triangles[(*w).k];
+        let a = vertices[indices[t]].position;
+        let b = vertices[indices[t + 1u]].position;
+        let c = vertices[indices[t + 2u]].position;
+        let s = ray_triangle(origin, d, a, b, c);
+        (*w).hit = s > 0.0 && s < 1.0;
+        (*w).k += 1u;
+    } else {
+        let node = bvh_nodes[(*w).index];
+        let enter = segment_hits_box(origin, inv, node.min, node.max);
+        if enter && node.count > 0u {
+            (*w).k = node.first;
+            (*w).end = node.first + node.count;
+        }
+        // The max() makes termination independent of the data (a zero-filled node).
+        (*w).index = select(max(node.first, (*w).index + 1u), (*w).index + 1u, enter || node.count > 0u);
+    }
+}
+
+// Whether the ray is decided: blocked, or past the last node and triangle.
+fn ray_done(w: RayWalk) -> bool {
+    return w.hit || !(w.k < w.end || w.index < arrayLength(&bvh_nodes));
+}
+
+// The segment query: one flat loop of `ray_step`s, with no early exit from nested loops, of at
+// most `budget` iterations (see `EXACT_LOOP_BUDGET` in `exact.wgsl`).
 fn occluded(origin: vec3<f32>, target_position: vec3<f32>, budget: u32) -> Traversal {
     let d = target_position - origin;
     let inv = 1.0 / d;
-    let n = arrayLength(&bvh_nodes);
-    var index = 0u;
-    var k = 0u;
-    var end = 0u;
-    var hit = false;
+    var w = RayWalk(0u, 0u, 0u, false);
     var steps = 0u;
-    while !hit && (k < end || index < n) && steps < budget {
+    while !ray_done(w) && steps < budget {
         steps += 1u;
-        if k < end {
-            let t = 3u * bvh_triangles[k];
-            let a = vertices[indices[t]].position;
-            let b = vertices[indices[t + 1u]].position;
-            let c = vertices[indices[t + 2u]].position;
-            let s = ray_triangle(origin, d, a, b, c);
-            hit = s > 0.0 && s < 1.0;
-            k += 1u;
-        } else {
-            let node = bvh_nodes[index];
-            let enter = segment_hits_box(origin, inv, node.min, node.max);
-            if enter && node.count > 0u {
-                k = node.first;
-                end = node.first + node.count;
-            }
-            // The max() makes termination independent of the data (a zero-filled node).
-            index = select(max(node.first, index + 1u), index + 1u, enter || node.count > 0u);
-        }
+        ray_step(origin, d, inv, &w);
     }
-    return Traversal(hit, hit || !(k < end || index < n), steps);
+    return Traversal(w.hit, ray_done(w), steps);
 }

@@ -80,7 +80,6 @@ fn estimate(id: vec2<u32>, glossy: bool) {
     let step = total / f32(SAMPLES);
     let xi = pixel_offset(pixel);
     let count = min(val_count, arrayLength(&vals));
-    let nodes = arrayLength(&bvh_nodes);
 
     var j = select(start - 1u, 0u, start == 0u);
     var sum = state.y;
@@ -117,10 +116,7 @@ fn estimate(id: vec2<u32>, glossy: bool) {
     // The shadow rays of the picks, in order: one flat loop of BVH steps in the rest of the
     // budget. A ray cut off by it sends the walk back to its VAL for the next round.
     var p = 0u;
-    var index = 0u;
-    var k = 0u;
-    var end = 0u;
-    var blocked = false;
+    var ray = RayWalk(0u, 0u, 0u, false);
     var d = vec3<f32>(0.0);
     var inv = vec3<f32>(0.0);
     var add = vec3<f32>(0.0);
@@ -135,30 +131,13 @@ fn estimate(id: vec2<u32>, glossy: bool) {
             add = radiance * (f32(draws_of[p]) * step / luminance(radiance));
             d = val.position + val.normal * RAY_OFFSET - origin;
             inv = 1.0 / d;
-            index = 0u;
-            k = 0u;
-            end = 0u;
-            blocked = false;
+            ray = RayWalk(0u, 0u, 0u, false);
             started = true;
-        } else if k < end {
-            let t = 3u * bvh_triangles[k];
-            let a = vertices[indices[t]].position;
-            let b = vertices[indices[t + 1u]].position;
-            let c = vertices[indices[t + 2u]].position;
-            let hit_at = ray_triangle(origin, d, a, b, c);
-            blocked = hit_at > 0.0 && hit_at < 1.0;
-            k += 1u;
         } else {
-            let node = bvh_nodes[index];
-            let enter = segment_hits_box(origin, inv, node.min, node.max);
-            if enter && node.count > 0u {
-                k = node.first;
-                end = node.first + node.count;
-            }
-            index = select(max(node.first, index + 1u), index + 1u, enter || node.count > 0u);
+            ray_step(origin, d, inv, &ray);
         }
-        if started && (blocked || !(k < end || index < nodes)) {
-            if !blocked {
+        if started && ray_done(ray) {
+            if !ray.hit {
                 l += add;
             }
             started = false;

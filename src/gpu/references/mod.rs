@@ -4,3 +4,4 @@
 pub mod brute_force;
 pub mod estimator;
 pub mod exact;
+mod rounds;
