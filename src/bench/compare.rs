@@ -565,7 +565,14 @@ fn exact_comparison(
         Err(e) => return Err(e.into()),
     };
     renderer.set_occlusion(scene.settings.visibility.mode, scene.settings.visibility.rule);
-    let default = renderer.render(gpu, Method::Sparse, w, h)?;
+    // What a user gets: the level's technique (the sparse method, or the GPU estimator where
+    // the scene's measured level names it; at `reference`, the sparse method with accurate's
+    // parameters, the reference being what it is compared with).
+    let own = match Method::from(scene.resolved.method) {
+        Method::Estimator => Method::Estimator,
+        _ => Method::Sparse,
+    };
+    let default = renderer.render(gpu, own, w, h)?;
     let estimate = crate::renderer::estimate::Estimator::new().estimate(
         gpu,
         renderer,

@@ -22,6 +22,7 @@ use super::BenchError;
 use super::compare::{ExactOptions, ExactReference, exact_reference, rel_rmse_without_worst};
 use super::equal_error::{self, AtEqualError, EqualErrorCurve};
 use crate::gpu::Gpu;
+use crate::gpu::references::estimator::DEFAULT_SAMPLES;
 use crate::renderer::Rendered;
 use crate::renderer::estimate::{ErrorEstimate, EstimateOptions, Estimator};
 use crate::renderer::{Method as RenderMethod, Renderer};
@@ -110,6 +111,9 @@ pub struct CandidateRow {
     /// How the indirect light was computed: the sparse method, or the GPU estimator of the
     /// exact reference (`--gpu-estimator`).
     pub method: crate::renderer::Method,
+    /// The GPU estimator's draws per pixel (`None` for the sparse method).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub draws: Option<u32>,
     pub rel_rmse_vs_exact: f64,
     pub rel_rmse_without_worst_1pct: f64,
     /// Indirect ms, the median of three frames after a warm-up one (as the levels').
@@ -204,6 +208,7 @@ pub fn levels(
             name: format!("GPU estimator, {draws} draws"),
             knobs: Knobs::of(&finest),
             method: crate::renderer::Method::Estimator,
+            draws: Some(draws),
             rel_rmse_vs_exact: m.error,
             rel_rmse_without_worst_1pct: m.without_worst,
             ms: m.ms,
@@ -247,42 +252,29 @@ pub fn suggest_levels(
     spot_light: bool,
     at: &str,
 ) -> serde_json::Value {
-    // The GPU estimator's rows are not parameters a level can take (yet): not suggested.
-    let measured: Vec<(&str, Knobs, f64, f64)> = levels
+    // The GPU estimator's rows carry their draws (the level becomes the estimator).
+    let measured: Vec<(&str, Knobs, Option<u32>, f64, f64)> = levels
         .iter()
-        .map(|r| (r.level.name(), r.knobs, r.rel_rmse_vs_exact, r.ms))
-        .chain(
-            candidates
-                .iter()
-                .filter(|c| c.method == RenderMethod::Sparse)
-                .map(|c| (c.name.as_str(), c.knobs, c.rel_rmse_vs_exact, c.ms)),
-        )
+        .map(|r| (r.level.name(), r.knobs, None, r.rel_rmse_vs_exact, r.ms))
+        .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, c.draws, c.rel_rmse_vs_exact, c.ms)))
         .collect();
     let mut out = existing.as_object().cloned().unwrap_or_default();
     for row in levels {
         let best = measured
             .iter()
             .filter(|(name, ..)| row.dominated_by.iter().any(|d| d == name))
-            .min_by(|a, b| a.2.total_cmp(&b.2));
-        let Some(&(name, knobs, error, ms)) = best else { continue };
+            .min_by(|a, b| a.3.total_cmp(&b.3));
+        let Some(&(name, knobs, draws, error, ms)) = best else { continue };
         let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
-        let k = row.knobs;
-        if knobs.visibility != k.visibility {
-            entry["visibility"] = knobs.visibility.name().into();
-        }
-        if spot_light && knobs.rsm_resolution != k.rsm_resolution {
-            entry["rsm_resolution"] = knobs.rsm_resolution.into();
-        }
-        for (key, value, was) in [
-            ("points", knobs.points, k.points),
-            ("near_field", knobs.near_field, k.near_field),
-            ("subdivision", knobs.subdivision, k.subdivision),
-        ] {
-            if value != was {
-                if !entry["sparse"].is_object() {
-                    entry["sparse"] = serde_json::json!({});
+        match draws {
+            // The estimator takes none of the sparse method's parameters.
+            Some(draws) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
+            None => {
+                if let Some(e) = entry.as_object_mut() {
+                    e.remove("technique");
+                    e.remove("draws");
                 }
-                entry["sparse"][key] = value.into();
+                set_changed_knobs(&mut entry, knobs, row.knobs, spot_light);
             }
         }
         entry["measured"] = format!(
@@ -294,6 +286,29 @@ pub fn suggest_levels(
         out.insert(row.level.name().to_owned(), entry);
     }
     serde_json::Value::Object(out)
+}
+
+/// Into a `settings.levels` entry, each of `knobs` that differs from the level's `was` (the RSM
+/// only on a scene with a spot light).
+fn set_changed_knobs(entry: &mut serde_json::Value, knobs: Knobs, was: Knobs, spot_light: bool) {
+    if knobs.visibility != was.visibility {
+        entry["visibility"] = knobs.visibility.name().into();
+    }
+    if spot_light && knobs.rsm_resolution != was.rsm_resolution {
+        entry["rsm_resolution"] = knobs.rsm_resolution.into();
+    }
+    for (key, value, before) in [
+        ("points", knobs.points, was.points),
+        ("near_field", knobs.near_field, was.near_field),
+        ("subdivision", knobs.subdivision, was.subdivision),
+    ] {
+        if value != before {
+            if !entry["sparse"].is_object() {
+                entry["sparse"] = serde_json::json!({});
+            }
+            entry["sparse"][key] = value.into();
+        }
+    }
 }
 
 /// The levels' plot of a `levels.json` (as [`levels`] writes it): its levels (but
@@ -360,6 +375,7 @@ fn measure_candidates(
             name,
             knobs: Knobs::of(&scene),
             method: crate::renderer::Method::Sparse,
+            draws: None,
             rel_rmse_vs_exact: m.error,
             rel_rmse_without_worst_1pct: m.without_worst,
             ms: m.ms,
@@ -505,7 +521,11 @@ fn level_row(
     reference: &ExactReference,
     curve: Option<&EqualErrorCurve>,
 ) -> Result<LevelRow, BenchError> {
-    let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference, Method::Sparse)?;
+    let method = match (scene.resolved.method, scene.resolved.estimator_draws) {
+        (crate::scene::Technique::Estimator, draws) => Method::Estimator(draws.unwrap_or(DEFAULT_SAMPLES)),
+        _ => Method::Sparse,
+    };
+    let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference, method)?;
     let estimate = Estimator::new().estimate(gpu, &renderer, &frame, &EstimateOptions::default())?;
     let at_equal_error = curve.and_then(|c| equal_error::at_error(&c.points, error, ms));
     Ok(LevelRow {
@@ -718,6 +738,7 @@ mod tests {
             name: name.to_owned(),
             knobs,
             method: RenderMethod::Sparse,
+            draws: None,
             rel_rmse_vs_exact: error,
             rel_rmse_without_worst_1pct: error,
             ms,
@@ -776,6 +797,37 @@ mod tests {
         let (resolved, _) = crate::scene::settings::resolve(Quality::Balanced, &Default::default(), &settings);
         assert_eq!((resolved.rsm_resolution, resolved.sparse.points, resolved.sparse.subdivision), (64, 0.5, 4.0));
         assert_eq!(resolved.visibility.mode, Occlusion::Clusters);
+    }
+
+    /// The GPU estimator dominating a level makes it that level's technique, with its draws
+    /// and none of the sparse parameters; a sparse configuration suggested later takes it back.
+    #[test]
+    fn a_dominating_estimator_becomes_the_levels_technique() {
+        let l = levels();
+        let rows = [row(Quality::Accurate, l[2].1, 0.29, 12000.0, &["GPU estimator, 8 draws"])];
+        let mut estimator = candidate("GPU estimator, 8 draws", l[2].1, 0.10, 9000.0);
+        estimator.method = RenderMethod::Estimator;
+        estimator.draws = Some(8);
+        let existing = serde_json::json!({"accurate": {"measured": "before", "rsm_resolution": 64}});
+        let s = suggest_levels(&rows, &[estimator], &existing, true, "here");
+        let accurate = &s["accurate"];
+        assert_eq!(
+            (&accurate["technique"], &accurate["draws"]),
+            (&serde_json::json!("estimator"), &serde_json::json!(8))
+        );
+        assert!(accurate.get("rsm_resolution").is_none(), "{accurate}");
+        let settings: crate::scene::SettingsDescription =
+            serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
+        settings.validate("settings").expect("and is valid");
+        let technique = crate::scene::settings::technique(Quality::Accurate, &settings);
+        assert_eq!(technique, (crate::scene::Technique::Estimator, Some(8)));
+        // A sparse configuration dominating it later: the technique goes.
+        let rows = [row(Quality::Accurate, l[2].1, 0.10, 9000.0, &["accurate + sparse.points=0.5"])];
+        let sparse =
+            candidate("accurate + sparse.points=0.5", knobs(Occlusion::Clusters, 128, 0.5, 4.0, 2.0), 0.09, 5000.0);
+        let s = suggest_levels(&rows, &[sparse], &s, true, "here");
+        assert!(s["accurate"].get("technique").is_none() && s["accurate"].get("draws").is_none(), "{s}");
+        assert_eq!(s["accurate"]["sparse"]["points"], 0.5);
     }
 
     #[test]

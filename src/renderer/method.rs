@@ -32,6 +32,7 @@ impl From<crate::scene::Technique> for Method {
         match technique {
             crate::scene::Technique::Exact => Method::Exact,
             crate::scene::Technique::Sparse => Method::Sparse,
+            crate::scene::Technique::Estimator => Method::Estimator,
         }
     }
 }

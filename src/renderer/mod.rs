@@ -177,7 +177,10 @@ impl Renderer {
             estimate: None,
             estimated_frames: 0,
             exact_val_stride: 1,
-            estimator: (estimator::DEFAULT_SAMPLES, scene.settings.seed as u32),
+            estimator: (
+                scene.resolved.estimator_draws.unwrap_or(estimator::DEFAULT_SAMPLES),
+                scene.settings.seed as u32,
+            ),
             scene: scene_gpu,
             indirect: Indirect::default(),
             target: None,

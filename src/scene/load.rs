@@ -107,11 +107,9 @@ impl Scene {
             (load_settings.sparse, load_settings.interpolation_neighbours, load_settings.seed),
             "the loader's parameters do not depend on the analysis"
         );
-        let method = match quality {
-            Quality::Reference => super::settings::Technique::Exact,
-            _ => super::settings::Technique::Sparse,
-        };
-        let resolved = ResolvedConfig { quality, budget_ms: description.settings.budget_ms, method, analysis, choices };
+        let (method, estimator_draws) = super::settings::technique(quality, &description.settings);
+        let budget_ms = description.settings.budget_ms;
+        let resolved = ResolvedConfig { quality, budget_ms, method, estimator_draws, analysis, choices };
         Ok(Scene {
             meshes,
             materials,

@@ -508,10 +508,11 @@ async fn render_scene(
     let level = quality.level.unwrap_or(resolved.quality);
     let parameters = crate::renderer::budget::level_parameters(level, &resolved.analysis, &entry.described);
     let budget_ms = quality.budget_ms.or(resolved.budget_ms);
-    let method = match (quality.method, level) {
-        (Some(method), _) => method.into(),
-        (None, crate::scene::Quality::Reference) => crate::renderer::Method::Exact,
-        (None, _) => crate::renderer::Method::Sparse,
+    // The level's technique: the exact reference at `reference`, the GPU estimator where the
+    // scene's measured level names it, else the sparse method.
+    let method = match quality.method {
+        Some(method) => method.into(),
+        None => crate::scene::settings::technique(level, &entry.described).0.into(),
     };
     let job = RenderJob {
         camera: camera.to_camera(entry.origin),

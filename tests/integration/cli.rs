@@ -395,3 +395,40 @@ fn every_technique_records_valid_gpu_timestamps() {
     let levels: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("levels.json")).unwrap()).unwrap();
     assert_eq!(levels["levels"].as_array().map(Vec::len), Some(4), "{levels}");
 }
+
+/// A scene whose measured `accurate` level names the GPU estimator renders with it at that level
+/// (the summary's method and stages), and with the sparse method at `balanced`.
+#[test]
+fn a_measured_level_naming_the_estimator_renders_with_it() {
+    let dir = fixture("scenes");
+    let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let mut scene: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for mesh in scene["meshes"].as_array_mut().unwrap() {
+        let obj = dir.join(mesh["obj"].as_str().unwrap());
+        mesh["obj"] = obj.to_str().unwrap().into();
+    }
+    scene["settings"]["levels"] =
+        serde_json::json!({"accurate": {"measured": "a test", "technique": "estimator", "draws": 4}});
+    let out = scratch("cli-estimator-level");
+    let path = out.join("scene.json");
+    std::fs::write(&path, scene.to_string()).unwrap();
+    for (quality, method, stage) in [("accurate", "estimator", "estimator"), ("balanced", "sparse", "gather")] {
+        let png = out.join(format!("{quality}.png"));
+        let o = relume(&[
+            "render",
+            path.to_str().unwrap(),
+            "--quality",
+            quality,
+            "--width",
+            "12",
+            "--height",
+            "10",
+            "--out",
+            png.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(summary["method"], method, "{quality}");
+        assert!(summary["timings_ms"].get(stage).is_some(), "{quality}: {summary}");
+    }
+}

@@ -20,11 +20,11 @@ use crate::gpu::{Gpu, GpuError};
 pub const WGSL: &str = include_str!("estimator.wgsl");
 const BVH: &str = include_str!("bvh.wgsl");
 
-/// Draws (shadow rays) per pixel at most (`render --draws`): each invocation notes its draws
-/// in arrays of this many entries before it traces them.
-pub const MAX_SAMPLES: u32 = 256;
+/// Draws (shadow rays) per pixel at most (`render --draws`, a measured level's `draws`): each
+/// invocation notes its draws in arrays of this many entries before it traces them.
+pub const MAX_SAMPLES: u32 = crate::scene::settings::MAX_ESTIMATOR_DRAWS;
 /// Shadow rays per pixel unless set.
-pub const DEFAULT_SAMPLES: u32 = 32;
+pub const DEFAULT_SAMPLES: u32 = crate::scene::settings::DEFAULT_ESTIMATOR_DRAWS;
 
 /// VALs one invocation walks per round, and BVH steps it traces: together under llvmpipe's loop
 /// limit, as the exact pass's [`EXACT_LOOP_BUDGET`].

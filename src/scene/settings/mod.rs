@@ -20,8 +20,8 @@ pub use direct::{DirectSettings, DirectShadows, MAX_DIRECT_LIGHTS, MAX_LIGHTS_VA
 pub use environment::{EnvironmentDistribution, EnvironmentSettings, EnvironmentSource, MAX_ENVIRONMENT_ROWS};
 pub use mr::{DifferentialDevice, DifferentialMethod, MAX_RECEIVER_MARGIN, MrSettings};
 pub use quality::{
-    BUDGET_RANGE_MS, Choice, MAX_MEASURED_CHARS, MeasuredLevel, MeasuredLevels, Quality, ResolvedConfig, SceneAnalysis,
-    Technique, resolve, validate_budget_ms,
+    BUDGET_RANGE_MS, Choice, DEFAULT_ESTIMATOR_DRAWS, MAX_ESTIMATOR_DRAWS, MAX_MEASURED_CHARS, MeasuredLevel,
+    MeasuredLevels, Quality, ResolvedConfig, SceneAnalysis, Technique, resolve, technique, validate_budget_ms,
 };
 pub use rgbd::RgbdSettings;
 pub use scene_file::{SettingsDescription, validate_exposure};

@@ -86,6 +86,30 @@ pub enum Technique {
     Sparse,
     /// The exact reference: brute force with a shadow ray per pixel and VAL (docs/design.md §5).
     Exact,
+    /// The exact reference estimated on the GPU: per pixel, `draws` VALs drawn by their
+    /// unoccluded light, a shadow ray each (docs/design.md §5). Only where a scene's measured
+    /// level names it (`settings.levels`).
+    Estimator,
+}
+
+/// Draws per pixel of [`Technique::Estimator`] at most, and unless a measured level says.
+pub const MAX_ESTIMATOR_DRAWS: u32 = 256;
+pub const DEFAULT_ESTIMATOR_DRAWS: u32 = 32;
+
+/// The technique `quality` asks for on a scene with `settings`, and the estimator's draws
+/// when it is the estimator: the exact reference at `reference`, else what the level's
+/// measured parameters name, else the sparse method.
+pub fn technique(quality: Quality, settings: &SettingsDescription) -> (Technique, Option<u32>) {
+    if quality == Quality::Reference {
+        return (Technique::Exact, None);
+    }
+    match settings.levels.get(quality).and_then(|m| m.technique) {
+        Some(Technique::Estimator) => {
+            let draws = settings.levels.get(quality).and_then(|m| m.draws);
+            (Technique::Estimator, Some(draws.unwrap_or(DEFAULT_ESTIMATOR_DRAWS)))
+        }
+        _ => (Technique::Sparse, None),
+    }
 }
 
 /// One parameter of the resolved configuration: its value and why it has it.
@@ -159,6 +183,21 @@ impl MeasuredLevels {
             if let Some(sparse) = m.sparse {
                 sparse.apply(SparseShading::default()).validate(&format!("{at}.sparse"))?;
             }
+            if m.technique == Some(Technique::Exact) {
+                return Err(crate::scene::SceneError::field(
+                    format!("{at}.technique"),
+                    "must be \"sparse\" or \"estimator\": the exact reference is quality \"reference\"",
+                ));
+            }
+            if let Some(draws) = m.draws {
+                if m.technique != Some(Technique::Estimator) {
+                    return Err(crate::scene::SceneError::field(
+                        format!("{at}.draws"),
+                        "only with technique \"estimator\"",
+                    ));
+                }
+                crate::scene::validate::int_in(draws, 1, MAX_ESTIMATOR_DRAWS, &format!("{at}.draws"))?;
+            }
         }
         Ok(())
     }
@@ -182,6 +221,14 @@ pub struct MeasuredLevel {
     /// The sparse method's parameters, with `tuning.sparse`'s fields and ranges.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sparse: Option<SparseTuning>,
+    /// `"sparse"` or `"estimator"` (the exact reference estimated on the GPU, `draws` VALs
+    /// per pixel); `"exact"` is the `reference` level's. Renders, `compare` and the levels bench
+    /// follow it; streams and replays run the sparse method at every level.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub technique: Option<Technique>,
+    /// With `technique: "estimator"`: VALs drawn per pixel, in 1..=256 (default 32).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub draws: Option<u32>,
 }
 
 impl MeasuredLevel {
@@ -279,8 +326,12 @@ pub struct ResolvedConfig {
     /// The scene file's frame-time budget, ms: streams and `relume replay` hold their frame
     /// time under it (`renderer::budget`); a single render reports whether it met it.
     pub budget_ms: Option<f32>,
-    /// The technique the level asks for: `exact` for `reference`, else `sparse`.
+    /// The technique the level asks for: `exact` for `reference`, the level's measured
+    /// technique where the scene file names one, else `sparse`.
     pub method: Technique,
+    /// With the estimator: its draws per pixel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimator_draws: Option<u32>,
     pub analysis: SceneAnalysis,
     /// Every parameter the level or the scene file decided, with its reason.
     pub choices: Vec<Choice>,
@@ -450,7 +501,18 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
             "quality \"reference\" asks for the exact reference method (a shadow ray per pixel and VAL); \
              its sparse parameters are accurate's",
         ),
-        _ => choices.note("method", "\"sparse\"", "the sparse model-space method"),
+        _ => match technique(quality, settings) {
+            (Technique::Estimator, draws) => {
+                let draws = draws.unwrap_or(DEFAULT_ESTIMATOR_DRAWS);
+                let reason = format!(
+                    "measured on this scene: {}; {draws} VALs drawn per pixel by their unoccluded light, a \
+                     shadow ray each (the rule would choose \"sparse\")",
+                    choices.measured_text
+                );
+                choices.note(&format!("levels.{}.technique", quality.name()), "\"estimator\"", reason);
+            }
+            _ => choices.note("method", "\"sparse\"", "the sparse model-space method"),
+        },
     }
 
     let rsm_reason = if analysis.spot_light || analysis.meshes == 0 {

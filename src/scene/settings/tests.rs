@@ -239,6 +239,25 @@ fn measured_parameters_replace_the_levels_rule_below_the_tuning() {
     }
 }
 
+/// A measured level may name the GPU estimator: that level's technique and draws, with the
+/// measurement as the reason; the other levels keep theirs.
+#[test]
+fn a_measured_level_can_name_the_estimator() {
+    let settings = r#"{"quality": "accurate", "levels": {"accurate": {"measured": "0.05 against 0.29",
+        "technique": "estimator", "draws": 16}}}"#;
+    let accurate = load(&[ROOM, CUBE], settings);
+    assert_eq!((accurate.resolved.method, accurate.resolved.estimator_draws), (Technique::Estimator, Some(16)));
+    let reason = &choice(&accurate, "levels.accurate.technique").reason;
+    assert!(reason.starts_with("measured on this scene: 0.05 against 0.29; 16 VALs drawn"), "{reason}");
+    assert!(accurate.resolved.report().starts_with("quality accurate: technique estimator"));
+    for (quality, method) in [("balanced", Technique::Sparse), ("reference", Technique::Exact)] {
+        let other = load(&[ROOM, CUBE], &settings.replacen("accurate", quality, 1));
+        assert_eq!((other.resolved.method, other.resolved.estimator_draws), (method, None), "{quality}");
+    }
+    let default_draws = settings.replace(r#", "draws": 16"#, "");
+    assert_eq!(load(&[ROOM, CUBE], &default_draws).resolved.estimator_draws, Some(DEFAULT_ESTIMATOR_DRAWS));
+}
+
 /// A measured level is checked where the scene file is, each field named.
 #[test]
 fn measured_parameters_are_validated_naming_the_field() {
@@ -260,6 +279,14 @@ fn measured_parameters_are_validated_naming_the_field() {
     assert!(error(r#"{"reference": {"measured": "m"}}"#).contains("reference"));
     assert!(error(r#"{"fast": {"measured": "m", "visibility": "auto"}}"#).contains("auto"));
     assert!(error(r#"{"fast": {"measured": "m", "near_field": 2}}"#).contains("near_field"));
+    let exact = error(r#"{"accurate": {"measured": "m", "technique": "exact"}}"#);
+    assert!(exact.contains("settings.levels.accurate.technique"), "{exact}");
+    for draws in
+        [r#""technique": "estimator", "draws": 0"#, r#""technique": "estimator", "draws": 257"#, r#""draws": 8"#]
+    {
+        let e = error(&format!(r#"{{"balanced": {{"measured": "m", {draws}}}}}"#));
+        assert!(e.contains("settings.levels.balanced.draws"), "{draws}: {e}");
+    }
 }
 
 /// `balanced` resolves to the defaults every image and figure was made with: each knob the
