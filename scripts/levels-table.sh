@@ -50,7 +50,7 @@ done
     echo "parameter at a value another level takes on that scene (visibility, also \`off\`; the spot"
     echo "light's RSM; the fraction of sparse points; the near field; a parameter the scene file sets"
     echo "in its \`tuning\` is not varied), measured the same way against the same reference"
-    echo "(src/bench/levels.rs). A level is **dominated** when one of them, or another level, is more"
+    echo "(src/bench/levels/mod.rs). A level is **dominated** when one of them, or another level, is more"
     echo "accurate and at least 1.2x faster: on that scene the level is the wrong choice. Each"
     echo "scene's plot shows the levels, the candidates, their Pareto front and the estimator's curve."
     echo

@@ -103,10 +103,9 @@ pub fn technique(quality: Quality, settings: &SettingsDescription) -> (Technique
     if quality == Quality::Reference {
         return (Technique::Exact, None);
     }
-    match settings.levels.get(quality).and_then(|m| m.technique) {
-        Some(Technique::Estimator) => {
-            let draws = settings.levels.get(quality).and_then(|m| m.draws);
-            (Technique::Estimator, Some(draws.unwrap_or(DEFAULT_ESTIMATOR_DRAWS)))
+    match settings.levels.get(quality) {
+        Some(m) if m.technique == Some(Technique::Estimator) => {
+            (Technique::Estimator, Some(m.draws.unwrap_or(DEFAULT_ESTIMATOR_DRAWS)))
         }
         _ => (Technique::Sparse, None),
     }
@@ -502,8 +501,7 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
              its sparse parameters are accurate's",
         ),
         _ => match technique(quality, settings) {
-            (Technique::Estimator, draws) => {
-                let draws = draws.unwrap_or(DEFAULT_ESTIMATOR_DRAWS);
+            (Technique::Estimator, Some(draws)) => {
                 let reason = format!(
                     "measured on this scene: {}; {draws} VALs drawn per pixel by their unoccluded light, a \
                      shadow ray each (the rule would choose \"sparse\")",

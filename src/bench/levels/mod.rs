@@ -22,7 +22,6 @@ use super::BenchError;
 use super::compare::{ExactOptions, ExactReference, exact_reference, rel_rmse_without_worst};
 use super::equal_error::{self, AtEqualError, EqualErrorCurve};
 use crate::gpu::Gpu;
-use crate::gpu::references::estimator::DEFAULT_SAMPLES;
 use crate::renderer::Rendered;
 use crate::renderer::estimate::{ErrorEstimate, EstimateOptions, Estimator};
 use crate::renderer::{Method as RenderMethod, Renderer};
@@ -121,6 +120,24 @@ pub struct CandidateRow {
     pub stages_ms: Vec<(String, f64)>,
 }
 
+impl CandidateRow {
+    /// The row of configuration `name`, `scene` as measured in `m` (with the GPU estimator's
+    /// `draws`, or the sparse method), the figures also printed as it goes.
+    fn of(name: String, scene: &Scene, draws: Option<u32>, m: &Measured) -> CandidateRow {
+        eprintln!("{name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
+        CandidateRow {
+            name,
+            knobs: Knobs::of(scene),
+            method: if draws.is_some() { RenderMethod::Estimator } else { RenderMethod::Sparse },
+            draws,
+            rel_rmse_vs_exact: m.error,
+            rel_rmse_without_worst_1pct: m.without_worst,
+            ms: m.ms,
+            stages_ms: m.frame.timings.stages.clone(),
+        }
+    }
+}
+
 /// `levels.json`: the rows and what they were measured against.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct LevelsReport {
@@ -203,17 +220,7 @@ pub fn levels(
     let mut measured = measured;
     for &draws in options.gpu_estimator {
         let m = measure(gpu, &finest, (w, h), &reference, Method::Estimator(draws))?;
-        eprintln!("GPU estimator, {draws} draws: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
-        measured.push(CandidateRow {
-            name: format!("GPU estimator, {draws} draws"),
-            knobs: Knobs::of(&finest),
-            method: crate::renderer::Method::Estimator,
-            draws: Some(draws),
-            rel_rmse_vs_exact: m.error,
-            rel_rmse_without_worst_1pct: m.without_worst,
-            ms: m.ms,
-            stages_ms: m.frame.timings.stages.clone(),
-        });
+        measured.push(CandidateRow::of(format!("GPU estimator, {draws} draws"), &finest, Some(draws), &m));
     }
     mark_dominated(&mut rows[..3], &measured);
     let at = format!("{w}x{h} on {}", gpu.adapter_name());
@@ -370,17 +377,7 @@ fn measure_candidates(
         let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(base))
             .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
         let m = measure(gpu, &scene, size, reference, Method::Sparse)?;
-        eprintln!("candidate {name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
-        measured.push(CandidateRow {
-            name,
-            knobs: Knobs::of(&scene),
-            method: crate::renderer::Method::Sparse,
-            draws: None,
-            rel_rmse_vs_exact: m.error,
-            rel_rmse_without_worst_1pct: m.without_worst,
-            ms: m.ms,
-            stages_ms: m.frame.timings.stages.clone(),
-        });
+        measured.push(CandidateRow::of(name, &scene, None, &m));
     }
     Ok(measured)
 }
@@ -522,7 +519,7 @@ fn level_row(
     curve: Option<&EqualErrorCurve>,
 ) -> Result<LevelRow, BenchError> {
     let method = match (scene.resolved.method, scene.resolved.estimator_draws) {
-        (crate::scene::Technique::Estimator, draws) => Method::Estimator(draws.unwrap_or(DEFAULT_SAMPLES)),
+        (crate::scene::Technique::Estimator, Some(draws)) => Method::Estimator(draws),
         _ => Method::Sparse,
     };
     let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference, method)?;
@@ -628,213 +625,4 @@ fn candidates_markdown(report: &LevelsReport) -> String {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn knobs(visibility: Occlusion, rsm_resolution: u32, points: f32, near_field: f32, subdivision: f32) -> Knobs {
-        Knobs { visibility, rsm_resolution, points, near_field, subdivision }
-    }
-
-    fn levels() -> Vec<(Quality, Knobs)> {
-        vec![
-            (Quality::Fast, knobs(Occlusion::Disks, 64, 0.5, 0.0, 4.0)),
-            (Quality::Balanced, knobs(Occlusion::Disks, 128, 1.0, 0.0, 2.0)),
-            (Quality::Accurate, knobs(Occlusion::Clusters, 128, 1.0, 4.0, 2.0)),
-        ]
-    }
-
-    /// Each level's one-parameter neighbours over the values the levels take, without the
-    /// levels themselves and without repeats: accurate's disks are balanced with the near field,
-    /// its near field off is balanced with clusters, both already listed from balanced.
-    #[test]
-    fn candidates_are_one_parameter_from_a_level_and_never_repeat() {
-        let c = candidate_knobs(&levels(), &serde_json::json!({}), true);
-        let names: Vec<&str> = c.iter().map(|(_, n, _)| n.as_str()).collect();
-        assert_eq!(
-            names,
-            [
-                "fast + visibility=off",
-                "fast + visibility=clusters",
-                "fast + rsm_resolution=128",
-                "fast + sparse.points=1",
-                "fast + sparse.near_field=4",
-                "balanced + visibility=off",
-                "balanced + visibility=clusters",
-                "balanced + rsm_resolution=64",
-                "balanced + sparse.points=0.5",
-                "balanced + sparse.near_field=4",
-                "accurate + visibility=off",
-                "accurate + rsm_resolution=64",
-                "accurate + sparse.points=0.5",
-            ]
-        );
-        for (base, _, k) in &c {
-            let (_, from) = levels().into_iter().find(|(l, _)| l == base).unwrap();
-            let differ = [
-                k.visibility != from.visibility,
-                k.rsm_resolution != from.rsm_resolution,
-                k.points != from.points,
-                k.near_field != from.near_field,
-                k.subdivision != from.subdivision,
-            ];
-            assert_eq!(differ.iter().filter(|d| **d).count(), 1, "{k:?} from {from:?}");
-        }
-    }
-
-    /// A parameter the scene file's tuning sets, or the RSM of a scene without a spot light,
-    /// is not varied.
-    #[test]
-    fn candidates_leave_what_the_scene_file_sets() {
-        let tuning = serde_json::json!({"rsm_resolution": 32, "visibility": "off", "sparse": {"near_field": 2}});
-        let c = candidate_knobs(&levels(), &tuning, true);
-        assert!(c.iter().all(|(_, n, _)| n.contains("sparse.points")), "{c:?}");
-        let c = candidate_knobs(&levels(), &serde_json::json!({}), false);
-        assert!(!c.iter().any(|(_, n, _)| n.contains("rsm_resolution")), "{c:?}");
-    }
-
-    /// The plot takes the levels but `reference`, every candidate, and the estimator's curve,
-    /// from the JSON the bench wrote.
-    #[test]
-    fn the_plot_takes_levels_candidates_and_the_curve_from_the_json() {
-        let report = serde_json::json!({
-            "scene": "room", "width": 64, "height": 48, "adapter": "cpu",
-            "levels": [
-                {"level": "fast", "rel_rmse_vs_exact": 0.2, "ms": 10.0},
-                {"level": "balanced", "rel_rmse_vs_exact": 0.1, "ms": 20.0},
-                {"level": "reference", "rel_rmse_vs_exact": 0.0, "ms": 900.0},
-            ],
-            "candidates": [{"name": "fast + sparse.points=1", "rel_rmse_vs_exact": 0.15, "ms": 15.0}],
-            "equal_error_curve": {"points": [{"ms": 100.0, "rel_rmse": 0.3}, {"ms": 200.0, "rel_rmse": 0.2}]},
-        });
-        let (title, points, curve) = plot_points(&report);
-        assert!(title.starts_with("room at 64x48"), "{title}");
-        let names: Vec<(&str, bool)> = points.iter().map(|p| (p.name.as_str(), p.level)).collect();
-        assert_eq!(names, [("fast", true), ("balanced", true), ("fast + sparse.points=1", false)]);
-        assert_eq!((points[2].rel_rmse, points[2].ms), (0.15, 15.0));
-        assert_eq!(curve, [(100.0, 0.3), (200.0, 0.2)]);
-        let (_, points, curve) = plot_points(&serde_json::json!({}));
-        assert!(points.is_empty() && curve.is_empty());
-    }
-
-    fn row(level: Quality, knobs: Knobs, error: f64, ms: f64, dominated_by: &[&str]) -> LevelRow {
-        LevelRow {
-            level,
-            rel_rmse_vs_exact: error,
-            rel_rmse_without_worst_1pct: error,
-            error_estimate: None,
-            estimate_ratio: None,
-            ms,
-            stages_ms: Vec::new(),
-            estimator_ms_at_equal_error: None,
-            at_equal_error: None,
-            resolved: ResolvedConfig::default(),
-            knobs,
-            dominated_by: dominated_by.iter().map(|d| (*d).to_owned()).collect(),
-        }
-    }
-
-    fn candidate(name: &str, knobs: Knobs, error: f64, ms: f64) -> CandidateRow {
-        CandidateRow {
-            name: name.to_owned(),
-            knobs,
-            method: RenderMethod::Sparse,
-            draws: None,
-            rel_rmse_vs_exact: error,
-            rel_rmse_without_worst_1pct: error,
-            ms,
-            stages_ms: Vec::new(),
-        }
-    }
-
-    /// A dominated level is suggested as its most accurate dominating configuration, written as
-    /// what differs from the level (over the scene file's entry, whose other fields stay);
-    /// a level not dominated keeps its entry; a scene loaded with the suggestion is that
-    /// configuration at that level, and passes validation.
-    #[test]
-    fn a_dominated_level_is_suggested_as_its_most_accurate_dominating_configuration() {
-        let l = levels();
-        let rows = [
-            row(Quality::Fast, l[0].1, 0.20, 100.0, &[]),
-            row(
-                Quality::Balanced,
-                l[1].1,
-                0.10,
-                500.0,
-                &["fast + visibility=clusters", "balanced + rsm_resolution=64"],
-            ),
-            row(Quality::Accurate, l[2].1, 0.05, 2000.0, &[]),
-        ];
-        let candidates = [
-            candidate("fast + visibility=clusters", knobs(Occlusion::Clusters, 64, 0.5, 0.0, 4.0), 0.08, 400.0),
-            candidate("balanced + rsm_resolution=64", knobs(Occlusion::Disks, 64, 1.0, 0.0, 2.0), 0.099, 300.0),
-            candidate("balanced + sparse.points=0.5", knobs(Occlusion::Disks, 128, 0.5, 0.0, 2.0), 0.07, 450.0),
-        ];
-        let existing = serde_json::json!({"balanced": {"measured": "before", "sparse": {"kernel": "paper"}},
-            "accurate": {"measured": "kept", "rsm_resolution": 64}});
-        let s = suggest_levels(&rows, &candidates, &existing, true, "64x64 on cpu");
-        let balanced = &s["balanced"];
-        assert_eq!(balanced["visibility"], "clusters");
-        assert_eq!(balanced["rsm_resolution"], 64);
-        assert_eq!(balanced["sparse"], serde_json::json!({"kernel": "paper", "points": 0.5, "subdivision": 4.0}));
-        let text = balanced["measured"].as_str().unwrap();
-        assert!(
-            text.starts_with("`fast + visibility=clusters`: rel RMSE 0.0800 at 400 ms, the level's own 0.1000 at 500")
-        );
-        assert!(text.contains("64x64 on cpu"), "{text}");
-        assert_eq!(s["accurate"], existing["accurate"]);
-        assert!(s.get("fast").is_none());
-        // Without a spot light the RSM is left out.
-        let s = suggest_levels(&rows, &candidates, &serde_json::Value::Null, false, "here");
-        assert!(s["balanced"].get("rsm_resolution").is_none(), "{s}");
-        // Nothing dominated: nothing suggested.
-        let free = [row(Quality::Fast, l[0].1, 0.2, 100.0, &[])];
-        assert_eq!(suggest_levels(&free, &candidates, &serde_json::Value::Null, true, "here"), serde_json::json!({}));
-
-        let suggested = suggest_levels(&rows, &candidates, &existing, true, "64x64 on cpu");
-        let settings: crate::scene::SettingsDescription =
-            serde_json::from_value(serde_json::json!({"levels": suggested})).expect("the suggestion parses");
-        settings.validate("settings").expect("and is valid");
-        let (resolved, _) = crate::scene::settings::resolve(Quality::Balanced, &Default::default(), &settings);
-        assert_eq!((resolved.rsm_resolution, resolved.sparse.points, resolved.sparse.subdivision), (64, 0.5, 4.0));
-        assert_eq!(resolved.visibility.mode, Occlusion::Clusters);
-    }
-
-    /// The GPU estimator dominating a level makes it that level's technique, with its draws
-    /// and none of the sparse parameters; a sparse configuration suggested later takes it back.
-    #[test]
-    fn a_dominating_estimator_becomes_the_levels_technique() {
-        let l = levels();
-        let rows = [row(Quality::Accurate, l[2].1, 0.29, 12000.0, &["GPU estimator, 8 draws"])];
-        let mut estimator = candidate("GPU estimator, 8 draws", l[2].1, 0.10, 9000.0);
-        estimator.method = RenderMethod::Estimator;
-        estimator.draws = Some(8);
-        let existing = serde_json::json!({"accurate": {"measured": "before", "rsm_resolution": 64}});
-        let s = suggest_levels(&rows, &[estimator], &existing, true, "here");
-        let accurate = &s["accurate"];
-        assert_eq!(
-            (&accurate["technique"], &accurate["draws"]),
-            (&serde_json::json!("estimator"), &serde_json::json!(8))
-        );
-        assert!(accurate.get("rsm_resolution").is_none(), "{accurate}");
-        let settings: crate::scene::SettingsDescription =
-            serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
-        settings.validate("settings").expect("and is valid");
-        let technique = crate::scene::settings::technique(Quality::Accurate, &settings);
-        assert_eq!(technique, (crate::scene::Technique::Estimator, Some(8)));
-        // A sparse configuration dominating it later: the technique goes.
-        let rows = [row(Quality::Accurate, l[2].1, 0.10, 9000.0, &["accurate + sparse.points=0.5"])];
-        let sparse =
-            candidate("accurate + sparse.points=0.5", knobs(Occlusion::Clusters, 128, 0.5, 4.0, 2.0), 0.09, 5000.0);
-        let s = suggest_levels(&rows, &[sparse], &s, true, "here");
-        assert!(s["accurate"].get("technique").is_none() && s["accurate"].get("draws").is_none(), "{s}");
-        assert_eq!(s["accurate"]["sparse"]["points"], 0.5);
-    }
-
-    #[test]
-    fn dominance_needs_both_lower_error_and_the_speedup() {
-        assert!(dominates((0.10, 100.0), (0.11, 120.0)));
-        assert!(!dominates((0.10, 100.0), (0.11, 119.0)), "not 1.2x faster");
-        assert!(!dominates((0.11, 10.0), (0.11, 120.0)), "not more accurate");
-        assert!(!dominates((0.10, 100.0), (0.10, 100.0)), "itself");
-    }
-}
+mod tests;
