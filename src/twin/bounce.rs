@@ -15,8 +15,9 @@
 use super::bvh::{ShadowTraversal, TraceBvh};
 use super::exact_cpu::RAY_OFFSET;
 use super::{Val, val_geometry_sided};
+use super::{pcg_hash, unit_float};
 use crate::gpu::visibility::disks::twin::{Combine, Disc, light_sphere, visibility};
-use crate::gpu::visibility::ism::twin::{flux_picks, pcg_hash, val_weight};
+use crate::gpu::visibility::ism::twin::{flux_picks, val_weight};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -27,10 +28,6 @@ pub struct BouncePoint {
     pub triangle: u32,
     pub barycentrics: Vec2,
     pub area: f32,
-}
-
-fn unit_float(h: u32) -> f32 {
-    (h >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
 /// `count` points spread over the triangles (`indices` into `positions`, world space) by area,

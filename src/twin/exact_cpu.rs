@@ -18,7 +18,7 @@
 //! otherwise.
 
 use super::bvh::{ShadowTraversal, TraceBvh};
-use super::{Material, Val, luminance, val_radiance_sided, view_direction};
+use super::{Material, Val, luminance, pcg_hash, val_radiance_sided, view_direction};
 use crate::image::LinearImage;
 use glam::{Mat4, Vec3, Vec4};
 use rand::{Rng, SeedableRng};
@@ -106,17 +106,10 @@ pub enum ValSampling {
     Systematic { samples: u32, seed: u32 },
 }
 
-/// The PCG hash of Jarzynski and Olano (2020), as `estimator.wgsl`'s `pcg_hash`.
-pub fn pcg_hash(v: u32) -> u32 {
-    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
-    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
-    (word >> 22) ^ word
-}
-
 /// Pixel `pixel`'s offset `xi` in [0, 1) of the systematic draws with `seed` (24 bits), as
 /// `estimator.wgsl`'s `pixel_offset`.
 pub fn pixel_offset(pixel: u32, seed: u32) -> f32 {
-    (pcg_hash(pixel ^ pcg_hash(seed)) >> 8) as f32 * (1.0 / 16_777_216.0)
+    super::unit_float(pcg_hash(pixel ^ pcg_hash(seed)))
 }
 
 /// Thresholds `(m + xi) step`, `m < samples`, below `sum` (`estimator.wgsl`'s).

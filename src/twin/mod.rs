@@ -53,6 +53,18 @@ pub fn near_field_weight(d: f32, radius: f32) -> f32 {
     1.0 - t * t * (3.0 - 2.0 * t)
 }
 
+/// The PCG hash of Jarzynski and Olano (2020), as `shader/common.wgsl`'s `pcg_hash`.
+pub fn pcg_hash(v: u32) -> u32 {
+    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// A hash's top 24 bits as a float in [0, 1), as `shader/common.wgsl`'s `unit_float`.
+pub fn unit_float(h: u32) -> f32 {
+    (h >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
 /// Luminance of a linear RGB triple (Rec. 709 weights); defined beside the images it is
 /// measured on.
 pub use crate::image::luminance;

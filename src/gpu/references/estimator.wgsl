@@ -29,16 +29,9 @@
 // Per pixel: (total, running sum before the next VAL, thresholds passed, unused).
 @group(0) @binding(8) var<storage, read_write> walk: array<vec4<f32>>;
 
-// `twin::exact_cpu::pcg_hash`: the PCG hash of Jarzynski and Olano (2020).
-fn pcg_hash(v: u32) -> u32 {
-    let state = v * 747796405u + 2891336453u;
-    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
-
 // `twin::exact_cpu::pixel_offset`: the pixel's xi in [0, 1), 24 bits.
 fn pixel_offset(pixel: u32) -> f32 {
-    return f32(pcg_hash(pixel ^ pcg_hash(SEED)) >> 8u) * (1.0 / 16777216.0);
+    return unit_float(pcg_hash(pixel ^ pcg_hash(SEED)));
 }
 
 // Thresholds (m + xi) step, m < SAMPLES, below `sum`.

@@ -110,6 +110,18 @@ struct Surface {
     geometric: vec3<f32>,
 }
 
+// `twin::pcg_hash`: the PCG hash of Jarzynski and Olano (2020).
+fn pcg_hash(v: u32) -> u32 {
+    let state = v * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// `twin::unit_float`: a hash's top 24 bits as a float in [0, 1).
+fn unit_float(h: u32) -> f32 {
+    return f32(h >> 8u) * (1.0 / 16777216.0);
+}
+
 fn luminance(c: vec3<f32>) -> f32 {
     return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
 }

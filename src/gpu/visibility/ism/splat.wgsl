@@ -13,16 +13,6 @@
 @group(0) @binding(1) var<storage, read> triangle_cdf: array<f32>;
 @group(0) @binding(2) var<storage, read_write> ism_atlas: array<atomic<u32>>;
 
-fn pcg_hash(v: u32) -> u32 {
-    let state = v * 747796405u + 2891336453u;
-    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
-
-fn unit_float(h: u32) -> f32 {
-    return f32(h >> 8u) * (1.0 / 16777216.0);
-}
-
 // Point j of map k, in the scene's world frame.
 fn ism_point(k: u32, j: u32) -> vec3<f32> {
     let h0 = pcg_hash((k * ISM_POINTS + j) ^ POINT_SEED);

@@ -6,7 +6,7 @@
 use super::super::clusters::twin::{
     CLUSTER_NEAR_FRACTION, Cluster, KmeansParams, MapFrame, disc_texel, kmeans_step, map_project, val_is_lit,
 };
-use crate::twin::{Val, luminance};
+use crate::twin::{Val, luminance, pcg_hash, unit_float};
 use glam::Vec3;
 
 /// VALs per block of the flux sums (one invocation sums a block, one scans the blocks).
@@ -132,17 +132,6 @@ pub fn triangle_cdf(positions: &[Vec3], indices: &[u32], density: &[f32]) -> Vec
             sum as f32
         })
         .collect()
-}
-
-/// WGSL `pcg_hash`.
-pub fn pcg_hash(v: u32) -> u32 {
-    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
-    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
-    (word >> 22) ^ word
-}
-
-fn unit_float(h: u32) -> f32 {
-    (h >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
 /// Point `j` of map `k` (WGSL `ism_point`).
