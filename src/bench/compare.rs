@@ -540,6 +540,7 @@ fn exact_comparison(
         let sparse = renderer.render(gpu, Method::Sparse, w, h)?;
         if let Some(dir) = images {
             write_png(&sparse.indirect, &dir.join(format!("indirect_sparse_occlusion_{key}.png")), exposure)?;
+            write_exr(&sparse.indirect, &dir.join(format!("indirect_sparse_occlusion_{key}.exr")))?;
         }
         let visibility_stages = renderer.visibility_stages();
         // `off` has no stage of its own: 0, not the empty sum's -0.

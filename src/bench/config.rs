@@ -76,11 +76,12 @@ pub struct ClusterOverrides {
     pub shadow_map_resolution: Option<u32>,
     pub soft: Option<SoftShadows>,
     pub shadow_maps: Option<ShadowMapSource>,
+    pub rays: Option<u32>,
 }
 
 impl ClusterOverrides {
     /// No override.
-    pub const NONE: Self = Self { count: None, shadow_map_resolution: None, soft: None, shadow_maps: None };
+    pub const NONE: Self = Self { count: None, shadow_map_resolution: None, soft: None, shadow_maps: None, rays: None };
 
     /// `base` with these overrides.
     pub fn apply(&self, base: &ClusterSettings) -> ClusterSettings {
@@ -89,6 +90,7 @@ impl ClusterOverrides {
             shadow_map_resolution: self.shadow_map_resolution.unwrap_or(base.shadow_map_resolution),
             soft: self.soft.unwrap_or(base.soft),
             shadow_maps: self.shadow_maps.unwrap_or(base.shadow_maps),
+            rays: self.rays.unwrap_or(base.rays),
             ..*base
         }
     }
@@ -136,6 +138,7 @@ pub(super) fn maps_name(m: ShadowMapSource) -> &'static str {
     match m {
         ShadowMapSource::Raster => "raster",
         ShadowMapSource::Ism => "ism",
+        ShadowMapSource::Rays => "rays",
     }
 }
 
@@ -206,6 +209,6 @@ pub fn describe(c: &Config) -> String {
             v(o.shadow_map_resolution.map(|n| n.to_string())),
             v(o.soft.map(|s| soft_name(s).to_owned())),
             v(o.shadow_maps.map(|m| maps_name(m).to_owned()))
-        )
+        ) + &o.rays.map_or(String::new(), |r| format!(", {r} rays"))
     }
 }

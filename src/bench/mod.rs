@@ -102,7 +102,8 @@ mod tests {
             ("cluster_count=257", "--sweep cluster_count: `257`: must be in 1..=256"),
             ("cluster_resolution=8", "--sweep cluster_resolution: `8`: must be in 16..=1024"),
             ("cluster_soft=soft", "--sweep cluster_soft: `soft`: expected `pcss`, `pcf` or `hard`"),
-            ("cluster_maps=voxels", "--sweep cluster_maps: `voxels`: expected `raster` or `ism`"),
+            ("cluster_maps=voxels", "--sweep cluster_maps: `voxels`: expected `raster`, `ism` or `rays`"),
+            ("cluster_rays=0", "--sweep cluster_rays: `0`: must be in 1..=64"),
         ] {
             let e = Sweep::parse(&args(&[arg])).unwrap_err().to_string();
             assert!(e.starts_with(wanted), "{arg}: {e}");

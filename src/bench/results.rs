@@ -191,7 +191,7 @@ pub fn brute_force_ism_csv(results: &BenchResults) -> String {
 
 /// The CSV's values of the research knobs `c` overrides, in [`super::TUNING_AXES`]' order (empty
 /// where it keeps the level's value).
-fn tuning_values(c: &Config) -> [String; 14] {
+fn tuning_values(c: &Config) -> [String; 15] {
     let n = |o: Option<u32>| o.map_or(String::new(), |n| n.to_string());
     let o = &c.clusters;
     [
@@ -203,6 +203,7 @@ fn tuning_values(c: &Config) -> [String; 14] {
         n(o.shadow_map_resolution),
         o.soft.map_or(String::new(), |s| soft_name(s).to_owned()),
         o.shadow_maps.map_or(String::new(), |m| maps_name(m).to_owned()),
+        n(o.rays),
         n(c.near_field),
         c.glossy_interpolation.map_or(String::new(), |g| glossy_interpolation_name(g).to_owned()),
         c.adaptive_percent.map_or(String::new(), |a| (f64::from(a) / 100.0).to_string()),

@@ -40,11 +40,13 @@ pub struct Sweep {
     pub cluster_resolution: Option<Vec<u32>>,
     pub cluster_soft: Option<Vec<SoftShadows>>,
     pub cluster_maps: Option<Vec<ShadowMapSource>>,
+    /// Shadow rays per (sparse point, cluster): measured with `cluster_maps` `rays`.
+    pub cluster_rays: Option<Vec<u32>>,
 }
 
 /// The axes `--sweep` accepts that override one of the level's research knobs (`tuning`); the
 /// bench's CSV has a column of each, named as the axis, in this order.
-pub const TUNING_AXES: [&str; 14] = [
+pub const TUNING_AXES: [&str; 15] = [
     "ism_count",
     "ism_resolution",
     "ism_points",
@@ -53,6 +55,7 @@ pub const TUNING_AXES: [&str; 14] = [
     "cluster_resolution",
     "cluster_soft",
     "cluster_maps",
+    "cluster_rays",
     "near_field",
     "glossy_interpolation",
     "adaptive",
@@ -153,8 +156,12 @@ impl Sweep {
                     set_axis(&mut sweep.cluster_soft, &flag, &values, |v| named(v, &all, soft_name))?;
                 }
                 "cluster_maps" => {
-                    let all = [ShadowMapSource::Raster, ShadowMapSource::Ism];
+                    let all = [ShadowMapSource::Raster, ShadowMapSource::Ism, ShadowMapSource::Rays];
                     set_axis(&mut sweep.cluster_maps, &flag, &values, |v| named(v, &all, maps_name))?;
+                }
+                "cluster_rays" => {
+                    let max = crate::scene::MAX_CLUSTER_RAYS;
+                    set_axis(&mut sweep.cluster_rays, &flag, &values, |v| int_in(v, 1, max))?
                 }
                 "neighbours" | "neighbors" => {
                     let max = crate::scene::MAX_NEIGHBOURS;
@@ -274,6 +281,9 @@ impl Sweep {
             }),
             each(&self.cluster_soft, |v| with(ClusterOverrides { soft: Some(v), ..base.clusters })),
             each(&self.cluster_maps, |v| with(ClusterOverrides { shadow_maps: Some(v), ..base.clusters })),
+            each(&self.cluster_rays, |v| {
+                with(ClusterOverrides { shadow_maps: Some(ShadowMapSource::Rays), rays: Some(v), ..base.clusters })
+            }),
         ];
         alone.into_iter().flatten().for_each(push);
         out
@@ -290,6 +300,7 @@ impl Sweep {
         vary(&mut out, self.cluster_resolution.as_deref(), |c, v| c.clusters.shadow_map_resolution = Some(v));
         vary(&mut out, self.cluster_soft.as_deref(), |c, v| c.clusters.soft = Some(v));
         vary(&mut out, self.cluster_maps.as_deref(), |c, v| c.clusters.shadow_maps = Some(v));
+        vary(&mut out, self.cluster_rays.as_deref(), |c, v| c.clusters.rays = Some(v));
         out
     }
 }

@@ -32,7 +32,9 @@ pub(super) fn built_for<K: PartialEq, T>(
 /// settings or [`super::Renderer::release_reference_passes`] drops it.
 #[derive(Default)]
 pub(super) struct Indirect {
-    pub(super) sparse: Option<Built<SparseSettings, SparseMethod>>,
+    /// Keyed by its settings and, when its visibility traces rays through a BVH of the placed
+    /// geometry (`clusters.shadow_maps: "rays"`), the placement generation (else 0).
+    pub(super) sparse: Option<Built<(SparseSettings, u64), SparseMethod>>,
     /// Keyed by `glossy`.
     pub(super) brute_force: Option<Built<bool, BruteForce>>,
     /// Keyed by `glossy` and the ISM settings.

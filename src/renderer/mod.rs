@@ -192,7 +192,8 @@ impl Renderer {
 
     /// Place mesh `i` of `scene` (the scene this renderer was built from) by
     /// `model_to_world[i]` from the next frame on: the vertices and the sparse points, which
-    /// live in model space, move with it; nothing is rebuilt but the exact reference's BVH.
+    /// live in model space, move with it; nothing is rebuilt but the BVHs (the exact reference's,
+    /// and the sparse method's with `clusters.shadow_maps: "rays"`).
     /// Nothing happens when the placement is unchanged.
     pub fn place_meshes(&mut self, gpu: &Gpu, scene: &Scene, model_to_world: &[Mat4]) {
         if model_to_world == self.placement.as_slice() {
@@ -627,8 +628,13 @@ impl Renderer {
                         near_radius: self.near_radius,
                         glossy_interpolation: shading.glossy_interpolation,
                     };
-                    built_for(&mut self.indirect.sparse, settings, || SparseMethod::new(gpu, scene, settings))?
-                        .fit(gpu, scene, capacity)?;
+                    let rays = settings.visibility.mode == scene::Occlusion::Clusters
+                        && settings.visibility.clusters.shadow_maps == scene::ShadowMapSource::Rays;
+                    let generation = if rays { self.placement_generation } else { 0 };
+                    built_for(&mut self.indirect.sparse, (settings, generation), || {
+                        SparseMethod::new(gpu, scene, settings)
+                    })?
+                    .fit(gpu, scene, capacity)?;
                 }
                 Method::BruteForce => {
                     built_for(&mut self.indirect.brute_force, glossy, || BruteForce::new(gpu, scene, glossy, None))?

@@ -68,8 +68,8 @@ pub use mesh::{Mesh, PlacedMesh, SparsePoints};
 pub use settings::{
     ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, ClusterMethod, ClusterSettings, DEFAULT_SUBDIVISION, DifferentialDevice,
     DirectSettings, DirectShadows, EnvironmentDistribution, EnvironmentSettings, EnvironmentSource,
-    GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS,
-    MAX_DIRECT_LIGHTS, MAX_ENVIRONMENT_ROWS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
+    GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTER_RAYS,
+    MAX_CLUSTERS, MAX_DIRECT_LIGHTS, MAX_ENVIRONMENT_ROWS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
     MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MrSettings, NEAR_FIELD_RANGE, Occlusion, OcclusionRule,
     OcclusionSetting, POINT_VIEWS, Quality, ResolvedConfig, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE,
     SecondBounceSettings, ShadowMapSource, SoftShadows, SparseShading, Technique, VisibilitySettings,

@@ -156,11 +156,16 @@ impl FlatScene {
                 world.zip(placed.occluder_radii()).zip(&sparse.triangles).enumerate()
             {
                 let material = mesh.triangle_materials[*triangle as usize] as usize;
+                let corners = mesh.triangles[*triangle as usize]
+                    .map(|v| Vec3::from(flat.vertices[(vertex_base + v) as usize].position));
+                let face = (corners[1] - corners[0]).cross(corners[2] - corners[0]).normalize_or(n);
                 let point = RawSparsePoint {
                     position: p.into(),
                     occluder_radius: radius,
                     normal: n.into(),
                     exponent: scene.materials[material].exponent,
+                    geometric: super::oriented_face_normal(face, n).into(),
+                    pad: 0.0,
                 };
                 if i < base { points[at[i] as usize] = point } else { candidates.push(point) }
             }

@@ -66,6 +66,10 @@ pub struct RawSparsePoint {
     pub occluder_radius: f32,
     pub normal: [f32; 3],
     pub exponent: f32,
+    /// The unit face normal of its triangle, on the side of `normal` (`twin::oriented_face_normal`):
+    /// the normal its shadow rays leave along (docs/design.md §3).
+    pub geometric: [f32; 3],
+    pub pad: f32,
 }
 
 /// WGSL `Gathered`: one lobe's gathered irradiance (W/m²) and averaged position (m).

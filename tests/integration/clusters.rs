@@ -126,7 +126,14 @@ pub(super) fn assert_lookup_and_gather_match(
     assert!(differ * 100 <= n, "{differ} of {n} visibilities differ");
     assert!(sum_diff / (n as f32) < 1e-3, "mean difference {}", sum_diff / n as f32);
     assert!(shadowed > 0, "the bunny must shadow some sparse points from some group");
+    assert_gather_applies_table(renderer, gpu, vals, r);
+}
 
+/// The gather as every VAL's irradiance times its group's entry of the GPU's table (1e-3
+/// relative).
+fn assert_gather_applies_table(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals: &[Val], r: &ClusterReadback) {
+    let flat = &renderer.scene.flat;
+    let m = r.clusters.len();
     let mid = renderer.read_sparse_intermediates(gpu).unwrap();
     let expected: Vec<Vec3> = flat
         .sparse_points
@@ -144,6 +151,76 @@ pub(super) fn assert_lookup_and_gather_match(
     for (i, e) in expected.iter().enumerate() {
         assert_close(mid.gathered_diffuse[i].irradiance.into(), *e, 1e-3, scale, 1e-9, &format!("E at {i}"));
     }
+}
+
+/// Clusters looked up by shadow rays (`shadow_maps: "rays"`): the member lists hold each
+/// cluster's VALs as k-means assigned them; every (sparse point, cluster) entry is the twin's on
+/// the GPU's own lists (1 % may differ, a ray grazing an edge: the twins' traversals round
+/// differently; mean difference under 1e-3), some shadowed; the gather applies them. With many
+/// rays to small clusters the sparse points' mean irradiance is exact visibility's within 1 %.
+#[test]
+fn clusters_by_rays_match_cpu_twins() {
+    let (clusters, rays) = (12u32, 8u32);
+    let scene =
+        clusters_scene(&format!(r#"{{"count": {clusters}, "iterations": 3, "shadow_maps": "rays", "rays": {rays}}}"#));
+    let gpu = gpu();
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    let at = stages.iter().position(|s| *s == "clustering").expect("a clustering stage");
+    let want = ["clustering", "cluster_ray_members", "cluster_ray_visibility", "gather"];
+    assert_eq!(&stages[at..at + 4], &want[..], "{stages:?}");
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let r = readback(&renderer, &gpu, vals.len());
+    let lists = r.members.clone().expect("member lists with rays");
+    let expected = twin::member_lists(&r.group_of_val, clusters);
+    assert_eq!(lists.starts, expected.starts);
+    for k in 0..clusters as usize {
+        let mut got = lists.of(k).to_vec();
+        got.sort_unstable();
+        assert_eq!(got, expected.of(k), "cluster {k}'s members");
+    }
+
+    let flat = &renderer.scene.flat;
+    let occluders = occluders(flat);
+    let m = clusters as usize;
+    let (mut differ, mut sum_diff, mut shadowed) = (0, 0.0, 0);
+    for (i, p) in flat.sparse_points.iter().enumerate() {
+        for k in 0..m {
+            let (x, n, g) = (Vec3::from(p.position), Vec3::from(p.normal), Vec3::from(p.geometric));
+            let cpu = twin::ray_visibility(i as u32, k as u32, x, n, g, &lists, &vals, &occluders, rays, clusters);
+            let gpu = r.visibility[i * m + k];
+            let d = (cpu - gpu).abs();
+            sum_diff += d;
+            differ += usize::from(d > 1e-3);
+            shadowed += usize::from(gpu < 0.5);
+        }
+    }
+    let n = flat.sparse_points.len() * m;
+    assert!(differ * 100 <= n, "{differ} of {n} visibilities differ");
+    assert!(sum_diff / (n as f32) < 1e-3, "mean difference {}", sum_diff / n as f32);
+    assert!(shadowed > 0, "the bunny must shadow some sparse points from some cluster");
+    assert_gather_applies_table(&renderer, &gpu, &vals, &r);
+
+    // Many rays to small clusters: each entry nearly its cluster's light-weighted visible share,
+    // so the gather is near exact visibility's sum.
+    let scene = clusters_scene(r#"{"count": 48, "iterations": 3, "shadow_maps": "rays", "rays": 64}"#);
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let gathered = mid.gathered_diffuse.iter().map(|g| f64::from(luminance(g.irradiance.into()))).sum::<f64>()
+        / mid.gathered_diffuse.len() as f64;
+    let (unoccluded, exact) = exact_sparse_irradiance(&renderer.scene.flat, &vals);
+    println!("mean sparse irradiance: rays {gathered:.5}, exact {exact:.5}, unoccluded {unoccluded:.5}");
+    assert!(exact < 0.97 * unoccluded, "the scene must occlude: {exact} of {unoccluded}");
+    assert!((gathered - exact).abs() <= 0.01 * exact, "rays {gathered} against exact {exact}");
+}
+
+fn occluders(flat: &FlatScene) -> relume::twin::bvh::Occluders {
+    let positions: Vec<Vec3> = flat.vertices.iter().map(|v| Vec3::from(v.position)).collect();
+    let triangles: Vec<[u32; 3]> = flat.indices.chunks(3).map(|t| [t[0], t[1], t[2]]).collect();
+    relume::twin::bvh::Occluders::new(positions, triangles)
 }
 
 /// Each frame's k-means starts from the last frame's centres: the second frame's clusters are

@@ -76,7 +76,7 @@ fn rust_structs_match_wgsl() {
             ]
         );
     }
-    check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent]);
+    check!(m, "SparsePoint", RawSparsePoint, [position, occluder_radius, normal, exponent, geometric, pad]);
     use relume::gpu::visibility::disks::{RawDiscGroup, RawOccluder};
     let occlusion = module_of("occlusion");
     check!(occlusion, "Occluder", RawOccluder, [position, radius, normal, index]);

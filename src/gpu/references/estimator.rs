@@ -6,7 +6,7 @@
 //! per pixel instead of a ray per VAL. Rust twin: `twin::exact_cpu` with
 //! `ValSampling::Systematic`.
 
-use super::rounds::PixelRounds;
+use super::rounds::{BVH_WGSL, PixelRounds};
 use crate::gpu::pass::{Entry, PassDesc, buffer, read, read_write, texture};
 use crate::gpu::references::brute_force::BruteForce;
 use crate::gpu::references::exact::EXACT_LOOP_BUDGET;
@@ -18,7 +18,6 @@ use crate::gpu::timing::{Recorder, StageTimings};
 use crate::gpu::{Gpu, GpuError};
 
 pub const WGSL: &str = include_str!("estimator.wgsl");
-const BVH: &str = include_str!("bvh.wgsl");
 
 /// Draws (shadow rays) per pixel at most (`render --draws`, a measured level's `draws`): each
 /// invocation notes its draws in arrays of this many entries before it traces them.
@@ -38,7 +37,7 @@ pub fn body(samples: u32, seed: u32) -> String {
         .u32("SEED", seed)
         .u32("WALK_BUDGET", WALK_BUDGET)
         .u32("TRACE_BUDGET", TRACE_BUDGET)
-        .include(BVH)
+        .include(BVH_WGSL)
         .include(ROUNDS)
         .include(WGSL)
         .finish()

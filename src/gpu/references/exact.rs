@@ -2,7 +2,7 @@
 //! brute force with a shadow ray per pixel and VAL through a BVH built on the CPU. Rust twins:
 //! `twin::shade_brute_force` over the VALs `twin::bvh::Bvh::occluded` lets through.
 
-use super::rounds::PixelRounds;
+use super::rounds::{BVH_WGSL, PixelRounds};
 use crate::gpu::pass::{Entry, PassDesc, read, read_write, texture};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::Wgsl;
@@ -12,7 +12,6 @@ use crate::gpu::timing::{Recorder, StageTimings};
 use crate::gpu::{Gpu, GpuError, LLVMPIPE_LOOP_LIMIT};
 
 pub const WGSL: &str = include_str!("exact.wgsl");
-const BVH: &str = include_str!("bvh.wgsl");
 
 /// Loop iterations (VAL loop and BVH traversal together) one invocation runs per round.
 /// llvmpipe silently ends all loops of an invocation after [`LLVMPIPE_LOOP_LIMIT`] iterations
@@ -26,7 +25,7 @@ pub fn body(val_stride: u32) -> String {
     Wgsl::new()
         .u32("VAL_STRIDE", val_stride)
         .u32("EXACT_LOOP_BUDGET", EXACT_LOOP_BUDGET)
-        .include(BVH)
+        .include(BVH_WGSL)
         .include(ROUNDS)
         .include(WGSL)
         .finish()

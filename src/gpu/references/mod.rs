@@ -4,4 +4,4 @@
 pub mod brute_force;
 pub mod estimator;
 pub mod exact;
-mod rounds;
+pub(crate) mod rounds;

@@ -12,6 +12,22 @@ use crate::gpu::{Gpu, GpuError};
 use crate::twin::bvh::Bvh;
 use std::time::Instant;
 
+/// The segment queries through the BVH (`bvh.wgsl`: bindings 4 and 5 of the pass including it).
+pub const BVH_WGSL: &str = include_str!("bvh.wgsl");
+
+/// The BVH of `scene`'s meshes as placed now (obvhs, flattened for `bvh.wgsl`): its nodes and its
+/// triangle order, the buffers `<label>.bvh_nodes` and `<label>.bvh_triangles`.
+pub fn bvh_buffers(gpu: &Gpu, scene: &GpuScene, label: &str) -> Result<(wgpu::Buffer, wgpu::Buffer), GpuError> {
+    let flat = &scene.flat;
+    let positions: Vec<glam::Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
+    let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let bvh = Bvh::build(&positions, &triangles);
+    let none = wgpu::BufferUsages::empty();
+    let nodes = gpu.storage_buffer(&format!("{label}.bvh_nodes"), &bvh.nodes, none)?;
+    let order = gpu.storage_buffer(&format!("{label}.bvh_triangles"), &bvh.order, none)?;
+    Ok((nodes, order))
+}
+
 /// A pass over the image's pixels in rounds, with the scene's BVH bound.
 pub struct PixelRounds {
     pass: &'static PassDesc,
@@ -37,14 +53,8 @@ impl PixelRounds {
         glossy: bool,
         workgroup: [u32; 3],
     ) -> Result<Self, GpuError> {
-        let flat = &scene.flat;
-        let positions: Vec<glam::Vec3> = flat.vertices.iter().map(|v| v.position.into()).collect();
-        let triangles: Vec<[u32; 3]> = flat.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-        let bvh = Bvh::build(&positions, &triangles);
-        let none = wgpu::BufferUsages::empty();
         let label = pass.label;
-        let nodes = gpu.storage_buffer(&format!("{label}.bvh_nodes"), &bvh.nodes, none)?;
-        let order = gpu.storage_buffer(&format!("{label}.bvh_triangles"), &bvh.order, none)?;
+        let (nodes, order) = bvh_buffers(gpu, scene, label)?;
         let source = pass.source_with(body, scene.textured(), workgroup, TILE_SIZE);
         let module = module_from_source(gpu, label, source)?;
         let kernel = Kernel::build(gpu, scene, pass, &module, pass.lobe_entry(glossy), &[], workgroup)?;

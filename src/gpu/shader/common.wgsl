@@ -51,6 +51,9 @@ struct SparsePoint {
     occluder_radius: f32,
     normal: vec3<f32>,
     exponent: f32,
+    // Its triangle's face normal on the side of `normal`: shadow rays leave along it.
+    geometric: vec3<f32>,
+    pad: f32,
 }
 
 // Gather output for one lobe: summed irradiance (W/m²), averaged VAL position (m) and the

@@ -57,7 +57,7 @@ struct Receiver {
 }
 
 fn receiver(index: u32) -> Receiver {
-    var p = SparsePoint(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0);
+    var p = SparsePoint(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0);
     if index != NO_POINT {
         p = sparse_points[index];
     }

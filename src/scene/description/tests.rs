@@ -390,6 +390,10 @@ fn settings_are_checked() {
         message.starts_with("settings.tuning.clusters.shadow_map_resolution: imperfect shadow maps need"),
         "{message}"
     );
+    for rays in [0, 65] {
+        let message = error_of(&with_tuning(&format!(r#"{{"clusters": {{"shadow_maps": "rays", "rays": {rays}}}}}"#)));
+        assert_eq!(message, format!("settings.tuning.clusters.rays: must be in 1..=64, got {rays}"));
+    }
     let message = error_of(&with_tuning(r#"{"clusters": {"shadow_maps": "points"}}"#));
     assert!(message.starts_with("settings.tuning.clusters.shadow_maps: unknown variant `points`"), "{message}");
     let text = with_tuning(r#"{"visibility": "ism", "ism": {"count": 16, "resolution": 32, "points": 100}}"#);

@@ -36,8 +36,8 @@ pub(crate) use tuning::{SetField, json_value, overrides};
 // The visibility modes' settings live in their folders under `gpu/visibility/` (data files
 // there, with the registry of modes): re-exported here beside the others.
 pub use crate::gpu::visibility::clusters::settings::{
-    ClusterMethod, ClusterSettings, ClusterTuning, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTERS, MAX_KMEANS_ITERATIONS,
-    ShadowMapSource,
+    ClusterMethod, ClusterSettings, ClusterTuning, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTER_RAYS, MAX_CLUSTERS,
+    MAX_KMEANS_ITERATIONS, ShadowMapSource,
 };
 pub use crate::gpu::visibility::ism::settings::{
     IsmSettings, IsmTuning, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,

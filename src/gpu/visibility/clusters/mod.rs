@@ -10,6 +10,7 @@
 //! instances other techniques build ([`Receivers`]) the second bounce's points or the camera's
 //! pixels; each instance names its stages ([`StageNames`]) so that two can run in one frame.
 
+pub mod rays;
 pub mod settings;
 mod shadow_maps;
 pub mod twin;
@@ -151,7 +152,7 @@ fn default_header() -> String {
 }
 
 /// Every compute pass of the mode, for the layout test (`crate::gpu::passes`).
-pub const PASSES: &[&PassDesc] = &[&CLUSTERING, &VISIBILITY];
+pub const PASSES: &[&PassDesc] = &[&CLUSTERING, &VISIBILITY, &rays::MEMBERS, &rays::VISIBILITY];
 
 /// k-means: four entry points over one set of bindings.
 pub const CLUSTERING: PassDesc = PassDesc {
@@ -264,6 +265,8 @@ enum Maps {
     Raster(ShadowMaps),
     /// Imperfect shadow maps splatted from points, with pull-push.
     Ism(ism::Maps),
+    /// No maps: shadow rays through the BVH to the clusters' members (the sparse points only).
+    Rays(rays::Rays),
 }
 
 /// The clustered visibility mode, and with flux seeding and imperfect shadow maps the `"ism"`
@@ -365,12 +368,17 @@ impl Clusters {
             true => Seeding::Flux(ism::FluxSampling::new(gpu, scene, &head)?),
             false => Seeding::Kmeans { seed: kernel("kmeans_seed")? },
         };
+        // Rays serve the sparse points; the second bounce's points and the brute force's pixels
+        // look the clusters up in rasterised maps.
+        let rays = settings.shadow_maps == ShadowMapSource::Rays && receivers == Receivers::SparsePoints;
         let maps = match ism {
             Some(ism) => Maps::Ism(ism::Maps::new(gpu, scene, &head, settings.count, ism::IsmParams::of(ism, scale))?),
+            None if rays => Maps::Rays(rays::Rays::new(gpu, scene, settings, &head)?),
             None => Maps::Raster(ShadowMaps::after(gpu, scene, settings, &head)?),
         };
         let imperfect = ism.is_some();
         let (visibility_desc, visibility_body) = match (receivers, imperfect) {
+            (Receivers::SparsePoints, false) if rays => (&rays::VISIBILITY, rays::visibility_body(&head, settings)),
             (Receivers::SparsePoints, true) => (&ism::VISIBILITY, ism::visibility_body(&head)),
             (Receivers::SparsePoints, false) => (&VISIBILITY, visibility_body(&head)),
             (Receivers::BouncePoints { .. }, _) => bounce::visibility_pass(&head, imperfect),
@@ -425,6 +433,7 @@ impl Clusters {
         match self.maps {
             Maps::Raster(_) => self.names.cluster_visibility,
             Maps::Ism(_) => self.names.ism_visibility,
+            Maps::Rays(_) => rays::VISIBILITY.label,
         }
     }
 
@@ -434,6 +443,7 @@ impl Clusters {
         match &self.maps {
             Maps::Raster(_) => stages.push(self.names.shadow_maps),
             Maps::Ism(maps) => stages.extend(maps.stages(&self.names)),
+            Maps::Rays(_) => stages.push(rays::MEMBERS_STAGE),
         }
         stages.push(self.visibility_stage());
         stages
@@ -500,20 +510,24 @@ impl Clusters {
                 }
             }
         })?;
-        let atlas = match &self.maps {
+        let table = buffer("group_visibility", &self.group_visibility);
+        let resources = match &self.maps {
             Maps::Raster(maps) => {
                 maps.record(gpu, scene, &self.clusters, &self.settings, None, self.names.shadow_maps, rec)?;
-                view("shadow_atlas", &maps.atlas_view)
+                vec![receivers, buffer("clusters", &self.clusters), view("shadow_atlas", &maps.atlas_view), table]
             }
             Maps::Ism(maps) => {
                 maps.record(gpu, scene, &self.clusters, &self.names, rec)?;
-                buffer("ism_atlas", &maps.levels[0])
+                vec![receivers, buffer("clusters", &self.clusters), buffer("ism_atlas", &maps.levels[0]), table]
+            }
+            Maps::Rays(rays) => {
+                rays.record(gpu, frame, &self.group_of_val, rec)?;
+                let [vals, members] = rays.resources(frame);
+                let [nodes, order] = rays.bvh();
+                vec![receivers, vals, members, table, nodes, order]
             }
         };
-        let group = self.visibility.bind(
-            gpu,
-            &[receivers, buffer("clusters", &self.clusters), atlas, buffer("group_visibility", &self.group_visibility)],
-        );
+        let group = self.visibility.bind(gpu, &resources);
         rec.stage(self.visibility_stage(), |e, s| {
             self.visibility.dispatch(e, &group, scene, [count, m, 1], s.as_ref().map(|s| s.compute()))
         })
@@ -550,6 +564,7 @@ impl Clusters {
                 .map(|(map, f)| map.into_iter().map(|d| d + f.near).collect())
                 .collect(),
             Maps::Ism(maps) => maps.read(gpu)?,
+            Maps::Rays(_) => Vec::new(),
         };
         Ok(ClusterReadback {
             frames,
@@ -561,7 +576,11 @@ impl Clusters {
             settings: self.settings,
             ism: match &self.maps {
                 Maps::Ism(maps) => Some(maps.params()),
-                Maps::Raster(_) => None,
+                Maps::Raster(_) | Maps::Rays(_) => None,
+            },
+            members: match &self.maps {
+                Maps::Rays(rays) => Some(rays.read(gpu, vals)?),
+                Maps::Raster(_) | Maps::Ism(_) => None,
             },
         })
     }
@@ -591,6 +610,8 @@ pub struct ClusterReadback {
     pub settings: ClusterSettings,
     /// The imperfect shadow maps' lengths, in the `"ism"` mode.
     pub ism: Option<ism::IsmParams>,
+    /// The clusters' member lists, with `shadow_maps: "rays"`.
+    pub members: Option<twin::MemberLists>,
 }
 
 impl GroupVisibility for Clusters {
@@ -605,6 +626,9 @@ impl GroupVisibility for Clusters {
     fn fit(&mut self, gpu: &Gpu, max_vals: u32) -> Result<(), GpuError> {
         if let Seeding::Flux(flux) = &mut self.seeding {
             flux.fit(gpu, max_vals)?;
+        }
+        if let Maps::Rays(rays) = &mut self.maps {
+            rays.fit(gpu, max_vals)?;
         }
         if max_vals > self.capacity {
             self.capacity = max_vals;

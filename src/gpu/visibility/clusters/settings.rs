@@ -21,6 +21,7 @@ pub struct ClusterSettings {
     pub count: u32,
     /// Side of each cluster's shadow map, texels, in 16..=1024; default 128. All maps share
     /// one atlas of `ceil(sqrt(count))` maps per side, at most [`MAX_CLUSTER_ATLAS_SIDE`] texels.
+    /// Unused with `shadow_maps: "rays"`.
     pub shadow_map_resolution: u32,
     /// Shadow filter: `"pcss"`, `"pcf"` or `"hard"` (default).
     pub soft: SoftShadows,
@@ -34,8 +35,13 @@ pub struct ClusterSettings {
     /// Where the clusters' shadow maps come from: `"raster"` (default: every triangle
     /// rasterised into every map, exact depths) or `"ism"` (imperfect shadow maps splatted
     /// from points with pull-push, as `settings.ism` says for points, pull-push and bias;
-    /// `shadow_map_resolution` must then be a power of two up to 512).
+    /// `shadow_map_resolution` must then be a power of two up to 512) or `"rays"` (no maps:
+    /// shadow rays through the scene's BVH from each sparse point to `rays` of the cluster's
+    /// VALs).
     pub shadow_maps: ShadowMapSource,
+    /// With `shadow_maps: "rays"`: shadow rays per (sparse point, cluster), in
+    /// 1..=[`MAX_CLUSTER_RAYS`]; default [`DEFAULT_CLUSTER_RAYS`].
+    pub rays: u32,
     /// The rasterised maps draw the meshes simplified (meshoptimizer's edge collapses, borders
     /// kept) to a surface within this fraction of the scene's extent of the full one, in
     /// [0, [`MAX_PROXY_ERROR`]]; 0 draws every triangle. Default [`DEFAULT_PROXY_ERROR`].
@@ -56,7 +62,15 @@ pub enum ShadowMapSource {
     Raster,
     /// Imperfect shadow maps (paper 004).
     Ism,
+    /// No maps: shadow rays through the scene's BVH to some of the cluster's VALs, their
+    /// outcomes weighted by the VALs' unoccluded light (`rays.wgsl`).
+    Rays,
 }
+
+/// Default of [`ClusterSettings::rays`].
+pub const DEFAULT_CLUSTER_RAYS: u32 = 4;
+/// Most shadow rays per (sparse point, cluster).
+pub const MAX_CLUSTER_RAYS: u32 = 64;
 
 /// Most clusters of the `"clusters"` visibility mode.
 pub const MAX_CLUSTERS: u32 = 256;
@@ -76,6 +90,7 @@ impl Default for ClusterSettings {
             normal_weight: 0.43,
             iterations: 4,
             shadow_maps: ShadowMapSource::Raster,
+            rays: DEFAULT_CLUSTER_RAYS,
             proxy_error: DEFAULT_PROXY_ERROR,
         }
     }
@@ -94,6 +109,7 @@ impl ClusterSettings {
         in_closed(self.normal_weight, 0.0, 100.0, &format!("{field}.normal_weight"))?;
         int_in(self.iterations, 1, MAX_KMEANS_ITERATIONS, &format!("{field}.iterations"))?;
         in_closed(self.proxy_error, 0.0, MAX_PROXY_ERROR, &format!("{field}.proxy_error"))?;
+        int_in(self.rays, 1, MAX_CLUSTER_RAYS, &format!("{field}.rays"))?;
         if self.shadow_maps == ShadowMapSource::Ism {
             let r = self.shadow_map_resolution;
             let texels = u64::from(self.count) * u64::from(r) * u64::from(r);
@@ -145,6 +161,8 @@ overrides! {
             /// k-means iterations per frame, in 1..=32.
             iterations: u32,
             shadow_maps: ShadowMapSource,
+            /// Shadow rays per (sparse point, cluster) with `shadow_maps: "rays"`, in 1..=64.
+            rays: u32,
             /// In [0, 0.05]; 0 draws every triangle.
             proxy_error: f32,
         }

@@ -630,3 +630,77 @@ mod tests {
         assert!(((first_lit + last_dark) / 2.0 - edge).abs() < 0.03, "centred on the edge");
     }
 }
+
+/// `ray_members.wgsl`'s lists: cluster `k`'s VALs (indices into the frame's VALs) are
+/// `members[starts[k]..starts[k + 1]]`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MemberLists {
+    /// Clusters + 1 entries.
+    pub starts: Vec<u32>,
+    pub members: Vec<u32>,
+}
+
+impl MemberLists {
+    /// Cluster `k`'s members.
+    pub fn of(&self, k: usize) -> &[u32] {
+        &self.members[self.starts[k] as usize..self.starts[k + 1] as usize]
+    }
+}
+
+/// Twin of `ray_members.wgsl`: the VALs of each of `clusters` clusters, by `group_of_val` (an
+/// index past the last cluster counts as the last, as the WGSL clamps it), each list in VAL
+/// order (the GPU's order within a list is its atomics').
+pub fn member_lists(group_of_val: &[u32], clusters: u32) -> MemberLists {
+    let m = clusters as usize;
+    let mut lists = vec![Vec::new(); m];
+    for (v, &g) in group_of_val.iter().enumerate() {
+        lists[(g as usize).min(m - 1)].push(v as u32);
+    }
+    let mut starts = vec![0];
+    for l in &lists {
+        starts.push(starts.last().copied().unwrap_or(0) + l.len() as u32);
+    }
+    MemberLists { starts, members: lists.concat() }
+}
+
+/// Twin of `ray_visibility.wgsl`'s `ray_visibility` for sparse point `i` (at `position` with
+/// `normal`, its rays leaving along the face normal `geometric`) and cluster `k` of `clusters`: `rays` of the cluster's members drawn
+/// systematically from its list, offset by a hash of the entry, each ray's outcome weighted by
+/// the VAL's unoccluded irradiance luminance at the point; 1 where none of them lights it.
+/// Traced through `occluders` without the shader's loop budget.
+#[allow(clippy::too_many_arguments)]
+pub fn ray_visibility(
+    i: u32,
+    k: u32,
+    position: Vec3,
+    normal: Vec3,
+    geometric: Vec3,
+    lists: &MemberLists,
+    vals: &[Val],
+    occluders: &crate::twin::bvh::Occluders,
+    rays: u32,
+    clusters: u32,
+) -> f32 {
+    let members = lists.of(k as usize);
+    let count = members.len() as u32;
+    if count == 0 {
+        return 1.0;
+    }
+    let origin = position + geometric * crate::twin::exact_cpu::RAY_OFFSET;
+    let xi = crate::twin::unit_float(crate::twin::pcg_hash(i.wrapping_mul(clusters).wrapping_add(k)));
+    let (mut seen, mut lit) = (0.0f32, 0.0f32);
+    for s in 0..rays {
+        let m = (((s as f32 + xi) * count as f32 / rays as f32) as u32).min(count - 1);
+        let val = &vals[members[m as usize] as usize];
+        let geo = crate::twin::val_geometry(position, normal, val.position, val.normal, val.area);
+        let light = luminance(val.flux) * geo.weight * geo.cos_receiver;
+        if light > 0.0 {
+            let target = val.position + val.normal * crate::twin::exact_cpu::RAY_OFFSET;
+            seen += light;
+            if !occluders.bvh.occluded(&occluders.positions, &occluders.triangles, origin, target) {
+                lit += light;
+            }
+        }
+    }
+    if seen > 0.0 { lit / seen } else { 1.0 }
+}

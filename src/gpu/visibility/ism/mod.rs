@@ -54,6 +54,7 @@ pub fn cluster_settings(ism: &IsmSettings) -> ClusterSettings {
         normal_weight: ClusterSettings::default().normal_weight,
         iterations: 1,
         shadow_maps: crate::scene::ShadowMapSource::Ism,
+        rays: ClusterSettings::default().rays,
         // Splatted from points: nothing rasterised.
         proxy_error: 0.0,
     }
