@@ -136,7 +136,7 @@ pub fn decode_srgb(encoded: u8) -> f32 {
 /// Relative RMSE of `test` against `reference` over pixels the reference covers:
 /// `sqrt(sum |t - r|^2 / sum |r|^2)` over RGB. 0 when both are black.
 pub fn relative_rmse(test: &LinearImage, reference: &LinearImage) -> f64 {
-    let (num, den) = squared_sums(reference, |i| (test.rgb(i) - reference.rgb(i)).length_squared());
+    let (num, den) = squared_sums(reference, |i| f64::from((test.rgb(i) - reference.rgb(i)).length_squared()), |_| 1.0);
     ratio_sqrt(num, den)
 }
 
@@ -146,24 +146,46 @@ pub fn relative_rmse(test: &LinearImage, reference: &LinearImage) -> f64 {
 /// reference, since `E|t - r|² = |t - r_true|² + s²` for an unbiased `r`. Equals
 /// [`relative_rmse`] when every `s²` is 0.
 pub fn noise_corrected_relative_rmse(test: &LinearImage, reference: &LinearImage, reference_variance: &[Vec3]) -> f64 {
-    let (num, den) = squared_sums(reference, |i| (test.rgb(i) - reference.rgb(i)).length_squared());
-    let (noise, _) = squared_sums(reference, |i| reference_variance[i].element_sum());
+    weighted_noise_corrected_relative_rmse(test, reference, reference_variance, |_| 1.0)
+}
+
+/// [`noise_corrected_relative_rmse`] with every pixel's terms weighted by `weight(i)`: over a
+/// sample of an image's pixels drawn with unequal probabilities, the inverse probabilities
+/// make each sum an unbiased estimate of the whole image's (Horvitz and Thompson).
+pub fn weighted_noise_corrected_relative_rmse(
+    test: &LinearImage,
+    reference: &LinearImage,
+    reference_variance: &[Vec3],
+    weight: impl Fn(usize) -> f64,
+) -> f64 {
+    let (num, den) =
+        squared_sums(reference, |i| weight(i) * f64::from((test.rgb(i) - reference.rgb(i)).length_squared()), &weight);
+    let (noise, _) = squared_sums(reference, |i| weight(i) * f64::from(reference_variance[i].element_sum()), &weight);
     ratio_sqrt((num - noise).max(0.0), den)
 }
 
 /// The reference's relative standard error: `sqrt(sum s² / sum |r|²)` over the pixels it covers,
 /// on the scale of [`relative_rmse`] (an error below it cannot be told from the reference's noise).
 pub fn relative_stderr(reference: &LinearImage, reference_variance: &[Vec3]) -> f64 {
-    let (noise, den) = squared_sums(reference, |i| reference_variance[i].element_sum());
+    weighted_relative_stderr(reference, reference_variance, |_| 1.0)
+}
+
+/// [`relative_stderr`] with every pixel's terms weighted by `weight(i)`.
+pub fn weighted_relative_stderr(
+    reference: &LinearImage,
+    reference_variance: &[Vec3],
+    weight: impl Fn(usize) -> f64,
+) -> f64 {
+    let (noise, den) = squared_sums(reference, |i| weight(i) * f64::from(reference_variance[i].element_sum()), &weight);
     ratio_sqrt(noise, den)
 }
 
-/// (sum of `term(i)`, sum of `|r_i|²`) over the pixels `reference` covers, in f64.
-fn squared_sums(reference: &LinearImage, term: impl Fn(usize) -> f32) -> (f64, f64) {
+/// (sum of `term(i)`, sum of `weight(i) |r_i|²`) over the pixels `reference` covers, in f64.
+fn squared_sums(reference: &LinearImage, term: impl Fn(usize) -> f64, weight: impl Fn(usize) -> f64) -> (f64, f64) {
     let (mut num, mut den) = (0.0f64, 0.0f64);
     for i in (0..reference.pixels.len()).filter(|&i| reference.covered(i)) {
-        num += term(i) as f64;
-        den += reference.rgb(i).length_squared() as f64;
+        num += term(i);
+        den += weight(i) * f64::from(reference.rgb(i).length_squared());
     }
     (num, den)
 }
