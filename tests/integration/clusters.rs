@@ -77,18 +77,25 @@ fn assert_kmeans_matches(start: &[twin::Cluster], vals: &[relume::twin::Val], r:
     }
 }
 
+/// A 16x16 sparse frame of `scene` whose stages run clustering, then `lookup` (the maps or the
+/// rays, two stages), then the gather; its VALs and what its clusters computed.
+fn render_16(gpu: &relume::gpu::Gpu, scene: &Scene, lookup: [&str; 2]) -> (Renderer, Vec<Val>, ClusterReadback) {
+    let mut renderer = Renderer::new(gpu, scene).unwrap();
+    let frame = renderer.render(gpu, Method::Sparse, 16, 16).unwrap();
+    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+    let at = stages.iter().position(|s| *s == "clustering").expect("a clustering stage");
+    let want = ["clustering", lookup[0], lookup[1], "gather"];
+    assert_eq!(&stages[at..at + 4], &want[..], "{stages:?}");
+    let vals = renderer.read_vals(gpu).unwrap();
+    let r = readback(&renderer, gpu, vals.len());
+    (renderer, vals, r)
+}
+
 #[test]
 fn clusters_match_cpu_twins() {
     let scene = clusters_scene(r#"{"count": 12, "shadow_map_resolution": 64, "iterations": 3, "soft": "pcss"}"#);
     let gpu = gpu();
-    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
-    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
-    let at = stages.iter().position(|s| *s == "clustering").expect("a clustering stage");
-    let want = ["clustering", "cluster_shadow_maps", "cluster_visibility", "gather"];
-    assert_eq!(&stages[at..at + 4], &want[..], "{stages:?}");
-    let vals = renderer.read_vals(&gpu).unwrap();
-    let r = readback(&renderer, &gpu, vals.len());
+    let (renderer, vals, r) = render_16(&gpu, &scene, ["cluster_shadow_maps", "cluster_visibility"]);
     let diagonal = 1.0 / r.kmeans.position_scale;
     assert_kmeans_matches(&vec![twin::Cluster::default(); 12], &vals, &r, diagonal);
 
@@ -172,14 +179,7 @@ fn clusters_by_rays_match_cpu_twins() {
     let scene =
         clusters_scene(&format!(r#"{{"count": {clusters}, "iterations": 3, "shadow_maps": "rays", "rays": {rays}}}"#));
     let gpu = gpu();
-    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-    let frame = renderer.render(&gpu, Method::Sparse, 16, 16).unwrap();
-    let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
-    let at = stages.iter().position(|s| *s == "clustering").expect("a clustering stage");
-    let want = ["clustering", "cluster_ray_members", "cluster_ray_visibility", "gather"];
-    assert_eq!(&stages[at..at + 4], &want[..], "{stages:?}");
-    let vals = renderer.read_vals(&gpu).unwrap();
-    let r = readback(&renderer, &gpu, vals.len());
+    let (renderer, vals, r) = render_16(&gpu, &scene, ["cluster_ray_members", "cluster_ray_visibility"]);
     let lists = r.members.clone().expect("member lists with rays");
     let expected = twin::member_lists(&r.group_of_val, clusters);
     assert_eq!(lists.starts, expected.starts);
