@@ -406,6 +406,12 @@ pub struct ExactComparison {
     /// with many maps): `brute_force_ism_skipped` says why, and the rest of the comparison runs.
     pub brute_force_ism_vs_exact: Option<ModeVsExact>,
     pub brute_force_ism_skipped: Option<String>,
+    /// The same with the clusters' shadow maps (`brute_force_clusters`, the scene's
+    /// `settings.tuning.clusters`, rasterised maps unless `shadow_maps` says `"ism"`): the
+    /// clusters' visibility where the light lands, beside `modes_vs_exact`'s `clusters` at the
+    /// sparse points. `None` with `brute_force_clusters_skipped` as above.
+    pub brute_force_clusters_vs_exact: Option<ModeVsExact>,
+    pub brute_force_clusters_skipped: Option<String>,
     /// Sparse with each visibility mode against the reference, in this order: `off`, the disks
     /// with the `sum` and the `product` rule, `clusters` (the scene's `settings.clusters`) and
     /// `ism` (its `settings.ism`).
@@ -549,22 +555,29 @@ fn exact_comparison(
         let gather_ms = sparse.timings.total_of(&[stage::GATHER]);
         modes.push(ModeVsExact::against(&exact, exact_sum, key, &sparse, visibility_ms, gather_ms));
     }
-    let (brute_force_ism_vs_exact, brute_force_ism_skipped) = match renderer.render(gpu, Method::BruteForceIsm, w, h) {
-        Ok(ism) => {
-            if let Some(dir) = images {
-                write_png(&ism.indirect, &dir.join("indirect_brute_force_ism.png"), exposure)?;
+    let grouped = |renderer: &mut Renderer, method, key| -> Result<(Option<ModeVsExact>, Option<String>), BenchError> {
+        match renderer.render(gpu, method, w, h) {
+            Ok(frame) => {
+                if let Some(dir) = images {
+                    write_png(&frame.indirect, &dir.join(format!("indirect_{key}.png")), exposure)?;
+                    write_exr(&frame.indirect, &dir.join(format!("indirect_{key}.exr")))?;
+                }
+                let groups: Vec<&str> =
+                    frame.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
+                let (visibility_ms, brute_ms) =
+                    (frame.timings.total_of(&groups), frame.timings.total_of(&[stage::BRUTE_FORCE]));
+                Ok((Some(ModeVsExact::against(&exact, exact_sum, key, &frame, visibility_ms, brute_ms)), None))
             }
-            let ism_stages: Vec<&str> =
-                ism.indirect_stages.iter().copied().filter(|s| *s != stage::BRUTE_FORCE).collect();
-            let (visibility_ms, brute_ms) =
-                (ism.timings.total_of(&ism_stages), ism.timings.total_of(&[stage::BRUTE_FORCE]));
-            (Some(ModeVsExact::against(&exact, exact_sum, "brute_force_ism", &ism, visibility_ms, brute_ms)), None)
+            // Its (pixel, group) table outgrows one storage binding at large sizes; the entry is
+            // optional, the rest of the comparison is not.
+            Err(e @ GpuError::TooLarge { .. }) => Ok((None, Some(format!("skipped: {e}")))),
+            Err(e) => Err(e.into()),
         }
-        // Its (pixel, group) table outgrows one storage binding at large sizes; the entry is
-        // optional, the rest of the comparison is not.
-        Err(e @ GpuError::TooLarge { .. }) => (None, Some(format!("skipped: {e}"))),
-        Err(e) => return Err(e.into()),
     };
+    let (brute_force_ism_vs_exact, brute_force_ism_skipped) =
+        grouped(renderer, Method::BruteForceIsm, "brute_force_ism")?;
+    let (brute_force_clusters_vs_exact, brute_force_clusters_skipped) =
+        grouped(renderer, Method::BruteForceClusters, "brute_force_clusters")?;
     renderer.set_occlusion(scene.settings.visibility.mode, scene.settings.visibility.rule);
     // What a user gets: the level's technique (the sparse method, or the GPU estimator where
     // the scene's measured level names it; at `reference`, the sparse method with accurate's
@@ -597,6 +610,8 @@ fn exact_comparison(
         brute_force_vs_exact,
         brute_force_ism_vs_exact,
         brute_force_ism_skipped,
+        brute_force_clusters_vs_exact,
+        brute_force_clusters_skipped,
         modes_vs_exact: modes,
         default_vs_exact,
     })

@@ -426,7 +426,11 @@ impl MrPipeline {
         let depth_ms = start.elapsed().as_secs_f64() * 1e3;
         let sparse_irradiance = match settings.method {
             Method::Sparse => renderer.read_gathered_irradiance(gpu)?,
-            Method::BruteForce | Method::BruteForceIsm | Method::Exact | Method::Estimator => Vec::new(),
+            Method::BruteForce
+            | Method::BruteForceIsm
+            | Method::BruteForceClusters
+            | Method::Exact
+            | Method::Estimator => Vec::new(),
         };
         let build_ms = std::mem::take(&mut self.build_ms);
         let differential = self.placed.as_mut().filter(|p| p.is_for(renderer)).and_then(|p| p.differential.as_mut());

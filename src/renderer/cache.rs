@@ -6,7 +6,7 @@ use crate::gpu::references::brute_force::BruteForce;
 use crate::gpu::references::estimator::Estimator;
 use crate::gpu::references::exact::Exact;
 use crate::gpu::sparse::{SparseMethod, SparseSettings};
-use crate::scene;
+use crate::gpu::visibility::VisibilitySettings;
 
 /// A technique with the settings it was built for: asked for with other settings, it is built
 /// anew.
@@ -37,8 +37,9 @@ pub(super) struct Indirect {
     pub(super) sparse: Option<Built<(SparseSettings, u64), SparseMethod>>,
     /// Keyed by `glossy`.
     pub(super) brute_force: Option<Built<bool, BruteForce>>,
-    /// Keyed by `glossy` and the ISM settings.
-    pub(super) brute_force_ism: Option<Built<(bool, scene::IsmSettings), BruteForce>>,
+    /// `brute_force_ism` or `brute_force_clusters`, keyed by `glossy` and the visibility
+    /// settings of its groups (mode `ism` or `clusters`).
+    pub(super) brute_force_grouped: Option<Built<(bool, VisibilitySettings), BruteForce>>,
     /// Keyed by (`glossy`, VAL stride, placement generation: the BVH is the placed geometry's).
     pub(super) exact: Option<Built<(bool, u32, u64), Exact>>,
     /// Keyed by (`glossy`, samples, seed, placement generation).

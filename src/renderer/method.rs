@@ -16,6 +16,10 @@ pub enum Method {
     /// pixel (`settings.ism`): the ISMs' visibility without the sparse interpolation
     /// (`gpu::references::brute_force`).
     BruteForceIsm,
+    /// The brute force with each VAL weighted by its cluster's shadow-map lookup at the pixel
+    /// (`settings.tuning.clusters`): the clusters' visibility where the light lands, without
+    /// the sparse sampling and interpolation (`gpu::references::brute_force`).
+    BruteForceClusters,
     /// Brute force with a shadow ray per pixel and VAL through a BVH (docs/design.md §5); see
     /// [`super::Renderer::set_exact_val_stride`].
     Exact,

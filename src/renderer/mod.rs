@@ -15,7 +15,9 @@
 //! camera:      CameraView (visibility)
 //! indirect:    SparseMethod (gather, [visibility mode], renormalise, interpolate, shade)
 //!              | BruteForce (brute_force) | BruteForce for brute_force_ism
-//!              (brute_force_ism_sampling, _splat, _pull_push, _visibility, brute_force) | Exact (exact)
+//!              (brute_force_ism_sampling, _splat, _pull_push, _visibility, brute_force)
+//!              | BruteForce for brute_force_clusters (brute_force_clusters_clustering,
+//!              _shadow_maps, _visibility, brute_force) | Exact (exact)
 //! direct:      DirectLight (direct), then for the scene's `lights`
 //!              ManyLights (lights_shadow_maps, lights_direct)
 //! ```
@@ -282,7 +284,7 @@ impl Renderer {
     /// are built again when next asked for.
     pub fn release_reference_passes(&mut self) {
         self.indirect.brute_force = None;
-        self.indirect.brute_force_ism = None;
+        self.indirect.brute_force_grouped = None;
         self.indirect.exact = None;
         self.indirect.estimator = None;
     }
@@ -540,8 +542,8 @@ impl Renderer {
             (false, _) => None,
             (true, Method::Sparse) => self.indirect.sparse.as_ref().map(|b| &b.technique as &dyn Technique),
             (true, Method::BruteForce) => self.indirect.brute_force.as_ref().map(|b| &b.technique as &dyn Technique),
-            (true, Method::BruteForceIsm) => {
-                self.indirect.brute_force_ism.as_ref().map(|b| &b.technique as &dyn Technique)
+            (true, Method::BruteForceIsm | Method::BruteForceClusters) => {
+                self.indirect.brute_force_grouped.as_ref().map(|b| &b.technique as &dyn Technique)
             }
             (true, Method::Exact) => self.indirect.exact.as_ref().map(|b| &b.technique as &dyn Technique),
             (true, Method::Estimator) => self.indirect.estimator.as_ref().map(|b| &b.technique as &dyn Technique),
@@ -569,6 +571,17 @@ impl Renderer {
         (list, indirect)
     }
 
+    /// The visibility settings of a grouped brute force's groups (`brute_force_ism`: the
+    /// scene's `ism`; `brute_force_clusters`: its `clusters`); `None` for the other methods.
+    fn grouped_visibility(&self, method: Method) -> Option<VisibilitySettings> {
+        let mode = match method {
+            Method::BruteForceIsm => scene::Occlusion::Ism,
+            Method::BruteForceClusters => scene::Occlusion::Clusters,
+            _ => return None,
+        };
+        Some(VisibilitySettings { mode, ..self.visibility })
+    }
+
     /// Build the techniques the frame needs that are not built for the current settings, and
     /// fit them and the camera's images to this frame.
     fn prepare(
@@ -581,14 +594,16 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         let (scene, glossy, capacity) = (&self.scene, self.glossy, self.vals.capacity);
         let pixels = (width * height) as usize;
-        if components.indirect && method == Method::BruteForceIsm {
+        let grouped = self.grouped_visibility(method);
+        if let Some(groups) = grouped.filter(|_| components.indirect) {
             // Refused before anything is built for it: its table of (pixel, group) lookups
             // must fit one storage binding.
-            let count = self.visibility.ism.count;
+            let (name, field, count) = match groups.mode {
+                scene::Occlusion::Ism => ("brute_force_ism", "settings.ism.count", groups.ism.count),
+                _ => ("brute_force_clusters", "settings.tuning.clusters.count", groups.clusters.count),
+            };
             gpu.check_size(
-                &format!(
-                    "brute_force_ism's visibility table ({width}x{height} pixels x settings.ism.count {count} floats)"
-                ),
+                &format!("{name}'s visibility table ({width}x{height} pixels x {field} {count} floats)"),
                 pixels as u64 * u64::from(count) * 4,
             )?;
         }
@@ -604,15 +619,12 @@ impl Renderer {
                 // The sparse method's group visibility mode lights the points through the first
                 // bounce's maps, and its disks occlude their light spheres as the sparse
                 // points'; the brute force (no visibility) and `off` leave them unoccluded.
-                // `brute_force_ism` sees them through the imperfect shadow maps, as the sparse
-                // method's `ism` does.
+                // `brute_force_ism` and `brute_force_clusters` see them through their groups'
+                // maps, as the sparse method's `ism` and `clusters` do.
                 let occluding = self.visibility.mode != scene::Occlusion::Off;
                 let visibility = match method {
                     Method::Sparse if occluding => Some(self.visibility),
-                    Method::BruteForceIsm => {
-                        Some(VisibilitySettings { mode: scene::Occlusion::Ism, ..self.visibility })
-                    }
-                    _ => None,
+                    _ => grouped,
                 };
                 b.set_visibility(gpu, scene, visibility)?;
                 b.fit(gpu, scene, capacity)?;
@@ -640,10 +652,10 @@ impl Renderer {
                     built_for(&mut self.indirect.brute_force, glossy, || BruteForce::new(gpu, scene, glossy, None))?
                         .fit(gpu, scene, capacity, width * height)?;
                 }
-                Method::BruteForceIsm => {
-                    let ism = self.visibility.ism;
-                    built_for(&mut self.indirect.brute_force_ism, (glossy, ism), || {
-                        BruteForce::new(gpu, scene, glossy, Some(&ism))
+                Method::BruteForceIsm | Method::BruteForceClusters => {
+                    let groups = grouped.expect("a grouped brute force has groups");
+                    built_for(&mut self.indirect.brute_force_grouped, (glossy, groups), || {
+                        BruteForce::new(gpu, scene, glossy, Some(&groups))
                     })?
                     .fit(gpu, scene, capacity, width * height)?;
                 }

@@ -45,9 +45,10 @@ impl Renderer {
         }
     }
 
-    /// `brute_force_ism`'s groups and maps, once a frame of that method was rendered.
-    pub fn brute_force_ism_groups(&self) -> Option<&crate::gpu::visibility::clusters::Clusters> {
-        self.indirect.brute_force_ism.as_ref()?.technique.groups()
+    /// `brute_force_ism`'s or `brute_force_clusters`' groups and maps, once a frame of either
+    /// method was rendered (the last one's).
+    pub fn brute_force_groups(&self) -> Option<&crate::gpu::visibility::clusters::Clusters> {
+        self.indirect.brute_force_grouped.as_ref()?.technique.groups()
     }
 
     /// The sparse technique, once a sparse frame was rendered.

@@ -35,15 +35,18 @@ fn every_technique_runs_on_vulkan_and_gl_with_the_same_figures() {
         for m in v["modes_vs_exact"].as_array().expect("every mode against exact") {
             e.push((m["mode"].as_str().unwrap().to_owned(), m["rel_rmse"].as_f64().unwrap()));
         }
-        for key in ["brute_force_vs_exact", "brute_force_ism_vs_exact", "default_vs_exact"] {
+        for key in
+            ["brute_force_vs_exact", "brute_force_ism_vs_exact", "brute_force_clusters_vs_exact", "default_vs_exact"]
+        {
             e.push((key.to_owned(), v[key]["rel_rmse"].as_f64().unwrap_or_else(|| panic!("{key}: {v}"))));
         }
         e
     };
     let (on_vulkan, on_gl) = (errors(&vulkan), errors(&gl));
-    assert_eq!(on_vulkan.len(), 9);
+    assert_eq!(on_vulkan.len(), 10);
     for ((what, a), (_, b)) in on_vulkan.iter().zip(&on_gl) {
-        let grouped = ["clusters", "ism", "brute_force_ism_vs_exact"].contains(&what.as_str());
+        let grouped =
+            ["clusters", "ism", "brute_force_ism_vs_exact", "brute_force_clusters_vs_exact"].contains(&what.as_str());
         let rel = if grouped { 0.05 } else { 1e-4 };
         assert!(a.is_finite() && (a - b).abs() <= rel * a.max(1e-3), "{what}: Vulkan {a} vs GL {b}");
     }

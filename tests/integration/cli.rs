@@ -164,10 +164,13 @@ fn compare_reports_the_cpu_reference_and_its_noise() {
     assert_eq!(brute["mode"].as_str(), Some("brute_force"));
     let (raw, corrected) = (brute["rel_rmse"].as_f64().unwrap(), brute["rel_rmse_corrected"].as_f64().unwrap());
     assert!(raw.is_finite() && corrected >= 0.0 && corrected <= raw, "brute force: {corrected} vs {raw}");
-    let ism = &v["brute_force_ism_vs_exact"];
-    assert_eq!(ism["mode"].as_str(), Some("brute_force_ism"));
-    assert!(ism["rel_rmse"].as_f64().unwrap().is_finite() && ism["visibility_ms"].as_f64().unwrap() > 0.0);
-    assert!(v["brute_force_ism_skipped"].is_null(), "a small image's table fits");
+    for key in ["brute_force_ism", "brute_force_clusters"] {
+        let grouped = &v[format!("{key}_vs_exact")];
+        assert_eq!(grouped["mode"].as_str(), Some(key));
+        let (rel_rmse, visibility_ms) = (grouped["rel_rmse"].as_f64().unwrap(), grouped["visibility_ms"].as_f64());
+        assert!(rel_rmse.is_finite() && visibility_ms.unwrap() > 0.0, "{grouped}");
+        assert!(v[format!("{key}_skipped")].is_null(), "a small image's table fits");
+    }
     // The scene's own configuration against exact, with the frame's estimate of that error.
     let default = &v["default_vs_exact"];
     let measured = default["rel_rmse_corrected"].as_f64().unwrap();

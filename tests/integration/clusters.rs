@@ -168,6 +168,43 @@ fn assert_gather_applies_table(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals
     }
 }
 
+/// `brute_force_clusters` (the brute force with the clusters' rasterised maps looked up at
+/// every pixel) against its twins on the GPU's own VALs, clusters and maps: its stages (named
+/// `brute_force_clusters_*`, then the brute force; no gather), the k-means, then the table and
+/// the image (`ism::assert_pixels_match`). With `shadow_maps: "rays"` it draws rasterised
+/// maps all the same (rays serve sparse points only).
+#[test]
+fn brute_force_clusters_matches_cpu_twins() {
+    let gpu = gpu();
+    for maps in ["raster", "rays"] {
+        let scene = clusters_scene(&format!(
+            r#"{{"count": 12, "shadow_map_resolution": 64, "iterations": 3, "soft": "pcss", "shadow_maps": "{maps}"}}"#
+        ));
+        let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+        let (w, h) = (16, 12);
+        let frame = renderer.render(&gpu, Method::BruteForceClusters, w, h).unwrap();
+        let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
+        let at = stages.iter().position(|s| *s == "brute_force_clusters_clustering").expect("its clusters");
+        let want = [
+            "brute_force_clusters_clustering",
+            "brute_force_clusters_shadow_maps",
+            "brute_force_clusters_visibility",
+            "brute_force",
+        ];
+        assert_eq!(&stages[at..at + 4], &want[..], "{maps}: {stages:?}");
+        assert!(!stages.contains(&"gather"), "{stages:?}");
+        let vals = renderer.read_vals(&gpu).unwrap();
+        let groups = renderer.brute_force_groups().expect("brute_force_clusters' clusters");
+        let r = groups.read(&gpu, vals.len(), (w * h) as usize).unwrap();
+        assert_eq!(r.clusters.len(), 12);
+        let diagonal = 1.0 / r.kmeans.position_scale;
+        assert_kmeans_matches(&vec![twin::Cluster::default(); 12], &vals, &r, diagonal);
+        let resolution = r.settings.shadow_map_resolution;
+        let label = format!("brute_force_clusters ({maps})");
+        super::ism::assert_pixels_match(&mut renderer, &gpu, &frame, &vals, &r, resolution, &label);
+    }
+}
+
 /// Clusters looked up by shadow rays (`shadow_maps: "rays"`): the member lists hold each
 /// cluster's VALs as k-means assigned them; every (sparse point, cluster) entry is the twin's on
 /// the GPU's own lists (1 % may differ, a ray grazing an edge: the twins' traversals round

@@ -128,14 +128,10 @@ fn ism_without_pull_push_and_without_light() {
 
 /// `brute_force_ism` (the brute force with per-pixel ISM visibility) against its twins on the
 /// GPU's own VALs, groups and maps: its stages (the `ism` mode's, named `brute_force_ism_*`,
-/// then the lookup at the pixels and the brute force), the lookup at every (pixel, group)
-/// against the clusters' lookup twin (the sparse points' tolerances: 1 % of entries may differ
-/// by a tap, mean difference under 1e-3), and every covered pixel against
-/// `twin::shade_brute_force_grouped` with the GPU's table (1e-3 of the brightest pixel, the
-/// brute-force twin test's tolerance), darker than the plain brute force somewhere.
+/// then the lookup at the pixels and the brute force), the groups, the maps, then the table
+/// and the image ([`assert_pixels_match`]).
 #[test]
 fn brute_force_ism_matches_cpu_twins() {
-    use relume::gpu::visibility::clusters::twin as ctwin;
     let count = 24;
     let scene = ism_scene(&format!(r#"{{"count": {count}, "resolution": 32, "points": 400}}"#));
     let gpu = gpu();
@@ -154,7 +150,7 @@ fn brute_force_ism_matches_cpu_twins() {
     assert_eq!(&stages[at..at + 5], &want[..], "{stages:?}");
     assert!(!stages.contains(&"gather"), "{stages:?}");
     let vals = renderer.read_vals(&gpu).unwrap();
-    let groups = renderer.brute_force_ism_groups().expect("brute_force_ism's groups");
+    let groups = renderer.brute_force_groups().expect("brute_force_ism's groups");
     let pixels = (w * h) as usize;
     let r = groups.read(&gpu, vals.len(), pixels).unwrap();
     let m = r.clusters.len();
@@ -165,23 +161,42 @@ fn brute_force_ism_matches_cpu_twins() {
     assert!(clusters.iter().filter(|c| c.count > 0.0).count() > m / 2);
     assert_maps_match(&renderer, &r, 0.25);
 
-    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
-    let flat = &renderer.scene.flat;
     let params = r.ism.expect("imperfect maps");
+    assert_pixels_match(&mut renderer, &gpu, &frame, &vals, &r, params.resolution, "brute_force_ism");
+}
+
+/// A grouped brute force's table and image against their twins on the GPU's own VALs, groups
+/// and maps (`r`, of `resolution`): the lookup at every (pixel, group) against the clusters'
+/// lookup twin (the sparse points' tolerances: 1 % of entries may differ by a tap, mean
+/// difference under 1e-3; uncovered pixels 1), some entry shadowed; every covered pixel
+/// against `twin::shade_brute_force_grouped` with the GPU's table (1e-3 of the brightest
+/// pixel, the brute-force twin test's tolerance); darker than the plain brute force.
+pub(super) fn assert_pixels_match(
+    renderer: &mut Renderer,
+    gpu: &relume::gpu::Gpu,
+    frame: &relume::renderer::Rendered,
+    vals: &[relume::twin::Val],
+    r: &relume::gpu::visibility::clusters::ClusterReadback,
+    resolution: u32,
+    label: &str,
+) {
+    use relume::gpu::visibility::clusters::twin as ctwin;
+    let (w, h) = (frame.indirect.width, frame.indirect.height);
+    let m = r.clusters.len();
+    let pixels = (w * h) as usize;
+    let slope_bias_texels = r.ism.map_or(0.0, |p| p.slope_bias_texels);
+    let hits = renderer.camera_view().unwrap().read(gpu).unwrap();
+    let flat = &renderer.scene.flat;
     let (mut differ, mut sum_diff, mut shadowed) = (0, 0.0, 0);
     for (i, hit) in hits.iter().enumerate() {
         let row = &r.visibility[i * m..(i + 1) * m];
         let Some(hit) = hit else {
-            assert!(row.iter().all(|v| *v == 1.0), "uncovered pixel {i}: {row:?}");
+            assert!(row.iter().all(|v| *v == 1.0), "{label}: uncovered pixel {i}: {row:?}");
             continue;
         };
         let (p, n, _) = flat.surface_at(hit.triangle, hit.barycentrics);
         for (k, c) in r.clusters.iter().enumerate() {
-            let tile = ctwin::DepthTile {
-                resolution: params.resolution,
-                depths: &r.maps[k],
-                slope_bias_texels: params.slope_bias_texels,
-            };
+            let tile = ctwin::DepthTile { resolution, depths: &r.maps[k], slope_bias_texels };
             let receiver = ctwin::ShadowReceiver { offset: p - c.position, normal: n };
             let d = (ctwin::cluster_visibility_in(&tile, c, &r.frames[k], &receiver, r.settings.soft) - row[k]).abs();
             sum_diff += d;
@@ -190,9 +205,9 @@ fn brute_force_ism_matches_cpu_twins() {
         }
     }
     let n = pixels * m;
-    assert!(differ * 100 <= n, "{differ} of {n} visibilities differ");
-    assert!(sum_diff / (n as f32) < 1e-3, "mean difference {}", sum_diff / n as f32);
-    assert!(shadowed > 0, "the bunny and the box shadow some pixels from some group");
+    assert!(differ * 100 <= n, "{label}: {differ} of {n} visibilities differ");
+    assert!(sum_diff / (n as f32) < 1e-3, "{label}: mean difference {}", sum_diff / n as f32);
+    assert!(shadowed > 0, "{label}: the bunny and the box shadow some pixels from some group");
 
     let eye = renderer.view().eye();
     let glossy = renderer.glossy();
@@ -203,7 +218,7 @@ fn brute_force_ism_matches_cpu_twins() {
             hit.map(|h| {
                 let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
                 let row = &r.visibility[i * m..(i + 1) * m];
-                relume::twin::shade_brute_force_grouped(p, n, &surface, eye, &vals, &r.group_of_val, row, glossy)
+                relume::twin::shade_brute_force_grouped(p, n, &surface, eye, vals, &r.group_of_val, row, glossy)
             })
         })
         .collect();
@@ -212,12 +227,12 @@ fn brute_force_ism_matches_cpu_twins() {
     for (i, e) in expected.iter().enumerate() {
         assert_eq!(e.is_some(), frame.indirect.covered(i));
         if let Some(e) = e {
-            super::assert_close(frame.indirect.rgb(i), *e, 1e-3, scale, 1e-9, &format!("brute_force_ism pixel {i}"));
+            super::assert_close(frame.indirect.rgb(i), *e, 1e-3, scale, 1e-9, &format!("{label} pixel {i}"));
         }
     }
-    let plain = renderer.render(&gpu, Method::BruteForce, w, h).unwrap();
+    let plain = renderer.render(gpu, Method::BruteForce, w, h).unwrap();
     let (a, b) = (frame.indirect.luminance_sum_and_peak().0, plain.indirect.luminance_sum_and_peak().0);
-    assert!(a < 0.99 * b, "the maps take light from some pixels: {a} vs {b}");
+    assert!(a < 0.99 * b, "{label}: the maps take light from some pixels: {a} vs {b}");
 }
 
 /// VALs 2.5 m from a 0.3 m object: every lit group's imperfect map holds the object's points (no

@@ -221,14 +221,7 @@ pub const ISM_VISIBILITY: PassDesc = PassDesc {
 /// The lookup pass's WGSL after `head` (the mode's header), reading `imperfect` maps or
 /// rasterised ones.
 fn visibility_body(head: &str, imperfect: bool) -> String {
-    let maps = if imperfect { ism::LOOKUP_WGSL } else { clusters::RASTER_DEPTH_WGSL };
-    Wgsl::new()
-        .include(head)
-        .include(POINT_WGSL)
-        .include(maps)
-        .include(clusters::VISIBILITY_LOOKUP_WGSL)
-        .include(VISIBILITY_WGSL)
-        .finish()
+    clusters::lookup_pass_body(head, imperfect, &[POINT_WGSL, VISIBILITY_WGSL])
 }
 
 /// The lookup pass at the bounce points and its WGSL after `head`, for `imperfect` maps or

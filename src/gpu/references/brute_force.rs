@@ -12,16 +12,23 @@
 //! (`ism.count` floats per pixel: 64 MiB at 128² with 1,024 maps; larger than the device's
 //! largest storage binding is an error naming it), then the brute force reading it
 //! (`visibility/group.wgsl`). Rust twin: `twin::shade_brute_force_grouped`.
+//!
+//! **`brute_force_clusters`** (`Method::BruteForceClusters`): the same with the `clusters`
+//! mode's groups and maps (`settings.tuning.clusters`: k-means, rasterised shadow maps, or
+//! imperfect ones with `shadow_maps: "ism"`; shadow rays serve sparse points only, so `"rays"`
+//! gets rasterised maps here), its stages named `brute_force_clusters_*`: the clusters'
+//! visibility looked up where the light lands instead of at the sparse points, so the maps'
+//! own error and the sparse sampling's separate.
 
-use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, read, read_write, texture, view};
+use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, depth_texture, read, read_write, texture, view};
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::{IMAGE_TILE, TILE_SIZE, VAL_TILES, WORKGROUP_SIZE, Wgsl};
 use crate::gpu::technique::{Frame, Technique};
 use crate::gpu::timing::Recorder;
-use crate::gpu::visibility::clusters::{Clusters, Receivers, SceneScale, StageNames};
+use crate::gpu::visibility::clusters::{self, Clusters, Receivers, SceneScale, StageNames};
 use crate::gpu::visibility::{GroupVisibility, VisibilitySettings, group_wgsl, ism};
 use crate::gpu::{Gpu, GpuError};
-use crate::scene::{IsmSettings, Occlusion};
+use crate::scene::{ClusterSettings, IsmSettings, Occlusion};
 
 pub const WGSL: &str = include_str!("brute_force.wgsl");
 pub const VISIBILITY_WGSL: &str = include_str!("brute_force_visibility.wgsl");
@@ -99,6 +106,21 @@ pub const GROUPED_PASS: PassDesc = PassDesc {
     ..PASS
 };
 
+/// Stage of `brute_force_clusters`' lookup at the pixels.
+pub const CLUSTERS_VISIBILITY_STAGE: &str = "brute_force_clusters_visibility";
+
+/// The stages of `brute_force_clusters`' groups and maps (imperfect ones with
+/// `shadow_maps: "ism"`).
+pub const CLUSTERS_STAGES: StageNames = StageNames {
+    clustering: "brute_force_clusters_clustering",
+    shadow_maps: "brute_force_clusters_shadow_maps",
+    ism_sampling: "brute_force_clusters_ism_sampling",
+    ism_splat: "brute_force_clusters_ism_splat",
+    ism_pull_push: "brute_force_clusters_ism_pull_push",
+    cluster_visibility: CLUSTERS_VISIBILITY_STAGE,
+    ism_visibility: CLUSTERS_VISIBILITY_STAGE,
+};
+
 /// The lookup at the pixels, reading imperfect shadow maps.
 pub const ISM_VISIBILITY: PassDesc = PassDesc {
     label: ISM_VISIBILITY_STAGE,
@@ -107,42 +129,54 @@ pub const ISM_VISIBILITY: PassDesc = PassDesc {
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
         let head = ism::header(&IsmSettings::default(), SceneScale { diagonal: 1.0 });
-        ISM_VISIBILITY.source(&visibility_body(&head), textured)
+        ISM_VISIBILITY.source(&visibility_body(&head, true), textured)
     },
 };
 
-fn visibility_body(head: &str) -> String {
-    use crate::gpu::visibility::clusters::VISIBILITY_LOOKUP_WGSL;
-    Wgsl::new()
-        .include(head)
-        .include(ism::LOOKUP_WGSL)
-        .include(VISIBILITY_LOOKUP_WGSL)
-        .include(VISIBILITY_WGSL)
-        .finish()
+/// The lookup at the pixels, reading rasterised shadow maps.
+pub const RASTER_VISIBILITY: PassDesc = PassDesc {
+    label: CLUSTERS_VISIBILITY_STAGE,
+    bindings: &[texture("visibility"), read("clusters"), depth_texture("shadow_atlas"), read_write("group_visibility")],
+    default_source: |textured| {
+        let head = clusters::header(&ClusterSettings::default(), SceneScale { diagonal: 1.0 });
+        RASTER_VISIBILITY.source(&visibility_body(&head, false), textured)
+    },
+    ..ISM_VISIBILITY
+};
+
+/// The lookup pass's WGSL after `head`, reading `imperfect` maps or rasterised ones.
+fn visibility_body(head: &str, imperfect: bool) -> String {
+    clusters::lookup_pass_body(head, imperfect, &[VISIBILITY_WGSL])
 }
 
-/// The lookup pass at the pixels and its WGSL after `head` ([`Clusters`] with
-/// [`Receivers::Pixels`] builds it); imperfect maps only.
+/// The lookup pass at the pixels and its WGSL after `head`, for `imperfect` maps or rasterised
+/// ones ([`Clusters`] with [`Receivers::Pixels`] builds it).
 pub fn visibility_pass(head: &str, imperfect: bool) -> (&'static PassDesc, String) {
-    assert!(imperfect, "brute_force_ism looks up imperfect shadow maps");
-    (&ISM_VISIBILITY, visibility_body(head))
+    (if imperfect { &ISM_VISIBILITY } else { &RASTER_VISIBILITY }, visibility_body(head, imperfect))
 }
 
 pub struct BruteForce {
     kernels: Kernels,
-    /// `brute_force_ism`: the imperfect shadow maps' groups, looked up at the pixels.
+    /// `brute_force_ism` and `brute_force_clusters`: the groups and their maps, looked up at
+    /// the pixels.
     groups: Option<Clusters>,
     /// Pixels of a row per invocation.
     pixels: u32,
 }
 
 impl BruteForce {
-    /// The brute force; with `ism`, `brute_force_ism` with those settings.
-    pub fn new(gpu: &Gpu, scene: &GpuScene, glossy: bool, ism: Option<&IsmSettings>) -> Result<Self, GpuError> {
-        let groups = match ism {
-            Some(ism) => {
-                let settings = VisibilitySettings { mode: Occlusion::Ism, ism: *ism, ..Default::default() };
-                Clusters::for_receivers(gpu, scene, &settings, Receivers::Pixels, ISM_STAGES)?
+    /// The brute force; with `groups` (its mode `ism` or `clusters`), `brute_force_ism` or
+    /// `brute_force_clusters` with those settings.
+    pub fn new(
+        gpu: &Gpu,
+        scene: &GpuScene,
+        glossy: bool,
+        groups: Option<&VisibilitySettings>,
+    ) -> Result<Self, GpuError> {
+        let groups = match groups {
+            Some(v) => {
+                let names = if v.mode == Occlusion::Ism { ISM_STAGES } else { CLUSTERS_STAGES };
+                Clusters::for_receivers(gpu, scene, v, Receivers::Pixels, names)?
             }
             None => None,
         };
@@ -164,7 +198,7 @@ impl BruteForce {
         self.kernels.fit(gpu, scene, max_vals)
     }
 
-    /// `brute_force_ism`'s groups and maps (tests read them back).
+    /// `brute_force_ism`'s or `brute_force_clusters`' groups and maps (tests read them back).
     pub fn groups(&self) -> Option<&Clusters> {
         self.groups.as_ref()
     }

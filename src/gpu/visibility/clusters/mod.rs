@@ -190,6 +190,18 @@ pub fn visibility_body(head: &str) -> String {
     Wgsl::new().include(head).include(RASTER_DEPTH_WGSL).include(VISIBILITY_WGSL).finish()
 }
 
+/// A lookup pass's WGSL after `head` for receivers other than the sparse points: the maps
+/// (`imperfect` ones or the rasterised atlas), the lookup, then `parts` (the receivers and the
+/// pass's entry point).
+pub fn lookup_pass_body(head: &str, imperfect: bool, parts: &[&str]) -> String {
+    let maps = if imperfect { ism::LOOKUP_WGSL } else { RASTER_DEPTH_WGSL };
+    let mut wgsl = Wgsl::new().include(head).include(maps).include(VISIBILITY_LOOKUP_WGSL);
+    for part in parts {
+        wgsl = wgsl.include(part);
+    }
+    wgsl.finish()
+}
+
 /// The lookup's WGSL after `head`, reading the rasterised atlas, without the pass's entry point.
 pub fn lookup_body(head: &str) -> String {
     Wgsl::new().include(head).include(RASTER_DEPTH_WGSL).include(VISIBILITY_LOOKUP_WGSL).finish()
