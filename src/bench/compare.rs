@@ -579,12 +579,13 @@ fn exact_comparison(
     let (brute_force_clusters_vs_exact, brute_force_clusters_skipped) =
         grouped(renderer, Method::BruteForceClusters, "brute_force_clusters")?;
     renderer.set_occlusion(scene.settings.visibility.mode, scene.settings.visibility.rule);
-    // What a user gets: the level's technique (the sparse method, or the GPU estimator where
-    // the scene's measured level names it; at `reference`, the sparse method with accurate's
-    // parameters, the reference being what it is compared with).
+    // What a user gets: the level's technique (the sparse method, or the GPU estimator or the
+    // brute force through the clusters' maps where the scene's measured level names it; at
+    // `reference`, the sparse method with accurate's parameters, the reference being what it
+    // is compared with).
     let own = match Method::from(scene.resolved.method) {
-        Method::Estimator => Method::Estimator,
-        _ => Method::Sparse,
+        Method::Exact => Method::Sparse,
+        method => method,
     };
     let default = renderer.render(gpu, own, w, h)?;
     let estimate = crate::renderer::estimate::Estimator::new().estimate(

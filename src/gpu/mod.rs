@@ -68,6 +68,8 @@ const SHADING_PASSES: &[&pass::PassDesc] = &[
     &references::brute_force::PASS,
     &references::brute_force::GROUPED_PASS,
     &references::brute_force::ISM_VISIBILITY,
+    &references::brute_force::IN_PASS_RASTER,
+    &references::brute_force::IN_PASS_ISM,
     &references::exact::PASS,
     &references::estimator::PASS,
     &lights::direct::PASS,

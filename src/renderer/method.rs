@@ -37,6 +37,7 @@ impl From<crate::scene::Technique> for Method {
             crate::scene::Technique::Exact => Method::Exact,
             crate::scene::Technique::Sparse => Method::Sparse,
             crate::scene::Technique::Estimator => Method::Estimator,
+            crate::scene::Technique::BruteForceClusters => Method::BruteForceClusters,
         }
     }
 }

@@ -17,7 +17,7 @@
 //!              | BruteForce (brute_force) | BruteForce for brute_force_ism
 //!              (brute_force_ism_sampling, _splat, _pull_push, _visibility, brute_force)
 //!              | BruteForce for brute_force_clusters (brute_force_clusters_clustering,
-//!              _shadow_maps, _visibility, brute_force) | Exact (exact)
+//!              _shadow_maps, brute_force: the maps looked up in it) | Exact (exact)
 //! direct:      DirectLight (direct), then for the scene's `lights`
 //!              ManyLights (lights_shadow_maps, lights_direct)
 //! ```
@@ -595,15 +595,15 @@ impl Renderer {
         let (scene, glossy, capacity) = (&self.scene, self.glossy, self.vals.capacity);
         let pixels = (width * height) as usize;
         let grouped = self.grouped_visibility(method);
-        if let Some(groups) = grouped.filter(|_| components.indirect) {
+        if components.indirect && method == Method::BruteForceIsm {
             // Refused before anything is built for it: its table of (pixel, group) lookups
-            // must fit one storage binding.
-            let (name, field, count) = match groups.mode {
-                scene::Occlusion::Ism => ("brute_force_ism", "settings.ism.count", groups.ism.count),
-                _ => ("brute_force_clusters", "settings.tuning.clusters.count", groups.clusters.count),
-            };
+            // must fit one storage binding (`brute_force_clusters` looks its maps up in its
+            // pass, with no table).
+            let count = self.visibility.ism.count;
             gpu.check_size(
-                &format!("{name}'s visibility table ({width}x{height} pixels x {field} {count} floats)"),
+                &format!(
+                    "brute_force_ism's visibility table ({width}x{height} pixels x settings.ism.count {count} floats)"
+                ),
                 pixels as u64 * u64::from(count) * 4,
             )?;
         }

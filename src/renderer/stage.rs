@@ -36,7 +36,5 @@ pub const SHADE: &str = sparse::shade::PASS.label;
 pub const BRUTE_FORCE: &str = references::brute_force::PASS.label;
 /// `brute_force_ism`'s lookup at the pixels (after its groups and maps).
 pub const BRUTE_FORCE_ISM_VISIBILITY: &str = references::brute_force::ISM_VISIBILITY_STAGE;
-/// `brute_force_clusters`' lookup at the pixels (after its clusters and maps).
-pub const BRUTE_FORCE_CLUSTERS_VISIBILITY: &str = references::brute_force::CLUSTERS_VISIBILITY_STAGE;
 pub const EXACT: &str = references::exact::PASS.label;
 pub const DIRECT: &str = spot::DIRECT;

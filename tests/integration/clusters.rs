@@ -169,14 +169,15 @@ fn assert_gather_applies_table(renderer: &Renderer, gpu: &relume::gpu::Gpu, vals
 }
 
 /// `brute_force_clusters` (the brute force with the clusters' rasterised maps looked up at
-/// every pixel) against its twins on the GPU's own VALs, clusters and maps: its stages (named
-/// `brute_force_clusters_*`, then the brute force; no gather), the k-means, then the table and
-/// the image (`ism::assert_pixels_match`). With `shadow_maps: "rays"` it draws rasterised
-/// maps all the same (rays serve sparse points only).
+/// every pixel, in its own pass) against its twins on the GPU's own VALs, clusters and maps:
+/// its stages (named `brute_force_clusters_*`, then the brute force; no gather, no lookup
+/// stage), the k-means, then the image (`ism::assert_pixels_match`). With `shadow_maps:
+/// "rays"` it draws rasterised maps all the same (rays serve sparse points only); with
+/// `"ism"` it looks imperfect maps up in the pass.
 #[test]
 fn brute_force_clusters_matches_cpu_twins() {
     let gpu = gpu();
-    for maps in ["raster", "rays"] {
+    for maps in ["raster", "rays", "ism"] {
         let scene = clusters_scene(&format!(
             r#"{{"count": 12, "shadow_map_resolution": 64, "iterations": 3, "soft": "pcss", "shadow_maps": "{maps}"}}"#
         ));
@@ -185,13 +186,16 @@ fn brute_force_clusters_matches_cpu_twins() {
         let frame = renderer.render(&gpu, Method::BruteForceClusters, w, h).unwrap();
         let stages: Vec<&str> = frame.timings.stages.iter().map(|(n, _)| n.as_str()).collect();
         let at = stages.iter().position(|s| *s == "brute_force_clusters_clustering").expect("its clusters");
-        let want = [
-            "brute_force_clusters_clustering",
-            "brute_force_clusters_shadow_maps",
-            "brute_force_clusters_visibility",
-            "brute_force",
-        ];
-        assert_eq!(&stages[at..at + 4], &want[..], "{maps}: {stages:?}");
+        let want: &[&str] = match maps {
+            "ism" => &[
+                "brute_force_clusters_clustering",
+                "brute_force_clusters_ism_splat",
+                "brute_force_clusters_ism_pull_push",
+                "brute_force",
+            ],
+            _ => &["brute_force_clusters_clustering", "brute_force_clusters_shadow_maps", "brute_force"],
+        };
+        assert_eq!(&stages[at..at + want.len()], want, "{maps}: {stages:?}");
         assert!(!stages.contains(&"gather"), "{stages:?}");
         let vals = renderer.read_vals(&gpu).unwrap();
         let groups = renderer.brute_force_groups().expect("brute_force_clusters' clusters");
@@ -199,7 +203,8 @@ fn brute_force_clusters_matches_cpu_twins() {
         assert_eq!(r.clusters.len(), 12);
         let diagonal = 1.0 / r.kmeans.position_scale;
         assert_kmeans_matches(&vec![twin::Cluster::default(); 12], &vals, &r, diagonal);
-        let resolution = r.settings.shadow_map_resolution;
+        assert!(r.visibility.is_empty(), "looked up in the pass: no table");
+        let resolution = r.ism.map_or(r.settings.shadow_map_resolution, |p| p.resolution);
         let label = format!("brute_force_clusters ({maps})");
         super::ism::assert_pixels_match(&mut renderer, &gpu, &frame, &vals, &r, resolution, &label);
     }

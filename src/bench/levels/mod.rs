@@ -16,7 +16,9 @@
 //! the spot light's RSM, the fraction of sparse points, the near field; a parameter the scene
 //! file sets in its `tuning` is left as set), and says of each level which measured
 //! configuration **dominates** it: more accurate and at least [`DOMINANCE_SPEEDUP`] times
-//! faster. A level so dominated is a wrong choice for this scene.
+//! faster. A level so dominated is a wrong choice for this scene. Beside them it measures the
+//! brute force through the clusters' maps (`brute_force_clusters`, the technique a measured
+//! level may name) with `balanced`'s and `accurate`'s VALs and clusters.
 
 use super::BenchError;
 use super::compare::{ExactOptions, ExactReference, exact_reference, rel_rmse_without_worst};
@@ -107,8 +109,8 @@ pub struct CandidateRow {
     pub name: String,
     /// The parameters (the reference's, for the GPU estimator, which ignores them).
     pub knobs: Knobs,
-    /// How the indirect light was computed: the sparse method, or the GPU estimator of the
-    /// exact reference (`--gpu-estimator`).
+    /// How the indirect light was computed: the sparse method, the GPU estimator of the exact
+    /// reference (`--gpu-estimator`), or the brute force through the clusters' maps.
     pub method: crate::renderer::Method,
     /// The GPU estimator's draws per pixel (`None` for the sparse method).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -121,14 +123,18 @@ pub struct CandidateRow {
 }
 
 impl CandidateRow {
-    /// The row of configuration `name`, `scene` as measured in `m` (with the GPU estimator's
-    /// `draws`, or the sparse method), the figures also printed as it goes.
-    fn of(name: String, scene: &Scene, draws: Option<u32>, m: &Measured) -> CandidateRow {
+    /// The row of configuration `name`, `scene` as measured in `m` by `method`, the figures also
+    /// printed as it goes.
+    fn of(name: String, scene: &Scene, method: Method, m: &Measured) -> CandidateRow {
         eprintln!("{name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
+        let draws = match method {
+            Method::Estimator(draws) => Some(draws),
+            Method::Sparse | Method::BruteForceClusters => None,
+        };
         CandidateRow {
             name,
             knobs: Knobs::of(scene),
-            method: if draws.is_some() { RenderMethod::Estimator } else { RenderMethod::Sparse },
+            method: method.render_method(),
             draws,
             rel_rmse_vs_exact: m.error,
             rel_rmse_without_worst_1pct: m.without_worst,
@@ -220,7 +226,7 @@ pub fn levels(
     let mut measured = measured;
     for &draws in options.gpu_estimator {
         let m = measure(gpu, &finest, (w, h), &reference, Method::Estimator(draws))?;
-        measured.push(CandidateRow::of(format!("GPU estimator, {draws} draws"), &finest, Some(draws), &m));
+        measured.push(CandidateRow::of(format!("GPU estimator, {draws} draws"), &finest, Method::Estimator(draws), &m));
     }
     mark_dominated(&mut rows[..3], &measured);
     let at = format!("{w}x{h} on {}", gpu.adapter_name());
@@ -259,11 +265,13 @@ pub fn suggest_levels(
     spot_light: bool,
     at: &str,
 ) -> serde_json::Value {
-    // The GPU estimator's rows carry their draws (the level becomes the estimator).
-    let measured: Vec<(&str, Knobs, Option<u32>, f64, f64)> = levels
+    // The GPU estimator's rows carry their draws (the level becomes the estimator), the brute
+    // force's its method (the level becomes it, with the row's VALs).
+    type Technique = (RenderMethod, Option<u32>);
+    let measured: Vec<(&str, Knobs, Technique, f64, f64)> = levels
         .iter()
-        .map(|r| (r.level.name(), r.knobs, None, r.rel_rmse_vs_exact, r.ms))
-        .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, c.draws, c.rel_rmse_vs_exact, c.ms)))
+        .map(|r| (r.level.name(), r.knobs, (RenderMethod::Sparse, None), r.rel_rmse_vs_exact, r.ms))
+        .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, (c.method, c.draws), c.rel_rmse_vs_exact, c.ms)))
         .collect();
     let mut out = existing.as_object().cloned().unwrap_or_default();
     for row in levels {
@@ -275,8 +283,15 @@ pub fn suggest_levels(
         let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
         match draws {
             // The estimator takes none of the sparse method's parameters.
-            Some(draws) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
-            None => {
+            (_, Some(draws)) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
+            // The brute force takes the row's VALs (its RSM) and clusters.
+            (RenderMethod::BruteForceClusters, None) => {
+                entry = serde_json::json!({"technique": "brute_force_clusters"});
+                if spot_light && knobs.rsm_resolution != row.knobs.rsm_resolution {
+                    entry["rsm_resolution"] = knobs.rsm_resolution.into();
+                }
+            }
+            _ => {
                 if let Some(e) = entry.as_object_mut() {
                     e.remove("technique");
                     e.remove("draws");
@@ -377,7 +392,16 @@ fn measure_candidates(
         let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(base))
             .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
         let m = measure(gpu, &scene, size, reference, Method::Sparse)?;
-        measured.push(CandidateRow::of(name, &scene, None, &m));
+        measured.push(CandidateRow::of(name, &scene, Method::Sparse, &m));
+    }
+    // The brute force through the clusters' maps with balanced's and accurate's VALs and
+    // clusters (the level's technique where it dominates).
+    for level in [Quality::Balanced, Quality::Accurate] {
+        let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(level))
+            .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
+        let m = measure(gpu, &scene, size, reference, Method::BruteForceClusters)?;
+        let name = format!("{} + technique=brute_force_clusters", level.name());
+        measured.push(CandidateRow::of(name, &scene, Method::BruteForceClusters, &m));
     }
     Ok(measured)
 }
@@ -480,6 +504,18 @@ enum Method {
     Sparse,
     /// The GPU estimator with this many draws per pixel.
     Estimator(u32),
+    /// The brute force through the clusters' maps.
+    BruteForceClusters,
+}
+
+impl Method {
+    fn render_method(self) -> RenderMethod {
+        match self {
+            Method::Sparse => RenderMethod::Sparse,
+            Method::Estimator(_) => RenderMethod::Estimator,
+            Method::BruteForceClusters => RenderMethod::BruteForceClusters,
+        }
+    }
 }
 
 /// Render `scene` once to warm up, then [`TIMED_FRAMES`] times; the frame of median indirect
@@ -492,13 +528,10 @@ fn measure(
     method: Method,
 ) -> Result<Measured, BenchError> {
     let mut renderer = Renderer::new(gpu, scene)?;
-    let method = match method {
-        Method::Sparse => RenderMethod::Sparse,
-        Method::Estimator(draws) => {
-            renderer.set_estimator(draws, scene.settings.seed as u32);
-            RenderMethod::Estimator
-        }
-    };
+    if let Method::Estimator(draws) = method {
+        renderer.set_estimator(draws, scene.settings.seed as u32);
+    }
+    let method = method.render_method();
     renderer.render(gpu, method, w, h)?;
     let mut frames = (0..TIMED_FRAMES).map(|_| renderer.render(gpu, method, w, h)).collect::<Result<Vec<_>, _>>()?;
     frames.sort_by(|a, b| a.indirect_ms().total_cmp(&b.indirect_ms()));
@@ -520,6 +553,7 @@ fn level_row(
 ) -> Result<LevelRow, BenchError> {
     let method = match (scene.resolved.method, scene.resolved.estimator_draws) {
         (crate::scene::Technique::Estimator, Some(draws)) => Method::Estimator(draws),
+        (crate::scene::Technique::BruteForceClusters, _) => Method::BruteForceClusters,
         _ => Method::Sparse,
     };
     let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference, method)?;
@@ -601,6 +635,9 @@ fn candidates_markdown(report: &LevelsReport) -> String {
             // reference's.
             let k = match c.method {
                 RenderMethod::Sparse => knobs(&c.knobs),
+                RenderMethod::BruteForceClusters => {
+                    format!("clusters per pixel | {} | – | – | –", c.knobs.rsm_resolution)
+                }
                 _ => format!("exact | {} | – | – | –", c.knobs.rsm_resolution),
             };
             (c.name.clone(), k, c.rel_rmse_vs_exact, c.rel_rmse_without_worst_1pct, c.ms)

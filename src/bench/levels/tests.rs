@@ -191,6 +191,28 @@ fn a_dominating_estimator_becomes_the_levels_technique() {
     assert_eq!(s["accurate"]["sparse"]["points"], 0.5);
 }
 
+/// The brute force through the clusters' maps dominating a level makes it that level's
+/// technique, with the candidate's RSM where it differs and none of the sparse parameters.
+#[test]
+fn a_dominating_brute_force_through_the_clusters_becomes_the_levels_technique() {
+    let l = levels();
+    let name = "balanced + technique=brute_force_clusters";
+    let rows = [row(Quality::Accurate, l[2].1, 0.24, 8000.0, &[name])];
+    let mut brute = candidate(name, knobs(Occlusion::Disks, 64, 1.0, 0.0, 2.0), 0.10, 6000.0);
+    brute.method = RenderMethod::BruteForceClusters;
+    let existing = serde_json::json!({"accurate": {"measured": "before", "sparse": {"points": 0.5}}});
+    let s = suggest_levels(&rows, &[brute], &existing, true, "here");
+    let accurate = &s["accurate"];
+    assert_eq!(accurate["technique"], "brute_force_clusters");
+    assert_eq!(accurate["rsm_resolution"], 64, "{accurate}");
+    assert!(accurate.get("sparse").is_none() && accurate.get("draws").is_none(), "{accurate}");
+    let settings: crate::scene::SettingsDescription =
+        serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
+    settings.validate("settings").expect("and is valid");
+    let technique = crate::scene::settings::technique(Quality::Accurate, &settings);
+    assert_eq!(technique, (crate::scene::Technique::BruteForceClusters, None));
+}
+
 #[test]
 fn dominance_needs_both_lower_error_and_the_speedup() {
     assert!(dominates((0.10, 100.0), (0.11, 120.0)));

@@ -221,7 +221,7 @@ pub const ISM_VISIBILITY: PassDesc = PassDesc {
 /// The lookup pass's WGSL after `head` (the mode's header), reading `imperfect` maps or
 /// rasterised ones.
 fn visibility_body(head: &str, imperfect: bool) -> String {
-    clusters::lookup_pass_body(head, imperfect, &[POINT_WGSL, VISIBILITY_WGSL])
+    clusters::lookup_pass_body(head, imperfect, [1, 2], &[POINT_WGSL, VISIBILITY_WGSL])
 }
 
 /// The lookup pass at the bounce points and its WGSL after `head`, for `imperfect` maps or

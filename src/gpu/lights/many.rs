@@ -98,7 +98,7 @@ fn maps_settings(groups: u32, resolution: u32, soft: SoftShadows) -> ClusterSett
 fn body(maps: &ClusterSettings, scale: SceneScale, groups: u32, add: bool) -> String {
     let head = clusters::header(maps, scale);
     Wgsl::new()
-        .include(&clusters::lookup_body(&head))
+        .include(&clusters::lookup_body(&head, [1, 2]))
         .u32("GROUP_COUNT", groups)
         .vec3_f32("AXIS", AXIS.to_array())
         .bool("ADD_TO_DIRECT", add)

@@ -18,7 +18,9 @@
 //! imperfect ones with `shadow_maps: "ism"`; shadow rays serve sparse points only, so `"rays"`
 //! gets rasterised maps here), its stages named `brute_force_clusters_*`: the clusters'
 //! visibility looked up where the light lands instead of at the sparse points, so the maps'
-//! own error and the sparse sampling's separate.
+//! own error and the sparse sampling's separate. Its clusters (at most 256) are looked up in
+//! the brute force's own pass, each invocation every cluster at its pixels before the VALs
+//! (`brute_force_lookup.wgsl`, [`Receivers::InPass`]): no table, so any image size fits.
 
 use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, depth_texture, read, read_write, texture, view};
 use crate::gpu::scene::GpuScene;
@@ -32,6 +34,8 @@ use crate::scene::{ClusterSettings, IsmSettings, Occlusion};
 
 pub const WGSL: &str = include_str!("brute_force.wgsl");
 pub const VISIBILITY_WGSL: &str = include_str!("brute_force_visibility.wgsl");
+/// `brute_force_clusters`' lookup in its own pass.
+pub const LOOKUP_WGSL: &str = include_str!("brute_force_lookup.wgsl");
 
 /// Stage of the lookup at the pixels.
 pub const ISM_VISIBILITY_STAGE: &str = "brute_force_ism_visibility";
@@ -48,12 +52,35 @@ pub const ISM_STAGES: StageNames = StageNames {
     ism_visibility: ISM_VISIBILITY_STAGE,
 };
 
-/// The pass's own WGSL: the VAL tiles, `val_visibility` for `groups` groups (or none),
-/// then `brute_force.wgsl`.
-pub fn body(groups: Option<u32>, pixels: u32) -> String {
-    let visibility = group_wgsl(groups, 4);
+/// How the brute force's VALs are seen from the pixels.
+#[derive(Clone, Copy, Debug)]
+pub enum PixelVisibility<'a> {
+    /// Not at all: every VAL reaches every pixel.
+    None,
+    /// Through a table of pixels x `groups`, filled before the pass (`brute_force_ism`).
+    Table { groups: u32 },
+    /// Through the clusters' maps, looked up in the pass (`brute_force_clusters`): the lookup's
+    /// header ([`Clusters::lookup_header`]) and whether the maps are imperfect.
+    InPass { head: &'a str, imperfect: bool },
+}
+
+/// `prepare_visibility` and `pixel_val_visibility` through `val_visibility` (no visibility, or
+/// the table's entry at the pixel).
+const TABLE_HOOK: &str = "fn prepare_visibility(receivers: ptr<function, array<Receiver, PIXELS>>) {}\n\
+                          fn pixel_val_visibility(r: Receiver, slot: u32, val: u32) -> f32 {\n    \
+                          return val_visibility(r.pixel, val);\n}\n";
+
+/// The pass's own WGSL: the VAL tiles, the pixels' `visibility`, then `brute_force.wgsl`.
+pub fn body(visibility: PixelVisibility<'_>, pixels: u32) -> String {
+    let visibility = match visibility {
+        PixelVisibility::None => group_wgsl(None, 4) + TABLE_HOOK,
+        PixelVisibility::Table { groups } => group_wgsl(Some(groups), 4) + TABLE_HOOK,
+        PixelVisibility::InPass { head, imperfect } => {
+            clusters::lookup_pass_body(head, imperfect, IN_PASS_BINDINGS, &[LOOKUP_WGSL])
+        }
+    };
     let adds: String = (0..pixels)
-        .map(|r| format!("    (*ls)[{r}] = add_val((*ls)[{r}], (*receivers)[{r}], val, val_index, glossy);\n"))
+        .map(|r| format!("    (*ls)[{r}] = add_val((*ls)[{r}], (*receivers)[{r}], {r}u, val, val_index, glossy);\n"))
         .collect();
     // `add_to_pixels`, unrolled: one statement per pixel.
     let add_to_pixels = format!(
@@ -95,30 +122,71 @@ pub const PASS: PassDesc = PassDesc {
     bindings: BINDINGS.split_at(4).0,
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 4)],
     workgroup: [IMAGE_TILE[0], TILE_SIZE / IMAGE_TILE[0], 1],
-    default_source: |textured| PASS.source(&body(None, CPU_PIXELS), textured),
+    default_source: |textured| PASS.source(&body(PixelVisibility::None, CPU_PIXELS), textured),
 };
 
 /// `brute_force_ism`'s pass: [`PASS`] plus the group table at the pixels.
 pub const GROUPED_PASS: PassDesc = PassDesc {
     bindings: BINDINGS,
     entries: &[Entry::first("main", 6), Entry::first("main_glossy", 6)],
-    default_source: |textured| GROUPED_PASS.source(&body(Some(64), CPU_PIXELS), textured),
+    default_source: |textured| GROUPED_PASS.source(&body(PixelVisibility::Table { groups: 64 }, CPU_PIXELS), textured),
     ..PASS
 };
 
-/// Stage of `brute_force_clusters`' lookup at the pixels.
-pub const CLUSTERS_VISIBILITY_STAGE: &str = "brute_force_clusters_visibility";
+/// The bindings of the clusters and their maps in `brute_force_clusters`' pass, after
+/// [`PASS`]'s and `group_of_val`.
+const IN_PASS_BINDINGS: [u32; 2] = [5, 6];
+
+/// `brute_force_clusters`' pass with rasterised maps: [`PASS`] plus each VAL's cluster, the
+/// clusters and their maps, looked up in the pass.
+pub const IN_PASS_RASTER: PassDesc = PassDesc {
+    bindings: &[
+        texture("visibility"),
+        read_write("indirect"),
+        read("vals"),
+        read("val_count"),
+        read("group_of_val"),
+        read("clusters"),
+        depth_texture("shadow_atlas"),
+    ],
+    entries: &[Entry::first("main", 7), Entry::first("main_glossy", 7)],
+    default_source: |textured| {
+        let head = clusters::header(&ClusterSettings::default(), SceneScale { diagonal: 1.0 });
+        let visibility = PixelVisibility::InPass { head: &head, imperfect: false };
+        IN_PASS_RASTER.source(&body(visibility, CPU_PIXELS), textured)
+    },
+    ..PASS
+};
+
+/// `brute_force_clusters`' pass with imperfect maps (`shadow_maps: "ism"`).
+pub const IN_PASS_ISM: PassDesc = PassDesc {
+    bindings: &[
+        texture("visibility"),
+        read_write("indirect"),
+        read("vals"),
+        read("val_count"),
+        read("group_of_val"),
+        read("clusters"),
+        read("ism_atlas"),
+    ],
+    default_source: |textured| {
+        let head = ism::header(&IsmSettings::default(), SceneScale { diagonal: 1.0 });
+        let visibility = PixelVisibility::InPass { head: &head, imperfect: true };
+        IN_PASS_ISM.source(&body(visibility, CPU_PIXELS), textured)
+    },
+    ..IN_PASS_RASTER
+};
 
 /// The stages of `brute_force_clusters`' groups and maps (imperfect ones with
-/// `shadow_maps: "ism"`).
+/// `shadow_maps: "ism"`); the lookup is in the brute force's own stage.
 pub const CLUSTERS_STAGES: StageNames = StageNames {
     clustering: "brute_force_clusters_clustering",
     shadow_maps: "brute_force_clusters_shadow_maps",
     ism_sampling: "brute_force_clusters_ism_sampling",
     ism_splat: "brute_force_clusters_ism_splat",
     ism_pull_push: "brute_force_clusters_ism_pull_push",
-    cluster_visibility: CLUSTERS_VISIBILITY_STAGE,
-    ism_visibility: CLUSTERS_VISIBILITY_STAGE,
+    cluster_visibility: "brute_force",
+    ism_visibility: "brute_force",
 };
 
 /// The lookup at the pixels, reading imperfect shadow maps.
@@ -133,26 +201,17 @@ pub const ISM_VISIBILITY: PassDesc = PassDesc {
     },
 };
 
-/// The lookup at the pixels, reading rasterised shadow maps.
-pub const RASTER_VISIBILITY: PassDesc = PassDesc {
-    label: CLUSTERS_VISIBILITY_STAGE,
-    bindings: &[texture("visibility"), read("clusters"), depth_texture("shadow_atlas"), read_write("group_visibility")],
-    default_source: |textured| {
-        let head = clusters::header(&ClusterSettings::default(), SceneScale { diagonal: 1.0 });
-        RASTER_VISIBILITY.source(&visibility_body(&head, false), textured)
-    },
-    ..ISM_VISIBILITY
-};
-
-/// The lookup pass's WGSL after `head`, reading `imperfect` maps or rasterised ones.
+/// The lookup pass's WGSL after `head`, reading imperfect maps.
 fn visibility_body(head: &str, imperfect: bool) -> String {
-    clusters::lookup_pass_body(head, imperfect, &[VISIBILITY_WGSL])
+    clusters::lookup_pass_body(head, imperfect, [1, 2], &[VISIBILITY_WGSL])
 }
 
-/// The lookup pass at the pixels and its WGSL after `head`, for `imperfect` maps or rasterised
-/// ones ([`Clusters`] with [`Receivers::Pixels`] builds it).
+/// The lookup pass at the pixels and its WGSL after `head` ([`Clusters`] with
+/// [`Receivers::Pixels`] builds it); imperfect maps only (`brute_force_clusters` looks its
+/// maps up in its own pass).
 pub fn visibility_pass(head: &str, imperfect: bool) -> (&'static PassDesc, String) {
-    (if imperfect { &ISM_VISIBILITY } else { &RASTER_VISIBILITY }, visibility_body(head, imperfect))
+    assert!(imperfect, "brute_force_ism's table holds imperfect shadow maps' lookups");
+    (&ISM_VISIBILITY, visibility_body(head, imperfect))
 }
 
 pub struct BruteForce {
@@ -174,16 +233,26 @@ impl BruteForce {
         groups: Option<&VisibilitySettings>,
     ) -> Result<Self, GpuError> {
         let groups = match groups {
-            Some(v) => {
-                let names = if v.mode == Occlusion::Ism { ISM_STAGES } else { CLUSTERS_STAGES };
-                Clusters::for_receivers(gpu, scene, v, Receivers::Pixels, names)?
+            // The imperfect maps' groups (up to 1,024) through a table; the clusters (up to 256)
+            // looked up in the pass.
+            Some(v) if v.mode == Occlusion::Ism => {
+                Clusters::for_receivers(gpu, scene, v, Receivers::Pixels, ISM_STAGES)?
             }
+            Some(v) => Clusters::for_receivers(gpu, scene, v, Receivers::InPass, CLUSTERS_STAGES)?,
             None => None,
         };
-        let count = groups.as_ref().map(|g| g.table().groups);
-        let desc = if count.is_some() { &GROUPED_PASS } else { &PASS };
+        let (desc, visibility) = match &groups {
+            None => (&PASS, PixelVisibility::None),
+            Some(g) => match g.imperfect_maps() {
+                Some(imperfect) if g.lookup_in_pass() => (
+                    if imperfect { &IN_PASS_ISM } else { &IN_PASS_RASTER },
+                    PixelVisibility::InPass { head: g.lookup_header(), imperfect },
+                ),
+                _ => (&GROUPED_PASS, PixelVisibility::Table { groups: g.table().groups }),
+            },
+        };
         let pixels = pixels_for(gpu);
-        let source = desc.source(&body(count, pixels), scene.textured());
+        let source = desc.source(&body(visibility, pixels), scene.textured());
         let entry = desc.lobe_entry(glossy);
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, desc.workgroup, TILE_SIZE)?;
         Ok(Self { kernels, groups, pixels })
@@ -223,9 +292,13 @@ impl Technique for BruteForce {
             buffer("vals", &frame.vals.buffer),
             buffer("val_count", &frame.vals.count),
         ];
-        let table = self.groups.as_ref().map(|g| g.table());
-        if let Some(t) = &table {
-            resources.extend([buffer("group_of_val", t.group_of_val), buffer("group_visibility", t.visibility)]);
+        if let Some(g) = &self.groups {
+            let t = g.table();
+            resources.push(buffer("group_of_val", t.group_of_val));
+            match g.lookup_resources().filter(|_| g.lookup_in_pass()) {
+                Some(lookup) => resources.extend(lookup),
+                None => resources.push(buffer("group_visibility", t.visibility)),
+            }
         }
         let invocations = [pixels[0].div_ceil(self.pixels), pixels[1], 1];
         rec.stage(PASS.label, |e, s| self.kernels.run(gpu, e, frame.scene, &resources, invocations, s))

@@ -1,9 +1,11 @@
 // Brute-force reference (docs/design.md §5): every VAL applied to every visible pixel through §3,
 // no sparse points, no interpolation. VALs stream through workgroup memory as in the gather, in
 // tiles and per-dispatch ranges (`shader/val_tiles.wgsl`, prepended), each range after the first
-// adding to the radiance the earlier ones wrote. `val_visibility(pixel, val)` (prepended)
-// is 1 for the brute force (no visibility) and the group's lookup at the pixel for
-// `brute_force_ism` (`visibility/group.wgsl`). Each invocation shades PIXELS consecutive
+// adding to the radiance the earlier ones wrote. `pixel_val_visibility(receiver, slot, val)`
+// (prepended, after `prepare_visibility` ran on the invocation's receivers) is 1 for the brute
+// force (no visibility), the group's entry of the table at the pixel for `brute_force_ism`
+// (`visibility/group.wgsl`), and its cluster's lookup at the pixel, made in this pass, for
+// `brute_force_clusters` (`brute_force_lookup.wgsl`). Each invocation shades PIXELS consecutive
 // pixels of a row (prepended by `brute_force.rs` with `add_to_pixels`, the per-VAL statement
 // written out once per pixel, as the gather's `add_to_receivers`): every VAL read from the tile
 // serves that many pixels. Rust twin: `twin::shade_brute_force`.
@@ -38,11 +40,12 @@ fn receiver(x: u32, y: u32) -> Receiver {
     return Receiver(s, w_o, spec, y * frame.width + x, inside, hit.covered);
 }
 
-// `l` plus the radiance VAL `val` (the `val_index`-th) reflects at pixel `r`.
-fn add_val(l: vec3<f32>, r: Receiver, val: Val, val_index: u32, glossy: bool) -> vec3<f32> {
+// `l` plus the radiance VAL `val` (the `val_index`-th) reflects at pixel `r`, the
+// invocation's `slot`-th.
+fn add_val(l: vec3<f32>, r: Receiver, slot: u32, val: Val, val_index: u32, glossy: bool) -> vec3<f32> {
     let s = r.surface;
     let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
-    let f = geo.weight * geo.cos_receiver * val_visibility(r.pixel, val_index);
+    let f = geo.weight * geo.cos_receiver * pixel_val_visibility(r, slot, val_index);
     return l + reflected_radiance(s, r.spec, r.w_o, geo.direction, val.flux * f, glossy);
 }
 
@@ -53,6 +56,7 @@ fn brute_force(id: vec2<u32>, local: u32, glossy: bool) {
         receivers[r] = receiver(id.x * PIXELS + r, id.y);
         ls[r] = vec3<f32>(0.0);
     }
+    prepare_visibility(&receivers);
     let end = val_range_end();
     for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
         let n = load_tile(base, local, end);

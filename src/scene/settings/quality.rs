@@ -90,6 +90,11 @@ pub enum Technique {
     /// unoccluded light, a shadow ray each (docs/design.md §5). Only where a scene's measured
     /// level names it (`settings.levels`).
     Estimator,
+    /// Every VAL at every pixel, each weighted by its cluster's shadow-map lookup at the pixel
+    /// (the clusters' visibility where the light lands, as the clustered-visibility paper
+    /// shades; `gpu::references::brute_force`): the level's RSM and clusters settings, no
+    /// sparse points. Only where a scene's measured level names it (`settings.levels`).
+    BruteForceClusters,
 }
 
 /// Draws per pixel of [`Technique::Estimator`] at most, and unless a measured level says.
@@ -107,6 +112,7 @@ pub fn technique(quality: Quality, settings: &SettingsDescription) -> (Technique
         Some(m) if m.technique == Some(Technique::Estimator) => {
             (Technique::Estimator, Some(m.draws.unwrap_or(DEFAULT_ESTIMATOR_DRAWS)))
         }
+        Some(m) if m.technique == Some(Technique::BruteForceClusters) => (Technique::BruteForceClusters, None),
         _ => (Technique::Sparse, None),
     }
 }
@@ -185,7 +191,8 @@ impl MeasuredLevels {
             if m.technique == Some(Technique::Exact) {
                 return Err(crate::scene::SceneError::field(
                     format!("{at}.technique"),
-                    "must be \"sparse\" or \"estimator\": the exact reference is quality \"reference\"",
+                    "must be \"sparse\", \"estimator\" or \"brute_force_clusters\": the exact reference is \
+                     quality \"reference\"",
                 ));
             }
             if let Some(draws) = m.draws {
@@ -220,9 +227,11 @@ pub struct MeasuredLevel {
     /// The sparse method's parameters, with `tuning.sparse`'s fields and ranges.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sparse: Option<SparseTuning>,
-    /// `"sparse"` or `"estimator"` (the exact reference estimated on the GPU, `draws` VALs
-    /// per pixel); `"exact"` is the `reference` level's. Renders, `compare` and the levels bench
-    /// follow it; streams and replays run the sparse method at every level.
+    /// `"sparse"`, `"estimator"` (the exact reference estimated on the GPU, `draws` VALs per
+    /// pixel) or `"brute_force_clusters"` (every VAL at every pixel through the clusters'
+    /// shadow maps, the level's `visibility` then `"clusters"`); `"exact"` is the `reference`
+    /// level's. Renders, `compare`, replays and the levels bench follow it; streams run the
+    /// sparse method at every level.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub technique: Option<Technique>,
     /// With `technique: "estimator"`: VALs drawn per pixel, in 1..=256 (default 32).
@@ -508,6 +517,14 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
                     choices.measured_text
                 );
                 choices.note(&format!("levels.{}.technique", quality.name()), "\"estimator\"", reason);
+            }
+            (Technique::BruteForceClusters, _) => {
+                let reason = format!(
+                    "measured on this scene: {}; every VAL at every pixel, weighted by its cluster's shadow-map \
+                     lookup there (the rule would choose \"sparse\")",
+                    choices.measured_text
+                );
+                choices.note(&format!("levels.{}.technique", quality.name()), "\"brute_force_clusters\"", reason);
             }
             _ => choices.note("method", "\"sparse\"", "the sparse model-space method"),
         },

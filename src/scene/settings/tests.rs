@@ -258,6 +258,29 @@ fn a_measured_level_can_name_the_estimator() {
     assert_eq!(load(&[ROOM, CUBE], &default_draws).resolved.estimator_draws, Some(DEFAULT_ESTIMATOR_DRAWS));
 }
 
+/// A measured level may name the brute force through the clusters' maps: that level's
+/// technique (no draws), the measurement as the reason, the level's RSM kept; `draws` with it
+/// is refused.
+#[test]
+fn a_measured_level_can_name_the_brute_force_through_the_clusters() {
+    let settings = r#"{"quality": "accurate", "levels": {"accurate": {"measured": "0.10 against 0.24",
+        "technique": "brute_force_clusters", "rsm_resolution": 64}}}"#;
+    let accurate = load(&[ROOM, CUBE], settings);
+    assert_eq!((accurate.resolved.method, accurate.resolved.estimator_draws), (Technique::BruteForceClusters, None));
+    assert_eq!(accurate.settings.rsm_resolution, 64);
+    let reason = &choice(&accurate, "levels.accurate.technique").reason;
+    assert!(reason.starts_with("measured on this scene: 0.10 against 0.24; every VAL at every pixel"), "{reason}");
+    assert!(accurate.resolved.report().starts_with("quality accurate: technique brute_force_clusters"));
+    assert_eq!(crate::renderer::Method::from(accurate.resolved.method), crate::renderer::Method::BruteForceClusters);
+    let balanced = load(&[ROOM, CUBE], &settings.replacen("accurate", "balanced", 1));
+    assert_eq!(balanced.resolved.method, Technique::Sparse);
+    let levels = r#"{"accurate": {"measured": "m", "technique": "brute_force_clusters", "draws": 8}}"#;
+    let json = format!(r#"{{"meshes": [], {LIGHT_AND_CAMERA}, "settings": {{"levels": {levels}}}}}"#);
+    let description = SceneDescription::from_json_str(&json).expect("parses");
+    let e = description.settings.validate("settings").expect_err("draws without the estimator").to_string();
+    assert!(e.contains("settings.levels.accurate.draws") && e.contains("only with technique"), "{e}");
+}
+
 /// A measured level is checked where the scene file is, each field named.
 #[test]
 fn measured_parameters_are_validated_naming_the_field() {

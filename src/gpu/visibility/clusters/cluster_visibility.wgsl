@@ -7,10 +7,12 @@
 // `twin::cluster_visibility` (same names). The pass's entry point and its own bindings are in
 // `cluster_visibility_main.wgsl`; the lookup alone also serves `gpu/lights/many_lights.wgsl`.
 
-// The maps are binding 2, read by `map_depth(k, texel)`: the rasterised atlas
-// (`raster_depth.wgsl`) or the imperfect shadow maps (`../ism/ism_lookup.wgsl`), prepended.
+// The maps are binding LOOKUP_MAPS_BINDING, read by `map_depth(k, texel)`: the rasterised
+// atlas (`raster_depth.wgsl`) or the imperfect shadow maps (`../ism/ism_lookup.wgsl`),
+// prepended. The bindings are 1 and 2 (`clusters::lookup_bindings`) but in the brute force
+// through the clusters' maps, whose own bindings come first.
 
-@group(0) @binding(1) var<storage, read> clusters: array<Cluster>;
+@group(0) @binding(LOOKUP_CLUSTERS_BINDING) var<storage, read> clusters: array<Cluster>;
 
 fn receiver_plane_depth(offset: vec3<f32>, normal: vec3<f32>, v: vec3<f32>) -> f32 {
     let den = dot(v, normal);

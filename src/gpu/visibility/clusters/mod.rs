@@ -185,26 +185,48 @@ pub const VISIBILITY: PassDesc = PassDesc {
     default_source: |textured| VISIBILITY.source(&visibility_body(&default_header()), textured),
 };
 
+/// The bindings of the lookup's `clusters` and maps (`LOOKUP_CLUSTERS_BINDING`,
+/// `LOOKUP_MAPS_BINDING`): 1 and 2 in the lookup passes, after its own in the brute force that
+/// looks the maps up inside its pass (`gpu::references::brute_force`).
+pub fn lookup_bindings(clusters: u32, maps: u32) -> String {
+    Wgsl::new().u32("LOOKUP_CLUSTERS_BINDING", clusters).u32("LOOKUP_MAPS_BINDING", maps).finish()
+}
+
 /// The visibility pass's WGSL after `head`, reading the rasterised atlas.
 pub fn visibility_body(head: &str) -> String {
-    Wgsl::new().include(head).include(RASTER_DEPTH_WGSL).include(VISIBILITY_WGSL).finish()
+    Wgsl::new()
+        .include(head)
+        .include(&lookup_bindings(1, 2))
+        .include(RASTER_DEPTH_WGSL)
+        .include(VISIBILITY_WGSL)
+        .finish()
 }
 
 /// A lookup pass's WGSL after `head` for receivers other than the sparse points: the maps
-/// (`imperfect` ones or the rasterised atlas), the lookup, then `parts` (the receivers and the
-/// pass's entry point).
-pub fn lookup_pass_body(head: &str, imperfect: bool, parts: &[&str]) -> String {
+/// (`imperfect` ones or the rasterised atlas), the lookup (its clusters and maps at
+/// `bindings`), then `parts` (the receivers and the pass's entry point).
+pub fn lookup_pass_body(head: &str, imperfect: bool, bindings: [u32; 2], parts: &[&str]) -> String {
     let maps = if imperfect { ism::LOOKUP_WGSL } else { RASTER_DEPTH_WGSL };
-    let mut wgsl = Wgsl::new().include(head).include(maps).include(VISIBILITY_LOOKUP_WGSL);
+    let mut wgsl = Wgsl::new()
+        .include(head)
+        .include(&lookup_bindings(bindings[0], bindings[1]))
+        .include(maps)
+        .include(VISIBILITY_LOOKUP_WGSL);
     for part in parts {
         wgsl = wgsl.include(part);
     }
     wgsl.finish()
 }
 
-/// The lookup's WGSL after `head`, reading the rasterised atlas, without the pass's entry point.
-pub fn lookup_body(head: &str) -> String {
-    Wgsl::new().include(head).include(RASTER_DEPTH_WGSL).include(VISIBILITY_LOOKUP_WGSL).finish()
+/// The lookup's WGSL after `head`, reading the rasterised atlas (its clusters and maps at
+/// `bindings`), without the pass's entry point.
+pub fn lookup_body(head: &str, bindings: [u32; 2]) -> String {
+    Wgsl::new()
+        .include(head)
+        .include(&lookup_bindings(bindings[0], bindings[1]))
+        .include(RASTER_DEPTH_WGSL)
+        .include(VISIBILITY_LOOKUP_WGSL)
+        .finish()
 }
 
 /// The shadow-map raster's complete WGSL (vertex and fragment stages).
@@ -236,6 +258,10 @@ pub enum Receivers {
     /// per-pixel visibility (`gpu::references::brute_force`); the table grows with the image
     /// ([`Clusters::fit_receivers`]).
     Pixels,
+    /// No lookup pass and no table: another pass looks the maps up itself, through
+    /// [`Clusters::lookup_resources`] and [`Clusters::lookup_header`] (the brute force through
+    /// the clusters' maps, `gpu::references::brute_force`). Rasterised or imperfect maps.
+    InPass,
 }
 
 /// The names of an instance's stages in the frame's timings: the sparse method's mode has the
@@ -294,7 +320,11 @@ pub struct Clusters {
     partial: Kernel,
     reduce: Kernel,
     maps: Maps,
-    visibility: Kernel,
+    /// The lookup pass (none for [`Receivers::InPass`]).
+    visibility: Option<Kernel>,
+    /// The WGSL header of its passes (the lookup's constants), for a pass that looks the maps
+    /// up itself.
+    head: String,
     /// `array<Cluster>`: this frame's centres, the next frame's start.
     clusters: wgpu::Buffer,
     /// `array<u32>`, one per VAL of [`Clusters::capacity`].
@@ -381,7 +411,7 @@ impl Clusters {
             false => Seeding::Kmeans { seed: kernel("kmeans_seed")? },
         };
         // Rays serve the sparse points; the second bounce's points and the brute force's pixels
-        // look the clusters up in rasterised maps.
+        // look the clusters up in rasterised maps (or imperfect ones).
         let rays = settings.shadow_maps == ShadowMapSource::Rays && receivers == Receivers::SparsePoints;
         let maps = match ism {
             Some(ism) => Maps::Ism(ism::Maps::new(gpu, scene, &head, settings.count, ism::IsmParams::of(ism, scale))?),
@@ -389,20 +419,28 @@ impl Clusters {
             None => Maps::Raster(ShadowMaps::after(gpu, scene, settings, &head)?),
         };
         let imperfect = ism.is_some();
-        let (visibility_desc, visibility_body) = match (receivers, imperfect) {
-            (Receivers::SparsePoints, false) if rays => (&rays::VISIBILITY, rays::visibility_body(&head, settings)),
-            (Receivers::SparsePoints, true) => (&ism::VISIBILITY, ism::visibility_body(&head)),
-            (Receivers::SparsePoints, false) => (&VISIBILITY, visibility_body(&head)),
-            (Receivers::BouncePoints { .. }, _) => bounce::visibility_pass(&head, imperfect),
-            (Receivers::Pixels, _) => brute_force::visibility_pass(&head, imperfect),
+        let lookup = match (receivers, imperfect) {
+            (Receivers::SparsePoints, false) if rays => {
+                Some((&rays::VISIBILITY, rays::visibility_body(&head, settings)))
+            }
+            (Receivers::SparsePoints, true) => Some((&ism::VISIBILITY, ism::visibility_body(&head))),
+            (Receivers::SparsePoints, false) => Some((&VISIBILITY, visibility_body(&head))),
+            (Receivers::BouncePoints { .. }, _) => Some(bounce::visibility_pass(&head, imperfect)),
+            (Receivers::Pixels, _) => Some(brute_force::visibility_pass(&head, imperfect)),
+            (Receivers::InPass, _) => None,
         };
-        let vis_module =
-            module_from_source(gpu, visibility_desc.label, visibility_desc.source(&visibility_body, textured))?;
+        let visibility = match lookup {
+            Some((desc, body)) => {
+                let module = module_from_source(gpu, desc.label, desc.source(&body, textured))?;
+                Some(Kernel::build(gpu, scene, desc, &module, desc.entry("main"), &[], desc.workgroup)?)
+            }
+            None => None,
+        };
         let m = settings.count as usize;
         let points = match receivers {
             Receivers::SparsePoints => scene.flat.sparse_count(),
             Receivers::BouncePoints { count } => count,
-            Receivers::Pixels => 1,
+            Receivers::Pixels | Receivers::InPass => 1,
         } as usize;
         let table = table_label(receivers);
         Ok(Self {
@@ -415,15 +453,8 @@ impl Clusters {
             partial: kernel("kmeans_partial")?,
             reduce: kernel("kmeans_reduce")?,
             maps,
-            visibility: Kernel::build(
-                gpu,
-                scene,
-                visibility_desc,
-                &vis_module,
-                visibility_desc.entry("main"),
-                &[],
-                visibility_desc.workgroup,
-            )?,
+            visibility,
+            head,
             clusters: gpu.storage_buffer_sized::<RawCluster>("clustering.clusters", m + 1)?,
             group_of_val: gpu.storage_buffer_sized::<u32>("clustering.group_of_val", 1)?,
             partials: gpu.storage_buffer_sized::<RawClusterSums>("clustering.cluster_partials", m)?,
@@ -457,8 +488,41 @@ impl Clusters {
             Maps::Ism(maps) => stages.extend(maps.stages(&self.names)),
             Maps::Rays(_) => stages.push(rays::MEMBERS_STAGE),
         }
-        stages.push(self.visibility_stage());
+        if self.visibility.is_some() {
+            stages.push(self.visibility_stage());
+        }
         stages
+    }
+
+    /// Whether another pass looks its maps up ([`Receivers::InPass`]).
+    pub fn lookup_in_pass(&self) -> bool {
+        self.receivers == Receivers::InPass
+    }
+
+    /// The lookup's header, for a pass that looks the maps up itself ([`Receivers::InPass`]).
+    pub fn lookup_header(&self) -> &str {
+        &self.head
+    }
+
+    /// Whether its maps are imperfect ones (`ism_lookup.wgsl`) rather than rasterised
+    /// (`raster_depth.wgsl`); `None` with shadow rays.
+    pub fn imperfect_maps(&self) -> Option<bool> {
+        match self.maps {
+            Maps::Raster(_) => Some(false),
+            Maps::Ism(_) => Some(true),
+            Maps::Rays(_) => None,
+        }
+    }
+
+    /// The clusters and their maps as a pass that looks them up itself binds them (`clusters`,
+    /// then `shadow_atlas` or `ism_atlas`); `None` with shadow rays.
+    pub fn lookup_resources(&self) -> Option<[crate::gpu::pass::Res<'_>; 2]> {
+        let maps = match &self.maps {
+            Maps::Raster(maps) => view("shadow_atlas", &maps.atlas_view),
+            Maps::Ism(maps) => buffer("ism_atlas", &maps.levels[0]),
+            Maps::Rays(_) => return None,
+        };
+        Some([buffer("clusters", &self.clusters), maps])
     }
 
     /// Record its stages for the frame's VALs (those appended so far): seed and update the
@@ -522,31 +586,39 @@ impl Clusters {
                 }
             }
         })?;
+        match &self.maps {
+            Maps::Raster(maps) => {
+                maps.record(gpu, scene, &self.clusters, &self.settings, None, self.names.shadow_maps, rec)?
+            }
+            Maps::Ism(maps) => maps.record(gpu, scene, &self.clusters, &self.names, rec)?,
+            Maps::Rays(rays) => rays.record(gpu, frame, &self.group_of_val, rec)?,
+        }
+        let Some(lookup) = &self.visibility else {
+            return Ok(());
+        };
         let table = buffer("group_visibility", &self.group_visibility);
         let resources = match &self.maps {
-            Maps::Raster(maps) => {
-                maps.record(gpu, scene, &self.clusters, &self.settings, None, self.names.shadow_maps, rec)?;
-                vec![receivers, buffer("clusters", &self.clusters), view("shadow_atlas", &maps.atlas_view), table]
-            }
-            Maps::Ism(maps) => {
-                maps.record(gpu, scene, &self.clusters, &self.names, rec)?;
-                vec![receivers, buffer("clusters", &self.clusters), buffer("ism_atlas", &maps.levels[0]), table]
-            }
             Maps::Rays(rays) => {
-                rays.record(gpu, frame, &self.group_of_val, rec)?;
                 let [vals, members] = rays.resources(frame);
                 let [nodes, order] = rays.bvh();
                 vec![receivers, vals, members, table, nodes, order]
             }
+            Maps::Raster(_) | Maps::Ism(_) => {
+                let [clusters, maps] = self.lookup_resources().expect("maps");
+                vec![receivers, clusters, maps, table]
+            }
         };
-        let group = self.visibility.bind(gpu, &resources);
+        let group = lookup.bind(gpu, &resources);
         rec.stage(self.visibility_stage(), |e, s| {
-            self.visibility.dispatch(e, &group, scene, [count, m, 1], s.as_ref().map(|s| s.compute()))
+            lookup.dispatch(e, &group, scene, [count, m, 1], s.as_ref().map(|s| s.compute()))
         })
     }
 
     /// Make the table hold `count` receivers (the pixels of a frame) x groups.
     pub fn fit_receivers(&mut self, gpu: &Gpu, count: u32) -> Result<(), GpuError> {
+        if self.receivers == Receivers::InPass {
+            return Ok(());
+        }
         let needed = count as u64 * u64::from(self.settings.count) * 4;
         if needed > self.group_visibility.size() {
             let n = count as usize * self.settings.count as usize;
@@ -560,9 +632,12 @@ impl Clusters {
     }
 
     /// Read back what the last frame computed (tests and tools): the clusters, each of the
-    /// first `vals` VALs' cluster, the visibility table and the shadow maps.
+    /// first `vals` VALs' cluster, the visibility table (empty for [`Receivers::InPass`]) and
+    /// the shadow maps.
     pub fn read(&self, gpu: &Gpu, vals: usize, points: usize) -> Result<ClusterReadback, GpuError> {
         let m = self.settings.count as usize;
+        // Looked up in another pass: no table.
+        let points = if self.receivers == Receivers::InPass { 0 } else { points };
         let mut clusters: Vec<RawCluster> = gpu.read_buffer(&self.clusters, m + 1)?;
         let bounds = clusters.pop().map(|b| (Vec3::from(b.position), b.radius));
         let clusters: Vec<twin::Cluster> = clusters.iter().map(Into::into).collect();
@@ -604,6 +679,7 @@ fn table_label(receivers: Receivers) -> &'static str {
         Receivers::SparsePoints => "group_visibility",
         Receivers::BouncePoints { .. } => "bounce2_visibility.bounce_visibility",
         Receivers::Pixels => "brute_force_ism_visibility.pixel_visibility",
+        Receivers::InPass => "brute_force_clusters.no_table",
     }
 }
 

@@ -3,7 +3,7 @@
 // `encode_map_depth`); after `cluster_visibility.wgsl`'s `clusters` and `frame_of`. Bound as an unfilterable float texture,
 // not `texture_depth_2d`, whose `textureLoad` does not translate to GLSL (the GL backend).
 
-@group(0) @binding(2) var shadow_atlas: texture_2d<f32>;
+@group(0) @binding(LOOKUP_MAPS_BINDING) var shadow_atlas: texture_2d<f32>;
 
 // Distance (m) in cluster k's map at `texel`; NOTHING outside the map or where nothing was drawn.
 fn map_depth(k: u32, texel: vec2<i32>) -> f32 {

@@ -1,7 +1,7 @@
 // The imperfect shadow maps as the visibility pass (`../clusters/cluster_visibility.wgsl`)
 // reads them, after `ism.wgsl`: the finest level after pull-push.
 
-@group(0) @binding(2) var<storage, read> ism_atlas: array<u32>;
+@group(0) @binding(LOOKUP_MAPS_BINDING) var<storage, read> ism_atlas: array<u32>;
 
 // Distance (m) in map k at `texel`; NOTHING outside the map or where it is empty.
 fn map_depth(k: u32, texel: vec2<i32>) -> f32 {

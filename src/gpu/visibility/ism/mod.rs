@@ -163,7 +163,12 @@ pub const VISIBILITY: PassDesc = PassDesc {
 
 /// The visibility pass's WGSL after `head`.
 pub fn visibility_body(head: &str) -> String {
-    Wgsl::new().include(head).include(LOOKUP_WGSL).include(clusters::VISIBILITY_WGSL).finish()
+    Wgsl::new()
+        .include(head)
+        .include(&clusters::lookup_bindings(1, 2))
+        .include(LOOKUP_WGSL)
+        .include(clusters::VISIBILITY_WGSL)
+        .finish()
 }
 
 /// The `"ism"` visibility mode for a scene: imperfect shadow maps of VALs drawn by flux.
