@@ -137,43 +137,43 @@ pub const GROUPED_PASS: PassDesc = PassDesc {
 /// [`PASS`]'s and `group_of_val`.
 const IN_PASS_BINDINGS: [u32; 2] = [5, 6];
 
-/// `brute_force_clusters`' pass with rasterised maps: [`PASS`] plus each VAL's cluster, the
-/// clusters and their maps, looked up in the pass.
-pub const IN_PASS_RASTER: PassDesc = PassDesc {
-    bindings: &[
+/// `brute_force_clusters`' bindings: [`PASS`]'s, each VAL's cluster, the clusters and `maps`.
+const fn in_pass_bindings(maps: Binding) -> [Binding; 7] {
+    [
         texture("visibility"),
         read_write("indirect"),
         read("vals"),
         read("val_count"),
         read("group_of_val"),
         read("clusters"),
-        depth_texture("shadow_atlas"),
-    ],
+        maps,
+    ]
+}
+
+/// `brute_force_clusters`' WGSL with the default settings' header, for `imperfect` maps or
+/// rasterised ones (the passes' `default_source`).
+fn in_pass_default_source(desc: &PassDesc, imperfect: bool, textured: bool) -> String {
+    let scale = SceneScale { diagonal: 1.0 };
+    let head = match imperfect {
+        true => ism::header(&IsmSettings::default(), scale),
+        false => clusters::header(&ClusterSettings::default(), scale),
+    };
+    desc.source(&body(PixelVisibility::InPass { head: &head, imperfect }, CPU_PIXELS), textured)
+}
+
+/// `brute_force_clusters`' pass with rasterised maps: [`PASS`] plus each VAL's cluster, the
+/// clusters and their maps, looked up in the pass.
+pub const IN_PASS_RASTER: PassDesc = PassDesc {
+    bindings: &in_pass_bindings(depth_texture("shadow_atlas")),
     entries: &[Entry::first("main", 7), Entry::first("main_glossy", 7)],
-    default_source: |textured| {
-        let head = clusters::header(&ClusterSettings::default(), SceneScale { diagonal: 1.0 });
-        let visibility = PixelVisibility::InPass { head: &head, imperfect: false };
-        IN_PASS_RASTER.source(&body(visibility, CPU_PIXELS), textured)
-    },
+    default_source: |textured| in_pass_default_source(&IN_PASS_RASTER, false, textured),
     ..PASS
 };
 
 /// `brute_force_clusters`' pass with imperfect maps (`shadow_maps: "ism"`).
 pub const IN_PASS_ISM: PassDesc = PassDesc {
-    bindings: &[
-        texture("visibility"),
-        read_write("indirect"),
-        read("vals"),
-        read("val_count"),
-        read("group_of_val"),
-        read("clusters"),
-        read("ism_atlas"),
-    ],
-    default_source: |textured| {
-        let head = ism::header(&IsmSettings::default(), SceneScale { diagonal: 1.0 });
-        let visibility = PixelVisibility::InPass { head: &head, imperfect: true };
-        IN_PASS_ISM.source(&body(visibility, CPU_PIXELS), textured)
-    },
+    bindings: &in_pass_bindings(read("ism_atlas")),
+    default_source: |textured| in_pass_default_source(&IN_PASS_ISM, true, textured),
     ..IN_PASS_RASTER
 };
 
