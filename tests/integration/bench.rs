@@ -285,7 +285,8 @@ fn levels_are_measured_and_the_estimate_is_within_1_5x_of_the_error() {
         let table = std::fs::read_to_string(dir.join("levels.md")).unwrap();
         assert!(table.contains("| balanced | sparse |"));
         if candidates {
-            assert_candidates(&report, &table);
+            let file: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&scene).unwrap()).unwrap();
+            assert_candidates(&report, &table, &file["settings"]["levels"]);
             // The plot, and drawn again from levels.json alone (`--replot` renders nothing).
             let svg = dir.join("levels.svg");
             assert!(std::fs::metadata(&svg).is_ok_and(|m| m.len() > 1000), "no levels.svg");
@@ -302,9 +303,11 @@ fn levels_are_measured_and_the_estimate_is_within_1_5x_of_the_error() {
 }
 
 /// `--candidates` on the small room: each candidate is a level with its points or near field
-/// changed (the scene file pins the rest), measured against the same reference; a level's
-/// `dominated_by` names exactly the measured configurations more accurate and 1.2x faster.
-fn assert_candidates(report: &serde_json::Value, table: &str) {
+/// changed (the scene file pins the rest), or the brute force through the clusters' maps with a
+/// level's VALs, measured against the same reference; a level's `dominated_by` names exactly
+/// the measured configurations more accurate and 1.2x faster; a level not dominated keeps the
+/// scene file's entry (`existing`) in the suggestion.
+fn assert_candidates(report: &serde_json::Value, table: &str, existing: &serde_json::Value) {
     let levels = &report["levels"].as_array().unwrap()[..3];
     let candidates = report["candidates"].as_array().unwrap();
     assert!(candidates.len() >= 3, "{candidates:?}");
@@ -320,10 +323,17 @@ fn assert_candidates(report: &serde_json::Value, table: &str) {
         let name = c["name"].as_str().unwrap();
         let (base, change) = name.split_once(" + ").unwrap_or_else(|| panic!("{name}"));
         let base = levels.iter().find(|l| l["level"] == base).unwrap_or_else(|| panic!("{name}"));
-        assert!(change.starts_with("sparse.points=") || change.starts_with("sparse.near_field="), "{name}");
         assert_eq!(c["knobs"]["visibility"], base["knobs"]["visibility"], "{name}: the file pins visibility");
         assert_eq!(c["knobs"]["rsm_resolution"], base["knobs"]["rsm_resolution"], "{name}: the file pins the RSM");
-        assert_ne!(c["knobs"], base["knobs"], "{name}");
+        if change == "technique=brute_force_clusters" {
+            // The brute force through the clusters' maps with the level's VALs.
+            assert_eq!(c["method"], "brute-force-clusters", "{name}");
+            assert_eq!(c["knobs"], base["knobs"], "{name}");
+        } else {
+            assert!(change.starts_with("sparse.points=") || change.starts_with("sparse.near_field="), "{name}");
+            assert_eq!(c["method"], "sparse", "{name}");
+            assert_ne!(c["knobs"], base["knobs"], "{name}");
+        }
         // Bold where it dominates a level.
         let row = [format!("| {name} |"), format!("| **{name}** |")];
         assert!(row.iter().any(|r| table.contains(r.as_str())), "{name} missing from the table");
@@ -345,7 +355,8 @@ fn assert_candidates(report: &serde_json::Value, table: &str) {
                 assert!(measured.starts_with(&format!("`{name}`: rel RMSE")), "{measured}");
                 assert!(table.contains("settings.levels"), "the table shows the suggestion");
             }
-            None => assert!(suggested.is_null(), "{suggested}"),
+            // Not dominated: the scene file's own entry stays (none, or the one it has).
+            None => assert_eq!(suggested, &existing[l["level"].as_str().unwrap()], "{suggested}"),
         }
     }
 }
