@@ -197,13 +197,13 @@ pub const ISM_VISIBILITY: PassDesc = PassDesc {
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
         let head = ism::header(&IsmSettings::default(), SceneScale { diagonal: 1.0 });
-        ISM_VISIBILITY.source(&visibility_body(&head, true), textured)
+        ISM_VISIBILITY.source(&visibility_body(&head), textured)
     },
 };
 
 /// The lookup pass's WGSL after `head`, reading imperfect maps.
-fn visibility_body(head: &str, imperfect: bool) -> String {
-    clusters::lookup_pass_body(head, imperfect, [1, 2], &[VISIBILITY_WGSL])
+fn visibility_body(head: &str) -> String {
+    clusters::lookup_pass_body(head, true, [1, 2], &[VISIBILITY_WGSL])
 }
 
 /// The lookup pass at the pixels and its WGSL after `head` ([`Clusters`] with
@@ -211,7 +211,7 @@ fn visibility_body(head: &str, imperfect: bool) -> String {
 /// maps up in its own pass).
 pub fn visibility_pass(head: &str, imperfect: bool) -> (&'static PassDesc, String) {
     assert!(imperfect, "brute_force_ism's table holds imperfect shadow maps' lookups");
-    (&ISM_VISIBILITY, visibility_body(head, imperfect))
+    (&ISM_VISIBILITY, visibility_body(head))
 }
 
 pub struct BruteForce {

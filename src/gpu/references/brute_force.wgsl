@@ -15,9 +15,12 @@
 @group(0) @binding(2) var<storage, read> vals: array<Val>;
 @group(0) @binding(3) var<storage, read> val_count: u32;
 
-// A pixel an invocation shades: its surface (a dummy outside the image or where nothing is).
+// A pixel an invocation shades: its surface (a dummy outside the image or where nothing is),
+// turned to face the viewer, and its shading normal as the mesh gives it (the clusters' lookup
+// takes that one, as at the sparse points).
 struct Receiver {
     surface: Surface,
+    given_normal: vec3<f32>,
     w_o: vec3<f32>,
     spec: vec3<f32>,
     pixel: u32,
@@ -32,12 +35,15 @@ fn receiver(x: u32, y: u32) -> Receiver {
         hit = decode_visibility(textureLoad(visibility, vec2<i32>(vec2<u32>(x, y)), 0));
     }
     var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1), vec3<f32>(0.0, 1.0, 0.0));
+    var given_normal = s.normal;
     if hit.covered {
-        s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
+        let given = surface_at(hit.triangle, hit.barycentrics);
+        given_normal = given.normal;
+        s = facing_viewer(given, frame.eye);
     }
     let w_o = view_direction(s.position, s.normal, frame.eye);
     let spec = s.material.specular * phong_normalisation(s.material.exponent);
-    return Receiver(s, w_o, spec, y * frame.width + x, inside, hit.covered);
+    return Receiver(s, given_normal, w_o, spec, y * frame.width + x, inside, hit.covered);
 }
 
 // `l` plus the radiance VAL `val` (the `val_index`-th) reflects at pixel `r`, the

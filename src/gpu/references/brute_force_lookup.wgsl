@@ -1,8 +1,8 @@
 // The brute force through the clusters' maps (`brute_force_clusters`), looked up in its own
 // pass: before its VALs, each invocation looks every cluster up at each of its pixels (the
 // lookup of `../visibility/clusters/cluster_visibility.wgsl`, prepended with the maps it reads,
-// at the pixel's surface as the camera's visibility buffer gives it, the normal unflipped as
-// the sparse points' and the table's lookups take it), so no table of pixels x clusters is
+// at the receiver's position and its normal as the mesh gives it, unflipped as the sparse
+// points' and the table's lookups take it), so no table of pixels x clusters is
 // stored and any image size fits. Uncovered pixels get 1. Rust twin:
 // `clusters::twin::cluster_visibility` at the pixels' surfaces, then
 // `twin::shade_brute_force_grouped`.
@@ -15,20 +15,11 @@ var<private> pixel_visibility: array<array<f32, CLUSTER_COUNT>, PIXELS>;
 fn prepare_visibility(receivers: ptr<function, array<Receiver, PIXELS>>) {
     for (var r = 0u; r < PIXELS; r++) {
         let p = (*receivers)[r];
-        var hit = Hit(false, 0u, vec2<f32>(0.0));
-        if p.inside {
-            let xy = vec2<i32>(i32(p.pixel % frame.width), i32(p.pixel / frame.width));
-            hit = decode_visibility(textureLoad(visibility, xy, 0));
-        }
-        var s = Surface(vec3<f32>(0.0), vec3<f32>(0.0, 1.0, 0.0), Material(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), -1), vec3<f32>(0.0, 1.0, 0.0));
-        if hit.covered {
-            s = surface_at(hit.triangle, hit.barycentrics);
-        }
         for (var k = 0u; k < CLUSTER_COUNT; k++) {
             var v = 1.0;
-            if hit.covered {
+            if p.covered {
                 let c = clusters[k];
-                v = cluster_visibility(k, c, s.position - c.position, s.normal);
+                v = cluster_visibility(k, c, p.surface.position - c.position, p.given_normal);
             }
             pixel_visibility[r][k] = v;
         }
