@@ -5,8 +5,10 @@ Reads the exact reference and a frame's indirect light as linear EXR (as `relume
 --reference exact --images DIR` writes them: `indirect_exact.exr`, and a mode's
 `indirect_sparse_occlusion_<mode>.exr`) and draws the estimate's pixels many times, without the
 reference's own sampling noise, uniformly (one pick in each equal run of the covered pixels)
-and by brightness (`src/renderer/estimate.rs`: q = 1/2 + 1/2 L^2 / mean(L^2), weights 1/q),
-printing the estimate over the true relative RMSE (mean, 10th percentile, median, 90th).
+by brightness (q = 1/2 + 1/2 L^2 / mean(L^2), weights 1/q), and by brightness and contrast, as
+`src/renderer/estimate.rs` draws them (q = (1 + L^2 / mean(L^2) + C / mean(C)) / 3, C the larger
+central difference of the frame's luminance), printing the estimate over the true relative RMSE
+(mean, 10th percentile, median, 90th, and how often it falls outside 1.5x of it).
 
     python3 tools/estimate_draws.py DIR/indirect_exact.exr DIR/indirect_sparse_occlusion_product.exr
 
@@ -109,11 +111,22 @@ def main():
     err = [sum((frame[i][c] - ref[i][c]) ** 2 for c in range(3)) for i in covered]
     sq = [sum(ref[i][c] ** 2 for c in range(3)) for i in covered]
     truth = math.sqrt(sum(err) / sum(sq))
-    lum = [0.2126 * frame[i][0] + 0.7152 * frame[i][1] + 0.0722 * frame[i][2] for i in covered]
+    every = [0.2126 * r + 0.7152 * g + 0.0722 * b for (r, g, b) in frame]
+    lum = [every[i] for i in covered]
     mean_sq = sum(x * x for x in lum) / len(lum)
+
+    def contrast(i):
+        x, y = i % w, i // w
+        dx = abs(every[i + 1] - every[i - 1]) if 0 < x < w - 1 else 0.0
+        dy = abs(every[i + w] - every[i - w]) if 0 < y < h - 1 else 0.0
+        return max(dx, dy)
+    con = [contrast(i) for i in covered]
+    mean_con = sum(con) / len(con)
     print('rel RMSE %.4f over %d covered pixels' % (truth, len(covered)))
-    for name, q in [('uniform', [1.0] * len(covered)),
-                    ('by brightness', [0.5 + 0.5 * x * x / mean_sq for x in lum])]:
+    rules = [('uniform', [1.0] * len(covered)),
+             ('by brightness', [0.5 + 0.5 * x * x / mean_sq for x in lum]),
+             ('+ contrast', [(1 + x * x / mean_sq + c / mean_con) / 3 for x, c in zip(lum, con)])]
+    for name, q in rules:
         total = sum(q)
         running = []
         acc = 0.0
@@ -131,8 +144,10 @@ def main():
                     sr += sq[j] / q[j]
                 ratios.append(math.sqrt(se / sr) / truth)
             ratios.sort()
-            print('%-14s %5d pixels: estimate / error mean %.3f, p10 %.3f, median %.3f, p90 %.3f' % (
-                name, pixels, sum(ratios) / draws, ratios[draws // 10], ratios[draws // 2], ratios[9 * draws // 10]))
+            outside = sum(1 for r in ratios if r > 1.5 or r < 1 / 1.5) / draws
+            print('%-14s %5d pixels: estimate / error mean %.3f, p10 %.3f, median %.3f, p90 %.3f, '
+                  'outside 1.5x %.0f %%' % (name, pixels, sum(ratios) / draws, ratios[draws // 10],
+                                            ratios[draws // 2], ratios[9 * draws // 10], 100 * outside))
 
 
 if __name__ == '__main__':

@@ -1,38 +1,57 @@
 //! The error estimate reported with every frame: how far the frame's indirect light is from the
 //! exact reference (every VAL, shadow rays through the scene's BVH), estimated at about a
-//! thousand of its pixels instead of all of them. The VALs are the frame's own: with two
-//! bounces, the second bounce's VALs as the frame drew them, so the estimate leaves out the
-//! error of the second bounce's own points (the exact reference of `relume compare` lights
-//! them through shadow rays).
+//! thousand of its pixels instead of all of them.
 //!
-//! At `pixels` of the frame's covered pixels, the CPU reference (`twin::exact_cpu`) estimates
-//! the exact indirect radiance with `samples` importance-sampled VALs per receiver, unbiased,
-//! with its own variance. The pixels are drawn with probability proportional to
-//! `q = 1/2 + 1/2 L² / mean(L²)`, `L` the frame's own indirect luminance there: half the draws
-//! uniform over the covered pixels, half by the square of the frame's brightness, systematically
-//! (one independent pick in each of `pixels` equal runs of the running sum of `q`, in row-major
-//! order). The estimate is the frame's relative RMSE at those pixels with the reference's noise
-//! taken out, `sqrt(max(0, sum w |t - r|² - sum w s²) / sum w |r|²)` with `w = 1 / q` (as
+//! **The VALs.** The exact reference `relume bench --levels` measures every level against is
+//! the scene at its `reference` level, whose spot light's RSM is often finer than a level's
+//! (`fast`, or a measured level with a coarser RSM). Where the frame's VALs are the spot
+//! light's alone, drawn at another RSM side, the estimate traces the spot light's VALs at the
+//! reference's side through the BVH ([`crate::twin::rsm::traced_vals`], once per light and
+//! placement) and sums over those: otherwise the VALs' coarseness, which on `cornell_bunny`
+//! with a 64² RSM against the reference's 128² is most of the brute force through the clusters'
+//! maps' error (0.0319, with the estimate over the frame's own VALs at 0.0180), would be
+//! invisible to it. Elsewhere the VALs are the frame's own: with uploaded, RGB-D or `lights`
+//! VALs (which no level changes), and with two bounces, the second bounce's VALs as the frame
+//! drew them, so the estimate leaves out the error of the second bounce's own points (the exact
+//! reference of `relume compare` lights them through shadow rays).
+//!
+//! **The pixels.** At `pixels` of the frame's covered pixels, the CPU reference
+//! (`twin::exact_cpu`) estimates the exact indirect radiance with `samples` importance-sampled
+//! VALs per receiver, unbiased, with its own variance. The pixels are drawn with probability
+//! proportional to `q = (1 + L² / mean(L²) + C / mean(C)) / 3`, `L` the frame's own indirect
+//! luminance there and `C` its local contrast (the larger central difference of `L`): a third
+//! of the draws uniform over the covered pixels, a third by the square of the frame's
+//! brightness, a third by its contrast, systematically (one independent pick in each of
+//! `pixels` equal runs of the running sum of `q`, in row-major order). The estimate is the
+//! frame's relative RMSE at those pixels with the reference's noise taken out,
+//! `sqrt(max(0, sum w |t - r|² - sum w s²) / sum w |r|²)` with `w = 1 / q` (as
 //! `image::weighted_noise_corrected_relative_rmse` computes it): a ratio estimator of the whole
 //! image's relative RMSE against the exact reference. An image's squared error and squared
 //! radiance both sit mostly in its bright pixels, and where a few pixels hold most of the error
-//! (a heavy tail, the highlights of a glossy object) uniform picks miss them and the estimate
-//! comes out low; drawing by brightness finds them, and the uniform half keeps every pixel a
-//! chance (light the frame lacks where it is dark). On the exact and sparse images of
-//! `cornell_glossy_open` at 256x256 (balanced: 0.0739, 82 % of its squared error in 1 % of the
-//! pixels), 300 draws of 1,024 pixels without the reference's noise put the estimate at
-//! 0.65-1.23 of the error (10th to 90th percentile, median 0.84) uniformly and at 0.81-1.16
-//! (median 0.98) by brightness; on `sponza_bunny` (near field 8, no visibility: 0.312) at
-//! 0.79-1.23 and 0.96-1.05; with the per-frame 64 pixels the medians go from 0.60 to 0.75 and
-//! from 0.74 to 0.98 (`tools/estimate_draws.py` on `relume compare --reference exact --images`).
+//! uniform picks miss them and the estimate comes out low; drawing by brightness finds the
+//! highlights of a glossy object, drawing by contrast the corners and contact lines where VALs
+//! lie close to the receivers (where a coarse RSM's VALs are most wrong), and the uniform third
+//! keeps every pixel a chance (light the frame lacks where it is dark). Over 300 draws of 1,024
+//! pixels without the reference's noise (`tools/estimate_draws.py` on `relume compare
+//! --reference exact --images`, and on `relume render --hdr` of `cornell_bunny` at `accurate`
+//! and at `reference`), the share of estimates outside 1.5x of the error, uniform / by
+//! brightness / by brightness and contrast: `cornell_bunny`'s brute force through the clusters'
+//! maps on a 64² RSM against the 128² reference (0.0318, 80 % of its squared error in 1 % of
+//! the pixels) 40 / 39 / 6 %; `cornell_glossy_open`'s brute force through the clusters' maps
+//! (0.0134) 10 / 14 / 2 %; its sparse frame (0.0897) 9 / 0 / 0 %; the ears' brute force through
+//! the maps (0.0619) 3 / 0 / 1 %; `sponza_bunny` without visibility (0.382) 0 / 0 / 0 %. With
+//! the per-frame 64 pixels: 83 / 81 / 62 %, 66 / 72 / 65 %, 53 / 46 / 21 %, 34 / 25 / 15 %,
+//! 26 / 1 / 1 %.
+//!
 //! Its spread is reported too: the standard deviation of the estimates of four interleaved
 //! quarters of the pixels, halved (the standard error of their mean).
 //!
 //! The cost is `pixels` x `samples` shadow rays plus, per receiver, one pass over the VALs to
 //! build the sampling distribution, and reading the frame's visibility buffer and VALs back:
 //! about 131k shadow rays at the defaults (1,024 pixels, 128 VALs each), against the tens of
-//! millions of the exact reference at 256². The
-//! scene's BVH is built once and kept while the meshes stay where they are.
+//! millions of the exact reference at 256². The scene's BVH is built once and kept while the
+//! meshes stay where they are; the traced VALs (a ray per texel of the reference's RSM, 16,384
+//! at 128²) are kept while the light and the meshes do.
 //!
 //! Every frame of `relume render`, `relume replay`, the service's renders and streams runs the
 //! cheaper [`PER_FRAME`] variant (`Renderer::set_error_estimate`): 64 pixels x 32 VALs, 2,048
@@ -48,8 +67,11 @@
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, luminance, weighted_noise_corrected_relative_rmse, weighted_relative_stderr};
 use crate::renderer::{Rendered, Renderer};
+use crate::scene::SpotLight;
+use crate::twin::Val;
 use crate::twin::bvh::TraceBvh;
 use crate::twin::exact_cpu::{self as cpu, Receiver, Receivers, ValSampling};
+use crate::twin::rsm;
 use glam::{Mat4, Vec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -102,7 +124,13 @@ pub struct ErrorEstimate {
     pub pixels: u32,
     /// VALs drawn per pixel.
     pub samples: u32,
-    /// Wall-clock time of the estimate, ms (readbacks, BVH when rebuilt, shadow rays).
+    /// VALs the reference sums over.
+    pub reference_vals: u32,
+    /// The RSM side at which the reference traced the spot light's VALs when the frame drew
+    /// them at another (a level coarser than `reference`); `None`: the frame's own VALs.
+    pub reference_rsm_resolution: Option<u32>,
+    /// Wall-clock time of the estimate, ms (readbacks, BVH and traced VALs when rebuilt, shadow
+    /// rays).
     pub ms: f64,
 }
 
@@ -115,17 +143,23 @@ impl ErrorEstimate {
             true => format!("below the estimate's own noise ({:.4})", self.reference_noise),
             false => format!("{:.4} +- {:.4}", self.rel_rmse, self.spread),
         };
+        let vals = match self.reference_rsm_resolution {
+            Some(r) => format!(" of the spot light's {} at the reference's {r}x{r} RSM", self.reference_vals),
+            None => format!(" of the frame's {}", self.reference_vals),
+        };
         format!(
-            "indirect rel RMSE {error} against the exact reference ({} pixels x {} VALs, {:.1} ms)",
+            "indirect rel RMSE {error} against the exact reference ({} pixels x {} VALs{vals}, {:.1} ms)",
             self.pixels, self.samples, self.ms
         )
     }
 }
 
-/// Keeps the scene's BVH between frames.
+/// Keeps the scene's BVH, and the spot light's VALs traced at the reference's RSM side,
+/// between frames.
 #[derive(Default)]
 pub struct Estimator {
     bvh: Option<(Vec<Mat4>, TraceBvh)>,
+    traced: Option<((SpotLight, u32), Vec<Val>)>,
 }
 
 impl Estimator {
@@ -150,24 +184,43 @@ impl Estimator {
             return Ok(None);
         }
         let covered: Vec<usize> = (0..hits.len()).filter(|&i| hits[i].is_some() && image.covered(i)).collect();
-        let brightness: Vec<f64> = covered.iter().map(|&i| f64::from(luminance(image.rgb(i))).powi(2)).collect();
-        let (picked, weights) = by_brightness(&covered, &brightness, options.pixels as usize, options.seed);
+        let lum: Vec<f32> = (0..image.pixels.len()).map(|i| luminance(image.rgb(i))).collect();
+        let brightness: Vec<f64> = covered.iter().map(|&i| f64::from(lum[i]).powi(2)).collect();
+        let contrast: Vec<f64> = covered.iter().map(|&i| contrast(&lum, image.width as usize, i)).collect();
+        let terms: [&[f64]; 2] = [&brightness, &contrast];
+        let (picked, weights) = by_importance(&covered, &terms, options.pixels as usize, options.seed);
         if picked.len() < 4 {
             return Ok(None);
         }
-        // The frame's own VALs: with two bounces they include the second bounce's, drawn from
-        // the bounce points the frame lit, so its estimate measures what the frame made of them.
-        let vals = renderer.read_vals(gpu)?;
         let flat = &renderer.scene.flat;
         let placement = renderer.placement().to_vec();
         if self.bvh.as_ref().is_none_or(|(p, _)| *p != placement) {
             self.bvh = Some((placement, flat.trace_bvh()));
+            self.traced = None;
         }
         let bvh = &self.bvh.as_ref().expect("built above").1;
+        // The VALs the exact reference sums over: the spot light's at the `reference` level's
+        // RSM side where the frame drew them coarser (or finer), traced once per light and
+        // placement; else the frame's own (with two bounces they include the second bounce's,
+        // drawn from the bounce points the frame lit, so its estimate measures what the frame
+        // made of them).
+        let own;
+        let (vals, reference_rsm_resolution): (&[Val], _) = match renderer.reference_spot() {
+            Some(key) => {
+                if self.traced.as_ref().is_none_or(|(k, _)| *k != key) {
+                    self.traced = Some((key, rsm::traced_vals(flat, bvh, &key.0, key.1)));
+                }
+                (&self.traced.as_ref().expect("traced above").1, Some(key.1))
+            }
+            None => {
+                own = renderer.read_vals(gpu)?;
+                (&own, None)
+            }
+        };
         let eye = renderer.view().eye();
         let receivers: Vec<Option<Receiver>> =
             picked.iter().map(|&i| hits[i].map(|h| flat.receiver_at(h.triangle, h.barycentrics, eye))).collect();
-        let scene = cpu::ExactScene { bvh, vals: &vals, glossy: renderer.glossy() };
+        let scene = cpu::ExactScene { bvh, vals, glossy: renderer.glossy() };
         let sampling = ValSampling::Importance { samples: options.samples, seed: options.seed };
         let n = picked.len() as u32;
         let reference = cpu::render(&scene, &Receivers::Hits(&receivers), n, 1, sampling);
@@ -194,22 +247,29 @@ impl Estimator {
             reference_noise: weighted_relative_stderr(&reference.image, &variance, |k| weights[k]),
             pixels: n,
             samples: options.samples,
+            reference_vals: vals.len() as u32,
+            reference_rsm_resolution,
             ms: start.elapsed().as_secs_f64() * 1e3,
         }))
     }
 }
 
 /// `count` picks of `items` (all of them, each of weight 1, when there are fewer) with
-/// probability proportional to `q = 1/2 + 1/2 brightness / mean(brightness)`: one independent
-/// uniform pick in each of `count` equal runs of the running sum of `q`. Each pick's weight is
-/// `1 / q` (an item may be picked more than once, each pick counting).
-fn by_brightness(items: &[usize], brightness: &[f64], count: usize, seed: u64) -> (Vec<usize>, Vec<f64>) {
+/// probability proportional to `q = (1 + sum_k t_k / mean(t_k)) / (K + 1)` over the `K`
+/// importance `terms` (a term of mean 0 counts as 1: uniform): one independent uniform pick in
+/// each of `count` equal runs of the running sum of `q`. Each pick's weight is `1 / q` (an item
+/// may be picked more than once, each pick counting).
+fn by_importance(items: &[usize], terms: &[&[f64]], count: usize, seed: u64) -> (Vec<usize>, Vec<f64>) {
     if items.len() <= count {
         return (items.to_vec(), vec![1.0; items.len()]);
     }
-    let mean = brightness.iter().sum::<f64>() / brightness.len() as f64;
-    let q: Vec<f64> =
-        brightness.iter().map(|b| if mean > 0.0 && b.is_finite() { 0.5 + 0.5 * b / mean } else { 1.0 }).collect();
+    let means: Vec<f64> = terms.iter().map(|t| t.iter().sum::<f64>() / t.len() as f64).collect();
+    let q: Vec<f64> = (0..items.len())
+        .map(|i| {
+            let share = |(t, &m): (&&[f64], &f64)| if m > 0.0 && t[i].is_finite() { t[i] / m } else { 1.0 };
+            (1.0 + terms.iter().zip(&means).map(share).sum::<f64>()) / (terms.len() + 1) as f64
+        })
+        .collect();
     let mut running = Vec::with_capacity(q.len());
     let mut sum = 0.0;
     for x in &q {
@@ -226,6 +286,16 @@ fn by_brightness(items: &[usize], brightness: &[f64], count: usize, seed: u64) -
         .unzip()
 }
 
+/// The local contrast of a `width`-wide image of luminances at pixel `i`: the larger of its
+/// horizontal and vertical central differences, `max(|L(x+1) - L(x-1)|, |L(y+1) - L(y-1)|)`,
+/// each 0 where its neighbours would fall outside the image.
+fn contrast(lum: &[f32], width: usize, i: usize) -> f64 {
+    let (x, y, height) = (i % width, i / width, lum.len() / width);
+    let dx = if x > 0 && x + 1 < width { (lum[i + 1] - lum[i - 1]).abs() } else { 0.0 };
+    let dy = if y > 0 && y + 1 < height { (lum[i + width] - lum[i - width]).abs() } else { 0.0 };
+    f64::from(dx.max(dy))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -239,6 +309,8 @@ mod tests {
             reference_noise: 0.1408,
             pixels: 64,
             samples: 32,
+            reference_vals: 16_384,
+            reference_rsm_resolution: Some(128),
             ms: 280.0,
         };
         let text = e.summary();
@@ -251,14 +323,46 @@ mod tests {
     #[test]
     fn picks_are_stratified_and_all_when_few() {
         let items: Vec<usize> = (100..200).collect();
-        let (picked, weights) = by_brightness(&items, &[1.0; 100], 10, 3);
+        let (picked, weights) = by_importance(&items, &[&[1.0; 100]], 10, 3);
         assert_eq!(picked.len(), 10);
         for (k, p) in picked.iter().enumerate() {
             assert!((100 + 10 * k..100 + 10 * (k + 1)).contains(p), "pick {k} = {p}");
         }
         assert!(weights.iter().all(|&w| w == 1.0), "{weights:?}");
-        assert_ne!(by_brightness(&items, &[1.0; 100], 10, 4).0, picked, "the seed moves the picks");
-        assert_eq!(by_brightness(&items[..5], &[0.0; 5], 10, 3), (items[..5].to_vec(), vec![1.0; 5]));
+        assert_ne!(by_importance(&items, &[&[1.0; 100]], 10, 4).0, picked, "the seed moves the picks");
+        assert_eq!(by_importance(&items[..5], &[&[0.0; 5]], 10, 3), (items[..5].to_vec(), vec![1.0; 5]));
+    }
+
+    /// Two terms share the draws: `q = (1 + b / mean(b) + c / mean(c)) / 3`, so the item
+    /// bright in one and the item of high contrast in the other both get a third of the draws
+    /// each (q = 3 of a sum of 8), the rest 1/3 each; a term of mean 0 counts as uniform.
+    #[test]
+    fn terms_share_the_draws() {
+        let items: Vec<usize> = (0..8).collect();
+        let (b, c) = ([8.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 8.0]);
+        for seed in 0..20 {
+            let (picked, weights) = by_importance(&items, &[&b, &c], 4, seed);
+            assert_eq!((picked[0], weights[0]), (0, 1.0 / 3.0), "seed {seed}: {picked:?}");
+            assert_eq!((picked[3], weights[3]), (7, 1.0 / 3.0), "seed {seed}: {picked:?}");
+            for (p, w) in picked.iter().zip(&weights) {
+                assert_eq!(*w, if *p == 0 || *p == 7 { 1.0 / 3.0 } else { 3.0 }, "seed {seed}: {picked:?}");
+            }
+        }
+        let (_, weights) = by_importance(&items, &[&b, &[0.0; 8]], 8 - 1, 1);
+        let near = |w: f64, x: f64| (w - x).abs() < 1e-12;
+        assert!(weights.iter().all(|&w| near(w, 0.3) || near(w, 1.5)), "{weights:?}");
+    }
+
+    /// The contrast is the larger central difference: a vertical step from 0 to 1 is 1 on both
+    /// columns beside it and 0 elsewhere, on the top row as on the others.
+    #[test]
+    fn contrast_is_the_larger_central_difference() {
+        let (w, h) = (6, 4);
+        let lum: Vec<f32> = (0..w * h).map(|i| if i % w >= 3 { 1.0 } else { 0.0 }).collect();
+        let row: Vec<f64> = (w..2 * w).map(|i| contrast(&lum, w, i)).collect();
+        assert_eq!(row, [0.0, 0.0, 1.0, 1.0, 0.0, 0.0]);
+        let top: Vec<f64> = (0..w).map(|i| contrast(&lum, w, i)).collect();
+        assert_eq!(top, row, "on the top row only the vertical difference is left out");
     }
 
     /// Bright items are drawn as often as `q` says and weigh `1 / q`: the weighted mean of any
@@ -272,7 +376,7 @@ mod tests {
         let truth = items.iter().map(|&i| value(i)).sum::<f64>() / items.len() as f64;
         let (mut estimates, mut bright) = (Vec::new(), 0usize);
         for seed in 0..200 {
-            let (picked, weights) = by_brightness(&items, &brightness, 50, seed);
+            let (picked, weights) = by_importance(&items, &[&brightness], 50, seed);
             let total: f64 = weights.iter().sum();
             estimates.push(picked.iter().zip(&weights).map(|(&i, w)| w * value(i)).sum::<f64>() / total);
             bright += picked.iter().filter(|&&i| i % 100 == 7).count();

@@ -82,6 +82,8 @@ pub struct Renderer {
     estimate: Option<(estimate::Estimator, estimate::EstimateOptions)>,
     estimated_frames: u64,
     exact_val_stride: u32,
+    /// The RSM side of the scene's `reference` level ([`Renderer::reference_spot`]).
+    reference_rsm_resolution: u32,
     /// [`Method::Estimator`]'s shadow rays per pixel and seed.
     estimator: (u32, u32),
     spot: Option<Spot>,
@@ -179,6 +181,7 @@ impl Renderer {
             estimate: None,
             estimated_frames: 0,
             exact_val_stride: 1,
+            reference_rsm_resolution: scene.settings.reference_rsm_resolution,
             estimator: (
                 scene.resolved.estimator_draws.unwrap_or(estimator::DEFAULT_SAMPLES),
                 scene.settings.seed as u32,
@@ -297,6 +300,19 @@ impl Renderer {
     /// The spot light, when the scene has one.
     pub fn spot(&self) -> Option<SpotLight> {
         self.spot.as_ref().map(|s| s.vals.light)
+    }
+
+    /// The spot light and the RSM side of the scene's `reference` level, when the frame's VALs
+    /// are that light's alone but drawn at another side (a level with a coarser RSM): the VALs
+    /// the error estimate traces to sum over what the exact reference of `relume bench
+    /// --levels` sums over. `None` when the frame's VALs are already those, or when uploaded,
+    /// RGB-D, `lights` or second-bounce VALs join the spot light's (the estimate then keeps the
+    /// frame's own).
+    pub fn reference_spot(&self) -> Option<(SpotLight, u32)> {
+        let spot = self.spot.as_ref()?;
+        let alone = self.uploaded_vals == 0 && !self.rgbd_active && self.light_rsms.is_none() && self.bounce.is_none();
+        let side = self.reference_rsm_resolution;
+        (alone && spot.vals.resolution != side).then_some((spot.vals.light, side))
     }
 
     /// The spot light's visibility buffer (its RSM), when the scene has a spot light.

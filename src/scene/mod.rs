@@ -280,6 +280,10 @@ impl Camera {
 pub struct Settings {
     /// Side of the square reflective shadow map, texels, in 8..=2048.
     pub rsm_resolution: u32,
+    /// Side of the RSM at the `reference` level (the scene file's `tuning`, else the level's:
+    /// measured levels never change it), whose VALs the exact reference of `relume bench
+    /// --levels` sums over and the error estimate does too where the frame's are coarser.
+    pub reference_rsm_resolution: u32,
     /// Whether the glossy gather may run (it still only runs when a material is glossy).
     pub glossy: bool,
     /// Seed of every random choice made at load (sparse point placement).

@@ -1,8 +1,11 @@
 //! CPU twins of the spot light and its reflective shadow map (docs/design.md §2, §4 step 6).
 
+use super::bvh::TraceBvh;
+use super::flat::FlatScene;
 use super::{Material, Val, mirror, phong_lobe, phong_normalisation, view_direction};
 use crate::scene::SpotLight;
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use std::f32::consts::PI;
 
 /// Falloff of the spot at an angle with cosine `cos_theta` off its axis: 1 inside the inner
@@ -59,6 +62,27 @@ pub fn rsm_texel_val(ndc: Vec2, resolution: u32, spot: &SpotLight, y: Vec3, n_y:
         area: to_light.length_squared() * omega,
         flux: rho_d * spot.intensity * (falloff * omega),
     }
+}
+
+/// The spot light's VALs at `resolution` x `resolution` texels, traced instead of rasterised:
+/// a ray from the light through each texel's centre ([`rsm_texel_direction`], where the GPU's
+/// raster samples the texel) meets a surface, whose VAL is [`rsm_texel_val`]; texels that see
+/// nothing or receive no flux make none. In the texels' row-major order. What `SpotVals` makes
+/// at that resolution without drawing an RSM (only a surface nearer the light than the raster's
+/// near plane differs), so that the error estimate can sum over the VALs of a resolution the
+/// frame did not draw (`renderer::estimate`).
+pub fn traced_vals(flat: &FlatScene, bvh: &TraceBvh, spot: &SpotLight, resolution: u32) -> Vec<Val> {
+    let r = resolution;
+    (0..r * r)
+        .into_par_iter()
+        .filter_map(|texel| {
+            let ndc = rsm_texel_ndc(texel % r, texel / r, r);
+            let hit = bvh.closest_hit(spot.position, rsm_texel_direction(ndc, spot))?;
+            let (y, n, surface) = flat.surface_at(hit.triangle, hit.barycentrics);
+            let val = rsm_texel_val(ndc, r, spot, y, n, surface.diffuse);
+            (val.flux.max_element() > 0.0).then_some(val)
+        })
+        .collect()
 }
 
 /// Irradiance (W/m²) at (`p`, `n`) straight from the spot, without visibility.

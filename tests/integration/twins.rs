@@ -473,6 +473,71 @@ fn rsm_vals_match_cpu_twin() {
     }
 }
 
+/// The spot light's VALs traced through the BVH (`twin::rsm::traced_vals`, what the error
+/// estimate sums over at the reference's RSM side) are the GPU RSM's at the same side: nearly
+/// every texel makes the same VAL (a ray and the raster may disagree on a texel whose centre
+/// lies on an edge between triangles), and the light they carry is the same.
+#[test]
+fn traced_rsm_vals_are_the_rasterised_ones() {
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
+    let gpu_vals = renderer.read_vals(&gpu).unwrap();
+    let r = renderer.rsm_view().unwrap().width;
+    let flat = &renderer.scene.flat;
+    let traced = twin::rsm::traced_vals(flat, &flat.trace_bvh(), &renderer.spot().unwrap(), r);
+    assert!(traced.len() > 500, "{} traced VALs", traced.len());
+    let off = (traced.len() as f64 - gpu_vals.len() as f64).abs() / gpu_vals.len() as f64;
+    assert!(off < 0.005, "{} traced VALs, {} rasterised", traced.len(), gpu_vals.len());
+    let positions: Vec<[f32; 3]> = gpu_vals.iter().map(|v| v.position.to_array()).collect();
+    let tree: kiddo::ImmutableKdTree<f32, 3> = kiddo::ImmutableKdTree::new_from_slice(&positions).unwrap();
+    let scale = max_of(traced.iter().map(|v| v.flux));
+    let mut unmatched = 0;
+    for t in &traced {
+        let nearest = tree.query(&t.position.to_array()).nearest_one::<kiddo::SquaredEuclidean<f32>>().execute();
+        let g = gpu_vals[nearest.item as usize];
+        if nearest.distance > 1e-8 {
+            unmatched += 1;
+            continue;
+        }
+        assert_close(g.flux, t.flux, REL, scale, 1e-12, "VAL flux");
+        assert!((g.area - t.area).abs() <= 1e-3 * t.area + 1e-12, "VAL area {} vs {}", g.area, t.area);
+        assert_close(g.normal, t.normal, 1e-3, 1.0, 0.0, "VAL normal");
+    }
+    assert!(unmatched * 200 <= traced.len(), "{unmatched} of {} traced VALs have no rasterised twin", traced.len());
+    let flux = |v: &[Val]| v.iter().map(|v| v.flux).sum::<Vec3>();
+    assert_close(flux(&traced), flux(&gpu_vals), 5e-3, flux(&gpu_vals).max_element(), 0.0, "total flux");
+}
+
+/// A frame whose VALs are coarser than the `reference` level's (a level with a smaller RSM)
+/// has an error the frame's own VALs cannot show: here the exact method itself at an 8x8 RSM,
+/// against the exact method at the reference's 32x32, where every bit of the error is the VALs'
+/// coarseness. The per-frame estimate sums over the reference's VALs, traced, and finds that
+/// error within the 1.5x the levels hold it to; summed over the frame's own VALs it would read
+/// about nothing.
+#[test]
+fn the_estimate_of_coarse_vals_sums_over_the_references() {
+    let gpu = gpu();
+    let fine = load_scene("cornell_bunny_small");
+    assert_eq!(fine.settings.reference_rsm_resolution, 32, "the fixture pins its RSM");
+    let mut coarse = fine.clone();
+    coarse.settings.rsm_resolution = 8;
+    let (w, h) = (64, 64);
+    let reference = Renderer::new(&gpu, &fine).unwrap().render(&gpu, Method::Exact, w, h).unwrap();
+    let mut renderer = Renderer::new(&gpu, &coarse).unwrap();
+    assert_eq!(renderer.reference_spot().map(|(_, side)| side), Some(32));
+    renderer.set_error_estimate(Some(relume::renderer::estimate::EstimateOptions::default()));
+    let frame = renderer.render(&gpu, Method::Exact, w, h).unwrap();
+    let measured = relume::image::relative_rmse(&frame.indirect, &reference.indirect);
+    let estimate = frame.error_estimate.expect("an estimate");
+    assert_eq!(estimate.reference_rsm_resolution, Some(32), "{estimate:?}");
+    assert!(estimate.reference_vals > 4 * frame.val_count, "{estimate:?}, {} frame VALs", frame.val_count);
+    assert!(measured > 0.02, "the coarse VALs must make an error to find: {measured}");
+    let ratio = estimate.rel_rmse / measured;
+    assert!((1.0 / 1.5..=1.5).contains(&ratio), "estimate {} against {measured}", estimate.rel_rmse);
+}
+
 /// docs/design.md §4 step 2 extremes on the GPU: Phong exponents 0 and 1e4 (the glossy divisions),
 /// an intense light, a surface right against the spot; every pixel finite and non-negative.
 #[test]

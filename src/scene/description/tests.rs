@@ -287,6 +287,7 @@ fn settings_are_checked() {
         settings,
         Settings {
             rsm_resolution: 256,
+            reference_rsm_resolution: 256,
             glossy: false,
             seed: 7,
             exposure: Some(2.5),

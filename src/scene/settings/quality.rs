@@ -641,6 +641,7 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
 
     let resolved = Settings {
         rsm_resolution: tuning.rsm_resolution.unwrap_or(rsm_resolution.0),
+        reference_rsm_resolution: settings.tuning.rsm_resolution.unwrap_or(level(Quality::Reference).rsm_resolution.0),
         glossy: settings.glossy,
         seed: settings.seed,
         exposure: settings.exposure,

@@ -344,6 +344,7 @@ fn balanced_is_the_old_defaults_on_every_fixture() {
             old_visibility.ism = t.ism.map_or(IsmSettings::default(), |o| o.apply(IsmSettings::default()));
             let old = Settings {
                 rsm_resolution: t.rsm_resolution.unwrap_or(128),
+                reference_rsm_resolution: t.rsm_resolution.unwrap_or(128),
                 glossy: s.glossy,
                 seed: s.seed,
                 exposure: s.exposure,

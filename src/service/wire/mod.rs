@@ -654,6 +654,8 @@ pub fn encode(message: ServerMessage) -> Vec<u8> {
                 reference_noise: e.reference_noise,
                 pixels: e.pixels,
                 samples: e.samples,
+                reference_vals: e.reference_vals,
+                reference_rsm_resolution: e.reference_rsm_resolution.unwrap_or(0),
                 ms: e.ms,
             }),
             quality: quality_to_proto(f.quality) as i32,
