@@ -437,8 +437,9 @@ pub struct DefaultVsExact {
     pub mean_ratio: f64,
     /// Brightest pixel's luminance over the reference's brightest.
     pub max_ratio: f64,
-    /// The frame's own estimate of `rel_rmse` (`crate::renderer::estimate`, default options), or `None`
-    /// when the frame has no pixel to estimate at.
+    /// The frame's own estimate of `rel_rmse` (`crate::renderer::estimate`, default options, over
+    /// the frame's own VALs as the exact reference here), or `None` when the frame has no pixel
+    /// to estimate at.
     pub error_estimate: Option<crate::renderer::estimate::ErrorEstimate>,
     /// `error_estimate.rel_rmse` over the measured error (`rel_rmse_corrected`, else
     /// `rel_rmse`).
@@ -592,7 +593,8 @@ fn exact_comparison(
         gpu,
         renderer,
         &default,
-        &crate::renderer::estimate::EstimateOptions::default(),
+        // Its exact reference sums over the scene's VALs at its own level: so does the estimate.
+        &crate::renderer::estimate::EstimateOptions { own_vals: true, ..Default::default() },
     )?;
     let default_vs_exact = default_vs_exact(&exact, scene.settings.visibility.mode, &default, estimate);
     Ok(ExactComparison {

@@ -10,7 +10,9 @@
 //! placement) and sums over those: otherwise the VALs' coarseness, which on `cornell_bunny`
 //! with a 64² RSM against the reference's 128² is most of the brute force through the clusters'
 //! maps' error (0.0319, with the estimate over the frame's own VALs at 0.0180), would be
-//! invisible to it. Elsewhere the VALs are the frame's own: with uploaded, RGB-D or `lights`
+//! invisible to it. `relume compare`, whose exact reference is the scene at its own level,
+//! asks for the frame's own VALs ([`EstimateOptions::own_vals`]). Elsewhere the VALs are the
+//! frame's own: with uploaded, RGB-D or `lights`
 //! VALs (which no level changes), and with two bounces, the second bounce's VALs as the frame
 //! drew them, so the estimate leaves out the error of the second bounce's own points (the exact
 //! reference of `relume compare` lights them through shadow rays).
@@ -83,7 +85,7 @@ pub const DEFAULT_PIXELS: u32 = 1024;
 /// VALs each of them draws by default.
 pub const DEFAULT_SAMPLES: u32 = 128;
 /// The per-frame estimate: few enough pixels and VALs to run after every frame.
-pub const PER_FRAME: EstimateOptions = EstimateOptions { pixels: 64, samples: 32, seed: 1 };
+pub const PER_FRAME: EstimateOptions = EstimateOptions { pixels: 64, samples: 32, seed: 1, own_vals: false };
 /// The stage the per-frame estimate's time is reported as.
 pub const STAGE: &str = "error_estimate";
 /// Bounds of [`EstimateOptions::pixels`]: at least one per interleaved quarter, at most what a
@@ -102,11 +104,15 @@ pub struct EstimateOptions {
     /// Seed of the pixels' and the VALs' random choices; a stream passes its frame index so that
     /// successive frames look at different pixels.
     pub seed: u64,
+    /// Sum over the frame's own VALs even where the `reference` level's differ: what
+    /// `relume compare`'s exact reference sums over (the scene at its own level), so that its
+    /// estimate and its measured error are of the same thing.
+    pub own_vals: bool,
 }
 
 impl Default for EstimateOptions {
     fn default() -> Self {
-        EstimateOptions { pixels: DEFAULT_PIXELS, samples: DEFAULT_SAMPLES, seed: 1 }
+        EstimateOptions { pixels: DEFAULT_PIXELS, samples: DEFAULT_SAMPLES, seed: 1, own_vals: false }
     }
 }
 
@@ -205,7 +211,8 @@ impl Estimator {
         // drawn from the bounce points the frame lit, so its estimate measures what the frame
         // made of them).
         let own;
-        let (vals, reference_rsm_resolution): (&[Val], _) = match renderer.reference_spot() {
+        let reference_spot = renderer.reference_spot().filter(|_| !options.own_vals);
+        let (vals, reference_rsm_resolution): (&[Val], _) = match reference_spot {
             Some(key) => {
                 if self.traced.as_ref().is_none_or(|(k, _)| *k != key) {
                     self.traced = Some((key, rsm::traced_vals(flat, bvh, &key.0, key.1)));

@@ -185,6 +185,21 @@ fn compare_reports_the_cpu_reference_and_its_noise() {
     assert_eq!((v["bounces"].as_u64(), v["second_bounce_ms"].as_f64()), (Some(1), Some(0.0)));
 }
 
+/// `compare`'s exact reference is the scene at its own level, so the estimate beside it sums
+/// over the same VALs, not the `reference` level's: cornell_bunny's balanced level draws a 64²
+/// RSM (at most 4,096 VALs), its reference a 128² one, which the per-frame estimate would trace.
+#[test]
+fn compares_estimate_sums_over_the_scenes_own_vals() {
+    let scene = fixture("scenes/cornell_bunny.json");
+    let args = ["--width", "8", "--height", "8", "--reference", "exact", "--reference-device", "cpu"];
+    let o = relume(&[&["compare", scene.to_str().unwrap()][..], &args].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let e = &v["default_vs_exact"]["error_estimate"];
+    assert!(e["reference_rsm_resolution"].is_null(), "{e}");
+    assert!((1..=64 * 64).contains(&e["reference_vals"].as_u64().unwrap()), "{e}");
+}
+
 /// With `"bounces": 2` the second bounce runs in every method `compare` renders (the CPU exact
 /// reference making its own through shadow rays) and its cost is reported; the GPU exact
 /// reference refuses it, naming the setting.
