@@ -23,6 +23,7 @@
 //! seldom, so the image does not pop from one frame to the next (the change it adds is measured
 //! by `relume replay --budget-ms`, docs/measurements/budget.md).
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::scene::settings::{SceneAnalysis, SettingsDescription, resolve};
@@ -282,32 +283,39 @@ impl BudgetController {
 
 /// `pixels` (`width` x `height`, row-major sRGB) resized to `out_width` x `out_height` by
 /// bilinear interpolation, pixel centres aligned: how a composite rendered at a lower
-/// resolution is brought back to the output size.
+/// resolution is brought back to the output size. Each output column's and row's two source
+/// texels and weight are found once, and the rows are filled over rayon's threads (it runs on
+/// the host after every scaled frame).
 pub fn upscale_rgb(pixels: &[[u8; 3]], width: u32, height: u32, out_width: u32, out_height: u32) -> Vec<[u8; 3]> {
     if (width, height) == (out_width, out_height) {
         return pixels.to_vec();
     }
-    let (w, h) = (width as usize, height as usize);
-    let sample = |x: f32, y: f32| -> [u8; 3] {
-        let x = x.clamp(0.0, (w - 1) as f32);
-        let y = y.clamp(0.0, (h - 1) as f32);
-        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-        let (fx, fy) = (x - x0 as f32, y - y0 as f32);
-        let p = |x: usize, y: usize, c: usize| f32::from(pixels[y * w + x][c]);
-        std::array::from_fn(|c| {
-            let top = p(x0, y0, c) * (1.0 - fx) + p(x1, y0, c) * fx;
-            let bottom = p(x0, y1, c) * (1.0 - fx) + p(x1, y1, c) * fx;
-            (top * (1.0 - fy) + bottom * fy).round().clamp(0.0, 255.0) as u8
-        })
+    // (first texel, second texel, weight of the second) along one axis.
+    let taps = |from: u32, to: u32| -> Vec<(usize, usize, f32)> {
+        let (n, scale) = (from as usize, from as f32 / to as f32);
+        (0..to)
+            .map(|o| {
+                let x = ((o as f32 + 0.5) * scale - 0.5).clamp(0.0, (n - 1) as f32);
+                let x0 = x.floor() as usize;
+                (x0, (x0 + 1).min(n - 1), x - x0 as f32)
+            })
+            .collect()
     };
-    let (sx, sy) = (width as f32 / out_width as f32, height as f32 / out_height as f32);
-    (0..out_width as usize * out_height as usize)
-        .map(|i| {
-            let (x, y) = (i % out_width as usize, i / out_width as usize);
-            sample((x as f32 + 0.5) * sx - 0.5, (y as f32 + 0.5) * sy - 0.5)
-        })
-        .collect()
+    let (columns, rows) = (taps(width, out_width), taps(height, out_height));
+    let w = width as usize;
+    let mut out = vec![[0u8; 3]; out_width as usize * out_height as usize];
+    out.par_chunks_mut(out_width as usize).zip(&rows).for_each(|(line, &(y0, y1, fy))| {
+        let (top, bottom) = (&pixels[y0 * w..(y0 + 1) * w], &pixels[y1 * w..(y1 + 1) * w]);
+        for (o, &(x0, x1, fx)) in line.iter_mut().zip(&columns) {
+            *o = std::array::from_fn(|c| {
+                let p = |row: &[[u8; 3]], x: usize| f32::from(row[x][c]);
+                let t = p(top, x0) * (1.0 - fx) + p(top, x1) * fx;
+                let b = p(bottom, x0) * (1.0 - fx) + p(bottom, x1) * fx;
+                (t * (1.0 - fy) + b * fy).round().clamp(0.0, 255.0) as u8
+            });
+        }
+    });
+    out
 }
 
 /// Mean absolute difference of two sRGB images of the same size, in 8-bit levels per channel:
@@ -433,6 +441,34 @@ mod tests {
         assert_eq!(c.parameters().level, Quality::Balanced);
         assert_eq!(c.parameters(), level_parameters(Quality::Balanced, &analysis, &settings));
         assert!(super::ladder(&analysis, &settings, false).iter().all(|p| p.resolution_scale == 1.0));
+    }
+
+    /// The upscale is bilinear with pixel centres aligned: every output pixel equals the
+    /// textbook formula evaluated on its own (here on a gradient and noise, 5x3 to 13x7), and
+    /// a single texel fills the output.
+    #[test]
+    fn upscaling_is_bilinear_with_centres_aligned() {
+        let (w, h, ow, oh) = (5usize, 3usize, 13usize, 7usize);
+        let src: Vec<[u8; 3]> =
+            (0..w * h).map(|i| [(i * 17 % 256) as u8, (i * 40 % 256) as u8, ((i * i * 7) % 256) as u8]).collect();
+        let up = upscale_rgb(&src, w as u32, h as u32, ow as u32, oh as u32);
+        for (i, got) in up.iter().enumerate() {
+            let (ox, oy) = (i % ow, i / ow);
+            let x = ((ox as f32 + 0.5) * w as f32 / ow as f32 - 0.5).clamp(0.0, (w - 1) as f32);
+            let y = ((oy as f32 + 0.5) * h as f32 / oh as f32 - 0.5).clamp(0.0, (h - 1) as f32);
+            let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+            let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+            let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+            for c in 0..3 {
+                let p = |x: usize, y: usize| f32::from(src[y * w + x][c]);
+                let top = p(x0, y0) * (1.0 - fx) + p(x1, y0) * fx;
+                let bottom = p(x0, y1) * (1.0 - fx) + p(x1, y1) * fx;
+                let want = (top * (1.0 - fy) + bottom * fy).round().clamp(0.0, 255.0) as u8;
+                assert_eq!(got[c], want, "pixel ({ox}, {oy}) channel {c}");
+            }
+        }
+        // A single texel fills the whole output.
+        assert_eq!(upscale_rgb(&[[7, 8, 9]], 1, 1, 3, 2), vec![[7, 8, 9]; 6]);
     }
 
     #[test]
