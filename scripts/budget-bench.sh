@@ -65,6 +65,20 @@ print("|---|---|---|---|---|---|---|---|---|---|---|")
 for r in rows:
     print("| " + " | ".join(r[:-1]) + " |")
 print()
+# Where each run's frame goes: the median of every stage after the first 5 frames (the stages
+# that do not fall with the render size set the floor of the cheapest rung).
+runs = {name: json.load(open(f"{out}/{name}/summary.json")) for name in ["balanced", "half", "twice"]}
+stages = list(dict.fromkeys(k for s in runs.values() for k in s["stage_ms"]))
+print("| stage (median ms after 5) | " + " | ".join(runs) + " |")
+print("|---|" + "---|" * len(runs))
+for stage in stages + ["whole frame"]:
+    cells = []
+    for s in runs.values():
+        values = s["frame_ms"] if stage == "whole frame" else s["stage_ms"].get(stage, [])
+        values = [v for v in values[5:] if v is not None]
+        cells.append(f"{statistics.median(values):.1f}" if values else "-")
+    print(f"| {stage} | " + " | ".join(cells) + " |")
+print()
 print(f"Adapter: {rows[0][-1]}; {frames} frames of `fixtures/recordings/tum_fr1_xyz` with "
       f"`fixtures/scenes/mr_bunny.json` at 640x480; balanced median frame {median} ms; binary `{binary}`.")
 EOF
@@ -79,7 +93,11 @@ EOF
     echo "level\" is where the controller ran (src/renderer/budget.rs); \"composite change\" is the"
     echo "mean absolute difference of consecutive composites in 8-bit levels, and \"change added\""
     echo "is that of a budgeted run minus the unbudgeted run's (the popping the controller adds)."
-    echo "The error estimate is the per-frame one (src/renderer/estimate.rs, \`PER_FRAME\`)."
+    echo "The error estimate is the per-frame one (src/renderer/estimate.rs, \`PER_FRAME\`). The"
+    echo "second table splits each run's frame by stage: a budget below the cheapest rung's frame"
+    echo "cannot be held, and the stages whose cost does not fall with the render size (the camera's"
+    echo "raster and the per-vertex interpolation, which grow with the mesh; the environment) are"
+    echo "that rung's floor."
     echo
     cat "$out/budget.md"
 } >"$page"
