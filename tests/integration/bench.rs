@@ -329,6 +329,13 @@ fn assert_candidates(report: &serde_json::Value, table: &str, existing: &serde_j
             // The brute force through the clusters' maps with the level's VALs.
             assert_eq!(c["method"], "brute-force-clusters", "{name}");
             assert_eq!(c["knobs"], base["knobs"], "{name}");
+        } else if let Some(s) = change.strip_prefix("technique=brute_force_clusters + sparse.subdivision=") {
+            // And at the coarsest subdivision: only that knob differs.
+            assert_eq!((c["method"].as_str(), s), (Some("brute-force-clusters"), "16"), "{name}");
+            let mut knobs = c["knobs"].clone();
+            assert_eq!(knobs["subdivision"], 16.0, "{name}");
+            knobs["subdivision"] = base["knobs"]["subdivision"].clone();
+            assert_eq!(knobs, base["knobs"], "{name}");
         } else {
             assert!(change.starts_with("sparse.points=") || change.starts_with("sparse.near_field="), "{name}");
             assert_eq!(c["method"], "sparse", "{name}");

@@ -18,7 +18,9 @@
 //! configuration **dominates** it: more accurate and at least [`DOMINANCE_SPEEDUP`] times
 //! faster. A level so dominated is a wrong choice for this scene. Beside them it measures the
 //! brute force through the clusters' maps (`brute_force_clusters`, the technique a measured
-//! level may name) with `balanced`'s and `accurate`'s VALs and clusters.
+//! level may name) with `balanced`'s and `accurate`'s VALs and clusters, at the level's
+//! subdivision and at the coarsest (its maps draw fewer triangles; docs/measurements/
+//! clustered-visibility.md).
 
 use super::BenchError;
 use super::compare::{ExactOptions, ExactReference, exact_reference, rel_rmse_without_worst};
@@ -27,6 +29,7 @@ use crate::gpu::Gpu;
 use crate::renderer::Rendered;
 use crate::renderer::estimate::{ErrorEstimate, EstimateOptions, Estimator};
 use crate::renderer::{Method as RenderMethod, Renderer};
+use crate::scene::settings::SUBDIVISION_RANGE;
 use crate::scene::{Occlusion, Quality, ResolvedConfig, Scene};
 use std::path::Path;
 
@@ -284,11 +287,14 @@ pub fn suggest_levels(
         match draws {
             // The estimator takes none of the sparse method's parameters.
             (_, Some(draws)) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
-            // The brute force takes the row's VALs (its RSM) and clusters.
+            // The brute force takes the row's VALs (its RSM), clusters and subdivision.
             (RenderMethod::BruteForceClusters, None) => {
                 entry = serde_json::json!({"technique": "brute_force_clusters"});
                 if spot_light && knobs.rsm_resolution != row.knobs.rsm_resolution {
                     entry["rsm_resolution"] = knobs.rsm_resolution.into();
+                }
+                if knobs.subdivision != row.knobs.subdivision {
+                    entry["sparse"] = serde_json::json!({"subdivision": knobs.subdivision});
                 }
             }
             _ => {
@@ -395,13 +401,26 @@ fn measure_candidates(
         measured.push(CandidateRow::of(name, &scene, Method::Sparse, &m));
     }
     // The brute force through the clusters' maps with balanced's and accurate's VALs and
-    // clusters (the level's technique where it dominates).
-    for level in [Quality::Balanced, Quality::Accurate] {
-        let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(level))
-            .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
-        let m = measure(gpu, &scene, size, reference, Method::BruteForceClusters)?;
-        let name = format!("{} + technique=brute_force_clusters", level.name());
-        measured.push(CandidateRow::of(name, &scene, Method::BruteForceClusters, &m));
+    // clusters (the level's technique where it dominates), at the level's subdivision and at
+    // the coarsest (unless the scene file's `tuning` sets it): the brute force shades pixels,
+    // so the subdivision only splits the triangles its maps draw, which costs time everywhere
+    // and buys accuracy where the maps' paraboloid projection needs small triangles.
+    let tuned = file["settings"]["tuning"]["sparse"].get("subdivision").is_some();
+    for (level, knobs) in knobs.iter().filter(|(l, _)| matches!(l, Quality::Balanced | Quality::Accurate)) {
+        let coarsest = SUBDIVISION_RANGE.1;
+        let coarse = (!tuned && knobs.subdivision != coarsest).then_some(coarsest);
+        for subdivision in std::iter::once(None).chain(coarse.map(Some)) {
+            let mut file = file.clone();
+            let mut name = format!("{} + technique=brute_force_clusters", level.name());
+            if let Some(s) = subdivision {
+                file["settings"]["tuning"]["sparse"]["subdivision"] = s.into();
+                name += &format!(" + sparse.subdivision={s}");
+            }
+            let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(*level))
+                .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
+            let m = measure(gpu, &scene, size, reference, Method::BruteForceClusters)?;
+            measured.push(CandidateRow::of(name, &scene, Method::BruteForceClusters, &m));
+        }
     }
     Ok(measured)
 }

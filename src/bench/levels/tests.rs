@@ -213,6 +213,25 @@ fn a_dominating_brute_force_through_the_clusters_becomes_the_levels_technique() 
     assert_eq!(technique, (crate::scene::Technique::BruteForceClusters, None));
 }
 
+/// The brute force at the coarsest subdivision dominating a level takes that subdivision into
+/// the entry (its maps draw fewer triangles), and the entry is a valid level.
+#[test]
+fn a_dominating_brute_force_at_the_coarsest_subdivision_keeps_it() {
+    let l = levels();
+    let name = "accurate + technique=brute_force_clusters + sparse.subdivision=16";
+    let rows = [row(Quality::Accurate, l[2].1, 0.24, 8000.0, &[name])];
+    let mut brute = candidate(name, Knobs { subdivision: 16.0, ..l[2].1 }, 0.23, 3000.0);
+    brute.method = RenderMethod::BruteForceClusters;
+    let s = suggest_levels(&rows, &[brute], &serde_json::json!({}), true, "here");
+    let accurate = &s["accurate"];
+    assert_eq!(accurate["technique"], "brute_force_clusters");
+    assert_eq!(accurate["sparse"], serde_json::json!({"subdivision": 16.0}), "{accurate}");
+    assert!(accurate.get("rsm_resolution").is_none(), "the level's own RSM: {accurate}");
+    let settings: crate::scene::SettingsDescription =
+        serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
+    settings.validate("settings").expect("and is valid");
+}
+
 #[test]
 fn dominance_needs_both_lower_error_and_the_speedup() {
     assert!(dominates((0.10, 100.0), (0.11, 120.0)));
