@@ -459,18 +459,28 @@ fn rsm_vals_match_cpu_twin() {
         }
     }
     assert_eq!(gpu_vals.len(), cpu_vals.len(), "VAL count");
-    // The GPU appends in no fixed order: match by position.
-    let positions: Vec<[f32; 3]> = gpu_vals.iter().map(|v| v.position.to_array()).collect();
+    assert_eq!(unmatched_vals(&cpu_vals, &gpu_vals), 0, "a CPU VAL has no GPU VAL at its position");
+}
+
+/// Each of `expected` against the VAL of `actual` at its position (the GPU appends in no fixed
+/// order: matched by position), flux, area and normal; the count of those with none there.
+fn unmatched_vals(expected: &[Val], actual: &[Val]) -> usize {
+    let positions: Vec<[f32; 3]> = actual.iter().map(|v| v.position.to_array()).collect();
     let tree: kiddo::ImmutableKdTree<f32, 3> = kiddo::ImmutableKdTree::new_from_slice(&positions).unwrap();
-    let scale = max_of(cpu_vals.iter().map(|v| v.flux));
-    for c in &cpu_vals {
-        let nearest = tree.query(&c.position.to_array()).nearest_one::<kiddo::SquaredEuclidean<f32>>().execute();
-        let g = gpu_vals[nearest.item as usize];
-        assert!(nearest.distance < 1e-8, "no GPU VAL at {}", c.position);
-        assert_close(g.flux, c.flux, REL, scale, 1e-12, "VAL flux");
-        assert!((g.area - c.area).abs() <= 1e-3 * c.area + 1e-12, "VAL area {} vs {}", g.area, c.area);
-        assert_close(g.normal, c.normal, 1e-3, 1.0, 0.0, "VAL normal");
+    let scale = max_of(expected.iter().map(|v| v.flux));
+    let mut unmatched = 0;
+    for e in expected {
+        let nearest = tree.query(&e.position.to_array()).nearest_one::<kiddo::SquaredEuclidean<f32>>().execute();
+        if nearest.distance >= 1e-8 {
+            unmatched += 1;
+            continue;
+        }
+        let a = actual[nearest.item as usize];
+        assert_close(a.flux, e.flux, REL, scale, 1e-12, "VAL flux");
+        assert!((a.area - e.area).abs() <= 1e-3 * e.area + 1e-12, "VAL area {} vs {}", a.area, e.area);
+        assert_close(a.normal, e.normal, 1e-3, 1.0, 0.0, "VAL normal");
     }
+    unmatched
 }
 
 /// The spot light's VALs traced through the BVH (`twin::rsm::traced_vals`, what the error
@@ -490,21 +500,7 @@ fn traced_rsm_vals_are_the_rasterised_ones() {
     assert!(traced.len() > 500, "{} traced VALs", traced.len());
     let off = (traced.len() as f64 - gpu_vals.len() as f64).abs() / gpu_vals.len() as f64;
     assert!(off < 0.005, "{} traced VALs, {} rasterised", traced.len(), gpu_vals.len());
-    let positions: Vec<[f32; 3]> = gpu_vals.iter().map(|v| v.position.to_array()).collect();
-    let tree: kiddo::ImmutableKdTree<f32, 3> = kiddo::ImmutableKdTree::new_from_slice(&positions).unwrap();
-    let scale = max_of(traced.iter().map(|v| v.flux));
-    let mut unmatched = 0;
-    for t in &traced {
-        let nearest = tree.query(&t.position.to_array()).nearest_one::<kiddo::SquaredEuclidean<f32>>().execute();
-        let g = gpu_vals[nearest.item as usize];
-        if nearest.distance > 1e-8 {
-            unmatched += 1;
-            continue;
-        }
-        assert_close(g.flux, t.flux, REL, scale, 1e-12, "VAL flux");
-        assert!((g.area - t.area).abs() <= 1e-3 * t.area + 1e-12, "VAL area {} vs {}", g.area, t.area);
-        assert_close(g.normal, t.normal, 1e-3, 1.0, 0.0, "VAL normal");
-    }
+    let unmatched = unmatched_vals(&traced, &gpu_vals);
     assert!(unmatched * 200 <= traced.len(), "{unmatched} of {} traced VALs have no rasterised twin", traced.len());
     let flux = |v: &[Val]| v.iter().map(|v| v.flux).sum::<Vec3>();
     assert_close(flux(&traced), flux(&gpu_vals), 5e-3, flux(&gpu_vals).max_element(), 0.0, "total flux");
