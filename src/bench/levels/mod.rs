@@ -287,14 +287,20 @@ pub fn suggest_levels(
         match draws {
             // The estimator takes none of the sparse method's parameters.
             (_, Some(draws)) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
-            // The brute force takes the row's VALs (its RSM), clusters and subdivision.
+            // The brute force takes the row's VALs (its RSM), clusters and subdivision: each
+            // where the candidate changed it, else as the level's entry already set it (the
+            // row ran with it), and none of the other sparse parameters.
             (RenderMethod::BruteForceClusters, None) => {
-                entry = serde_json::json!({"technique": "brute_force_clusters"});
+                let before = std::mem::replace(&mut entry, serde_json::json!({"technique": "brute_force_clusters"}));
                 if spot_light && knobs.rsm_resolution != row.knobs.rsm_resolution {
                     entry["rsm_resolution"] = knobs.rsm_resolution.into();
+                } else if let Some(r) = before.get("rsm_resolution") {
+                    entry["rsm_resolution"] = r.clone();
                 }
                 if knobs.subdivision != row.knobs.subdivision {
                     entry["sparse"] = serde_json::json!({"subdivision": knobs.subdivision});
+                } else if let Some(s) = before.get("sparse").and_then(|s| s.get("subdivision")) {
+                    entry["sparse"] = serde_json::json!({"subdivision": s});
                 }
             }
             _ => {

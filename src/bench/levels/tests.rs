@@ -222,11 +222,18 @@ fn a_dominating_brute_force_at_the_coarsest_subdivision_keeps_it() {
     let rows = [row(Quality::Accurate, l[2].1, 0.24, 8000.0, &[name])];
     let mut brute = candidate(name, Knobs { subdivision: 16.0, ..l[2].1 }, 0.23, 3000.0);
     brute.method = RenderMethod::BruteForceClusters;
-    let s = suggest_levels(&rows, &[brute], &serde_json::json!({}), true, "here");
+    let s = suggest_levels(&rows, std::slice::from_ref(&brute), &serde_json::json!({}), true, "here");
     let accurate = &s["accurate"];
     assert_eq!(accurate["technique"], "brute_force_clusters");
     assert_eq!(accurate["sparse"], serde_json::json!({"subdivision": 16.0}), "{accurate}");
     assert!(accurate.get("rsm_resolution").is_none(), "the level's own RSM: {accurate}");
+    // The level ran with its entry's RSM (and the candidate with it): the new entry keeps it,
+    // and drops the sparse parameters the brute force does not take.
+    let existing = serde_json::json!({"accurate": {"measured": "before", "technique": "brute_force_clusters",
+        "rsm_resolution": 64, "sparse": {"points": 0.5}}});
+    let s = suggest_levels(&rows, &[brute], &existing, true, "here");
+    assert_eq!(s["accurate"]["rsm_resolution"], 64, "{s}");
+    assert_eq!(s["accurate"]["sparse"], serde_json::json!({"subdivision": 16.0}), "{s}");
     let settings: crate::scene::SettingsDescription =
         serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
     settings.validate("settings").expect("and is valid");
