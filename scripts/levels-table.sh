@@ -56,6 +56,15 @@ done
     echo "accurate and at least 1.2x faster: on that scene the level is the wrong choice. Each"
     echo "scene's plot shows the levels, the candidates, their Pareto front and the estimator's curve."
     echo
+    # A scene's table from a run made before a candidate existed says so.
+    older=$(for n in $scenes; do
+        grep -q "sparse.subdivision=16" "$out/$n/levels.md" || printf '`%s` ' "$n"
+    done)
+    if [ -n "$older" ]; then
+        echo "Measured before the coarse-subdivision candidate of the brute force existed (their"
+        echo "tables lack it): $older"
+        echo
+    fi
     for n in $scenes; do
         echo "## \`fixtures/scenes/$n.json\`"
         echo
