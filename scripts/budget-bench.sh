@@ -55,7 +55,8 @@ for name in ["balanced", "half", "twice"]:
     within = "" if budget is None else f"{100 * (p90 / budget - 1):+.1f} %"
     rows.append((name, "none" if budget is None else f"{budget:.1f}", f"{p90:.1f}", within,
                  f"{statistics.median(after):.1f}", levels,
-                 f"{last['level']}: {last['occlusion']}, vals_step {last['vals_step']}, scale {last['resolution_scale']}",
+                 f"{last['level']}: {last['occlusion']}, vals_step {last['vals_step']}, scale {last['resolution_scale']}"
+                 + ("" if last.get("camera_detail", 1.0) >= 1.0 else f", camera detail {last['camera_detail']}"),
                  f"{statistics.mean(est):.4f}" if est else "-",
                  f"{100 * statistics.mean(s['error_estimate_ms']) / statistics.mean(s['frame_ms']):.1f} %",
                  f"{change:.3f}", f"{change - base_change:+.3f}", s["adapter"]))
@@ -95,9 +96,10 @@ EOF
     echo "is that of a budgeted run minus the unbudgeted run's (the popping the controller adds)."
     echo "The error estimate is the per-frame one (src/renderer/estimate.rs, \`PER_FRAME\`). The"
     echo "second table splits each run's frame by stage: a budget below the cheapest rung's frame"
-    echo "cannot be held, and the stages whose cost does not fall with the render size (the camera's"
-    echo "raster and the per-vertex interpolation, which grow with the mesh; the environment) are"
-    echo "that rung's floor."
+    echo "cannot be held. The stages whose cost does not fall with the render size (the camera's"
+    echo "raster and the per-vertex interpolation, which grow with the mesh; the environment) set"
+    echo "the floor of the rungs that scale the render size; the cheapest rung lowers it by drawing"
+    echo "the meshes simplified to a quarter of their triangles (camera detail 0.25)."
     echo
     cat "$out/budget.md"
 } >"$page"

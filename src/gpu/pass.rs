@@ -270,11 +270,24 @@ impl Kernel {
         invocations: [u32; 3],
         timestamp_writes: Option<wgpu::ComputePassTimestampWrites<'_>>,
     ) {
+        self.dispatch_on(encoder, group, &scene.bind_group, invocations, timestamp_writes);
+    }
+
+    /// [`Kernel::dispatch`] with `scene_group` as group(1): the scene with other triangles over
+    /// the same vertices (the camera's simplified copy, [`GpuScene::camera_triangles`]).
+    pub fn dispatch_on(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        group: &wgpu::BindGroup,
+        scene_group: &wgpu::BindGroup,
+        invocations: [u32; 3],
+        timestamp_writes: Option<wgpu::ComputePassTimestampWrites<'_>>,
+    ) {
         let mut pass =
             encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(&self.label), timestamp_writes });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, group, &[]);
-        pass.set_bind_group(1, &scene.bind_group, &[]);
+        pass.set_bind_group(1, scene_group, &[]);
         let [x, y, z] = std::array::from_fn(|i| invocations[i].div_ceil(self.workgroup[i]));
         pass.dispatch_workgroups(x, y, z);
     }
@@ -364,10 +377,23 @@ impl Kernels {
         invocations: [u32; 3],
         span: Option<Span<'_>>,
     ) {
+        self.run_on(gpu, encoder, &scene.bind_group, resources, invocations, span);
+    }
+
+    /// [`Kernels::run`] with `scene_group` as group(1) ([`Kernel::dispatch_on`]).
+    pub fn run_on(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        scene_group: &wgpu::BindGroup,
+        resources: &[Res<'_>],
+        invocations: [u32; 3],
+        span: Option<Span<'_>>,
+    ) {
         for (part, kernel) in self.kernels.iter().enumerate() {
             let group = kernel.bind(gpu, resources);
             let timestamps = span.as_ref().and_then(|s| s.compute_part(part, self.kernels.len()));
-            kernel.dispatch(encoder, &group, scene, invocations, timestamps);
+            kernel.dispatch_on(encoder, &group, scene_group, invocations, timestamps);
         }
     }
 

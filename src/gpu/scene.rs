@@ -5,8 +5,19 @@
 use super::raw::RawFrame;
 use super::visibility::disks::DiscOccluders;
 use super::{Gpu, GpuError};
-pub use crate::twin::flat::{FlatScene, TextureArray, depth_range_around};
+pub use crate::twin::flat::{FlatScene, TextureArray, Triangles, depth_range_around};
 use crate::twin::raw::RawSparsePoint;
+
+/// The camera's simplified copy of the scene's triangles over the same vertices
+/// ([`FlatScene::lod_triangles`]), and the group(1) that binds it: the camera's raster and the
+/// passes that decode the camera's visibility buffer draw and read these triangles in a frame
+/// that asks for them (`Frame::camera_scene`).
+pub struct CameraLod {
+    /// The `ratio` and `error` it was simplified with.
+    pub parameters: (f32, f32),
+    pub triangles: Triangles,
+    pub bind_group: wgpu::BindGroup,
+}
 
 /// The uploaded scene.
 pub struct GpuScene {
@@ -26,6 +37,8 @@ pub struct GpuScene {
     pub vertex_neighbours: wgpu::Buffer,
     /// Only with adaptive candidates: [`FlatScene::vertex_candidates`].
     pub vertex_candidates: Option<wgpu::Buffer>,
+    /// The camera's simplified copy of the triangles, once built ([`GpuScene::build_camera_lod`]).
+    pub camera_lod: Option<CameraLod>,
     /// The rest of group(1), for [`GpuScene::bind_group_with_indices`].
     triangle_materials: wgpu::Buffer,
     materials: wgpu::Buffer,
@@ -102,10 +115,42 @@ impl GpuScene {
             disc_groups,
             vertex_neighbours,
             vertex_candidates,
+            camera_lod: None,
             triangle_materials,
             materials,
             textures,
         })
+    }
+
+    /// Build (or build again, for other parameters) the camera's simplified copy of the
+    /// triangles: [`FlatScene::lod_triangles`] of `ratio` and `error`, uploaded with a group(1)
+    /// that binds it in place of the scene's triangles.
+    pub fn build_camera_lod(&mut self, gpu: &Gpu, ratio: f32, error: f32) -> Result<(), GpuError> {
+        if self.camera_lod.as_ref().is_some_and(|l| l.parameters == (ratio, error)) {
+            return Ok(());
+        }
+        let triangles = self.flat.lod_triangles(ratio, error);
+        let none = wgpu::BufferUsages::empty();
+        let indices = gpu.storage_buffer("scene.lod_indices", &triangles.indices, none)?;
+        let materials = gpu.storage_buffer("scene.lod_triangle_materials", &triangles.materials, none)?;
+        let entries =
+            group_entries(&self.frame, &self.vertices, &indices, &materials, &self.materials, self.textures.as_ref());
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("scene.lod_bind_group"),
+            layout: &self.layout,
+            entries: &entries,
+        });
+        self.camera_lod = Some(CameraLod { parameters: (ratio, error), triangles, bind_group });
+        Ok(())
+    }
+
+    /// The camera's triangles: group(1) binding them and how many there are; the simplified
+    /// copy when `lod` and it is built, else the scene's own.
+    pub fn camera_triangles(&self, lod: bool) -> (&wgpu::BindGroup, u32) {
+        match &self.camera_lod {
+            Some(l) if lod => (&l.bind_group, l.triangles.count()),
+            _ => (&self.bind_group, self.flat.triangle_count()),
+        }
     }
 
     /// Upload the sparse points placed anew (same count as at creation): the points, and the

@@ -39,6 +39,13 @@ pub struct Frame<'a> {
     pub camera: &'a CameraTarget,
     /// World to the camera's clip space.
     pub camera_to_clip: Mat4,
+    /// Group(1) with the triangles the camera draws and its visibility buffer names
+    /// (`GpuScene::camera_triangles`): the scene's own, or in a frame of the sparse method that
+    /// asks for it, their simplified copy. The camera's raster and every pass that decodes its
+    /// visibility buffer (the sparse shade and near field, the direct light) bind this one.
+    pub camera_scene: &'a wgpu::BindGroup,
+    /// How many triangles `camera_scene` binds.
+    pub camera_triangles: u32,
 }
 
 /// One technique of a frame.

@@ -1,8 +1,8 @@
 //! `relume replay`: relight every frame of a recorded RGB-D sequence (docs/design.md §6) and write
 //! the composited frames, the indirect-only images and a timing and stability summary.
 
-use crate::gpu::Gpu;
 use crate::gpu::timing::TimingSource;
+use crate::gpu::{Gpu, GpuError};
 use crate::image::LinearImage;
 use crate::mr::environment::Environment;
 use crate::mr::{AccumulateOptions, MrOptions, MrRenderer, relative_change};
@@ -138,7 +138,7 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
     for i in 0..frames {
         let frame = recording.frame(i)?;
         let parameters = controller.as_ref().map_or(level_parameters, BudgetController::parameters);
-        apply(&mut mr, &parameters, &scene, base_rgbd, (width, height));
+        apply(gpu, &mut mr, &parameters, &scene, base_rgbd, (width, height))?;
         let start = Instant::now();
         let mut out = mr.render_frame(gpu, &frame)?;
         let (w, h) = parameters.scaled(width, height);
@@ -192,14 +192,24 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
 }
 
 /// Sets what the next frame of `mr` runs at: the visibility mode, the near field, the RGB-D
-/// grid (the scene's `grid_step` times `vals_step`, at most 64) and the render size.
-fn apply(mr: &mut MrRenderer, p: &FrameParameters, scene: &Scene, rgbd: crate::rgbd::RgbdSettings, size: (u32, u32)) {
+/// grid (the scene's `grid_step` times `vals_step`, at most 64), the render size and the
+/// camera's triangles.
+fn apply(
+    gpu: &Gpu,
+    mr: &mut MrRenderer,
+    p: &FrameParameters,
+    scene: &Scene,
+    rgbd: crate::rgbd::RgbdSettings,
+    size: (u32, u32),
+) -> Result<(), GpuError> {
     let renderer = mr.renderer_mut();
     renderer.set_occlusion(p.occlusion, scene.settings.visibility.rule);
     renderer.set_near_field(p.near_field);
+    renderer.set_camera_lod(gpu, p.camera_lod())?;
     let settings = mr.frame_settings_mut();
     settings.rgbd = crate::rgbd::RgbdSettings { grid_step: (rgbd.grid_step * p.vals_step).min(64), ..rgbd };
     (settings.width, settings.height) = p.scaled(size.0, size.1);
+    Ok(())
 }
 
 /// The 90th percentile (nearest rank) of `values`; 0 for none.

@@ -40,6 +40,14 @@ pub const HOLD_FRAMES: u32 = 6;
 pub const PROBE_HEADROOM: f64 = 0.75;
 /// Frames a rung that went over the budget is not tried again (doubled at each failure).
 pub const BACKOFF_FRAMES: u64 = 16;
+/// The cheapest rung's camera draws at most this fraction of each material's triangles
+/// (`FrameParameters::camera_detail`, `twin::flat::FlatScene::lod_triangles`): the camera's
+/// raster and the shading of its pixels cost per triangle drawn, not per pixel, so that
+/// below half the render size they are most of what is left of a frame.
+pub const CAMERA_LOD_RATIO: f32 = 0.25;
+/// ...simplified no further than this error, a fraction of the extent of the scene's vertices
+/// (meshoptimizer's relative measure): 0.4 mm on the TUM replay's bunny.
+pub const CAMERA_LOD_ERROR: f32 = 0.002;
 
 /// What one frame runs at: the parameters a loaded scene's renderer can change from one frame
 /// to the next.
@@ -58,6 +66,10 @@ pub struct FrameParameters {
     /// Render size over output size; the composite is scaled back up to the output size
     /// (dynamic resolution).
     pub resolution_scale: f32,
+    /// The most of each material's triangles the camera draws: 1, the full meshes; below it
+    /// ([`CAMERA_LOD_RATIO`]) the simplified copy (the sparse method's frames; the sparse
+    /// points and the light at the vertices keep the full meshes).
+    pub camera_detail: f32,
 }
 
 impl FrameParameters {
@@ -69,7 +81,13 @@ impl FrameParameters {
             near_field: settings.sparse.near_field,
             vals_step: 1,
             resolution_scale: 1.0,
+            camera_detail: 1.0,
         }
+    }
+
+    /// What [`crate::renderer::Renderer::set_camera_lod`] takes for `camera_detail`.
+    pub fn camera_lod(&self) -> Option<(f32, f32)> {
+        (self.camera_detail < 1.0).then_some((self.camera_detail, CAMERA_LOD_ERROR))
     }
 
     /// The parameters as `name=value` pairs, as frames report them.
@@ -81,6 +99,7 @@ impl FrameParameters {
             ("near_field".to_owned(), format!("{}", self.near_field)),
             ("vals_step".to_owned(), self.vals_step.to_string()),
             ("resolution_scale".to_owned(), format!("{}", self.resolution_scale)),
+            ("camera_detail".to_owned(), format!("{}", self.camera_detail)),
         ]
     }
 
@@ -101,7 +120,9 @@ pub fn level_parameters(level: Quality, analysis: &SceneAnalysis, settings: &Set
 
 /// The ladder of a budgeted stream, cheapest first: below `fast`'s own parameters, the VALs of
 /// an RGB-D frame halved then thirded on each side and (with `scale`) the render size scaled
-/// down to half, visibility off last; then each level's own parameters, `fast`, `balanced`,
+/// down to half, visibility off, and last the camera drawing the meshes simplified
+/// ([`CAMERA_LOD_RATIO`]: on the TUM replay the camera's raster and the per-vertex light are
+/// most of the frame at half size); then each level's own parameters, `fast`, `balanced`,
 /// `accurate`, with between the last two balanced's visibility and accurate's near field (on
 /// the TUM replay accurate's imperfect shadow maps cost about five times the disks' frame, the
 /// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take).
@@ -117,6 +138,7 @@ pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: b
         ..fast
     };
     let mut rungs = vec![
+        FrameParameters { camera_detail: CAMERA_LOD_RATIO, ..below(Occlusion::Off, 3, 0.5) },
         below(Occlusion::Off, 3, 0.5),
         below(Occlusion::Off, 2, 0.5),
         below(fast.occlusion, 2, 0.5),
@@ -341,6 +363,7 @@ mod tests {
                 near_field: 0.0,
                 vals_step: 1,
                 resolution_scale: 0.5 + 0.5 * i as f32 / (n - 1) as f32,
+                camera_detail: 1.0,
             })
             .collect()
     }
@@ -431,6 +454,10 @@ mod tests {
         let settings = SettingsDescription::default();
         let ladder = ladder(&analysis, &settings, true);
         assert_eq!(ladder.first().unwrap().occlusion, Occlusion::Off);
+        // Only the cheapest rung draws the simplified meshes; every level's own draws them whole.
+        assert_eq!(ladder[0].camera_lod(), Some((CAMERA_LOD_RATIO, CAMERA_LOD_ERROR)));
+        assert_eq!(FrameParameters { camera_detail: 1.0, ..ladder[0] }, ladder[1]);
+        assert!(ladder[1..].iter().all(|p| p.camera_lod().is_none()), "{ladder:?}");
         assert_eq!(ladder.last().unwrap().level, Quality::Accurate);
         assert_eq!(ladder.last().unwrap().occlusion, Occlusion::Clusters);
         // Between balanced and accurate: balanced's visibility with accurate's near field.

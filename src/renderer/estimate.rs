@@ -73,6 +73,7 @@ use crate::scene::SpotLight;
 use crate::twin::Val;
 use crate::twin::bvh::TraceBvh;
 use crate::twin::exact_cpu::{self as cpu, Receiver, Receivers, ValSampling};
+use crate::twin::flat::Hit;
 use crate::twin::rsm;
 use glam::{Mat4, Vec3};
 use rand::{Rng, SeedableRng};
@@ -225,8 +226,19 @@ impl Estimator {
             }
         };
         let eye = renderer.view().eye();
-        let receivers: Vec<Option<Receiver>> =
-            picked.iter().map(|&i| hits[i].map(|h| flat.receiver_at(h.triangle, h.barycentrics, eye))).collect();
+        // A frame that drew the simplified triangles is compared with the exact light where
+        // the full meshes are at its pixels: the surface the eye's ray through the simplified
+        // copy's point meets first (none where the copy's silhouette overhangs the meshes').
+        let lod = renderer.camera_lod_drawn();
+        let receiver = |h: Hit| match lod {
+            None => Some(flat.receiver_at(h.triangle, h.barycentrics, eye)),
+            Some(t) => {
+                let (p, _, _) = flat.surface_on(&t.indices, &t.materials, h.triangle, h.barycentrics);
+                let full = bvh.closest_hit(eye, p - eye)?;
+                Some(flat.receiver_at(full.triangle, full.barycentrics, eye))
+            }
+        };
+        let receivers: Vec<Option<Receiver>> = picked.iter().map(|&i| hits[i].and_then(receiver)).collect();
         let scene = cpu::ExactScene { bvh, vals, glossy: renderer.glossy() };
         let sampling = ValSampling::Importance { samples: options.samples, seed: options.seed };
         let n = picked.len() as u32;

@@ -111,6 +111,10 @@ pub struct Renderer {
     indirect: Indirect,
     /// The camera's images at the size of the last frame.
     target: Option<CameraTarget>,
+    /// Whether frames of the sparse method draw the camera's simplified copy of the triangles
+    /// ([`Renderer::set_camera_lod`]), and whether the last frame did.
+    camera_lod: bool,
+    camera_lod_drawn: bool,
     /// Model-to-world of each mesh, as uploaded, and how many times it changed.
     placement: Vec<Mat4>,
     placement_generation: u64,
@@ -189,6 +193,8 @@ impl Renderer {
             scene: scene_gpu,
             indirect: Indirect::default(),
             target: None,
+            camera_lod: false,
+            camera_lod_drawn: false,
             placement: scene.meshes.iter().map(|m| m.model_to_world).collect(),
             placement_generation: 0,
             origin: scene.origin,
@@ -485,7 +491,19 @@ impl Renderer {
         gpu.queue.write_buffer(&self.vals.count, 0, bytemuck::bytes_of(&self.uploaded_vals));
 
         let target = self.target.as_ref().expect("prepare sizes the camera target");
-        let frame = Frame { scene: &self.scene, vals: &self.vals, camera: target, camera_to_clip };
+        // The simplified triangles only under the sparse method, whose per-pixel passes (and the
+        // direct light's) bind the camera's triangles; the other methods' per-pixel passes
+        // decode the camera's visibility buffer with the scene's own.
+        self.camera_lod_drawn = self.camera_lod && method == Method::Sparse && self.scene.camera_lod.is_some();
+        let (camera_scene, camera_triangles) = self.scene.camera_triangles(self.camera_lod_drawn);
+        let frame = Frame {
+            scene: &self.scene,
+            vals: &self.vals,
+            camera: target,
+            camera_to_clip,
+            camera_scene,
+            camera_triangles,
+        };
         let (techniques, indirect) = self.techniques(method, components);
         let stage_count = techniques.iter().map(|t| t.stages().len()).sum();
         let mut rec = Recorder::new(gpu, "relume.frame", stage_count);
@@ -585,6 +603,25 @@ impl Renderer {
             list.extend(self.many.as_ref().map(|m| m as &dyn Technique));
         }
         (list, indirect)
+    }
+
+    /// From now on, frames of the sparse method draw the camera's view of the meshes simplified
+    /// (`Some((ratio, error))`: [`crate::twin::flat::FlatScene::lod_triangles`], built on first
+    /// use) or in full (`None`): the frame budget's cheapest rung, where the camera's raster and
+    /// the shading of its pixels cost per triangle. The sparse points, the per-vertex light and
+    /// every other view (the spot light's, the maps) keep the full meshes.
+    pub fn set_camera_lod(&mut self, gpu: &Gpu, lod: Option<(f32, f32)>) -> Result<(), GpuError> {
+        if let Some((ratio, error)) = lod {
+            self.scene.build_camera_lod(gpu, ratio, error)?;
+        }
+        self.camera_lod = lod.is_some();
+        Ok(())
+    }
+
+    /// The simplified triangles the last frame's camera drew, if it drew them
+    /// ([`Renderer::set_camera_lod`]).
+    pub fn camera_lod_drawn(&self) -> Option<&crate::twin::flat::Triangles> {
+        self.scene.camera_lod.as_ref().filter(|_| self.camera_lod_drawn).map(|l| &l.triangles)
     }
 
     /// The visibility settings of a grouped brute force's groups (`brute_force_ism`: the

@@ -116,6 +116,8 @@ pub struct RenderJob {
     /// The request's level's visibility mode and near field (sparse point spacings).
     pub occlusion: Occlusion,
     pub near_field: f32,
+    /// The camera's simplified triangles, ratio and error (`FrameParameters::camera_lod`).
+    pub camera_lod: Option<(f32, f32)>,
 }
 /// A composited stream frame (sRGB, row-major) and how long compositing took, ms.
 pub type Composite = (Vec<[u8; 3]>, f64);
@@ -155,6 +157,8 @@ pub struct StreamFrameJob {
     pub glossy: bool,
     /// `sparse.near_field` of the stream's level (sparse point spacings).
     pub near_field: f32,
+    /// The camera's simplified triangles, ratio and error (`FrameParameters::camera_lod`).
+    pub camera_lod: Option<(f32, f32)>,
 }
 
 /// A scene as loaded, kept while several workers may need to upload it.
@@ -691,6 +695,7 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, Work
     renderer.place_meshes(gpu, scene, &placement(scene, &[]));
     renderer.set_occlusion(job.occlusion, scene.settings.visibility.rule);
     renderer.set_near_field(job.near_field);
+    renderer.set_camera_lod(gpu, job.camera_lod)?;
     renderer.set_glossy(scene.settings.glossy);
     renderer.clear_vals();
     renderer.set_camera(job.camera);
@@ -725,6 +730,7 @@ fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> 
     mr.place(gpu, renderer, scene, &placement(scene, &job.model_transforms))?;
     renderer.set_occlusion(job.occlusion, scene.settings.visibility.rule);
     renderer.set_near_field(job.near_field);
+    renderer.set_camera_lod(gpu, job.camera_lod)?;
     renderer.set_glossy(job.glossy);
     if let Some(light) = job.light.as_ref().or(scene.light.as_ref()) {
         renderer.set_spot_light(light);

@@ -459,6 +459,7 @@ mod tests {
             near_field: 0.0,
             vals_step: 2,
             resolution_scale: 1.0,
+            camera_detail: 1.0,
         };
         metrics.record_frame_quality(Some(0.04), &parameters, Some(true));
         metrics.record_frame_quality(None, &parameters, None);

@@ -419,6 +419,7 @@ impl Session {
             rgbd,
             occlusion: parameters.occlusion,
             near_field: parameters.near_field,
+            camera_lod: parameters.camera_lod(),
             glossy: s.glossy,
         };
         let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);

@@ -68,6 +68,22 @@ impl TextureArray {
     }
 }
 
+/// A set of triangles over a scene's vertices: three corner indices per triangle and a
+/// material per triangle. The scene's own ([`FlatScene::triangles`]) or the camera's simplified
+/// copy ([`FlatScene::lod_triangles`]), which the per-pixel passes decode the camera's
+/// visibility buffer with.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Triangles {
+    pub indices: Vec<u32>,
+    pub materials: Vec<u32>,
+}
+
+impl Triangles {
+    pub fn count(&self) -> u32 {
+        (self.indices.len() / 3) as u32
+    }
+}
+
 /// Triangles longer than this fraction of the scene's extent keep their corners in
 /// [`FlatScene::simplified_indices`]: nothing merges into them.
 pub const PROXY_LONGEST_EDGE: f32 = 0.02;
@@ -259,6 +275,38 @@ impl FlatScene {
         (kept.into_iter().map(|w| original[w as usize]).collect(), reached)
     }
 
+    /// The camera's simplified copy of the triangles (the frame budget's cheapest rung,
+    /// `renderer::budget`): every run of consecutive triangles of one material simplified on its
+    /// own by meshoptimizer over the original vertices (so that every per-vertex array, the
+    /// sparse neighbours, the interpolated lights, stays valid for it; seams of normals and
+    /// texture coordinates stay where they are), to at most `ratio` of the run's triangles,
+    /// stopping short of that where the surface would move more than `error` (a fraction of
+    /// the extent of all vertices, meshoptimizer's relative measure). `ratio` 1 or `error` 0
+    /// keeps every triangle.
+    pub fn lod_triangles(&self, ratio: f32, error: f32) -> Triangles {
+        if ratio >= 1.0 || error <= 0.0 || self.indices.is_empty() {
+            return Triangles { indices: self.indices.clone(), materials: self.triangle_materials.clone() };
+        }
+        let points: Vec<[f32; 3]> = self.vertices.iter().map(|v| v.position).collect();
+        let adapter = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&points), 12, 0)
+            .expect("three f32 per vertex make a position stream");
+        let mut out = Triangles::default();
+        let mut start = 0;
+        while start < self.triangle_materials.len() {
+            let material = self.triangle_materials[start];
+            let end = (start..self.triangle_materials.len())
+                .find(|&t| self.triangle_materials[t] != material)
+                .unwrap_or(self.triangle_materials.len());
+            let run = &self.indices[3 * start..3 * end];
+            let target = 3 * (((end - start) as f32 * ratio.max(0.0)).ceil() as usize).max(1);
+            let kept = meshopt::simplify(run, &adapter, target, error, meshopt::SimplifyOptions::None, None);
+            out.materials.extend(std::iter::repeat_n(material, kept.len() / 3));
+            out.indices.extend(kept);
+            start = end;
+        }
+        out
+    }
+
     pub fn sparse_count(&self) -> u32 {
         self.sparse_points.len() as u32
     }
@@ -271,13 +319,25 @@ impl FlatScene {
     /// Interpolated surface of `triangle` at barycentrics `b`: (position, unit normal, material).
     /// Twin of `surface_at` in `shader/scene.wgsl`.
     pub fn surface_at(&self, triangle: u32, b: glam::Vec2) -> (Vec3, Vec3, crate::twin::Material) {
+        self.surface_on(&self.indices, &self.triangle_materials, triangle, b)
+    }
+
+    /// [`Self::surface_at`] on other triangles over the same vertices (`indices`, three per
+    /// triangle, and `materials`, one per triangle).
+    pub fn surface_on(
+        &self,
+        indices: &[u32],
+        materials: &[u32],
+        triangle: u32,
+        b: glam::Vec2,
+    ) -> (Vec3, Vec3, crate::twin::Material) {
         let t = 3 * triangle as usize;
-        let v = [0, 1, 2].map(|k| self.vertices[self.indices[t + k] as usize]);
+        let v = [0, 1, 2].map(|k| self.vertices[indices[t + k] as usize]);
         let p = v.map(|v| Vec3::from(v.position));
         let n = twin::barycentric(b, v[0].normal.into(), v[1].normal.into(), v[2].normal.into());
         let normal =
             if n.length_squared() > 1e-20 { n.normalize() } else { (p[1] - p[0]).cross(p[2] - p[0]).normalize() };
-        let m = self.materials[self.triangle_materials[triangle as usize] as usize];
+        let m = self.materials[materials[triangle as usize] as usize];
         let mut diffuse = Vec3::from(m.diffuse);
         if let (Ok(layer), Some(textures)) = (usize::try_from(m.diffuse_texture), &self.textures) {
             let st = |v: RawVertex| Vec3::new(v.s, v.t, 0.0);
@@ -292,8 +352,12 @@ impl FlatScene {
     /// The unit face normal of `triangle` turned to the side of `shading` (the geometric normal
     /// of `shader/scene.wgsl`'s `surface_at`; docs/design.md §3, shading and geometric normals).
     pub fn geometric_normal(&self, triangle: u32, shading: Vec3) -> Vec3 {
+        self.geometric_normal_on(&self.indices, triangle, shading)
+    }
+
+    fn geometric_normal_on(&self, indices: &[u32], triangle: u32, shading: Vec3) -> Vec3 {
         let t = 3 * triangle as usize;
-        let p = [0, 1, 2].map(|k| Vec3::from(self.vertices[self.indices[t + k] as usize].position));
+        let p = [0, 1, 2].map(|k| Vec3::from(self.vertices[indices[t + k] as usize].position));
         twin::oriented_face_normal((p[1] - p[0]).cross(p[2] - p[0]).normalize(), shading)
     }
 
@@ -301,8 +365,20 @@ impl FlatScene {
     /// with its geometric normal, both normals facing the viewer (`facing_viewer` of
     /// `surface_at` in the per-pixel passes).
     pub fn receiver_at(&self, triangle: u32, b: glam::Vec2, eye: Vec3) -> twin::exact_cpu::Receiver {
-        let (p, n, m) = self.surface_at(triangle, b);
-        let geometric = self.geometric_normal(triangle, n);
+        self.receiver_on(&self.indices, &self.triangle_materials, triangle, b, eye)
+    }
+
+    /// [`Self::receiver_at`] on other triangles over the same vertices ([`Self::surface_on`]).
+    pub fn receiver_on(
+        &self,
+        indices: &[u32],
+        materials: &[u32],
+        triangle: u32,
+        b: glam::Vec2,
+        eye: Vec3,
+    ) -> twin::exact_cpu::Receiver {
+        let (p, n, m) = self.surface_on(indices, materials, triangle, b);
+        let geometric = self.geometric_normal_on(indices, triangle, n);
         twin::exact_cpu::Receiver::sided(p, n, geometric, m, eye)
     }
 
@@ -407,5 +483,36 @@ mod proxy_tests {
             assert!(off <= 2.0 * reached, "a face {off} m off the sphere (reached {reached})");
         }
         assert_eq!(flat.simplified_indices(0.0).0, flat.indices);
+    }
+
+    /// The camera's copy simplifies each material's run on its own to at most its share of
+    /// the triangles, keeps every triangle's material, names only the run's own vertices, stays
+    /// within twice its error of the surface, and ratio 1 keeps everything.
+    #[test]
+    fn the_cameras_copy_simplifies_each_material_within_its_error() {
+        let mut flat = plane_and_sphere(16);
+        let plane_triangles = 2 * 16 * 16;
+        let sphere_triangles = flat.indices.len() / 3 - plane_triangles;
+        flat.triangle_materials[plane_triangles..].iter_mut().for_each(|m| *m = 1);
+        let error = 0.01;
+        let lod = flat.lod_triangles(0.25, error);
+        assert_eq!(lod.materials.len(), lod.indices.len() / 3);
+        let at = |i: u32| Vec3::from(flat.vertices[i as usize].position);
+        let first_sphere_vertex = flat.indices[3 * plane_triangles..].iter().min().copied().unwrap();
+        let mut counts = [0usize; 2];
+        for (t, &m) in lod.indices.chunks_exact(3).zip(&lod.materials) {
+            counts[m as usize] += 1;
+            let on_sphere = t.iter().map(|&i| i >= first_sphere_vertex).collect::<Vec<_>>();
+            assert!(on_sphere.iter().all(|&s| s == (m == 1)), "triangle {t:?} of material {m} mixes the runs");
+            if m == 1 {
+                let c = (at(t[0]) + at(t[1]) + at(t[2])) / 3.0;
+                let off = (c.distance(Vec3::splat(0.5)) - 0.2).abs();
+                assert!(off <= 2.0 * error, "a face {off} m off the sphere");
+            }
+        }
+        assert!(counts[1] > 0 && counts[1] <= sphere_triangles.div_ceil(4), "sphere {counts:?} of {sphere_triangles}");
+        assert!(counts[0] > 0 && counts[0] <= plane_triangles / 4, "plane {counts:?} of {plane_triangles}");
+        let all = flat.lod_triangles(1.0, error);
+        assert_eq!((all.indices, all.materials), (flat.indices.clone(), flat.triangle_materials.clone()));
     }
 }

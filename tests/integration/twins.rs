@@ -77,7 +77,7 @@ fn sparse_pipeline_matches_cpu_twins() {
 
     // Step 5: per-pixel shading, from the GPU's visibility buffer and vertex lights.
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
-    let expected = sparse_shading_twin(flat, &hits, &mid, eye);
+    let expected = sparse_shading_twin(flat, (&flat.indices, &flat.triangle_materials), &hits, &mid, eye);
     let scale = max_of(expected.iter().flatten().copied());
     assert!(scale > 0.0, "some pixel must receive indirect light");
     for (i, e) in expected.iter().enumerate() {
@@ -135,6 +135,53 @@ fn glossy_radiance_interpolation_matches_cpu_twins() {
     assert!(changed > 0, "the glossy lobe must be carried differently");
 }
 
+/// The camera's simplified copy of the meshes (the frame budget's cheapest rung): the camera
+/// draws under half the triangles, every covered pixel is the CPU twin's shading decoded on the
+/// simplified triangles from the GPU's per-vertex light, the image stays close to the full
+/// meshes' (the silhouette moves by less than a pixel's share of it), the error estimate looks
+/// at the full meshes' surfaces, and the other methods and `None` draw the full meshes.
+#[test]
+fn the_cameras_simplified_copy_matches_cpu_twins() {
+    use relume::renderer::budget::{CAMERA_LOD_ERROR, CAMERA_LOD_RATIO};
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let (w, h) = (96, 80);
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let full = renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    assert!(renderer.camera_lod_drawn().is_none());
+    renderer.set_camera_lod(&gpu, Some((CAMERA_LOD_RATIO, CAMERA_LOD_ERROR))).unwrap();
+    renderer.set_error_estimate(Some(relume::renderer::estimate::PER_FRAME));
+    let frame = renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let lod = renderer.camera_lod_drawn().expect("a sparse frame draws the simplified copy").clone();
+    let all = renderer.scene.flat.triangle_count();
+    assert!(lod.count() * 2 < all, "{} of {all} triangles drawn", lod.count());
+    let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
+    let scale = assert_pixels_match_twin(&gpu, &renderer, &frame, &mid);
+    let pixels = full.indirect.pixels.len();
+    let coverage_changed = (0..pixels).filter(|&i| full.indirect.covered(i) != frame.indirect.covered(i)).count();
+    assert!(coverage_changed * 50 < pixels, "{coverage_changed} of {pixels} pixels changed coverage");
+    let both: Vec<usize> = (0..pixels).filter(|&i| full.indirect.covered(i) && frame.indirect.covered(i)).collect();
+    let mean_change =
+        both.iter().map(|&i| (full.indirect.rgb(i) - frame.indirect.rgb(i)).abs().max_element()).sum::<f32>()
+            / both.len() as f32;
+    assert!(mean_change < 0.05 * scale, "mean change {mean_change} of {scale}");
+    eprintln!(
+        "simplified copy: {} of {all} triangles, {coverage_changed} of {pixels} pixels changed coverage, \
+         mean change {mean_change} of {scale}",
+        lod.count()
+    );
+    let estimate = frame.error_estimate.expect("an estimate of the simplified frame");
+    assert!(estimate.rel_rmse.is_finite() && estimate.rel_rmse > 0.0, "{estimate:?}");
+    // The brute force decodes the camera's pixels on the full meshes: it draws them.
+    renderer.set_error_estimate(None);
+    renderer.render(&gpu, Method::BruteForce, w, h).unwrap();
+    assert!(renderer.camera_lod_drawn().is_none(), "the brute force draws the full meshes");
+    renderer.set_camera_lod(&gpu, None).unwrap();
+    let again = renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    assert!(renderer.camera_lod_drawn().is_none());
+    assert_eq!((0..pixels).filter(|&i| again.indirect.covered(i) != full.indirect.covered(i)).count(), 0);
+}
+
 /// Every covered pixel of `frame`'s indirect light against [`sparse_shading_twin`] at the
 /// renderer's camera view, from the GPU's own intermediates; returns the scale (the brightest
 /// expected pixel).
@@ -145,7 +192,13 @@ fn assert_pixels_match_twin(
     mid: &relume::renderer::SparseIntermediates,
 ) -> f32 {
     let hits = renderer.camera_view().unwrap().read(gpu).unwrap();
-    let expected = sparse_shading_twin(&renderer.scene.flat, &hits, mid, renderer.view().eye());
+    let flat = &renderer.scene.flat;
+    // The triangles the camera drew: the scene's, or their simplified copy.
+    let triangles = match renderer.camera_lod_drawn() {
+        Some(t) => (&t.indices[..], &t.materials[..]),
+        None => (&flat.indices[..], &flat.triangle_materials[..]),
+    };
+    let expected = sparse_shading_twin(flat, triangles, &hits, mid, renderer.view().eye());
     let scale = max_of(expected.iter().flatten().copied());
     for (i, e) in expected.iter().enumerate() {
         if let Some(e) = e {
@@ -155,9 +208,11 @@ fn assert_pixels_match_twin(
     scale
 }
 
-/// `twin::shade_sparse` at every pixel of `hits`, from the GPU's vertex lights in `mid`.
+/// `twin::shade_sparse` at every pixel of `hits`, from the GPU's vertex lights in `mid`;
+/// `triangles` (corner indices, materials) are those `hits` name.
 fn sparse_shading_twin(
     flat: &relume::gpu::scene::FlatScene,
+    (indices, materials): (&[u32], &[u32]),
     hits: &[Option<relume::gpu::raster::Hit>],
     mid: &relume::renderer::SparseIntermediates,
     eye: Vec3,
@@ -168,9 +223,9 @@ fn sparse_shading_twin(
     let mut expected = Vec::new();
     for hit in hits {
         expected.push(hit.map(|h| {
-            let (p, n, surface) = flat.surface_at(h.triangle, h.barycentrics);
+            let (p, n, surface) = flat.surface_on(indices, materials, h.triangle, h.barycentrics);
             let t = 3 * h.triangle as usize;
-            let corners = [0, 1, 2].map(|k| flat.indices[t + k] as usize);
+            let corners = [0, 1, 2].map(|k| indices[t + k] as usize);
             let lerp = |l: &[PointLight]| PointLight {
                 position: twin::barycentric(
                     h.barycentrics,
@@ -343,7 +398,7 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
     let (flat, eye) = (&renderer.scene.flat, renderer.view().eye());
     assert_far_field_gather_matches_twin(flat, &mid, eye, &vals, radius);
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
-    let sparse = sparse_shading_twin(flat, &hits, &mid, eye);
+    let sparse = sparse_shading_twin(flat, (&flat.indices, &flat.triangle_materials), &hits, &mid, eye);
     let centres = vertex_centres(flat, scene.settings.sparse.kernel);
     let near: Vec<Option<Vec3>> = hits
         .iter()

@@ -316,6 +316,8 @@ impl Technique for ManyLights {
             ],
         );
         let pixels = [camera.view.width, camera.view.height, 1];
-        rec.stage(SHADE_STAGE, |e, s| self.kernel.dispatch(e, &group, scene, pixels, s.as_ref().map(|s| s.compute())))
+        rec.stage(SHADE_STAGE, |e, s| {
+            self.kernel.dispatch_on(e, &group, frame.camera_scene, pixels, s.as_ref().map(|s| s.compute()))
+        })
     }
 }

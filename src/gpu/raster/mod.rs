@@ -101,12 +101,27 @@ impl Visibility {
         world_to_clip: Mat4,
         span: Option<Span<'_>>,
     ) {
+        let triangles = (&scene.bind_group, scene.flat.triangle_count());
+        self.record_on(gpu, encoder, triangles, target, world_to_clip, span);
+    }
+
+    /// [`Visibility::record`] of other triangles over the scene's vertices: `triangles` is
+    /// the group(1) that binds them and their count (`GpuScene::camera_triangles`).
+    pub fn record_on(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        triangles: (&wgpu::BindGroup, u32),
+        target: &VisibilityTarget,
+        world_to_clip: Mat4,
+        span: Option<Span<'_>>,
+    ) {
         gpu.queue.write_buffer(&target.world_to_clip, 0, bytemuck::bytes_of(&world_to_clip.to_cols_array_2d()));
         let mut pass = begin_visibility_pass(encoder, &target.label, &target.view, &target.depth, span);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &target.bind_group, &[]);
-        pass.set_bind_group(1, &scene.bind_group, &[]);
-        pass.draw(0..scene.flat.indices.len() as u32, 0..1);
+        pass.set_bind_group(1, triangles.0, &[]);
+        pass.draw(0..3 * triangles.1, 0..1);
     }
 }
 
@@ -187,7 +202,8 @@ impl Technique for CameraView {
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         rec.stage(Self::STAGE, |e, s| {
-            self.raster.record(gpu, e, frame.scene, &frame.camera.view, frame.camera_to_clip, s)
+            let triangles = (frame.camera_scene, frame.camera_triangles);
+            self.raster.record_on(gpu, e, triangles, &frame.camera.view, frame.camera_to_clip, s)
         })
     }
 }

@@ -239,7 +239,7 @@ impl Technique for SparseMethod {
         );
         resources.extend(radiance.map(|(_, g)| buffer("vertex_glossy_radiance", g)));
         let pixels = [camera.view.width, camera.view.height, 1];
-        rec.stage(shade::PASS.label, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))?;
+        rec.stage(shade::PASS.label, |e, s| self.shade.run_on(gpu, e, frame.camera_scene, &resources, pixels, s))?;
         match &self.near_field {
             Some(n) => n.record(gpu, frame, chosen, rec),
             None => Ok(()),

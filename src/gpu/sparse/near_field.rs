@@ -213,6 +213,6 @@ impl NearField {
             buffer("vertex_centres", &self.vertex_centres),
         ];
         let pixels = [camera.view.width, camera.view.height, 1];
-        rec.stage(SHADE_STAGE, |e, s| self.shade.run(gpu, e, scene, &resources, pixels, s))
+        rec.stage(SHADE_STAGE, |e, s| self.shade.run_on(gpu, e, frame.camera_scene, &resources, pixels, s))
     }
 }
