@@ -255,7 +255,8 @@ fn parameter(frame: &proto::RenderedFrame, name: &str) -> String {
 /// control message, changes what its frames run at (the level's visibility mode and near
 /// field, resolved for the scene); every frame carries its error estimate; and a budget far
 /// under the frame's time makes the controller fall, frame by frame, to the cheapest rung
-/// (visibility off, a third of the VAL grid), which the frames report.
+/// (visibility off, a third of the VAL grid, the camera drawing the simplified meshes), which
+/// the frames report.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_stream_changes_its_level_mid_stream_and_falls_under_a_budget() {
     let scene = mr_scene(false);
@@ -301,6 +302,7 @@ async fn a_stream_changes_its_level_mid_stream_and_falls_under_a_budget() {
     assert_eq!(last.quality(), proto::QualityLevel::Fast, "{:?}", last.parameters);
     assert_eq!(parameter(&last, "visibility"), "off");
     assert_eq!(parameter(&last, "vals_step"), "3");
+    assert_eq!(parameter(&last, "camera_detail"), "0.25");
     let bad = ws.exchange(level(None, Some(-3.0), 3)).await;
     let Body::Error(e) = bad else { panic!("a budget out of range is an error, got {bad:?}") };
     assert_eq!(e.field, "control.render.budget_ms");
