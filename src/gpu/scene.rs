@@ -17,6 +17,9 @@ pub struct CameraLod {
     pub parameters: (f32, f32),
     pub triangles: Triangles,
     pub bind_group: wgpu::BindGroup,
+    /// The vertices its triangles use, ascending, and how many: the per-vertex light the
+    /// camera's pixels read ([`GpuScene::camera_vertices`]).
+    pub vertices: (wgpu::Buffer, u32),
 }
 
 /// The uploaded scene.
@@ -39,6 +42,9 @@ pub struct GpuScene {
     pub vertex_candidates: Option<wgpu::Buffer>,
     /// The camera's simplified copy of the triangles, once built ([`GpuScene::build_camera_lod`]).
     pub camera_lod: Option<CameraLod>,
+    /// Every vertex's index, ascending: the vertices the interpolation lights when the camera
+    /// draws the full meshes.
+    all_vertices: wgpu::Buffer,
     /// The rest of group(1), for [`GpuScene::bind_group_with_indices`].
     triangle_materials: wgpu::Buffer,
     materials: wgpu::Buffer,
@@ -63,6 +69,8 @@ impl GpuScene {
         let disc_occluders = gpu.storage_buffer("scene.disc_occluders", &discs.occluders, none)?;
         let disc_groups = gpu.storage_buffer("scene.disc_groups", &discs.groups, none)?;
         let vertex_neighbours = gpu.storage_buffer("scene.vertex_neighbours", &flat.vertex_neighbours, none)?;
+        let every: Vec<u32> = (0..flat.vertex_count()).collect();
+        let all_vertices = gpu.storage_buffer("scene.all_vertices", &every, none)?;
         let vertex_candidates = (flat.candidates > 0)
             .then(|| gpu.storage_buffer("scene.vertex_candidates", &flat.vertex_candidates, none))
             .transpose()?;
@@ -116,6 +124,7 @@ impl GpuScene {
             vertex_neighbours,
             vertex_candidates,
             camera_lod: None,
+            all_vertices,
             triangle_materials,
             materials,
             textures,
@@ -140,8 +149,21 @@ impl GpuScene {
             layout: &self.layout,
             entries: &entries,
         });
-        self.camera_lod = Some(CameraLod { parameters: (ratio, error), triangles, bind_group });
+        let mut used = triangles.indices.clone();
+        used.sort_unstable();
+        used.dedup();
+        let vertices = (gpu.storage_buffer("scene.lod_vertices", &used, none)?, used.len() as u32);
+        self.camera_lod = Some(CameraLod { parameters: (ratio, error), triangles, bind_group, vertices });
         Ok(())
+    }
+
+    /// The vertices whose light the camera's pixels read, and how many: those of the simplified
+    /// copy when `lod` and it is built, else every vertex ([`GpuScene::camera_triangles`]).
+    pub fn camera_vertices(&self, lod: bool) -> (&wgpu::Buffer, u32) {
+        match &self.camera_lod {
+            Some(l) if lod => (&l.vertices.0, l.vertices.1),
+            _ => (&self.all_vertices, self.flat.vertex_count()),
+        }
     }
 
     /// The camera's triangles: group(1) binding them and how many there are; the simplified

@@ -46,6 +46,9 @@ pub struct Frame<'a> {
     pub camera_scene: &'a wgpu::BindGroup,
     /// How many triangles `camera_scene` binds.
     pub camera_triangles: u32,
+    /// The vertices those triangles use and how many (`GpuScene::camera_vertices`): the
+    /// per-vertex interpolation lights only these.
+    pub camera_vertices: (&'a wgpu::Buffer, u32),
 }
 
 /// One technique of a frame.

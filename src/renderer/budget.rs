@@ -67,8 +67,8 @@ pub struct FrameParameters {
     /// (dynamic resolution).
     pub resolution_scale: f32,
     /// The most of each material's triangles the camera draws: 1, the full meshes; below it
-    /// ([`CAMERA_LOD_RATIO`]) the simplified copy (the sparse method's frames; the sparse
-    /// points and the light at the vertices keep the full meshes).
+    /// ([`CAMERA_LOD_RATIO`]) the simplified copy (the sparse method's frames: the interpolation
+    /// lights only the copy's vertices; the sparse points keep the full meshes).
     pub camera_detail: f32,
 }
 

@@ -496,6 +496,7 @@ impl Renderer {
         // decode the camera's visibility buffer with the scene's own.
         self.camera_lod_drawn = self.camera_lod && method == Method::Sparse && self.scene.camera_lod.is_some();
         let (camera_scene, camera_triangles) = self.scene.camera_triangles(self.camera_lod_drawn);
+        let camera_vertices = self.scene.camera_vertices(self.camera_lod_drawn);
         let frame = Frame {
             scene: &self.scene,
             vals: &self.vals,
@@ -503,6 +504,7 @@ impl Renderer {
             camera_to_clip,
             camera_scene,
             camera_triangles,
+            camera_vertices,
         };
         let (techniques, indirect) = self.techniques(method, components);
         let stage_count = techniques.iter().map(|t| t.stages().len()).sum();
@@ -608,8 +610,9 @@ impl Renderer {
     /// From now on, frames of the sparse method draw the camera's view of the meshes simplified
     /// (`Some((ratio, error))`: [`crate::twin::flat::FlatScene::lod_triangles`], built on first
     /// use) or in full (`None`): the frame budget's cheapest rung, where the camera's raster and
-    /// the shading of its pixels cost per triangle. The sparse points, the per-vertex light and
-    /// every other view (the spot light's, the maps) keep the full meshes.
+    /// the per-vertex interpolation cost per triangle and vertex. The interpolation then lights
+    /// only the copy's vertices; the sparse points and every other view (the spot light's, the
+    /// maps) keep the full meshes.
     pub fn set_camera_lod(&mut self, gpu: &Gpu, lod: Option<(f32, f32)>) -> Result<(), GpuError> {
         if let Some((ratio, error)) = lod {
             self.scene.build_camera_lod(gpu, ratio, error)?;

@@ -51,7 +51,9 @@ pub fn body(neighbours: u32, kernel: InterpolationKernel, bound: LightBound, bas
     head.include(WGSL).finish()
 }
 
-/// The bindings of [`ADAPTIVE_PASS`]; [`PASS`] has the first nine (no candidates).
+/// The bindings of both passes: [`PASS`] leaves out the candidates' two. Every entry runs
+/// over `vertex_list` (the vertices to light: all of them, or those of the camera's simplified
+/// triangles, `GpuScene::camera_vertices`).
 const BINDINGS: &[Binding] = &[
     read("sparse_points"),
     read("vertex_neighbours"),
@@ -64,24 +66,50 @@ const BINDINGS: &[Binding] = &[
     read_write("vertex_glossy_radiance"),
     read("vertex_candidates"),
     read("chosen"),
+    read("vertex_list"),
 ];
 
-/// One invocation per vertex.
+/// One invocation per vertex of `vertex_list`.
 pub const PASS: PassDesc = PassDesc {
     label: "interpolate",
-    bindings: BINDINGS.split_at(9).0,
+    bindings: BINDINGS,
     entries: &[
-        Entry::first("main", 4),
-        Entry::first("main_glossy", 6),
+        Entry {
+            name: "main",
+            bindings: 12,
+            except: &[
+                "sparse_glossy",
+                "vertex_glossy",
+                "vertex_centres",
+                "gathered_glossy",
+                "vertex_glossy_radiance",
+                "vertex_candidates",
+                "chosen",
+            ],
+        },
+        Entry {
+            name: "main_glossy",
+            bindings: 12,
+            except: &["vertex_centres", "gathered_glossy", "vertex_glossy_radiance", "vertex_candidates", "chosen"],
+        },
         Entry {
             name: "centres",
-            bindings: 7,
-            except: &["sparse_diffuse", "vertex_diffuse", "sparse_glossy", "vertex_glossy"],
+            bindings: 12,
+            except: &[
+                "sparse_diffuse",
+                "vertex_diffuse",
+                "sparse_glossy",
+                "vertex_glossy",
+                "gathered_glossy",
+                "vertex_glossy_radiance",
+                "vertex_candidates",
+                "chosen",
+            ],
         },
         Entry {
             name: "main_glossy_radiance",
-            bindings: 9,
-            except: &["sparse_glossy", "vertex_glossy", "vertex_centres"],
+            bindings: 12,
+            except: &["sparse_glossy", "vertex_glossy", "vertex_centres", "vertex_candidates", "chosen"],
         },
     ],
     workgroup: [WORKGROUP_SIZE, 1, 1],
@@ -98,17 +126,17 @@ pub const ADAPTIVE_PASS: PassDesc = PassDesc {
     entries: &[
         Entry {
             name: "main",
-            bindings: 11,
+            bindings: 12,
             except: &["sparse_glossy", "vertex_glossy", "vertex_centres", "gathered_glossy", "vertex_glossy_radiance"],
         },
         Entry {
             name: "main_glossy",
-            bindings: 11,
+            bindings: 12,
             except: &["vertex_centres", "gathered_glossy", "vertex_glossy_radiance"],
         },
         Entry {
             name: "centres",
-            bindings: 11,
+            bindings: 12,
             except: &[
                 "sparse_diffuse",
                 "vertex_diffuse",
@@ -120,7 +148,7 @@ pub const ADAPTIVE_PASS: PassDesc = PassDesc {
         },
         Entry {
             name: "main_glossy_radiance",
-            bindings: 11,
+            bindings: 12,
             except: &["sparse_glossy", "vertex_glossy", "vertex_centres"],
         },
     ],

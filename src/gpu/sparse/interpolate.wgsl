@@ -23,6 +23,9 @@
 // sums in, and per vertex their weighted mean out.
 @group(0) @binding(7) var<storage, read> gathered_glossy: array<Gathered>;
 @group(0) @binding(8) var<storage, read_write> vertex_glossy_radiance: array<vec4<f32>>;
+// The vertices to light, one invocation each: every vertex, or those of the camera's simplified
+// triangles (`GpuScene::camera_vertices`).
+@group(0) @binding(11) var<storage, read> vertex_list: array<u32>;
 
 // A vertex's weighted sparse points: its NEIGHBOURS nearest points gathered every frame, then,
 // with adaptive candidates (`adaptive_candidates`, prepended by `interpolate::body`), those of
@@ -85,20 +88,22 @@ fn interpolate_glossy(nb: VertexNeighbourhood) -> PointLight {
 
 @compute @workgroup_size(WORKGROUP_X)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= frame.vertex_count {
+    if id.x >= arrayLength(&vertex_list) {
         return;
     }
-    vertex_diffuse[id.x] = interpolate_diffuse(neighbourhood(id.x));
+    let v = vertex_list[id.x];
+    vertex_diffuse[v] = interpolate_diffuse(neighbourhood(v));
 }
 
 @compute @workgroup_size(WORKGROUP_X)
 fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= frame.vertex_count {
+    if id.x >= arrayLength(&vertex_list) {
         return;
     }
-    let nb = neighbourhood(id.x);
-    vertex_diffuse[id.x] = interpolate_diffuse(nb);
-    vertex_glossy[id.x] = interpolate_glossy(nb);
+    let v = vertex_list[id.x];
+    let nb = neighbourhood(v);
+    vertex_diffuse[v] = interpolate_diffuse(nb);
+    vertex_glossy[v] = interpolate_glossy(nb);
 }
 
 // `glossy_interpolation: "radiance"`: the diffuse light as `main` does, and the weighted mean
@@ -106,11 +111,12 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
 // `twin::glossy_toward_eye`), which the shade pass multiplies by the pixel's lobe factor.
 @compute @workgroup_size(WORKGROUP_X)
 fn main_glossy_radiance(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= frame.vertex_count {
+    if id.x >= arrayLength(&vertex_list) {
         return;
     }
-    let nb = neighbourhood(id.x);
-    vertex_diffuse[id.x] = interpolate_diffuse(nb);
+    let v = vertex_list[id.x];
+    let nb = neighbourhood(v);
+    vertex_diffuse[v] = interpolate_diffuse(nb);
     var g = vec3<f32>(0.0);
     if nb.total > 0.0 {
         for (var j = 0u; j < nb.count; j++) {
@@ -120,23 +126,24 @@ fn main_glossy_radiance(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    vertex_glossy_radiance[id.x] = vec4<f32>(g, 0.0);
+    vertex_glossy_radiance[v] = vec4<f32>(g, 0.0);
 }
 
 // The near field's centre of each vertex (`twin::near_field::vertex_centre`): where its
 // neighbours are, weighted as the interpolation weighs them; the vertex itself without any.
 @compute @workgroup_size(WORKGROUP_X)
 fn centres(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= frame.vertex_count {
+    if id.x >= arrayLength(&vertex_list) {
         return;
     }
-    let nb = neighbourhood(id.x);
-    var c = vertices[id.x].position;
+    let v = vertex_list[id.x];
+    let nb = neighbourhood(v);
+    var c = vertices[v].position;
     if nb.total > 0.0 {
         c = vec3<f32>(0.0);
         for (var j = 0u; j < nb.count; j++) {
             c += sparse_points[nb.ids[j]].position * (nb.weights[j] / nb.total);
         }
     }
-    vertex_centres[id.x] = vec4<f32>(c, 0.0);
+    vertex_centres[v] = vec4<f32>(c, 0.0);
 }

@@ -204,7 +204,7 @@ impl Technique for SparseMethod {
             rec.stage(v.stage(), |e, s| v.record(gpu, e, scene, &self.gathered, s))?;
         }
 
-        let (points, vertices) = (scene.flat.sparse_count(), scene.flat.vertex_count());
+        let points = scene.flat.sparse_count();
         // With the glossy radiance interpolated, the point lights have no glossy lobe, so
         // `with_lobes` binds the diffuse buffers alone (the gathered glossy sums go to the
         // interpolation instead).
@@ -229,6 +229,8 @@ impl Technique for SparseMethod {
         }
         let chosen = self.adaptive.as_ref().map(|(a, _)| &a.chosen);
         resources.extend(chosen.into_iter().flat_map(|c| interpolate::adaptive_resources(scene, c)));
+        let (vertex_list, vertices) = frame.camera_vertices;
+        resources.push(buffer("vertex_list", vertex_list));
         rec.stage(interpolate::PASS.label, |e, s| {
             self.interpolate.run(gpu, e, scene, &resources, [vertices, 1, 1], s)
         })?;

@@ -193,12 +193,14 @@ impl NearField {
             buffer("vertex_centres", &self.vertex_centres),
         ];
         centres.extend(chosen.into_iter().flat_map(|c| interpolate::adaptive_resources(scene, c)));
+        let (vertex_list, vertices) = frame.camera_vertices;
+        centres.push(buffer("vertex_list", vertex_list));
         let centres = self.centres.bind(gpu, &centres);
         let n = frame.vals.capacity.min(g.capacity);
         rec.stage(GRID_STAGE, |e, s| {
             e.clear_buffer(&g.counts, 0, None);
             let part = |i| s.as_ref().and_then(|s| s.compute_part(i, 4));
-            self.centres.dispatch(e, &centres, scene, [scene.flat.vertex_count(), 1, 1], part(0));
+            self.centres.dispatch(e, &centres, scene, [vertices, 1, 1], part(0));
             self.count.dispatch(e, &count, scene, [n, 1, 1], part(1));
             self.scan.dispatch(e, &scan, scene, [WORKGROUP_SIZE, 1, 1], part(2));
             self.scatter.dispatch(e, &scatter, scene, [n, 1, 1], part(3));
