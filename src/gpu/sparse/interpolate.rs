@@ -73,45 +73,7 @@ const BINDINGS: &[Binding] = &[
 pub const PASS: PassDesc = PassDesc {
     label: "interpolate",
     bindings: BINDINGS,
-    entries: &[
-        Entry {
-            name: "main",
-            bindings: 12,
-            except: &[
-                "sparse_glossy",
-                "vertex_glossy",
-                "vertex_centres",
-                "gathered_glossy",
-                "vertex_glossy_radiance",
-                "vertex_candidates",
-                "chosen",
-            ],
-        },
-        Entry {
-            name: "main_glossy",
-            bindings: 12,
-            except: &["vertex_centres", "gathered_glossy", "vertex_glossy_radiance", "vertex_candidates", "chosen"],
-        },
-        Entry {
-            name: "centres",
-            bindings: 12,
-            except: &[
-                "sparse_diffuse",
-                "vertex_diffuse",
-                "sparse_glossy",
-                "vertex_glossy",
-                "gathered_glossy",
-                "vertex_glossy_radiance",
-                "vertex_candidates",
-                "chosen",
-            ],
-        },
-        Entry {
-            name: "main_glossy_radiance",
-            bindings: 12,
-            except: &["sparse_glossy", "vertex_glossy", "vertex_centres", "vertex_candidates", "chosen"],
-        },
-    ],
+    entries: &ENTRIES,
     workgroup: [WORKGROUP_SIZE, 1, 1],
     default_source: |textured| {
         let body = body(crate::scene::DEFAULT_NEIGHBOURS, InterpolationKernel::default(), LightBound::default(), None);
@@ -119,39 +81,65 @@ pub const PASS: PassDesc = PassDesc {
     },
 };
 
+/// The entry points, each with the bindings it leaves out; the last two of each list are the
+/// candidates' ([`ADAPTIVE_ENTRIES`] binds them).
+const ENTRIES: [Entry; 4] = [
+    Entry {
+        name: "main",
+        bindings: 12,
+        except: &[
+            "sparse_glossy",
+            "vertex_glossy",
+            "vertex_centres",
+            "gathered_glossy",
+            "vertex_glossy_radiance",
+            "vertex_candidates",
+            "chosen",
+        ],
+    },
+    Entry {
+        name: "main_glossy",
+        bindings: 12,
+        except: &["vertex_centres", "gathered_glossy", "vertex_glossy_radiance", "vertex_candidates", "chosen"],
+    },
+    Entry {
+        name: "centres",
+        bindings: 12,
+        except: &[
+            "sparse_diffuse",
+            "vertex_diffuse",
+            "sparse_glossy",
+            "vertex_glossy",
+            "gathered_glossy",
+            "vertex_glossy_radiance",
+            "vertex_candidates",
+            "chosen",
+        ],
+    },
+    Entry {
+        name: "main_glossy_radiance",
+        bindings: 12,
+        except: &["sparse_glossy", "vertex_glossy", "vertex_centres", "vertex_candidates", "chosen"],
+    },
+];
+
+/// [`ENTRIES`] binding the candidates too.
+const ADAPTIVE_ENTRIES: [Entry; 4] = [
+    with_candidates(ENTRIES[0]),
+    with_candidates(ENTRIES[1]),
+    with_candidates(ENTRIES[2]),
+    with_candidates(ENTRIES[3]),
+];
+
+const fn with_candidates(entry: Entry) -> Entry {
+    Entry { except: entry.except.split_at(entry.except.len() - 2).0, ..entry }
+}
+
 /// [`PASS`] for a scene with adaptive candidates: every entry also reads each vertex's nearest
 /// candidates and which were chosen this frame (`adaptive_candidates.wgsl`).
 pub const ADAPTIVE_PASS: PassDesc = PassDesc {
     bindings: BINDINGS,
-    entries: &[
-        Entry {
-            name: "main",
-            bindings: 12,
-            except: &["sparse_glossy", "vertex_glossy", "vertex_centres", "gathered_glossy", "vertex_glossy_radiance"],
-        },
-        Entry {
-            name: "main_glossy",
-            bindings: 12,
-            except: &["vertex_centres", "gathered_glossy", "vertex_glossy_radiance"],
-        },
-        Entry {
-            name: "centres",
-            bindings: 12,
-            except: &[
-                "sparse_diffuse",
-                "vertex_diffuse",
-                "sparse_glossy",
-                "vertex_glossy",
-                "gathered_glossy",
-                "vertex_glossy_radiance",
-            ],
-        },
-        Entry {
-            name: "main_glossy_radiance",
-            bindings: 12,
-            except: &["sparse_glossy", "vertex_glossy", "vertex_centres"],
-        },
-    ],
+    entries: &ADAPTIVE_ENTRIES,
     default_source: |textured| {
         let neighbours = crate::scene::DEFAULT_NEIGHBOURS;
         let body = body(neighbours, InterpolationKernel::default(), LightBound::default(), Some(64));
