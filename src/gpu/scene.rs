@@ -11,7 +11,7 @@ use crate::twin::raw::RawSparsePoint;
 /// The camera's simplified copy of the scene's triangles over the same vertices
 /// ([`FlatScene::lod_triangles`]), and the group(1) that binds it: the camera's raster and the
 /// passes that decode the camera's visibility buffer draw and read these triangles in a frame
-/// that asks for them (`Frame::camera_scene`).
+/// that asks for them (`Frame::camera_triangles`).
 pub struct CameraLod {
     /// The `ratio` and `error` it was simplified with.
     pub parameters: (f32, f32),
@@ -149,9 +149,7 @@ impl GpuScene {
             layout: &self.layout,
             entries: &entries,
         });
-        let mut used = triangles.indices.clone();
-        used.sort_unstable();
-        used.dedup();
+        let used = triangles.vertices();
         let vertices = (gpu.storage_buffer("scene.lod_vertices", &used, none)?, used.len() as u32);
         self.camera_lod = Some(CameraLod { parameters: (ratio, error), triangles, bind_group, vertices });
         Ok(())

@@ -39,16 +39,24 @@ pub struct Frame<'a> {
     pub camera: &'a CameraTarget,
     /// World to the camera's clip space.
     pub camera_to_clip: Mat4,
-    /// Group(1) with the triangles the camera draws and its visibility buffer names
-    /// (`GpuScene::camera_triangles`): the scene's own, or in a frame of the sparse method that
-    /// asks for it, their simplified copy. The camera's raster and every pass that decodes its
+    /// Whether the camera draws the scene's simplified copy (`GpuScene::camera_lod`, a frame of
+    /// the sparse method that asks for it) instead of its own triangles.
+    pub camera_lod: bool,
+}
+
+impl Frame<'_> {
+    /// Group(1) with the triangles the camera draws and its visibility buffer names, and how
+    /// many (`GpuScene::camera_triangles`). The camera's raster and every pass that decodes its
     /// visibility buffer (the sparse shade and near field, the direct light) bind this one.
-    pub camera_scene: &'a wgpu::BindGroup,
-    /// How many triangles `camera_scene` binds.
-    pub camera_triangles: u32,
+    pub fn camera_triangles(&self) -> (&wgpu::BindGroup, u32) {
+        self.scene.camera_triangles(self.camera_lod)
+    }
+
     /// The vertices those triangles use and how many (`GpuScene::camera_vertices`): the
     /// per-vertex interpolation lights only these.
-    pub camera_vertices: (&'a wgpu::Buffer, u32),
+    pub fn camera_vertices(&self) -> (&wgpu::Buffer, u32) {
+        self.scene.camera_vertices(self.camera_lod)
+    }
 }
 
 /// One technique of a frame.

@@ -495,16 +495,12 @@ impl Renderer {
         // direct light's) bind the camera's triangles; the other methods' per-pixel passes
         // decode the camera's visibility buffer with the scene's own.
         self.camera_lod_drawn = self.camera_lod && method == Method::Sparse && self.scene.camera_lod.is_some();
-        let (camera_scene, camera_triangles) = self.scene.camera_triangles(self.camera_lod_drawn);
-        let camera_vertices = self.scene.camera_vertices(self.camera_lod_drawn);
         let frame = Frame {
             scene: &self.scene,
             vals: &self.vals,
             camera: target,
             camera_to_clip,
-            camera_scene,
-            camera_triangles,
-            camera_vertices,
+            camera_lod: self.camera_lod_drawn,
         };
         let (techniques, indirect) = self.techniques(method, components);
         let stage_count = techniques.iter().map(|t| t.stages().len()).sum();
@@ -519,33 +515,9 @@ impl Renderer {
         }
         let indirect_stages = indirect.map_or_else(Vec::new, |t| t.stages());
 
-        let pixels = (width * height) as usize;
-        let coverage_only = |image: &[[f32; 4]]| image.iter().map(|p| [0.0, 0.0, 0.0, p[3]]).collect::<Vec<_>>();
         let has_direct = self.spot.is_some() || self.many.is_some();
-        let (indirect, direct) = match (components.indirect, components.direct && has_direct) {
-            (true, true) => {
-                (gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?, gpu.read_buffer(&target.direct, pixels)?)
-            }
-            (true, false) => {
-                let indirect = gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?;
-                let direct = coverage_only(&indirect);
-                (indirect, direct)
-            }
-            (false, true) => {
-                let direct = gpu.read_buffer::<[f32; 4]>(&target.direct, pixels)?;
-                (coverage_only(&direct), direct)
-            }
-            (false, false) => {
-                // Neither wrote the camera's images: coverage from its visibility buffer.
-                let coverage: Vec<[f32; 4]> = target
-                    .view
-                    .read(gpu)?
-                    .iter()
-                    .map(|h| [0.0, 0.0, 0.0, if h.is_some() { 1.0 } else { 0.0 }])
-                    .collect();
-                (coverage.clone(), coverage)
-            }
-        };
+        let (indirect, direct) =
+            readback::camera_images(gpu, target, components.indirect, components.direct && has_direct)?;
         let val_count = self.live_val_count(gpu)?;
         let mut rendered = Rendered {
             direct: LinearImage { width, height, pixels: direct },

@@ -6,9 +6,45 @@ use crate::gpu::lights::bounce::SecondBounce;
 use crate::gpu::raster::VisibilityTarget;
 use crate::gpu::raw::{RawGathered, RawPointLight, RawVal};
 use crate::gpu::sparse::SparseMethod;
-use crate::gpu::technique::Technique;
+use crate::gpu::technique::{CameraTarget, Technique};
 use crate::gpu::{Gpu, GpuError, Lobes};
 use glam::Vec3;
+
+/// An image's RGBA pixels, row-major.
+type Pixels = Vec<[f32; 4]>;
+
+/// A frame's indirect and direct images (RGBA per pixel, alpha the coverage) from `target`:
+/// those the frame wrote (`indirect`, `direct`), the other one coverage alone; coverage from the
+/// visibility buffer when it wrote neither.
+pub(super) fn camera_images(
+    gpu: &Gpu,
+    target: &CameraTarget,
+    indirect: bool,
+    direct: bool,
+) -> Result<(Pixels, Pixels), GpuError> {
+    let pixels = (target.view.width * target.view.height) as usize;
+    let coverage_only = |image: &[[f32; 4]]| image.iter().map(|p| [0.0, 0.0, 0.0, p[3]]).collect::<Vec<_>>();
+    Ok(match (indirect, direct) {
+        (true, true) => {
+            (gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?, gpu.read_buffer(&target.direct, pixels)?)
+        }
+        (true, false) => {
+            let indirect = gpu.read_buffer::<[f32; 4]>(&target.indirect, pixels)?;
+            let direct = coverage_only(&indirect);
+            (indirect, direct)
+        }
+        (false, true) => {
+            let direct = gpu.read_buffer::<[f32; 4]>(&target.direct, pixels)?;
+            (coverage_only(&direct), direct)
+        }
+        (false, false) => {
+            // Neither wrote the camera's images: coverage from its visibility buffer.
+            let coverage: Pixels =
+                target.view.read(gpu)?.iter().map(|h| [0.0, 0.0, 0.0, if h.is_some() { 1.0 } else { 0.0 }]).collect();
+            (coverage.clone(), coverage)
+        }
+    })
+}
 
 impl Renderer {
     /// The camera's visibility buffer of the last frame.

@@ -82,6 +82,14 @@ impl Triangles {
     pub fn count(&self) -> u32 {
         (self.indices.len() / 3) as u32
     }
+
+    /// The vertices the triangles use, ascending, each once.
+    pub fn vertices(&self) -> Vec<u32> {
+        let mut used = self.indices.clone();
+        used.sort_unstable();
+        used.dedup();
+        used
+    }
 }
 
 /// Triangles longer than this fraction of the scene's extent keep their corners in
@@ -292,17 +300,13 @@ impl FlatScene {
             .expect("three f32 per vertex make a position stream");
         let mut out = Triangles::default();
         let mut start = 0;
-        while start < self.triangle_materials.len() {
-            let material = self.triangle_materials[start];
-            let end = (start..self.triangle_materials.len())
-                .find(|&t| self.triangle_materials[t] != material)
-                .unwrap_or(self.triangle_materials.len());
-            let run = &self.indices[3 * start..3 * end];
-            let target = 3 * (((end - start) as f32 * ratio.max(0.0)).ceil() as usize).max(1);
-            let kept = meshopt::simplify(run, &adapter, target, error, meshopt::SimplifyOptions::None, None);
-            out.materials.extend(std::iter::repeat_n(material, kept.len() / 3));
+        for run in self.triangle_materials.chunk_by(|a, b| a == b) {
+            let indices = &self.indices[3 * start..3 * (start + run.len())];
+            let target = 3 * ((run.len() as f32 * ratio.max(0.0)).ceil() as usize).max(1);
+            let kept = meshopt::simplify(indices, &adapter, target, error, meshopt::SimplifyOptions::None, None);
+            out.materials.extend(std::iter::repeat_n(run[0], kept.len() / 3));
             out.indices.extend(kept);
-            start = end;
+            start += run.len();
         }
         out
     }

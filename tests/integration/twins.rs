@@ -159,9 +159,7 @@ fn the_cameras_simplified_copy_matches_cpu_twins() {
     let mid = renderer.read_sparse_intermediates(&gpu).unwrap();
     let scale = assert_pixels_match_twin(&gpu, &renderer, &frame, &mid);
     // The interpolation lit the vertices of the simplified triangles, and only those.
-    let mut used = lod.indices.clone();
-    used.sort_unstable();
-    used.dedup();
+    let used = lod.vertices();
     let eye = renderer.view().eye();
     assert_interpolation_matches_twin(&renderer.scene.flat, &mid, scene.settings.sparse, eye, Some(&used));
     let lit = |v: usize| mid.vertex_diffuse[v].intensity.iter().any(|&c| c != 0.0);

@@ -317,7 +317,7 @@ impl Technique for ManyLights {
         );
         let pixels = [camera.view.width, camera.view.height, 1];
         rec.stage(SHADE_STAGE, |e, s| {
-            self.kernel.dispatch_on(e, &group, frame.camera_scene, pixels, s.as_ref().map(|s| s.compute()))
+            self.kernel.dispatch_on(e, &group, frame.camera_triangles().0, pixels, s.as_ref().map(|s| s.compute()))
         })
     }
 }

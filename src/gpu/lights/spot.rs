@@ -114,6 +114,6 @@ impl Technique for DirectLight {
             buffer("light_distance", &self.light_distance),
         ];
         let pixels = [camera.view.width, camera.view.height, 1];
-        rec.stage(DIRECT, |e, s| self.pass.run_on(gpu, e, frame.camera_scene, &resources, pixels, s))
+        rec.stage(DIRECT, |e, s| self.pass.run_on(gpu, e, frame.camera_triangles().0, &resources, pixels, s))
     }
 }

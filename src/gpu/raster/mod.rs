@@ -202,8 +202,7 @@ impl Technique for CameraView {
 
     fn record(&self, gpu: &Gpu, frame: &Frame<'_>, rec: &mut Recorder<'_>) -> Result<(), GpuError> {
         rec.stage(Self::STAGE, |e, s| {
-            let triangles = (frame.camera_scene, frame.camera_triangles);
-            self.raster.record_on(gpu, e, triangles, &frame.camera.view, frame.camera_to_clip, s)
+            self.raster.record_on(gpu, e, frame.camera_triangles(), &frame.camera.view, frame.camera_to_clip, s)
         })
     }
 }

@@ -229,7 +229,7 @@ impl Technique for SparseMethod {
         }
         let chosen = self.adaptive.as_ref().map(|(a, _)| &a.chosen);
         resources.extend(chosen.into_iter().flat_map(|c| interpolate::adaptive_resources(scene, c)));
-        let (vertex_list, vertices) = frame.camera_vertices;
+        let (vertex_list, vertices) = frame.camera_vertices();
         resources.push(buffer("vertex_list", vertex_list));
         rec.stage(interpolate::PASS.label, |e, s| {
             self.interpolate.run(gpu, e, scene, &resources, [vertices, 1, 1], s)
@@ -241,7 +241,9 @@ impl Technique for SparseMethod {
         );
         resources.extend(radiance.map(|(_, g)| buffer("vertex_glossy_radiance", g)));
         let pixels = [camera.view.width, camera.view.height, 1];
-        rec.stage(shade::PASS.label, |e, s| self.shade.run_on(gpu, e, frame.camera_scene, &resources, pixels, s))?;
+        rec.stage(shade::PASS.label, |e, s| {
+            self.shade.run_on(gpu, e, frame.camera_triangles().0, &resources, pixels, s)
+        })?;
         match &self.near_field {
             Some(n) => n.record(gpu, frame, chosen, rec),
             None => Ok(()),

@@ -193,7 +193,7 @@ impl NearField {
             buffer("vertex_centres", &self.vertex_centres),
         ];
         centres.extend(chosen.into_iter().flat_map(|c| interpolate::adaptive_resources(scene, c)));
-        let (vertex_list, vertices) = frame.camera_vertices;
+        let (vertex_list, vertices) = frame.camera_vertices();
         centres.push(buffer("vertex_list", vertex_list));
         let centres = self.centres.bind(gpu, &centres);
         let n = frame.vals.capacity.min(g.capacity);
@@ -215,6 +215,6 @@ impl NearField {
             buffer("vertex_centres", &self.vertex_centres),
         ];
         let pixels = [camera.view.width, camera.view.height, 1];
-        rec.stage(SHADE_STAGE, |e, s| self.shade.run_on(gpu, e, frame.camera_scene, &resources, pixels, s))
+        rec.stage(SHADE_STAGE, |e, s| self.shade.run_on(gpu, e, frame.camera_triangles().0, &resources, pixels, s))
     }
 }
