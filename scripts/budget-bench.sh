@@ -57,7 +57,8 @@ for name in ["balanced", "half", "twice"]:
     rows.append((name, "none" if budget is None else f"{budget:.1f}", f"{p90:.1f}", within,
                  f"{statistics.median(after):.1f}", levels,
                  f"{last['level']}: {last['occlusion']}, vals_step {last['vals_step']}, scale {last['resolution_scale']}"
-                 + ("" if last.get("camera_detail", 1.0) >= 1.0 else f", camera detail {last['camera_detail']}"),
+                 + ("" if last.get("camera_detail", 1.0) >= 1.0 else f", camera detail {last['camera_detail']}")
+                 + ("" if last.get("receivers_step", 1) == 1 else f", receivers step {last['receivers_step']}"),
                  f"{statistics.mean(est):.4f}" if est else "-",
                  f"{100 * statistics.mean(s['error_estimate_ms']) / statistics.mean(s['frame_ms']):.1f} %",
                  f"{change:.3f}", f"{change - base_change:+.3f}", s["adapter"]))
@@ -80,6 +81,9 @@ for stage in stages + ["whole frame"]:
         values = [v for v in values[5:] if v is not None]
         cells.append(f"{statistics.median(values):.1f}" if values else "-")
     print(f"| {stage} | " + " | ".join(cells) + " |")
+# The differential pass's receivers (its cost follows them; 0 without the pass).
+cells = [f"{statistics.median(s['receivers_per_frame'][5:] or [0]):.0f}" for s in runs.values()]
+print("| differential receivers (median count) | " + " | ".join(cells) + " |")
 print()
 print(f"Adapter: {rows[0][-1]}; {frames} frames of `fixtures/recordings/tum_fr1_xyz` with "
       f"`{scene}` at 640x480; balanced median frame {median} ms; binary `{binary}`.")
@@ -100,7 +104,9 @@ EOF
     echo "cannot be held. The stages whose cost does not fall with the render size (the camera's"
     echo "raster and the per-vertex interpolation, which grow with the mesh; the environment) set"
     echo "the floor of the rungs that scale the render size; the cheapest rung lowers it by drawing"
-    echo "the meshes simplified to a quarter of their triangles (camera detail 0.25)."
+    echo "the meshes simplified to a quarter of their triangles (camera detail 0.25). With the"
+    echo "differential pass, every rung below \`fast\`'s own computes one receiver in 4 (receivers"
+    echo "step 2): the pass is most of the frame at every rung, and its cost follows its receivers."
     echo
     cat "$out/budget.md"
 } >"$page"

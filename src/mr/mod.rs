@@ -138,6 +138,7 @@ impl MrRenderer {
             height: options.height,
             exposure: options.exposure,
             rgbd: scene.settings.rgbd,
+            receivers_step: 1,
             method: scene.resolved.method.into(),
         };
         Ok(Self { renderer, pipeline, settings, accumulator, frames: 0 })
@@ -192,6 +193,9 @@ pub struct FrameSettings {
     pub exposure: f32,
     /// How the frame's pixels become VALs and receivers, and its `radiance_scale`.
     pub rgbd: RgbdSettings,
+    /// Multiplier of `settings.mr.receiver_step` (the product at most 64): a frame budget's
+    /// cheap rungs take one receiver in 4 (`FrameParameters::receivers_step`).
+    pub receivers_step: u32,
     /// The indirect method. The differential pass's re-emitters take what the sparse method
     /// gathered at the sparse points: with another method they add no light (the virtual
     /// content's shadow alone).
@@ -388,7 +392,8 @@ impl MrPipeline {
         let start = Instant::now();
         let grid = bounds.map(|bounds| {
             let pose = renderer.local_pose(&frame.camera_to_world);
-            differential::receivers(frame, &pose, &rgbd, &self.mr, bounds)
+            let step = (self.mr.receiver_step * settings.receivers_step.max(1)).min(64);
+            differential::receivers(frame, &pose, &rgbd, &MrSettings { receiver_step: step, ..self.mr }, bounds)
         });
         let receivers_ms = start.elapsed().as_secs_f64() * 1e3;
         let start = Instant::now();

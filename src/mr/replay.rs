@@ -51,6 +51,8 @@ pub struct ReplaySummary {
     pub accumulate: bool,
     /// VALs that lit each frame.
     pub vals_per_frame: Vec<u32>,
+    /// The differential pass's receivers each frame (0 where it did not run).
+    pub receivers_per_frame: Vec<u32>,
     /// Milliseconds per stage, one entry per frame.
     pub stage_ms: BTreeMap<String, Vec<f64>>,
     /// Wall time per frame, from frame loaded to images read back (ms).
@@ -119,6 +121,7 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
         height,
         accumulate: options.accumulate.is_some(),
         vals_per_frame: Vec::new(),
+        receivers_per_frame: Vec::new(),
         stage_ms: BTreeMap::new(),
         frame_ms: Vec::new(),
         irradiance_change: Vec::new(),
@@ -168,6 +171,7 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
             summary.stage_ms.entry(stage.clone()).or_default().push(*ms);
         }
         summary.vals_per_frame.push(out.val_count);
+        summary.receivers_per_frame.push(out.differential.as_ref().map_or(0, |d| d.grid.receivers.len() as u32));
         if let Some(p) = &previous {
             summary.irradiance_change.push(relative_change(p, &out.sparse_irradiance));
         }
@@ -192,8 +196,8 @@ pub fn replay(gpu: &Gpu, options: &ReplayOptions) -> anyhow::Result<ReplaySummar
 }
 
 /// Sets what the next frame of `mr` runs at: the visibility mode, the near field, the RGB-D
-/// grid (the scene's `grid_step` times `vals_step`, at most 64), the render size and the
-/// camera's triangles.
+/// grid (the scene's `grid_step` times `vals_step`, at most 64), the differential pass's
+/// receivers, the render size and the camera's triangles.
 fn apply(
     gpu: &Gpu,
     mr: &mut MrRenderer,
@@ -208,6 +212,7 @@ fn apply(
     renderer.set_camera_lod(gpu, p.camera_lod())?;
     let settings = mr.frame_settings_mut();
     settings.rgbd = crate::rgbd::RgbdSettings { grid_step: (rgbd.grid_step * p.vals_step).min(64), ..rgbd };
+    settings.receivers_step = p.receivers_step;
     (settings.width, settings.height) = p.scaled(size.0, size.1);
     Ok(())
 }

@@ -48,6 +48,11 @@ pub const CAMERA_LOD_RATIO: f32 = 0.25;
 /// ...simplified no further than this error, a fraction of the extent of the scene's vertices
 /// (meshoptimizer's relative measure): 0.4 mm on the TUM replay's bunny.
 pub const CAMERA_LOD_ERROR: f32 = 0.002;
+/// Below `fast`'s own parameters a composited stream with the differential pass takes every
+/// `RECEIVERS_STEP`-th receiver in each direction (`FrameParameters::receivers_step`): on the
+/// TUM replay the pass is most of a frame at every rung (649 of 760 ms at the cheapest before),
+/// and its cost follows the receivers it computes; the composite interpolates between them.
+pub const RECEIVERS_STEP: u32 = 2;
 
 /// What one frame runs at: the parameters a loaded scene's renderer can change from one frame
 /// to the next.
@@ -70,6 +75,10 @@ pub struct FrameParameters {
     /// ([`CAMERA_LOD_RATIO`]) the simplified copy (the sparse method's frames: the interpolation
     /// lights only the copy's vertices; the sparse points keep the full meshes).
     pub camera_detail: f32,
+    /// Multiplier of `settings.mr.receiver_step`: the differential pass computes 1/`receivers_step`²
+    /// of its receivers ([`RECEIVERS_STEP`] below `fast`'s own parameters, frames composited
+    /// with the differential pass only; 1 otherwise).
+    pub receivers_step: u32,
 }
 
 impl FrameParameters {
@@ -82,6 +91,7 @@ impl FrameParameters {
             vals_step: 1,
             resolution_scale: 1.0,
             camera_detail: 1.0,
+            receivers_step: 1,
         }
     }
 
@@ -100,6 +110,7 @@ impl FrameParameters {
             ("vals_step".to_owned(), self.vals_step.to_string()),
             ("resolution_scale".to_owned(), format!("{}", self.resolution_scale)),
             ("camera_detail".to_owned(), format!("{}", self.camera_detail)),
+            ("receivers_step".to_owned(), self.receivers_step.to_string()),
         ]
     }
 
@@ -125,16 +136,22 @@ pub fn level_parameters(level: Quality, analysis: &SceneAnalysis, settings: &Set
 /// most of the frame at half size); then each level's own parameters, `fast`, `balanced`,
 /// `accurate`, with between the last two balanced's visibility and accurate's near field (on
 /// the TUM replay accurate's imperfect shadow maps cost about five times the disks' frame, the
-/// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take).
+/// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take). With
+/// the differential pass (a composited stream whose scene has `settings.mr.differential`) every
+/// rung below `fast`'s own also thins its receivers ([`RECEIVERS_STEP`]), and a rung of `fast`'s
+/// parameters with them comes before `fast`.
 /// Consecutive rungs with the same parameters are merged (the richer level's name kept). Without `scale` no rung changes the render size (a stream whose frames are not
 /// composited, or a render).
 pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: bool) -> Vec<FrameParameters> {
     let [fast, balanced, accurate] =
         [Quality::Fast, Quality::Balanced, Quality::Accurate].map(|q| level_parameters(q, analysis, settings));
+    // The differential pass's receivers thinned: only frames composited with it.
+    let receivers_step = if scale && settings.mr.differential { RECEIVERS_STEP } else { 1 };
     let below = |occlusion, vals_step, resolution_scale| FrameParameters {
         occlusion,
         vals_step,
         resolution_scale: if scale { resolution_scale } else { 1.0 },
+        receivers_step,
         ..fast
     };
     let mut rungs = vec![
@@ -146,6 +163,7 @@ pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: b
         below(fast.occlusion, 2, 0.7),
         below(fast.occlusion, 1, 0.7),
         below(fast.occlusion, 1, 0.85),
+        FrameParameters { receivers_step, ..fast },
         fast,
         balanced,
         FrameParameters { level: Quality::Accurate, near_field: accurate.near_field, ..balanced },
@@ -353,6 +371,7 @@ pub fn mean_abs_change(a: &[[u8; 3]], b: &[[u8; 3]]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::settings::MrSettings;
 
     fn rungs(n: usize) -> Vec<FrameParameters> {
         let levels = [Quality::Fast, Quality::Balanced, Quality::Accurate];
@@ -364,6 +383,7 @@ mod tests {
                 vals_step: 1,
                 resolution_scale: 0.5 + 0.5 * i as f32 / (n - 1) as f32,
                 camera_detail: 1.0,
+                receivers_step: 1,
             })
             .collect()
     }
@@ -468,6 +488,22 @@ mod tests {
         assert_eq!(c.parameters().level, Quality::Balanced);
         assert_eq!(c.parameters(), level_parameters(Quality::Balanced, &analysis, &settings));
         assert!(super::ladder(&analysis, &settings, false).iter().all(|p| p.resolution_scale == 1.0));
+        // Composited with the differential pass (the default `settings.mr`): every rung below
+        // fast's own thins the receivers, the rung before fast is fast's parameters with them.
+        // (fast's own rung may carry balanced's name: here their parameters are the same.)
+        let own = level_parameters(Quality::Fast, &analysis, &settings);
+        let fast = ladder.iter().position(|p| FrameParameters { level: Quality::Fast, ..*p } == own).unwrap();
+        assert!(ladder[..fast].iter().all(|p| p.receivers_step == RECEIVERS_STEP), "{ladder:?}");
+        assert!(ladder[fast..].iter().all(|p| p.receivers_step == 1), "{ladder:?}");
+        assert_eq!(ladder[fast - 1], FrameParameters { receivers_step: RECEIVERS_STEP, ..own });
+        // Without it, or without a composite, no rung does; without it that rung is gone.
+        let mut plain = settings.clone();
+        plain.mr = MrSettings { differential: false, ..settings.mr };
+        let plain = super::ladder(&analysis, &plain, true);
+        assert_eq!(plain.len(), ladder.len() - 1, "{plain:?}");
+        for other in [plain, super::ladder(&analysis, &settings, false)] {
+            assert!(other.iter().all(|p| p.receivers_step == 1), "{other:?}");
+        }
     }
 
     /// The upscale is bilinear with pixel centres aligned: every output pixel equals the

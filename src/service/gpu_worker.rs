@@ -159,6 +159,8 @@ pub struct StreamFrameJob {
     pub near_field: f32,
     /// The camera's simplified triangles, ratio and error (`FrameParameters::camera_lod`).
     pub camera_lod: Option<(f32, f32)>,
+    /// Multiplier of the differential pass's receiver step (`FrameParameters::receivers_step`).
+    pub receivers_step: u32,
 }
 
 /// A scene as loaded, kept while several workers may need to upload it.
@@ -741,6 +743,7 @@ fn render_stream_frame(gpu: &Gpu, loaded: &mut Loaded, job: &StreamFrameJob) -> 
         height: k.height,
         exposure: job.exposure.unwrap_or(1.0),
         rgbd: job.rgbd,
+        receivers_step: job.receivers_step,
         method: job.method,
     };
     let input = mr::FrameInput { frame: &job.frame, settings: &settings, accumulate: None };

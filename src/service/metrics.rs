@@ -460,6 +460,7 @@ mod tests {
             vals_step: 2,
             resolution_scale: 1.0,
             camera_detail: 1.0,
+            receivers_step: 1,
         };
         metrics.record_frame_quality(Some(0.04), &parameters, Some(true));
         metrics.record_frame_quality(None, &parameters, None);

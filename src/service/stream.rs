@@ -420,6 +420,7 @@ impl Session {
             occlusion: parameters.occlusion,
             near_field: parameters.near_field,
             camera_lod: parameters.camera_lod(),
+            receivers_step: parameters.receivers_step,
             glossy: s.glossy,
         };
         let (frame_id, timestamp) = (job.frame_id, job.frame.timestamp);

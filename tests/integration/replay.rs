@@ -187,12 +187,46 @@ fn replay_with_a_budget_reports_the_levels_it_ran_at() {
     let last = &parameters[4];
     assert_eq!((last["level"].as_str(), last["occlusion"].as_str()), (Some("fast"), Some("off")), "{last}");
     assert_eq!((last["vals_step"].as_u64(), last["resolution_scale"].as_f64()), (Some(3), Some(0.5)), "{last}");
+    assert_eq!(last["receivers_step"].as_u64(), Some(1), "no differential pass, no receivers to thin: {last}");
     assert!(summary["level_frames"]["fast"].as_u64().unwrap() >= 2, "{summary}");
     let estimates = summary["error_estimate"].as_array().unwrap();
     assert!(estimates.iter().all(|e| e.as_f64().is_some_and(|e| e.is_finite() && e >= 0.0)), "{estimates:?}");
     assert_eq!(summary["composite_change"].as_array().unwrap().len(), 4);
     let image = image::open(out.join("composited").join("0004.png")).unwrap();
     assert_eq!((image.width(), image.height()), (80, 60));
+}
+
+/// With the differential pass, the budget's rungs below `fast` thin its receivers: the frames
+/// the controller moved there report `receivers_step` 2 and compute about a quarter of the
+/// receivers the first frame (the scene's level) did; a scene without the pass (the test above)
+/// keeps them. Receivers every 16 pixels, so that the pass stays cheap here.
+#[test]
+fn a_budget_thins_the_differential_receivers() {
+    let out = scratch("replay_budget_receivers");
+    let text = std::fs::read_to_string(fixture("scenes/mr_bunny_differential.json")).unwrap();
+    let mut scene: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let obj = fixture("meshes/stanford_bunny/stanford-bunny.obj");
+    scene["meshes"][0]["obj"] = obj.to_str().unwrap().into();
+    scene["settings"]["mr"] = serde_json::json!({ "receiver_step": 16 });
+    let path = out.join("scene.json");
+    std::fs::write(&path, scene.to_string()).unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(["replay", fixture("recordings/tum_fr1_xyz").to_str().unwrap(), "--scene"])
+        .arg(&path)
+        .args(["--frames", "5", "--width", "80", "--height", "60", "--budget-ms", "0.5", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let parameters = summary["parameters"].as_array().unwrap();
+    let steps: Vec<u64> = parameters.iter().map(|p| p["receivers_step"].as_u64().unwrap()).collect();
+    assert_eq!((steps[0], steps[4]), (1, 2), "the scene's level, then the thinned rungs: {steps:?}");
+    let receivers: Vec<f64> =
+        summary["receivers_per_frame"].as_array().unwrap().iter().map(|r| r.as_f64().unwrap()).collect();
+    let ratio = receivers[4] / receivers[0];
+    assert!(receivers[0] > 100.0 && (0.1..0.4).contains(&ratio), "receivers per frame {receivers:?}");
 }
 
 /// A scene with its own spot light gets the spot's VALs on top of the frame's: both sources

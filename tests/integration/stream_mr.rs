@@ -303,6 +303,7 @@ async fn a_stream_changes_its_level_mid_stream_and_falls_under_a_budget() {
     assert_eq!(parameter(&last, "visibility"), "off");
     assert_eq!(parameter(&last, "vals_step"), "3");
     assert_eq!(parameter(&last, "camera_detail"), "0.25");
+    assert_eq!(parameter(&last, "receivers_step"), "1", "no differential pass, no receivers to thin");
     let bad = ws.exchange(level(None, Some(-3.0), 3)).await;
     let Body::Error(e) = bad else { panic!("a budget out of range is an error, got {bad:?}") };
     assert_eq!(e.field, "control.render.budget_ms");

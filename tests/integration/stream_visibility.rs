@@ -61,6 +61,7 @@ fn exact_reference(scene: &Value, frame: &RgbdFrame) -> (f64, f64) {
         height: k.height,
         exposure: 1.0,
         rgbd: loaded.settings.rgbd,
+        receivers_step: 1,
         method: Method::Sparse,
     };
     mr.render_frame(&gpu, &mut renderer, FrameInput { frame, settings: &settings, accumulate: None }).expect("render");
