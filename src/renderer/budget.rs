@@ -48,7 +48,7 @@ pub const CAMERA_LOD_RATIO: f32 = 0.25;
 /// ...simplified no further than this error, a fraction of the extent of the scene's vertices
 /// (meshoptimizer's relative measure): 0.4 mm on the TUM replay's bunny.
 pub const CAMERA_LOD_ERROR: f32 = 0.002;
-/// Below `fast`'s own parameters a composited stream with the differential pass takes every
+/// Below `fast`'s own parameters a scene with the differential pass takes every
 /// `RECEIVERS_STEP`-th receiver in each direction (`FrameParameters::receivers_step`): on the
 /// TUM replay the pass is most of a frame at every rung (649 of 760 ms at the cheapest before),
 /// and its cost follows the receivers it computes; the composite interpolates between them.
@@ -76,8 +76,8 @@ pub struct FrameParameters {
     /// lights only the copy's vertices; the sparse points keep the full meshes).
     pub camera_detail: f32,
     /// Multiplier of `settings.mr.receiver_step`: the differential pass computes 1/`receivers_step`²
-    /// of its receivers ([`RECEIVERS_STEP`] below `fast`'s own parameters, frames composited
-    /// with the differential pass only; 1 otherwise).
+    /// of its receivers ([`RECEIVERS_STEP`] below `fast`'s own parameters of a scene with the
+    /// differential pass; 1 otherwise).
     pub receivers_step: u32,
 }
 
@@ -137,16 +137,17 @@ pub fn level_parameters(level: Quality, analysis: &SceneAnalysis, settings: &Set
 /// `accurate`, with between the last two balanced's visibility and accurate's near field (on
 /// the TUM replay accurate's imperfect shadow maps cost about five times the disks' frame, the
 /// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take). With
-/// the differential pass (a composited stream whose scene has `settings.mr.differential`) every
-/// rung below `fast`'s own also thins its receivers ([`RECEIVERS_STEP`]), and a rung of `fast`'s
-/// parameters with them comes before `fast`.
+/// the differential pass (`settings.mr.differential`) every rung below `fast`'s own also thins
+/// its receivers ([`RECEIVERS_STEP`]), and a rung of `fast`'s parameters with them comes before
+/// `fast`.
 /// Consecutive rungs with the same parameters are merged (the richer level's name kept). Without `scale` no rung changes the render size (a stream whose frames are not
 /// composited, or a render).
 pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: bool) -> Vec<FrameParameters> {
     let [fast, balanced, accurate] =
         [Quality::Fast, Quality::Balanced, Quality::Accurate].map(|q| level_parameters(q, analysis, settings));
-    // The differential pass's receivers thinned: only frames composited with it.
-    let receivers_step = if scale && settings.mr.differential { RECEIVERS_STEP } else { 1 };
+    // The differential pass's receivers thinned (a no-op for frames it does not relight: a
+    // stream's frames seen from a virtual camera, or not composited).
+    let receivers_step = if settings.mr.differential { RECEIVERS_STEP } else { 1 };
     let below = |occlusion, vals_step, resolution_scale| FrameParameters {
         occlusion,
         vals_step,
@@ -488,22 +489,22 @@ mod tests {
         assert_eq!(c.parameters().level, Quality::Balanced);
         assert_eq!(c.parameters(), level_parameters(Quality::Balanced, &analysis, &settings));
         assert!(super::ladder(&analysis, &settings, false).iter().all(|p| p.resolution_scale == 1.0));
-        // Composited with the differential pass (the default `settings.mr`): every rung below
-        // fast's own thins the receivers, the rung before fast is fast's parameters with them.
+        // With the differential pass (the default `settings.mr`): every rung below fast's own
+        // thins the receivers, the rung before fast is fast's parameters with them.
         // (fast's own rung may carry balanced's name: here their parameters are the same.)
         let own = level_parameters(Quality::Fast, &analysis, &settings);
         let fast = ladder.iter().position(|p| FrameParameters { level: Quality::Fast, ..*p } == own).unwrap();
         assert!(ladder[..fast].iter().all(|p| p.receivers_step == RECEIVERS_STEP), "{ladder:?}");
         assert!(ladder[fast..].iter().all(|p| p.receivers_step == 1), "{ladder:?}");
         assert_eq!(ladder[fast - 1], FrameParameters { receivers_step: RECEIVERS_STEP, ..own });
-        // Without it, or without a composite, no rung does; without it that rung is gone.
+        // Without it no rung does, and that rung is gone; without scaling (a stream) they still do.
         let mut plain = settings.clone();
         plain.mr = MrSettings { differential: false, ..settings.mr };
         let plain = super::ladder(&analysis, &plain, true);
         assert_eq!(plain.len(), ladder.len() - 1, "{plain:?}");
-        for other in [plain, super::ladder(&analysis, &settings, false)] {
-            assert!(other.iter().all(|p| p.receivers_step == 1), "{other:?}");
-        }
+        assert!(plain.iter().all(|p| p.receivers_step == 1), "{plain:?}");
+        let stream = super::ladder(&analysis, &settings, false);
+        assert!(stream.iter().any(|p| p.receivers_step == RECEIVERS_STEP), "{stream:?}");
     }
 
     /// The upscale is bilinear with pixel centres aligned: every output pixel equals the

@@ -245,6 +245,32 @@ async fn an_environment_map_on_the_service_is_confined_and_bounded() {
     server.stop().await;
 }
 
+/// A stream of a scene with the differential pass under a budget no frame can meet falls to
+/// the rungs that thin the pass's receivers (`receivers_step` 2), which its frames report; its
+/// first frame, at the scene's level, computes every receiver.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_budgeted_differential_stream_thins_its_receivers() {
+    let frames = frames(&[0, 1, 2, 3]);
+    let server = TestServer::start(|_| {}).await;
+    let id = server.create(&mr_scene(true)).await;
+    let mut ws = server.stream(&id).await;
+    let (first, _) = streamed_png(ws.exchange(frames[0].0.clone()).await, 0);
+    assert_eq!(parameter(&first, "receivers_step"), "1");
+    assert!(first.timings.iter().any(|t| t.stage == "differential"), "{:?}", first.timings);
+    let render = proto::RenderSettings { budget_ms: Some(0.5), ..Default::default() };
+    let control = proto::Control { request_id: 1, render: Some(render), ..Default::default() };
+    assert!(matches!(ws.exchange(envelope(Body::Control(control))).await, Body::SettingsAck(_)));
+    let mut last = None;
+    for (i, (bytes, _)) in frames.iter().enumerate().skip(1) {
+        last = Some(streamed_png(ws.exchange(bytes.clone()).await, i as u64).0);
+    }
+    let last = last.expect("frames");
+    assert_eq!(last.quality(), proto::QualityLevel::Fast, "{:?}", last.parameters);
+    assert_eq!(parameter(&last, "receivers_step"), "2", "{:?}", last.parameters);
+    drop(ws);
+    server.stop().await;
+}
+
 /// The parameters a streamed frame reports it ran at, by name.
 fn parameter(frame: &proto::RenderedFrame, name: &str) -> String {
     let found = frame.parameters.iter().find(|p| p.name == name);
