@@ -1,6 +1,6 @@
 //! The `relume` binary: outputs on success, and clear errors naming the offending field or flag.
 
-use super::{fixture, scratch};
+use super::{fixture, fixture_scene_json, scratch};
 use std::process::{Command, Output};
 
 fn relume(args: &[&str]) -> Output {
@@ -353,12 +353,7 @@ fn client_commands_name_bad_flags_and_unreachable_servers() {
 #[test]
 fn render_takes_a_scene_lit_by_lights_alone() {
     let dir = scratch("cli_render_lights");
-    let base = std::fs::read_to_string(fixture("scenes/cornell_bunny_small.json")).unwrap();
-    let mut scene: serde_json::Value = serde_json::from_str(&base).unwrap();
-    for mesh in scene["meshes"].as_array_mut().unwrap() {
-        let obj = fixture("scenes").join(mesh["obj"].as_str().unwrap());
-        mesh["obj"] = serde_json::Value::String(obj.to_str().unwrap().to_owned());
-    }
+    let mut scene = fixture_scene_json("cornell_bunny_small");
     scene.as_object_mut().unwrap().remove("light");
     let neither = dir.join("neither.json");
     std::fs::write(&neither, scene.to_string()).unwrap();
@@ -418,13 +413,7 @@ fn every_technique_records_valid_gpu_timestamps() {
 /// (the summary's method and stages), and with the sparse method at `balanced`.
 #[test]
 fn a_measured_level_naming_the_estimator_renders_with_it() {
-    let dir = fixture("scenes");
-    let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
-    let mut scene: serde_json::Value = serde_json::from_str(&text).unwrap();
-    for mesh in scene["meshes"].as_array_mut().unwrap() {
-        let obj = dir.join(mesh["obj"].as_str().unwrap());
-        mesh["obj"] = obj.to_str().unwrap().into();
-    }
+    let mut scene = fixture_scene_json("cornell_bunny_small");
     scene["settings"]["levels"] =
         serde_json::json!({"accurate": {"measured": "a test", "technique": "estimator", "draws": 4}});
     let out = scratch("cli-estimator-level");

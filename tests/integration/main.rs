@@ -55,6 +55,19 @@ pub fn gpu() -> Gpu {
     Gpu::new().expect("a GPU adapter (lavapipe in CI: apt-get install mesa-vulkan-drivers)")
 }
 
+/// The fixture scene `name` as JSON with its meshes named by absolute path, so that a changed
+/// copy can be written anywhere (a test's scratch directory) and still load.
+pub fn fixture_scene_json(name: &str) -> serde_json::Value {
+    let dir = fixture("scenes");
+    let text = std::fs::read_to_string(dir.join(format!("{name}.json"))).expect("fixture scene");
+    let mut scene: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    for mesh in scene["meshes"].as_array_mut().expect("meshes") {
+        let obj = dir.join(mesh["obj"].as_str().expect("obj"));
+        mesh["obj"] = obj.to_str().expect("UTF-8 path").into();
+    }
+    scene
+}
+
 /// A fresh directory under the target dir for a test's files.
 pub fn scratch(name: &str) -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);

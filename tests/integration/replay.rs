@@ -2,7 +2,7 @@
 //! virtual bunny receives the room's light, takes on its colour, and the composite is the
 //! camera image wherever the bunny is not drawn.
 
-use super::{fixture, gpu, load_scene, scratch};
+use super::{fixture, fixture_scene_json, gpu, load_scene, scratch};
 use relume::mr::{MrOptions, MrRenderer};
 use relume::rgbd::RgbdFrame;
 use relume::rgbd::recording::{Recording, RecordingOptions};
@@ -203,10 +203,7 @@ fn replay_with_a_budget_reports_the_levels_it_ran_at() {
 #[test]
 fn a_budget_thins_the_differential_receivers() {
     let out = scratch("replay_budget_receivers");
-    let text = std::fs::read_to_string(fixture("scenes/mr_bunny_differential.json")).unwrap();
-    let mut scene: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let obj = fixture("meshes/stanford_bunny/stanford-bunny.obj");
-    scene["meshes"][0]["obj"] = obj.to_str().unwrap().into();
+    let mut scene = fixture_scene_json("mr_bunny_differential");
     scene["settings"]["mr"] = serde_json::json!({ "receiver_step": 16 });
     let path = out.join("scene.json");
     std::fs::write(&path, scene.to_string()).unwrap();
