@@ -5,10 +5,15 @@
 //!
 //! It acts on what it measures, never on an assumed split of the frame's cost: it keeps, per
 //! rung, a smoothed frame time (an exponential moving average, weight [`SMOOTHING`] on the
-//! newest frame) of the frames that ran there. After each frame:
+//! newest frame) of the frames that ran there. The rungs' costs drift together (the content a
+//! recording shows grows, another process takes the cores): when the current rung's smoothed
+//! time changes by a factor, every other measured rung's cost is multiplied by it, so that a
+//! rung measured long ago is judged at today's cost, its ratio to the others as measured.
+//! After each frame:
 //!
-//! - over the budget (smoothed): one rung down, two when over 1.5x the budget, or straight to
-//!   the richest lower rung already measured under [`TARGET`] x budget;
+//! - over the budget (smoothed, or this frame alone over [`MISS`] x budget): one rung down, two
+//!   when over 1.5x the budget, or straight to the richest lower rung already measured under
+//!   [`TARGET`] x budget; a lower rung whose cost is over that target is passed;
 //! - under [`TARGET`] x budget for [`HOLD_FRAMES`] frames in a row: one rung up when that rung
 //!   was measured under the target, or, not yet measured or measured over it (a cost that may
 //!   be stale: a first frame building its pipelines), when this one is under
@@ -33,6 +38,10 @@ use crate::scene::{Occlusion, Quality, Settings};
 pub const TARGET: f64 = 0.9;
 /// Weight of the newest frame in a rung's smoothed frame time.
 pub const SMOOTHING: f64 = 0.5;
+/// A frame over this multiple of the budget moves the controller down whatever the smoothed
+/// time says: the budget's target allows 10 % over at the 90th percentile, and averaging it
+/// with earlier frames would add a second such frame before the move.
+pub const MISS: f64 = 1.1;
 /// Frames under the target in a row before the controller tries a richer rung.
 pub const HOLD_FRAMES: u32 = 6;
 /// A rung not yet measured is tried only when the current one is under this fraction of the
@@ -49,9 +58,11 @@ pub const CAMERA_LOD_RATIO: f32 = 0.25;
 /// (meshoptimizer's relative measure): 0.4 mm on the TUM replay's bunny.
 pub const CAMERA_LOD_ERROR: f32 = 0.002;
 /// Below `fast`'s own parameters a scene with the differential pass takes every
-/// `RECEIVERS_STEP`-th receiver in each direction (`FrameParameters::receivers_step`): on the
-/// TUM replay the pass is most of a frame at every rung (649 of 760 ms at the cheapest before),
-/// and its cost follows the receivers it computes; the composite interpolates between them.
+/// `RECEIVERS_STEP`-th receiver in each direction (`FrameParameters::receivers_step`), and on
+/// the half-size rungs every `RECEIVERS_STEP`²-th: on the TUM replay the pass is most of a frame
+/// at every rung (649 of 760 ms at the cheapest before), its cost follows the receivers it
+/// computes, and neither the render size nor the VALs change it; the composite interpolates
+/// between the receivers.
 pub const RECEIVERS_STEP: u32 = 2;
 
 /// What one frame runs at: the parameters a loaded scene's renderer can change from one frame
@@ -138,8 +149,8 @@ pub fn level_parameters(level: Quality, analysis: &SceneAnalysis, settings: &Set
 /// the TUM replay accurate's imperfect shadow maps cost about five times the disks' frame, the
 /// near field alone about 1.2-2x: a step a budget of twice the balanced frame can take). With
 /// the differential pass (`settings.mr.differential`) every rung below `fast`'s own also thins
-/// its receivers ([`RECEIVERS_STEP`]), and a rung of `fast`'s parameters with them comes before
-/// `fast`.
+/// its receivers ([`RECEIVERS_STEP`], squared at half size), and a rung of `fast`'s parameters
+/// with them comes before `fast`.
 /// Consecutive rungs with the same parameters are merged (the richer level's name kept). Without `scale` no rung changes the render size (a stream whose frames are not
 /// composited, or a render).
 pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: bool) -> Vec<FrameParameters> {
@@ -148,11 +159,13 @@ pub fn ladder(analysis: &SceneAnalysis, settings: &SettingsDescription, scale: b
     // The differential pass's receivers thinned (a no-op for frames it does not relight: a
     // stream's frames seen from a virtual camera, or not composited).
     let receivers_step = if settings.mr.differential { RECEIVERS_STEP } else { 1 };
-    let below = |occlusion, vals_step, resolution_scale| FrameParameters {
+    let below = |occlusion, vals_step, resolution_scale: f32| FrameParameters {
         occlusion,
         vals_step,
         resolution_scale: if scale { resolution_scale } else { 1.0 },
-        receivers_step,
+        // The half-size rungs are where a budget far under the frame lands: they thin the
+        // receivers again, the one part of the frame the other parameters leave whole.
+        receivers_step: if resolution_scale <= 0.5 { receivers_step * receivers_step } else { receivers_step },
         ..fast
     };
     let mut rungs = vec![
@@ -273,10 +286,21 @@ impl BudgetController {
             None => frame_ms,
         };
         if !warm_up {
+            // The other rungs' costs follow this one's change (see the module's documentation).
+            if let Some(previous) = self.cost[r].filter(|&c| c > 0.0) {
+                let drift = smoothed / previous;
+                for (i, cost) in self.cost.iter_mut().enumerate() {
+                    if i != r {
+                        *cost = cost.map(|c| c * drift);
+                    }
+                }
+            }
             self.cost[r] = Some(smoothed);
         }
         let target = self.budget_ms * TARGET;
-        if smoothed > self.budget_ms && r > 0 {
+        // A frame over the budget by more than the miss allowed does not wait for the average.
+        let over = smoothed.max(if frame_ms > MISS * self.budget_ms { frame_ms } else { 0.0 });
+        if over > self.budget_ms && r > 0 {
             // The rung left is not tried again for its back-off; the back-off doubles when a
             // probe failed.
             if !warm_up {
@@ -286,15 +310,14 @@ impl BudgetController {
                 self.backoff[r] = self.backoff[r].saturating_mul(2);
             }
             let measured = (0..r).rev().find(|&i| self.cost[i].is_some_and(|c| c <= target));
-            let steps = if smoothed > 1.5 * self.budget_ms { 2 } else { 1 };
-            self.rung = measured.map_or(r.saturating_sub(steps), |i| i.max(r.saturating_sub(steps)));
-            // A lower rung measured over the target too is passed when the one measured under
-            // it is lower still: the measured one is where the time held.
-            if let Some(i) = measured
-                && self.cost[self.rung].is_some_and(|c| c > target)
-            {
-                self.rung = i;
+            let steps = if over > 1.5 * self.budget_ms { 2 } else { 1 };
+            let mut next = measured.map_or(r.saturating_sub(steps), |i| i.max(r.saturating_sub(steps)));
+            // A lower rung whose cost (as drifted) is over the target is passed too, down to
+            // one that fits or was not measured yet.
+            while next > 0 && self.cost[next].is_some_and(|c| c > target) {
+                next -= 1;
             }
+            self.rung = next;
             self.under = 0;
             self.probing = false;
             return Move::Down;
@@ -392,15 +415,25 @@ mod tests {
     /// A synthetic cost model: the frame's time grows with the rung (a fixed part, and a part
     /// that grows with the rung), with noise of +-`noise` (a fixed pseudo-random sequence).
     fn run(budget: f32, cost: impl Fn(usize) -> f64, noise: f64, frames: usize) -> (Vec<f64>, Vec<usize>, usize) {
+        run_in_time(budget, |rung, _| cost(rung), noise, frames)
+    }
+
+    /// [`run`] with a cost that also depends on the frame's index.
+    fn run_in_time(
+        budget: f32,
+        cost: impl Fn(usize, usize) -> f64,
+        noise: f64,
+        frames: usize,
+    ) -> (Vec<f64>, Vec<usize>, usize) {
         let mut c = BudgetController::new(budget, rungs(10), 7);
         let mut times = Vec::new();
         let mut rungs = Vec::new();
         let mut moves = 0;
         let mut state = 12345u64;
-        for _ in 0..frames {
+        for frame in 0..frames {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             let u = (state >> 33) as f64 / (1u64 << 31) as f64;
-            let ms = cost(c.rung()) * (1.0 + noise * (2.0 * u - 1.0));
+            let ms = cost(c.rung(), frame) * (1.0 + noise * (2.0 * u - 1.0));
             times.push(ms);
             rungs.push(c.rung());
             if c.observe(ms) != Move::Hold {
@@ -428,6 +461,28 @@ mod tests {
         // It does not sit far below: the richest rung that fits is 1 (400 ms at most +8 %).
         let settled = &rungs[30..];
         assert!(settled.iter().filter(|&&r| r >= 1).count() * 10 >= settled.len() * 8, "{rungs:?}");
+    }
+
+    #[test]
+    fn costs_that_grow_together_are_followed_down() {
+        // The upper rungs cost about the same (one pass, the differential one, is most of the
+        // frame and only the lowest rungs thin it); the controller climbs to the top and
+        // measures them on the way. At frame 30 every rung's cost grows by 80 % (another
+        // process takes the cores). The rungs it measured on the way up must be judged at
+        // their grown cost: at their old one each looks as if it fitted, and the frames over
+        // the budget go on rung after rung.
+        let cost = |r: usize, frame: usize| {
+            let load = if frame >= 30 { 1.8 } else { 1.0 };
+            load * if r < 4 { 300.0 } else { 480.0 + 20.0 * r as f64 }
+        };
+        let (times, rungs, moves) = run_in_time(1000.0, cost, 0.03, 70);
+        assert_eq!(rungs[29], 9, "it climbed to the top first: {rungs:?}");
+        let over = times[30..].iter().filter(|&&t| t > 1100.0).count();
+        assert!(over <= 3, "{over} frames over the budget + 10 % after the change: {times:?} {rungs:?}");
+        // It settles where the frames fit (probing the rung above now and then).
+        let settled = rungs[40..].iter().filter(|&&r| r < 4).count();
+        assert!(settled * 10 >= (rungs.len() - 40) * 9, "it settled where the frames fit: {rungs:?}");
+        assert!(moves <= 12, "{moves} moves in 70 frames: popping ({rungs:?})");
     }
 
     #[test]
@@ -494,7 +549,13 @@ mod tests {
         // (fast's own rung may carry balanced's name: here their parameters are the same.)
         let own = level_parameters(Quality::Fast, &analysis, &settings);
         let fast = ladder.iter().position(|p| FrameParameters { level: Quality::Fast, ..*p } == own).unwrap();
-        assert!(ladder[..fast].iter().all(|p| p.receivers_step == RECEIVERS_STEP), "{ladder:?}");
+        // At half size they are thinned again.
+        let thinned = |p: &FrameParameters| match p.resolution_scale <= 0.5 {
+            true => RECEIVERS_STEP * RECEIVERS_STEP,
+            false => RECEIVERS_STEP,
+        };
+        assert!(ladder[..fast].iter().all(|p| p.receivers_step == thinned(p)), "{ladder:?}");
+        assert_eq!(ladder[0].receivers_step, RECEIVERS_STEP * RECEIVERS_STEP);
         assert!(ladder[fast..].iter().all(|p| p.receivers_step == 1), "{ladder:?}");
         assert_eq!(ladder[fast - 1], FrameParameters { receivers_step: RECEIVERS_STEP, ..own });
         // Without it no rung does, and that rung is gone; without scaling (a stream) they still do.
@@ -505,6 +566,7 @@ mod tests {
         assert!(plain.iter().all(|p| p.receivers_step == 1), "{plain:?}");
         let stream = super::ladder(&analysis, &settings, false);
         assert!(stream.iter().any(|p| p.receivers_step == RECEIVERS_STEP), "{stream:?}");
+        assert_eq!(stream[0].receivers_step, RECEIVERS_STEP * RECEIVERS_STEP, "{stream:?}");
     }
 
     /// The upscale is bilinear with pixel centres aligned: every output pixel equals the
