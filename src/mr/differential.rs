@@ -15,7 +15,9 @@
 //!    `L (E + dE) / E`: the ratio of the irradiance with and without the virtual content, so
 //!    `radiance_scale` cancels. The clamp keeps a pixel brighter than its estimated irradiance
 //!    explains (lit by light no VAL stands for) from darkening more than a white surface would.
-//!    Receiver values are interpolated bilinearly to pixels.
+//!    Receiver values are interpolated bilinearly to pixels, from the receivers on the pixel's
+//!    own surface only (the RGB-D rules' test of a depth step, `twin::rgbd::same_surface`): the
+//!    change does not bleed across a silhouette onto a surface behind or in front.
 
 use crate::gpu::differential::groups::{EMITTER_GROUP_SIZE, GROUP_SIZE, REACH, group_vals};
 use crate::gpu::differential::twin::ContentSphere;
@@ -26,7 +28,7 @@ use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use crate::scene::settings::DifferentialMethod;
 use crate::twin::Val;
-use crate::twin::rgbd::{grid_size, srgb_to_linear};
+use crate::twin::rgbd::{grid_size, same_surface, srgb_to_linear};
 use glam::{Affine3A, Mat4, UVec2, Vec3};
 use std::f32::consts::PI;
 
@@ -64,6 +66,12 @@ pub struct ReceiverGrid {
     pub receivers: Vec<Receiver>,
     /// Per receiver, the camera's radiance there (W/(m² sr)): its RGB-D VAL's `flux / (pi a)`.
     pub radiance: Vec<Vec3>,
+    /// Per receiver, its depth along the camera's optical axis (m); empty when not known (the
+    /// interpolation then tests no surface).
+    pub depth: Vec<f32>,
+    /// The depth camera's horizontal focal length (pixels), which turns pixels across the
+    /// image into metres at a depth.
+    pub focal: f32,
 }
 
 /// The receivers of `frame`, its camera at `camera_to_world` (the scene's frame: relative to
@@ -79,12 +87,16 @@ pub fn receivers(
     let settings = RgbdSettings { grid_step: mr.receiver_step.max(1), ..*rgbd };
     let size = grid_size(&frame.intrinsics, &settings);
     let (lo, hi) = (bounds.0 - mr.receiver_margin, bounds.1 + mr.receiver_margin);
-    let mut grid = ReceiverGrid { settings, size, cells: vec![None; (size.x * size.y) as usize], ..Default::default() };
+    let focal = frame.intrinsics.fx;
+    let mut grid =
+        ReceiverGrid { settings, size, cells: vec![None; (size.x * size.y) as usize], focal, ..Default::default() };
+    let world_to_camera = camera_to_world.inverse();
     for (cell, val) in crate::twin::rgbd::rgbd_vals_by_cell_posed(frame, camera_to_world, &settings) {
         if val.position.cmpge(lo).all() && val.position.cmple(hi).all() {
             grid.cells[(cell.y * size.x + cell.x) as usize] = Some(grid.receivers.len() as u32);
             grid.receivers.push(Receiver { position: val.position, normal: val.normal });
             grid.radiance.push(if val.area > 0.0 { val.flux / (PI * val.area) } else { Vec3::ZERO });
+            grid.depth.push(world_to_camera.transform_point3(val.position).z);
         }
     }
     grid
@@ -97,9 +109,13 @@ pub struct LightField<'a> {
 }
 
 impl LightField<'_> {
-    /// Bilinear interpolation at depth-image pixel (`u`, `v`) between the four nearest cell
-    /// centres that have receivers (their weights renormalised); `None` when none has one.
-    pub fn at(&self, u: f32, v: f32) -> Option<ReceiverLight> {
+    /// Bilinear interpolation at depth-image pixel (`u`, `v`), whose depth is `depth` (m; 0 or
+    /// NaN when unknown), between the four nearest cell centres that have receivers on the
+    /// pixel's surface (their weights renormalised); `None` when none has one. A receiver is on
+    /// the pixel's surface when the depth step between them is no steeper than the RGB-D rules
+    /// allow a surface (`twin::rgbd::same_surface`, over at least a cell's width: the
+    /// receiver's depth is the cell's filtered one).
+    pub fn at(&self, u: f32, v: f32, depth: f32) -> Option<ReceiverLight> {
         let step = self.grid.settings.grid_step.max(1);
         // Cell g's centre pixel is g s + floor((s - 1) / 2) (`twin::rgbd::cell_centre`).
         let (s, centre) = (step as f32, ((step - 1) / 2) as f32);
@@ -117,6 +133,16 @@ impl LightField<'_> {
                 continue;
             }
             if let Some(r) = self.grid.cells[(cy as u32 * self.grid.size.x + cx as u32) as usize] {
+                if depth > 0.0
+                    && self.grid.focal > 0.0
+                    && let Some(&z) = self.grid.depth.get(r as usize)
+                {
+                    let pixels = (cx as f32 * s + centre - u).hypot(cy as f32 * s + centre - v).max(s);
+                    let lateral = pixels * depth / self.grid.focal;
+                    if !same_surface(depth, z, lateral, self.grid.settings.min_cosine) {
+                        continue;
+                    }
+                }
                 let l = &self.light[r as usize];
                 sum.unoccluded += l.unoccluded * w;
                 sum.blocked += l.blocked * w;
@@ -149,7 +175,7 @@ pub fn relight_camera(
             let (x, y) = (i % w, i / w);
             let (u, v) = (x * fw / w, y * fh / h);
             let c = frame.color[v * fw + u];
-            let light = match field.at(u as f32, v as f32) {
+            let light = match field.at(u as f32, v as f32, frame.depth[v * fw + u]) {
                 Some(l) if radiance_scale > 0.0 => l,
                 _ => return c,
             };
@@ -523,6 +549,7 @@ mod tests {
             cells: vec![Some(0), Some(1)],
             receivers: vec![Receiver { position: Vec3::ZERO, normal: Vec3::Z }; 2],
             radiance: vec![Vec3::ONE; 2],
+            ..Default::default()
         };
         let light = [
             ReceiverLight { unoccluded: Vec3::ONE, blocked: Vec3::ZERO, added: Vec3::ZERO },
@@ -530,11 +557,30 @@ mod tests {
         ];
         let field = LightField { grid: &grid, light: &light };
         // Centres at pixels 1 and 5.
-        assert_eq!(field.at(1.0, 1.0).map(|l| l.unoccluded), Some(Vec3::ONE));
-        let mid = field.at(3.0, 1.0).expect("between two receivers");
+        assert_eq!(field.at(1.0, 1.0, 0.0).map(|l| l.unoccluded), Some(Vec3::ONE));
+        let mid = field.at(3.0, 1.0, 0.0).expect("between two receivers");
         assert!((mid.unoccluded - Vec3::splat(2.0)).abs().max_element() < 1e-6);
         assert!((mid.blocked - Vec3::splat(0.5)).abs().max_element() < 1e-6);
         let empty = ReceiverGrid { cells: vec![None, None], ..grid.clone() };
-        assert!(LightField { grid: &empty, light: &light }.at(3.0, 1.0).is_none());
+        assert!(LightField { grid: &empty, light: &light }.at(3.0, 1.0, 0.0).is_none());
+
+        // With depths: receiver 0 on a desk 1 m away, receiver 1 on a wall 2 m away (a step
+        // no surface seen at the grazing cosine makes over a few millimetres).
+        let (desk, wall) = (1.0, 2.0);
+        let stepped = ReceiverGrid { depth: vec![desk, wall], focal: 500.0, ..grid.clone() };
+        let field = LightField { grid: &stepped, light: &light };
+        // A desk pixel between the two takes the desk's receiver alone, a wall pixel the wall's.
+        assert_eq!(field.at(3.0, 1.0, desk).map(|l| l.unoccluded), Some(Vec3::ONE));
+        assert_eq!(field.at(3.0, 1.0, wall).map(|l| l.unoccluded), Some(Vec3::splat(3.0)));
+        // A pixel on neither (the bunny's own depth, say) takes no change.
+        assert!(field.at(3.0, 1.0, 0.5).is_none());
+        // Unknown depth: the plain bilinear blend.
+        let mid = field.at(3.0, 1.0, f32::NAN).expect("between two receivers");
+        assert!((mid.unoccluded - Vec3::splat(2.0)).abs().max_element() < 1e-6);
+        // A slanted surface: the two receivers 2 cm apart in depth across 4 pixels at 1 m
+        // (8 mm across the image: 68 degrees from the view direction) blend as before.
+        let slanted = ReceiverGrid { depth: vec![1.0, 1.02], ..stepped.clone() };
+        let mid = LightField { grid: &slanted, light: &light }.at(3.0, 1.0, 1.01).expect("one surface");
+        assert!((mid.unoccluded - Vec3::splat(2.0)).abs().max_element() < 1e-6);
     }
 }
