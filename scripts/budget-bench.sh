@@ -106,7 +106,8 @@ EOF
     echo "the floor of the rungs that scale the render size; the cheapest rung lowers it by drawing"
     echo "the meshes simplified to a quarter of their triangles (camera detail 0.25). With the"
     echo "differential pass, every rung below \`fast\`'s own computes one receiver in 4 (receivers"
-    echo "step 2): the pass is most of the frame at every rung, and its cost follows its receivers."
+    echo "step 2), one in 16 at half size (step 4): the pass is most of the frame at every rung, and"
+    echo "its cost follows its receivers."
     echo
     cat "$out/budget.md"
 } >"$page"

@@ -194,7 +194,8 @@ pub struct FrameSettings {
     /// How the frame's pixels become VALs and receivers, and its `radiance_scale`.
     pub rgbd: RgbdSettings,
     /// Multiplier of `settings.mr.receiver_step` (the product at most 64): a frame budget's
-    /// cheap rungs take one receiver in 4 (`FrameParameters::receivers_step`).
+    /// cheap rungs take one receiver in 4, its half-size rungs one in 16
+    /// (`FrameParameters::receivers_step`).
     pub receivers_step: u32,
     /// The indirect method. The differential pass's re-emitters take what the sparse method
     /// gathered at the sparse points: with another method they add no light (the virtual
