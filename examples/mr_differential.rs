@@ -5,9 +5,9 @@
 //!
 //! `cargo run --release --example mr_differential -- [SCENE] [RECORDING] [FRAME ...]`
 //! (default: `fixtures/scenes/mr_bunny_differential.json` on `fixtures/recordings/tum_fr1_xyz`,
-//! every frame). `FAST="16,4,8,0.03,1.1,4;32,4,4,0.05,1.1,16"` adds parameter sets (group size,
-//! reach, adaptive spacing, change spread, irradiance ratio, re-emitter group size:
-//! `mr::differential::FastSettings`).
+//! every frame). `FAST="16,4,8,0.03,1.1,4;32,4,4,0.05,1.1,16,0"` adds parameter sets (group size,
+//! reach, adaptive spacing, change spread, irradiance ratio, re-emitter group size and, when
+//! given, the faint members' ray share: `mr::differential::FastSettings`).
 //! The fast pass runs where `settings.mr.device` puts it (the CPU on CPU adapters).
 
 use relume::gpu::Gpu;
@@ -34,7 +34,7 @@ fn main() -> anyhow::Result<()> {
     let mut variants = vec![FastSettings::default()];
     for v in std::env::var("FAST").unwrap_or_default().split(';').filter(|v| !v.is_empty()) {
         let f: Vec<f32> = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
-        anyhow::ensure!(f.len() == 6, "FAST: six numbers per set, got {v}");
+        anyhow::ensure!(matches!(f.len(), 6 | 7), "FAST: six or seven numbers per set, got {v}");
         variants.push(FastSettings {
             emitter_group_size: f[5] as usize,
             group_size: f[0] as usize,
@@ -42,6 +42,7 @@ fn main() -> anyhow::Result<()> {
             spacing: f[2] as u32,
             change_spread: f[3],
             irradiance_ratio: f[4],
+            ray_share: f.get(6).copied().unwrap_or(relume::mr::differential::RAY_SHARE),
         });
     }
     let gpu = Gpu::new()?;
@@ -77,7 +78,7 @@ fn main() -> anyhow::Result<()> {
             let fast_ms = start.elapsed().as_secs_f64() * 1e3;
             let a = Agreement::of(&d.light, &light, &d.visible);
             println!(
-                "| {i} | {} | {exact_ms:.0} | {},{},{},{},{},{} | {} | {fast_ms:.0} | {:.4} | {:.4} | {:.3} | {:.3} |",
+                "| {i} | {} | {exact_ms:.0} | {},{},{},{},{},{},{} | {} | {fast_ms:.0} | {:.4} | {:.4} | {:.3} | {:.3} |",
                 d.light.len(),
                 fast.group_size,
                 fast.reach,
@@ -85,6 +86,7 @@ fn main() -> anyhow::Result<()> {
                 fast.change_spread,
                 fast.irradiance_ratio,
                 fast.emitter_group_size,
+                fast.ray_share,
                 counts.computed,
                 a.change_rel_rmse,
                 a.unoccluded_rel_rmse,

@@ -211,7 +211,7 @@ pub fn receiver_light(
         DifferentialMethod::Fast => {
             let grouped = group_vals(vals, real_count, (fast.group_size, fast.emitter_group_size), fast.reach);
             let content = ContentSphere::around(bounds);
-            let sums = Sums::Fast { grouped: &grouped, content: &content };
+            let sums = Sums::Fast { grouped: &grouped, content: &content, ray_share: fast.ray_share };
             adaptive_light(grid, fast, |receivers| pass.run(gpu, scene, receivers, sums).map(|l| l.0))
         }
     }
@@ -233,6 +233,8 @@ pub struct FastSettings {
     pub change_spread: f32,
     /// [`ADAPTIVE_IRRADIANCE_RATIO`].
     pub irradiance_ratio: f32,
+    /// [`RAY_SHARE`].
+    pub ray_share: f32,
 }
 
 impl Default for FastSettings {
@@ -244,6 +246,7 @@ impl Default for FastSettings {
             spacing: ADAPTIVE_SPACING,
             change_spread: ADAPTIVE_CHANGE_SPREAD,
             irradiance_ratio: ADAPTIVE_IRRADIANCE_RATIO,
+            ray_share: RAY_SHARE,
         }
     }
 }
@@ -296,6 +299,15 @@ impl Agreement {
 pub fn net_change(l: &ReceiverLight) -> f32 {
     l.change().element_sum() / l.unoccluded.element_sum().max(1e-12)
 }
+
+/// A member of a VAL group that the fast pass opens (a group near the receiver) and that lights
+/// the receiver with less than this share of its estimated irradiance gets no shadow ray of its
+/// own: it takes the visibility of its group's representative member
+/// (`gpu::differential::twin::receiver_light_fast`). On the TUM replay 70 % of the rays to
+/// opened groups' members carried 1 % of their irradiance; at this share the fast pass casts
+/// 2.5x fewer rays and agrees with the exact pass as closely as with every ray cast
+/// (docs/measurements/differential.md, "Faint members").
+pub const RAY_SHARE: f32 = 3e-4;
 
 /// Coarsest spacing (in receiver cells) of the fast pass's adaptive receivers: every
 /// `ADAPTIVE_SPACING`-th cell in each direction is computed, then cells at half that spacing, and

@@ -216,7 +216,7 @@ fn mr_differential_structs_match_wgsl() {
 fn mr_differential_fast_structs_match_wgsl() {
     use relume::gpu::differential::{RawFastParams, RawReceiver, RawReceiverLight, RawValGroup};
     let m = module_of("differential_fast");
-    check!(m, "FastParams", RawFastParams, [receiver_count, group_count, real_groups, _pad0, content]);
+    check!(m, "FastParams", RawFastParams, [receiver_count, group_count, real_groups, ray_share, content]);
     check!(m, "Receiver", RawReceiver, [position, _pad0, normal, _pad1]);
     check!(m, "ReceiverLight", RawReceiverLight, [unoccluded, blocked, added]);
     check!(

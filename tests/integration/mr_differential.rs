@@ -150,9 +150,10 @@ fn mr_differential_gpu_matches_twin() {
 /// The fast kernel (`fast.wgsl`) and its twin agree at every receiver, on the GPU and on the
 /// CPU backend, with the VALs grouped as the fast pass groups them: lamps in groups of 4 (so
 /// that the plate's receivers sum some groups as one and open others) and the box's re-emitters
-/// in groups of 8. The kernel decides a group's reach and cone with the GPU's `length`, `asin`
-/// and `cos`, which may round a receiver exactly at a threshold the other way: the sums then
-/// differ by the aggregate's error, under 5 %; at most 1 % of the receivers may.
+/// in groups of 8; every ray cast, and the faint members on their group's shared ray. The
+/// kernel decides a group's reach and cone with the GPU's `length`, `asin` and `cos`, which may
+/// round a receiver exactly at a threshold the other way: the sums then differ by the
+/// aggregate's error, under 5 %; at most 1 % of the receivers may.
 #[test]
 fn mr_differential_fast_gpu_matches_twin() {
     use relume::gpu::differential::groups::group_vals;
@@ -172,36 +173,54 @@ fn mr_differential_fast_gpu_matches_twin() {
         representative: g.representative + shift,
         ..*g
     }));
-    let twins: Vec<_> =
-        receivers.iter().map(|r| twin::receiver_light_fast(r, &grouped, &content, &occluders)).collect();
+    let twins = |share| -> Vec<_> {
+        receivers.iter().map(|r| twin::receiver_light_fast(r, &grouped, &content, share, &occluders)).collect()
+    };
+    // Every ray cast, then the faint members (a share of 2 % of the estimated irradiance: a
+    // lamp's average share is 1/64) on their group's shared ray.
+    let (all_rays, shared) = (twins(0.0), twins(0.02));
     let (mut summed, mut blocked) = (0, 0);
-    for (r, fast) in receivers.iter().zip(&twins) {
+    for (r, fast) in receivers.iter().zip(&all_rays) {
         let exact = twin::receiver_light(r, &vals, real_count, &occluders);
         let tol = 1e-4 * exact.unoccluded.max_element() + 1e-6;
         summed += usize::from((fast.unoccluded - exact.unoccluded).abs().max_element() > tol);
         blocked += usize::from(exact.blocked.x > 0.0);
     }
-    eprintln!("{} receivers: {summed} sum some lamp group as one, {blocked} shadowed", receivers.len());
+    let differ = |a: &relume::gpu::differential::ReceiverLight, b: &relume::gpu::differential::ReceiverLight| {
+        (a.blocked - b.blocked).abs().max_element() + (a.added - b.added).abs().max_element() > 0.0
+    };
+    let by_shared = all_rays.iter().zip(&shared).filter(|(a, b)| differ(a, b)).count();
+    eprintln!(
+        "{} receivers: {summed} sum some lamp group as one, {blocked} shadowed, {by_shared} changed by shared rays",
+        receivers.len()
+    );
     assert!(summed > 100 && blocked > 50, "the test must exercise both paths: {summed} summed, {blocked} shadowed");
-    for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
-        let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
-        let (light, rounds) =
-            pass.run(&gpu, &gpu_scene, &receivers, Sums::Fast { grouped: &grouped, content: &content }).unwrap();
-        let mut off = 0;
-        for (r, (got, want)) in receivers.iter().zip(light.iter().zip(&twins)) {
-            let scale = (want.unoccluded + want.added).max_element();
-            let tol = 1e-4 * scale + 1e-6;
-            let worst = [(got.unoccluded, want.unoccluded), (got.blocked, want.blocked), (got.added, want.added)]
-                .iter()
-                .map(|(g, w)| (*g - *w).abs().max_element())
-                .fold(0.0f32, f32::max);
-            if worst > tol {
-                off += 1;
-                assert!(worst <= 0.05 * scale, "{device:?} at {}: {got:?} vs twin {want:?}", r.position);
+    assert!(by_shared > 20, "the test must exercise the shared rays: {by_shared} receivers changed by them");
+    for (share, twins) in [(0.0, &all_rays), (0.02, &shared)] {
+        for device in [DifferentialDevice::Gpu, DifferentialDevice::Cpu] {
+            let mut pass = Differential::on(&gpu, &gpu_scene, device).unwrap();
+            let sums = Sums::Fast { grouped: &grouped, content: &content, ray_share: share };
+            let (light, rounds) = pass.run(&gpu, &gpu_scene, &receivers, sums).unwrap();
+            let mut off = 0;
+            for (r, (got, want)) in receivers.iter().zip(light.iter().zip(twins)) {
+                let scale = (want.unoccluded + want.added).max_element();
+                let tol = 1e-4 * scale + 1e-6;
+                let worst = [(got.unoccluded, want.unoccluded), (got.blocked, want.blocked), (got.added, want.added)]
+                    .iter()
+                    .map(|(g, w)| (*g - *w).abs().max_element())
+                    .fold(0.0f32, f32::max);
+                if worst > tol {
+                    off += 1;
+                    assert!(
+                        worst <= 0.05 * scale,
+                        "{device:?}, share {share}, at {}: {got:?} vs twin {want:?}",
+                        r.position
+                    );
+                }
             }
+            eprintln!("{device:?}, share {share}: {rounds} rounds, {off} receivers off the twin by over 1e-4");
+            assert!(off * 100 <= receivers.len(), "{device:?}, share {share}: {off} receivers off the twin");
         }
-        eprintln!("{device:?}: {rounds} rounds, {off} receivers off the twin by over 1e-4");
-        assert!(off * 100 <= receivers.len(), "{device:?}: {off} receivers off the twin");
     }
 }
 

@@ -5,17 +5,22 @@
 // to its representative member is free. A real group the content may block is summed as one only
 // beyond its `shadow_reach`, blocked as a whole when the ray to its representative is. Every other
 // group has its members summed one by one, a shadow ray each, as the exact pass sums them (none
-// for a real group whose cone misses the content). Twin:
-// `gpu::differential::twin::receiver_light_fast`.
+// for a real group whose cone misses the content), but the members that light the receiver with
+// less than `params.ray_share` of its estimated irradiance (`irradiance_estimate`): these take
+// the visibility of the group's representative member, whose ray is cast as the group is opened.
+// Twin: `gpu::differential::twin::receiver_light_fast`.
 //
 // Resumable in rounds, as `differential.wgsl`: the state between rounds is the group and the
-// member (1-based, 0 at the group's own test) in `progress[2 i]` and `progress[2 i + 1]`.
+// member (1-based, 0 at the group's own test; bit 31 the representative's ray, `SHARED_HIT`) in
+// `progress[2 i]` and `progress[2 i + 1]`.
 
 struct FastParams {
     receiver_count: u32,
     group_count: u32,
     real_groups: u32,
-    _pad0: u32,
+    // Members that light a receiver with less than this share of its estimated irradiance take
+    // their group's shared ray.
+    ray_share: f32,
     // The virtual content's bounding sphere: centre and radius (m).
     content: vec4<f32>,
 }
@@ -39,6 +44,27 @@ struct ValGroup {
 @group(0) @binding(8) var<storage, read> groups: array<ValGroup>;
 
 const HALF_PI: f32 = 1.5707963;
+// Bit of the member word set when the opened group's representative is blocked; the rest is the
+// member index.
+const SHARED_HIT: u32 = 0x80000000u;
+const MEMBER_INDEX: u32 = 0x7fffffffu;
+
+// Twin of `irradiance_estimate`: the sum of the channels of the irradiance of the real groups'
+// aggregates at `r`, no visibility, in the groups' order.
+fn irradiance_estimate(r: Receiver) -> f32 {
+    var sum = 0.0;
+    let n = min(params.real_groups, arrayLength(&groups));
+    for (var k = 0u; k < n; k++) {
+        let group = groups[k];
+        let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);
+        let f = geo.weight * geo.cos_receiver;
+        if f > 0.0 {
+            let e = group.flux * f;
+            sum += e.x + e.y + e.z;
+        }
+    }
+    return sum;
+}
 
 // Twin of `ContentSphere::may_block`: whether a segment from `origin` to a point of the sphere
 // (`centre`, `radius`) can cross the content's bounding sphere.
@@ -79,6 +105,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let origin = r.position + r.normal * RAY_OFFSET;
     let count = min(params.group_count, arrayLength(&groups));
     var steps = 0u;
+    var cutoff = 0.0;
+    if params.ray_share > 0.0 {
+        cutoff = params.ray_share * irradiance_estimate(r);
+        steps = min(params.real_groups, arrayLength(&groups));
+    }
     while g < count && steps < FAST_DIFFERENTIAL_LOOP_BUDGET {
         steps += 1u;
         let group = groups[g];
@@ -125,24 +156,43 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
                 g += 1u;
             } else {
-                m = 1u;
+                // The group is opened: its representative's ray, for the members too faint for
+                // their own.
+                var representative_hit = 0u;
+                if params.ray_share > 0.0 && (!real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET)) {
+                    let t = vals[group.representative];
+                    let ray = occluded(origin, t.position + t.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                    steps += ray.steps;
+                    if !ray.complete {
+                        break;
+                    }
+                    if ray.hit {
+                        representative_hit = SHARED_HIT;
+                    }
+                }
+                m = 1u | representative_hit;
             }
         } else {
-            let val = vals[group.first + m - 1u];
+            let val = vals[group.first + (m & MEMBER_INDEX) - 1u];
             let geo = val_geometry(r.position, r.normal, val.position, val.normal, val.area);
             let f = geo.weight * geo.cos_receiver;
             if f > 0.0 {
                 let e = vec4<f32>(val.flux * f, 0.0);
                 // A real group whose cone misses the content (its members' targets lie within
-                // its radius and a ray offset): no member's ray can be blocked, none is cast.
+                // its radius and a ray offset): no member's ray can be blocked, none is cast. A
+                // member too faint for its own ray takes the representative's.
                 var hit = false;
                 if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
-                    let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
-                    steps += ray.steps;
-                    if !ray.complete {
-                        break;
+                    if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {
+                        hit = (m & SHARED_HIT) != 0u;
+                    } else {
+                        let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                        steps += ray.steps;
+                        if !ray.complete {
+                            break;
+                        }
+                        hit = ray.hit;
                     }
-                    hit = ray.hit;
                 }
                 if real {
                     sums.unoccluded += e;
@@ -154,7 +204,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
             }
             m += 1u;
-            if m > group.count {
+            if (m & MEMBER_INDEX) > group.count {
                 m = 0u;
                 g += 1u;
             }

@@ -99,7 +99,8 @@ pub struct RawFastParams {
     pub group_count: u32,
     /// `groups[.. real_groups]` hold real VALs, the rest re-emitters.
     pub real_groups: u32,
-    pub _pad0: u32,
+    /// [`Sums::Fast`]'s `ray_share`.
+    pub ray_share: f32,
     /// The content's bounding sphere ([`ContentSphere`]): centre and radius.
     pub content: [f32; 4],
 }
@@ -289,8 +290,8 @@ fn cpu_sums(bvh: &TraceBvh, receivers: &[Receiver], sums: Sums<'_>) -> Vec<Recei
             let light = |r| twin::receiver_light_with(r, vals, real_count, blocked);
             receivers.par_iter().map(light).collect()
         }
-        Sums::Fast { grouped, content } => {
-            let light = |r| twin::receiver_light_fast_with(r, grouped, content, blocked);
+        Sums::Fast { grouped, content, ray_share } => {
+            let light = |r| twin::receiver_light_fast_with(r, grouped, content, ray_share, blocked);
             receivers.par_iter().map(light).collect()
         }
     }
@@ -303,8 +304,9 @@ pub enum Sums<'a> {
     /// the virtual content's re-emitters.
     Exact { vals: &'a [Val], real_count: usize },
     /// The VALs in groups ([`twin::receiver_light_fast`]), real VALs and re-emitters, with
-    /// `content` the virtual content's bounding sphere.
-    Fast { grouped: &'a GroupedVals, content: &'a ContentSphere },
+    /// `content` the virtual content's bounding sphere; a group's members that light a receiver
+    /// with less than `ray_share` of its estimated irradiance share one shadow ray.
+    Fast { grouped: &'a GroupedVals, content: &'a ContentSphere, ray_share: f32 },
 }
 
 /// A frame's bind group, for the kernel it was bound to.
@@ -400,7 +402,7 @@ impl GpuPass {
                 gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
                 Bound::Exact(self.kernel.bind(gpu, &self.resources(&self.params)))
             }
-            Sums::Fast { grouped, content } => {
+            Sums::Fast { grouped, content, ray_share } => {
                 if self.fast.is_none() {
                     self.fast = Some(build_kernel(gpu, scene, &FAST_PASS, &fast_body())?);
                 }
@@ -419,7 +421,7 @@ impl GpuPass {
                     receiver_count: receivers.len() as u32,
                     group_count: grouped.groups.len() as u32,
                     real_groups: grouped.real_groups as u32,
-                    _pad0: 0,
+                    ray_share,
                     content: content.centre.extend(content.radius).into(),
                 };
                 gpu.queue.write_buffer(&self.fast_params, 0, bytemuck::bytes_of(&params));

@@ -131,16 +131,37 @@ impl ContentSphere {
 /// can block it); a re-emitter group adds it to `added` when the shadow ray to its
 /// representative member is free. A real group whose cone may meet the content is summed as one
 /// only beyond its `shadow_reach`, and blocked as a whole when the ray to its representative is.
-/// Every other group has its members summed as [`receiver_light`] sums them, a shadow ray each,
-/// but for a real group whose cone misses the content: its members are summed without rays.
-/// `content` is the virtual triangles.
+/// Every other group has its members summed one by one, as [`receiver_light`] sums them, but for
+/// a real group whose cone misses the content (its members are summed without rays) and for the
+/// members that light the receiver with less than `ray_share` of its estimated irradiance
+/// ([`irradiance_estimate`]): these take the visibility of the group's representative member,
+/// one ray for all of them. `content` is the virtual triangles.
 pub fn receiver_light_fast(
     receiver: &Receiver,
     grouped: &GroupedVals,
     sphere: &ContentSphere,
+    ray_share: f32,
     content: &Occluders,
 ) -> ReceiverLight {
-    receiver_light_fast_with(receiver, grouped, sphere, |origin, targets| content.blocked_mask(origin, targets))
+    receiver_light_fast_with(receiver, grouped, sphere, ray_share, |origin, targets| {
+        content.blocked_mask(origin, targets)
+    })
+}
+
+/// The irradiance `receiver` would get from the real groups' aggregates, no visibility (W/m²,
+/// the sum of the channels): the scale of [`receiver_light_fast`]'s `ray_share`. The sum runs
+/// in the groups' order, as `fast.wgsl`'s `irradiance_estimate`.
+pub fn irradiance_estimate(receiver: &Receiver, grouped: &GroupedVals) -> f32 {
+    let mut sum = 0.0;
+    for group in &grouped.groups[..grouped.real_groups] {
+        let a = &group.aggregate;
+        let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
+        let f = g.weight * g.cos_receiver;
+        if f > 0.0 {
+            sum += (a.flux * f).element_sum();
+        }
+    }
+    sum
 }
 
 /// [`receiver_light_fast`] with `blocked` deciding the shadow rays, as for
@@ -149,10 +170,12 @@ pub fn receiver_light_fast_with(
     receiver: &Receiver,
     grouped: &GroupedVals,
     sphere: &ContentSphere,
+    ray_share: f32,
     blocked: impl Fn(Vec3, &[Vec3]) -> u32 + Copy,
 ) -> ReceiverLight {
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
     let one_blocked = |target: &Val| blocked(origin, &[target.position + target.normal * RAY_OFFSET]) & 1 == 1;
+    let cutoff = if ray_share > 0.0 { ray_share * irradiance_estimate(receiver, grouped) } else { 0.0 };
     let mut sums = ReceiverLight::default();
     for (k, group) in grouped.groups.iter().enumerate() {
         let real = k < grouped.real_groups;
@@ -193,14 +216,77 @@ pub fn receiver_light_fast_with(
         // A real group whose members' rays all pass clear of the content (their targets lie
         // within the radius and a ray offset of the aggregate) is summed without rays: the same
         // sums, in the same order, as with them.
-        let clear = real && !sphere.may_block(origin, a.position, group.radius + RAY_OFFSET);
-        let part = match clear {
-            true => receiver_light_with(receiver, members, members.len(), |_, _| 0),
-            false => receiver_light_with(receiver, members, if real { members.len() } else { 0 }, blocked),
+        let part = if real && !sphere.may_block(origin, a.position, group.radius + RAY_OFFSET) {
+            receiver_light_with(receiver, members, members.len(), |_, _| 0)
+        } else {
+            let shared = std::cell::OnceCell::new();
+            let representative = &grouped.vals[group.representative as usize];
+            members_light(
+                receiver,
+                members,
+                real,
+                cutoff,
+                || *shared.get_or_init(|| one_blocked(representative)),
+                blocked,
+            )
         };
         sums.unoccluded += part.unoccluded;
         sums.blocked += part.blocked;
         sums.added += part.added;
+    }
+    sums
+}
+
+/// The sums of one group's `members` (all real or all re-emitters) at `receiver`, each with a
+/// shadow ray decided by `blocked` but those whose irradiance (the sum of its channels) is below
+/// `cutoff`, which take `shared()`'s visibility. Summed in the members' order.
+fn members_light(
+    receiver: &Receiver,
+    members: &[Val],
+    real: bool,
+    cutoff: f32,
+    shared: impl Fn() -> bool,
+    blocked: impl Fn(Vec3, &[Vec3]) -> u32,
+) -> ReceiverLight {
+    let origin = receiver.position + receiver.normal * RAY_OFFSET;
+    let mut sums = ReceiverLight::default();
+    for chunk in members.chunks(SHADOW_BATCH) {
+        // The chunk's members that light the receiver: irradiance and whether a ray decides them.
+        let mut lit = [(Vec3::ZERO, false); SHADOW_BATCH];
+        let mut targets = [Vec3::ZERO; SHADOW_BATCH];
+        let (mut n, mut rays) = (0, 0);
+        for val in chunk {
+            let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
+            let f = g.weight * g.cos_receiver;
+            if f > 0.0 {
+                let e = val.flux * f;
+                let ray = e.element_sum() >= cutoff;
+                if ray {
+                    targets[rays] = val.position + val.normal * RAY_OFFSET;
+                    rays += 1;
+                }
+                lit[n] = (e, ray);
+                n += 1;
+            }
+        }
+        let mask = if rays > 0 { blocked(origin, &targets[..rays]) } else { 0 };
+        let mut ray = 0;
+        for &(e, own) in &lit[..n] {
+            let hit = if own {
+                ray += 1;
+                mask >> (ray - 1) & 1 == 1
+            } else {
+                shared()
+            };
+            if real {
+                sums.unoccluded += e;
+                if hit {
+                    sums.blocked += e;
+                }
+            } else if !hit {
+                sums.added += e;
+            }
+        }
     }
     sums
 }
