@@ -2,7 +2,8 @@
 // `differential.wgsl` over VAL groups (`gpu::differential::groups`). A group beyond its reach is
 // summed as its aggregate: a real one adds it to `unoccluded` without a ray when its cone misses
 // the virtual content's bounding sphere; a re-emitter group adds it to `added` when the shadow ray
-// to its representative member is free. A real group the content may block is summed as one only
+// to its representative member is free, or without a ray when it lights the receiver with less
+// than `params.ray_share` of its estimated irradiance. A real group the content may block is summed as one only
 // beyond its `shadow_reach`, blocked as a whole when the ray to its representative is. Every other
 // group has its members summed one by one, a shadow ray each, as the exact pass sums them (none
 // for a real group whose cone misses the content), but the members that light the receiver with
@@ -123,6 +124,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                     let e = vec4<f32>(group.flux * f, 0.0);
                     if real {
                         sums.unoccluded += e;
+                    } else if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {
+                        // A faint re-emitter group: facing the receiver, counted as seen.
+                        sums.added += e;
                     } else {
                         let t = vals[group.representative];
                         let ray = occluded(origin, t.position + t.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);

@@ -129,13 +129,15 @@ impl ContentSphere {
 /// A group beyond its reach is summed as its aggregate: a real one adds it to `unoccluded`
 /// without a shadow ray when its cone misses `sphere`, the content's bounding sphere (nothing
 /// can block it); a re-emitter group adds it to `added` when the shadow ray to its
-/// representative member is free. A real group whose cone may meet the content is summed as one
+/// representative member is free, or without a ray when it lights the receiver with less than
+/// `ray_share` of its estimated irradiance ([`irradiance_estimate`]; it faces the receiver, and
+/// the content's own surface hides a faint group from it rarely: measured in
+/// docs/measurements/differential.md, "Faint members"). A real group whose cone may meet the content is summed as one
 /// only beyond its `shadow_reach`, and blocked as a whole when the ray to its representative is.
 /// Every other group has its members summed one by one, as [`receiver_light`] sums them, but for
 /// a real group whose cone misses the content (its members are summed without rays) and for the
-/// members that light the receiver with less than `ray_share` of its estimated irradiance
-/// ([`irradiance_estimate`]): these take the visibility of the group's representative member,
-/// one ray for all of them. `content` is the virtual triangles.
+/// members that light the receiver with less than `ray_share` of its estimated irradiance:
+/// these take the visibility of the group's representative member, one ray for all of them. `content` is the virtual triangles.
 pub fn receiver_light_fast(
     receiver: &Receiver,
     grouped: &GroupedVals,
@@ -190,10 +192,9 @@ pub fn receiver_light_fast_with(
             let e = a.flux * f;
             if real {
                 sums.unoccluded += e;
-            } else {
-                if !one_blocked(&grouped.vals[group.representative as usize]) {
-                    sums.added += e;
-                }
+            } else if e.element_sum() < cutoff || !one_blocked(&grouped.vals[group.representative as usize]) {
+                // A faint re-emitter group facing the receiver is counted as seen, without a ray.
+                sums.added += e;
             }
             continue;
         }
