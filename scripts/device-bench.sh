@@ -98,13 +98,17 @@ step() {
 scenes=fixtures/scenes
 # The default job's scene with the differential pass on the CPU's cores (`settings.mr.device`),
 # beside the scene's own files so that its relative paths hold; removed on exit.
+# And with the exact differential pass on the GPU: the fast pass waits on the host between its
+# adaptive levels, and a GPU runs the exact pass in one dispatch; which is faster there?
 mr_cpu="$scenes/.device-bench-mr-cpu.json"
-trap 'rm -f "$mr_cpu"' EXIT
-python3 - "$scenes/mr_bunny_differential.json" "$mr_cpu" <<'PY'
+mr_exact="$scenes/.device-bench-mr-exact.json"
+trap 'rm -f "$mr_cpu" "$mr_exact"' EXIT
+python3 - "$scenes/mr_bunny_differential.json" "$mr_cpu" "$mr_exact" <<'PY'
 import json, sys
-scene = json.load(open(sys.argv[1]))
-scene.setdefault("settings", {}).setdefault("mr", {})["device"] = "cpu"
-json.dump(scene, open(sys.argv[2], "w"), indent=2)
+for out, key, value in [(sys.argv[2], "device", "cpu"), (sys.argv[3], "differential_method", "exact")]:
+    scene = json.load(open(sys.argv[1]))
+    scene.setdefault("settings", {}).setdefault("mr", {})[key] = value
+    json.dump(scene, open(out, "w"), indent=2)
 PY
 if [ "$smoke" = 1 ]; then
     # Tiny sizes: checks every step's machinery on lavapipe in well under a minute.
@@ -114,6 +118,7 @@ if [ "$smoke" = 1 ]; then
     step levels_1080 120 "$bin" bench "$scenes/cornell_bunny_small.json" --levels --width 24 --height 16 --out "$work/levels_1080"
     step mr_640 120 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$scenes/mr_bunny_differential.json" --frames 2 --width 64 --height 48 --out "$work/mr_640"
     step mr_640_cpu 120 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$mr_cpu" --frames 2 --width 64 --height 48 --out "$work/mr_640_cpu"
+    step mr_640_exact 120 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$mr_exact" --frames 2 --width 64 --height 48 --out "$work/mr_640_exact"
     step sweep 120 "$bin" bench "$scenes/cornell_bunny_small.json" --quick --no-plots --no-temporal --out "$work/sweep"
     step sparse_vs_brute 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 32 --height 18
     step exact 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 16 --height 16 --reference exact
@@ -136,6 +141,8 @@ else
     # The same replay at 640x480 with the differential pass on the device's CPU cores instead
     # (rayon over them; the GPU's fast pass waits on the host between its adaptive levels).
     step mr_640_cpu 60 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$mr_cpu" --width 640 --height 480 --out "$work/mr_640_cpu"
+    # And the exact pass on the GPU, one dispatch where the fast one takes four levels.
+    step mr_640_exact 60 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$mr_exact" --width 640 --height 480 --out "$work/mr_640_exact"
     step sparse_vs_brute 45 "$bin" compare "$scenes/cornell_bunny.json" --width 1920 --height 1080
     # Sponza at 512 wide: the sparse frame against the brute force without visibility.
     step sponza_512 45 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288

@@ -26,6 +26,7 @@ def step_output(work: Path, name: str):
         "mr_640": work / "mr_640" / "summary.json",
         "mr_1280": work / "mr_1280" / "summary.json",
         "mr_640_cpu": work / "mr_640_cpu" / "summary.json",
+        "mr_640_exact": work / "mr_640_exact" / "summary.json",
         "levels_1080": work / "levels_1080" / "levels.json",
         "levels_sponza": work / "levels_sponza" / "levels.json",
     }.get(name)
@@ -140,7 +141,13 @@ def main() -> int:
             + "."
         ]
 
-    for name, where in (("mr_640", ""), ("mr_1280", ""), ("mr_640_cpu", ", the differential pass on the CPU")):
+    replays = (
+        ("mr_640", ""),
+        ("mr_1280", ""),
+        ("mr_640_cpu", ", the differential pass on the CPU"),
+        ("mr_640_exact", ", the exact differential pass"),
+    )
+    for name, where in replays:
         replay = by_name.get(name)
         if isinstance(replay, dict) and replay.get("frame_ms"):
             frames = replay["frame_ms"]
