@@ -44,7 +44,6 @@ struct ValGroup {
 // `shader/rounds.wgsl`.
 @group(0) @binding(8) var<storage, read> groups: array<ValGroup>;
 
-const HALF_PI: f32 = 1.5707963;
 // Bit of the member word set when the opened group's representative is blocked; the rest is the
 // member index.
 const SHARED_HIT: u32 = 0x80000000u;
@@ -81,8 +80,11 @@ fn may_be_blocked(origin: vec3<f32>, centre: vec3<f32>, radius: f32) -> bool {
     if dc - rc >= dg + radius {
         return false;
     }
-    let spread = asin(rc / dc) + asin(min(radius / dg, 1.0));
-    return spread >= HALF_PI || dot(to_content, to_group) > dc * dg * cos(spread);
+    // cos of the sum of the cones' half-angles, without trigonometric functions.
+    let sa = rc / dc;
+    let sb = min(radius / dg, 1.0);
+    let cos_spread = sqrt(1.0 - sa * sa) * sqrt(1.0 - sb * sb) - sa * sb;
+    return cos_spread <= 0.0 || dot(to_content, to_group) > dc * dg * cos_spread;
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y, WORKGROUP_Z)

@@ -120,8 +120,12 @@ impl ContentSphere {
         if dc - self.radius >= dg + radius {
             return false;
         }
-        let spread = (self.radius / dc).asin() + (radius / dg).min(1.0).asin();
-        spread >= std::f32::consts::FRAC_PI_2 || to_content.dot(to_group) > dc * dg * spread.cos()
+        // The cones' half-angles a and b (sin a = r / d); the segment can cross when the angle
+        // between their axes is under a + b: cos(a + b) = cos a cos b - sin a sin b, no
+        // trigonometric function (a + b of 90° or more: always).
+        let (sa, sb) = (self.radius / dc, (radius / dg).min(1.0));
+        let cos_spread = (1.0 - sa * sa).sqrt() * (1.0 - sb * sb).sqrt() - sa * sb;
+        cos_spread <= 0.0 || to_content.dot(to_group) > dc * dg * cos_spread
     }
 }
 
