@@ -34,6 +34,19 @@ impl ReceiverLight {
     pub fn change(&self) -> Vec3 {
         self.added - self.blocked
     }
+
+    /// Add one VAL's irradiance `e` (W/m²): a real VAL's to `unoccluded`, and to `blocked` when
+    /// its shadow ray is; a re-emitter's to `added` when its ray is free.
+    fn add(&mut self, e: Vec3, real: bool, blocked: bool) {
+        if real {
+            self.unoccluded += e;
+            if blocked {
+                self.blocked += e;
+            }
+        } else if !blocked {
+            self.added += e;
+        }
+    }
 }
 
 /// The sums of `differential.wgsl` at `receiver`: `vals[.. real_count]` are real VALs, the
@@ -78,15 +91,7 @@ pub fn receiver_light_with(
         }
         let mask = blocked(origin, &targets[..n]);
         for (k, &(e, j)) in lit[..n].iter().enumerate() {
-            let blocked = mask >> k & 1 == 1;
-            if j < real_count {
-                sums.unoccluded += e;
-                if blocked {
-                    sums.blocked += e;
-                }
-            } else if !blocked {
-                sums.added += e;
-            }
+            sums.add(e, j < real_count, mask >> k & 1 == 1);
         }
     }
     sums
@@ -283,14 +288,7 @@ fn members_light(
             } else {
                 shared()
             };
-            if real {
-                sums.unoccluded += e;
-                if hit {
-                    sums.blocked += e;
-                }
-            } else if !hit {
-                sums.added += e;
-            }
+            sums.add(e, real, hit);
         }
     }
     sums
