@@ -117,7 +117,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         steps += 1u;
         let group = groups[g];
         let real = g < params.real_groups;
-        if m == 0u {
+        if m == 0u && dot(r.normal, group.position - r.position) < -(group.radius + RAY_OFFSET) {
+            // Wholly below the receiver's tangent plane: no member lights it (twin `below`).
+            g += 1u;
+        } else if m == 0u {
             let far = length(group.position - r.position) > group.reach;
             if far && (!real || !may_be_blocked(origin, group.position, group.radius)) {
                 let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);

@@ -191,6 +191,9 @@ pub fn receiver_light_fast_with(
     for (k, group) in grouped.groups.iter().enumerate() {
         let real = k < grouped.real_groups;
         let a = &group.aggregate;
+        if below(receiver, a.position, group.radius) {
+            continue;
+        }
         let far = (a.position - receiver.position).length() > group.reach;
         if far && (!real || !sphere.may_block(origin, a.position, group.radius)) {
             let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
@@ -245,6 +248,13 @@ pub fn receiver_light_fast_with(
         sums.added += part.added;
     }
     sums
+}
+
+/// Whether the sphere (`centre`, `radius`) lies wholly below `receiver`'s tangent plane, by a
+/// ray offset: every VAL in it has a receiver cosine of 0, so a group in it adds nothing and is
+/// passed without a look at its members (`fast.wgsl`'s `below`).
+fn below(receiver: &Receiver, centre: Vec3, radius: f32) -> bool {
+    receiver.normal.dot(centre - receiver.position) < -(radius + RAY_OFFSET)
 }
 
 /// The sums of one group's `members` (all real or all re-emitters) at `receiver`, each with a
