@@ -3,12 +3,13 @@
 // summed as its aggregate: a real one adds it to `unoccluded` without a ray when its cone misses
 // the virtual content's bounding sphere; a re-emitter group adds it to `added` when the shadow ray
 // to its representative member is free, or without a ray when it lights the receiver with less
-// than `params.ray_share` of its estimated irradiance. A real group the content may block is summed as one only
-// beyond its `shadow_reach`, blocked as a whole when the ray to its representative is. Every other
-// group has its members summed one by one, a shadow ray each, as the exact pass sums them (none
-// for a real group whose cone misses the content), but the members that light the receiver with
-// less than `params.ray_share` of its estimated irradiance (`irradiance_estimate`): these take
-// the visibility of the group's representative member, whose ray is cast as the group is opened.
+// than `params.ray_share` of its estimated irradiance. A real group the content may block is
+// summed as one only beyond its `shadow_reach`, blocked as a whole when the ray to its
+// representative is. Every other group has its members summed one by one, a shadow ray each, as
+// the exact pass sums them (none for a real group whose cone misses the content), but the
+// members that light the receiver with less than `params.ray_share` of its estimated irradiance
+// (`irradiance_estimate`): these take the visibility of the group's representative member,
+// whose ray is cast as the group is opened.
 // Twin: `gpu::differential::twin::receiver_light_fast`.
 //
 // Resumable in rounds, as `differential.wgsl`: the state between rounds is the group and the

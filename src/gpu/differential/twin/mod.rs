@@ -69,32 +69,7 @@ pub fn receiver_light_with(
     real_count: usize,
     blocked: impl Fn(Vec3, &[Vec3]) -> u32,
 ) -> ReceiverLight {
-    let origin = receiver.position + receiver.normal * RAY_OFFSET;
-    let mut sums = ReceiverLight::default();
-    for (c, chunk) in vals.chunks(SHADOW_BATCH).enumerate() {
-        // The VALs of the chunk that light the receiver: their ray targets, and their irradiance
-        // and index.
-        let mut targets = [Vec3::ZERO; SHADOW_BATCH];
-        let mut lit = [(Vec3::ZERO, 0usize); SHADOW_BATCH];
-        let mut n = 0;
-        for (i, val) in chunk.iter().enumerate() {
-            let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
-            let f = g.weight * g.cos_receiver;
-            if f > 0.0 {
-                targets[n] = val.position + val.normal * RAY_OFFSET;
-                lit[n] = (val.flux * f, c * SHADOW_BATCH + i);
-                n += 1;
-            }
-        }
-        if n == 0 {
-            continue;
-        }
-        let mask = blocked(origin, &targets[..n]);
-        for (k, &(e, j)) in lit[..n].iter().enumerate() {
-            sums.add(e, j < real_count, mask >> k & 1 == 1);
-        }
-    }
-    sums
+    sums_with(receiver, vals, real_count, 0.0, || false, blocked)
 }
 
 /// The virtual content's bounding sphere for the fast pass's cull: centre and radius (m), padded
@@ -141,12 +116,14 @@ impl ContentSphere {
 /// representative member is free, or without a ray when it lights the receiver with less than
 /// `ray_share` of its estimated irradiance ([`irradiance_estimate`]; it faces the receiver, and
 /// the content's own surface hides a faint group from it rarely: measured in
-/// docs/measurements/differential.md, "Faint members"). A real group whose cone may meet the content is summed as one
-/// only beyond its `shadow_reach`, and blocked as a whole when the ray to its representative is.
+/// docs/measurements/differential.md, "Faint members"). A real group whose cone may meet the
+/// content is summed as one only beyond its `shadow_reach`, and blocked as a whole when the ray
+/// to its representative is.
 /// Every other group has its members summed one by one, as [`receiver_light`] sums them, but for
 /// a real group whose cone misses the content (its members are summed without rays) and for the
 /// members that light the receiver with less than `ray_share` of its estimated irradiance:
-/// these take the visibility of the group's representative member, one ray for all of them. `content` is the virtual triangles.
+/// these take the visibility of the group's representative member, one ray for all of them.
+/// `content` is the virtual triangles.
 pub fn receiver_light_fast(
     receiver: &Receiver,
     grouped: &GroupedVals,
@@ -234,10 +211,11 @@ pub fn receiver_light_fast_with(
         } else {
             let shared = std::cell::OnceCell::new();
             let representative = &grouped.vals[group.representative as usize];
-            members_light(
+            let real_count = if real { members.len() } else { 0 };
+            sums_with(
                 receiver,
                 members,
-                real,
+                real_count,
                 cutoff,
                 || *shared.get_or_init(|| one_blocked(representative)),
                 blocked,
@@ -257,48 +235,51 @@ fn below(receiver: &Receiver, centre: Vec3, radius: f32) -> bool {
     receiver.normal.dot(centre - receiver.position) < -(radius + RAY_OFFSET)
 }
 
-/// The sums of one group's `members` (all real or all re-emitters) at `receiver`, each with a
-/// shadow ray decided by `blocked` but those whose irradiance (the sum of its channels) is below
-/// `cutoff`, which take `shared()`'s visibility. Summed in the members' order.
-fn members_light(
+/// The sums of `vals` at `receiver` (`vals[.. real_count]` real, the rest re-emitters), the
+/// shadow rays of the VALs that light it decided by `blocked` at most [`SHADOW_BATCH`] at a
+/// time, but for those whose irradiance (the sum of its channels) is under a positive `cutoff`:
+/// these take `shared()`'s visibility. Summed in the VALs' order, so the sums are the same
+/// however the rays are decided.
+fn sums_with(
     receiver: &Receiver,
-    members: &[Val],
-    real: bool,
+    vals: &[Val],
+    real_count: usize,
     cutoff: f32,
     shared: impl Fn() -> bool,
     blocked: impl Fn(Vec3, &[Vec3]) -> u32,
 ) -> ReceiverLight {
     let origin = receiver.position + receiver.normal * RAY_OFFSET;
     let mut sums = ReceiverLight::default();
-    for chunk in members.chunks(SHADOW_BATCH) {
-        // The chunk's members that light the receiver: irradiance and whether a ray decides them.
-        let mut lit = [(Vec3::ZERO, false); SHADOW_BATCH];
+    for (c, chunk) in vals.chunks(SHADOW_BATCH).enumerate() {
+        // The chunk's VALs that light the receiver: irradiance, index and whether a ray of its
+        // own decides it; the rays' targets.
+        let mut lit = [(Vec3::ZERO, 0usize, false); SHADOW_BATCH];
         let mut targets = [Vec3::ZERO; SHADOW_BATCH];
         let (mut n, mut rays) = (0, 0);
-        for val in chunk {
+        for (i, val) in chunk.iter().enumerate() {
             let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
             let f = g.weight * g.cos_receiver;
             if f > 0.0 {
                 let e = val.flux * f;
-                let ray = e.element_sum() >= cutoff;
+                let ray = !(cutoff > 0.0 && e.element_sum() < cutoff);
                 if ray {
                     targets[rays] = val.position + val.normal * RAY_OFFSET;
                     rays += 1;
                 }
-                lit[n] = (e, ray);
+                lit[n] = (e, c * SHADOW_BATCH + i, ray);
                 n += 1;
             }
         }
         let mask = if rays > 0 { blocked(origin, &targets[..rays]) } else { 0 };
         let mut ray = 0;
-        for &(e, own) in &lit[..n] {
+        for &(e, j, own) in &lit[..n] {
             let hit = if own {
                 ray += 1;
                 mask >> (ray - 1) & 1 == 1
             } else {
                 shared()
             };
-            sums.add(e, real, hit);
+            sums.add(e, j < real_count, hit);
         }
     }
     sums
