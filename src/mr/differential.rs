@@ -302,11 +302,13 @@ pub fn net_change(l: &ReceiverLight) -> f32 {
 
 /// A member of a VAL group that the fast pass opens (a group near the receiver) and that lights
 /// the receiver with less than this share of its estimated irradiance gets no shadow ray of its
-/// own: it takes the visibility of its group's representative member; a far re-emitter group
-/// that faint is counted as seen (`gpu::differential::twin::receiver_light_fast`). On the TUM
-/// replay 70 % of the rays to opened groups' members carried 1 % of their irradiance; at this
-/// share the fast pass casts 3.3x fewer rays and agrees with the exact pass as closely as with
-/// every ray cast (docs/measurements/differential.md, "Faint members").
+/// own: a real group's member takes the visibility of its group's representative member; a
+/// re-emitter that faint, and a far re-emitter group that faint, is counted as seen
+/// (`gpu::differential::twin::receiver_light_fast`). On the TUM replay 70 % of the rays to
+/// opened groups' members carried 1 % of their irradiance; at this share the fast pass casts
+/// 3.3x fewer rays and agrees with the exact pass as closely as with every ray cast; counting
+/// the faint re-emitters as seen casts a fifth fewer again, for a contact shadow about 2 %
+/// lighter (docs/measurements/differential.md, "Faint members").
 pub const RAY_SHARE: f32 = 3e-4;
 
 /// Coarsest spacing (in receiver cells) of the fast pass's adaptive receivers: every

@@ -8,8 +8,8 @@
 // representative is. Every other group has its members summed one by one, a shadow ray each, as
 // the exact pass sums them (none for a real group whose cone misses the content), but the
 // members that light the receiver with less than `params.ray_share` of its estimated irradiance
-// (`irradiance_estimate`): these take the visibility of the group's representative member,
-// whose ray is cast as the group is opened.
+// (`irradiance_estimate`): a real group's take the visibility of the group's representative
+// member, whose ray is cast as the group is opened; a re-emitter group's are counted as seen.
 // Twin: `gpu::differential::twin::receiver_light_fast`.
 //
 // Resumable in rounds, as `differential.wgsl`: the state between rounds is the group and the
@@ -166,10 +166,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
                 g += 1u;
             } else {
-                // The group is opened: its representative's ray, for the members too faint for
-                // their own.
+                // The group is opened: a real group's representative's ray, for the members too
+                // faint for their own (a re-emitter group's faint members are counted as seen).
                 var representative_hit = 0u;
-                if params.ray_share > 0.0 && (!real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET)) {
+                if params.ray_share > 0.0 && real && may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
                     let t = vals[group.representative];
                     let ray = occluded(origin, t.position + t.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
                     steps += ray.steps;
@@ -190,7 +190,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 let e = vec4<f32>(val.flux * f, 0.0);
                 // A real group whose cone misses the content (its members' targets lie within
                 // its radius and a ray offset): no member's ray can be blocked, none is cast. A
-                // member too faint for its own ray takes the representative's.
+                // member too faint for its own ray takes the representative's (never set for a
+                // re-emitter group: seen).
                 var hit = false;
                 if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
                     if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {

@@ -122,7 +122,8 @@ impl ContentSphere {
 /// Every other group has its members summed one by one, as [`receiver_light`] sums them, but for
 /// a real group whose cone misses the content (its members are summed without rays) and for the
 /// members that light the receiver with less than `ray_share` of its estimated irradiance:
-/// these take the visibility of the group's representative member, one ray for all of them.
+/// a real group's take the visibility of the group's representative member, one ray for all of
+/// them; a re-emitter group's are counted as seen, as a faint far re-emitter group is.
 /// `content` is the virtual triangles.
 pub fn receiver_light_fast(
     receiver: &Receiver,
@@ -217,7 +218,7 @@ pub fn receiver_light_fast_with(
                 members,
                 real_count,
                 cutoff,
-                || *shared.get_or_init(|| one_blocked(representative)),
+                || real && *shared.get_or_init(|| one_blocked(representative)),
                 blocked,
             )
         };
