@@ -563,3 +563,41 @@ fn mr_differential_fast_against_exact_on_synthetic() {
         relume::rgbd::recording::Recording::open(&dir, &relume::rgbd::recording::RecordingOptions::default()).unwrap();
     fast_against_exact("synthetic", 0.10, &scene_of(&bunny), None, &recording, &[0, 1, 2]);
 }
+
+/// On the CPU backend the pass runs beside the render from a placement's second frame on, with
+/// the re-emitters as the last frame's sparse points lit them: frame 1 sums frame 0's
+/// re-emitters (whose light differs from frame 1's own), and its sums are those the pass makes
+/// of the same VALs after the render.
+#[test]
+fn beside_the_render_the_differential_pass_takes_the_last_frames_reemitters() {
+    use relume::mr::differential::{FastSettings, receiver_light};
+    use relume::mr::{MrOptions, MrRenderer};
+    let gpu = gpu();
+    let mut scene = super::load_scene("mr_bunny_differential");
+    scene.settings.mr.device = DifferentialDevice::Cpu;
+    let recording = relume::rgbd::recording::Recording::open(
+        &super::fixture("recordings/tum_fr1_xyz"),
+        &relume::rgbd::recording::RecordingOptions::default(),
+    )
+    .unwrap();
+    let k = recording.intrinsics();
+    let options = MrOptions { width: k.width / 4, height: k.height / 4, exposure: 1.0, accumulate: None };
+    let mut mr = MrRenderer::new(&gpu, &scene, options).unwrap();
+    let frames: Vec<_> = (0..2).map(|i| mr.render_frame(&gpu, &recording.frame(i).unwrap()).unwrap()).collect();
+    let d: Vec<_> = frames.iter().map(|f| f.differential.as_ref().expect("the pass ran")).collect();
+    let emitters = |d: &relume::mr::DifferentialFrame| d.vals[d.real_count..].to_vec();
+    assert!(!emitters(d[0]).is_empty());
+    // Frame 0 ran after its render, with its own re-emitters; frame 1 beside, with frame 0's.
+    assert_eq!(emitters(d[1]), emitters(d[0]), "frame 1 sums the last frame's re-emitters");
+    assert_ne!(frames[1].sparse_irradiance, frames[0].sparse_irradiance, "the frames' own light differs");
+    assert_ne!(d[1].vals[..d[1].real_count], d[0].vals[..d[0].real_count], "the real VALs are the frame's own");
+    // The same sums as the pass after the render makes of those VALs.
+    let gpu_scene = GpuScene::new(&gpu, FlatScene::from_scene(&scene)).unwrap();
+    let mut pass = Differential::on(&gpu, &gpu_scene, DifferentialDevice::Cpu).unwrap();
+    let method = (d[1].method, &FastSettings::default());
+    let (light, counts) =
+        receiver_light(&mut pass, &gpu, &gpu_scene, &d[1].grid, &d[1].vals, d[1].real_count, d[1].bounds, method)
+            .unwrap();
+    assert_eq!(counts, d[1].counts);
+    assert_eq!(light, d[1].light);
+}
