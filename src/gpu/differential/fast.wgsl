@@ -184,34 +184,39 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         } else {
             let val = vals[group.first + (m & MEMBER_INDEX) - 1u];
-            let geo = val_geometry(r.position, r.normal, val.position, val.normal, val.area);
-            let f = geo.weight * geo.cos_receiver;
-            if f > 0.0 {
-                let e = vec4<f32>(val.flux * f, 0.0);
-                // A real group whose cone misses the content (its members' targets lie within
-                // its radius and a ray offset): no member's ray can be blocked, none is cast. A
-                // member too faint for its own ray takes the representative's (never set for a
-                // re-emitter group: seen).
-                var hit = false;
-                if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
-                    if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {
-                        hit = (m & SHARED_HIT) != 0u;
-                    } else {
-                        let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
-                        steps += ray.steps;
-                        if !ray.complete {
-                            break;
+            // Below the receiver's tangent plane, or facing away: no light, known before the
+            // distance's square root and the form factor's division (twin `sums_with`).
+            let v = val.position - r.position;
+            if dot(r.normal, v) > 0.0 && dot(val.normal, v) < 0.0 {
+                let geo = val_geometry(r.position, r.normal, val.position, val.normal, val.area);
+                let f = geo.weight * geo.cos_receiver;
+                if f > 0.0 {
+                    let e = vec4<f32>(val.flux * f, 0.0);
+                    // A real group whose cone misses the content (its members' targets lie
+                    // within its radius and a ray offset): no member's ray can be blocked, none
+                    // is cast. A member too faint for its own ray takes the representative's
+                    // (never set for a re-emitter group: seen).
+                    var hit = false;
+                    if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
+                        if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {
+                            hit = (m & SHARED_HIT) != 0u;
+                        } else {
+                            let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                            steps += ray.steps;
+                            if !ray.complete {
+                                break;
+                            }
+                            hit = ray.hit;
                         }
-                        hit = ray.hit;
                     }
-                }
-                if real {
-                    sums.unoccluded += e;
-                    if hit {
-                        sums.blocked += e;
+                    if real {
+                        sums.unoccluded += e;
+                        if hit {
+                            sums.blocked += e;
+                        }
+                    } else if !hit {
+                        sums.added += e;
                     }
-                } else if !hit {
-                    sums.added += e;
                 }
             }
             m += 1u;

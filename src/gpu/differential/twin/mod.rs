@@ -258,6 +258,13 @@ fn sums_with(
         let mut targets = [Vec3::ZERO; SHADOW_BATCH];
         let (mut n, mut rays) = (0, 0);
         for (i, val) in chunk.iter().enumerate() {
+            // Below the receiver's tangent plane, or facing away: no light, known without the
+            // distance's square root and the form factor's division (most of a group's members
+            // at a receiver that opens it).
+            let v = val.position - receiver.position;
+            if receiver.normal.dot(v) <= 0.0 || val.normal.dot(v) >= 0.0 {
+                continue;
+            }
             let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
             let f = g.weight * g.cos_receiver;
             if f > 0.0 {
