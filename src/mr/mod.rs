@@ -12,14 +12,13 @@
 //! [`MrPipeline::render_frame`] lights the frame (the real VALs, the environment's, the
 //! differential pass's receivers), renders the virtual content from the frame's camera, relights
 //! the real surfaces near it with the differential pass and composites. On the differential
-//! pass's CPU backend (CPU adapters), when the last frame of the placement is at most
-//! [`BESIDE_MAX_GAP_S`] older, the pass runs beside the render on a thread of its own: the
-//! render's GPU work waits on the device much of its time, and the pass fills the cores
-//! meanwhile. It then cannot wait for this frame's gather, so its re-emitters are the sparse
-//! points as the last frame lit them: the light the virtual content reflects onto the room lags
-//! one frame (its shadow does not: the real VALs are this frame's). On the GPU backend, which
-//! shares the device with the render, on a placement's first frame and after a gap, the pass
-//! runs after the render with this frame's re-emitters. Measured in
+//! pass's CPU backend (CPU adapters), from the second frame of a placement on, the pass runs
+//! beside the render on a thread of its own: the render's GPU work waits on the device much of
+//! its time, and the pass fills the cores meanwhile. It then cannot wait for this frame's gather,
+//! so its re-emitters are the sparse points as the last frame lit them: the light the virtual
+//! content reflects onto the room lags one frame (its shadow does not: the real VALs are this
+//! frame's). On the GPU backend, which shares the device with the render, and on a placement's
+//! first frame, the pass runs after the render with this frame's re-emitters. Measured in
 //! docs/measurements/differential.md, "Beside the render".
 
 pub mod differential;
@@ -267,31 +266,20 @@ struct DifferentialState {
     pass: Differential,
     emitters: Vec<Emitter>,
     bounds: (Vec3, Vec3),
-    /// The last frame of this placement that ran the sparse method: its timestamp (s) and the
-    /// diffuse irradiance its sparse points gathered (one per emitter).
-    last_irradiance: Option<(f64, Vec<Vec3>)>,
+    /// The diffuse irradiance the sparse points gathered in the last frame of this placement
+    /// (one per emitter), when it ran the sparse method.
+    last_irradiance: Option<Vec<Vec3>>,
 }
 
-/// The differential pass runs beside the render (module docs, "The frame") only when the last
-/// frame is at most this much older than the frame (s, by the frames' timestamps): a few camera
-/// frames at 30 Hz, over which the re-emitters' light changes little. Frames further apart, out
-/// of order or with no timestamps are relit after their render.
-pub const BESIDE_MAX_GAP_S: f64 = 0.25;
-
 impl DifferentialState {
-    /// What the pass sums when it runs beside the render of the frame at `timestamp`: the real
-    /// VALs `vals` and the re-emitters lit by the last frame's sparse points. `None` where it
-    /// cannot: on the GPU backend (which shares the device with the render), or with no last
-    /// frame within [`BESIDE_MAX_GAP_S`] before it.
-    fn beside(&self, vals: &[Val], timestamp: f64) -> Option<Vec<Val>> {
+    /// What the pass sums when it runs beside the frame's GPU work: the real VALs `vals` and
+    /// the re-emitters lit by the last frame's sparse points. `None` where it cannot: on the
+    /// GPU backend (which shares the device with the frame), or with no last frame.
+    fn beside(&self, vals: &[Val]) -> Option<Vec<Val>> {
         if self.pass.device() != crate::gpu::differential::DifferentialDevice::Cpu {
             return None;
         }
-        let (at, last) = self.last_irradiance.as_ref()?;
-        let gap = timestamp - at;
-        if !(gap > 0.0 && gap <= BESIDE_MAX_GAP_S) || last.len() != self.emitters.len() {
-            return None;
-        }
+        let last = self.last_irradiance.as_ref().filter(|l| l.len() == self.emitters.len())?;
         let mut all = vals.to_vec();
         all.extend(differential::emitter_vals(&self.emitters, last));
         Some(all)
@@ -479,9 +467,7 @@ impl MrPipeline {
         // On the CPU backend, with the re-emitters of the last frame's sparse points, the
         // differential pass runs beside this frame's render (module docs, "The frame").
         let beside: Option<Vec<Val>> = match (&state, &lighting.real_vals) {
-            (Some(d), Some(vals)) if settings.method == Method::Sparse && lighting.grid.is_some() => {
-                d.beside(vals, frame.timestamp)
-            }
+            (Some(d), Some(vals)) if settings.method == Method::Sparse && lighting.grid.is_some() => d.beside(vals),
             _ => None,
         };
         let (rendered, early) = std::thread::scope(|scope| {
@@ -541,8 +527,7 @@ impl MrPipeline {
                         (all, summed, 0.0)
                     }
                 };
-                d.last_irradiance =
-                    (settings.method == Method::Sparse).then(|| (frame.timestamp, sparse_irradiance.clone()));
+                d.last_irradiance = (settings.method == Method::Sparse).then(|| sparse_irradiance.clone());
                 tracing::debug!(?method, ?counts, "differential receivers");
                 let visible = visible_receivers(&grid, frame, &virtual_depth, w, h);
                 log_differential(&light, &visible);

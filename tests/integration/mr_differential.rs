@@ -564,10 +564,10 @@ fn mr_differential_fast_against_exact_on_synthetic() {
     fast_against_exact("synthetic", 0.10, &scene_of(&bunny), None, &recording, &[0, 1, 2]);
 }
 
-/// On the CPU backend the pass runs beside the render when the last frame is recent, with the
-/// re-emitters as the last frame's sparse points lit them: frame 1 sums frame 0's re-emitters
-/// (whose light differs from frame 1's own), and its sums are those the pass makes of the same
-/// VALs after the render. A frame after a gap (frame 20, 0.6 s later) sums its own.
+/// On the CPU backend the pass runs beside the render from a placement's second frame on, with
+/// the re-emitters as the last frame's sparse points lit them: frame 1 sums frame 0's
+/// re-emitters (whose light differs from frame 1's own), and its sums are those the pass makes
+/// of the same VALs after the render.
 #[test]
 fn beside_the_render_the_differential_pass_takes_the_last_frames_reemitters() {
     use relume::mr::differential::{FastSettings, receiver_light};
@@ -583,10 +583,7 @@ fn beside_the_render_the_differential_pass_takes_the_last_frames_reemitters() {
     let k = recording.intrinsics();
     let options = MrOptions { width: k.width / 4, height: k.height / 4, exposure: 1.0, accumulate: None };
     let mut mr = MrRenderer::new(&gpu, &scene, options).unwrap();
-    let frames: Vec<_> =
-        [0, 1, 20].iter().map(|&i| mr.render_frame(&gpu, &recording.frame(i).unwrap()).unwrap()).collect();
-    let gap = recording.frame(20).unwrap().timestamp - recording.frame(1).unwrap().timestamp;
-    assert!(gap > relume::mr::BESIDE_MAX_GAP_S, "{gap} s");
+    let frames: Vec<_> = (0..2).map(|i| mr.render_frame(&gpu, &recording.frame(i).unwrap()).unwrap()).collect();
     let d: Vec<_> = frames.iter().map(|f| f.differential.as_ref().expect("the pass ran")).collect();
     let emitters = |d: &relume::mr::DifferentialFrame| d.vals[d.real_count..].to_vec();
     assert!(!emitters(d[0]).is_empty());
@@ -603,22 +600,4 @@ fn beside_the_render_the_differential_pass_takes_the_last_frames_reemitters() {
             .unwrap();
     assert_eq!(counts, d[1].counts);
     assert_eq!(light, d[1].light);
-    // After the gap: each re-emitter's flux over its sparse point's irradiance (its albedo times
-    // its area) as in frame 0, which summed its own.
-    let (mut own, mut compared) = (true, 0);
-    for ((e2, e0), (i2, i0)) in emitters(d[2])
-        .iter()
-        .zip(emitters(d[0]))
-        .zip(frames[2].sparse_irradiance.iter().zip(&frames[0].sparse_irradiance))
-    {
-        for c in 0..3 {
-            if i0[c] > 1e-3 && i2[c] > 1e-3 {
-                let (a, b) = (e2.flux[c] / i2[c], e0.flux[c] / i0[c]);
-                own &= (a - b).abs() <= 1e-5 * b.abs().max(1e-12);
-                compared += 1;
-            }
-        }
-    }
-    assert!(compared > 100 && own, "frame 20 sums its own re-emitters ({compared} compared)");
-    assert_ne!(emitters(d[2]), emitters(d[1]));
 }
