@@ -200,26 +200,11 @@ pub fn receiver_light(
     vals: &[Val],
     real_count: usize,
     bounds: (Vec3, Vec3),
-    method: (DifferentialMethod, &FastSettings),
-) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), GpuError> {
-    receiver_light_by(grid, vals, real_count, bounds, method, |receivers, sums| {
-        pass.run(gpu, scene, receivers, sums).map(|l| l.0)
-    })
-}
-
-/// [`receiver_light`] with `run` summing `sums` at the receivers it is given (on the CPU
-/// backend, `Differential::run_on_cpu`, with no device to hold).
-pub fn receiver_light_by<E>(
-    grid: &ReceiverGrid,
-    vals: &[Val],
-    real_count: usize,
-    bounds: (Vec3, Vec3),
     (method, fast): (DifferentialMethod, &FastSettings),
-    mut run: impl FnMut(&[Receiver], Sums<'_>) -> Result<Vec<ReceiverLight>, E>,
-) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), E> {
+) -> Result<(Vec<ReceiverLight>, AdaptiveCounts), GpuError> {
     match method {
         DifferentialMethod::Exact => {
-            let light = run(&grid.receivers, Sums::Exact { vals, real_count })?;
+            let (light, _) = pass.run(gpu, scene, &grid.receivers, Sums::Exact { vals, real_count })?;
             let counts = AdaptiveCounts { computed: light.len(), ..Default::default() };
             Ok((light, counts))
         }
@@ -227,7 +212,7 @@ pub fn receiver_light_by<E>(
             let grouped = group_vals(vals, real_count, (fast.group_size, fast.emitter_group_size), fast.reach);
             let content = ContentSphere::around(bounds);
             let sums = Sums::Fast { grouped: &grouped, content: &content, ray_share: fast.ray_share };
-            adaptive_light(grid, fast, |receivers| run(receivers, sums))
+            adaptive_light(grid, fast, |receivers| pass.run(gpu, scene, receivers, sums).map(|l| l.0))
         }
     }
 }

@@ -6,20 +6,6 @@
 //! relighting of the real surfaces, composite) on a renderer it is given; [`MrRenderer`] runs it
 //! for `relume replay` (frame in, composited image + indirect image + timings out), and the
 //! service's streams run it on the scene's shared renderer (`service::gpu_worker`).
-//!
-//! ## The frame
-//!
-//! [`MrPipeline::render_frame`] lights the frame (the real VALs, the environment's, the
-//! differential pass's receivers), renders the virtual content from the frame's camera, relights
-//! the real surfaces near it with the differential pass and composites. On the differential
-//! pass's CPU backend (CPU adapters), from the second frame of a placement on, the pass runs
-//! beside the render on a thread of its own: the render's GPU work waits on the device much of
-//! its time, and the pass fills the cores meanwhile. It then cannot wait for this frame's gather,
-//! so its re-emitters are the sparse points as the last frame lit them: the light the virtual
-//! content reflects onto the room lags one frame (its shadow does not: the real VALs are this
-//! frame's). On the GPU backend, which shares the device with the render, and on a placement's
-//! first frame, the pass runs after the render with this frame's re-emitters. Measured in
-//! docs/measurements/differential.md, "Beside the render".
 
 pub mod differential;
 pub mod environment;
@@ -124,10 +110,8 @@ pub struct MrRenderer {
 }
 
 /// Stage name of the differential rendering in a replay's timings (wall time: receivers on the
-/// CPU, the GPU rounds or the CPU sums, the composite's relighting, and a rebuild of the pass's
-/// BVH when the meshes moved since the last frame). Where the sums run beside the render (module
-/// docs, "The frame") their time overlaps the render's stages: the stages then add up to more
-/// than the frame.
+/// CPU, the GPU rounds, the composite's relighting, and a rebuild of the pass's BVH when the
+/// meshes moved since the last frame).
 pub const DIFFERENTIAL_STAGE: &str = "differential";
 
 /// Stage name of the environment's VALs (CPU: the `auto` estimate and the VALs' upload).
@@ -266,24 +250,6 @@ struct DifferentialState {
     pass: Differential,
     emitters: Vec<Emitter>,
     bounds: (Vec3, Vec3),
-    /// The diffuse irradiance the sparse points gathered in the last frame of this placement
-    /// (one per emitter), when it ran the sparse method.
-    last_irradiance: Option<Vec<Vec3>>,
-}
-
-impl DifferentialState {
-    /// What the pass sums when it runs beside the frame's GPU work: the real VALs `vals` and
-    /// the re-emitters lit by the last frame's sparse points. `None` where it cannot: on the
-    /// GPU backend (which shares the device with the frame), or with no last frame.
-    fn beside(&self, vals: &[Val]) -> Option<Vec<Val>> {
-        if self.pass.device() != crate::gpu::differential::DifferentialDevice::Cpu {
-            return None;
-        }
-        let last = self.last_irradiance.as_ref().filter(|l| l.len() == self.emitters.len())?;
-        let mut all = vals.to_vec();
-        all.extend(differential::emitter_vals(&self.emitters, last));
-        Some(all)
-    }
 }
 
 /// A frame's light, set on the renderer by [`MrPipeline::light`]: what the rest of the frame
@@ -366,7 +332,6 @@ impl MrPipeline {
                 pass: Differential::on(gpu, &renderer.scene, self.mr.device)?,
                 emitters: differential::emitters_placed(scene, model_to_world),
                 bounds: differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position))),
-                last_irradiance: None,
             }),
         };
         if differential.is_some() {
@@ -460,40 +425,7 @@ impl MrPipeline {
         let lighting = self.light(gpu, renderer, input)?;
         let (w, h) = (settings.width, settings.height);
         renderer.set_pinhole_view(frame.intrinsics, &frame.camera_to_world);
-        let build_ms = std::mem::take(&mut self.build_ms);
-        let method = DifferentialMethod::for_frames(self.mr.differential_method, settings.method == Method::Exact);
-        let fast = differential::FastSettings::default();
-        let state = self.placed.as_mut().filter(|p| p.is_for(renderer)).and_then(|p| p.differential.as_mut());
-        // On the CPU backend, with the re-emitters of the last frame's sparse points, the
-        // differential pass runs beside this frame's render (module docs, "The frame").
-        let beside: Option<Vec<Val>> = match (&state, &lighting.real_vals) {
-            (Some(d), Some(vals)) if settings.method == Method::Sparse && lighting.grid.is_some() => d.beside(vals),
-            _ => None,
-        };
-        let (rendered, early) = std::thread::scope(|scope| {
-            let early = match (&state, &beside, &lighting.grid, &lighting.real_vals) {
-                (Some(d), Some(all), Some(grid), Some(vals)) => {
-                    let d: &DifferentialState = d;
-                    Some(scope.spawn(move || {
-                        let start = Instant::now();
-                        let summed = differential::receiver_light_by(
-                            grid,
-                            all,
-                            vals.len(),
-                            d.bounds,
-                            (method, &fast),
-                            |receivers, sums| d.pass.run_on_cpu(receivers, sums).ok_or(()),
-                        );
-                        summed.ok().map(|summed| (summed, start.elapsed().as_secs_f64() * 1e3))
-                    }))
-                }
-                _ => None,
-            };
-            let rendered = renderer.render(gpu, settings.method, w, h);
-            let early = early.and_then(|h| h.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic)));
-            (rendered, early)
-        });
-        let mut rendered = rendered?;
+        let mut rendered = renderer.render(gpu, settings.method, w, h)?;
         lighting.add_stages(&mut rendered.timings);
         let start = Instant::now();
         let virtual_depth = virtual_depth(gpu, renderer, &frame.camera_to_world)?;
@@ -506,37 +438,34 @@ impl MrPipeline {
             | Method::Exact
             | Method::Estimator => Vec::new(),
         };
-        let (background, differential) = match (state, &lighting.real_vals, lighting.grid) {
+        let build_ms = std::mem::take(&mut self.build_ms);
+        let differential = self.placed.as_mut().filter(|p| p.is_for(renderer)).and_then(|p| p.differential.as_mut());
+        let (background, differential) = match (differential, &lighting.real_vals, lighting.grid) {
             (Some(d), Some(vals), Some(grid)) => {
                 let start = Instant::now();
-                let (all, (light, counts), beside_ms) = match (beside, early) {
-                    (Some(all), Some((summed, ms))) => (all, summed, ms),
-                    _ => {
-                        let mut all = vals.clone();
-                        all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
-                        let summed = differential::receiver_light(
-                            &mut d.pass,
-                            gpu,
-                            &renderer.scene,
-                            &grid,
-                            &all,
-                            vals.len(),
-                            d.bounds,
-                            (method, &fast),
-                        )?;
-                        (all, summed, 0.0)
-                    }
-                };
-                d.last_irradiance = (settings.method == Method::Sparse).then(|| sparse_irradiance.clone());
+                let mut all = vals.clone();
+                all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
+                let method =
+                    DifferentialMethod::for_frames(self.mr.differential_method, settings.method == Method::Exact);
+                let (light, counts) = differential::receiver_light(
+                    &mut d.pass,
+                    gpu,
+                    &renderer.scene,
+                    &grid,
+                    &all,
+                    vals.len(),
+                    d.bounds,
+                    (method, &differential::FastSettings::default()),
+                )?;
                 tracing::debug!(?method, ?counts, "differential receivers");
                 let visible = visible_receivers(&grid, frame, &virtual_depth, w, h);
                 log_differential(&light, &visible);
                 let field = LightField { grid: &grid, light: &light };
                 let background = differential::relight_camera(frame, &field, w, h, settings.rgbd.radiance_scale);
-                let ms = build_ms + lighting.receivers_ms + beside_ms + start.elapsed().as_secs_f64() * 1e3;
+                let ms = build_ms + lighting.receivers_ms + start.elapsed().as_secs_f64() * 1e3;
                 rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), ms));
-                let (real_count, bounds) = (vals.len(), d.bounds);
-                let summed = DifferentialFrame { method, grid, light, counts, visible, vals: all, real_count, bounds };
+                let (vals, real_count, bounds) = (all, vals.len(), d.bounds);
+                let summed = DifferentialFrame { method, grid, light, counts, visible, vals, real_count, bounds };
                 (Some(background), Some(summed))
             }
             _ => (None, None),

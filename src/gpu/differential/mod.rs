@@ -278,15 +278,6 @@ impl Differential {
             Backend::Cpu(bvh) => Ok((cpu_sums(bvh, receivers, sums), 0)),
         }
     }
-
-    /// [`Differential::run`] on the CPU backend, which needs neither the device nor the scene's
-    /// buffers (so it can run beside the frame's GPU work); `None` on the GPU backend.
-    pub fn run_on_cpu(&self, receivers: &[Receiver], sums: Sums<'_>) -> Option<Vec<ReceiverLight>> {
-        match &self.backend {
-            Backend::Cpu(bvh) => Some(cpu_sums(bvh, receivers, sums)),
-            Backend::Gpu(_) => None,
-        }
-    }
 }
 
 /// [`Differential::run`] on the CPU cores, a receiver per task.
