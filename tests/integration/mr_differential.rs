@@ -151,9 +151,9 @@ fn mr_differential_gpu_matches_twin() {
 /// CPU backend, with the VALs grouped as the fast pass groups them: lamps in groups of 4 (so
 /// that the plate's receivers sum some groups as one and open others) and the box's re-emitters
 /// in groups of 8; every ray cast, and the faint members on their group's shared ray. The
-/// kernel decides a group's reach and cone with the GPU's `length`, `asin` and `cos`, which may
-/// round a receiver exactly at a threshold the other way: the sums then differ by the
-/// aggregate's error, under 5 %; at most 1 % of the receivers may.
+/// kernel decides a group's reach and cone with the GPU's `length` and `sqrt`, which may round
+/// a receiver exactly at a threshold the other way: the sums then differ by the aggregate's
+/// error, under 5 %; at most 1 % of the receivers may.
 #[test]
 fn mr_differential_fast_gpu_matches_twin() {
     use relume::gpu::differential::groups::group_vals;

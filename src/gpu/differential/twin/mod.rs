@@ -143,11 +143,8 @@ pub fn receiver_light_fast(
 pub fn irradiance_estimate(receiver: &Receiver, grouped: &GroupedVals) -> f32 {
     let mut sum = 0.0;
     for group in &grouped.groups[..grouped.real_groups] {
-        let a = &group.aggregate;
-        let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
-        let f = g.weight * g.cos_receiver;
-        if f > 0.0 {
-            sum += (a.flux * f).element_sum();
+        if let Some(e) = lit_by(receiver, &group.aggregate) {
+            sum += e.element_sum();
         }
     }
     sum
@@ -174,12 +171,7 @@ pub fn receiver_light_fast_with(
         }
         let far = (a.position - receiver.position).length() > group.reach;
         if far && (!real || !sphere.may_block(origin, a.position, group.radius)) {
-            let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
-            let f = g.weight * g.cos_receiver;
-            if f <= 0.0 {
-                continue;
-            }
-            let e = a.flux * f;
+            let Some(e) = lit_by(receiver, a) else { continue };
             if real {
                 sums.unoccluded += e;
             } else if e.element_sum() < cutoff || !one_blocked(&grouped.vals[group.representative as usize]) {
@@ -191,12 +183,7 @@ pub fn receiver_light_fast_with(
         if (a.position - receiver.position).length() > group.shadow_reach {
             // A real group that the content may block, far enough: its aggregate, blocked as a
             // whole when the ray to its representative member is.
-            let g = val_geometry(receiver.position, receiver.normal, a.position, a.normal, a.area);
-            let f = g.weight * g.cos_receiver;
-            if f <= 0.0 {
-                continue;
-            }
-            let e = a.flux * f;
+            let Some(e) = lit_by(receiver, a) else { continue };
             sums.unoccluded += e;
             if one_blocked(&grouped.vals[group.representative as usize]) {
                 sums.blocked += e;
@@ -227,6 +214,14 @@ pub fn receiver_light_fast_with(
         sums.added += part.added;
     }
     sums
+}
+
+/// The irradiance (W/m²) `val` gives `receiver` without visibility, when its form factor there
+/// is positive (`fast.wgsl`'s `f > 0.0`): the one test every sum of the twins makes.
+fn lit_by(receiver: &Receiver, val: &Val) -> Option<Vec3> {
+    let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
+    let f = g.weight * g.cos_receiver;
+    (f > 0.0).then(|| val.flux * f)
 }
 
 /// Whether the sphere (`centre`, `radius`) lies wholly below `receiver`'s tangent plane, by a
@@ -265,10 +260,7 @@ fn sums_with(
             if receiver.normal.dot(v) <= 0.0 || val.normal.dot(v) >= 0.0 {
                 continue;
             }
-            let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
-            let f = g.weight * g.cos_receiver;
-            if f > 0.0 {
-                let e = val.flux * f;
+            if let Some(e) = lit_by(receiver, val) {
                 let ray = !(cutoff > 0.0 && e.element_sum() < cutoff);
                 if ray {
                     targets[rays] = val.position + val.normal * RAY_OFFSET;
