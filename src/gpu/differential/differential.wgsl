@@ -46,9 +46,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     while j < count && steps < DIFFERENTIAL_LOOP_BUDGET {
         steps += 1u;
         let val = vals[j];
-        let geo = val_geometry(r.position, r.normal, val.position, val.normal, val.area);
-        let e = val.flux * (geo.weight * geo.cos_receiver);
-        if geo.weight * geo.cos_receiver > 0.0 {
+        let f = val_form_factor(r.position, r.normal, val.position, val.normal, val.area);
+        let e = val.flux * f;
+        if f > 0.0 {
             let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, DIFFERENTIAL_LOOP_BUDGET - steps);
             steps += ray.steps;
             if !ray.complete {

@@ -57,8 +57,7 @@ fn irradiance_estimate(r: Receiver) -> f32 {
     let n = min(params.real_groups, arrayLength(&groups));
     for (var k = 0u; k < n; k++) {
         let group = groups[k];
-        let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);
-        let f = geo.weight * geo.cos_receiver;
+        let f = val_form_factor(r.position, r.normal, group.position, group.normal, group.area);
         if f > 0.0 {
             let e = group.flux * f;
             sum += e.x + e.y + e.z;
@@ -122,10 +121,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             // Wholly below the receiver's tangent plane: no member lights it (twin `below`).
             g += 1u;
         } else if m == 0u {
-            let far = length(group.position - r.position) > group.reach;
+            // Distances compared squared (a reach of f32::MAX, never, squares to infinity).
+            let d = group.position - r.position;
+            let far = dot(d, d) > group.reach * group.reach;
             if far && (!real || !may_be_blocked(origin, group.position, group.radius)) {
-                let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);
-                let f = geo.weight * geo.cos_receiver;
+                let f = val_form_factor(r.position, r.normal, group.position, group.normal, group.area);
                 if f > 0.0 {
                     let e = vec4<f32>(group.flux * f, 0.0);
                     if real {
@@ -146,11 +146,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                     }
                 }
                 g += 1u;
-            } else if length(group.position - r.position) > group.shadow_reach {
+            } else if dot(d, d) > group.shadow_reach * group.shadow_reach {
                 // A real group the content may block, far enough: its aggregate, blocked as a
                 // whole when the ray to its representative member is.
-                let geo = val_geometry(r.position, r.normal, group.position, group.normal, group.area);
-                let f = geo.weight * geo.cos_receiver;
+                let f = val_form_factor(r.position, r.normal, group.position, group.normal, group.area);
                 if f > 0.0 {
                     let t = vals[group.representative];
                     let ray = occluded(origin, t.position + t.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
@@ -184,39 +183,33 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         } else {
             let val = vals[group.first + (m & MEMBER_INDEX) - 1u];
-            // Below the receiver's tangent plane, or facing away: no light, known before the
-            // distance's square root and the form factor's division (twin `sums_with`).
-            let v = val.position - r.position;
-            if dot(r.normal, v) > 0.0 && dot(val.normal, v) < 0.0 {
-                let geo = val_geometry(r.position, r.normal, val.position, val.normal, val.area);
-                let f = geo.weight * geo.cos_receiver;
-                if f > 0.0 {
-                    let e = vec4<f32>(val.flux * f, 0.0);
-                    // A real group whose cone misses the content (its members' targets lie
-                    // within its radius and a ray offset): no member's ray can be blocked, none
-                    // is cast. A member too faint for its own ray takes the representative's
-                    // (never set for a re-emitter group: seen).
-                    var hit = false;
-                    if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
-                        if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {
-                            hit = (m & SHARED_HIT) != 0u;
-                        } else {
-                            let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
-                            steps += ray.steps;
-                            if !ray.complete {
-                                break;
-                            }
-                            hit = ray.hit;
+            let f = val_form_factor(r.position, r.normal, val.position, val.normal, val.area);
+            if f > 0.0 {
+                let e = vec4<f32>(val.flux * f, 0.0);
+                // A real group whose cone misses the content (its members' targets lie
+                // within its radius and a ray offset): no member's ray can be blocked, none
+                // is cast. A member too faint for its own ray takes the representative's
+                // (never set for a re-emitter group: seen).
+                var hit = false;
+                if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
+                    if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {
+                        hit = (m & SHARED_HIT) != 0u;
+                    } else {
+                        let ray = occluded(origin, val.position + val.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
+                        steps += ray.steps;
+                        if !ray.complete {
+                            break;
                         }
+                        hit = ray.hit;
                     }
-                    if real {
-                        sums.unoccluded += e;
-                        if hit {
-                            sums.blocked += e;
-                        }
-                    } else if !hit {
-                        sums.added += e;
+                }
+                if real {
+                    sums.unoccluded += e;
+                    if hit {
+                        sums.blocked += e;
                     }
+                } else if !hit {
+                    sums.added += e;
                 }
             }
             m += 1u;

@@ -171,6 +171,20 @@ fn val_geometry(x: vec3<f32>, n_x: vec3<f32>, val_position: vec3<f32>, val_norma
     return ValGeometry(w, cos_receiver, cos_val / (PI * d2 + max(val_area, 0.0)));
 }
 
+// `twin::val_form_factor`: `val_geometry`'s `weight * cos_receiver`, the two cosines' 1/d
+// folded into the denominator (no square root, one division); 0 for a coincident pair, a VAL
+// behind the receiver or facing away.
+fn val_form_factor(x: vec3<f32>, n_x: vec3<f32>, val_position: vec3<f32>, val_normal: vec3<f32>, val_area: f32) -> f32 {
+    let v = val_position - x;
+    let cos_receiver = dot(n_x, v);
+    let cos_val = -dot(val_normal, v);
+    let d2 = dot(v, v);
+    if cos_receiver <= 0.0 || cos_val <= 0.0 || d2 <= COINCIDENT_DISTANCE_SQ {
+        return 0.0;
+    }
+    return cos_receiver * cos_val / (d2 * (PI * d2 + max(val_area, 0.0)));
+}
+
 // `twin::oriented_face_normal`: the unit face normal `face` turned to the side of the shading
 // normal `shading` (the vertex normals decide which side is the front).
 fn oriented_face_normal(face: vec3<f32>, shading: vec3<f32>) -> vec3<f32> {

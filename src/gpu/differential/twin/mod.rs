@@ -6,7 +6,7 @@ pub mod groups;
 
 use crate::twin::bvh::{Occluders, PACKET_RAYS};
 use crate::twin::exact_cpu::RAY_OFFSET;
-use crate::twin::{Val, val_geometry};
+use crate::twin::{Val, val_form_factor};
 use glam::Vec3;
 use groups::GroupedVals;
 
@@ -169,7 +169,9 @@ pub fn receiver_light_fast_with(
         if below(receiver, a.position, group.radius) {
             continue;
         }
-        let far = (a.position - receiver.position).length() > group.reach;
+        // Distances compared squared (a reach of f32::MAX, never, squares to infinity).
+        let d2 = (a.position - receiver.position).length_squared();
+        let far = d2 > group.reach * group.reach;
         if far && (!real || !sphere.may_block(origin, a.position, group.radius)) {
             let Some(e) = lit_by(receiver, a) else { continue };
             if real {
@@ -180,7 +182,7 @@ pub fn receiver_light_fast_with(
             }
             continue;
         }
-        if (a.position - receiver.position).length() > group.shadow_reach {
+        if d2 > group.shadow_reach * group.shadow_reach {
             // A real group that the content may block, far enough: its aggregate, blocked as a
             // whole when the ray to its representative member is.
             let Some(e) = lit_by(receiver, a) else { continue };
@@ -217,10 +219,13 @@ pub fn receiver_light_fast_with(
 }
 
 /// The irradiance (W/m²) `val` gives `receiver` without visibility, when its form factor there
-/// is positive (`fast.wgsl`'s `f > 0.0`): the one test every sum of the twins makes.
+/// is positive (`fast.wgsl`'s `f > 0.0`): the one test every sum of the twins makes. The form
+/// factor is [`val_form_factor`], which tests the cosines before the division (a VAL below the
+/// receiver's tangent plane or facing away: most of a group's members at a receiver that opens
+/// it).
+#[inline]
 fn lit_by(receiver: &Receiver, val: &Val) -> Option<Vec3> {
-    let g = val_geometry(receiver.position, receiver.normal, val.position, val.normal, val.area);
-    let f = g.weight * g.cos_receiver;
+    let f = val_form_factor(receiver.position, receiver.normal, val.position, val.normal, val.area);
     (f > 0.0).then(|| val.flux * f)
 }
 
@@ -253,13 +258,6 @@ fn sums_with(
         let mut targets = [Vec3::ZERO; SHADOW_BATCH];
         let (mut n, mut rays) = (0, 0);
         for (i, val) in chunk.iter().enumerate() {
-            // Below the receiver's tangent plane, or facing away: no light, known without the
-            // distance's square root and the form factor's division (most of a group's members
-            // at a receiver that opens it).
-            let v = val.position - receiver.position;
-            if receiver.normal.dot(v) <= 0.0 || val.normal.dot(v) >= 0.0 {
-                continue;
-            }
             if let Some(e) = lit_by(receiver, val) {
                 let ray = !(cutoff > 0.0 && e.element_sum() < cutoff);
                 if ray {
