@@ -13,8 +13,9 @@
 // Twin: `gpu::differential::twin::receiver_light_fast`.
 //
 // Resumable in rounds, as `differential.wgsl`: the state between rounds is the group and the
-// member (1-based, 0 at the group's own test; bit 31 the representative's ray, `SHARED_HIT`) in
-// `progress[2 i]` and `progress[2 i + 1]`.
+// member (1-based, 0 at the group's own test; bit 31 the representative's ray, `SHARED_HIT`,
+// bit 30 whether the content may block the members' rays, `BLOCKABLE`) in `progress[2 i]` and
+// `progress[2 i + 1]`.
 
 struct FastParams {
     receiver_count: u32,
@@ -45,10 +46,12 @@ struct ValGroup {
 // `shader/rounds.wgsl`.
 @group(0) @binding(8) var<storage, read> groups: array<ValGroup>;
 
-// Bit of the member word set when the opened group's representative is blocked; the rest is the
+// Bits of the member word: set when the opened group's representative is blocked, and when the
+// content may block its members' rays (decided once, as the group is opened); the rest is the
 // member index.
 const SHARED_HIT: u32 = 0x80000000u;
-const MEMBER_INDEX: u32 = 0x7fffffffu;
+const BLOCKABLE: u32 = 0x40000000u;
+const MEMBER_INDEX: u32 = 0x3fffffffu;
 
 // Twin of `irradiance_estimate`: the sum of the channels of the irradiance of the real groups'
 // aggregates at `r`, no visibility, in the groups' order.
@@ -167,8 +170,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             } else {
                 // The group is opened: a real group's representative's ray, for the members too
                 // faint for their own (a re-emitter group's faint members are counted as seen).
+                // A real group whose cone misses the content (its members' targets lie within its
+                // radius and a ray offset): no member's ray can be blocked, none is cast.
+                let blockable = !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET);
                 var representative_hit = 0u;
-                if params.ray_share > 0.0 && real && may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
+                if params.ray_share > 0.0 && real && blockable {
                     let t = vals[group.representative];
                     let ray = occluded(origin, t.position + t.normal * RAY_OFFSET, FAST_DIFFERENTIAL_LOOP_BUDGET - steps);
                     steps += ray.steps;
@@ -179,19 +185,17 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                         representative_hit = SHARED_HIT;
                     }
                 }
-                m = 1u | representative_hit;
+                m = 1u | representative_hit | select(0u, BLOCKABLE, blockable);
             }
         } else {
             let val = vals[group.first + (m & MEMBER_INDEX) - 1u];
             let f = val_form_factor(r.position, r.normal, val.position, val.normal, val.area);
             if f > 0.0 {
                 let e = vec4<f32>(val.flux * f, 0.0);
-                // A real group whose cone misses the content (its members' targets lie
-                // within its radius and a ray offset): no member's ray can be blocked, none
-                // is cast. A member too faint for its own ray takes the representative's
-                // (never set for a re-emitter group: seen).
+                // A member too faint for its own ray takes the representative's (never set for a
+                // re-emitter group: seen).
                 var hit = false;
-                if !real || may_be_blocked(origin, group.position, group.radius + RAY_OFFSET) {
+                if (m & BLOCKABLE) != 0u {
                     if params.ray_share > 0.0 && e.x + e.y + e.z < cutoff {
                         hit = (m & SHARED_HIT) != 0u;
                     } else {
