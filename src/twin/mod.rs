@@ -166,17 +166,18 @@ pub fn val_geometry_sided(
 
 /// [`val_geometry`]'s `weight * cos_receiver` (1/m²), with the two cosines' `1/d` folded into
 /// the denominator: `(n_x . v)(-n_j . v) / (d² (pi d² + a_j))` for `v` the VAL's offset, `d` its
-/// length; no square root and one division (the differential passes' sums, `twin` of WGSL
+/// length; no square root and one division (the differential passes' sums; twin of WGSL
 /// `val_form_factor`). 0 for a coincident pair, and a VAL behind the receiver or facing away.
 #[inline]
 pub fn val_form_factor(x: Vec3, n_x: Vec3, val_position: Vec3, val_normal: Vec3, val_area: f32) -> f32 {
     let v = val_position - x;
-    let (cos_receiver, cos_val) = (n_x.dot(v), -val_normal.dot(v));
+    // The cosines times d.
+    let (receiver_d, val_d) = (n_x.dot(v), -val_normal.dot(v));
     let d2 = v.length_squared();
-    if cos_receiver <= 0.0 || cos_val <= 0.0 || d2 <= COINCIDENT_DISTANCE_SQ {
+    if receiver_d <= 0.0 || val_d <= 0.0 || d2 <= COINCIDENT_DISTANCE_SQ {
         return 0.0;
     }
-    cos_receiver * cos_val / (d2 * (PI * d2 + val_area.max(0.0)))
+    receiver_d * val_d / (d2 * (PI * d2 + val_area.max(0.0)))
 }
 
 /// Irradiance (W/m²) at `x` from one Lambertian disc VAL of flux `flux` (W).

@@ -176,13 +176,14 @@ fn val_geometry(x: vec3<f32>, n_x: vec3<f32>, val_position: vec3<f32>, val_norma
 // behind the receiver or facing away.
 fn val_form_factor(x: vec3<f32>, n_x: vec3<f32>, val_position: vec3<f32>, val_normal: vec3<f32>, val_area: f32) -> f32 {
     let v = val_position - x;
-    let cos_receiver = dot(n_x, v);
-    let cos_val = -dot(val_normal, v);
+    // The cosines times d.
+    let receiver_d = dot(n_x, v);
+    let val_d = -dot(val_normal, v);
     let d2 = dot(v, v);
-    if cos_receiver <= 0.0 || cos_val <= 0.0 || d2 <= COINCIDENT_DISTANCE_SQ {
+    if receiver_d <= 0.0 || val_d <= 0.0 || d2 <= COINCIDENT_DISTANCE_SQ {
         return 0.0;
     }
-    return cos_receiver * cos_val / (d2 * (PI * d2 + max(val_area, 0.0)));
+    return receiver_d * val_d / (d2 * (PI * d2 + max(val_area, 0.0)));
 }
 
 // `twin::oriented_face_normal`: the unit face normal `face` turned to the side of the shading
