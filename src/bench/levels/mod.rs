@@ -255,12 +255,15 @@ fn read_json(path: &Path) -> Result<serde_json::Value, BenchError> {
     serde_json::from_str(&text).map_err(|e| super::flag_error("--candidates", e.to_string()))
 }
 
-/// The scene file's `settings.levels` the measurement suggests: for each level that a measured
-/// configuration dominates, the most accurate of those configurations, written as the
-/// parameters where it differs from the level as measured (over that level's entry in
-/// `existing`, the scene file's `settings.levels`, whose other parameters it keeps; the RSM
-/// only on a scene with a spot light), with what was measured (`at`: the size and adapter).
-/// Levels not dominated keep their entry in `existing`.
+/// The scene file's `settings.levels` the measurement suggests: for each level that misses its
+/// target error ([`Quality::target_rel_rmse`]), the fastest measured configuration (another
+/// level or a candidate) that meets it; for each other level that a measured configuration
+/// dominates, the most accurate of those configurations. Each is written as the parameters
+/// where it differs from the level as measured (over that level's entry in `existing`, the
+/// scene file's `settings.levels`, whose other parameters it keeps; the RSM only on a scene
+/// with a spot light), with what was measured (`at`: the size and adapter). A level that meets
+/// its target undominated, or that misses it with nothing measured meeting it nor dominating
+/// it, keeps its entry in `existing`.
 pub fn suggest_levels(
     levels: &[LevelRow],
     candidates: &[CandidateRow],
@@ -271,17 +274,28 @@ pub fn suggest_levels(
     // The GPU estimator's rows carry their draws (the level becomes the estimator), the brute
     // force's its method (the level becomes it, with the row's VALs).
     type Technique = (RenderMethod, Option<u32>);
+    let technique = |r: &LevelRow| match r.resolved.method {
+        crate::scene::Technique::Estimator => (RenderMethod::Estimator, r.resolved.estimator_draws),
+        crate::scene::Technique::BruteForceClusters => (RenderMethod::BruteForceClusters, None),
+        _ => (RenderMethod::Sparse, None),
+    };
     let measured: Vec<(&str, Knobs, Technique, f64, f64)> = levels
         .iter()
-        .map(|r| (r.level.name(), r.knobs, (RenderMethod::Sparse, None), r.rel_rmse_vs_exact, r.ms))
+        .map(|r| (r.level.name(), r.knobs, technique(r), r.rel_rmse_vs_exact, r.ms))
         .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, (c.method, c.draws), c.rel_rmse_vs_exact, c.ms)))
         .collect();
     let mut out = existing.as_object().cloned().unwrap_or_default();
     for row in levels {
-        let best = measured
-            .iter()
-            .filter(|(name, ..)| row.dominated_by.iter().any(|d| d == name))
-            .min_by(|a, b| a.3.total_cmp(&b.3));
+        let target = row.level.target_rel_rmse().filter(|&t| row.rel_rmse_vs_exact > t);
+        let meeting = target.and_then(|t| {
+            measured.iter().filter(|m| m.0 != row.level.name() && m.3 <= t).min_by(|a, b| a.4.total_cmp(&b.4))
+        });
+        let best = meeting.or_else(|| {
+            measured
+                .iter()
+                .filter(|(name, ..)| row.dominated_by.iter().any(|d| d == name))
+                .min_by(|a, b| a.3.total_cmp(&b.3))
+        });
         let Some(&(name, knobs, draws, error, ms)) = best else { continue };
         let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
         match draws {
@@ -311,9 +325,15 @@ pub fn suggest_levels(
                 set_changed_knobs(&mut entry, knobs, row.knobs, spot_light);
             }
         }
+        let why = match (meeting, target) {
+            (Some(_), Some(t)) => {
+                format!("; the fastest measured within the level's target {t:.2}, which its own misses")
+            }
+            _ => String::new(),
+        };
         entry["measured"] = format!(
             "`{name}`: rel RMSE {error:.4} at {ms:.0} ms, the level's own {:.4} at {:.0} ms, at {at} (relume \
-             bench --levels --candidates)",
+             bench --levels --candidates){why}",
             row.rel_rmse_vs_exact, row.ms
         )
         .into();
@@ -634,8 +654,9 @@ pub fn markdown(report: &LevelsReport) -> String {
     if report.suggested_levels.as_object().is_some_and(|o| !o.is_empty()) {
         let json = serde_json::to_string_pretty(&report.suggested_levels).unwrap_or_default();
         out.push_str(&format!(
-            "\nThe scene file's `settings.levels` this run suggests (each dominated level as its most accurate \
-             dominating configuration):\n\n```json\n{json}\n```\n"
+            "\nThe scene file's `settings.levels` this run suggests (each level that misses its target error as \
+             the fastest configuration that meets it, each other dominated level as its most accurate dominating \
+             configuration):\n\n```json\n{json}\n```\n"
         ));
     }
     out
@@ -674,10 +695,15 @@ fn candidates_markdown(report: &LevelsReport) -> String {
     }
     out.push('\n');
     for l in report.levels.iter().filter(|l| l.level != Quality::Reference) {
+        let target = match l.level.target_rel_rmse() {
+            Some(t) if l.rel_rmse_vs_exact > t => format!("; **misses** its target {t:.2}"),
+            Some(t) => format!("; meets its target {t:.2}"),
+            None => String::new(),
+        };
         match l.dominated_by.as_slice() {
-            [] => out.push_str(&format!("- `{}`: not dominated.\n", l.level.name())),
+            [] => out.push_str(&format!("- `{}`: not dominated{target}.\n", l.level.name())),
             by => out.push_str(&format!(
-                "- `{}`: **dominated** by {}.\n",
+                "- `{}`: **dominated** by {}{target}.\n",
                 l.level.name(),
                 by.iter().map(|b| format!("`{b}`")).collect::<Vec<_>>().join(", ")
             )),

@@ -163,6 +163,47 @@ fn a_dominated_level_is_suggested_as_its_most_accurate_dominating_configuration(
     assert_eq!(resolved.visibility.mode, Occlusion::Clusters);
 }
 
+/// A level that misses its target error is suggested as the fastest measured configuration
+/// that meets it, dominating or not (the most accurate dominating one may be slower, or miss
+/// the target too); another level's row may be that configuration, with its technique. With
+/// nothing meeting the target the dominance rule applies; a level at its target is not moved.
+#[test]
+fn a_level_missing_its_target_takes_the_fastest_configuration_meeting_it() {
+    let l = levels();
+    let mut accurate = row(Quality::Accurate, l[2].1, 0.02, 1200.0, &[]);
+    accurate.resolved.method = crate::scene::Technique::BruteForceClusters;
+    let rows =
+        [row(Quality::Fast, l[0].1, 0.19, 80.0, &[]), row(Quality::Balanced, l[1].1, 0.118, 60.0, &[]), accurate];
+    let near = "balanced + sparse.near_field=4";
+    let candidates = [
+        // More accurate and as fast: not dominating, and still over 0.10.
+        candidate("balanced + visibility=clusters", knobs(Occlusion::Clusters, 128, 1.0, 0.0, 2.0), 0.105, 58.0),
+        candidate(near, knobs(Occlusion::Disks, 128, 1.0, 4.0, 2.0), 0.090, 460.0),
+    ];
+    let existing = serde_json::json!({"accurate": {"measured": "kept", "technique": "brute_force_clusters"}});
+    let s = suggest_levels(&rows, &candidates, &existing, true, "here");
+    assert_eq!(s["balanced"]["sparse"], serde_json::json!({"near_field": 4.0}), "{s}");
+    let text = s["balanced"]["measured"].as_str().unwrap();
+    assert!(text.starts_with(&format!("`{near}`: rel RMSE 0.0900 at 460 ms")), "{text}");
+    assert!(text.contains("within the level's target 0.10"), "{text}");
+    assert!(s.get("fast").is_none() && s["accurate"] == existing["accurate"], "{s}");
+
+    // Without the near field's row, accurate's (the brute force) is the fastest under 0.10.
+    let s = suggest_levels(&rows, &candidates[..1], &existing, true, "here");
+    assert_eq!(s["balanced"]["technique"], "brute_force_clusters", "{s}");
+    let settings: crate::scene::SettingsDescription =
+        serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
+    settings.validate("settings").expect("and is valid");
+    let technique = crate::scene::settings::technique(Quality::Balanced, &settings);
+    assert_eq!(technique, (crate::scene::Technique::BruteForceClusters, None));
+
+    // Nothing under 0.10 but a dominating configuration: the dominance rule.
+    let rows = [row(Quality::Balanced, l[1].1, 0.118, 600.0, &["balanced + visibility=clusters"])];
+    let s = suggest_levels(&rows, &candidates[..1], &serde_json::json!({}), true, "here");
+    assert_eq!(s["balanced"]["visibility"], "clusters", "{s}");
+    assert!(!s["balanced"]["measured"].as_str().unwrap().contains("target"), "{s}");
+}
+
 /// The GPU estimator dominating a level makes it that level's technique, with its draws
 /// and none of the sparse parameters; a sparse configuration suggested later takes it back.
 #[test]

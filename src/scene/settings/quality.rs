@@ -75,6 +75,19 @@ impl Quality {
             Quality::Reference => "reference",
         }
     }
+
+    /// The indirect error the level aims at: rel RMSE against the converged exact reference,
+    /// at 256 pixels wide (fast 0.20, balanced 0.10, accurate 0.05; none for the reference
+    /// itself). `relume bench --levels --candidates` suggests, for a level that misses it on a
+    /// scene, the fastest measured configuration that meets it (docs/measurements/levels.md).
+    pub fn target_rel_rmse(self) -> Option<f64> {
+        match self {
+            Quality::Fast => Some(0.20),
+            Quality::Balanced => Some(0.10),
+            Quality::Accurate => Some(0.05),
+            Quality::Reference => None,
+        }
+    }
 }
 
 /// How the indirect light of a resolved scene is asked to be computed.
