@@ -53,7 +53,11 @@ done
     echo "balanced's and accurate's VALs (\`technique=brute_force_clusters\`, also at the coarsest subdivision,"
     echo "\`sparse.subdivision=16\`: it splits only the triangles the maps draw), measured the same way against the same reference"
     echo "(src/bench/levels/mod.rs). A level is **dominated** when one of them, or another level, is more"
-    echo "accurate and at least 1.2x faster: on that scene the level is the wrong choice. Each"
+    echo "accurate and at least 1.2x faster: on that scene the level is the wrong choice. A level"
+    echo "**misses** its target when its error is over the level's (fast 0.20, balanced 0.10, accurate"
+    echo "0.05; \`Quality::target_rel_rmse\`); the bench then suggests for it the fastest measured"
+    echo "configuration that meets the target, and for each other dominated level its most accurate"
+    echo "dominating one: that is the scene file's \`settings.levels\` entry the fixtures carry. Each"
     echo "scene's plot shows the levels, the candidates, their Pareto front and the estimator's curve."
     echo
     # A scene's table from a run made before a candidate existed says so.
@@ -63,6 +67,14 @@ done
     if [ -n "$older" ]; then
         echo "Measured before the coarse-subdivision candidate of the brute force existed (their"
         echo "tables lack it): $older"
+        echo
+    fi
+    untargeted=$(for n in $scenes; do
+        grep -q "its target" "$out/$n/levels.md" || printf '`%s` ' "$n"
+    done)
+    if [ -n "$untargeted" ]; then
+        echo "Measured before the bench marked each level against its target error (their lists"
+        echo "say only what dominates a level, their suggestions only for dominated levels): $untargeted"
         echo
     fi
     for n in $scenes; do

@@ -206,13 +206,12 @@ fn compares_estimate_sums_over_the_scenes_own_vals() {
 #[test]
 fn two_bounces_are_compared_and_the_gpu_reference_refuses_them() {
     let dir = scratch("cli_two_bounces");
-    let text = std::fs::read_to_string(fixture("scenes/cornell_bunny_small.json")).unwrap().replace(
-        "\"visibility\": \"off\" }",
-        "\"visibility\": \"off\", \"second_bounce\": {\"points\": 256, \"vals\": 32} }, \"bounces\": 2",
-    );
+    let mut json: serde_json::Value = serde_json::from_str(&super::test_room_text()).unwrap();
+    json["settings"]["tuning"]["second_bounce"] = serde_json::json!({"points": 256, "vals": 32});
+    json["settings"]["bounces"] = 2.into();
     // In the scratch directory, its meshes named by absolute path.
     let meshes = fixture("meshes");
-    let text = text.replace("../meshes/", &format!("{}/", meshes.to_str().unwrap()));
+    let text = json.to_string().replace("../meshes/", &format!("{}/", meshes.to_str().unwrap()));
     let scene = dir.join("two_bounces.json");
     std::fs::write(&scene, &text).unwrap();
     let scene_arg = scene.to_str().unwrap();

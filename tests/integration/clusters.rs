@@ -22,12 +22,12 @@ use relume::twin::exact_cpu::RAY_OFFSET;
 use relume::twin::flat::FlatScene;
 use relume::twin::{Val, luminance, val_irradiance};
 
-/// `cornell_bunny_small.json` with `"visibility": mode` and `settings` (more entries of
-/// `settings.tuning`, e.g. `"clusters": {...}`, and `"bounces"`, which goes beside `tuning`) in
-/// place of its `"visibility": "off"`.
+/// The tests' room ([`super::test_room_text`]) with `"visibility": mode` and `settings` (more
+/// entries of `settings.tuning`, e.g. `"clusters": {...}`, and `"bounces"`, which goes beside
+/// `tuning`) in place of its `"visibility": "off"`.
 pub(super) fn small_scene_with(mode: &str, settings: &str) -> Scene {
     let dir = super::fixture("scenes");
-    let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let base = super::test_room_text();
     // `bounces` is what the user wants, beside `tuning`; the rest are research knobs in it.
     let (bounces, settings) = match ["\"bounces\": 1", "\"bounces\": 2"].iter().find(|b| settings.contains(**b)) {
         Some(b) => (format!("{b}, "), settings.replace(&format!("{b}, "), "").replace(*b, "")),

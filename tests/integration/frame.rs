@@ -1,7 +1,7 @@
 //! The frame is the list of techniques the request needs: a component left out runs none of
 //! its stages, and what is computed does not depend on what else was asked for.
 
-use crate::{gpu, load_scene};
+use crate::{gpu, load_test_room};
 use relume::renderer::{Components, Method, Renderer, stage};
 
 fn stage_names(frame: &relume::renderer::Rendered) -> Vec<&str> {
@@ -16,7 +16,7 @@ fn stage_names(frame: &relume::renderer::Rendered) -> Vec<&str> {
 #[test]
 fn a_direct_only_frame_runs_no_indirect_stage() {
     let gpu = gpu();
-    let mut scene = load_scene("cornell_bunny_small");
+    let mut scene = load_test_room();
     scene.settings.visibility.mode = relume::scene::Occlusion::Disks;
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     for method in [Method::Sparse, Method::BruteForce] {
@@ -55,7 +55,7 @@ fn a_direct_only_frame_runs_no_indirect_stage() {
 #[test]
 fn settings_round_trips_give_the_same_frame() {
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let scene = load_test_room();
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.set_occlusion(relume::scene::Occlusion::Off, scene.settings.visibility.rule);
     let first = renderer.render(&gpu, Method::Sparse, 24, 24).unwrap();

@@ -8,9 +8,13 @@ use relume::scene::{Scene, SceneDescription};
 
 use super::{fixture, gpu};
 
-/// The Cornell box of `cornell_bunny_small.json` alone (no bunny), with its light, camera,
-/// material override and settings; `mesh` is the box's file field.
+/// The Cornell box of `cornell_bunny_small.json` alone (no bunny), with its light, camera and
+/// material override, and the settings of `cornell_gltf_small.json` (its tuning and the levels
+/// measured on it); `mesh` is the box's file field.
 fn cornell_json(mesh: &str) -> String {
+    let text = std::fs::read_to_string(fixture("scenes/cornell_gltf_small.json")).expect("fixture");
+    let fixture: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    let settings = fixture["settings"].to_string();
     format!(
         r#"{{
         "meshes": [{{ {mesh}, "sparse_points": 512, "skip_groups": ["light"],
@@ -18,7 +22,7 @@ fn cornell_json(mesh: &str) -> String {
         "light": {{ "position": [0.6, 1.6, 0.6], "direction": [-1.6, -0.3, -0.8],
                     "inner_angle_deg": 15, "outer_angle_deg": 25, "intensity": [10, 10, 10] }},
         "camera": {{ "position": [0, 1.0, 3.3], "target": [0, 0.9, 0], "fov_y_deg": 38, "width": 64, "height": 64 }},
-        "settings": {{ "tuning": {{ "rsm_resolution": 32, "visibility": "off" }} }}
+        "settings": {settings}
     }}"#
     )
 }

@@ -51,6 +51,25 @@ pub fn load_scene(name: &str) -> Scene {
     Scene::load(&path).unwrap_or_else(|e| panic!("loading {}: {e}", path.display()))
 }
 
+/// The tests' room: `cornell_bunny_small.json` as the tests of one pass against its twin take
+/// it, as JSON text (meshes relative to `fixtures/scenes`): visibility off
+/// (`settings.tuning.visibility`) and none of the levels measured on the fixture
+/// (`settings.levels`, whose balanced level adds the near field), so the passes a test looks at
+/// run alone and cheaply. A test that needs a mode replaces `"visibility": "off"`.
+pub fn test_room_text() -> String {
+    let text = std::fs::read_to_string(fixture("scenes/cornell_bunny_small.json")).expect("fixture scene");
+    let mut json: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    let settings = json["settings"].as_object_mut().expect("the fixture has settings");
+    settings.remove("levels");
+    settings["tuning"]["visibility"] = "off".into();
+    serde_json::to_string_pretty(&json).expect("JSON")
+}
+
+/// [`test_room_text`] loaded.
+pub fn load_test_room() -> Scene {
+    Scene::from_json_str(&test_room_text(), &fixture("scenes")).expect("the tests' room loads")
+}
+
 pub fn gpu() -> Gpu {
     Gpu::new().expect("a GPU adapter (lavapipe in CI: apt-get install mesa-vulkan-drivers)")
 }

@@ -12,9 +12,9 @@ use relume::rgbd::recording::{Recording, RecordingOptions};
 use relume::scene::Scene;
 use serde_json::{Value, json};
 
+/// The tests' room (occlusion off, none of the fixture's measured levels).
 fn fixture_json() -> Value {
-    let text = std::fs::read_to_string(fixture("scenes/cornell_bunny_small.json")).unwrap();
-    serde_json::from_str(&text).unwrap()
+    serde_json::from_str(&super::test_room_text()).unwrap()
 }
 
 fn scene_of(v: &Value) -> Scene {

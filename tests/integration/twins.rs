@@ -6,7 +6,7 @@
 //! the largest value of the compared buffer (plus a tiny absolute floor for zeros), which is
 //! still far below anything visible and far below the sparse method's own error.
 
-use super::{assert_close, gpu, load_scene};
+use super::{assert_close, gpu, load_scene, load_test_room};
 use glam::{Mat4, Vec3};
 use relume::gpu::raw::RawPointLight;
 use relume::gpu::visibility::disks::twin::Combine;
@@ -26,7 +26,7 @@ fn light(r: &RawPointLight) -> PointLight {
 #[test]
 fn sparse_pipeline_matches_cpu_twins() {
     let gpu = gpu();
-    let mut scene = load_scene("cornell_bunny_small");
+    let mut scene = load_test_room();
     // The paper's glossy chain (renormalised glossy lights, interpolated per vertex); the
     // default, the interpolated glossy radiance, is `glossy_radiance_interpolation_matches_cpu_twins`.
     scene.settings.sparse.glossy_interpolation = relume::scene::GlossyInterpolation::Lights;
@@ -111,7 +111,7 @@ fn sparse_pipeline_matches_cpu_twins() {
 fn glossy_radiance_interpolation_matches_cpu_twins() {
     use relume::scene::GlossyInterpolation;
     let gpu = gpu();
-    let mut scene = load_scene("cornell_bunny_small");
+    let mut scene = load_test_room();
     let (w, h) = (48, 40);
     scene.settings.sparse.glossy_interpolation = GlossyInterpolation::Lights;
     let lights = Renderer::new(&gpu, &scene).unwrap().render(&gpu, Method::Sparse, w, h).unwrap();
@@ -145,7 +145,7 @@ fn glossy_radiance_interpolation_matches_cpu_twins() {
 fn the_cameras_simplified_copy_matches_cpu_twins() {
     use relume::renderer::budget::{CAMERA_LOD_ERROR, CAMERA_LOD_RATIO};
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let scene = load_test_room();
     let (w, h) = (96, 80);
     // A fresh renderer's first frame draws the copy: a vertex it does not use keeps the light
     // buffers' zeros.
@@ -279,7 +279,7 @@ fn sparse_shading_twin(
 #[test]
 fn gather_takes_every_val_past_the_cpu_loop_limit() {
     let gpu = gpu();
-    let mut scene = load_scene("cornell_bunny_small");
+    let mut scene = load_test_room();
     scene.settings.rsm_resolution = 300;
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
@@ -303,7 +303,7 @@ fn gather_variants_match_cpu_twin() {
     use relume::gpu::sparse::gather::{Gather, GatherInput, GatherLobes};
     use relume::gpu::timing::Recorder;
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let scene = load_test_room();
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
     let vals = renderer.read_vals(&gpu).unwrap();
@@ -396,7 +396,7 @@ fn near_field_takes_every_near_val_past_the_cpu_loop_limit() {
 
 fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h): (u32, u32)) {
     let gpu = gpu();
-    let mut scene = load_scene("cornell_bunny_small");
+    let mut scene = load_test_room();
     scene.settings.sparse.near_field = near_field;
     if let Some(r) = rsm_resolution {
         scene.settings.rsm_resolution = r;
@@ -478,7 +478,7 @@ fn brute_force_takes_every_val_past_the_cpu_loop_limit() {
 
 fn brute_force_matches_twin(rsm_resolution: Option<u32>, (w, h): (u32, u32)) {
     let gpu = gpu();
-    let mut scene = load_scene("cornell_bunny_small");
+    let mut scene = load_test_room();
     if let Some(r) = rsm_resolution {
         scene.settings.rsm_resolution = r;
     }
@@ -507,7 +507,7 @@ fn brute_force_matches_twin(rsm_resolution: Option<u32>, (w, h): (u32, u32)) {
 #[test]
 fn rsm_vals_match_cpu_twin() {
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let scene = load_test_room();
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
     let gpu_vals = renderer.read_vals(&gpu).unwrap();
@@ -558,7 +558,7 @@ fn unmatched_vals(expected: &[Val], actual: &[Val]) -> usize {
 #[test]
 fn traced_rsm_vals_are_the_rasterised_ones() {
     let gpu = gpu();
-    let scene = load_scene("cornell_bunny_small");
+    let scene = load_test_room();
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.render(&gpu, Method::Sparse, 8, 8).unwrap();
     let gpu_vals = renderer.read_vals(&gpu).unwrap();
@@ -583,7 +583,7 @@ fn traced_rsm_vals_are_the_rasterised_ones() {
 #[test]
 fn the_estimate_of_coarse_vals_sums_over_the_references() {
     let gpu = gpu();
-    let fine = load_scene("cornell_bunny_small");
+    let fine = load_test_room();
     assert_eq!(fine.settings.reference_rsm_resolution, 32, "the fixture pins its RSM");
     let mut coarse = fine.clone();
     coarse.settings.rsm_resolution = 8;
@@ -653,7 +653,7 @@ fn extreme_materials_render_finite_and_non_negative() {
 #[test]
 fn occlusion_matches_cpu_twin() {
     let dir = super::fixture("scenes");
-    let base = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let base = super::test_room_text();
     for (rule, combine) in [("sum", Combine::Sum), ("product", Combine::Product)] {
         let json = base
             .replace("\"visibility\": \"off\"", &format!("\"visibility\": \"disks\", \"occlusion_rule\": \"{rule}\""));
@@ -735,7 +735,7 @@ fn exact_visibility_matches_cpu_twin_on_cornell_bunny() {
 fn cpu_exact_reference_matches_gpu_exact() {
     use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
     let gpu = gpu();
-    let mut renderer = Renderer::new(&gpu, &load_scene("cornell_bunny_small")).unwrap();
+    let mut renderer = Renderer::new(&gpu, &load_test_room()).unwrap();
     let (w, h) = (20, 16);
     let options = |device| ExactOptions { device, val_stride: 1, samples: None, spp: 1 };
     let on_gpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Gpu)).unwrap();
@@ -852,7 +852,7 @@ fn traced_pixel_centres_match_the_visibility_buffer() {
     use relume::twin::bvh::TraceBvh;
     use relume::twin::exact_cpu::CameraRays;
     let gpu = gpu();
-    let mut renderer = Renderer::new(&gpu, &load_scene("cornell_bunny_small")).unwrap();
+    let mut renderer = Renderer::new(&gpu, &load_test_room()).unwrap();
     let (w, h) = (48, 40);
     renderer.render(&gpu, Method::Sparse, w, h).unwrap();
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
@@ -1049,7 +1049,7 @@ fn adaptive_points_match_cpu_twins() {
     use twin::adaptive::{HYSTERESIS, candidate_score, scored_light, select};
     let gpu = gpu();
     let dir = super::fixture("scenes");
-    let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let text = super::test_room_text();
     let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
     json["settings"]["tuning"]["sparse"] = serde_json::json!({"adaptive": 0.5});
     let scene = relume::scene::Scene::from_json_str(&json.to_string(), &dir).unwrap();
@@ -1130,7 +1130,7 @@ fn adaptive_points_match_cpu_twins() {
 fn interpolation_takes_the_scene_neighbour_count() {
     let gpu = gpu();
     let dir = super::fixture("scenes");
-    let text = std::fs::read_to_string(dir.join("cornell_bunny_small.json")).unwrap();
+    let text = super::test_room_text();
     let mut images = Vec::new();
     for k in [4, 16] {
         let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
