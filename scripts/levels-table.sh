@@ -56,7 +56,8 @@ done
     echo "accurate and at least 1.2x faster: on that scene the level is the wrong choice. A level"
     echo "**misses** its target when its error is over the level's (fast 0.20, balanced 0.10, accurate"
     echo "0.05; \`Quality::target_rel_rmse\`); the bench then suggests for it the fastest measured"
-    echo "configuration that meets the target, and for each other dominated level its most accurate"
+    echo "configuration that meets the target (fast in at most a quarter of accurate's time, balanced"
+    echo "in no more than accurate's), and for each other dominated level its most accurate"
     echo "dominating one: that is the scene file's \`settings.levels\` entry the fixtures carry. Each"
     echo "scene's plot shows the levels, the candidates, their Pareto front and the estimator's curve."
     echo

@@ -257,7 +257,8 @@ fn read_json(path: &Path) -> Result<serde_json::Value, BenchError> {
 
 /// The scene file's `settings.levels` the measurement suggests: for each level that misses its
 /// target error ([`Quality::target_rel_rmse`]), the fastest measured configuration (another
-/// level or a candidate) that meets it; for each other level that a measured configuration
+/// level or a candidate) that meets it within the level's time bound
+/// ([`Quality::time_share_of_accurate`] of accurate's measured time); for each other level that a measured configuration
 /// dominates, the most accurate of those configurations. Each is written as the parameters
 /// where it differs from the level as measured (over that level's entry in `existing`, the
 /// scene file's `settings.levels`, whose other parameters it keeps; the RSM only on a scene
@@ -284,11 +285,19 @@ pub fn suggest_levels(
         .map(|r| (r.level.name(), r.knobs, technique(r), r.rel_rmse_vs_exact, r.ms))
         .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, (c.method, c.draws), c.rel_rmse_vs_exact, c.ms)))
         .collect();
+    let accurate_ms = levels.iter().find(|r| r.level == Quality::Accurate).map(|r| r.ms);
     let mut out = existing.as_object().cloned().unwrap_or_default();
     for row in levels {
         let target = row.level.target_rel_rmse().filter(|&t| row.rel_rmse_vs_exact > t);
+        let max_ms = match (row.level.time_share_of_accurate(), accurate_ms) {
+            (Some(share), Some(ms)) => share * ms,
+            _ => f64::INFINITY,
+        };
         let meeting = target.and_then(|t| {
-            measured.iter().filter(|m| m.0 != row.level.name() && m.3 <= t).min_by(|a, b| a.4.total_cmp(&b.4))
+            measured
+                .iter()
+                .filter(|m| m.0 != row.level.name() && m.3 <= t && m.4 <= max_ms)
+                .min_by(|a, b| a.4.total_cmp(&b.4))
         });
         let best = meeting.or_else(|| {
             measured

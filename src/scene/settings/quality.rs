@@ -88,6 +88,17 @@ impl Quality {
             Quality::Reference => None,
         }
     }
+
+    /// The most of `accurate`'s frame time the level may take on a scene: fast a quarter,
+    /// balanced no more than accurate (none for accurate and the reference). A configuration
+    /// that meets the level's [`Self::target_rel_rmse`] only slower than this is not the level.
+    pub fn time_share_of_accurate(self) -> Option<f64> {
+        match self {
+            Quality::Fast => Some(0.25),
+            Quality::Balanced => Some(1.0),
+            Quality::Accurate | Quality::Reference => None,
+        }
+    }
 }
 
 /// How the indirect light of a resolved scene is asked to be computed.
