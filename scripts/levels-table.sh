@@ -61,23 +61,17 @@ done
     echo "dominating one: that is the scene file's \`settings.levels\` entry the fixtures carry. Each"
     echo "scene's plot shows the levels, the candidates, their Pareto front and the estimator's curve."
     echo
-    # A scene's table from a run made before a candidate existed says so.
-    older=$(for n in $scenes; do
-        grep -q "sparse.subdivision=16" "$out/$n/levels.md" || printf '`%s` ' "$n"
-    done)
-    if [ -n "$older" ]; then
-        echo "Measured before the coarse-subdivision candidate of the brute force existed (their"
-        echo "tables lack it): $older"
-        echo
-    fi
-    untargeted=$(for n in $scenes; do
-        grep -q "its target" "$out/$n/levels.md" || printf '`%s` ' "$n"
-    done)
-    if [ -n "$untargeted" ]; then
-        echo "Measured before the bench marked each level against its target error (their lists"
-        echo "say only what dominates a level, their suggestions only for dominated levels): $untargeted"
-        echo
-    fi
+    # The scenes whose tables come from a run made before the bench wrote `marker`, named after
+    # `text` (nothing when every table has it).
+    measured_before() {
+        local marker="$1" text="$2" missing
+        missing=$(for n in $scenes; do grep -q "$marker" "$out/$n/levels.md" || printf '`%s` ' "$n"; done)
+        [ -z "$missing" ] || printf '%s: %s\n\n' "$text" "$missing"
+    }
+    measured_before "sparse.subdivision=16" "Measured before the coarse-subdivision candidate of the brute force existed (their
+tables lack it)"
+    measured_before "its target" "Measured before the bench marked each level against its target error (their lists
+say only what dominates a level, their suggestions only for dominated levels)"
     for n in $scenes; do
         echo "## \`fixtures/scenes/$n.json\`"
         echo
