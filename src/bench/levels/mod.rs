@@ -439,12 +439,16 @@ fn measure_candidates(
     // clusters (the level's technique where it dominates), at the level's subdivision and at
     // the coarsest (unless the scene file's `tuning` sets it): the brute force shades pixels,
     // so the subdivision only splits the triangles its maps draw, which costs time everywhere
-    // and buys accuracy where the maps' paraboloid projection needs small triangles.
+    // and buys accuracy where the maps' paraboloid projection needs small triangles. Not at the
+    // level's own subdivision where the level already is that brute force: its row is that
+    // measurement, and a second one differing by the timing's noise could dominate it.
     let tuned = file["settings"]["tuning"]["sparse"].get("subdivision").is_some();
-    for (level, knobs) in knobs.iter().filter(|(l, _)| matches!(l, Quality::Balanced | Quality::Accurate)) {
+    for row in levels.iter().filter(|r| matches!(r.level, Quality::Balanced | Quality::Accurate)) {
+        let (level, knobs) = (&row.level, &row.knobs);
         let coarsest = SUBDIVISION_RANGE.1;
         let coarse = (!tuned && knobs.subdivision != coarsest).then_some(coarsest);
-        for subdivision in std::iter::once(None).chain(coarse.map(Some)) {
+        let own = (row.resolved.method != crate::scene::Technique::BruteForceClusters).then_some(None);
+        for subdivision in own.into_iter().chain(coarse.map(Some)) {
             let mut file = file.clone();
             let mut name = format!("{} + technique=brute_force_clusters", level.name());
             if let Some(s) = subdivision {
