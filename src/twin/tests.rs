@@ -28,15 +28,17 @@ fn disc_form_factor_is_exact_on_axis() {
 }
 
 /// The differential passes' form factor without a square root is `val_geometry`'s `weight *
-/// cos_receiver` to rounding (of the largest form factor at that distance), for VALs around a receiver facing every way, and 0 exactly where
-/// that is (behind the receiver, facing away, coincident).
+/// cos_receiver` to rounding (of the largest form factor at that distance), for VALs around a
+/// receiver facing every way, and 0 exactly where that is (behind the receiver, facing away,
+/// coincident).
 #[test]
 fn form_factor_without_a_square_root_is_val_geometrys() {
     let (x, n_x) = (Vec3::new(0.2, -0.1, 0.3), Vec3::new(0.3, 0.9, -0.2).normalize());
     let (mut lit, mut unlit) = (0, 0);
-    for (i, p) in fibonacci_sphere(500).into_iter().enumerate() {
-        let position = x + p * (0.01 + 0.5 * (i % 7) as f32);
-        let normal = fibonacci_sphere(500)[(i * 37) % 500];
+    let directions = fibonacci_sphere(500);
+    for (i, p) in directions.iter().enumerate() {
+        let position = x + *p * (0.01 + 0.5 * (i % 7) as f32);
+        let normal = directions[(i * 37) % 500];
         let area = [0.0, 1e-4, 0.02, -0.01][i % 4];
         let g = val_geometry(x, n_x, position, normal, area);
         let (want, got) = (g.weight * g.cos_receiver, val_form_factor(x, n_x, position, normal, area));

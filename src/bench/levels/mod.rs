@@ -130,10 +130,7 @@ impl CandidateRow {
     /// printed as it goes.
     fn of(name: String, scene: &Scene, method: Method, m: &Measured) -> CandidateRow {
         eprintln!("{name}: rel RMSE {:.4}, {:.1} ms", m.error, m.ms);
-        let draws = match method {
-            Method::Estimator(draws) => Some(draws),
-            Method::Sparse | Method::BruteForceClusters => None,
-        };
+        let draws = method.draws();
         CandidateRow {
             name,
             knobs: Knobs::of(scene),
@@ -258,8 +255,9 @@ fn read_json(path: &Path) -> Result<serde_json::Value, BenchError> {
 /// The scene file's `settings.levels` the measurement suggests: for each level that misses its
 /// target error ([`Quality::target_rel_rmse`]), the fastest measured configuration (another
 /// level or a candidate) that meets it within the level's time bound
-/// ([`Quality::time_share_of_accurate`] of accurate's measured time); for each other level that a measured configuration
-/// dominates, the most accurate of those configurations. Each is written as the parameters
+/// ([`Quality::time_share_of_accurate`] of accurate's measured time); for each other level
+/// that a measured configuration dominates, the most accurate of those configurations. Each
+/// is written as the parameters
 /// where it differs from the level as measured (over that level's entry in `existing`, the
 /// scene file's `settings.levels`, whose other parameters it keeps; the RSM only on a scene
 /// with a spot light), with what was measured (`at`: the size and adapter). A level that meets
@@ -275,10 +273,9 @@ pub fn suggest_levels(
     // The GPU estimator's rows carry their draws (the level becomes the estimator), the brute
     // force's its method (the level becomes it, with the row's VALs).
     type Technique = (RenderMethod, Option<u32>);
-    let technique = |r: &LevelRow| match r.resolved.method {
-        crate::scene::Technique::Estimator => (RenderMethod::Estimator, r.resolved.estimator_draws),
-        crate::scene::Technique::BruteForceClusters => (RenderMethod::BruteForceClusters, None),
-        _ => (RenderMethod::Sparse, None),
+    let technique = |r: &LevelRow| {
+        let method = Method::of(&r.resolved);
+        (method.render_method(), method.draws())
     };
     let measured: Vec<(&str, Knobs, Technique, f64, f64)> = levels
         .iter()
@@ -567,6 +564,25 @@ enum Method {
 }
 
 impl Method {
+    /// What a level resolved to on a scene is measured as: the estimator where the scene's
+    /// measured level names it with its draws, the brute force through the clusters' maps
+    /// where it names that, else the sparse method.
+    fn of(resolved: &ResolvedConfig) -> Method {
+        match (resolved.method, resolved.estimator_draws) {
+            (crate::scene::Technique::Estimator, Some(draws)) => Method::Estimator(draws),
+            (crate::scene::Technique::BruteForceClusters, _) => Method::BruteForceClusters,
+            _ => Method::Sparse,
+        }
+    }
+
+    /// The estimator's draws per pixel (none for the other methods).
+    fn draws(self) -> Option<u32> {
+        match self {
+            Method::Estimator(draws) => Some(draws),
+            Method::Sparse | Method::BruteForceClusters => None,
+        }
+    }
+
     fn render_method(self) -> RenderMethod {
         match self {
             Method::Sparse => RenderMethod::Sparse,
@@ -609,11 +625,7 @@ fn level_row(
     reference: &ExactReference,
     curve: Option<&EqualErrorCurve>,
 ) -> Result<LevelRow, BenchError> {
-    let method = match (scene.resolved.method, scene.resolved.estimator_draws) {
-        (crate::scene::Technique::Estimator, Some(draws)) => Method::Estimator(draws),
-        (crate::scene::Technique::BruteForceClusters, _) => Method::BruteForceClusters,
-        _ => Method::Sparse,
-    };
+    let method = Method::of(&scene.resolved);
     let Measured { frame, error, without_worst, ms, renderer } = measure(gpu, scene, size, reference, method)?;
     let estimate = Estimator::new().estimate(gpu, &renderer, &frame, &EstimateOptions::default())?;
     let at_equal_error = curve.and_then(|c| equal_error::at_error(&c.points, error, ms));

@@ -79,7 +79,8 @@ impl Quality {
     /// The indirect error the level aims at: rel RMSE against the converged exact reference,
     /// at 256 pixels wide (fast 0.20, balanced 0.10, accurate 0.05; none for the reference
     /// itself). `relume bench --levels --candidates` suggests, for a level that misses it on a
-    /// scene, the fastest measured configuration that meets it (docs/measurements/levels.md).
+    /// scene, the fastest measured configuration that meets it within the level's
+    /// [`Self::time_share_of_accurate`] (docs/measurements/levels.md).
     pub fn target_rel_rmse(self) -> Option<f64> {
         match self {
             Quality::Fast => Some(0.20),
