@@ -91,6 +91,9 @@ pub struct ExactOptions {
     pub samples: Option<u32>,
     /// Jittered samples per pixel (CPU only beyond 1).
     pub spp: u32,
+    /// Shadow rays ignore blockers nearer the receiver than this (m; CPU only beyond 0):
+    /// 0 for every reference, an analysis otherwise (`twin::exact_cpu::ExactScene::blockers_from`).
+    pub blockers_from: f32,
 }
 
 /// Seed of the CPU reference's random numbers (VAL draws, sub-pixel positions): fixed, so a
@@ -115,7 +118,10 @@ impl ExactOptions {
                 return Err("--reference-samples: replaces --val-stride; give one of them".into());
             }
         }
-        if self.device == ReferenceDevice::Gpu && (self.samples.is_some() || self.spp > 1) {
+        if !(self.blockers_from >= 0.0 && self.blockers_from.is_finite()) {
+            return Err(format!("blockers_from: must be finite and >= 0, got {}", self.blockers_from));
+        }
+        if self.device == ReferenceDevice::Gpu && (self.samples.is_some() || self.spp > 1 || self.blockers_from > 0.0) {
             return Err("--reference-device: gpu computes every VAL (or a stride) at the pixel centre; \
                         --reference-samples and --spp need cpu"
                 .into());
@@ -126,7 +132,11 @@ impl ExactOptions {
     /// The device `Auto` stands for on `gpu`.
     pub fn device_on(&self, gpu: &Gpu) -> ReferenceDevice {
         match self.device {
-            ReferenceDevice::Auto if gpu.is_cpu() || self.samples.is_some() || self.spp > 1 => ReferenceDevice::Cpu,
+            ReferenceDevice::Auto
+                if gpu.is_cpu() || self.samples.is_some() || self.spp > 1 || self.blockers_from > 0.0 =>
+            {
+                ReferenceDevice::Cpu
+            }
             ReferenceDevice::Auto => ReferenceDevice::Gpu,
             d => d,
         }
@@ -254,7 +264,8 @@ pub fn exact_reference_seeded(
     if let Some(bounce) = renderer.second_bounce() {
         vals.extend(second_bounce_exact(flat, bounce, &vals, &bvh));
     }
-    let scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy() };
+    let scene =
+        cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy(), blockers_from: options.blockers_from };
     let out = cpu::render(&scene, &receivers, width, height, sampling);
     frame.indirect = out.image;
     frame.timings.stages.push((cpu::STAGE.to_owned(), start.elapsed().as_secs_f64() * 1e3));

@@ -114,8 +114,13 @@ pub struct ExactArgs {
 impl ExactArgs {
     /// The checked options with every `val_stride`-th VAL; `Err` names the flag.
     pub fn options(&self, val_stride: u32) -> anyhow::Result<ExactOptions> {
-        let options =
-            ExactOptions { device: self.reference_device, val_stride, samples: self.reference_samples, spp: self.spp };
+        let options = ExactOptions {
+            device: self.reference_device,
+            val_stride,
+            samples: self.reference_samples,
+            spp: self.spp,
+            blockers_from: 0.0,
+        };
         options.check().map_err(anyhow::Error::msg)?;
         Ok(options)
     }

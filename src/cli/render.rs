@@ -87,7 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // A direct-only image needs no reference.
         Method::Exact if needs.indirect => {
             let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
-            let options = ExactOptions { device, val_stride, samples: None, spp: 1 };
+            let options = ExactOptions { device, val_stride, samples: None, spp: 1, blockers_from: 0.0 };
             exact_reference(&gpu, &mut renderer, w, h, &options)?.frame
         }
         method => renderer.render_components(&gpu, method, w, h, needs)?,

@@ -239,7 +239,7 @@ impl Estimator {
             }
         };
         let receivers: Vec<Option<Receiver>> = picked.iter().map(|&i| hits[i].and_then(receiver)).collect();
-        let scene = cpu::ExactScene { bvh, vals, glossy: renderer.glossy() };
+        let scene = cpu::ExactScene { bvh, vals, glossy: renderer.glossy(), blockers_from: 0.0 };
         let sampling = ValSampling::Importance { samples: options.samples, seed: options.seed };
         let n = picked.len() as u32;
         let reference = cpu::render(&scene, &Receivers::Hits(&receivers), n, 1, sampling);

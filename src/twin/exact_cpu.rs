@@ -162,6 +162,10 @@ pub struct ExactScene<'a> {
     pub bvh: &'a TraceBvh,
     pub vals: &'a [Val],
     pub glossy: bool,
+    /// Shadow rays ignore blockers nearer the receiver than this (m): 0 in every reference. An
+    /// analysis of which occluders an approximate visibility misses (`examples/exact_split.rs`):
+    /// what the image loses where only blockers this close to the receiver are left out.
+    pub blockers_from: f32,
 }
 
 /// Frames of at least this many pixels choose their shadow-ray traversal by timing both on
@@ -199,6 +203,7 @@ pub fn render_with(
         receivers,
         width,
         sampling,
+        blockers_from: scene.blockers_from,
     };
     let traversal = traversal.unwrap_or_else(|| frame.pilot(pixels));
     let results: Vec<(Pixel, u64)> =
@@ -252,6 +257,7 @@ struct Frame<'a> {
     receivers: &'a Receivers<'a>,
     width: u32,
     sampling: ValSampling,
+    blockers_from: f32,
 }
 
 impl Frame<'_> {
@@ -312,7 +318,7 @@ impl Frame<'_> {
                         ws.targets.push(target);
                     }
                 }
-                let l = ws.visible_sum(self.bvh, origin, traversal, rays);
+                let l = ws.visible_sum(self.bvh, origin, traversal, self.blockers_from, rays);
                 Halves { a: l, b: l, n: (1, 0) }
             }
             ValSampling::Systematic { samples, seed } => {
@@ -345,7 +351,7 @@ impl Frame<'_> {
                     sum = after;
                     passed = thresholds_below(sum, step, xi, samples);
                 }
-                let l = ws.visible_sum(self.bvh, origin, traversal, rays);
+                let l = ws.visible_sum(self.bvh, origin, traversal, self.blockers_from, rays);
                 Halves { a: l, b: l, n: (1, 0) }
             }
             ValSampling::Importance { samples, seed } => {
@@ -384,7 +390,7 @@ impl Frame<'_> {
                         ws.terms.push(f);
                         ws.targets.push(self.targets[j as usize]);
                     }
-                    ws.visible_sum(self.bvh, origin, traversal, rays) / draws as f32
+                    ws.visible_sum(self.bvh, origin, traversal, self.blockers_from, rays) / draws as f32
                 };
                 let a = half(na, ws);
                 let b = half(nb, ws);
@@ -442,10 +448,27 @@ struct Workspace {
 }
 
 impl Workspace {
-    /// The sum of `terms` whose shadow ray from `origin` to the matching `targets` is clear.
-    fn visible_sum(&mut self, bvh: &TraceBvh, origin: Vec3, traversal: ShadowTraversal, rays: &mut u64) -> Vec3 {
+    /// The sum of `terms` whose shadow ray from `origin` to the matching `targets` is clear
+    /// beyond `blockers_from` (m) of the origin (0: the whole segment).
+    fn visible_sum(
+        &mut self,
+        bvh: &TraceBvh,
+        origin: Vec3,
+        traversal: ShadowTraversal,
+        blockers_from: f32,
+        rays: &mut u64,
+    ) -> Vec3 {
         *rays += self.targets.len() as u64;
-        bvh.shadow_rays(origin, &self.targets, traversal, &mut self.blocked);
+        if blockers_from > 0.0 {
+            self.blocked.clear();
+            self.blocked.extend(self.targets.iter().map(|&t| {
+                let d = t - origin;
+                let length = d.length();
+                length > blockers_from && bvh.segment_blocked(origin + d * (blockers_from / length), t)
+            }));
+        } else {
+            bvh.shadow_rays(origin, &self.targets, traversal, &mut self.blocked);
+        }
         self.terms.iter().zip(&self.blocked).filter(|(_, b)| !**b).map(|(f, _)| *f).sum()
     }
 }
@@ -546,6 +569,32 @@ mod tests {
             .collect()
     }
 
+    /// `blockers_from`: the room's occluder lies 0.5 m or more along every floor receiver's
+    /// shadow rays, so ignoring blockers within 0.3 m changes nothing (to float rounding),
+    /// within 3 m (past the occluder on every ray: at most 1.9 m along the longest) leaves every
+    /// receiver unoccluded, the brute force over every VAL; and the occluder must shadow some
+    /// receivers at 0 for either to mean anything.
+    #[test]
+    fn blockers_from_ignores_only_the_blockers_that_near() {
+        let room = room();
+        let hits = floor_receivers();
+        let image = |blockers_from| {
+            let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true, blockers_from };
+            render(&scene, &Receivers::Hits(&hits), hits.len() as u32, 1, ValSampling::All).image
+        };
+        let (every, near_left_out, none) = (image(0.0), image(0.3), image(3.0));
+        let mut shadowed = 0;
+        for (i, r) in hits.iter().enumerate() {
+            let r = r.unwrap();
+            let unoccluded = shade_brute_force(r.position, r.normal, &r.surface, EYE, &room.vals, true);
+            let (a, b, c) = (every.rgb(i), near_left_out.rgb(i), none.rgb(i));
+            assert!((a - b).abs().max_element() <= 1e-5 * a.max_element(), "receiver {i}: {a} vs {b}");
+            assert!((c - unoccluded).abs().max_element() <= 1e-5 * unoccluded.max_element(), "receiver {i}: {c}");
+            shadowed += usize::from(a.element_sum() < 0.9 * unoccluded.element_sum());
+        }
+        assert!(shadowed >= 2, "the occluder must shadow some receivers, shadowed {shadowed}");
+    }
+
     /// Every VAL at the centre: the brute-force twin over the VALs the GPU layout's traversal
     /// (`Bvh::occluded`, twin of `bvh.wgsl`) finds visible, to float rounding (1e-5 relative),
     /// and noise-free; the occluder must darken some receivers for the test to mean anything.
@@ -553,7 +602,7 @@ mod tests {
     fn every_val_equals_brute_force_over_visible_vals() {
         let room = room();
         let hits = floor_receivers();
-        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true };
+        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true, blockers_from: 0.0 };
         let out = render(&scene, &Receivers::Hits(&hits), hits.len() as u32, 1, ValSampling::All);
         let mut shadowed = 0;
         for (i, r) in hits.iter().enumerate() {
@@ -588,7 +637,7 @@ mod tests {
         let mut room = room();
         room.vals = vals_above(4, 4000, 0.6, 1.0..1.1, 1e-4);
         let hits = floor_receivers();
-        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true };
+        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true, blockers_from: 0.0 };
         let n = hits.len() as u32;
         for sampling in [ValSampling::All, ValSampling::Stride(3), ValSampling::Importance { samples: 64, seed: 2 }] {
             let render = |t| render_with(&scene, &Receivers::Hits(&hits), n, 1, sampling, Some(t));
@@ -613,7 +662,7 @@ mod tests {
     fn importance_estimate_mean_over_seeds_converges_to_the_full_sum() {
         let room = room();
         let hits = floor_receivers();
-        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true };
+        let scene = ExactScene { bvh: &room.trace, vals: &room.vals, glossy: true, blockers_from: 0.0 };
         let n = hits.len() as u32;
         let full = render(&scene, &Receivers::Hits(&hits), n, 1, ValSampling::All).image;
         let seeds = 200;
@@ -705,7 +754,7 @@ mod tests {
             let r = Receiver::sided(Vec3::ZERO, bent, Vec3::Y, matte, eye);
             let brute =
                 crate::twin::shade_brute_force_sided(r.position, r.normal, r.geometric, &matte, eye, &vals, false);
-            let scene = ExactScene { bvh: &trace, vals: &vals, glossy: false };
+            let scene = ExactScene { bvh: &trace, vals: &vals, glossy: false, blockers_from: 0.0 };
             let exact = render(&scene, &Receivers::Hits(&[Some(r)]), 1, 1, ValSampling::All).image.rgb(0);
             for (name, got) in [("brute force", brute), ("exact", exact)] {
                 let ratio = got.x as f64 / want;
@@ -734,7 +783,7 @@ mod tests {
             let n = (p1 - p0).cross(p2 - p0).normalize();
             Receiver::new(crate::twin::barycentric(b, p0, p1, p2), n, SURFACE, EYE)
         };
-        let no_vals = ExactScene { bvh: &room.trace, vals: &[], glossy: true };
+        let no_vals = ExactScene { bvh: &room.trace, vals: &[], glossy: true, blockers_from: 0.0 };
         for (x, y) in [(3u32, 30u32), (16, 16), (28, 25)] {
             let (o, d) = camera.ray(x as f32 + 0.5, y as f32 + 0.5);
             let sampling = PixelSampling { spp: 1, seed: 0 };

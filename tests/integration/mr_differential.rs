@@ -264,7 +264,7 @@ fn mr_differential_plate_darkens_as_exact_predicts() {
         receivers.iter().map(|r| Some(exact_cpu::Receiver::new(r.position, r.normal, surface, eye))).collect();
     let n = receivers.len() as u32;
     let render = |bvh: &TraceBvh| {
-        let scene = ExactScene { bvh, vals: &vals, glossy: false };
+        let scene = ExactScene { bvh, vals: &vals, glossy: false, blockers_from: 0.0 };
         exact_cpu::render(&scene, &Receivers::Hits(&hits), n, 1, ValSampling::All).image
     };
     let (camera, reference) = (render(&without), render(&with));

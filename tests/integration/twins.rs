@@ -737,7 +737,7 @@ fn cpu_exact_reference_matches_gpu_exact() {
     let gpu = gpu();
     let mut renderer = Renderer::new(&gpu, &load_test_room()).unwrap();
     let (w, h) = (20, 16);
-    let options = |device| ExactOptions { device, val_stride: 1, samples: None, spp: 1 };
+    let options = |device| ExactOptions { device, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0 };
     let on_gpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Gpu)).unwrap();
     let on_cpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Cpu)).unwrap();
     assert_eq!((on_gpu.device, on_cpu.device), (ReferenceDevice::Gpu, ReferenceDevice::Cpu));
@@ -813,7 +813,7 @@ fn estimator_matches_cpu_twin(scene: &str, (w, h): (u32, u32), draws: &[u32], ex
         let receivers: Vec<_> =
             hits.iter().map(|h| h.map(|h| flat.receiver_at(h.triangle, h.barycentrics, eye))).collect();
         let bvh = flat.trace_bvh();
-        let cpu_scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy() };
+        let cpu_scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy(), blockers_from: 0.0 };
         let sampling = ValSampling::Systematic { samples, seed: 7 };
         let on_cpu = cpu::render(&cpu_scene, &Receivers::Hits(&receivers), w, h, sampling).image;
         let scale = max_of((0..on_cpu.pixels.len()).map(|i| on_cpu.rgb(i)));
