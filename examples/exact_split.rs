@@ -28,20 +28,18 @@ fn list<T: std::str::FromStr>(args: &[String], flag: &str) -> Vec<T> {
         .unwrap_or_default()
 }
 
-/// The share of the squared error (summed over RGB) in the worst 1 % of pixels, and the mean
-/// ratio (the image's summed luminance over the reference's).
+/// The share of the squared error (summed over RGB) in the worst 1 % of covered pixels, and the
+/// mean ratio as `relume compare` reports it (summed luminance over the reference's).
 fn worst_share_and_ratio(test: &LinearImage, reference: &LinearImage) -> (f64, f64) {
-    let mut errors: Vec<f64> = test
-        .pixels
-        .iter()
-        .zip(&reference.pixels)
-        .map(|(t, r)| (0..3).map(|c| f64::from(t[c] - r[c]).powi(2)).sum())
+    let mut errors: Vec<f64> = (0..reference.pixels.len())
+        .filter(|&i| reference.covered(i))
+        .map(|i| f64::from((test.rgb(i) - reference.rgb(i)).length_squared()))
         .collect();
     errors.sort_by(|a, b| b.total_cmp(a));
     let total: f64 = errors.iter().sum();
     let worst: f64 = errors[..errors.len().div_ceil(100)].iter().sum();
-    let sum = |im: &LinearImage| im.pixels.iter().map(|p| f64::from(p[0] + p[1] + p[2])).sum::<f64>();
-    (worst / total.max(f64::MIN_POSITIVE), sum(test) / sum(reference))
+    let (sum, reference_sum) = (test.luminance_sum_and_peak().0, reference.luminance_sum_and_peak().0);
+    (worst / total.max(f64::MIN_POSITIVE), sum / reference_sum)
 }
 
 fn main() {

@@ -122,8 +122,8 @@ impl ExactOptions {
             return Err(format!("blockers_from: must be finite and >= 0, got {}", self.blockers_from));
         }
         if self.device == ReferenceDevice::Gpu && (self.samples.is_some() || self.spp > 1 || self.blockers_from > 0.0) {
-            return Err("--reference-device: gpu computes every VAL (or a stride) at the pixel centre; \
-                        --reference-samples and --spp need cpu"
+            return Err("--reference-device: gpu computes every VAL (or a stride) at the pixel centre, past every \
+                        blocker; --reference-samples, --spp and blockers_from need cpu"
                 .into());
         }
         Ok(())
