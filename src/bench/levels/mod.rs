@@ -257,12 +257,11 @@ fn read_json(path: &Path) -> Result<serde_json::Value, BenchError> {
 /// level or a candidate) that meets it within the level's time bound
 /// ([`Quality::time_share_of_accurate`] of accurate's measured time); for each other level
 /// that a measured configuration dominates, the most accurate of those configurations. Each
-/// is written as the parameters
-/// where it differs from the level as measured (over that level's entry in `existing`, the
-/// scene file's `settings.levels`, whose other parameters it keeps; the RSM only on a scene
-/// with a spot light), with what was measured (`at`: the size and adapter). A level that meets
-/// its target undominated, or that misses it with nothing measured meeting it nor dominating
-/// it, keeps its entry in `existing`.
+/// is written as the parameters where it differs from the level as measured (over that
+/// level's entry in `existing`, the scene file's `settings.levels`, whose other parameters it
+/// keeps; the RSM only on a scene with a spot light), with what was measured (`at`: the size
+/// and adapter). A level that meets its target undominated, or that misses it with nothing
+/// measured meeting it nor dominating it, keeps its entry in `existing`.
 pub fn suggest_levels(
     levels: &[LevelRow],
     candidates: &[CandidateRow],
