@@ -255,8 +255,10 @@ fn read_json(path: &Path) -> Result<serde_json::Value, BenchError> {
 /// The scene file's `settings.levels` the measurement suggests: for each level that misses its
 /// target error ([`Quality::target_rel_rmse`]), the fastest measured configuration (another
 /// level or a candidate) that meets it within the level's time bound
-/// ([`Quality::time_share_of_accurate`] of accurate's measured time); for each other level
-/// that a measured configuration dominates, the most accurate of those configurations. Each
+/// ([`Quality::time_share_of_accurate`] of accurate's time as suggested); `accurate`, which has
+/// no time bound, where nothing meets its target, the most accurate measured configuration
+/// more accurate than its own; for each other level that a measured configuration dominates,
+/// the most accurate of those configurations. Each
 /// is written as the parameters where it differs from the level as measured (over that
 /// level's entry in `existing`, the scene file's `settings.levels`, whose other parameters it
 /// keeps; the RSM only on a scene with a spot light), with what was measured (`at`: the size
@@ -281,26 +283,43 @@ pub fn suggest_levels(
         .map(|r| (r.level.name(), r.knobs, technique(r), r.rel_rmse_vs_exact, r.ms))
         .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, (c.method, c.draws), c.rel_rmse_vs_exact, c.ms)))
         .collect();
-    let accurate_ms = levels.iter().find(|r| r.level == Quality::Accurate).map(|r| r.ms);
-    let mut out = existing.as_object().cloned().unwrap_or_default();
-    for row in levels {
+    // What each level becomes: the fastest meeting its target within its time bound; else,
+    // for `accurate`, which has no bound, the most accurate measured configuration where it is
+    // more accurate than the level's own; else the most accurate dominating one.
+    let choose = |row: &LevelRow, max_ms: f64| {
         let target = row.level.target_rel_rmse().filter(|&t| row.rel_rmse_vs_exact > t);
-        let max_ms = match (row.level.time_share_of_accurate(), accurate_ms) {
-            (Some(share), Some(ms)) => share * ms,
-            _ => f64::INFINITY,
-        };
         let meeting = target.and_then(|t| {
             measured
                 .iter()
                 .filter(|m| m.0 != row.level.name() && m.3 <= t && m.4 <= max_ms)
                 .min_by(|a, b| a.4.total_cmp(&b.4))
         });
-        let best = meeting.or_else(|| {
+        let closer = (target.is_some() && row.level == Quality::Accurate)
+            .then(|| {
+                measured
+                    .iter()
+                    .filter(|m| m.0 != row.level.name() && m.3 < row.rel_rmse_vs_exact)
+                    .min_by(|a, b| a.3.total_cmp(&b.3))
+            })
+            .flatten();
+        let best = meeting.or(closer).or_else(|| {
             measured
                 .iter()
                 .filter(|(name, ..)| row.dominated_by.iter().any(|d| d == name))
                 .min_by(|a, b| a.3.total_cmp(&b.3))
         });
+        (target, meeting, best)
+    };
+    // The other levels' time bounds are shares of accurate's time as it will run.
+    let accurate_ms =
+        levels.iter().find(|r| r.level == Quality::Accurate).map(|r| choose(r, f64::INFINITY).2.map_or(r.ms, |m| m.4));
+    let mut out = existing.as_object().cloned().unwrap_or_default();
+    for row in levels {
+        let max_ms = match (row.level.time_share_of_accurate(), accurate_ms) {
+            (Some(share), Some(ms)) => share * ms,
+            _ => f64::INFINITY,
+        };
+        let (target, meeting, best) = choose(row, max_ms);
         let Some(&(name, knobs, draws, error, ms)) = best else { continue };
         let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
         match draws {
@@ -333,6 +352,9 @@ pub fn suggest_levels(
         let why = match (meeting, target) {
             (Some(_), Some(t)) => {
                 format!("; the fastest measured within the level's target {t:.2}, which its own misses")
+            }
+            (None, Some(t)) if !row.dominated_by.iter().any(|d| d == name) => {
+                format!("; the most accurate measured, none within the level's target {t:.2}")
             }
             _ => String::new(),
         };
@@ -422,8 +444,9 @@ fn measure_candidates(
     let base_dir = path.parent().unwrap_or_else(|| Path::new("."));
     let knobs: Vec<(Quality, Knobs)> = levels.iter().map(|r| (r.level, r.knobs)).collect();
     let mut measured = Vec::new();
-    for (base, name, knobs) in candidate_knobs(&knobs, &file["settings"]["tuning"], finest.resolved.analysis.spot_light)
-    {
+    let spot_light = finest.resolved.analysis.spot_light;
+    let reference_rsm = Knobs::of(finest).rsm_resolution;
+    for (base, name, knobs) in candidate_knobs(&knobs, &file["settings"]["tuning"], spot_light, reference_rsm) {
         let mut file = file.clone();
         file["settings"]["tuning"] = knobs.tuning(file["settings"]["tuning"].take());
         let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(base))
@@ -437,16 +460,26 @@ fn measure_candidates(
     // so the subdivision only splits the triangles its maps draw, which costs time everywhere
     // and buys accuracy where the maps' paraboloid projection needs small triangles. Not at the
     // level's own subdivision where the level already is that brute force: its row is that
-    // measurement, and a second one differing by the timing's noise could dominate it.
+    // measurement, and a second one differing by the timing's noise could dominate it. Also
+    // with the reference's VALs (on a scene with a spot light whose file does not set the RSM),
+    // at the coarsest subdivision the file allows.
     let tuned = file["settings"]["tuning"]["sparse"].get("subdivision").is_some();
+    let rsm_tuned = file["settings"]["tuning"].get("rsm_resolution").is_some();
     for row in levels.iter().filter(|r| matches!(r.level, Quality::Balanced | Quality::Accurate)) {
         let (level, knobs) = (&row.level, &row.knobs);
         let coarsest = SUBDIVISION_RANGE.1;
         let coarse = (!tuned && knobs.subdivision != coarsest).then_some(coarsest);
         let own = (row.resolved.method != crate::scene::Technique::BruteForceClusters).then_some(None);
-        for subdivision in own.into_iter().chain(coarse.map(Some)) {
+        let variants = own.into_iter().map(|s| (s, None)).chain(coarse.map(|s| (Some(s), None)));
+        let finer_vals = (spot_light && !rsm_tuned && knobs.rsm_resolution != reference_rsm)
+            .then_some((if tuned { None } else { Some(coarsest) }, Some(reference_rsm)));
+        for (subdivision, rsm) in variants.chain(finer_vals) {
             let mut file = file.clone();
             let mut name = format!("{} + technique=brute_force_clusters", level.name());
+            if let Some(r) = rsm {
+                file["settings"]["tuning"]["rsm_resolution"] = r.into();
+                name += &format!(" + rsm_resolution={r}");
+            }
             if let Some(s) = subdivision {
                 file["settings"]["tuning"]["sparse"]["subdivision"] = s.into();
                 name += &format!(" + sparse.subdivision={s}");
@@ -488,12 +521,15 @@ pub fn dominates((error, ms): (f64, f64), (other_error, other_ms): (f64, f64)) -
 
 /// The configurations one parameter away from each of `levels` (fast, balanced, accurate with
 /// their knobs), each parameter taking the values the levels take (and visibility `off`), in
-/// the order of the levels, without repeats and without the levels' own. A parameter set in
-/// the scene file's `tuning` is not varied; nor is the RSM without a spot light.
+/// the order of the levels, without repeats and without the levels' own. The RSM also takes
+/// `reference_rsm`, the reference's: the VALs every error is measured against, which on a scene
+/// lit next to its blockers are worth more than any level's parameter. A parameter set in the
+/// scene file's `tuning` is not varied; nor is the RSM without a spot light.
 pub fn candidate_knobs(
     levels: &[(Quality, Knobs)],
     tuning: &serde_json::Value,
     spot_light: bool,
+    reference_rsm: u32,
 ) -> Vec<(Quality, String, Knobs)> {
     let set = |key: &str| tuning.get(key).is_some();
     let set_sparse = |key: &str| tuning.get("sparse").and_then(|s| s.get(key)).is_some();
@@ -505,7 +541,16 @@ pub fn candidate_knobs(
     };
     let points = if set_sparse("points") { Vec::new() } else { values(|k| f64::from(k.points)) };
     let near_field = if set_sparse("near_field") { Vec::new() } else { values(|k| f64::from(k.near_field)) };
-    let rsm = if set("rsm_resolution") || !spot_light { Vec::new() } else { values(|k| f64::from(k.rsm_resolution)) };
+    let rsm = if set("rsm_resolution") || !spot_light {
+        Vec::new()
+    } else {
+        let mut v = values(|k| f64::from(k.rsm_resolution));
+        if !v.contains(&f64::from(reference_rsm)) {
+            v.push(f64::from(reference_rsm));
+            v.sort_by(f64::total_cmp);
+        }
+        v
+    };
     let mut visibility: Vec<Occlusion> = Vec::new();
     if !(set("visibility") || set("occlusion")) {
         for v in std::iter::once(Occlusion::Off).chain(levels.iter().map(|(_, k)| k.visibility)) {

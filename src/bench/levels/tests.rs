@@ -20,7 +20,7 @@ fn levels() -> Vec<(Quality, Knobs)> {
 /// its near field off is balanced with clusters, both already listed from balanced.
 #[test]
 fn candidates_are_one_parameter_from_a_level_and_never_repeat() {
-    let c = candidate_knobs(&levels(), &serde_json::json!({}), true);
+    let c = candidate_knobs(&levels(), &serde_json::json!({}), true, 128);
     let names: Vec<&str> = c.iter().map(|(_, n, _)| n.as_str()).collect();
     assert_eq!(
         names,
@@ -53,14 +53,30 @@ fn candidates_are_one_parameter_from_a_level_and_never_repeat() {
     }
 }
 
+/// The reference's RSM is a candidate where no level takes it: the finer VALs every error is
+/// measured against.
+#[test]
+fn candidates_try_the_references_vals() {
+    let coarse: Vec<(Quality, Knobs)> =
+        levels().into_iter().map(|(q, k)| (q, Knobs { rsm_resolution: 64, ..k })).collect();
+    let c = candidate_knobs(&coarse, &serde_json::json!({}), true, 128);
+    let rsm: Vec<&str> = c.iter().map(|(_, n, _)| n.as_str()).filter(|n| n.contains("rsm")).collect();
+    assert_eq!(rsm, ["fast + rsm_resolution=128", "balanced + rsm_resolution=128", "accurate + rsm_resolution=128"]);
+    assert!(c.iter().filter(|(_, n, _)| n.contains("rsm")).all(|(_, _, k)| k.rsm_resolution == 128));
+    // Not where the file sets the RSM, nor without a spot light.
+    let tuned = candidate_knobs(&coarse, &serde_json::json!({"rsm_resolution": 64}), true, 128);
+    assert!(!tuned.iter().any(|(_, n, _)| n.contains("rsm")), "{tuned:?}");
+    assert!(!candidate_knobs(&coarse, &serde_json::json!({}), false, 128).iter().any(|(_, n, _)| n.contains("rsm")));
+}
+
 /// A parameter the scene file's tuning sets, or the RSM of a scene without a spot light,
 /// is not varied.
 #[test]
 fn candidates_leave_what_the_scene_file_sets() {
     let tuning = serde_json::json!({"rsm_resolution": 32, "visibility": "off", "sparse": {"near_field": 2}});
-    let c = candidate_knobs(&levels(), &tuning, true);
+    let c = candidate_knobs(&levels(), &tuning, true, 128);
     assert!(c.iter().all(|(_, n, _)| n.contains("sparse.points")), "{c:?}");
-    let c = candidate_knobs(&levels(), &serde_json::json!({}), false);
+    let c = candidate_knobs(&levels(), &serde_json::json!({}), false, 128);
     assert!(!c.iter().any(|(_, n, _)| n.contains("rsm_resolution")), "{c:?}");
 }
 
@@ -215,6 +231,40 @@ fn a_level_missing_its_target_takes_the_fastest_configuration_meeting_it() {
     let near = candidate("fast + sparse.near_field=4", knobs(Occlusion::Disks, 64, 0.5, 4.0, 4.0), 0.19, 1700.0);
     let s = suggest_levels(&rows, &[near], &serde_json::json!({}), true, "here");
     assert_eq!(s["fast"]["sparse"], serde_json::json!({"near_field": 4.0}), "{s}");
+}
+
+/// `accurate` missing its target with nothing measured meeting it becomes the most accurate
+/// measured configuration, slower or not (it has no time bound), and the other levels' bounds
+/// follow its time as suggested: balanced may then take a configuration slower than
+/// accurate's own row that meets 0.10. With nothing more accurate than its own, it stays.
+#[test]
+fn accurate_missing_its_target_takes_the_most_accurate_measured() {
+    let l = levels();
+    let mut accurate = row(Quality::Accurate, l[2].1, 0.118, 7500.0, &[]);
+    accurate.resolved.method = crate::scene::Technique::BruteForceClusters;
+    let rows = [row(Quality::Balanced, l[1].1, 0.31, 1700.0, &[]), accurate];
+    let mut finer = candidate("accurate + technique=brute_force_clusters + rsm_resolution=128", l[2].1, 0.092, 9000.0);
+    finer.method = RenderMethod::BruteForceClusters;
+    finer.knobs.rsm_resolution = 256;
+    let mut coarse = finer.clone();
+    (coarse.name, coarse.rel_rmse_vs_exact, coarse.ms) =
+        ("balanced + technique=brute_force_clusters".into(), 0.099, 8000.0);
+    let candidates = [finer, coarse];
+    let s = suggest_levels(&rows, &candidates, &serde_json::json!({}), true, "here");
+    assert_eq!(s["accurate"]["rsm_resolution"], 256, "{s}");
+    let text = s["accurate"]["measured"].as_str().unwrap();
+    assert!(text.contains("the most accurate measured, none within the level's target 0.05"), "{text}");
+    // Balanced's bound is accurate's suggested 9000 ms: the fastest under 0.10 within it.
+    assert!(
+        s["balanced"]["measured"].as_str().unwrap().starts_with("`balanced + technique=brute_force_clusters`"),
+        "{s}"
+    );
+    // Without the finer one, the other: the most accurate of what was measured.
+    let s = suggest_levels(&rows, &candidates[1..], &serde_json::json!({}), true, "here");
+    assert!(s["accurate"]["measured"].as_str().unwrap().starts_with("`balanced + technique"), "{s}");
+    let slower = [row(Quality::Balanced, l[1].1, 0.31, 1700.0, &[]), row(Quality::Accurate, l[2].1, 0.06, 7500.0, &[])];
+    let s = suggest_levels(&slower, &candidates, &serde_json::json!({}), true, "here");
+    assert!(s.get("accurate").is_none(), "{s}");
 }
 
 /// The GPU estimator dominating a level makes it that level's technique, with its draws
