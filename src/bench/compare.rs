@@ -591,15 +591,16 @@ fn exact_comparison(
     let (brute_force_clusters_vs_exact, brute_force_clusters_skipped) =
         grouped(renderer, Method::BruteForceClusters, "brute_force_clusters")?;
     renderer.set_occlusion(scene.settings.visibility.mode, scene.settings.visibility.rule);
-    // What a user gets: the level's technique (the sparse method, or the GPU estimator or the
-    // brute force through the clusters' maps where the scene's measured level names it; at
-    // `reference`, the sparse method with accurate's parameters, the reference being what it
-    // is compared with).
-    let own = match Method::from(scene.resolved.method) {
-        Method::Exact => Method::Sparse,
-        method => method,
+    // What a user gets: the level's technique (the sparse method, or the GPU estimator, the
+    // brute force through the clusters' maps or the exact reference over the level's VALs
+    // where the scene's measured level names it, the last then the reference itself, which is
+    // over the same VALs; at `reference`, the sparse method with accurate's parameters, the
+    // reference being what it is compared with).
+    let default = match Method::from(scene.resolved.method) {
+        Method::Exact if scene.resolved.quality != crate::scene::Quality::Reference => exact.frame.clone(),
+        Method::Exact => renderer.render(gpu, Method::Sparse, w, h)?,
+        method => renderer.render(gpu, method, w, h)?,
     };
-    let default = renderer.render(gpu, own, w, h)?;
     let estimate = crate::renderer::estimate::Estimator::new().estimate(
         gpu,
         renderer,

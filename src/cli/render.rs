@@ -88,7 +88,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Method::Exact if needs.indirect => {
             let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
             let options = ExactOptions { device, val_stride, samples: None, spp: 1, blockers_from: 0.0 };
-            exact_reference(&gpu, &mut renderer, w, h, &options)?.frame
+            let mut frame = exact_reference(&gpu, &mut renderer, w, h, &options)?.frame;
+            // A level below `reference` that measured the exact reference over coarser VALs its
+            // best: its error is the VALs', and the frame reports it as every level's does.
+            if scene.resolved.quality != relume::scene::Quality::Reference {
+                let mut estimator = relume::renderer::estimate::Estimator::new();
+                frame.error_estimate =
+                    estimator.estimate(&gpu, &renderer, &frame, &relume::renderer::estimate::PER_FRAME)?;
+            }
+            frame
         }
         method => renderer.render_components(&gpu, method, w, h, needs)?,
     };

@@ -90,6 +90,7 @@ impl Components {
 }
 
 /// One rendered frame: linear radiance (W/(m² sr)), alpha = 1 where geometry covers the pixel.
+#[derive(Clone)]
 pub struct Rendered {
     pub direct: LinearImage,
     pub indirect: LinearImage,

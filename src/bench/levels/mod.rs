@@ -23,7 +23,7 @@
 //! clustered-visibility.md).
 
 use super::BenchError;
-use super::compare::{ExactOptions, ExactReference, exact_reference, rel_rmse_without_worst};
+use super::compare::{ExactOptions, ExactReference, ReferenceDevice, exact_reference, rel_rmse_without_worst};
 use super::equal_error::{self, AtEqualError, EqualErrorCurve};
 use crate::gpu::Gpu;
 use crate::renderer::Rendered;
@@ -325,6 +325,13 @@ pub fn suggest_levels(
         match draws {
             // The estimator takes none of the sparse method's parameters.
             (_, Some(draws)) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
+            // The exact reference takes the row's VALs (its RSM) and nothing else.
+            (RenderMethod::Exact, None) => {
+                entry = serde_json::json!({"technique": "exact"});
+                if spot_light {
+                    entry["rsm_resolution"] = knobs.rsm_resolution.into();
+                }
+            }
             // The brute force takes the row's VALs (its RSM), clusters and subdivision: each
             // where the candidate changed it, else as the level's entry already set it (the
             // row ran with it), and none of the other sparse parameters.
@@ -490,7 +497,30 @@ fn measure_candidates(
             measured.push(CandidateRow::of(name, &scene, Method::BruteForceClusters, &m));
         }
     }
+    // The exact reference itself over coarser VALs, as `accurate` (on a scene with a spot light
+    // whose file does not set the RSM; one bounce: the GPU's exact reference has no second):
+    // a shadow ray per pixel and VAL costs the reference's time over the VALs' ratio, and where
+    // the maps cannot see what blocks the light next to the receivers it can be the most
+    // accurate configuration short of the reference.
+    if spot_light && !rsm_tuned && finest.settings.bounces == 1 {
+        for r in exact_candidate_rsm(reference_rsm) {
+            let mut file = file.clone();
+            file["settings"]["tuning"]["rsm_resolution"] = r.into();
+            let scene = Scene::from_json_str_at(&file.to_string(), base_dir, Some(Quality::Accurate))
+                .map_err(|source| BenchError::Scene { path: path.to_owned(), source })?;
+            let m = measure(gpu, &scene, size, reference, Method::Exact)?;
+            let name = format!("accurate + technique=exact + rsm_resolution={r}");
+            measured.push(CandidateRow::of(name, &scene, Method::Exact, &m));
+        }
+    }
     Ok(measured)
+}
+
+/// The RSM sides the exact reference is measured at as a candidate: an eighth, a quarter and
+/// half the reference's side (1/64, 1/16 and 1/4 of its VALs and time), within the RSM's range.
+pub fn exact_candidate_rsm(reference_rsm: u32) -> Vec<u32> {
+    let (lo, _) = crate::scene::RSM_RESOLUTION_RANGE;
+    [8, 4, 2].iter().map(|d| reference_rsm / d).filter(|&r| r >= lo).collect()
 }
 
 /// Each level's `dominated_by`: the other levels and the candidates that dominate it (none
@@ -605,6 +635,8 @@ enum Method {
     Estimator(u32),
     /// The brute force through the clusters' maps.
     BruteForceClusters,
+    /// The exact reference (a shadow ray per pixel and VAL) over the configuration's VALs.
+    Exact,
 }
 
 impl Method {
@@ -615,6 +647,7 @@ impl Method {
         match (resolved.method, resolved.estimator_draws) {
             (crate::scene::Technique::Estimator, Some(draws)) => Method::Estimator(draws),
             (crate::scene::Technique::BruteForceClusters, _) => Method::BruteForceClusters,
+            (crate::scene::Technique::Exact, _) => Method::Exact,
             _ => Method::Sparse,
         }
     }
@@ -623,7 +656,7 @@ impl Method {
     fn draws(self) -> Option<u32> {
         match self {
             Method::Estimator(draws) => Some(draws),
-            Method::Sparse | Method::BruteForceClusters => None,
+            Method::Sparse | Method::BruteForceClusters | Method::Exact => None,
         }
     }
 
@@ -632,6 +665,7 @@ impl Method {
             Method::Sparse => RenderMethod::Sparse,
             Method::Estimator(_) => RenderMethod::Estimator,
             Method::BruteForceClusters => RenderMethod::BruteForceClusters,
+            Method::Exact => RenderMethod::Exact,
         }
     }
 }
@@ -648,6 +682,19 @@ fn measure(
     let mut renderer = Renderer::new(gpu, scene)?;
     if let Method::Estimator(draws) = method {
         renderer.set_estimator(draws, scene.settings.seed as u32);
+    }
+    if method == Method::Exact {
+        // As `relume render` runs it: on the device `auto` picks (the CPU on lavapipe, where the
+        // GPU's exact reference takes about 15x as long), once (its figures do not vary and its
+        // time hardly does; after the direct light's frame, which warms the renderer up).
+        let options =
+            ExactOptions { device: ReferenceDevice::Auto, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0 };
+        let frame = exact_reference(gpu, &mut renderer, w, h, &options)?.frame;
+        let error = reference
+            .corrected_rel_rmse(&frame.indirect)
+            .unwrap_or_else(|| crate::image::relative_rmse(&frame.indirect, reference.indirect()));
+        let without_worst = rel_rmse_without_worst(&frame.indirect, reference.indirect(), 0.01);
+        return Ok(Measured { ms: frame.indirect_ms(), frame, error, without_worst, renderer });
     }
     let method = method.render_method();
     renderer.render(gpu, method, w, h)?;
@@ -724,8 +771,9 @@ pub fn markdown(report: &LevelsReport) -> String {
         let json = serde_json::to_string_pretty(&report.suggested_levels).unwrap_or_default();
         out.push_str(&format!(
             "\nThe scene file's `settings.levels` this run suggests (each level that misses its target error as \
-             the fastest configuration that meets it, each other dominated level as its most accurate dominating \
-             configuration):\n\n```json\n{json}\n```\n"
+             the fastest configuration that meets it, `accurate` with none meeting it as the most accurate \
+             measured, each other dominated level as its most accurate dominating configuration):\n\n```json\n\
+             {json}\n```\n"
         ));
     }
     out

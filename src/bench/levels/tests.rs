@@ -267,6 +267,28 @@ fn accurate_missing_its_target_takes_the_most_accurate_measured() {
     assert!(s.get("accurate").is_none(), "{s}");
 }
 
+/// The exact reference over coarser VALs is tried at an eighth, a quarter and half the
+/// reference's RSM side, never under the RSM's range; chosen, it is the level's technique with
+/// its RSM and nothing else, and a scene loads with it.
+#[test]
+fn the_exact_reference_over_coarser_vals_can_become_accurate() {
+    assert_eq!(exact_candidate_rsm(128), [16, 32, 64]);
+    assert_eq!(exact_candidate_rsm(32), [8, 16]);
+    let l = levels();
+    let rows = [row(Quality::Accurate, l[2].1, 0.085, 1100.0, &[])];
+    let mut exact = candidate("accurate + technique=exact + rsm_resolution=16", l[2].1, 0.044, 4700.0);
+    (exact.method, exact.knobs.rsm_resolution) = (RenderMethod::Exact, 16);
+    let existing = serde_json::json!({"accurate": {"measured": "before", "sparse": {"near_field": 0.0}}});
+    let s = suggest_levels(&rows, &[exact], &existing, true, "here");
+    assert_eq!(s["accurate"]["technique"], "exact", "{s}");
+    assert_eq!(s["accurate"]["rsm_resolution"], 16, "{s}");
+    assert!(s["accurate"].get("sparse").is_none(), "{s}");
+    let settings: crate::scene::SettingsDescription =
+        serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
+    settings.validate("settings").expect("and is valid");
+    assert_eq!(crate::scene::settings::technique(Quality::Accurate, &settings), (crate::scene::Technique::Exact, None));
+}
+
 /// The GPU estimator dominating a level makes it that level's technique, with its draws
 /// and none of the sparse parameters; a sparse configuration suggested later takes it back.
 #[test]

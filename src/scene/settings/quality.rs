@@ -138,6 +138,7 @@ pub fn technique(quality: Quality, settings: &SettingsDescription) -> (Technique
             (Technique::Estimator, Some(m.draws.unwrap_or(DEFAULT_ESTIMATOR_DRAWS)))
         }
         Some(m) if m.technique == Some(Technique::BruteForceClusters) => (Technique::BruteForceClusters, None),
+        Some(m) if m.technique == Some(Technique::Exact) => (Technique::Exact, None),
         _ => (Technique::Sparse, None),
     }
 }
@@ -213,13 +214,6 @@ impl MeasuredLevels {
             if let Some(sparse) = m.sparse {
                 sparse.apply(SparseShading::default()).validate(&format!("{at}.sparse"))?;
             }
-            if m.technique == Some(Technique::Exact) {
-                return Err(crate::scene::SceneError::field(
-                    format!("{at}.technique"),
-                    "must be \"sparse\", \"estimator\" or \"brute_force_clusters\": the exact reference is \
-                     quality \"reference\"",
-                ));
-            }
             if let Some(draws) = m.draws {
                 if m.technique != Some(Technique::Estimator) {
                     return Err(crate::scene::SceneError::field(
@@ -253,10 +247,11 @@ pub struct MeasuredLevel {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sparse: Option<SparseTuning>,
     /// `"sparse"`, `"estimator"` (the exact reference estimated on the GPU, `draws` VALs per
-    /// pixel) or `"brute_force_clusters"` (every VAL at every pixel through the clusters'
-    /// shadow maps, the level's `visibility` then `"clusters"`); `"exact"` is the `reference`
-    /// level's. Renders, `compare`, replays and the levels bench follow it; streams run the
-    /// sparse method at every level.
+    /// pixel), `"brute_force_clusters"` (every VAL at every pixel through the clusters'
+    /// shadow maps, the level's `visibility` then `"clusters"`) or `"exact"` (a shadow ray per
+    /// pixel and VAL over the level's VALs, which a coarser `rsm_resolution` makes fewer than
+    /// the `reference` level's). Renders, `compare`, replays and the levels bench follow it;
+    /// streams run the sparse method at every level.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub technique: Option<Technique>,
     /// With `technique: "estimator"`: VALs drawn per pixel, in 1..=256 (default 32).
@@ -550,6 +545,14 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
                     choices.measured_text
                 );
                 choices.note(&format!("levels.{}.technique", quality.name()), "\"brute_force_clusters\"", reason);
+            }
+            (Technique::Exact, _) => {
+                let reason = format!(
+                    "measured on this scene: {}; a shadow ray per pixel and VAL over the level's VALs (the rule \
+                     would choose \"sparse\")",
+                    choices.measured_text
+                );
+                choices.note(&format!("levels.{}.technique", quality.name()), "\"exact\"", reason);
             }
             _ => choices.note("method", "\"sparse\"", "the sparse model-space method"),
         },
