@@ -258,46 +258,37 @@ fn a_measured_level_can_name_the_estimator() {
     assert_eq!(load(&[ROOM, CUBE], &default_draws).resolved.estimator_draws, Some(DEFAULT_ESTIMATOR_DRAWS));
 }
 
-/// A measured level may name the brute force through the clusters' maps: that level's
-/// technique (no draws), the measurement as the reason, the level's RSM kept; `draws` with it
-/// is refused.
+/// A measured level may name the brute force through the clusters' maps, or the exact
+/// reference over its own VALs (a coarser RSM than the `reference` level's, which stays):
+/// that level's technique (no draws), the measurement as the reason, the level's RSM applied;
+/// `draws` with the brute force is refused.
 #[test]
-fn a_measured_level_can_name_the_brute_force_through_the_clusters() {
-    let settings = r#"{"quality": "accurate", "levels": {"accurate": {"measured": "0.10 against 0.24",
-        "technique": "brute_force_clusters", "rsm_resolution": 64}}}"#;
-    let accurate = load(&[ROOM, CUBE], settings);
-    assert_eq!((accurate.resolved.method, accurate.resolved.estimator_draws), (Technique::BruteForceClusters, None));
-    assert_eq!(accurate.settings.rsm_resolution, 64);
-    let reason = &choice(&accurate, "levels.accurate.technique").reason;
-    assert!(reason.starts_with("measured on this scene: 0.10 against 0.24; every VAL at every pixel"), "{reason}");
-    assert!(accurate.resolved.report().starts_with("quality accurate: technique brute_force_clusters"));
-    let balanced = load(&[ROOM, CUBE], &settings.replacen("accurate", "balanced", 1));
-    assert_eq!(balanced.resolved.method, Technique::Sparse);
+fn a_measured_level_can_name_the_brute_force_through_the_clusters_or_the_exact_reference() {
+    for (technique, rsm, does) in [
+        (Technique::BruteForceClusters, 64, "every VAL at every pixel"),
+        (Technique::Exact, 16, "a shadow ray per pixel and VAL"),
+    ] {
+        let name = serde_json::to_value(technique).unwrap();
+        let settings = format!(
+            r#"{{"quality": "accurate", "levels": {{"accurate": {{"measured": "0.10 against 0.24",
+            "technique": {name}, "rsm_resolution": {rsm}}}}}}}"#
+        );
+        let accurate = load(&[ROOM, CUBE], &settings);
+        assert_eq!((accurate.resolved.method, accurate.resolved.estimator_draws), (technique, None));
+        assert_eq!(accurate.settings.rsm_resolution, rsm);
+        assert_eq!(accurate.settings.reference_rsm_resolution, 128);
+        let reason = &choice(&accurate, "levels.accurate.technique").reason;
+        assert!(reason.starts_with(&format!("measured on this scene: 0.10 against 0.24; {does}")), "{reason}");
+        let report = accurate.resolved.report();
+        assert!(report.starts_with(&format!("quality accurate: technique {}", name.as_str().unwrap())), "{report}");
+        let balanced = load(&[ROOM, CUBE], &settings.replacen("accurate", "balanced", 1));
+        assert_eq!(balanced.resolved.method, Technique::Sparse);
+    }
     let levels = r#"{"accurate": {"measured": "m", "technique": "brute_force_clusters", "draws": 8}}"#;
     let json = format!(r#"{{"meshes": [], {LIGHT_AND_CAMERA}, "settings": {{"levels": {levels}}}}}"#);
     let description = SceneDescription::from_json_str(&json).expect("parses");
     let e = description.settings.validate("settings").expect_err("draws without the estimator").to_string();
     assert!(e.contains("settings.levels.accurate.draws") && e.contains("only with technique"), "{e}");
-}
-
-/// A measured level may name the exact reference over its own VALs (a coarser RSM than the
-/// `reference` level's): that level's technique, the measurement as the reason, its RSM
-/// applied while the reference's stays.
-#[test]
-fn a_measured_level_can_name_the_exact_reference_over_coarser_vals() {
-    let settings = r#"{"quality": "accurate", "levels": {"accurate": {"measured": "0.044 against 0.085",
-        "technique": "exact", "rsm_resolution": 16}}}"#;
-    let accurate = load(&[ROOM, CUBE], settings);
-    assert_eq!((accurate.resolved.method, accurate.resolved.estimator_draws), (Technique::Exact, None));
-    assert_eq!(accurate.settings.rsm_resolution, 16);
-    assert_ne!(accurate.settings.reference_rsm_resolution, 16);
-    let reason = &choice(&accurate, "levels.accurate.technique").reason;
-    assert!(
-        reason.starts_with("measured on this scene: 0.044 against 0.085; a shadow ray per pixel and VAL"),
-        "{reason}"
-    );
-    let balanced = load(&[ROOM, CUBE], &settings.replacen("accurate", "balanced", 1));
-    assert_eq!(balanced.resolved.method, Technique::Sparse);
 }
 
 /// A measured level is checked where the scene file is, each field named.
