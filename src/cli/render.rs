@@ -92,9 +92,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             // A level below `reference` that measured the exact reference over coarser VALs its
             // best: its error is the VALs', and the frame reports it as every level's does.
             if scene.resolved.quality != relume::scene::Quality::Reference {
-                let mut estimator = relume::renderer::estimate::Estimator::new();
-                frame.error_estimate =
-                    estimator.estimate(&gpu, &renderer, &frame, &relume::renderer::estimate::PER_FRAME)?;
+                renderer.estimate_error(&gpu, &mut frame)?;
             }
             frame
         }

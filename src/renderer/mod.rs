@@ -528,19 +528,27 @@ impl Renderer {
             exact_rounds,
             error_estimate: None,
         };
-        if components.indirect
-            && let Some((mut estimator, options)) = self.estimate.take()
-        {
-            let seed = options.seed.wrapping_add(self.estimated_frames);
-            self.estimated_frames += 1;
-            let result = estimator.estimate(gpu, self, &rendered, &estimate::EstimateOptions { seed, ..options });
-            self.estimate = Some((estimator, options));
-            rendered.error_estimate = result?;
-            if let Some(e) = &rendered.error_estimate {
-                rendered.timings.stages.push((estimate::STAGE.to_owned(), e.ms));
-            }
+        if components.indirect {
+            self.estimate_error(gpu, &mut rendered)?;
         }
         Ok(rendered)
+    }
+
+    /// The frame's error estimate, where [`Renderer::set_error_estimate`] asked for one, into
+    /// `rendered` (and its time as the estimate's stage): what every frame with indirect light
+    /// gets, also for one this renderer's frame was made from elsewhere (the CPU exact reference
+    /// over a level's coarser VALs, `bench::compare::exact_reference`).
+    pub fn estimate_error(&mut self, gpu: &Gpu, rendered: &mut Rendered) -> Result<(), GpuError> {
+        let Some((mut estimator, options)) = self.estimate.take() else { return Ok(()) };
+        let seed = options.seed.wrapping_add(self.estimated_frames);
+        self.estimated_frames += 1;
+        let result = estimator.estimate(gpu, self, rendered, &estimate::EstimateOptions { seed, ..options });
+        self.estimate = Some((estimator, options));
+        rendered.error_estimate = result?;
+        if let Some(e) = &rendered.error_estimate {
+            rendered.timings.stages.push((estimate::STAGE.to_owned(), e.ms));
+        }
+        Ok(())
     }
 
     /// The frame's techniques in order, and which of them computes the indirect light. Call

@@ -1,0 +1,152 @@
+//! What a levels run suggests for the scene file's `settings.levels`: for each level, the
+//! measured configuration it should become, written as what differs from it.
+
+use super::{CandidateRow, Knobs, LevelRow, Method, RenderMethod};
+use crate::scene::Quality;
+
+/// The scene file's `settings.levels` the measurement suggests: for each level that misses its
+/// target error ([`Quality::target_rel_rmse`]), the fastest measured configuration (another
+/// level or a candidate) that meets it within the level's time bound
+/// ([`Quality::time_share_of_accurate`] of accurate's time as suggested); `accurate`, which has
+/// no time bound, where nothing meets its target, the most accurate measured configuration
+/// more accurate than its own; for each other level that a measured configuration dominates,
+/// the most accurate of those configurations. Each
+/// is written as the parameters where it differs from the level as measured (over that
+/// level's entry in `existing`, the scene file's `settings.levels`, whose other parameters it
+/// keeps; the RSM only on a scene with a spot light), with what was measured (`at`: the size
+/// and adapter). A level that meets its target undominated, or that misses it with nothing
+/// measured meeting it nor dominating it, keeps its entry in `existing`.
+pub fn suggest_levels(
+    levels: &[LevelRow],
+    candidates: &[CandidateRow],
+    existing: &serde_json::Value,
+    spot_light: bool,
+    at: &str,
+) -> serde_json::Value {
+    // The GPU estimator's rows carry their draws (the level becomes the estimator), the brute
+    // force's its method (the level becomes it, with the row's VALs).
+    type Technique = (RenderMethod, Option<u32>);
+    let technique = |r: &LevelRow| {
+        let method = Method::of(&r.resolved);
+        (method.render_method(), method.draws())
+    };
+    let measured: Vec<(&str, Knobs, Technique, f64, f64)> = levels
+        .iter()
+        .map(|r| (r.level.name(), r.knobs, technique(r), r.rel_rmse_vs_exact, r.ms))
+        .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, (c.method, c.draws), c.rel_rmse_vs_exact, c.ms)))
+        .collect();
+    // What each level becomes: the fastest meeting its target within its time bound; else,
+    // for `accurate`, which has no bound, the most accurate measured configuration where it is
+    // more accurate than the level's own; else the most accurate dominating one.
+    let choose = |row: &LevelRow, max_ms: f64| {
+        let target = row.level.target_rel_rmse().filter(|&t| row.rel_rmse_vs_exact > t);
+        let meeting = target.and_then(|t| {
+            measured
+                .iter()
+                .filter(|m| m.0 != row.level.name() && m.3 <= t && m.4 <= max_ms)
+                .min_by(|a, b| a.4.total_cmp(&b.4))
+        });
+        let closer = (target.is_some() && row.level == Quality::Accurate)
+            .then(|| {
+                measured
+                    .iter()
+                    .filter(|m| m.0 != row.level.name() && m.3 < row.rel_rmse_vs_exact)
+                    .min_by(|a, b| a.3.total_cmp(&b.3))
+            })
+            .flatten();
+        let best = meeting.or(closer).or_else(|| {
+            measured
+                .iter()
+                .filter(|(name, ..)| row.dominated_by.iter().any(|d| d == name))
+                .min_by(|a, b| a.3.total_cmp(&b.3))
+        });
+        (target, meeting, best)
+    };
+    // The other levels' time bounds are shares of accurate's time as it will run.
+    let accurate_ms =
+        levels.iter().find(|r| r.level == Quality::Accurate).map(|r| choose(r, f64::INFINITY).2.map_or(r.ms, |m| m.4));
+    let mut out = existing.as_object().cloned().unwrap_or_default();
+    for row in levels {
+        let max_ms = match (row.level.time_share_of_accurate(), accurate_ms) {
+            (Some(share), Some(ms)) => share * ms,
+            _ => f64::INFINITY,
+        };
+        let (target, meeting, best) = choose(row, max_ms);
+        let Some(&(name, knobs, draws, error, ms)) = best else { continue };
+        let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
+        match draws {
+            // The estimator takes none of the sparse method's parameters.
+            (_, Some(draws)) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
+            // The exact reference takes the row's VALs (its RSM) and nothing else.
+            (RenderMethod::Exact, None) => {
+                entry = serde_json::json!({"technique": "exact"});
+                if spot_light {
+                    entry["rsm_resolution"] = knobs.rsm_resolution.into();
+                }
+            }
+            // The brute force takes the row's VALs (its RSM), clusters and subdivision: each
+            // where the candidate changed it, else as the level's entry already set it (the
+            // row ran with it), and none of the other sparse parameters.
+            (RenderMethod::BruteForceClusters, None) => {
+                let before = std::mem::replace(&mut entry, serde_json::json!({"technique": "brute_force_clusters"}));
+                if spot_light && knobs.rsm_resolution != row.knobs.rsm_resolution {
+                    entry["rsm_resolution"] = knobs.rsm_resolution.into();
+                } else if let Some(r) = before.get("rsm_resolution") {
+                    entry["rsm_resolution"] = r.clone();
+                }
+                if knobs.subdivision != row.knobs.subdivision {
+                    entry["sparse"] = serde_json::json!({"subdivision": knobs.subdivision});
+                } else if let Some(s) = before.get("sparse").and_then(|s| s.get("subdivision")) {
+                    entry["sparse"] = serde_json::json!({"subdivision": s});
+                }
+            }
+            _ => {
+                if let Some(e) = entry.as_object_mut() {
+                    e.remove("technique");
+                    e.remove("draws");
+                }
+                set_changed_knobs(&mut entry, knobs, row.knobs, spot_light);
+            }
+        }
+        let why = match (meeting, target) {
+            (Some(_), Some(t)) => {
+                format!("; the fastest measured within the level's target {t:.2}, which its own misses")
+            }
+            (None, Some(t)) if !row.dominated_by.iter().any(|d| d == name) => {
+                format!("; the most accurate measured, none within the level's target {t:.2}")
+            }
+            _ => String::new(),
+        };
+        entry["measured"] = format!(
+            "`{name}`: rel RMSE {error:.4} at {ms:.0} ms, the level's own {:.4} at {:.0} ms, at {at} (relume \
+             bench --levels --candidates){why}",
+            row.rel_rmse_vs_exact, row.ms
+        )
+        .into();
+        out.insert(row.level.name().to_owned(), entry);
+    }
+    serde_json::Value::Object(out)
+}
+
+/// Into a `settings.levels` entry, each of `knobs` that differs from the level's `was` (the RSM
+/// only on a scene with a spot light).
+fn set_changed_knobs(entry: &mut serde_json::Value, knobs: Knobs, was: Knobs, spot_light: bool) {
+    if knobs.visibility != was.visibility {
+        entry["visibility"] = knobs.visibility.name().into();
+    }
+    if spot_light && knobs.rsm_resolution != was.rsm_resolution {
+        entry["rsm_resolution"] = knobs.rsm_resolution.into();
+    }
+    for (key, value, before) in [
+        ("points", knobs.points, was.points),
+        ("near_field", knobs.near_field, was.near_field),
+        ("subdivision", knobs.subdivision, was.subdivision),
+    ] {
+        if value != before {
+            if !entry["sparse"].is_object() {
+                entry["sparse"] = serde_json::json!({});
+            }
+            entry["sparse"][key] = value.into();
+        }
+    }
+}
