@@ -45,8 +45,7 @@ fn main() -> anyhow::Result<()> {
     let (_, radius) = coherent.scene.flat.bounding_sphere();
     let step = 0.01 * radius;
     let side_dir = light.direction.cross(Vec3::Y).try_normalize().unwrap_or(Vec3::X);
-    let options =
-        ExactOptions { device: ReferenceDevice::Cpu, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0 };
+    let options = ExactOptions::every_val(ReferenceDevice::Cpu);
     let (mut kept, mut reseeded, mut exact) = (Vec::new(), Vec::new(), Vec::new());
     for t in 0..frames {
         let mut l = light;

@@ -46,7 +46,8 @@ pub fn brute_force_frame(gpu: &Gpu, renderer: &mut Renderer, width: u32, height:
     renderer.render(gpu, Method::BruteForce, width, height)
 }
 
-/// The exact-visibility reference over every `val_stride`-th VAL, one frame.
+/// The exact-visibility reference over every `val_stride`-th VAL, one frame (no error
+/// estimate: it is what the estimate compares with).
 pub fn exact_frame(
     gpu: &Gpu,
     renderer: &mut Renderer,
@@ -55,7 +56,28 @@ pub fn exact_frame(
     val_stride: u32,
 ) -> Result<Rendered, GpuError> {
     renderer.set_exact_val_stride(val_stride);
-    renderer.render(gpu, Method::Exact, width, height)
+    renderer.render_unestimated(gpu, Method::Exact, width, height)
+}
+
+/// A frame of a level whose technique is the exact reference: at `reference` the reference
+/// itself, below it the exact reference over the level's coarser VALs (`settings.levels.<level>
+/// .technique: "exact"`), where `options.device` `auto` runs the CPU reference on a CPU adapter
+/// (lavapipe: about 15x faster than the GPU pass there). Below `reference` the frame carries
+/// the error estimate every level's frame has ([`Renderer::estimate_error`]); at `reference`
+/// none, the frame being what the estimate compares with.
+pub fn exact_level_frame(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    width: u32,
+    height: u32,
+    options: &ExactOptions,
+    level: crate::scene::Quality,
+) -> Result<Rendered, GpuError> {
+    let mut frame = exact_reference(gpu, renderer, width, height, options)?.frame;
+    if level != crate::scene::Quality::Reference {
+        renderer.estimate_error(gpu, &mut frame)?;
+    }
+    Ok(frame)
 }
 
 /// Where `compare --reference exact` computes its reference.
@@ -101,6 +123,11 @@ pub struct ExactOptions {
 pub const REFERENCE_SEED: u64 = 0x5eed;
 
 impl ExactOptions {
+    /// The reference: every VAL summed at each pixel's centre past every blocker, on `device`.
+    pub const fn every_val(device: ReferenceDevice) -> ExactOptions {
+        ExactOptions { device, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0 }
+    }
+
     /// Check the options: `Err` names the flag (`--reference-samples: ...`).
     pub fn check(&self) -> Result<(), String> {
         use crate::twin::exact_cpu::{MAX_SPP, MAX_VAL_SAMPLES};

@@ -1,7 +1,7 @@
 //! `relume render`: a scene to PNG (and EXR), one component or all three.
 
 use super::{Size, checked_val_stride, load_renderable};
-use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
+use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_level_frame};
 use relume::gpu::Gpu;
 use relume::image::LinearImage;
 use relume::renderer::{Component, Components, Method, Renderer};
@@ -88,13 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Method::Exact if needs.indirect => {
             let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
             let options = ExactOptions { device, val_stride, samples: None, spp: 1, blockers_from: 0.0 };
-            let mut frame = exact_reference(&gpu, &mut renderer, w, h, &options)?.frame;
-            // A level below `reference` that measured the exact reference over coarser VALs its
-            // best: its error is the VALs', and the frame reports it as every level's does.
-            if scene.resolved.quality != relume::scene::Quality::Reference {
-                renderer.estimate_error(&gpu, &mut frame)?;
-            }
-            frame
+            exact_level_frame(&gpu, &mut renderer, w, h, &options, scene.resolved.quality)?
         }
         method => renderer.render_components(&gpu, method, w, h, needs)?,
     };

@@ -473,6 +473,22 @@ impl Renderer {
         self.render_components(gpu, method, width, height, Components::ALL)
     }
 
+    /// [`Renderer::render`] without the error estimate [`Renderer::set_error_estimate`] asks
+    /// for: a frame that is itself what the estimate compares with (the exact reference), or
+    /// one whose estimate is taken afterwards.
+    pub fn render_unestimated(
+        &mut self,
+        gpu: &Gpu,
+        method: Method,
+        width: u32,
+        height: u32,
+    ) -> Result<Rendered, GpuError> {
+        let estimate = self.estimate.take();
+        let rendered = self.render(gpu, method, width, height);
+        self.estimate = estimate;
+        rendered
+    }
+
     /// Render `components` at `width` x `height`: prepare the frame's techniques, record them
     /// in order, submit, and read back the images they wrote.
     pub fn render_components(

@@ -161,7 +161,9 @@ impl LightOverride {
 pub struct Quality {
     /// The quality level (default: the scene's `settings.quality`): the level's parameters
     /// resolved for the scene, those a loaded scene can change per frame (visibility mode,
-    /// near field); `reference` renders the exact reference unless `method` is given.
+    /// near field) and its technique: `reference` renders the exact reference, as does a level
+    /// the scene's `settings.levels` measured as `exact` (over the scene's VALs; the CPU
+    /// reference on a CPU adapter), unless `method` is given.
     #[serde(default)]
     pub level: Option<crate::scene::Quality>,
     /// A frame-time budget, ms, in [0.1, 600000] (default: the scene's `settings.budget_ms`).
@@ -169,7 +171,7 @@ pub struct Quality {
     /// (`X-Relume-Budget-Met`). Streams adapt to theirs.
     #[serde(default)]
     pub budget_ms: Option<f32>,
-    /// Default: `sparse` (the exact reference at level `reference`).
+    /// Default: the level's technique (`sparse`, or the exact reference at level `reference`).
     #[serde(default)]
     pub method: Option<RenderMethod>,
     #[serde(default)]

@@ -26,11 +26,12 @@ use std::time::{Duration, Instant};
 use glam::Mat4;
 use tokio::sync::oneshot;
 
+use crate::bench::compare::{ExactOptions, ReferenceDevice, exact_level_frame};
 use crate::gpu::{Gpu, GpuError};
 use crate::mr::{self, MrPipeline, environment::Environment};
 use crate::renderer::{Method, Rendered, Renderer};
 use crate::rgbd::{RgbdFrame, RgbdSettings};
-use crate::scene::{Camera, Occlusion, Scene, SpotLight};
+use crate::scene::{Camera, Occlusion, Quality, Scene, SpotLight};
 
 use super::api::Component;
 use super::config::{Limits, limit};
@@ -111,6 +112,9 @@ pub struct RenderJob {
     /// The spot light, for scenes that have one.
     pub light: Option<SpotLight>,
     pub method: Method,
+    /// The request's level: with the exact method, whether the frame is the reference itself
+    /// (no error estimate) or a level's exact reference over the scene's VALs.
+    pub level: Quality,
     pub width: u32,
     pub height: u32,
     /// The request's level's visibility mode and near field (sparse point spacings).
@@ -704,7 +708,15 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, Work
     if let Some(light) = &job.light {
         renderer.set_spot_light(light);
     }
-    Ok((renderer.render(gpu, job.method, job.width, job.height)?, None))
+    let frame = match job.method {
+        // On a CPU adapter the CPU reference, as `relume render` runs it.
+        Method::Exact => {
+            let options = ExactOptions::every_val(ReferenceDevice::Auto);
+            exact_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
+        }
+        method => renderer.render(gpu, method, job.width, job.height)?,
+    };
+    Ok((frame, None))
 }
 
 /// Model-to-world of every mesh of `scene`: as loaded, but where `transforms` (by mesh

@@ -518,6 +518,7 @@ async fn render_scene(
         camera: camera.to_camera(entry.origin),
         light: light.map(|l| l.to_spot_light(entry.origin)),
         method,
+        level,
         width: camera.width,
         height: camera.height,
         occlusion: parameters.occlusion,

@@ -737,7 +737,7 @@ fn cpu_exact_reference_matches_gpu_exact() {
     let gpu = gpu();
     let mut renderer = Renderer::new(&gpu, &load_test_room()).unwrap();
     let (w, h) = (20, 16);
-    let options = |device| ExactOptions { device, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0 };
+    let options = ExactOptions::every_val;
     let on_gpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Gpu)).unwrap();
     let on_cpu = exact_reference(&gpu, &mut renderer, w, h, &options(ReferenceDevice::Cpu)).unwrap();
     assert_eq!((on_gpu.device, on_cpu.device), (ReferenceDevice::Gpu, ReferenceDevice::Cpu));

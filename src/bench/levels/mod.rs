@@ -543,8 +543,7 @@ fn measure(
         // As `relume render` runs it: on the device `auto` picks (the CPU on lavapipe, where the
         // GPU's exact reference takes about 15x as long), once (its figures do not vary and its
         // time hardly does; after the direct light's frame, which warms the renderer up).
-        let options =
-            ExactOptions { device: ReferenceDevice::Auto, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0 };
+        let options = ExactOptions::every_val(ReferenceDevice::Auto);
         exact_reference(gpu, &mut renderer, w, h, &options)?.frame
     } else {
         let method = method.render_method();
