@@ -5,6 +5,8 @@
 //!
 //! - `--rsm 16,32,64`: coarser VALs (fewer, each with more area and flux). How far a level's
 //!   VALs alone put it from the reference, before any approximation of visibility.
+//! - `--val-budget 256,1024,4096`: fewer VALs from the RSMs of the scene's `lights`
+//!   (`settings.tuning.direct.val_budget`), the same question for a scene lit by many lights.
 //! - `--blockers-from 0.2,1`: blockers nearer the receiver than this many metres let light
 //!   through. Where the image changes is where occluders that close decide the light: what a
 //!   shadow map seen from far away (texels of centimetres to decimetres) cannot resolve.
@@ -13,7 +15,7 @@
 //! 1 % of pixels, the worst 1 %'s share of the squared error, the mean ratio. `--images DIR`
 //! writes `reference.exr` and one EXR per variant.
 //!
-//!   cargo run --release --example exact_split -- <scene.json> [--rsm R,..] [--blockers-from M,..] [--images DIR]
+//!   cargo run --release --example exact_split -- <scene.json> [--rsm R,..] [--val-budget N,..] [--blockers-from M,..] [--images DIR]
 use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference, rel_rmse_without_worst};
 use relume::image::{LinearImage, relative_rmse};
 use relume::renderer::Renderer;
@@ -44,8 +46,11 @@ fn worst_share_and_ratio(test: &LinearImage, reference: &LinearImage) -> (f64, f
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).expect("usage: exact_split <scene.json> [--rsm R,..] [--blockers-from M,..] [--images DIR]");
+    let path = args.get(1).expect(
+        "usage: exact_split <scene.json> [--rsm R,..] [--val-budget N,..] [--blockers-from M,..] [--images DIR]",
+    );
     let rsms: Vec<u32> = list(&args, "--rsm");
+    let budgets: Vec<u32> = list(&args, "--val-budget");
     let blockers: Vec<f32> = list(&args, "--blockers-from");
     let images: Option<PathBuf> = list::<String>(&args, "--images").first().map(PathBuf::from);
     let text = std::fs::read_to_string(path).unwrap();
@@ -54,15 +59,17 @@ fn main() {
     if let Some(dir) = &images {
         std::fs::create_dir_all(dir).unwrap();
     }
-    let run = |rsm: Option<u32>, blockers_from: f32| {
+    // A change of the scene file's `settings.tuning` (none: the reference).
+    let run = |tuning: Option<(&str, u32)>, blockers_from: f32| {
         let mut file: serde_json::Value = serde_json::from_str(&text).unwrap();
-        if let Some(r) = rsm {
-            file["settings"]["tuning"]["rsm_resolution"] = r.into();
+        match tuning {
+            Some(("val_budget", n)) => file["settings"]["tuning"]["direct"]["val_budget"] = n.into(),
+            Some((key, n)) => file["settings"]["tuning"][key] = n.into(),
+            None => {}
         }
         let scene = Scene::from_json_str_at(&file.to_string(), base, Some(Quality::Reference)).unwrap();
         let mut renderer = Renderer::new(&gpu, &scene).unwrap();
-        let options =
-            ExactOptions { device: ReferenceDevice::Cpu, val_stride: 1, samples: None, spp: 1, blockers_from };
+        let options = ExactOptions { blockers_from, ..ExactOptions::every_val(ReferenceDevice::Cpu) };
         let start = std::time::Instant::now();
         let exact = exact_reference(&gpu, &mut renderer, 256, 256, &options).unwrap();
         let seconds = start.elapsed().as_secs_f64();
@@ -73,10 +80,11 @@ fn main() {
     if let Some(dir) = &images {
         reference.write_exr(&dir.join("reference.exr")).unwrap();
     }
-    let variants = rsms.iter().map(|&r| (format!("rsm {r}"), Some(r), 0.0));
+    let variants = rsms.iter().map(|&r| (format!("rsm {r}"), Some(("rsm_resolution", r)), 0.0));
+    let variants = variants.chain(budgets.iter().map(|&n| (format!("val budget {n}"), Some(("val_budget", n)), 0.0)));
     let variants = variants.chain(blockers.iter().map(|&m| (format!("blockers from {m} m"), None, m)));
-    for (name, rsm, blockers_from) in variants {
-        let (image, seconds, vals) = run(rsm, blockers_from);
+    for (name, tuning, blockers_from) in variants {
+        let (image, seconds, vals) = run(tuning, blockers_from);
         let error = relative_rmse(&image, &reference);
         let without = rel_rmse_without_worst(&image, &reference, 0.01);
         let (share, ratio) = worst_share_and_ratio(&image, &reference);
