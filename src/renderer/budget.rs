@@ -125,6 +125,14 @@ impl FrameParameters {
         ]
     }
 
+    /// [`Self::pairs`] and `method`, the frame's indirect technique ([`Method::name`]): a level
+    /// may name one (`settings.levels`), and a stream runs the sparse method at every level.
+    pub fn pairs_with_method(&self, method: crate::renderer::Method) -> Vec<(String, String)> {
+        let mut pairs = self.pairs();
+        pairs.insert(1, ("method".to_owned(), method.name().to_owned()));
+        pairs
+    }
+
     /// Output size scaled by `resolution_scale` (at least 1 x 1).
     pub fn scaled(&self, width: u32, height: u32) -> (u32, u32) {
         let s = self.resolution_scale.clamp(0.05, 1.0);

@@ -29,6 +29,20 @@ pub enum Method {
     Estimator,
 }
 
+impl Method {
+    /// The method's name as requests and frames give it (`sparse`, `brute-force`, `exact`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Sparse => "sparse",
+            Method::BruteForce => "brute-force",
+            Method::BruteForceIsm => "brute-force-ism",
+            Method::BruteForceClusters => "brute-force-clusters",
+            Method::Exact => "exact",
+            Method::Estimator => "estimator",
+        }
+    }
+}
+
 /// The method a scene's resolved technique asks for (`settings.quality`: the exact reference
 /// at `reference`, the sparse method otherwise).
 impl From<crate::scene::Technique> for Method {
@@ -111,5 +125,20 @@ impl Rendered {
     /// Time of the stages that computed the indirect light (ms).
     pub fn indirect_ms(&self) -> f64 {
         self.timings.total_of(&self.indirect_stages)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Method;
+    use clap::ValueEnum;
+
+    /// A frame's `method` parameter names the method as a request and the CLI's `--method` do.
+    #[test]
+    fn the_name_is_the_requests_and_the_clis() {
+        for &method in Method::value_variants() {
+            assert_eq!(serde_json::to_value(method).unwrap(), method.name(), "{method:?}");
+            assert_eq!(method.to_possible_value().unwrap().get_name(), method.name(), "{method:?}");
+        }
     }
 }

@@ -451,7 +451,7 @@ async fn delete_scene(
                 ("X-Relume-Timing-Source" = String, description = "`gpu_timestamps` or `wall_clock`"),
                 ("X-Relume-Quality" = String, description = "The level the render ran at"),
                 ("X-Relume-Parameters" = String, description = "What it ran at, `name=value` pairs separated \
-                    by `; `: `level`, `visibility`, `near_field`, `vals_step`, `resolution_scale`, `camera_detail`, `receivers_step`"),
+                    by `; `: `level`, `method` (the indirect technique), `visibility`, `near_field`, `vals_step`, `resolution_scale`, `camera_detail`, `receivers_step`"),
                 ("X-Relume-Error-Estimate" = f64, description = "Estimated relative RMSE of the indirect light \
                     against the exact reference (src/renderer/estimate.rs); absent when the render has none"),
                 ("X-Relume-Error-Estimate-Spread" = f64, description = "The estimate's standard error"),
@@ -547,7 +547,7 @@ async fn render_scene(
         }
     };
     put("x-relume-quality", level.name().to_owned());
-    let pairs: Vec<String> = parameters.pairs().iter().map(|(k, v)| format!("{k}={v}")).collect();
+    let pairs: Vec<String> = parameters.pairs_with_method(method).iter().map(|(k, v)| format!("{k}={v}")).collect();
     put("x-relume-parameters", pairs.join("; "));
     if let Some(e) = estimate {
         put("x-relume-error-estimate", format!("{:.6}", e.rel_rmse));

@@ -176,6 +176,8 @@ struct InFlight {
     quality: StreamQuality,
     /// What the frame runs at, and the stream's budget then.
     parameters: FrameParameters,
+    /// The frame's indirect technique.
+    method: Method,
     budget_ms: Option<f32>,
     answer: oneshot::Receiver<Result<RenderOutput, WorkerError>>,
 }
@@ -433,6 +435,7 @@ impl Session {
                     decode_ms,
                     quality: s.quality,
                     parameters,
+                    method,
                     budget_ms,
                     answer,
                 });
@@ -593,7 +596,7 @@ fn rendered_frame(in_flight: &InFlight, output: RenderOutput, dropped_frames: u6
         dropped_frames,
         error_estimate: output.frame.error_estimate,
         quality: in_flight.parameters.level,
-        parameters: in_flight.parameters.pairs(),
+        parameters: in_flight.parameters.pairs_with_method(in_flight.method),
         budget_ms: in_flight.budget_ms,
     })
 }

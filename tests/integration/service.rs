@@ -503,7 +503,7 @@ async fn a_level_naming_the_exact_reference_renders_it() {
     let cpu = server.get("/healthz").await.json()["adapter"].as_str().is_some_and(|a| a.contains("llvmpipe"));
     let stage = if cpu { relume::twin::exact_cpu::STAGE } else { relume::renderer::stage::EXACT };
     let path = format!("/v1/scenes/{id}/render");
-    let render = |level: &str| {
+    let render = |level: &'static str| {
         let request = json!({"quality": {"level": level, "component": "indirect", "format": "f32"}});
         let (server, path) = (&server, &path);
         async move {
@@ -514,6 +514,8 @@ async fn a_level_naming_the_exact_reference_renders_it() {
             assert!(!timing.contains("gather;dur="), "the sparse method ran: {timing}");
             let gpu_pass = format!("{};dur=", relume::renderer::stage::EXACT);
             assert!(!cpu || !timing.contains(&gpu_pass), "the GPU pass ran on a CPU adapter: {timing}");
+            let parameters = reply.header("x-relume-parameters");
+            assert!(parameters.starts_with(&format!("level={level}; method=exact; ")), "{parameters}");
             let estimate = reply.headers.get("x-relume-error-estimate").map(|v| v.to_str().expect("ASCII").to_owned());
             let floats: Vec<f32> =
                 reply.body.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes"))).collect();

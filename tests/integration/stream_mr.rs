@@ -299,6 +299,7 @@ async fn a_stream_changes_its_level_mid_stream_and_falls_under_a_budget() {
     assert_eq!(first.quality(), proto::QualityLevel::Fast);
     assert_eq!(parameter(&first, "visibility"), "disks", "the bunny can occlude itself");
     assert_eq!(parameter(&first, "near_field"), "0");
+    assert_eq!(parameter(&first, "method"), "sparse");
     let estimate = first.error_estimate.expect("every frame carries its error estimate");
     assert!(estimate.rel_rmse.is_finite() && estimate.rel_rmse >= 0.0 && estimate.pixels > 0, "{estimate:?}");
     assert!(first.timings.iter().any(|t| t.stage == "error_estimate"), "{:?}", first.timings);
