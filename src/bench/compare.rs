@@ -59,13 +59,14 @@ pub fn exact_frame(
     renderer.render_unestimated(gpu, Method::Exact, width, height)
 }
 
-/// A frame of a level whose technique is the exact reference: at `reference` the reference
-/// itself, below it the exact reference over the level's coarser VALs (`settings.levels.<level>
-/// .technique: "exact"`), where `options.device` `auto` runs the CPU reference on a CPU adapter
-/// (lavapipe: about 15x faster than the GPU pass there). Below `reference` the frame carries
-/// the error estimate every level's frame has ([`Renderer::estimate_error`]); at `reference`
-/// none, the frame being what the estimate compares with.
-pub fn exact_level_frame(
+/// A frame of a level whose technique traces a shadow ray per pixel and VAL drawn: the exact
+/// reference (at `reference` the reference itself; below it over the level's coarser VALs,
+/// `settings.levels.<level>.technique: "exact"`) or, with `options.estimator`, the estimator
+/// (`"estimator"`, the renderer's draws). `options.device` `auto` runs the CPU's on a CPU
+/// adapter (lavapipe: about 15x faster than the GPU pass there). Below `reference` the frame
+/// carries the error estimate every level's frame has ([`Renderer::estimate_error`]); at
+/// `reference` none, the frame being what the estimate compares with.
+pub fn traced_level_frame(
     gpu: &Gpu,
     renderer: &mut Renderer,
     width: u32,
@@ -116,6 +117,10 @@ pub struct ExactOptions {
     /// Shadow rays ignore blockers nearer the receiver than this (m; CPU only beyond 0):
     /// 0 for every reference, an analysis otherwise (`twin::exact_cpu::ExactScene::blockers_from`).
     pub blockers_from: f32,
+    /// The renderer's estimator ([`Renderer::set_estimator`]: its draws per pixel and seed)
+    /// instead of a sum over the VALs: on the GPU the estimator pass, on the CPU its twin's
+    /// systematic draws (`ValSampling::Systematic`), the level technique `"estimator"`.
+    pub estimator: bool,
 }
 
 /// Seed of the CPU reference's random numbers (VAL draws, sub-pixel positions): fixed, so a
@@ -125,7 +130,12 @@ pub const REFERENCE_SEED: u64 = 0x5eed;
 impl ExactOptions {
     /// The reference: every VAL summed at each pixel's centre past every blocker, on `device`.
     pub const fn every_val(device: ReferenceDevice) -> ExactOptions {
-        ExactOptions { device, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0 }
+        ExactOptions { device, val_stride: 1, samples: None, spp: 1, blockers_from: 0.0, estimator: false }
+    }
+
+    /// The renderer's estimator ([`Self::estimator`]) on `device`.
+    pub const fn estimator_on(device: ReferenceDevice) -> ExactOptions {
+        ExactOptions { estimator: true, ..ExactOptions::every_val(device) }
     }
 
     /// Check the options: `Err` names the flag (`--reference-samples: ...`).
@@ -144,6 +154,9 @@ impl ExactOptions {
             if self.val_stride != 1 {
                 return Err("--reference-samples: replaces --val-stride; give one of them".into());
             }
+        }
+        if self.estimator && (self.samples.is_some() || self.val_stride != 1) {
+            return Err("the estimator draws its own VALs: not with --reference-samples or --val-stride".into());
         }
         if !(self.blockers_from >= 0.0 && self.blockers_from.is_finite()) {
             return Err(format!("blockers_from: must be finite and >= 0, got {}", self.blockers_from));
@@ -172,6 +185,7 @@ impl ExactOptions {
     /// How the reference treats the VALs (as reported: "all", "stride" or "importance").
     pub fn estimator(&self) -> &'static str {
         match (self.samples, self.val_stride) {
+            _ if self.estimator => "systematic",
             (Some(_), _) => "importance",
             (None, 1) => "all",
             _ => "stride",
@@ -253,8 +267,11 @@ pub fn exact_reference_seeded(
     use crate::twin::exact_cpu::{self as cpu, CameraRays, PixelSampling, Receiver, Receivers, ValSampling};
     let device = options.device_on(gpu);
     if device == ReferenceDevice::Gpu {
-        let frame = exact_frame(gpu, renderer, width, height, options.val_stride)?;
-        let exact = options.val_stride == 1;
+        let frame = match options.estimator {
+            true => renderer.render_unestimated(gpu, Method::Estimator, width, height)?,
+            false => exact_frame(gpu, renderer, width, height, options.val_stride)?,
+        };
+        let exact = options.val_stride == 1 && !options.estimator;
         return Ok(ExactReference {
             variance: exact.then(|| vec![glam::Vec3::ZERO; frame.indirect.pixels.len()]),
             frame,
@@ -281,7 +298,9 @@ pub fn exact_reference_seeded(
     } else {
         Receivers::Traced { camera: &camera, sampling: PixelSampling { spp: options.spp, seed }, surface: &surface }
     };
+    let (draws, draws_seed) = renderer.estimator();
     let sampling = match (options.samples, options.val_stride) {
+        _ if options.estimator => ValSampling::Systematic { samples: draws, seed: draws_seed },
         (Some(samples), _) => ValSampling::Importance { samples, seed },
         (None, 1) => ValSampling::All,
         (None, s) => ValSampling::Stride(s),

@@ -84,8 +84,7 @@ pub fn measure(
 ) -> Result<EqualErrorCurve, GpuError> {
     let mut points = Vec::with_capacity(samples.len());
     for &n in samples {
-        let options =
-            ExactOptions { device: ReferenceDevice::Cpu, val_stride: 1, samples: Some(n), spp: 1, blockers_from: 0.0 };
+        let options = ExactOptions { samples: Some(n), ..ExactOptions::every_val(ReferenceDevice::Cpu) };
         let estimate = compare::exact_reference_seeded(gpu, renderer, width, height, &options, CURVE_SEED)?;
         let rel_rmse = error_against(reference, estimate.indirect());
         points.push(CurvePoint {

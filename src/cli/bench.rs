@@ -44,9 +44,11 @@ pub struct Args {
     /// (more accurate and at least 1.2x faster).
     #[arg(long, requires = "levels")]
     candidates: bool,
-    /// With --levels: also measure the GPU estimator of the exact reference (VALs drawn per
-    /// pixel by their unoccluded light, a shadow ray each) at each of these draws per pixel,
-    /// as configurations beside the candidates.
+    /// With --levels: also measure the estimator of the exact reference over the reference's
+    /// VALs (VALs drawn per pixel by their unoccluded light, a shadow ray each; the GPU pass, or
+    /// on a CPU adapter its CPU twin, as `relume render` runs it) at each of these draws per
+    /// pixel, as configurations beside the candidates (with --candidates: 16, 64 and 256 unless
+    /// given).
     #[arg(long, requires = "levels", value_name = "N1,N2,...")]
     gpu_estimator: Option<String>,
     /// With --levels: render nothing, draw the plot of the levels.json already in --out again.

@@ -120,6 +120,7 @@ impl ExactArgs {
             samples: self.reference_samples,
             spp: self.spp,
             blockers_from: 0.0,
+            estimator: false,
         };
         options.check().map_err(anyhow::Error::msg)?;
         Ok(options)

@@ -1,7 +1,7 @@
 //! `relume render`: a scene to PNG (and EXR), one component or all three.
 
 use super::{Size, checked_val_stride, load_renderable};
-use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_level_frame};
+use relume::bench::compare::{ExactOptions, ReferenceDevice, traced_level_frame};
 use relume::gpu::Gpu;
 use relume::image::LinearImage;
 use relume::renderer::{Component, Components, Method, Renderer};
@@ -25,8 +25,8 @@ pub struct Args {
     /// `indirect` and `full`, each as `.png` and `.exr`, all at the full image's exposure.
     #[arg(long, conflicts_with_all = ["out", "hdr", "component"])]
     out_dir: Option<PathBuf>,
-    /// How the indirect light is computed (default: sparse, or exact for a scene at quality
-    /// `reference`).
+    /// How the indirect light is computed (default: the level's technique: sparse, or exact at
+    /// quality `reference`, or what the scene's `settings.levels` names).
     #[arg(long, value_enum)]
     method: Option<Method>,
     /// The quality level, instead of the scene file's `settings.quality`.
@@ -41,11 +41,12 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     val_stride: u32,
     /// With --method estimator: VALs drawn per pixel, each with a shadow ray (1..=256,
-    /// default 32).
+    /// default the level's `draws`, else 32).
     #[arg(long)]
     draws: Option<u32>,
-    /// With --method exact: where the reference runs (auto: the CPU on CPU adapters, the GPU
-    /// otherwise; as `compare --reference-device`).
+    /// With --method exact or estimator: where it runs (auto: the CPU on CPU adapters, the
+    /// estimator as its twin's systematic draws; the GPU otherwise; as `compare
+    /// --reference-device`).
     #[arg(long, value_enum)]
     reference_device: Option<ReferenceDevice>,
 }
@@ -53,18 +54,20 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let val_stride = checked_val_stride(args.val_stride)?;
     anyhow::ensure!(
-        args.reference_device.is_none() || args.method.is_none_or(|m| m == Method::Exact),
-        "--reference-device: only with --method exact"
+        args.reference_device.is_none() || args.method.is_none_or(|m| matches!(m, Method::Exact | Method::Estimator)),
+        "--reference-device: only with --method exact or estimator"
     );
     if let Some(e) = args.exposure {
         anyhow::ensure!(e.is_finite() && e > 0.0, "--exposure: must be a positive number, got {e}");
     }
     use relume::gpu::references::estimator::{DEFAULT_SAMPLES, MAX_SAMPLES};
-    let draws = args.draws.unwrap_or(DEFAULT_SAMPLES);
-    anyhow::ensure!(
-        (1..=MAX_SAMPLES).contains(&draws),
-        "--draws: must be a count of draws per pixel in 1..={MAX_SAMPLES}, got {draws}"
-    );
+    let draws = args.draws;
+    if let Some(draws) = draws {
+        anyhow::ensure!(
+            (1..=MAX_SAMPLES).contains(&draws),
+            "--draws: must be a count of draws per pixel in 1..={MAX_SAMPLES}, got {draws}"
+        );
+    }
     anyhow::ensure!(
         args.draws.is_none() || args.method == Some(Method::Estimator),
         "--draws: only with --method estimator"
@@ -73,13 +76,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The scene's quality level asks for a technique; --method overrides it.
     let method = args.method.unwrap_or(scene.resolved.method.into());
     anyhow::ensure!(
-        args.reference_device.is_none() || method == Method::Exact,
-        "--reference-device: only with --method exact (or a scene at quality reference)"
+        args.reference_device.is_none() || matches!(method, Method::Exact | Method::Estimator),
+        "--reference-device: only with --method exact or estimator (or a level whose technique is one of them)"
     );
     let (w, h) = args.size.resolve(&scene)?;
     let gpu = Gpu::new()?;
     let mut renderer = Renderer::new(&gpu, &scene)?;
     renderer.set_exact_val_stride(val_stride);
+    // The level's draws (`settings.levels`) unless --draws gives them.
+    let draws = draws.or(scene.resolved.estimator_draws).unwrap_or(DEFAULT_SAMPLES);
     renderer.set_estimator(draws, scene.settings.seed as u32);
     renderer.set_error_estimate(Some(relume::renderer::estimate::PER_FRAME));
     let needs = if args.out_dir.is_some() { Components::ALL } else { args.component.needs() };
@@ -87,8 +92,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // A direct-only image needs no reference.
         Method::Exact if needs.indirect => {
             let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
-            let options = ExactOptions { device, val_stride, samples: None, spp: 1, blockers_from: 0.0 };
-            exact_level_frame(&gpu, &mut renderer, w, h, &options, scene.resolved.quality)?
+            let options = ExactOptions { val_stride, ..ExactOptions::every_val(device) };
+            traced_level_frame(&gpu, &mut renderer, w, h, &options, scene.resolved.quality)?
+        }
+        Method::Estimator if needs.indirect => {
+            let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
+            traced_level_frame(&gpu, &mut renderer, w, h, &ExactOptions::estimator_on(device), scene.resolved.quality)?
         }
         method => renderer.render_components(&gpu, method, w, h, needs)?,
     };

@@ -248,6 +248,11 @@ impl Renderer {
         self.estimator = (samples.clamp(1, estimator::MAX_SAMPLES), seed);
     }
 
+    /// [`Method::Estimator`]'s draws per pixel and seed.
+    pub fn estimator(&self) -> (u32, u32) {
+        self.estimator
+    }
+
     /// Change the visibility mode and its settings from the next sparse frame on.
     pub fn set_visibility(&mut self, visibility: VisibilitySettings) {
         self.visibility = visibility;

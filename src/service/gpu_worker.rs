@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 use glam::Mat4;
 use tokio::sync::oneshot;
 
-use crate::bench::compare::{ExactOptions, ReferenceDevice, exact_level_frame};
+use crate::bench::compare::{ExactOptions, ReferenceDevice, traced_level_frame};
 use crate::gpu::{Gpu, GpuError};
 use crate::mr::{self, MrPipeline, environment::Environment};
 use crate::renderer::{Method, Rendered, Renderer};
@@ -709,10 +709,14 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, Work
         renderer.set_spot_light(light);
     }
     let frame = match job.method {
-        // On a CPU adapter the CPU reference, as `relume render` runs it.
+        // On a CPU adapter the CPU's, as `relume render` runs them.
         Method::Exact => {
             let options = ExactOptions::every_val(ReferenceDevice::Auto);
-            exact_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
+            traced_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
+        }
+        Method::Estimator => {
+            let options = ExactOptions::estimator_on(ReferenceDevice::Auto);
+            traced_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
         }
         method => renderer.render(gpu, method, job.width, job.height)?,
     };

@@ -314,6 +314,8 @@ fn assert_candidates(report: &serde_json::Value, table: &str, existing: &serde_j
     let levels = &report["levels"].as_array().unwrap()[..3];
     let candidates = report["candidates"].as_array().unwrap();
     assert!(candidates.len() >= 3, "{candidates:?}");
+    let estimators: Vec<u64> = candidates.iter().filter_map(|c| c["draws"].as_u64()).collect();
+    assert_eq!(estimators, relume::bench::levels::ESTIMATOR_CANDIDATE_DRAWS.map(u64::from), "{candidates:?}");
     let mut all: Vec<(String, f64, f64)> = Vec::new();
     for l in levels {
         all.push((
@@ -331,6 +333,10 @@ fn assert_candidates(report: &serde_json::Value, table: &str, existing: &serde_j
             // The brute force through the clusters' maps with the level's VALs.
             assert_eq!(c["method"], "brute-force-clusters", "{name}");
             assert_eq!(c["knobs"], base["knobs"], "{name}");
+        } else if let Some(draws) = change.strip_prefix("technique=estimator + draws=") {
+            // The estimator over the reference's VALs, as accurate, at each default count.
+            assert_eq!(base["level"], "accurate", "{name}");
+            assert_eq!((c["method"].as_str(), c["draws"].as_u64()), (Some("estimator"), draws.parse().ok()), "{name}");
         } else if let Some(s) = change.strip_prefix("technique=brute_force_clusters + sparse.subdivision=") {
             // And at the coarsest subdivision: only that knob differs.
             assert_eq!((c["method"].as_str(), s), (Some("brute-force-clusters"), "16"), "{name}");

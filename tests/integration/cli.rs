@@ -408,8 +408,9 @@ fn every_technique_records_valid_gpu_timestamps() {
     assert_eq!(levels["levels"].as_array().map(Vec::len), Some(4), "{levels}");
 }
 
-/// A scene whose measured `accurate` level names the GPU estimator renders with it at that level
-/// (the summary's method and stages), and with the sparse method at `balanced`.
+/// A scene whose measured `accurate` level names the estimator renders with it at that level
+/// (the summary's method and stages: the GPU pass, or on a CPU adapter its CPU twin), and with
+/// the sparse method at `balanced`.
 #[test]
 fn a_measured_level_naming_the_estimator_renders_with_it() {
     let mut scene = fixture_scene_json("cornell_bunny_small");
@@ -418,7 +419,10 @@ fn a_measured_level_naming_the_estimator_renders_with_it() {
     let out = scratch("cli-estimator-level");
     let path = out.join("scene.json");
     std::fs::write(&path, scene.to_string()).unwrap();
-    for (quality, method, stage) in [("accurate", "estimator", "estimator"), ("balanced", "sparse", "gather")] {
+    let (estimator, twin) = ("estimator", relume::twin::exact_cpu::STAGE);
+    for (quality, method, stages) in
+        [("accurate", "estimator", [estimator, twin]), ("balanced", "sparse", ["gather"; 2])]
+    {
         let png = out.join(format!("{quality}.png"));
         let o = relume(&[
             "render",
@@ -435,6 +439,7 @@ fn a_measured_level_naming_the_estimator_renders_with_it() {
         assert!(o.status.success(), "{}", stderr(&o));
         let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(summary["method"], method, "{quality}");
-        assert!(summary["timings_ms"].get(stage).is_some(), "{quality}: {summary}");
+        assert!(stages.iter().any(|s| summary["timings_ms"].get(s).is_some()), "{quality}: {summary}");
+        assert_eq!(summary["timings_ms"].get("gather").is_some(), method == "sparse", "{quality}: {summary}");
     }
 }

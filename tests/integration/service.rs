@@ -486,50 +486,63 @@ async fn brute_force_ism_renders_and_is_refused_over_the_device_limit() {
     server.stop().await;
 }
 
-/// A level whose technique is the exact reference renders it through the service as `relume
-/// render` does: on a CPU adapter the CPU reference (its stage `exact_cpu`), elsewhere the GPU
-/// pass, with the error estimate every level's frame carries; at `reference` the same exact sum
-/// over the scene's VALs (the level's are the scene's, fixed when it loads) without an estimate,
-/// the frame being what the estimate compares with.
+/// A level whose technique traces shadow rays renders it through the service as `relume render`
+/// does: on a CPU adapter the CPU's (the exact reference, or the estimator's twin; stage
+/// `exact_cpu`), elsewhere the GPU pass, with the error estimate every level's frame carries; at
+/// `reference` the same exact sum over the scene's VALs (the level's are the scene's, fixed when
+/// it loads) without an estimate, the frame being what the estimate compares with.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_level_naming_the_exact_reference_renders_it() {
+async fn a_level_naming_the_exact_reference_or_the_estimator_renders_it() {
     let server = TestServer::start(|_| {}).await;
     let mut scene = fixture_scene("cornell_bunny_small", 16);
     scene["settings"]["quality"] = "accurate".into();
     let measured = "a test: the exact reference over 16² VALs";
-    scene["settings"]["levels"] =
-        json!({"accurate": {"measured": measured, "technique": "exact", "rsm_resolution": 16}});
+    scene["settings"]["levels"] = json!({
+        "accurate": {"measured": measured, "technique": "exact", "rsm_resolution": 16},
+        "balanced": {"measured": "a test", "technique": "estimator", "draws": 4},
+    });
     let id = server.create(&scene).await;
     let cpu = server.get("/healthz").await.json()["adapter"].as_str().is_some_and(|a| a.contains("llvmpipe"));
-    let stage = if cpu { relume::twin::exact_cpu::STAGE } else { relume::renderer::stage::EXACT };
     let path = format!("/v1/scenes/{id}/render");
-    let render = |level: &'static str| {
+    let render = |level: &'static str, method: &'static str| {
         let request = json!({"quality": {"level": level, "component": "indirect", "format": "f32"}});
         let (server, path) = (&server, &path);
+        let gpu_pass = if method == "exact" { relume::renderer::stage::EXACT } else { "estimator" };
+        let stage = if cpu { relume::twin::exact_cpu::STAGE } else { gpu_pass };
         async move {
             let reply = server.post(path, &request).await;
             assert_eq!(reply.status, StatusCode::OK, "{}", String::from_utf8_lossy(&reply.body));
             let timing = reply.header("server-timing").to_owned();
             assert!(timing.contains(&format!("{stage};dur=")), "{stage} missing from {timing}");
             assert!(!timing.contains("gather;dur="), "the sparse method ran: {timing}");
-            let gpu_pass = format!("{};dur=", relume::renderer::stage::EXACT);
+            let gpu_pass = format!("{gpu_pass};dur=");
             assert!(!cpu || !timing.contains(&gpu_pass), "the GPU pass ran on a CPU adapter: {timing}");
             let parameters = reply.header("x-relume-parameters");
-            assert!(parameters.starts_with(&format!("level={level}; method=exact; ")), "{parameters}");
+            assert!(parameters.starts_with(&format!("level={level}; method={method}; ")), "{parameters}");
             let estimate = reply.headers.get("x-relume-error-estimate").map(|v| v.to_str().expect("ASCII").to_owned());
             let floats: Vec<f32> =
                 reply.body.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes"))).collect();
             (floats, estimate)
         }
     };
-    let (accurate, estimate) = render("accurate").await;
+    let (accurate, estimate) = render("accurate", "exact").await;
     let estimate: f64 = estimate.expect("an accurate frame carries its estimate").parse().expect("a number");
     assert!(estimate.is_finite() && estimate >= 0.0, "{estimate}");
-    let (reference, none) = render("reference").await;
+    let (reference, none) = render("reference", "exact").await;
     assert_eq!(none, None, "the reference carries no estimate");
     assert_eq!(accurate.len(), 16 * 16 * 4);
     assert!(accurate.chunks_exact(4).any(|p| p[0] > 0.0 && p[3] == 1.0), "indirect light on covered pixels");
     assert_eq!(accurate, reference, "the same exact sum over the same VALs");
+    // Four draws per pixel: an estimate of the same sum, with its noise.
+    let (balanced, estimate) = render("balanced", "estimator").await;
+    assert!(estimate.is_some(), "a balanced frame carries its estimate");
+    let image = |f: &[f32]| relume::image::LinearImage {
+        width: 16,
+        height: 16,
+        pixels: f.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect(),
+    };
+    let error = relume::image::relative_rmse(&image(&balanced), &image(&reference));
+    assert!(error > 1e-3 && error < 1.0, "4 draws against the exact sum: {error}");
     server.stop().await;
 }
 

@@ -816,20 +816,7 @@ fn estimator_matches_cpu_twin(scene: &str, (w, h): (u32, u32), draws: &[u32], ex
         let cpu_scene = cpu::ExactScene { bvh: &bvh, vals: &vals, glossy: renderer.glossy(), blockers_from: 0.0 };
         let sampling = ValSampling::Systematic { samples, seed: 7 };
         let on_cpu = cpu::render(&cpu_scene, &Receivers::Hits(&receivers), w, h, sampling).image;
-        let scale = max_of((0..on_cpu.pixels.len()).map(|i| on_cpu.rgb(i)));
-        assert!(scale > 0.0);
-        let mut differing = 0;
-        for i in 0..on_cpu.pixels.len() {
-            assert_eq!(on_cpu.covered(i), on_gpu.indirect.covered(i), "coverage of pixel {i}");
-            let (c, g) = (on_cpu.rgb(i), on_gpu.indirect.rgb(i));
-            let bad = (c - g).abs().max_element() > REL * scale + 1e-9;
-            if bad && differing < 5 {
-                eprintln!("{samples} draws, pixel {i}: GPU {g} CPU {c}");
-            }
-            differing += usize::from(bad);
-        }
-        let covered = on_cpu.coverage();
-        assert!(differing * 50 <= covered, "{samples} draws: {differing} of {covered} pixels differ from the twin");
+        assert_estimator_twins(&on_cpu, &on_gpu.indirect, &format!("{samples} draws"));
         if let Some(exact) = &exact {
             errors.push(relume::image::relative_rmse(&on_gpu.indirect, exact));
         }
@@ -839,6 +826,48 @@ fn estimator_matches_cpu_twin(scene: &str, (w, h): (u32, u32), draws: &[u32], ex
         assert!(energy(&on_gpu.indirect) < 0.97 * energy(&brute), "{samples} draws: occlusion removes light");
     }
     errors
+}
+
+/// The estimator's CPU twin against its GPU pass, as [`gpu_estimator_matches_cpu_twin`] allows:
+/// the same coverage, and at most 2 % of pixels beyond 1e-3 of the largest.
+fn assert_estimator_twins(on_cpu: &relume::image::LinearImage, on_gpu: &relume::image::LinearImage, label: &str) {
+    let scale = max_of((0..on_cpu.pixels.len()).map(|i| on_cpu.rgb(i)));
+    assert!(scale > 0.0);
+    let mut differing = 0;
+    for i in 0..on_cpu.pixels.len() {
+        assert_eq!(on_cpu.covered(i), on_gpu.covered(i), "coverage of pixel {i}");
+        let (c, g) = (on_cpu.rgb(i), on_gpu.rgb(i));
+        let bad = (c - g).abs().max_element() > REL * scale + 1e-9;
+        if bad && differing < 5 {
+            eprintln!("{label}, pixel {i}: GPU {g} CPU {c}");
+        }
+        differing += usize::from(bad);
+    }
+    let covered = on_cpu.coverage();
+    assert!(differing * 50 <= covered, "{label}: {differing} of {covered} pixels differ from the twin");
+}
+
+/// The level technique `"estimator"` as `relume render`, the service and the levels bench run
+/// it (`bench::compare::exact_reference` with `ExactOptions::estimator_on`): on the CPU its
+/// twin's systematic draws, on the GPU the estimator pass, both with the renderer's draws and
+/// seed, so the same image; and an estimate, not the sum over every VAL.
+#[test]
+fn the_estimator_technique_runs_its_twin_on_the_cpu() {
+    use relume::bench::compare::{ExactOptions, ReferenceDevice, exact_reference};
+    let gpu = gpu();
+    let scene = load_scene("cornell_bunny_small");
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    renderer.set_estimator(16, 7);
+    let (w, h) = (24, 20);
+    let mut on = |options: ExactOptions| exact_reference(&gpu, &mut renderer, w, h, &options).unwrap();
+    let on_cpu = on(ExactOptions::estimator_on(ReferenceDevice::Cpu));
+    let on_gpu = on(ExactOptions::estimator_on(ReferenceDevice::Gpu));
+    let exact = on(ExactOptions::every_val(ReferenceDevice::Cpu));
+    assert_eq!(on_cpu.frame.indirect_stages, [relume::twin::exact_cpu::STAGE]);
+    assert_eq!(on_gpu.frame.indirect_stages, ["brute_force", "estimator"]);
+    assert_estimator_twins(on_cpu.indirect(), on_gpu.indirect(), "16 draws");
+    let error = relume::image::relative_rmse(on_cpu.indirect(), exact.indirect());
+    assert!(error > 1e-3 && error < 0.5, "16 draws against every VAL: {error}");
 }
 
 /// Primary rays through pixel centres in the obvhs BVH (the CPU reference's receivers with

@@ -175,7 +175,8 @@ pub struct LevelsOptions<'a> {
     pub equal_error: Option<&'a [u32]>,
     /// The configurations one parameter away from a level (`--candidates`).
     pub candidates: bool,
-    /// The GPU estimator at each of these draws per pixel (`--gpu-estimator`).
+    /// The estimator over the reference's VALs at each of these draws per pixel
+    /// (`--gpu-estimator`; with `candidates` and none given, [`ESTIMATOR_CANDIDATE_DRAWS`]).
     pub gpu_estimator: &'a [u32],
 }
 
@@ -227,9 +228,18 @@ pub fn levels(
         false => (Vec::new(), serde_json::Value::Null),
     };
     let mut measured = measured;
-    for &draws in options.gpu_estimator {
+    // The estimator over the reference's VALs, as `accurate`: its draws' noise falls as 1/sqrt
+    // of their count, where every other technique's error has a floor (its VALs', its
+    // visibility's), and on the CPU its cost is mostly the unoccluded sum over every VAL that
+    // its draws are proportional to, so more draws cost little more.
+    let draws = match options.gpu_estimator {
+        [] if candidates => &ESTIMATOR_CANDIDATE_DRAWS[..],
+        given => given,
+    };
+    for &draws in draws {
         let m = measure(gpu, &finest, (w, h), &reference, Method::Estimator(draws))?;
-        measured.push(CandidateRow::of(format!("GPU estimator, {draws} draws"), &finest, Method::Estimator(draws), &m));
+        let name = format!("accurate + technique=estimator + draws={draws}");
+        measured.push(CandidateRow::of(name, &finest, Method::Estimator(draws), &m));
     }
     mark_dominated(&mut rows[..3], &measured);
     let at = format!("{w}x{h} on {}", gpu.adapter_name());
@@ -374,6 +384,11 @@ fn measure_candidates(
     }
     Ok(measured)
 }
+
+/// The estimator's draws per pixel measured as candidates unless `--gpu-estimator` gives them:
+/// on `sponza_gallery` and `sponza_bunny` the converging estimator's curve crosses balanced's
+/// target 0.10 near 16 draws and accurate's 0.05 near 64 (docs/measurements/levels.md).
+pub const ESTIMATOR_CANDIDATE_DRAWS: [u32; 3] = [16, 64, 256];
 
 /// The RSM sides the exact reference is measured at as a candidate: an eighth, a quarter and
 /// half the reference's side (1/64, 1/16 and 1/4 of its VALs and time), within the RSM's range.
@@ -542,11 +557,15 @@ fn measure(
     if let Method::Estimator(draws) = method {
         renderer.set_estimator(draws, scene.settings.seed as u32);
     }
-    let frame = if method == Method::Exact {
-        // As `relume render` runs it: on the device `auto` picks (the CPU on lavapipe, where the
-        // GPU's exact reference takes about 15x as long), once (its figures do not vary and its
-        // time hardly does; after the direct light's frame, which warms the renderer up).
-        let options = ExactOptions::every_val(ReferenceDevice::Auto);
+    let traced = match method {
+        Method::Exact => Some(ExactOptions::every_val(ReferenceDevice::Auto)),
+        Method::Estimator(_) if gpu.is_cpu() => Some(ExactOptions::estimator_on(ReferenceDevice::Auto)),
+        _ => None,
+    };
+    let frame = if let Some(options) = traced {
+        // As `relume render` runs them: on the device `auto` picks (the CPU on lavapipe, where
+        // the GPU's exact reference takes about 15x as long), once (its figures do not vary and
+        // its time hardly does; after the direct light's frame, which warms the renderer up).
         exact_reference(gpu, &mut renderer, w, h, &options)?.frame
     } else {
         let method = method.render_method();
@@ -649,13 +668,14 @@ fn candidates_markdown(report: &LevelsReport) -> String {
         .iter()
         .map(|r| (r.level.name().to_owned(), knobs(&r.knobs), r.rel_rmse_vs_exact, r.rel_rmse_without_worst_1pct, r.ms))
         .chain(report.candidates.iter().map(|c| {
-            // The GPU estimator has none of the sparse method's parameters; its VALs are the
-            // reference's.
+            // The estimator and the exact reference have none of the sparse method's
+            // parameters; the estimator's VALs are the reference's.
             let k = match c.method {
                 RenderMethod::Sparse => knobs(&c.knobs),
                 RenderMethod::BruteForceClusters => {
                     format!("clusters per pixel | {} | – | – | –", c.knobs.rsm_resolution)
                 }
+                RenderMethod::Estimator => format!("estimator | {} | – | – | –", c.knobs.rsm_resolution),
                 _ => format!("exact | {} | – | – | –", c.knobs.rsm_resolution),
             };
             (c.name.clone(), k, c.rel_rmse_vs_exact, c.rel_rmse_without_worst_1pct, c.ms)

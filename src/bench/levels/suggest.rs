@@ -75,8 +75,14 @@ pub fn suggest_levels(
         let Some(&(name, knobs, draws, error, ms)) = best else { continue };
         let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
         match draws {
-            // The estimator takes none of the sparse method's parameters.
-            (_, Some(draws)) => entry = serde_json::json!({"technique": "estimator", "draws": draws}),
+            // The estimator takes none of the sparse method's parameters, but its draws and the
+            // row's VALs (the reference's RSM).
+            (_, Some(draws)) => {
+                entry = serde_json::json!({"technique": "estimator", "draws": draws});
+                if spot_light {
+                    entry["rsm_resolution"] = knobs.rsm_resolution.into();
+                }
+            }
             // The exact reference takes the row's VALs (its RSM) and nothing else.
             (RenderMethod::Exact, None) => {
                 entry = serde_json::json!({"technique": "exact"});

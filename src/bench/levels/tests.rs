@@ -289,20 +289,22 @@ fn the_exact_reference_over_coarser_vals_can_become_accurate() {
     assert_eq!(crate::scene::settings::technique(Quality::Accurate, &settings), (crate::scene::Technique::Exact, None));
 }
 
-/// The GPU estimator dominating a level makes it that level's technique, with its draws
-/// and none of the sparse parameters; a sparse configuration suggested later takes it back.
+/// The estimator dominating a level makes it that level's technique, with its draws and its
+/// row's VALs (the reference's RSM, where the level's entry had its own) and none of the
+/// sparse parameters; a sparse configuration suggested later takes it back.
 #[test]
 fn a_dominating_estimator_becomes_the_levels_technique() {
     let l = levels();
-    let rows = [row(Quality::Accurate, l[2].1, 0.29, 12000.0, &["GPU estimator, 8 draws"])];
-    let mut estimator = candidate("GPU estimator, 8 draws", l[2].1, 0.10, 9000.0);
+    let rows = [row(Quality::Accurate, l[2].1, 0.29, 12000.0, &["accurate + technique=estimator + draws=8"])];
+    let mut estimator = candidate("accurate + technique=estimator + draws=8", l[2].1, 0.10, 9000.0);
     estimator.method = RenderMethod::Estimator;
     estimator.draws = Some(8);
     let existing = serde_json::json!({"accurate": {"measured": "before", "rsm_resolution": 64}});
     let s = suggest_levels(&rows, &[estimator], &existing, true, "here");
     let accurate = &s["accurate"];
     assert_eq!((&accurate["technique"], &accurate["draws"]), (&serde_json::json!("estimator"), &serde_json::json!(8)));
-    assert!(accurate.get("rsm_resolution").is_none(), "{accurate}");
+    assert_eq!(accurate["rsm_resolution"], l[2].1.rsm_resolution, "{accurate}");
+    assert_ne!(l[2].1.rsm_resolution, 64, "the entry's own RSM replaced");
     let settings: crate::scene::SettingsDescription =
         serde_json::from_value(serde_json::json!({"levels": s})).expect("the suggestion parses");
     settings.validate("settings").expect("and is valid");
