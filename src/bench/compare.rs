@@ -63,9 +63,9 @@ pub fn exact_frame(
 /// reference (at `reference` the reference itself; below it over the level's coarser VALs,
 /// `settings.levels.<level>.technique: "exact"`) or, with `options.estimator`, the estimator
 /// (`"estimator"`, the renderer's draws). `options.device` `auto` runs the CPU's on a CPU
-/// adapter (lavapipe: about 15x faster than the GPU pass there). Below `reference` the frame
-/// carries the error estimate every level's frame has ([`Renderer::estimate_error`]); at
-/// `reference` none, the frame being what the estimate compares with.
+/// adapter (lavapipe: about 15x faster than the GPU pass there). The frame carries the error
+/// estimate every level's frame has ([`Renderer::estimate_error`]), except the exact reference
+/// at `reference`, which is what the estimate compares with.
 pub fn traced_level_frame(
     gpu: &Gpu,
     renderer: &mut Renderer,
@@ -75,7 +75,7 @@ pub fn traced_level_frame(
     level: crate::scene::Quality,
 ) -> Result<Rendered, GpuError> {
     let mut frame = exact_reference(gpu, renderer, width, height, options)?.frame;
-    if level != crate::scene::Quality::Reference {
+    if level != crate::scene::Quality::Reference || options.estimator {
         renderer.estimate_error(gpu, &mut frame)?;
     }
     Ok(frame)
@@ -182,7 +182,8 @@ impl ExactOptions {
         }
     }
 
-    /// How the reference treats the VALs (as reported: "all", "stride" or "importance").
+    /// How the reference treats the VALs (as reported: "all", "stride", "importance" or
+    /// "systematic").
     pub fn estimator(&self) -> &'static str {
         match (self.samples, self.val_stride) {
             _ if self.estimator => "systematic",

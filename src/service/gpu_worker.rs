@@ -115,6 +115,8 @@ pub struct RenderJob {
     /// The request's level: with the exact method, whether the frame is the reference itself
     /// (no error estimate) or a level's exact reference over the scene's VALs.
     pub level: Quality,
+    /// The level's estimator draws per pixel, where its technique is the estimator.
+    pub draws: Option<u32>,
     pub width: u32,
     pub height: u32,
     /// The request's level's visibility mode and near field (sparse point spacings).
@@ -715,6 +717,9 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, Work
             traced_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
         }
         Method::Estimator => {
+            // The request's level's draws, not the scene's level's the renderer was made with.
+            let draws = job.draws.unwrap_or(crate::gpu::references::estimator::DEFAULT_SAMPLES);
+            renderer.set_estimator(draws, scene.settings.seed as u32);
             let options = ExactOptions::estimator_on(ReferenceDevice::Auto);
             traced_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
         }

@@ -510,15 +510,14 @@ async fn render_scene(
     let budget_ms = quality.budget_ms.or(resolved.budget_ms);
     // The level's technique: the exact reference at `reference`, the GPU estimator where the
     // scene's measured level names it, else the sparse method.
-    let method = match quality.method {
-        Some(method) => method.into(),
-        None => crate::scene::settings::technique(level, &entry.described).0.into(),
-    };
+    let (technique, draws) = crate::scene::settings::technique(level, &entry.described);
+    let method = quality.method.map_or(technique.into(), Into::into);
     let job = RenderJob {
         camera: camera.to_camera(entry.origin),
         light: light.map(|l| l.to_spot_light(entry.origin)),
         method,
         level,
+        draws,
         width: camera.width,
         height: camera.height,
         occlusion: parameters.occlusion,

@@ -500,6 +500,7 @@ async fn a_level_naming_the_exact_reference_or_the_estimator_renders_it() {
     scene["settings"]["levels"] = json!({
         "accurate": {"measured": measured, "technique": "exact", "rsm_resolution": 16},
         "balanced": {"measured": "a test", "technique": "estimator", "draws": 4},
+        "fast": {"measured": "a test", "technique": "estimator", "draws": 64},
     });
     let id = server.create(&scene).await;
     let cpu = server.get("/healthz").await.json()["adapter"].as_str().is_some_and(|a| a.contains("llvmpipe"));
@@ -533,16 +534,22 @@ async fn a_level_naming_the_exact_reference_or_the_estimator_renders_it() {
     assert_eq!(accurate.len(), 16 * 16 * 4);
     assert!(accurate.chunks_exact(4).any(|p| p[0] > 0.0 && p[3] == 1.0), "indirect light on covered pixels");
     assert_eq!(accurate, reference, "the same exact sum over the same VALs");
-    // Four draws per pixel: an estimate of the same sum, with its noise.
+    // Four draws per pixel: an estimate of the same sum, with its noise; each level with its own
+    // draws (the scene's level, `accurate`, has none), so 64 draws come closer.
     let (balanced, estimate) = render("balanced", "estimator").await;
     assert!(estimate.is_some(), "a balanced frame carries its estimate");
-    let image = |f: &[f32]| relume::image::LinearImage {
-        width: 16,
-        height: 16,
-        pixels: f.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect(),
+    let (fast, _) = render("fast", "estimator").await;
+    let error = |f: &[f32]| {
+        let image = |f: &[f32]| relume::image::LinearImage {
+            width: 16,
+            height: 16,
+            pixels: f.chunks_exact(4).map(|p| [p[0], p[1], p[2], p[3]]).collect(),
+        };
+        relume::image::relative_rmse(&image(f), &image(&reference))
     };
-    let error = relume::image::relative_rmse(&image(&balanced), &image(&reference));
-    assert!(error > 1e-3 && error < 1.0, "4 draws against the exact sum: {error}");
+    let (four, sixty_four) = (error(&balanced), error(&fast));
+    assert!(four > 1e-3 && four < 1.0, "4 draws against the exact sum: {four}");
+    assert!(sixty_four < 0.7 * four, "64 draws against the exact sum: {sixty_four}, 4 draws: {four}");
     server.stop().await;
 }
 
