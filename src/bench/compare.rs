@@ -138,6 +138,16 @@ impl ExactOptions {
         ExactOptions { estimator: true, ..ExactOptions::every_val(device) }
     }
 
+    /// What `method` renders with on `device` where it traces shadow rays: the exact reference
+    /// over every VAL, or the renderer's estimator; `None` for the other methods.
+    pub const fn traced(method: Method, device: ReferenceDevice) -> Option<ExactOptions> {
+        match method {
+            Method::Exact => Some(ExactOptions::every_val(device)),
+            Method::Estimator => Some(ExactOptions::estimator_on(device)),
+            _ => None,
+        }
+    }
+
     /// Check the options: `Err` names the flag (`--reference-samples: ...`).
     pub fn check(&self) -> Result<(), String> {
         use crate::twin::exact_cpu::{MAX_SPP, MAX_VAL_SAMPLES};

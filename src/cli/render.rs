@@ -88,18 +88,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     renderer.set_estimator(draws, scene.settings.seed as u32);
     renderer.set_error_estimate(Some(relume::renderer::estimate::PER_FRAME));
     let needs = if args.out_dir.is_some() { Components::ALL } else { args.component.needs() };
-    let frame = match method {
-        // A direct-only image needs no reference.
-        Method::Exact if needs.indirect => {
-            let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
-            let options = ExactOptions { val_stride, ..ExactOptions::every_val(device) };
+    let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
+    let frame = match ExactOptions::traced(method, device) {
+        // A direct-only image needs no reference. --val-stride thins the exact reference's VALs.
+        Some(options) if needs.indirect => {
+            let options = ExactOptions { val_stride: if options.estimator { 1 } else { val_stride }, ..options };
             traced_level_frame(&gpu, &mut renderer, w, h, &options, scene.resolved.quality)?
         }
-        Method::Estimator if needs.indirect => {
-            let device = args.reference_device.unwrap_or(ReferenceDevice::Auto);
-            traced_level_frame(&gpu, &mut renderer, w, h, &ExactOptions::estimator_on(device), scene.resolved.quality)?
-        }
-        method => renderer.render_components(&gpu, method, w, h, needs)?,
+        _ => renderer.render_components(&gpu, method, w, h, needs)?,
     };
     let exposure_of =
         |image: &LinearImage| args.exposure.or(scene.settings.exposure).unwrap_or_else(|| image.auto_exposure());

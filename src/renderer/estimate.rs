@@ -68,7 +68,7 @@
 
 use crate::gpu::{Gpu, GpuError};
 use crate::image::{LinearImage, luminance, weighted_noise_corrected_relative_rmse, weighted_relative_stderr};
-use crate::renderer::{Rendered, Renderer};
+use crate::renderer::{Method, Rendered, Renderer};
 use crate::scene::SpotLight;
 use crate::twin::Val;
 use crate::twin::bvh::TraceBvh;
@@ -313,6 +313,56 @@ fn contrast(lum: &[f32], width: usize, i: usize) -> f64 {
     let dx = if x > 0 && x + 1 < width { (lum[i + 1] - lum[i - 1]).abs() } else { 0.0 };
     let dy = if y > 0 && y + 1 < height { (lum[i + width] - lum[i - width]).abs() } else { 0.0 };
     f64::from(dx.max(dy))
+}
+
+/// The renderer's per-frame estimate: asked for, run after a frame, or held back for one.
+impl Renderer {
+    /// Run the error estimate ([`Estimator`]) after every frame that computes indirect
+    /// light, with `options` (its seed is offset by the frame's index, so that successive
+    /// frames look at other pixels); `None`: no estimate. Its time is the frame's
+    /// `error_estimate` stage.
+    pub fn set_error_estimate(&mut self, options: Option<EstimateOptions>) {
+        match options {
+            None => self.estimate = None,
+            Some(options) => {
+                let estimator = self.estimate.take().map_or_else(Estimator::new, |(e, _)| e);
+                self.estimate = Some((estimator, options));
+            }
+        }
+    }
+
+    /// [`Renderer::render`] without the error estimate [`Renderer::set_error_estimate`] asks
+    /// for: a frame that is itself what the estimate compares with (the exact reference), or
+    /// one whose estimate is taken afterwards.
+    pub fn render_unestimated(
+        &mut self,
+        gpu: &Gpu,
+        method: Method,
+        width: u32,
+        height: u32,
+    ) -> Result<Rendered, GpuError> {
+        let estimate = self.estimate.take();
+        let rendered = self.render(gpu, method, width, height);
+        self.estimate = estimate;
+        rendered
+    }
+
+    /// The frame's error estimate, where [`Renderer::set_error_estimate`] asked for one, into
+    /// `rendered` (and its time as the estimate's stage): what every frame with indirect light
+    /// gets, also for one this renderer's frame was made from elsewhere (the CPU exact reference
+    /// over a level's coarser VALs, `bench::compare::exact_reference`).
+    pub fn estimate_error(&mut self, gpu: &Gpu, rendered: &mut Rendered) -> Result<(), GpuError> {
+        let Some((mut estimator, options)) = self.estimate.take() else { return Ok(()) };
+        let seed = options.seed.wrapping_add(self.estimated_frames);
+        self.estimated_frames += 1;
+        let result = estimator.estimate(gpu, self, rendered, &EstimateOptions { seed, ..options });
+        self.estimate = Some((estimator, options));
+        rendered.error_estimate = result?;
+        if let Some(e) = &rendered.error_estimate {
+            rendered.timings.stages.push((STAGE.to_owned(), e.ms));
+        }
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -274,20 +274,6 @@ impl Renderer {
         self.near_radius = spacings.max(0.0) * self.sparse_spacing;
     }
 
-    /// Run the error estimate ([`estimate::Estimator`]) after every frame that computes indirect
-    /// light, with `options` (its seed is offset by the frame's index, so that successive
-    /// frames look at other pixels); `None`: no estimate. Its time is the frame's
-    /// `error_estimate` stage.
-    pub fn set_error_estimate(&mut self, options: Option<estimate::EstimateOptions>) {
-        match options {
-            None => self.estimate = None,
-            Some(options) => {
-                let estimator = self.estimate.take().map_or_else(estimate::Estimator::new, |(e, _)| e);
-                self.estimate = Some((estimator, options));
-            }
-        }
-    }
-
     /// Allow or forbid the glossy lobe (it still runs only when a material is glossy) from the
     /// next frame on.
     pub fn set_glossy(&mut self, allowed: bool) {
@@ -478,22 +464,6 @@ impl Renderer {
         self.render_components(gpu, method, width, height, Components::ALL)
     }
 
-    /// [`Renderer::render`] without the error estimate [`Renderer::set_error_estimate`] asks
-    /// for: a frame that is itself what the estimate compares with (the exact reference), or
-    /// one whose estimate is taken afterwards.
-    pub fn render_unestimated(
-        &mut self,
-        gpu: &Gpu,
-        method: Method,
-        width: u32,
-        height: u32,
-    ) -> Result<Rendered, GpuError> {
-        let estimate = self.estimate.take();
-        let rendered = self.render(gpu, method, width, height);
-        self.estimate = estimate;
-        rendered
-    }
-
     /// Render `components` at `width` x `height`: prepare the frame's techniques, record them
     /// in order, submit, and read back the images they wrote.
     pub fn render_components(
@@ -553,23 +523,6 @@ impl Renderer {
             self.estimate_error(gpu, &mut rendered)?;
         }
         Ok(rendered)
-    }
-
-    /// The frame's error estimate, where [`Renderer::set_error_estimate`] asked for one, into
-    /// `rendered` (and its time as the estimate's stage): what every frame with indirect light
-    /// gets, also for one this renderer's frame was made from elsewhere (the CPU exact reference
-    /// over a level's coarser VALs, `bench::compare::exact_reference`).
-    pub fn estimate_error(&mut self, gpu: &Gpu, rendered: &mut Rendered) -> Result<(), GpuError> {
-        let Some((mut estimator, options)) = self.estimate.take() else { return Ok(()) };
-        let seed = options.seed.wrapping_add(self.estimated_frames);
-        self.estimated_frames += 1;
-        let result = estimator.estimate(gpu, self, rendered, &estimate::EstimateOptions { seed, ..options });
-        self.estimate = Some((estimator, options));
-        rendered.error_estimate = result?;
-        if let Some(e) = &rendered.error_estimate {
-            rendered.timings.stages.push((estimate::STAGE.to_owned(), e.ms));
-        }
-        Ok(())
     }
 
     /// The frame's techniques in order, and which of them computes the indirect light. Call

@@ -112,8 +112,7 @@ pub struct RenderJob {
     /// The spot light, for scenes that have one.
     pub light: Option<SpotLight>,
     pub method: Method,
-    /// The request's level: with the exact method, whether the frame is the reference itself
-    /// (no error estimate) or a level's exact reference over the scene's VALs.
+    /// The request's level (at `reference` the exact frame carries no error estimate).
     pub level: Quality,
     /// The level's estimator draws per pixel, where its technique is the estimator.
     pub draws: Option<u32>,
@@ -710,20 +709,15 @@ fn render(gpu: &Gpu, loaded: &mut Loaded, job: &RenderJob) -> Result<Frame, Work
     if let Some(light) = &job.light {
         renderer.set_spot_light(light);
     }
-    let frame = match job.method {
+    if job.method == Method::Estimator {
+        // The request's level's draws, not the scene's level's the renderer was made with.
+        let draws = job.draws.unwrap_or(crate::gpu::references::estimator::DEFAULT_SAMPLES);
+        renderer.set_estimator(draws, scene.settings.seed as u32);
+    }
+    let frame = match ExactOptions::traced(job.method, ReferenceDevice::Auto) {
         // On a CPU adapter the CPU's, as `relume render` runs them.
-        Method::Exact => {
-            let options = ExactOptions::every_val(ReferenceDevice::Auto);
-            traced_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
-        }
-        Method::Estimator => {
-            // The request's level's draws, not the scene's level's the renderer was made with.
-            let draws = job.draws.unwrap_or(crate::gpu::references::estimator::DEFAULT_SAMPLES);
-            renderer.set_estimator(draws, scene.settings.seed as u32);
-            let options = ExactOptions::estimator_on(ReferenceDevice::Auto);
-            traced_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?
-        }
-        method => renderer.render(gpu, method, job.width, job.height)?,
+        Some(options) => traced_level_frame(gpu, renderer, job.width, job.height, &options, job.level)?,
+        None => renderer.render(gpu, job.method, job.width, job.height)?,
     };
     Ok((frame, None))
 }
