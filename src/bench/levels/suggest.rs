@@ -5,7 +5,8 @@ use super::{CandidateRow, Knobs, LevelRow, Method, RenderMethod};
 use crate::scene::Quality;
 
 /// The scene file's `settings.levels` the measurement suggests: for each level that misses its
-/// target error ([`Quality::target_rel_rmse`]), the fastest measured configuration (another
+/// target error ([`Quality::meets_targets`]: the rel RMSE, and for balanced also without the
+/// worst 1 % of pixels), the fastest measured configuration (another
 /// level or a candidate) that meets it within the level's time bound
 /// ([`Quality::time_share_of_accurate`] of accurate's time as suggested); `accurate`, which has
 /// no time bound, where nothing meets its target, the most accurate measured configuration
@@ -30,49 +31,76 @@ pub fn suggest_levels(
         let method = Method::of(&r.resolved);
         (method.render_method(), method.draws())
     };
-    let measured: Vec<(&str, Knobs, Technique, f64, f64)> = levels
+    struct Row<'a> {
+        name: &'a str,
+        knobs: Knobs,
+        technique: Technique,
+        error: f64,
+        without_worst: f64,
+        ms: f64,
+    }
+    let measured: Vec<Row> = levels
         .iter()
-        .map(|r| (r.level.name(), r.knobs, technique(r), r.rel_rmse_vs_exact, r.ms))
-        .chain(candidates.iter().map(|c| (c.name.as_str(), c.knobs, (c.method, c.draws), c.rel_rmse_vs_exact, c.ms)))
+        .map(|r| Row {
+            name: r.level.name(),
+            knobs: r.knobs,
+            technique: technique(r),
+            error: r.rel_rmse_vs_exact,
+            without_worst: r.rel_rmse_without_worst_1pct,
+            ms: r.ms,
+        })
+        .chain(candidates.iter().map(|c| Row {
+            name: c.name.as_str(),
+            knobs: c.knobs,
+            technique: (c.method, c.draws),
+            error: c.rel_rmse_vs_exact,
+            without_worst: c.rel_rmse_without_worst_1pct,
+            ms: c.ms,
+        }))
         .collect();
     // What each level becomes: the fastest meeting its target within its time bound; else,
     // for `accurate`, which has no bound, the most accurate measured configuration where it is
     // more accurate than the level's own; else the most accurate dominating one.
     let choose = |row: &LevelRow, max_ms: f64| {
-        let target = row.level.target_rel_rmse().filter(|&t| row.rel_rmse_vs_exact > t);
-        let meeting = target.and_then(|t| {
-            measured
-                .iter()
-                .filter(|m| m.0 != row.level.name() && m.3 <= t && m.4 <= max_ms)
-                .min_by(|a, b| a.4.total_cmp(&b.4))
-        });
-        let closer = (target.is_some() && row.level == Quality::Accurate)
+        let level = row.level;
+        let misses = !level.meets_targets(row.rel_rmse_vs_exact, row.rel_rmse_without_worst_1pct);
+        let meeting = misses
             .then(|| {
                 measured
                     .iter()
-                    .filter(|m| m.0 != row.level.name() && m.3 < row.rel_rmse_vs_exact)
-                    .min_by(|a, b| a.3.total_cmp(&b.3))
+                    .filter(|m| {
+                        m.name != level.name() && level.meets_targets(m.error, m.without_worst) && m.ms <= max_ms
+                    })
+                    .min_by(|a, b| a.ms.total_cmp(&b.ms))
+            })
+            .flatten();
+        let closer = (misses && level == Quality::Accurate)
+            .then(|| {
+                measured
+                    .iter()
+                    .filter(|m| m.name != level.name() && m.error < row.rel_rmse_vs_exact)
+                    .min_by(|a, b| a.error.total_cmp(&b.error))
             })
             .flatten();
         let best = meeting.or(closer).or_else(|| {
             measured
                 .iter()
-                .filter(|(name, ..)| row.dominated_by.iter().any(|d| d == name))
-                .min_by(|a, b| a.3.total_cmp(&b.3))
+                .filter(|m| row.dominated_by.iter().any(|d| d == m.name))
+                .min_by(|a, b| a.error.total_cmp(&b.error))
         });
-        (target, meeting, best)
+        (misses, meeting, best)
     };
     // The other levels' time bounds are shares of accurate's time as it will run.
     let accurate_ms =
-        levels.iter().find(|r| r.level == Quality::Accurate).map(|r| choose(r, f64::INFINITY).2.map_or(r.ms, |m| m.4));
+        levels.iter().find(|r| r.level == Quality::Accurate).map(|r| choose(r, f64::INFINITY).2.map_or(r.ms, |m| m.ms));
     let mut out = existing.as_object().cloned().unwrap_or_default();
     for row in levels {
         let max_ms = match (row.level.time_share_of_accurate(), accurate_ms) {
             (Some(share), Some(ms)) => share * ms,
             _ => f64::INFINITY,
         };
-        let (target, meeting, best) = choose(row, max_ms);
-        let Some(&(name, knobs, draws, error, ms)) = best else { continue };
+        let (misses, meeting, best) = choose(row, max_ms);
+        let Some(&Row { name, knobs, technique: draws, error, ms, .. }) = best else { continue };
         let mut entry = out.get(row.level.name()).filter(|e| e.is_object()).cloned().unwrap_or(serde_json::json!({}));
         match draws {
             // The estimator takes none of the sparse method's parameters, but its draws and the
@@ -114,12 +142,13 @@ pub fn suggest_levels(
                 set_changed_knobs(&mut entry, knobs, row.knobs, spot_light);
             }
         }
-        let why = match (meeting, target) {
-            (Some(_), Some(t)) => {
-                format!("; the fastest measured within the level's target {t:.2}, which its own misses")
+        let targets = targets_text(row.level);
+        let why = match (meeting, misses) {
+            (Some(_), true) => {
+                format!("; the fastest measured within the level's target {targets}, which its own misses")
             }
-            (None, Some(t)) if !row.dominated_by.iter().any(|d| d == name) => {
-                format!("; the most accurate measured, none within the level's target {t:.2}")
+            (None, true) if !row.dominated_by.iter().any(|d| d == name) => {
+                format!("; the most accurate measured, none within the level's target {targets}")
             }
             _ => String::new(),
         };
@@ -132,6 +161,15 @@ pub fn suggest_levels(
         out.insert(row.level.name().to_owned(), entry);
     }
     serde_json::Value::Object(out)
+}
+
+/// The level's targets in words: `0.10 (0.07 without its worst 1 %)`.
+pub fn targets_text(level: Quality) -> String {
+    let whole = level.target_rel_rmse().map_or(String::new(), |t| format!("{t:.2}"));
+    match level.target_without_worst_1pct() {
+        Some(t) => format!("{whole} ({t:.2} without its worst 1 %)"),
+        None => whole,
+    }
 }
 
 /// Into a `settings.levels` entry, each of `knobs` that differs from the level's `was` (the RSM

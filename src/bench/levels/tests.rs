@@ -108,7 +108,8 @@ fn row(level: Quality, knobs: Knobs, error: f64, ms: f64, dominated_by: &[&str])
     LevelRow {
         level,
         rel_rmse_vs_exact: error,
-        rel_rmse_without_worst_1pct: error,
+        // Most of the error in a few pixels, as on the fixtures.
+        rel_rmse_without_worst_1pct: 0.6 * error,
         error_estimate: None,
         estimate_ratio: None,
         ms,
@@ -128,7 +129,8 @@ fn candidate(name: &str, knobs: Knobs, error: f64, ms: f64) -> CandidateRow {
         method: RenderMethod::Sparse,
         draws: None,
         rel_rmse_vs_exact: error,
-        rel_rmse_without_worst_1pct: error,
+        // Most of the error in a few pixels, as on the fixtures.
+        rel_rmse_without_worst_1pct: 0.6 * error,
         ms,
         stages_ms: Vec::new(),
     }
@@ -317,6 +319,41 @@ fn a_dominating_estimator_becomes_the_levels_technique() {
     let s = suggest_levels(&rows, &[sparse], &s, true, "here");
     assert!(s["accurate"].get("technique").is_none() && s["accurate"].get("draws").is_none(), "{s}");
     assert_eq!(s["accurate"]["sparse"]["points"], 0.5);
+}
+
+/// Balanced, the default level, has a second target: 0.07 without the frame's worst 1 % of
+/// pixels. A balanced level within 0.10 but over 0.07 without its worst pixels misses, and is
+/// suggested as the fastest configuration meeting both (here the estimator at twice the draws,
+/// as on the many lights' Sponza); one within 0.10 only does not qualify, however fast. The
+/// other levels have no second target.
+#[test]
+fn balanced_is_held_to_its_error_without_the_worst_pixels_too() {
+    assert!(Quality::Balanced.meets_targets(0.10, 0.07) && !Quality::Balanced.meets_targets(0.084, 0.078));
+    assert!(!Quality::Balanced.meets_targets(0.11, 0.05));
+    assert!(Quality::Fast.meets_targets(0.2, 0.2) && Quality::Accurate.meets_targets(0.05, 0.05));
+    assert!(Quality::Reference.meets_targets(1.0, 1.0));
+    let l = levels();
+    let mut balanced = row(Quality::Balanced, l[1].1, 0.084, 9000.0, &[]);
+    balanced.rel_rmse_without_worst_1pct = 0.078;
+    let rows = [balanced, row(Quality::Accurate, l[2].1, 0.04, 11000.0, &[])];
+    let estimator = |draws: u32, error: f64, without: f64, ms: f64| {
+        let mut c = candidate(&format!("accurate + technique=estimator + draws={draws}"), l[2].1, error, ms);
+        (c.method, c.draws, c.rel_rmse_without_worst_1pct) = (RenderMethod::Estimator, Some(draws), without);
+        c
+    };
+    let mut faster =
+        candidate("balanced + visibility=clusters", knobs(Occlusion::Clusters, 128, 1.0, 0.0, 2.0), 0.08, 500.0);
+    faster.rel_rmse_without_worst_1pct = 0.072;
+    let candidates = [faster, estimator(32, 0.059, 0.055, 9500.0), estimator(64, 0.04, 0.037, 11000.0)];
+    let s = suggest_levels(&rows, &candidates, &serde_json::json!({}), true, "here");
+    assert_eq!((&s["balanced"]["technique"], &s["balanced"]["draws"]), (&"estimator".into(), &32.into()), "{s}");
+    let text = s["balanced"]["measured"].as_str().unwrap();
+    assert!(text.contains("within the level's target 0.10 (0.07 without its worst 1 %)"), "{text}");
+    assert!(s.get("accurate").is_none(), "{s}");
+    // Within 0.07 without its worst pixels, balanced stays.
+    let mut rows = rows;
+    rows[0].rel_rmse_without_worst_1pct = 0.069;
+    assert!(suggest_levels(&rows, &candidates, &serde_json::json!({}), true, "here").get("balanced").is_none());
 }
 
 /// The brute force through the clusters' maps dominating a level makes it that level's
