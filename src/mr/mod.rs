@@ -7,6 +7,7 @@
 //! for `relume replay` (frame in, composited image + indirect image + timings out), and the
 //! service's streams run it on the scene's shared renderer (`service::gpu_worker`).
 
+pub mod crop;
 pub mod differential;
 pub mod environment;
 pub mod replay;
@@ -22,6 +23,7 @@ use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use crate::scene::settings::DifferentialMethod;
 use crate::twin::Val;
+use crop::Crop;
 use differential::{Emitter, LightField, MrSettings, ReceiverGrid};
 use environment::Environment;
 use glam::{DAffine3, Mat4, Vec3};
@@ -150,6 +152,13 @@ impl MrRenderer {
         self.pipeline.set_environment(environment);
     }
 
+    /// Render each following frame over the whole image (`false`) or over the pixels the
+    /// virtual content's box projects to (`true`, the default; [`Crop`]): the same image, the
+    /// switch is for measuring and testing the crop.
+    pub fn set_crop_to_content(&mut self, crop: bool) {
+        self.pipeline.crop_to_content = crop;
+    }
+
     /// Relight `frame` ([`MrPipeline::render_frame`]): its VALs (or the accumulated set), the
     /// environment, the scene's spot light if any, the virtual object seen from the frame's
     /// camera and composited over its colour, relit by the differential pass.
@@ -225,6 +234,8 @@ pub struct MrPipeline {
     placed: Option<Placed>,
     /// Time (ms) of a rebuild of the differential pass not yet counted in a frame's stage.
     build_ms: f64,
+    /// Whether frames are rendered over the content's pixels only ([`Crop::of_box`]).
+    crop_to_content: bool,
 }
 
 /// What depends on where the meshes are.
@@ -233,6 +244,9 @@ struct Placed {
     placement: Vec<Mat4>,
     /// Centre of the virtual content's bounding sphere: the environment's VALs surround it.
     centre: Vec3,
+    /// The virtual content's box (min, max corners, the scene's frame): the render covers the
+    /// pixels it projects to ([`Crop::of_box`]).
+    bounds: (Vec3, Vec3),
     /// Only with `settings.mr.differential`.
     differential: Option<DifferentialState>,
 }
@@ -302,7 +316,7 @@ impl MrPipeline {
     /// The pipeline of a scene with `mr` settings, lit by `environment` too. Call
     /// [`MrPipeline::place`] before the first frame.
     pub fn new(mr: MrSettings, environment: Environment) -> Self {
-        Self { mr, environment, placed: None, build_ms: 0.0 }
+        Self { mr, environment, placed: None, build_ms: 0.0, crop_to_content: true }
     }
 
     /// Light the following frames with `environment` too.
@@ -326,12 +340,13 @@ impl MrPipeline {
             return Ok(());
         }
         let start = Instant::now();
+        let bounds = differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position)));
         let differential = match self.mr.differential {
             false => None,
             true => Some(DifferentialState {
                 pass: Differential::on(gpu, &renderer.scene, self.mr.device)?,
                 emitters: differential::emitters_placed(scene, model_to_world),
-                bounds: differential::bounds(renderer.scene.flat.vertices.iter().map(|v| Vec3::from(v.position))),
+                bounds,
             }),
         };
         if differential.is_some() {
@@ -339,7 +354,7 @@ impl MrPipeline {
             tracing::debug!(ms = self.build_ms, "differential pass built for a new placement");
         }
         let centre = renderer.scene.flat.bounding_sphere().0;
-        self.placed = Some(Placed { placement: model_to_world.to_vec(), centre, differential });
+        self.placed = Some(Placed { placement: model_to_world.to_vec(), centre, bounds, differential });
         Ok(())
     }
 
@@ -424,11 +439,24 @@ impl MrPipeline {
         let (frame, settings) = (input.frame, input.settings);
         let lighting = self.light(gpu, renderer, input)?;
         let (w, h) = (settings.width, settings.height);
-        renderer.set_pinhole_view(frame.intrinsics, &frame.camera_to_world);
-        let mut rendered = renderer.render(gpu, settings.method, w, h)?;
+        // The render covers the pixels the content's box projects to, pasted back at their place.
+        let k = frame.intrinsics.scaled_to(w, h);
+        let crop = match self.placed.as_ref().filter(|p| p.is_for(renderer) && self.crop_to_content) {
+            Some(p) => Crop::of_box(&k, &renderer.local_pose(&frame.camera_to_world), p.bounds),
+            None => Crop::full(w, h),
+        };
+        renderer.set_pinhole_view(crop.intrinsics(&k), &frame.camera_to_world);
+        let mut rendered = renderer.render(gpu, settings.method, crop.width, crop.height)?;
         lighting.add_stages(&mut rendered.timings);
         let start = Instant::now();
-        let virtual_depth = virtual_depth(gpu, renderer, &frame.camera_to_world)?;
+        let virtual_depth = crop.paste(&virtual_depth(gpu, renderer, &frame.camera_to_world)?, w, h, None);
+        if !crop.is_full(w, h) {
+            for image in [&mut rendered.indirect, &mut rendered.direct] {
+                if !image.pixels.is_empty() {
+                    *image = LinearImage { width: w, height: h, pixels: crop.paste(&image.pixels, w, h, [0.0; 4]) };
+                }
+            }
+        }
         let depth_ms = start.elapsed().as_secs_f64() * 1e3;
         let sparse_irradiance = match settings.method {
             Method::Sparse => renderer.read_gathered_irradiance(gpu)?,

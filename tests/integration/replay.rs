@@ -66,6 +66,37 @@ fn bunny_is_lit_by_the_room_and_composited_over_the_camera_image() {
     assert!(drawn > 50, "the bunny is drawn over the camera image: {drawn} pixels");
 }
 
+/// The render over the pixels the bunny's box projects to (the default) is the render over
+/// the whole image: every pixel the full render covers is covered, with the same light (each
+/// crop pixel sees the full image's ray through it), and the composites agree; the differential
+/// pass runs in both, so this holds for the relit desk too.
+#[test]
+fn the_render_over_the_contents_pixels_is_the_whole_images() {
+    let gpu = gpu();
+    let mut scene = load_scene("mr_bunny_differential");
+    scene.settings.rgbd.grid_step = 16;
+    let frame = recording().frame(0).unwrap();
+    let mut frames = [true, false].map(|crop| {
+        let mut mr = MrRenderer::new(&gpu, &scene, MrOptions { width: 320, height: 240, ..options() }).unwrap();
+        mr.set_crop_to_content(crop);
+        mr.render_frame(&gpu, &frame).unwrap()
+    });
+    let [cropped, full] = &mut frames;
+    assert_eq!((cropped.indirect.width, cropped.indirect.height), (320, 240));
+    let covered = |f: &relume::mr::MrFrame| (0..320 * 240).filter(|&i| f.indirect.covered(i)).collect::<Vec<_>>();
+    let pixels = covered(full);
+    assert!(pixels.len() > 500, "the bunny is in view: {} pixels", pixels.len());
+    assert_eq!(covered(cropped), pixels, "the same pixels covered");
+    let peak = pixels.iter().map(|&i| full.indirect.rgb(i).max_element()).fold(0.0f32, f32::max);
+    let off = pixels
+        .iter()
+        .filter(|&&i| (cropped.indirect.rgb(i) - full.indirect.rgb(i)).abs().max_element() > 1e-4 * peak)
+        .count();
+    assert!(off * 1000 <= pixels.len(), "{off} of {} pixels' light differs", pixels.len());
+    let apart = cropped.composited.iter().zip(&full.composited).filter(|(a, b)| a != b).count();
+    assert!(apart * 1000 <= cropped.composited.len(), "{apart} composite pixels differ");
+}
+
 /// Tinting the room red tints the bunny's indirect light red: with the green and blue of the
 /// camera image scaled by 0.3 the bunny's red share must rise from near neutral to near the
 /// VALs' own red share (within 0.05: the white bunny reflects the mix of VALs it sees, which
