@@ -211,16 +211,17 @@ pub fn block_color(color: &[[u8; 3]], intrinsics: &Intrinsics, block: UVec4) -> 
 
 /// The filtered depth of every cell in grid order (0 = no VAL): the first GPU dispatch.
 pub fn grid_depths(frame: &RgbdFrame, settings: &RgbdSettings) -> Vec<f32> {
+    use rayon::prelude::*;
     let i = &frame.intrinsics;
     let g = grid_size(i, settings);
-    let mut out = Vec::with_capacity((g.x * g.y) as usize);
-    for gy in 0..g.y {
-        for gx in 0..g.x {
-            let c = cell_centre(cell_block(i, UVec2::new(gx, gy), settings));
-            out.push(bilateral_depth(&frame.depth, i, c.x, c.y, settings));
-        }
-    }
-    out
+    // Each cell on its own, over the cores (the differential pass's receivers are this grid).
+    (0..g.x * g.y)
+        .into_par_iter()
+        .map(|k| {
+            let c = cell_centre(cell_block(i, UVec2::new(k % g.x, k / g.x), settings));
+            bilateral_depth(&frame.depth, i, c.x, c.y, settings)
+        })
+        .collect()
 }
 
 /// The camera-space position of the cell `cell + offset` if it exists, has depth and lies on
@@ -302,11 +303,13 @@ pub fn rgbd_vals_by_cell_posed(
     camera_to_world: &Affine3A,
     settings: &RgbdSettings,
 ) -> Vec<(UVec2, Val)> {
+    use rayon::prelude::*;
     let i = &frame.intrinsics;
     let grid = grid_depths(frame, settings);
     let g = grid_size(i, settings);
-    (0..g.y)
-        .flat_map(|gy| (0..g.x).map(move |gx| UVec2::new(gx, gy)))
+    (0..g.x * g.y)
+        .into_par_iter()
+        .map(|k| UVec2::new(k % g.x, k / g.x))
         .filter_map(|cell| grid_cell_val(&grid, &frame.color, i, camera_to_world, settings, cell).map(|v| (cell, v)))
         .collect()
 }
