@@ -47,7 +47,7 @@ pub struct Args {
     /// With --levels: also measure the estimator of the exact reference over the reference's
     /// VALs (VALs drawn per pixel by their unoccluded light, a shadow ray each; the GPU pass, or
     /// on a CPU adapter its CPU twin, as `relume render` runs it) at each of these draws per
-    /// pixel, as configurations beside the candidates (with --candidates: 16, 64 and 256 unless
+    /// pixel, as configurations beside the candidates (with --candidates: 16, 32, 64 and 256 unless
     /// given).
     #[arg(long, requires = "levels", value_name = "N1,N2,...")]
     gpu_estimator: Option<String>,

@@ -28,7 +28,7 @@ use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
 use crate::scene::settings::DifferentialMethod;
 use crate::twin::Val;
-use crate::twin::rgbd::{grid_size, same_surface, srgb_to_linear};
+use crate::twin::rgbd::{grid_size, same_surface, srgb8_to_linear};
 use glam::{Affine3A, Mat4, UVec2, Vec3};
 use std::f32::consts::PI;
 
@@ -182,7 +182,7 @@ pub fn relight_camera(
                 Some(l) if radiance_scale > 0.0 => l,
                 _ => return c,
             };
-            let linear = srgb_to_linear(Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0);
+            let linear = srgb8_to_linear(c);
             let out = relit_radiance(linear * radiance_scale, &light) / radiance_scale;
             [out.x, out.y, out.z].map(crate::image::encode_srgb)
         })

@@ -452,17 +452,24 @@ pub fn explaining_level(receivers: &ReceiverGrid, real: &[Val], unit: &[Val]) ->
 /// (at least 0), the median over the receivers as in [`explaining_level`] (which is this at
 /// albedo 1: the least level any albedo allows). `None` when no receiver takes part.
 pub fn calibrated_level(receivers: &ReceiverGrid, real: &[Val], unit: &[Val], albedo: f32) -> Option<Vec3> {
+    use rayon::prelude::*;
     let n = receivers.receivers.len();
     let stride = n.div_ceil(CALIBRATION_RECEIVERS).max(1);
+    // Each receiver's level on its own, over the cores.
+    let levels: Vec<Option<Vec3>> = (0..n)
+        .into_par_iter()
+        .step_by(stride)
+        .map(|i| {
+            let (r, l) = (&receivers.receivers[i], receivers.radiance[i]);
+            let irradiance =
+                |vals: &[Val]| -> Vec3 { vals.iter().map(|v| val_irradiance(r.position, r.normal, v)).sum() };
+            let e_unit = irradiance(unit);
+            (e_unit.min_element() >= MIN_UNSEEN_IRRADIANCE)
+                .then(|| ((PI * l / albedo - irradiance(real)) / e_unit).max(Vec3::ZERO))
+        })
+        .collect();
     let mut needed: [Vec<f32>; 3] = Default::default();
-    for i in (0..n).step_by(stride) {
-        let (r, l) = (&receivers.receivers[i], receivers.radiance[i]);
-        let irradiance = |vals: &[Val]| -> Vec3 { vals.iter().map(|v| val_irradiance(r.position, r.normal, v)).sum() };
-        let e_unit = irradiance(unit);
-        if e_unit.min_element() < MIN_UNSEEN_IRRADIANCE {
-            continue;
-        }
-        let level = ((PI * l / albedo - irradiance(real)) / e_unit).max(Vec3::ZERO);
+    for level in levels.into_iter().flatten() {
         for (c, values) in needed.iter_mut().enumerate() {
             values.push(level[c]);
         }
@@ -491,7 +498,7 @@ pub fn map_calibration(receivers: &ReceiverGrid, real: &[Val], map: &[Val], albe
 /// its pixels with valid depth (all pixels when none has).
 pub fn mean_radiance(frame: &crate::rgbd::RgbdFrame, settings: &crate::rgbd::RgbdSettings) -> Vec3 {
     let linear =
-        |c: &[u8; 3]| crate::twin::rgbd::srgb_to_linear(Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0);
+        |c: &[u8; 3]| crate::twin::rgbd::srgb8_to_linear(*c);
     let (mut sum, mut n) = (Vec3::ZERO, 0usize);
     for (c, z) in frame.color.iter().zip(&frame.depth) {
         if crate::twin::rgbd::valid_depth(*z, settings) {

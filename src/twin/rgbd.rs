@@ -51,6 +51,15 @@ pub fn srgb_to_linear(c: Vec3) -> Vec3 {
     Vec3::new(f(c.x), f(c.y), f(c.z))
 }
 
+/// [`srgb_to_linear`] of an 8-bit colour (each channel over 255), from a table of the 256
+/// values: the same floats, without three `powf` per pixel (the camera image's pixels are
+/// decoded several times a mixed-reality frame).
+pub fn srgb8_to_linear(c: [u8; 3]) -> Vec3 {
+    static TABLE: std::sync::LazyLock<[f32; 256]> =
+        std::sync::LazyLock::new(|| std::array::from_fn(|i| srgb_to_linear(Vec3::splat(i as f32 / 255.0)).x));
+    Vec3::new(TABLE[c[0] as usize], TABLE[c[1] as usize], TABLE[c[2] as usize])
+}
+
 /// Whether depth `z` (m) is a measurement: finite, positive and in `[min_depth, max_depth]`.
 pub fn valid_depth(z: f32, settings: &RgbdSettings) -> bool {
     z.is_finite() && z > 0.0 && z >= settings.min_depth && z <= settings.max_depth
@@ -203,7 +212,7 @@ pub fn block_color(color: &[[u8; 3]], intrinsics: &Intrinsics, block: UVec4) -> 
     for y in block.y..block.w {
         for x in block.x..block.z {
             let c = color.get((y * intrinsics.width + x) as usize).copied().unwrap_or([0; 3]);
-            sum += srgb_to_linear(Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0);
+            sum += srgb8_to_linear(c);
         }
     }
     sum / ((block.z - block.x) * (block.w - block.y)) as f32
@@ -320,6 +329,16 @@ mod tests {
     use glam::Vec2;
 
     const TUM: Intrinsics = Intrinsics::TUM;
+
+    /// The table is the function, bit for bit, at every 8-bit value of every channel.
+    #[test]
+    fn the_8_bit_table_is_the_function() {
+        for v in 0..=255u8 {
+            let c = [v, 255 - v, v / 2];
+            let direct = srgb_to_linear(Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0);
+            assert_eq!(srgb8_to_linear(c).to_array().map(f32::to_bits), direct.to_array().map(f32::to_bits));
+        }
+    }
 
     fn frame(
         intrinsics: Intrinsics,
