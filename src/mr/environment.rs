@@ -497,8 +497,7 @@ pub fn map_calibration(receivers: &ReceiverGrid, real: &[Val], map: &[Val], albe
 /// Mean observed radiance of `frame` (W/(m² sr)): `radiance_scale * srgb_to_linear(rgb)` over
 /// its pixels with valid depth (all pixels when none has).
 pub fn mean_radiance(frame: &crate::rgbd::RgbdFrame, settings: &crate::rgbd::RgbdSettings) -> Vec3 {
-    let linear =
-        |c: &[u8; 3]| crate::twin::rgbd::srgb8_to_linear(*c);
+    let linear = |c: &[u8; 3]| crate::twin::rgbd::srgb8_to_linear(*c);
     let (mut sum, mut n) = (Vec3::ZERO, 0usize);
     for (c, z) in frame.color.iter().zip(&frame.depth) {
         if crate::twin::rgbd::valid_depth(*z, settings) {

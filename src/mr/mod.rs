@@ -493,7 +493,15 @@ impl MrPipeline {
                 let background = differential::relight_camera(frame, &field, w, h, settings.rgbd.radiance_scale);
                 let relight_ms = relight.elapsed().as_secs_f64() * 1e3;
                 let receivers_ms = lighting.receivers_ms;
-                tracing::debug!(?method, ?counts, receivers_ms, sums_ms, relight_ms, build_ms, "differential receivers");
+                tracing::debug!(
+                    ?method,
+                    ?counts,
+                    receivers_ms,
+                    sums_ms,
+                    relight_ms,
+                    build_ms,
+                    "differential receivers"
+                );
                 let ms = build_ms + lighting.receivers_ms + start.elapsed().as_secs_f64() * 1e3;
                 rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), ms));
                 let (vals, real_count, bounds) = (all, vals.len(), d.bounds);
