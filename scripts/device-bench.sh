@@ -147,11 +147,11 @@ else
     # Sponza at 512 wide: the sparse frame against the brute force without visibility.
     step sponza_512 45 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288
     step exact 45 "$bin" compare "$scenes/cornell_bunny.json" --width 512 --height 512 --reference exact --reference-device gpu
-    # Sponza's levels against the GPU estimator of the exact reference (8 and 32 draws): on
-    # lavapipe accurate is 0.84-0.94 of the estimator's time at 8 draws for 1.6-2.7x its error;
-    # is the estimator the faster way to that error on a GPU? (accurate is now the brute force
-    # through the clusters' maps: 0.23 from exact at a third of the sparse level's time on lavapipe)
-    step levels_sponza 60 "$bin" bench "$scenes/sponza_bunny.json" --levels --width 512 --height 288 --gpu-estimator 8,32 --out "$work/levels_sponza"
+    # Sponza's levels and their candidates on the GPU: on lavapipe balanced and accurate are
+    # the estimator of the exact reference (16 and 64 draws, 0.070 and 0.035 from exact, 12x
+    # and 13x the sparse level's time there; docs/measurements/level-parameters.md); which
+    # levels would a GPU's measured fronts pick (the suggestion block of levels.md)?
+    step levels_sponza 90 "$bin" bench "$scenes/sponza_bunny.json" --levels --candidates --width 512 --height 288 --out "$work/levels_sponza"
     step sweep 60 "$bin" bench "$scenes/cornell_bunny.json" --no-plots --out "$work/sweep" \
         --sweep sparse_points=1024,4096,16384 --sweep rsm_resolution=128,256,724 --sweep resolution=1920x1080
     # The service under load on one GPU: what one backend of a cluster delivers.

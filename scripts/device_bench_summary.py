@@ -178,13 +178,17 @@ def main() -> int:
     est = by_name.get("levels_sponza")
     if isinstance(est, dict) and est.get("levels"):
         shown.add("levels_sponza")
-        md += ["", f"## Levels and the GPU estimator: {est.get('scene', '')} at {est['width']}x{est['height']}", ""]
+        md += ["", f"## Levels and their candidates: {est.get('scene', '')} at {est['width']}x{est['height']}", ""]
         md += ["| configuration | rel RMSE vs exact | indirect ms | dominated by |", "|---|---|---|---|"]
         for row in est["levels"]:
             by = ", ".join(row.get("dominated_by") or []) or "-"
             md.append(f"| {row['level']} | {fmt(row['rel_rmse_vs_exact'])} | {fmt(row['ms'])} | {by} |")
         for row in est.get("candidates") or []:
             md.append(f"| {row['name']} | {fmt(row['rel_rmse_vs_exact'])} | {fmt(row['ms'])} | |")
+        suggested = est.get("suggested_levels") or {}
+        if suggested:
+            md += ["", "The scene file's `settings.levels` these figures suggest:", "", "```json"]
+            md += [json.dumps(suggested, indent=2), "```"]
 
     sponza = by_name.get("sponza_512")
     if isinstance(sponza, dict) and "speedup" in sponza:
