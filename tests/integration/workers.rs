@@ -66,8 +66,16 @@ async fn two_devices_share_the_renders_pin_streams_and_take_over_a_lost_device()
     let after_renders = frames(&server).await;
     assert_eq!((after_renders[wa], after_renders[wb]), (1.0, 1.0), "one render on each worker");
 
-    // A stream of `a` is pinned to `a`'s worker: its frames all render there.
+    // A stream of `a` is pinned to `a`'s worker: its frames all render there. The session
+    // (and its pin) starts on the server after the handshake's answer has reached the client,
+    // so the gauge is read until it shows the pin (a busy machine once read it before).
     let mut ws = server.stream(&a).await;
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while worker_value(&metrics(&server).await, "relume_worker_streams", wa) == 0.0
+        && std::time::Instant::now() < deadline
+    {
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
     assert_eq!(worker_value(&metrics(&server).await, "relume_worker_streams", wa), 1.0);
     for id in 1..=3 {
         let answer = ws.exchange(envelope(Body::RgbdFrame(frame(id, 8, 8)))).await;
