@@ -63,7 +63,8 @@ done
     echo "configuration that meets the target (fast in at most a quarter of accurate's time, balanced"
     echo "in no more than accurate's as suggested; accurate, with nothing within 0.05, the most accurate measured"
     echo "where it is more accurate than its own), and for each other dominated level its most accurate"
-    echo "dominating one: that is the scene file's \`settings.levels\` entry the fixtures carry. Each"
+    echo "dominating one: that is the scene file's \`settings.levels\` entry the fixtures carry (all but"
+    echo "\`cornell_bunny_small\`'s balanced, which stays the sparse method its tests run: [why](level-parameters.md#balanceds-second-target)). Each"
     echo "scene's plot shows the levels, the candidates, their Pareto front and the estimator's curve."
     echo
     # The scenes whose tables come from a run made before the bench wrote `marker`, named after
