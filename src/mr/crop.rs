@@ -86,12 +86,13 @@ impl Crop {
     }
 
     /// The crop's `pixels` (row-major, the crop's size) at their place in a `width x height`
-    /// image of `fill`.
-    pub fn paste<T: Copy>(&self, pixels: &[T], width: u32, height: u32, fill: T) -> Vec<T> {
-        let mut out = vec![fill; (width * height) as usize];
-        if pixels.is_empty() {
-            return out;
+    /// image of `fill`; `pixels` themselves where the crop is that whole image or they are
+    /// none (an image the frame did not compute).
+    pub fn paste<T: Copy>(&self, pixels: Vec<T>, width: u32, height: u32, fill: T) -> Vec<T> {
+        if pixels.is_empty() || self.is_full(width, height) {
+            return pixels;
         }
+        let mut out = vec![fill; (width * height) as usize];
         for (row, src) in pixels.chunks_exact(self.width as usize).enumerate() {
             let start = ((self.y + row as u32) * width + self.x) as usize;
             out[start..start + src.len()].copy_from_slice(src);
@@ -158,10 +159,13 @@ mod tests {
             assert!((full - cropped - glam::Vec2::new(96.0, 64.0)).abs().max_element() < 1e-4);
         }
         let pixels: Vec<u32> = (0..128 * 96).collect();
-        let pasted = c.paste(&pixels, 640, 480, u32::MAX);
+        let pasted = c.paste(pixels.clone(), 640, 480, u32::MAX);
         assert_eq!(pasted.iter().filter(|&&p| p != u32::MAX).count(), pixels.len());
         assert_eq!(pasted[(64 * 640 + 96) as usize], 0);
         assert_eq!(pasted[((64 + 95) * 640 + 96 + 127) as usize], 128 * 96 - 1);
         assert_eq!(pasted[(64 * 640 + 95) as usize], u32::MAX);
+        // The whole image, or no pixels: as they are.
+        assert_eq!(Crop::full(128, 96).paste(pixels.clone(), 128, 96, u32::MAX), pixels);
+        assert!(c.paste(Vec::new(), 640, 480, u32::MAX).is_empty());
     }
 }

@@ -449,13 +449,10 @@ impl MrPipeline {
         let mut rendered = renderer.render(gpu, settings.method, crop.width, crop.height)?;
         lighting.add_stages(&mut rendered.timings);
         let start = Instant::now();
-        let virtual_depth = crop.paste(&virtual_depth(gpu, renderer, &frame.camera_to_world)?, w, h, None);
-        if !crop.is_full(w, h) {
-            for image in [&mut rendered.indirect, &mut rendered.direct] {
-                if !image.pixels.is_empty() {
-                    *image = LinearImage { width: w, height: h, pixels: crop.paste(&image.pixels, w, h, [0.0; 4]) };
-                }
-            }
+        let virtual_depth = crop.paste(virtual_depth(gpu, renderer, &frame.camera_to_world)?, w, h, None);
+        for image in [&mut rendered.indirect, &mut rendered.direct] {
+            let pixels = crop.paste(std::mem::take(&mut image.pixels), w, h, [0.0; 4]);
+            *image = LinearImage { width: w, height: h, pixels };
         }
         let depth_ms = start.elapsed().as_secs_f64() * 1e3;
         let sparse_irradiance = match settings.method {
@@ -502,7 +499,7 @@ impl MrPipeline {
                     build_ms,
                     "differential receivers"
                 );
-                let ms = build_ms + lighting.receivers_ms + start.elapsed().as_secs_f64() * 1e3;
+                let ms = build_ms + receivers_ms + start.elapsed().as_secs_f64() * 1e3;
                 rendered.timings.stages.push((DIFFERENTIAL_STAGE.to_owned(), ms));
                 let (vals, real_count, bounds) = (all, vals.len(), d.bounds);
                 let summed = DifferentialFrame { method, grid, light, counts, visible, vals, real_count, bounds };
