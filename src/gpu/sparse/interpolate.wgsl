@@ -42,10 +42,12 @@ fn neighbourhood(v: u32) -> VertexNeighbourhood {
     let nb = neighbourhood_at(vertex.position, vertex.normal, vertex_neighbours[v]);
     var out: VertexNeighbourhood;
     var d_max = 0.0;
-    for (var j = 0u; j < nb.count; j++) {
-        out.ids[j] = nb.ids[j];
-        out.weights[j] = nb.weights[j];
-        d_max = max(d_max, distance(sparse_points[nb.ids[j]].position, vertex.position));
+    for (var j = 0u; j < NEIGHBOURS; j++) {
+        if j < nb.count {
+            out.ids[j] = nb.ids[j];
+            out.weights[j] = nb.weights[j];
+            d_max = max(d_max, distance(sparse_points[nb.ids[j]].position, vertex.position));
+        }
     }
     out.count = nb.count;
     out.total = nb.total;
@@ -69,8 +71,10 @@ fn interpolate_diffuse(nb: VertexNeighbourhood) -> PointLight {
     if nb.total <= 0.0 {
         return out;
     }
-    for (var j = 0u; j < nb.count; j++) {
-        out = accumulate(out, sparse_diffuse[nb.ids[j]], nb.weights[j], nb.total);
+    for (var j = 0u; j < ROW; j++) {
+        if j < nb.count {
+            out = accumulate(out, sparse_diffuse[nb.ids[j]], nb.weights[j], nb.total);
+        }
     }
     return out;
 }
@@ -80,8 +84,10 @@ fn interpolate_glossy(nb: VertexNeighbourhood) -> PointLight {
     if nb.total <= 0.0 {
         return out;
     }
-    for (var j = 0u; j < nb.count; j++) {
-        out = accumulate(out, sparse_glossy[nb.ids[j]], nb.weights[j], nb.total);
+    for (var j = 0u; j < ROW; j++) {
+        if j < nb.count {
+            out = accumulate(out, sparse_glossy[nb.ids[j]], nb.weights[j], nb.total);
+        }
     }
     return out;
 }

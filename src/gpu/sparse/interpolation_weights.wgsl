@@ -25,29 +25,6 @@ fn facing(n_v: vec3<f32>, n: vec3<f32>) -> f32 {
     return clamp((dot(n_v, n) - FACING_EPSILON) / (1.0 - FACING_EPSILON), 0.0, 1.0);
 }
 
-fn interpolation_weights(n_v: vec3<f32>, offsets: array<vec3<f32>, NEIGHBOURS>, normals: array<vec3<f32>, NEIGHBOURS>, count: u32) -> array<f32, NEIGHBOURS> {
-    var d_max = 0.0;
-    for (var j = 0u; j < count; j++) {
-        d_max = max(d_max, length(offsets[j]));
-    }
-    var w: array<f32, NEIGHBOURS>;
-    var total = 0.0;
-    for (var j = 0u; j < count; j++) {
-        w[j] = spatial_weight(n_v, normals[j], offsets[j], d_max) * facing(n_v, normals[j]);
-        total += w[j];
-    }
-    if total <= 0.0 && count > 0u {
-        var fallback = 0u;
-        for (var j = count; j > 0u; j--) {
-            if dot(n_v, normals[j - 1u]) > FACING_EPSILON {
-                fallback = j - 1u;
-            }
-        }
-        w[fallback] = 1.0;
-    }
-    return w;
-}
-
 struct Neighbourhood {
     ids: array<u32, NEIGHBOURS>,
     weights: array<f32, NEIGHBOURS>,
@@ -56,25 +33,39 @@ struct Neighbourhood {
 }
 
 // The weights of the sparse points `ids` (NO_NEIGHBOUR-terminated) for a receiver at `position`
-// with unit normal `normal`: a vertex, or an adaptive candidate taking its neighbours' light.
+// with unit normal `normal`: a vertex, or an adaptive candidate taking its neighbours' light
+// (`twin::interpolation_weights`). The points are read where they are used rather than copied
+// into local arrays: llvmpipe keeps a dynamically indexed local array in memory, which made this
+// function most of the interpolation's time on a CPU adapter.
 fn neighbourhood_at(position: vec3<f32>, normal: vec3<f32>, ids: array<u32, NEIGHBOURS>) -> Neighbourhood {
-    var offsets: array<vec3<f32>, NEIGHBOURS>;
-    var normals: array<vec3<f32>, NEIGHBOURS>;
     var count = 0u;
+    var d_max = 0.0;
     for (var j = 0u; j < NEIGHBOURS; j++) {
         if ids[j] == NO_NEIGHBOUR {
             break;
         }
-        let p = sparse_points[ids[j]];
-        offsets[j] = p.position - position;
-        normals[j] = p.normal;
+        d_max = max(d_max, length(sparse_points[ids[j]].position - position));
         count += 1u;
     }
-    let w = interpolation_weights(normal, offsets, normals, count);
+    var w: array<f32, NEIGHBOURS>;
     var total = 0.0;
-    for (var j = 0u; j < count; j++) {
-        total += w[j];
+    for (var j = 0u; j < NEIGHBOURS; j++) {
+        if j < count {
+            let p = sparse_points[ids[j]];
+            w[j] = spatial_weight(normal, p.normal, p.position - position, d_max) * facing(normal, p.normal);
+            total += w[j];
+        }
+    }
+    if total <= 0.0 && count > 0u {
+        // Every weight 0: the first neighbour facing the receiver at all takes it whole.
+        var fallback = 0u;
+        for (var j = count; j > 0u; j--) {
+            if dot(normal, sparse_points[ids[j - 1u]].normal) > FACING_EPSILON {
+                fallback = j - 1u;
+            }
+        }
+        w[fallback] = 1.0;
+        total = 1.0;
     }
     return Neighbourhood(ids, w, count, total);
 }
-
