@@ -102,8 +102,8 @@ def main() -> int:
         md += ["", "## Gather vs the FMA kernel (target: >= 50 % of the FMA kernel)", ""]
         md += [f"FMA kernel: {fmt(fma['fma_per_s'])} FMA/s; {fma['vals']} VALs, {fma['sparse_points']} sparse points.", ""]
         md += [
-            "| lobes | tile size | points per invocation | gather ms | pairs/s | pairs/s / FMA/s |",
-            "|---|---|---|---|---|---|",
+            "| lobes | tile size | points per invocation | invocations per point | gather ms | pairs/s | pairs/s / FMA/s |",
+            "|---|---|---|---|---|---|---|",
         ]
         for v in fma.get("gather_variants", []):
             lobes = {
@@ -112,7 +112,7 @@ def main() -> int:
                 "glossy_radiance": "diffuse + glossy (sum only)",
             }[v["lobes"]]
             md.append(
-                f"| {lobes} | {v['tile_size']} | {v.get('receivers', 1)} | {fmt(v['gather_ms'])} "
+                f"| {lobes} | {v['tile_size']} | {v.get('receivers', 1)} | {v.get('lanes', 1)} | {fmt(v['gather_ms'])} "
                 f"| {fmt(v['interactions_per_s'])} | {fmt(v['ratio_to_fma'])} |"
             )
 

@@ -42,6 +42,8 @@ pub struct GatherVariant {
     pub tile_size: u32,
     /// Sparse points per invocation (relume's default: `gather::receivers_for` the adapter).
     pub receivers: u32,
+    /// Invocations per sparse point (relume's default: `gather::lanes_for` the adapter).
+    pub lanes: u32,
     /// Best of `repeats` timed dispatches.
     pub gather_ms: f64,
     /// VAL-receiver interactions per second: VALs x sparse points / time.
@@ -69,13 +71,27 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
     let glossy = renderer.glossy();
     let n = renderer.scene.flat.sparse_points.len();
     let max_size = gpu.device.limits().max_compute_invocations_per_workgroup;
-    // (tile size, points per invocation): the tile sizes with one point each, then the points
-    // per invocation at the default tile; each for the diffuse and (when the scene has glossy
-    // materials) the glossy gather, side by side in one run.
-    let shapes: &[(u32, u32)] = if quick {
-        &[(64, 1), (64, 4)]
+    // (tile size, points per invocation, invocations per point): the tile sizes with one point
+    // each, then the points per invocation at the default tile, then the invocations per point
+    // (GPUs' default, `gather::GPU_LANES`, and around it); each for the diffuse and (when the
+    // scene has glossy materials) the glossy gather, side by side in one run.
+    let shapes: &[(u32, u32, u32)] = if quick {
+        &[(64, 1, 1), (64, 4, 1), (64, 1, 8)]
     } else {
-        &[(32, 1), (64, 1), (128, 1), (256, 1), (64, 2), (64, 4), (64, 8), (32, 4)]
+        &[
+            (32, 1, 1),
+            (64, 1, 1),
+            (128, 1, 1),
+            (256, 1, 1),
+            (64, 2, 1),
+            (64, 4, 1),
+            (64, 8, 1),
+            (32, 4, 1),
+            (64, 1, 4),
+            (64, 1, 8),
+            (64, 1, 16),
+            (128, 1, 32),
+        ]
     };
     let mut gather_variants = Vec::new();
     let lobes: &[GatherLobes] = if glossy {
@@ -83,12 +99,12 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
     } else {
         &[GatherLobes::Diffuse]
     };
-    for (&lobe, &(tile_size, receivers)) in lobes.iter().flat_map(|l| shapes.iter().map(move |s| (l, s))) {
+    for (&lobe, &(tile_size, receivers, lanes)) in lobes.iter().flat_map(|l| shapes.iter().map(move |s| (l, s))) {
         if tile_size > max_size {
             continue;
         }
         let gathered = Lobes::new::<RawGathered>(gpu, "bench.gathered", n, lobe.glossy())?;
-        let mut pass = Gather::variant(gpu, &renderer.scene, lobe, tile_size, receivers)?;
+        let mut pass = Gather::variant(gpu, &renderer.scene, lobe, tile_size, (receivers, lanes))?;
         pass.fit(gpu, &renderer.scene, renderer.val_capacity())?;
         let mut best = f64::INFINITY;
         // One warm-up dispatch, then the timed ones.
@@ -112,6 +128,7 @@ pub fn measure(gpu: &Gpu, scene: &Scene, quick: bool) -> Result<FmaReport, Bench
             lobes: lobe,
             tile_size,
             receivers,
+            lanes,
             gather_ms: best,
             interactions_per_s,
             ratio_to_fma: interactions_per_s / fma_per_s,

@@ -295,8 +295,9 @@ fn gather_takes_every_val_past_the_cpu_loop_limit() {
 
 /// The gather with 1, 5 and 7 sparse points per invocation (CPU adapters take
 /// `gather::CPU_RECEIVERS`, 8, which every other gather test here runs; 5 and 7 leave the last
-/// invocation's slots partly past the last of the 768 points) against `twin::gather_point`,
-/// both lobes. Same tolerances as the rest of this file.
+/// invocation's slots partly past the last of the 768 points), and with one point shared by 8
+/// and 16 invocations (GPUs' `gather::GPU_LANES`), against `twin::gather_point`, both lobes.
+/// Same tolerances as the rest of this file.
 #[test]
 fn gather_variants_match_cpu_twin() {
     use relume::gpu::raw::RawGathered;
@@ -309,9 +310,10 @@ fn gather_variants_match_cpu_twin() {
     let vals = renderer.read_vals(&gpu).unwrap();
     let n = renderer.scene.flat.sparse_points.len();
     assert!(renderer.glossy() && !n.is_multiple_of(5) && !n.is_multiple_of(7), "{n} points");
-    for receivers in [1, 5, 7] {
+    for (receivers, lanes) in [(1, 1), (5, 1), (7, 1), (1, 8), (1, 16)] {
         let gathered = relume::gpu::Lobes::new::<RawGathered>(&gpu, "test.gathered", n, true).unwrap();
-        let mut pass = Gather::variant(&gpu, &renderer.scene, GatherLobes::GlossyLights, 64, receivers).unwrap();
+        let mut pass =
+            Gather::variant(&gpu, &renderer.scene, GatherLobes::GlossyLights, 64, (receivers, lanes)).unwrap();
         pass.fit(&gpu, &renderer.scene, renderer.val_capacity()).unwrap();
         let mut rec = Recorder::new(&gpu, "test.gather", 1);
         let input = GatherInput { scene: &renderer.scene, vals: &renderer.vals, gathered: &gathered, groups: None };

@@ -7,7 +7,8 @@
 //! [`Gpu::CPU_MAX_GATHERED_VALS`] VALs (llvmpipe ends a shader's loops after
 //! [`crate::gpu::LLVMPIPE_LOOP_LIMIT`] iterations, silently), so there the VALs are gathered in
 //! ranges, one dispatch each, every range merging into the sums of the ones before
-//! ([`Kernels::val_ranges`]). GPUs take every VAL in one dispatch.
+//! ([`Kernels::val_ranges`]). GPUs take every VAL in one dispatch, and share each sparse point
+//! among [`GPU_LANES`] invocations ([`lanes_for`]).
 
 use crate::gpu::pass::{Binding, Entry, Kernels, PassDesc, buffer, read, read_write, with_lobes};
 use crate::gpu::scene::GpuScene;
@@ -58,14 +59,15 @@ pub const LIST_BINDING: u32 = 7;
 /// receivers per invocation, whether the glossy mean position is summed, then `gather.wgsl`.
 /// `near_radius` (m): the near-field radius whose share the gather leaves out (0: none).
 pub fn body(groups: Option<u32>, near_radius: f32, receivers: u32, lobes: GatherLobes) -> String {
-    list_body(groups, near_radius, receivers, lobes, Receivers::Span { first: 0, end: u32::MAX })
+    list_body(groups, near_radius, (receivers, 1), lobes, Receivers::Span { first: 0, end: u32::MAX })
 }
 
-/// [`body`] for the receiver slots `slots`.
+/// [`body`] for the receiver slots `slots`, with `(receivers, lanes)`: sparse points per
+/// invocation, and invocations per sparse point for the `_lanes` entry points.
 pub fn list_body(
     groups: Option<u32>,
     near_radius: f32,
-    receivers: u32,
+    (receivers, lanes): (u32, u32),
     lobes: GatherLobes,
     slots: Receivers,
 ) -> String {
@@ -88,6 +90,7 @@ pub fn list_body(
         .include(VAL_TILES)
         .include(&visibility)
         .u32("RECEIVERS", receivers)
+        .u32("LANES", lanes)
         .include(&add_to_receivers(receivers))
         .include(&points)
         .f32("NEAR_FIELD_RADIUS", near_radius)
@@ -109,8 +112,8 @@ fn add_to_receivers(receivers: u32) -> String {
 }
 
 /// Sparse points per invocation on CPU adapters, measured by the bench's gather variants
-/// (docs/measurements/gather-variants.md); GPUs take one, for parallelism (a frame has only thousands of
-/// points).
+/// (docs/measurements/gather-variants.md); GPUs take one, and share it among [`GPU_LANES`]
+/// invocations, for parallelism (a frame has only thousands of points).
 pub const CPU_RECEIVERS: u32 = 8;
 
 /// The most sparse points one invocation may take (the bench's and the tests' range).
@@ -119,6 +122,21 @@ pub const MAX_RECEIVERS: u32 = 8;
 /// Sparse points per invocation on `gpu`.
 pub fn receivers_for(gpu: &Gpu) -> u32 {
     if gpu.is_cpu() { CPU_RECEIVERS } else { 1 }
+}
+
+/// Invocations per sparse point on GPUs (`main_lanes` in `gather.wgsl`): with one each, an
+/// H200 gathered 8,192 points at 8·10¹⁰ pairs/s where the brute force's million pixels ran at
+/// 5·10¹¹ (docs/measurements/gpu.md), most of its threads idle. Not yet measured on a GPU:
+/// the bench's gather variants time 1, 4, 8 and 16 side by side.
+pub const GPU_LANES: u32 = 8;
+
+/// The most invocations per sparse point (at most a workgroup).
+pub const MAX_LANES: u32 = 64;
+
+/// Invocations per sparse point on `gpu`: CPU adapters take several points per invocation
+/// instead ([`receivers_for`]), whose lanes are SIMD lanes already.
+pub fn lanes_for(gpu: &Gpu) -> u32 {
+    if gpu.is_cpu() { 1 } else { GPU_LANES }
 }
 
 /// The bindings of [`CHOSEN_PASS`]; [`GROUPED_PASS`] has the first seven (no list), [`PASS`]
@@ -139,7 +157,12 @@ const BINDINGS: &[Binding] = &[
 pub const PASS: PassDesc = PassDesc {
     label: "gather",
     bindings: BINDINGS.split_at(5).0,
-    entries: &[Entry::first("main", 4), Entry::first("main_glossy", 5)],
+    entries: &[
+        Entry::first("main", 4),
+        Entry::first("main_glossy", 5),
+        Entry::first("main_lanes", 4),
+        Entry::first("main_glossy_lanes", 5),
+    ],
     workgroup: [TILE_SIZE, 1, 1],
     default_source: |textured| PASS.source(&body(None, 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights), textured),
 };
@@ -147,7 +170,12 @@ pub const PASS: PassDesc = PassDesc {
 /// The gather of a group visibility mode: [`PASS`] plus the group table.
 pub const GROUPED_PASS: PassDesc = PassDesc {
     bindings: BINDINGS.split_at(7).0,
-    entries: &[Entry { name: "main", bindings: 7, except: &["gathered_glossy"] }, Entry::first("main_glossy", 7)],
+    entries: &[
+        Entry { name: "main", bindings: 7, except: &["gathered_glossy"] },
+        Entry::first("main_glossy", 7),
+        Entry { name: "main_lanes", bindings: 7, except: &["gathered_glossy"] },
+        Entry::first("main_glossy_lanes", 7),
+    ],
     default_source: |textured| {
         GROUPED_PASS.source(&body(Some(64), 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights), textured)
     },
@@ -162,9 +190,11 @@ pub const CHOSEN_PASS: PassDesc = PassDesc {
     entries: &[
         Entry { name: "main", bindings: 9, except: &["gathered_glossy", "group_of_val", "group_visibility"] },
         Entry { name: "main_glossy", bindings: 9, except: &["group_of_val", "group_visibility"] },
+        Entry { name: "main_lanes", bindings: 9, except: &["gathered_glossy", "group_of_val", "group_visibility"] },
+        Entry { name: "main_glossy_lanes", bindings: 9, except: &["group_of_val", "group_visibility"] },
     ],
     default_source: |textured| {
-        let body = list_body(None, 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights, Receivers::Chosen);
+        let body = list_body(None, 0.0, (CPU_RECEIVERS, 1), GatherLobes::GlossyLights, Receivers::Chosen);
         CHOSEN_PASS.source(&body, textured)
     },
     ..PASS
@@ -172,9 +202,14 @@ pub const CHOSEN_PASS: PassDesc = PassDesc {
 
 /// [`CHOSEN_PASS`] with a group visibility mode's table.
 pub const CHOSEN_GROUPED_PASS: PassDesc = PassDesc {
-    entries: &[Entry { name: "main", bindings: 9, except: &["gathered_glossy"] }, Entry::first("main_glossy", 9)],
+    entries: &[
+        Entry { name: "main", bindings: 9, except: &["gathered_glossy"] },
+        Entry::first("main_glossy", 9),
+        Entry { name: "main_lanes", bindings: 9, except: &["gathered_glossy"] },
+        Entry::first("main_glossy_lanes", 9),
+    ],
     default_source: |textured| {
-        let body = list_body(Some(64), 0.0, CPU_RECEIVERS, GatherLobes::GlossyLights, Receivers::Chosen);
+        let body = list_body(Some(64), 0.0, (CPU_RECEIVERS, 1), GatherLobes::GlossyLights, Receivers::Chosen);
         CHOSEN_GROUPED_PASS.source(&body, textured)
     },
     ..CHOSEN_PASS
@@ -184,6 +219,8 @@ pub struct Gather {
     kernels: Kernels,
     /// Sparse points per invocation.
     receivers: u32,
+    /// Invocations per sparse point (with one point per invocation).
+    lanes: u32,
     /// Which points its slots are.
     slots: Receivers,
     /// Whether it writes the glossy sums (binds them).
@@ -198,6 +235,7 @@ struct Shape {
     near_radius: f32,
     tile_size: u32,
     receivers: u32,
+    lanes: u32,
     slots: Receivers,
 }
 
@@ -235,28 +273,42 @@ impl Gather {
         slots: Receivers,
     ) -> Result<Self, GpuError> {
         let receivers = receivers_for(gpu);
-        Self::build(gpu, scene, Shape { lobes, groups, near_radius, tile_size: TILE_SIZE, receivers, slots })
+        // Fewer lanes where the scene's points would take the dispatch past the device's
+        // workgroups per dimension (one workgroup per TILE_SIZE invocations).
+        let points = scene.flat.sparse_points.len() as u64;
+        let most = u64::from(gpu.device.limits().max_compute_workgroups_per_dimension);
+        let mut lanes = lanes_for(gpu);
+        while lanes > 1 && (points * u64::from(lanes)).div_ceil(u64::from(TILE_SIZE)) > most {
+            lanes /= 2;
+        }
+        Self::build(gpu, scene, Shape { lobes, groups, near_radius, tile_size: TILE_SIZE, receivers, lanes, slots })
     }
 
     /// The pass with `tile_size` VALs per tile and threads per workgroup instead of
-    /// [`TILE_SIZE`], and `receivers` (1..=[`MAX_RECEIVERS`]) sparse points per invocation
-    /// instead of [`receivers_for`]'s, at every point gathered every frame, without visibility
-    /// groups or near field (the bench compares them; the device must allow the workgroup size).
+    /// [`TILE_SIZE`], and `(receivers, lanes)` instead of [`receivers_for`]'s and
+    /// [`lanes_for`]'s: 1..=[`MAX_RECEIVERS`] sparse points per invocation, or one point shared
+    /// by `lanes` (a divisor of `tile_size`, at most [`MAX_LANES`]) invocations; at every point
+    /// gathered every frame, without visibility groups or near field (the bench compares them;
+    /// the device must allow the workgroup size).
     pub fn variant(
         gpu: &Gpu,
         scene: &GpuScene,
         lobes: GatherLobes,
         tile_size: u32,
-        receivers: u32,
+        (receivers, lanes): (u32, u32),
     ) -> Result<Self, GpuError> {
         let slots = Receivers::Span { first: 0, end: scene.flat.base_sparse_count() };
-        let shape = Shape { lobes, groups: None, near_radius: 0.0, tile_size, receivers, slots };
+        let shape = Shape { lobes, groups: None, near_radius: 0.0, tile_size, receivers, lanes, slots };
         Self::build(gpu, scene, shape)
     }
 
     fn build(gpu: &Gpu, scene: &GpuScene, shape: Shape) -> Result<Self, GpuError> {
-        let Shape { lobes, groups, near_radius, tile_size, receivers, slots } = shape;
+        let Shape { lobes, groups, near_radius, tile_size, receivers, lanes, slots } = shape;
         assert!((1..=MAX_RECEIVERS).contains(&receivers), "{receivers} receivers per invocation");
+        assert!(
+            (1..=MAX_LANES).contains(&lanes) && tile_size.is_multiple_of(lanes) && (lanes == 1 || receivers == 1),
+            "{lanes} lanes per point ({receivers} points per invocation, tile {tile_size})"
+        );
         let workgroup = [tile_size, 1, 1];
         let desc = match (groups.is_some(), slots) {
             (false, Receivers::Span { .. }) => &PASS,
@@ -264,11 +316,16 @@ impl Gather {
             (false, Receivers::Chosen) => &CHOSEN_PASS,
             (true, Receivers::Chosen) => &CHOSEN_GROUPED_PASS,
         };
-        let body = list_body(groups, near_radius, receivers, lobes, slots);
+        let body = list_body(groups, near_radius, (receivers, lanes), lobes, slots);
         let source = desc.source_with(&body, scene.textured(), workgroup, tile_size);
-        let entry = desc.lobe_entry(lobes.glossy());
+        let entry = match (lobes.glossy(), lanes > 1) {
+            (false, false) => desc.entry("main"),
+            (true, false) => desc.entry("main_glossy"),
+            (false, true) => desc.entry("main_lanes"),
+            (true, true) => desc.entry("main_glossy_lanes"),
+        };
         let kernels = Kernels::val_ranges(gpu, scene, desc, source, entry, workgroup, tile_size)?;
-        Ok(Self { kernels, receivers, slots, glossy: lobes.glossy() })
+        Ok(Self { kernels, receivers, lanes, slots, glossy: lobes.glossy() })
     }
 
     /// Cover frames of up to `max_vals` VALs (see [`Kernels::fit`]).
@@ -285,7 +342,7 @@ impl Gather {
             panic!("the chosen candidates' gather needs their list");
         };
         let resources = self.resources(input);
-        let n = (end.min(input.scene.flat.base_sparse_count()) - first).div_ceil(self.receivers);
+        let n = (end.min(input.scene.flat.base_sparse_count()) - first).div_ceil(self.receivers) * self.lanes;
         self.kernels.run(gpu, e, input.scene, &resources, [n, 1, 1], span);
     }
 
@@ -307,7 +364,7 @@ impl Gather {
         assert_eq!(self.slots, Receivers::Chosen, "the gather of the points gathered every frame takes no list");
         let mut resources = self.resources(input);
         resources.extend([buffer("receiver_list", chosen.list), buffer("receiver_count", chosen.count)]);
-        let n = chosen.slots.div_ceil(self.receivers);
+        let n = chosen.slots.div_ceil(self.receivers) * self.lanes;
         self.kernels.run(gpu, e, input.scene, &resources, [n, 1, 1], span);
     }
 

@@ -20,6 +20,13 @@
 // invocations are SIMD lanes that each read the whole VAL from workgroup memory, run faster
 // with several (the bench's `gather_variants`); GPUs take one, for parallelism.
 //
+// GPUs instead share each sparse point among LANES consecutive invocations (prepended by
+// `gather.rs`; RECEIVERS is then 1): each sums every LANES-th VAL of each tile, and the lanes'
+// sums are added in lane order at the end (`main_lanes`, `main_glossy_lanes`). A frame has a few
+// thousand sparse points, and one invocation each leaves most of a large GPU's threads idle
+// (an H200 gathered 8,192 points at a sixth of the brute force's pairs per second), while the
+// sums only change their order.
+//
 // `val_visibility(point, val)` is the fraction of a VAL's light that reaches the point: 1
 // without a group visibility mode (prepended by `gather.rs`), else its group's entry of the
 // table (`gpu/visibility/group.wgsl`).
@@ -169,5 +176,57 @@ fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invo
             gathered_diffuse[i] = merge_gathered(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
             gathered_glossy[i] = merge_gathered(earlier_glossy(i), s.g, s.ws, s.ls, vec3<f32>(0.0));
         }
+    }
+}
+
+// The lanes' sums of one sparse point, in workgroup memory for the lane-order addition.
+var<workgroup> lane_sums: array<Sums, WORKGROUP_X>;
+
+fn add_sums(a: Sums, b: Sums) -> Sums {
+    return Sums(a.e + b.e, a.g + b.g, a.ld + b.ld, a.ld2 + b.ld2, a.ls + b.ls, a.wd + b.wd, a.ws + b.ws);
+}
+
+// The sums of this dispatch's VALs at the point of receiver slot `slot`, shared by the LANES
+// invocations of the workgroup from `local - lane` on: each adds every LANES-th VAL of a tile,
+// from its `lane`-th. Every invocation gets the point's whole sums (uniform control flow for
+// the barriers).
+fn gather_lanes(slot: u32, local: u32, lane: u32, glossy: bool) -> Sums {
+    var s = Sums(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0);
+    let r = receiver(receiver_point(slot));
+    let end = val_range_end();
+    for (var base = VAL_BEGIN; base < end; base += TILE_SIZE) {
+        let n = load_tile(base, local, end);
+        for (var j = lane; j < n; j += LANES) {
+            s = add_val(s, r, tile[j], base + j, glossy);
+        }
+        workgroupBarrier();
+    }
+    lane_sums[local] = s;
+    workgroupBarrier();
+    var total = lane_sums[local - lane];
+    for (var k = 1u; k < LANES; k++) {
+        total = add_sums(total, lane_sums[local - lane + k]);
+    }
+    return total;
+}
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main_lanes(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let lane = local % LANES;
+    let s = gather_lanes(id.x / LANES, local, lane, false);
+    let i = receiver_point(id.x / LANES);
+    if lane == 0u && i != NO_POINT {
+        gathered_diffuse[i] = merge_gathered(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
+    }
+}
+
+@compute @workgroup_size(WORKGROUP_X)
+fn main_glossy_lanes(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let lane = local % LANES;
+    let s = gather_lanes(id.x / LANES, local, lane, true);
+    let i = receiver_point(id.x / LANES);
+    if lane == 0u && i != NO_POINT {
+        gathered_diffuse[i] = merge_gathered(earlier_diffuse(i), s.e, s.wd, s.ld, s.ld2);
+        gathered_glossy[i] = merge_gathered(earlier_glossy(i), s.g, s.ws, s.ls, vec3<f32>(0.0));
     }
 }
