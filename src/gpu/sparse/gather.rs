@@ -127,7 +127,7 @@ pub fn receivers_for(gpu: &Gpu) -> u32 {
 /// Invocations per sparse point on GPUs (`main_lanes` in `gather.wgsl`): with one each, an
 /// H200 gathered 8,192 points at 8·10¹⁰ pairs/s where the brute force's million pixels ran at
 /// 5·10¹¹ (docs/measurements/gpu.md), most of its threads idle. Not yet measured on a GPU:
-/// the bench's gather variants time 1, 4, 8 and 16 side by side.
+/// the bench's gather variants time 1, 4, 8, 16 and 32 side by side.
 pub const GPU_LANES: u32 = 8;
 
 /// The most invocations per sparse point (at most a workgroup).
