@@ -123,6 +123,7 @@ if [ "$smoke" = 1 ]; then
     step sparse_vs_brute 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 32 --height 18
     step exact 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 16 --height 16 --reference exact
     step sponza_512 120 "$bin" compare "$scenes/sponza_bunny.json" --width 32 --height 18
+    step sponza_512_lanes1 120 env RELUME_GATHER_LANES=1 "$bin" compare "$scenes/sponza_bunny.json" --width 32 --height 18
     step levels_sponza 120 "$bin" bench "$scenes/cornell_bunny_small.json" --levels --width 16 --height 9 --gpu-estimator 4 --out "$work/levels_sponza"
     step load 60 "$bin" load --seconds 3 --streams 1 --http 1 --json
 else
@@ -144,8 +145,11 @@ else
     # And the exact pass on the GPU, one dispatch where the fast one takes four levels.
     step mr_640_exact 60 "$bin" replay fixtures/recordings/tum_fr1_xyz --scene "$mr_exact" --width 640 --height 480 --out "$work/mr_640_exact"
     step sparse_vs_brute 45 "$bin" compare "$scenes/cornell_bunny.json" --width 1920 --height 1080
-    # Sponza at 512 wide: the sparse frame against the brute force without visibility.
+    # Sponza at 512 wide: the sparse frame against the brute force without visibility; then the
+    # same with the gather's kernel before GPUs shared each sparse point among invocations
+    # (one invocation a point), side by side.
     step sponza_512 45 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288
+    step sponza_512_lanes1 45 env RELUME_GATHER_LANES=1 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288
     step exact 45 "$bin" compare "$scenes/cornell_bunny.json" --width 512 --height 512 --reference exact --reference-device gpu
     # Sponza's levels and their candidates on the GPU: on lavapipe balanced and accurate are
     # the estimator of the exact reference (16 and 64 draws, 0.070 and 0.035 from exact, 12x

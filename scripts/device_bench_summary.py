@@ -198,6 +198,15 @@ def main() -> int:
             f"{sponza['width']}x{sponza['height']}, {sponza['vals']} VALs: sparse {fmt(sponza['sparse_ms'])} ms, "
             f"brute force {fmt(sponza['brute_force_ms'])} ms, speed-up {fmt(sponza['speedup'])}x."
         ]
+        before = by_name.get("sponza_512_lanes1")
+        if isinstance(before, dict) and "speedup" in before:
+            shown.add("sponza_512_lanes1")
+            md += [
+                "",
+                f"With one invocation per sparse point in the gather (`RELUME_GATHER_LANES=1`, the kernel before "
+                f"GPUs shared each point among invocations), the same run: sparse {fmt(before['sparse_ms'])} ms, "
+                f"brute force {fmt(before['brute_force_ms'])} ms, speed-up {fmt(before['speedup'])}x.",
+            ]
 
     load = by_name.get("load")
     if isinstance(load, dict) and "frames_per_second" in load:

@@ -103,6 +103,20 @@ pub enum GpuError {
     Unsupported(String),
 }
 
+/// `RELUME_GATHER_LANES`, when set: a power of two from 1 to [`sparse::gather::MAX_LANES`].
+fn gather_lanes_from_env() -> Result<Option<u32>, GpuError> {
+    let Ok(text) = std::env::var("RELUME_GATHER_LANES") else {
+        return Ok(None);
+    };
+    match text.trim().parse::<u32>() {
+        Ok(n) if n.is_power_of_two() && n <= sparse::gather::MAX_LANES => Ok(Some(n)),
+        _ => Err(GpuError::Unsupported(format!(
+            "RELUME_GATHER_LANES: expected a power of two from 1 to {}, got `{text}`",
+            sparse::gather::MAX_LANES
+        ))),
+    }
+}
+
 /// Loop iterations after which llvmpipe (lavapipe) ends every loop of a shader invocation,
 /// silently: `LP_MAX_TGSI_LOOP_ITERATIONS` in Mesa's gallivm, "shared between every loop in a
 /// shader" and counted per SIMD vector of invocations. Passes whose loops can run longer must
@@ -177,6 +191,10 @@ pub struct Gpu {
     pub adapter_info: wgpu::AdapterInfo,
     /// Whether GPU timestamp queries (inside encoders) are available.
     pub timestamps: bool,
+    /// Invocations per sparse point in the gather, when not the adapter's default
+    /// (`sparse::gather::lanes_for`): `RELUME_GATHER_LANES`, for measuring the gather side by
+    /// side on a device and for running the GPUs' kernel on a CPU adapter in tests.
+    pub gather_lanes: Option<u32>,
 }
 
 impl Gpu {
@@ -257,7 +275,8 @@ impl Gpu {
                 ..Default::default()
             })
             .await?;
-        Ok(Self { device, queue, adapter_info: info, timestamps })
+        let gather_lanes = gather_lanes_from_env()?;
+        Ok(Self { device, queue, adapter_info: info, timestamps, gather_lanes })
     }
 
     /// VALs beyond which one invocation of the gather or the brute force on a CPU adapter would

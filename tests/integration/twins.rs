@@ -333,6 +333,38 @@ fn gather_variants_match_cpu_twin() {
     }
 }
 
+/// The renderer's gather with the GPUs' kernel (`gather::GPU_LANES` invocations per sparse
+/// point, forced on this CPU adapter through `Gpu::gather_lanes`) gives the frame that the CPU
+/// adapters' kernel (8 points per invocation) gives, the same pairs summed in another order: on
+/// the glossy open room at `accurate`, whose gathers run through the clusters' table and at the
+/// adaptive candidates the frame chooses (the grouped and the chosen passes), and at `balanced`.
+#[test]
+fn the_gpus_gather_renders_the_frame_of_the_cpu_adapters_gather() {
+    use relume::scene::Scene;
+    use relume::scene::settings::Quality;
+    let path = super::fixture("scenes/cornell_glossy_open.json");
+    let mut lanes = gpu();
+    lanes.gather_lanes = Some(relume::gpu::sparse::gather::GPU_LANES);
+    for quality in [Quality::Balanced, Quality::Accurate] {
+        let scene = Scene::load_at(&path, Some(quality)).unwrap();
+        let render = |gpu: &relume::gpu::Gpu| {
+            let mut renderer = Renderer::new(gpu, &scene).unwrap();
+            renderer.render(gpu, Method::Sparse, 32, 64).unwrap().indirect.pixels
+        };
+        let (cpu_kernel, gpu_kernel) = (render(&gpu()), render(&lanes));
+        let largest = cpu_kernel.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);
+        let (mut squared, mut total) = (0.0f64, 0.0f64);
+        for (a, b) in cpu_kernel.iter().zip(&gpu_kernel) {
+            for c in 0..3 {
+                squared += f64::from(a[c] - b[c]).powi(2);
+                total += f64::from(a[c]).powi(2);
+            }
+        }
+        let rel_rmse = (squared / total.max(1e-30)).sqrt();
+        assert!(largest > 0.0 && rel_rmse < 1e-4, "{quality:?}: rel RMSE {rel_rmse} between the kernels' frames");
+    }
+}
+
 /// The GPU's gathered light (diffuse and glossy irradiance, mean diffuse VAL position) at every
 /// sparse point against `twin::gather_point` over `vals`.
 fn assert_gather_matches_twin(

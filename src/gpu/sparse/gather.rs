@@ -134,9 +134,10 @@ pub const GPU_LANES: u32 = 8;
 pub const MAX_LANES: u32 = 64;
 
 /// Invocations per sparse point on `gpu`: CPU adapters take several points per invocation
-/// instead ([`receivers_for`]), whose lanes are SIMD lanes already.
+/// instead ([`receivers_for`]), whose lanes are SIMD lanes already; `gpu.gather_lanes`
+/// (`RELUME_GATHER_LANES`) overrides.
 pub fn lanes_for(gpu: &Gpu) -> u32 {
-    if gpu.is_cpu() { 1 } else { GPU_LANES }
+    gpu.gather_lanes.unwrap_or(if gpu.is_cpu() { 1 } else { GPU_LANES })
 }
 
 /// The bindings of [`CHOSEN_PASS`]; [`GROUPED_PASS`] has the first seven (no list), [`PASS`]
@@ -272,7 +273,8 @@ impl Gather {
         near_radius: f32,
         slots: Receivers,
     ) -> Result<Self, GpuError> {
-        let receivers = receivers_for(gpu);
+        // Shared points take one each.
+        let receivers = if lanes_for(gpu) > 1 { 1 } else { receivers_for(gpu) };
         // Fewer lanes where the scene's points would take the dispatch past the device's
         // workgroups per dimension (one workgroup per TILE_SIZE invocations).
         let points = scene.flat.sparse_points.len() as u64;
