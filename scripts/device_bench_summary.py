@@ -26,7 +26,7 @@ def step_output(work: Path, name: str):
         "mr_640": work / "mr_640" / "summary.json",
         "mr_1280": work / "mr_1280" / "summary.json",
         "mr_640_cpu": work / "mr_640_cpu" / "summary.json",
-        "mr_640_exact": work / "mr_640_exact" / "summary.json",
+        "mr_640_fast": work / "mr_640_fast" / "summary.json",
         "levels_1080": work / "levels_1080" / "levels.json",
         "levels_sponza": work / "levels_sponza" / "levels.json",
     }.get(name)
@@ -145,7 +145,7 @@ def main() -> int:
         ("mr_640", ""),
         ("mr_1280", ""),
         ("mr_640_cpu", ", the differential pass on the CPU"),
-        ("mr_640_exact", ", the exact differential pass"),
+        ("mr_640_fast", ", the fast differential pass"),
     )
     for name, where in replays:
         replay = by_name.get(name)

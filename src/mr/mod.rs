@@ -21,7 +21,7 @@ use crate::renderer::{Method, Rendered, Renderer};
 use crate::rgbd::accumulate::ValAccumulator;
 use crate::rgbd::{RgbdFrame, RgbdSettings};
 use crate::scene::Scene;
-use crate::scene::settings::DifferentialMethod;
+use crate::scene::settings::{DifferentialDevice, DifferentialMethod};
 use crate::twin::Val;
 use crop::Crop;
 use differential::{Emitter, LightField, MrSettings, ReceiverGrid};
@@ -470,8 +470,11 @@ impl MrPipeline {
                 let start = Instant::now();
                 let mut all = vals.clone();
                 all.extend(differential::emitter_vals(&d.emitters, &sparse_irradiance));
-                let method =
-                    DifferentialMethod::for_frames(self.mr.differential_method, settings.method == Method::Exact);
+                let method = DifferentialMethod::for_frames(
+                    self.mr.differential_method,
+                    settings.method == Method::Exact,
+                    d.pass.device() == DifferentialDevice::Gpu,
+                );
                 let (light, counts) = differential::receiver_light(
                     &mut d.pass,
                     gpu,

@@ -79,11 +79,23 @@ pub enum DifferentialMethod {
 }
 
 impl DifferentialMethod {
-    /// The method of frames whose indirect light is the exact reference (`exact`) or not:
-    /// `setting` when the scene or the request chose one, else the exact pass beside the exact
-    /// reference (quality `reference`) and the fast one beside every other method.
-    pub fn for_frames(setting: Option<DifferentialMethod>, exact_reference: bool) -> DifferentialMethod {
-        setting.unwrap_or(if exact_reference { DifferentialMethod::Exact } else { DifferentialMethod::Fast })
+    /// The method of frames whose indirect light is the exact reference (`exact_reference`) or
+    /// not, with the pass on the GPU (`gpu_backend`) or on the CPU: `setting` when the scene or
+    /// the request chose one, else the exact pass beside the exact reference (quality
+    /// `reference`) and on the GPU, where it is also the faster (an H200 on the TUM replay: the
+    /// differential stage 216 ms a frame against the fast pass's 499 ms, which waits on the host
+    /// between its adaptive levels; docs/measurements/gpu.md), and the fast one on the CPU
+    /// beside every other method.
+    pub fn for_frames(
+        setting: Option<DifferentialMethod>,
+        exact_reference: bool,
+        gpu_backend: bool,
+    ) -> DifferentialMethod {
+        setting.unwrap_or(if exact_reference || gpu_backend {
+            DifferentialMethod::Exact
+        } else {
+            DifferentialMethod::Fast
+        })
     }
 }
 

@@ -122,13 +122,19 @@ fn the_differential_method_follows_the_level_unless_the_scene_file_sets_it() {
         let s = scene(&format!(r#"{{"quality": "{quality}"}}"#));
         let exact = s.resolved.method == Technique::Exact;
         assert_eq!(s.settings.mr.differential_method, None, "{quality}: left to the frames");
-        let resolved = DifferentialMethod::for_frames(s.settings.mr.differential_method, exact);
+        let resolved = DifferentialMethod::for_frames(s.settings.mr.differential_method, exact, false);
+        // On the GPU the frames run the exact pass at every level.
+        let on_gpu = DifferentialMethod::for_frames(s.settings.mr.differential_method, exact, true);
+        assert_eq!(on_gpu, DifferentialMethod::Exact, "{quality} on the GPU");
         assert_eq!(tuning::json_value(&resolved), format!("\"{method}\""), "{quality}");
         assert_eq!(choice(&s, "mr.differential_method").value, format!("\"{method}\""), "{quality}");
     }
     let set = scene(r#"{"quality": "reference", "mr": {"differential_method": "fast"}}"#);
     assert_eq!(set.settings.mr.differential_method, Some(DifferentialMethod::Fast));
-    assert_eq!(DifferentialMethod::for_frames(set.settings.mr.differential_method, true), DifferentialMethod::Fast);
+    assert_eq!(
+        DifferentialMethod::for_frames(set.settings.mr.differential_method, true, true),
+        DifferentialMethod::Fast
+    );
     let c = choice(&set, "mr.differential_method");
     assert_eq!(
         (c.value.as_str(), c.reason.as_str()),
