@@ -349,18 +349,11 @@ fn the_gpus_gather_renders_the_frame_of_the_cpu_adapters_gather() {
         let scene = Scene::load_at(&path, Some(quality)).unwrap();
         let render = |gpu: &relume::gpu::Gpu| {
             let mut renderer = Renderer::new(gpu, &scene).unwrap();
-            renderer.render(gpu, Method::Sparse, 32, 64).unwrap().indirect.pixels
+            renderer.render(gpu, Method::Sparse, 32, 64).unwrap().indirect
         };
         let (cpu_kernel, gpu_kernel) = (render(&gpu()), render(&lanes));
-        let largest = cpu_kernel.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);
-        let (mut squared, mut total) = (0.0f64, 0.0f64);
-        for (a, b) in cpu_kernel.iter().zip(&gpu_kernel) {
-            for c in 0..3 {
-                squared += f64::from(a[c] - b[c]).powi(2);
-                total += f64::from(a[c]).powi(2);
-            }
-        }
-        let rel_rmse = (squared / total.max(1e-30)).sqrt();
+        let largest = cpu_kernel.pixels.iter().flat_map(|p| p[..3].iter().copied()).fold(0.0f32, f32::max);
+        let rel_rmse = relume::image::relative_rmse(&gpu_kernel, &cpu_kernel);
         assert!(largest > 0.0 && rel_rmse < 1e-4, "{quality:?}: rel RMSE {rel_rmse} between the kernels' frames");
     }
 }

@@ -273,13 +273,13 @@ impl Gather {
         near_radius: f32,
         slots: Receivers,
     ) -> Result<Self, GpuError> {
+        let mut lanes = lanes_for(gpu);
         // Shared points take one each.
-        let receivers = if lanes_for(gpu) > 1 { 1 } else { receivers_for(gpu) };
+        let receivers = if lanes > 1 { 1 } else { receivers_for(gpu) };
         // Fewer lanes where the scene's points would take the dispatch past the device's
         // workgroups per dimension (one workgroup per TILE_SIZE invocations).
         let points = scene.flat.sparse_points.len() as u64;
         let most = u64::from(gpu.device.limits().max_compute_workgroups_per_dimension);
-        let mut lanes = lanes_for(gpu);
         while lanes > 1 && (points * u64::from(lanes)).div_ceil(u64::from(TILE_SIZE)) > most {
             lanes /= 2;
         }

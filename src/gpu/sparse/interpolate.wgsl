@@ -41,17 +41,15 @@ fn neighbourhood(v: u32) -> VertexNeighbourhood {
     let vertex = vertices[v];
     let nb = neighbourhood_at(vertex.position, vertex.normal, vertex_neighbours[v]);
     var out: VertexNeighbourhood;
-    var d_max = 0.0;
     for (var j = 0u; j < NEIGHBOURS; j++) {
         if j < nb.count {
             out.ids[j] = nb.ids[j];
             out.weights[j] = nb.weights[j];
-            d_max = max(d_max, distance(sparse_points[nb.ids[j]].position, vertex.position));
         }
     }
     out.count = nb.count;
     out.total = nb.total;
-    return adaptive_candidates(v, out, d_max);
+    return adaptive_candidates(v, out, nb.d_max);
 }
 
 // The weighted mean of the lights `l` of the neighbourhood and, when BOUNDED, the largest

@@ -30,6 +30,8 @@ struct Neighbourhood {
     weights: array<f32, NEIGHBOURS>,
     count: u32,
     total: f32,
+    // The farthest point's distance, where the kernel falls to 0.
+    d_max: f32,
 }
 
 // The weights of the sparse points `ids` (NO_NEIGHBOUR-terminated) for a receiver at `position`
@@ -67,5 +69,5 @@ fn neighbourhood_at(position: vec3<f32>, normal: vec3<f32>, ids: array<u32, NEIG
         w[fallback] = 1.0;
         total = 1.0;
     }
-    return Neighbourhood(ids, w, count, total);
+    return Neighbourhood(ids, w, count, total, d_max);
 }
