@@ -15,14 +15,14 @@ fn main() {
     let mut renderer = Renderer::new(&gpu, &scene).unwrap();
     renderer.render(&gpu, Method::Sparse, 256, 256).unwrap();
     let vals = renderer.read_vals(&gpu).unwrap();
-    let grid = ValGrid::build(&vals, radius, bucket_count(vals.len() as u32));
+    let grid = ValGrid::build(&vals, radius, bucket_count(vals.len() as u32), 1);
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let (flat, mut visited, mut within, mut weighted, mut pixels) =
         (&renderer.scene.flat, 0usize, 0usize, 0usize, 0usize);
     for h in hits.iter().flatten() {
         let (p, _, _) = flat.surface_at(h.triangle, h.barycentrics);
         pixels += 1;
-        for v in grid.near_vals(p) {
+        for v in grid.near_vals(p, 0) {
             visited += 1;
             let d = v.position.distance(p);
             within += usize::from(d < radius);

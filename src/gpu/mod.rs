@@ -65,6 +65,7 @@ const SHADING_PASSES: &[&pass::PassDesc] = &[
     &sparse::shade::PASS,
     &sparse::near_field::GRID,
     &sparse::near_field::SHADE,
+    &sparse::near_field::FILTER,
     &references::brute_force::PASS,
     &references::brute_force::GROUPED_PASS,
     &references::brute_force::ISM_VISIBILITY,

@@ -648,6 +648,7 @@ impl Renderer {
                         kernel: shading.kernel,
                         bound: shading.bound,
                         near_radius: self.near_radius,
+                        near_interleave: shading.near_field_interleave,
                         glossy_interpolation: shading.glossy_interpolation,
                     };
                     let rays = settings.visibility.mode == scene::Occlusion::Clusters

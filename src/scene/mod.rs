@@ -70,8 +70,8 @@ pub use settings::{
     DirectSettings, DirectShadows, EnvironmentDistribution, EnvironmentSettings, EnvironmentSource,
     GlossyInterpolation, InterpolationKernel, IsmSettings, LightBound, MAX_CLUSTER_ATLAS_SIDE, MAX_CLUSTER_RAYS,
     MAX_CLUSTERS, MAX_DIRECT_LIGHTS, MAX_ENVIRONMENT_ROWS, MAX_ISM_POINTS, MAX_ISM_SPLATS, MAX_ISM_TEXELS, MAX_ISMS,
-    MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MrSettings, NEAR_FIELD_RANGE, Occlusion, OcclusionRule,
-    OcclusionSetting, POINT_VIEWS, Quality, ResolvedConfig, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE,
+    MAX_KMEANS_ITERATIONS, MAX_LIGHTS_VAL_BUDGET, MrSettings, NEAR_FIELD_INTERLEAVE_SIDES, NEAR_FIELD_RANGE, Occlusion,
+    OcclusionRule, OcclusionSetting, POINT_VIEWS, Quality, ResolvedConfig, RgbdSettings, SPOT_VIEWS, SUBDIVISION_RANGE,
     SecondBounceSettings, ShadowMapSource, SoftShadows, SparseShading, Technique, VisibilitySettings,
 };
 pub use texture::MAX_TEXTURE_SIDE;

@@ -3,11 +3,21 @@
 //! per-pixel sum over the buckets of the 2 x 2 x 2 cells around a receiver. The sum equals
 //! [`super::shade_near_field`] over every VAL up to float order: a VAL left out lies farther
 //! than the radius, where its weight is 0 (`tests::grid_sum_equals_the_sum_over_every_val`).
+//!
+//! Interleaved (`settings.sparse.near_field_interleave` = side N > 1): the VALs fall into N²
+//! subsets by a hash of their index ([`val_subset`]), each pixel of an N x N block sums one
+//! subset ([`pixel_subset`]) times N² ([`near_field_terms`]), and a filter over the block
+//! ([`filter`]) averages the pixels that lie on the same surface as the pixel: where all of
+//! them do, every subset counts once, and the pixel gets the whole near field. The VALs within
+//! [`close_radius`] (the radius over N) light every pixel, through a second grid of cells that
+//! much smaller: about 1/8 of the per-pixel work at N = 4.
 
 use glam::{IVec3, Vec3};
 
-use super::Val;
-use crate::scene::InterpolationKernel;
+use super::{
+    Val, mirror, near_field_weight, pcg_hash, phong_lobe, phong_normalisation, val_geometry_sided, view_direction,
+};
+use crate::scene::{InterpolationKernel, Material};
 
 /// Fewest and most buckets: the scan's workgroup (64) splits them into runs, and the most keeps
 /// each run (2^20 / 64 = 16,384 buckets, two loops) under llvmpipe's loop limit.
@@ -18,6 +28,192 @@ pub const BUCKET_RANGE: (u32, u32) = (1 << 10, 1 << 20);
 pub fn bucket_count(max_vals: u32) -> u32 {
     let wanted = (2 * u64::from(max_vals)).next_power_of_two();
     wanted.clamp(u64::from(BUCKET_RANGE.0), u64::from(BUCKET_RANGE.1)) as u32
+}
+
+pub use crate::scene::NEAR_FIELD_INTERLEAVE_SIDES as INTERLEAVE_SIDES;
+
+/// Slots of the grid (cell buckets x subsets) for up to `max_vals` VALs in `subsets` subsets:
+/// [`bucket_count`] of the VALs (the one-workgroup scan's cost grows with the slots), and at
+/// least 256 cell buckets. The cells are twice the near-field radius wide, so a frame's VALs
+/// occupy far fewer cells than there are VALs wherever the near field is worth its cost.
+pub fn slot_count(max_vals: u32, subsets: u32) -> u32 {
+    bucket_count(max_vals).max(256 * subsets)
+}
+
+/// The subset (of `subsets`, a power of two) VAL `index` of the frame falls in.
+pub fn val_subset(index: u32, subsets: u32) -> u32 {
+    pcg_hash(index) & (subsets - 1)
+}
+
+/// The subset pixel (`x`, `y`) sums, on a block `side` pixels wide: every `side` x `side`
+/// window holds each subset once.
+pub fn pixel_subset(x: u32, y: u32, side: u32) -> u32 {
+    x % side + side * (y % side)
+}
+
+/// What a pixel's near VALs deliver before its material: the irradiance (W/m², RGB) and the
+/// same weighted by the Phong lobe toward the eye, so that the radiance is
+/// `diffuse / pi * irradiance + specular * phong_normalisation(k) * lobe` ([`NearTerms::radiance`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NearTerms {
+    pub irradiance: Vec3,
+    pub lobe: Vec3,
+}
+
+impl NearTerms {
+    /// The radiance toward the eye at a surface of `material` (its lobe when `glossy`).
+    pub fn radiance(&self, material: &Material, glossy: bool) -> Vec3 {
+        let mut l = material.diffuse / std::f32::consts::PI * self.irradiance;
+        if glossy {
+            l += material.specular * phong_normalisation(material.exponent) * self.lobe;
+        }
+        l
+    }
+}
+
+/// The radius (m) within which every pixel takes every VAL also when the near field of radius
+/// `radius` is interleaved over blocks `side` wide: the radius over the side (0 when not
+/// interleaved). A VAL that close lights a pixel far more than its neighbours a few pixels away
+/// (its light falls with the squared distance), so shading it at one pixel of 16 and spreading
+/// the result over the block would make fireflies; beyond it a VAL's light varies little over a
+/// block. Each VAL's near share splits into this close share, [`super::near_field_weight`] at
+/// this radius, and the interleaved rest.
+pub fn close_radius(radius: f32, side: u32) -> f32 {
+    if side > 1 { radius / side as f32 } else { 0.0 }
+}
+
+/// [`super::shade_near_field`] before the material as an interleaved pixel of subset `subset` of
+/// `subsets` (side²) takes it: every VAL's close share ([`close_radius`]) plus, for the VALs of
+/// its subset (`vals` in the frame's order, whose index decides the subset), the rest of the
+/// near share times `subsets`.
+#[allow(clippy::too_many_arguments)]
+pub fn near_field_terms(
+    receiver: (Vec3, Vec3, Vec3),
+    exponent: f32,
+    eye: Vec3,
+    centre: Vec3,
+    vals: &[Val],
+    (subset, subsets): (u32, u32),
+    glossy: bool,
+    radius: f32,
+) -> NearTerms {
+    let close = close_radius(radius, (subsets as f32).sqrt().round() as u32);
+    let share = |v: &Val| near_field_weight(v.position.distance(centre), close);
+    let close_terms = terms_weighted(receiver, exponent, eye, vals.iter().map(|v| (v, share(v))), glossy);
+    let mine = vals.iter().enumerate().filter(|(i, _)| val_subset(*i as u32, subsets) == subset);
+    let rest = mine.map(|(_, v)| (v, near_field_weight(v.position.distance(centre), radius) - share(v)));
+    let rest = terms_weighted(receiver, exponent, eye, rest, glossy);
+    let scale = subsets as f32;
+    NearTerms {
+        irradiance: close_terms.irradiance + scale * rest.irradiance,
+        lobe: close_terms.lobe + scale * rest.lobe,
+    }
+}
+
+/// The terms of `vals` at receiver (`p`, shading normal `n` toward the viewer, geometric `n_g`)
+/// whose near-field centre is `centre`, each VAL weighted by its near-field share.
+pub fn terms_over<'a>(
+    receiver: (Vec3, Vec3, Vec3),
+    exponent: f32,
+    eye: Vec3,
+    centre: Vec3,
+    vals: impl IntoIterator<Item = &'a Val>,
+    glossy: bool,
+    radius: f32,
+) -> NearTerms {
+    let weighted = vals.into_iter().map(|v| (v, near_field_weight(v.position.distance(centre), radius)));
+    terms_weighted(receiver, exponent, eye, weighted, glossy)
+}
+
+/// The terms of each VAL of `vals` at the receiver times its weight.
+pub fn terms_weighted<'a>(
+    (p, n, n_g): (Vec3, Vec3, Vec3),
+    exponent: f32,
+    eye: Vec3,
+    vals: impl IntoIterator<Item = (&'a Val, f32)>,
+    glossy: bool,
+) -> NearTerms {
+    let w_o = view_direction(p, n, eye);
+    let mut terms = NearTerms::default();
+    for (val, weight) in vals {
+        if weight <= 0.0 {
+            continue;
+        }
+        let geo = val_geometry_sided(p, n, n_g, val.position, val.normal, val.area);
+        let e = val.flux * (geo.weight * geo.cos_receiver * weight);
+        terms.irradiance += e;
+        if glossy {
+            terms.lobe += phong_lobe(mirror(geo.direction, n).dot(w_o), exponent) * e;
+        }
+    }
+    terms
+}
+
+/// A covered pixel's interleaved near field: its subset's terms and its surface point.
+#[derive(Clone, Copy, Debug)]
+pub struct NearPixel {
+    pub terms: NearTerms,
+    pub position: Vec3,
+    /// The shading normal, toward the viewer.
+    pub normal: Vec3,
+}
+
+/// Neighbours whose normals differ by more than this cosine's angle (about 26 degrees) are on
+/// another surface for the filter.
+pub const FILTER_NORMAL_COS: f32 = 0.9;
+/// Neighbours farther from the pixel's tangent plane than this fraction of their distance
+/// (about 6 degrees) are on another surface for the filter.
+pub const FILTER_PLANE: f32 = 0.1;
+/// Neighbours farther than this fraction of the near-field radius from the pixel are not
+/// averaged (the floor on both sides of a pillar).
+pub const FILTER_DISTANCE: f32 = 0.25;
+
+/// How much neighbour `q` counts in pixel `p`'s filter: 0 on another surface
+/// ([`FILTER_NORMAL_COS`], [`FILTER_PLANE`], [`FILTER_DISTANCE`]), else 1.
+pub fn filter_weight(p: &NearPixel, q: &NearPixel, radius: f32) -> f32 {
+    let d = q.position - p.position;
+    let same = p.normal.dot(q.normal) >= FILTER_NORMAL_COS
+        && p.normal.dot(d).abs() <= FILTER_PLANE * d.length()
+        && d.length_squared() <= (FILTER_DISTANCE * radius).powi(2);
+    if same { 1.0 } else { 0.0 }
+}
+
+/// The weight of offset `o` of a window of half-width `half` on one axis: the window is
+/// `2 half + 1` pixels wide, its two end pixels weigh a half each (they hold the same subset),
+/// so each subset weighs 1 in all; `half` 0 is the pixel alone.
+pub fn window_weight(o: i32, half: i32) -> f32 {
+    if half > 0 && o.abs() == half { 0.5 } else { 1.0 }
+}
+
+/// The filter over blocks `side` wide of an image `width` pixels wide (row-major, `None` where
+/// not covered): each covered pixel's terms averaged over its window's pixels on the same
+/// surface ([`filter_weight`]), weighted by [`window_weight`]. `side` 1 returns the terms.
+pub fn filter(pixels: &[Option<NearPixel>], width: u32, side: u32, radius: f32) -> Vec<Option<NearTerms>> {
+    let (w, h) = (width as i32, (pixels.len() as u32 / width.max(1)) as i32);
+    let half = (side / 2) as i32;
+    (0..pixels.len())
+        .map(|i| {
+            let p = pixels[i]?;
+            let (x, y) = (i as i32 % w, i as i32 / w);
+            let (mut sum, mut total) = (NearTerms::default(), 0.0);
+            for dy in -half..=half {
+                for dx in -half..=half {
+                    let (qx, qy) = (x + dx, y + dy);
+                    if qx < 0 || qy < 0 || qx >= w || qy >= h {
+                        continue;
+                    }
+                    let Some(q) = pixels[(qy * w + qx) as usize] else { continue };
+                    let weight = window_weight(dx, half) * window_weight(dy, half) * filter_weight(&p, &q, radius);
+                    if weight > 0.0 {
+                        sum.irradiance += weight * q.terms.irradiance;
+                        sum.lobe += weight * q.terms.lobe;
+                        total += weight;
+                    }
+                }
+            }
+            Some(NearTerms { irradiance: sum.irradiance / total, lobe: sum.lobe / total })
+        })
+        .collect()
 }
 
 /// The grid's cell for near-field radius `radius` (m): twice it, so a sphere of the radius
@@ -54,24 +250,31 @@ pub fn vertex_centre(kernel: InterpolationKernel, position: Vec3, normal: Vec3, 
     neighbours.iter().zip(&w).map(|((p, _), w)| *p * (w / total)).sum()
 }
 
-/// The VALs sorted into hashed buckets.
+/// The VALs sorted into hashed buckets, each bucket split into the subsets' slots: slot
+/// `bucket * subsets + subset`.
 pub struct ValGrid {
     pub radius: f32,
-    /// Per bucket: its VALs' count and first index in `vals`.
+    /// VAL subsets (1 without interleaving).
+    pub subsets: u32,
+    /// Per slot: its VALs' count and first index in `vals`.
     pub counts: Vec<u32>,
     pub starts: Vec<u32>,
-    /// The VALs in bucket order (in input order within a bucket).
+    /// The VALs in slot order (in input order within a slot).
     pub vals: Vec<Val>,
 }
 
 impl ValGrid {
-    /// Sort `vals` for near-field radius `radius` (m, > 0) into `buckets` buckets.
-    pub fn build(vals: &[Val], radius: f32, buckets: u32) -> Self {
+    /// Sort `vals` for near-field radius `radius` (m, > 0) into `slots` slots (a power of two, a
+    /// multiple of `subsets`), `subsets` of them per cell bucket.
+    pub fn build(vals: &[Val], radius: f32, slots: u32, subsets: u32) -> Self {
         let cell = cell_size(radius);
-        let bucket = |v: &Val| bucket_of(cell_of(v.position, cell), buckets) as usize;
-        let mut counts = vec![0u32; buckets as usize];
-        for v in vals {
-            counts[bucket(v)] += 1;
+        let buckets = slots / subsets;
+        let slot = |i: usize, v: &Val| {
+            (bucket_of(cell_of(v.position, cell), buckets) * subsets + val_subset(i as u32, subsets)) as usize
+        };
+        let mut counts = vec![0u32; slots as usize];
+        for (i, v) in vals.iter().enumerate() {
+            counts[slot(i, v)] += 1;
         }
         let starts: Vec<u32> = counts
             .iter()
@@ -83,22 +286,22 @@ impl ValGrid {
             .collect();
         let mut next = starts.clone();
         let mut sorted = vec![Val { position: Vec3::ZERO, normal: Vec3::Y, area: 0.0, flux: Vec3::ZERO }; vals.len()];
-        for v in vals {
-            let b = bucket(v);
+        for (i, v) in vals.iter().enumerate() {
+            let b = slot(i, v);
             sorted[next[b] as usize] = *v;
             next[b] += 1;
         }
-        Self { radius, counts, starts, vals: sorted }
+        Self { radius, subsets, counts, starts, vals: sorted }
     }
 
-    /// The buckets a receiver at `p` visits, each once, in the shader's order: the cells from
-    /// the one holding `p - radius` on every axis, x fastest.
+    /// The cell buckets a receiver at `p` visits, each once, in the shader's order: the cells
+    /// from the one holding `p - radius` on every axis, x fastest.
     pub fn buckets_around(&self, p: Vec3) -> Vec<u32> {
         let corner = cell_of(p - Vec3::splat(self.radius), cell_size(self.radius));
         let mut visited: Vec<u32> = Vec::with_capacity(8);
         for c in 0..8 {
             let offset = IVec3::new(c & 1, (c >> 1) & 1, c >> 2);
-            let b = bucket_of(corner + offset, self.counts.len() as u32);
+            let b = bucket_of(corner + offset, self.counts.len() as u32 / self.subsets);
             if !visited.contains(&b) {
                 visited.push(b);
             }
@@ -106,11 +309,13 @@ impl ValGrid {
         visited
     }
 
-    /// The VALs of the buckets around `p` (a superset of those within the radius).
-    pub fn near_vals(&self, p: Vec3) -> impl Iterator<Item = &Val> {
-        self.buckets_around(p).into_iter().flat_map(|b| {
-            let start = self.starts[b as usize] as usize;
-            &self.vals[start..start + self.counts[b as usize] as usize]
+    /// The VALs of `subset` in the buckets around `p` (a superset of those of the subset
+    /// within the radius).
+    pub fn near_vals(&self, p: Vec3, subset: u32) -> impl Iterator<Item = &Val> {
+        self.buckets_around(p).into_iter().flat_map(move |b| {
+            let slot = (b * self.subsets + subset) as usize;
+            let start = self.starts[slot] as usize;
+            &self.vals[start..start + self.counts[slot] as usize]
         })
     }
 }
@@ -152,15 +357,19 @@ mod tests {
     /// Every VAL within the radius of a receiver is in the buckets it visits, and none twice,
     /// so the grid's sum is the sum over every VAL. Few buckets (8 for a scene 7 cells wide)
     /// make cells share buckets, which the visit must not count twice; the tolerance is float
-    /// order (relative 1e-4).
+    /// order (relative 1e-4). Interleaved, a subset's slots hold exactly that subset's VALs, and
+    /// the subsets' sums add up to the whole.
     #[test]
     fn grid_sum_equals_the_sum_over_every_val() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let vals = random_vals(&mut rng, 3000, 4.0);
         let surface =
             Material { diffuse: Vec3::splat(0.7), specular: Vec3::splat(0.2), exponent: 30.0, diffuse_texture: None };
-        for buckets in [8, BUCKET_RANGE.0, bucket_count(3000)] {
-            let grid = ValGrid::build(&vals, 0.3, buckets);
+        let close = |a: Vec3, b: Vec3, scale: f32| (a - b).abs().max_element() <= 1e-4 * scale + 1e-12;
+        for (slots, subsets) in
+            [(8, 1), (BUCKET_RANGE.0, 1), (bucket_count(3000), 1), (64, 16), (slot_count(3000, 4), 4)]
+        {
+            let grid = ValGrid::build(&vals, 0.3, slots, subsets);
             let mut lit = 0;
             for _ in 0..300 {
                 let p = Vec3::new(rng.random(), rng.random(), rng.random()) * 4.0 - 2.0;
@@ -169,11 +378,128 @@ mod tests {
                 // The centre up to a third of the radius away from the pixel, as at a corner.
                 let centre = p + (Vec3::new(rng.random(), rng.random(), rng.random()) - 0.5) * 0.2;
                 let all = shade_near_field(p, n, n, &surface, eye, centre, &vals, true, grid.radius);
-                let near = shade_near_field(p, n, n, &surface, eye, centre, grid.near_vals(centre), true, grid.radius);
-                assert!((all - near).abs().max_element() <= 1e-4 * all.max_element() + 1e-12, "{all} vs {near}");
+                let mut parts = Vec3::ZERO;
+                for subset in 0..subsets {
+                    let mine = terms_over((p, n, n), 30.0, eye, centre, grid.near_vals(centre, subset), true, 0.3);
+                    let of_subset = vals.iter().enumerate().filter(|(i, _)| val_subset(*i as u32, subsets) == subset);
+                    let expected = terms_over((p, n, n), 30.0, eye, centre, of_subset.map(|(_, v)| v), true, 0.3);
+                    let (a, b) = (mine.radiance(&surface, true), expected.radiance(&surface, true));
+                    assert!(close(a, b, b.max_element()), "subset {subset} of {subsets}: {a} vs {b}");
+                    parts += mine.radiance(&surface, true);
+                }
+                assert!(close(all, parts, all.max_element()), "{all} vs {parts}");
                 lit += usize::from(all.max_element() > 0.0);
             }
             assert!(lit > 200, "only {lit} of 300 receivers had a VAL within the radius");
+        }
+    }
+
+    #[test]
+    fn subsets_are_even_and_every_window_holds_each_once() {
+        for side in INTERLEAVE_SIDES {
+            let subsets = side * side;
+            let mut counts = vec![0u32; subsets as usize];
+            for i in 0..64_000 {
+                counts[val_subset(i, subsets) as usize] += 1;
+            }
+            let expected = 64_000 / subsets;
+            assert!(counts.iter().all(|&c| c.abs_diff(expected) < expected / 10 + 10), "{side}: {counts:?}");
+            // The window of half-width side / 2 around any pixel, its ends at half weight.
+            let half = (side / 2) as i32;
+            for (x, y) in [(0, 0), (5, 9), (17, 3)] {
+                let mut weights = vec![0.0f32; subsets as usize];
+                for dy in -half..=half {
+                    for dx in -half..=half {
+                        let s = pixel_subset((x + 8 + dx) as u32, (y + 8 + dy) as u32, side);
+                        weights[s as usize] += window_weight(dx, half) * window_weight(dy, half);
+                    }
+                }
+                assert!(weights.iter().all(|&w| w == 1.0), "side {side} at ({x}, {y}): {weights:?}");
+            }
+            assert!(slot_count(1000, subsets).is_power_of_two() && slot_count(1000, subsets) >= 256 * subsets);
+        }
+    }
+
+    /// Each of the filter's three tests alone keeps a neighbour out: its normal, its height
+    /// over the pixel's tangent plane, its distance.
+    #[test]
+    fn filter_weight_rejects_each_other_surface() {
+        let radius = 1.0;
+        let pixel = |position: Vec3, normal: Vec3| NearPixel { terms: NearTerms::default(), position, normal };
+        let p = pixel(Vec3::ZERO, Vec3::Z);
+        let tilted = |degrees: f32| Vec3::new(degrees.to_radians().sin(), 0.0, degrees.to_radians().cos());
+        assert_eq!(filter_weight(&p, &p, radius), 1.0);
+        assert_eq!(filter_weight(&p, &pixel(Vec3::new(0.1, 0.05, 0.0), Vec3::Z), radius), 1.0);
+        assert_eq!(filter_weight(&p, &pixel(Vec3::new(0.1, 0.0, 0.0), tilted(20.0)), radius), 1.0);
+        assert_eq!(filter_weight(&p, &pixel(Vec3::new(0.1, 0.0, 0.0), tilted(30.0)), radius), 0.0);
+        assert_eq!(filter_weight(&p, &pixel(Vec3::new(0.1, 0.0, 0.005), Vec3::Z), radius), 1.0);
+        assert_eq!(filter_weight(&p, &pixel(Vec3::new(0.1, 0.0, 0.02), Vec3::Z), radius), 0.0);
+        assert_eq!(filter_weight(&p, &pixel(Vec3::new(0.2, 0.0, 0.0), Vec3::Z), radius), 1.0);
+        assert_eq!(filter_weight(&p, &pixel(Vec3::new(0.3, 0.0, 0.0), Vec3::Z), radius), 0.0);
+    }
+
+    /// Where every pixel of a block sees the same surface point, the interleaved pixels' filter
+    /// is the whole near field (each subset once); at the image's edge it is an average of the
+    /// subsets the window holds. A second surface at right angles is kept out of the filter.
+    #[test]
+    fn the_filter_recombines_the_subsets_on_one_surface_only() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let vals = random_vals(&mut rng, 4000, 2.0);
+        let (eye, radius) = (Vec3::new(0.0, -3.0, 0.0), 0.8);
+        let (floor, wall) = ((Vec3::new(0.1, -0.2, 0.0), -Vec3::Y), (Vec3::new(0.3, 0.0, 0.1), Vec3::X));
+        let terms = |(p, n): (Vec3, Vec3), subset, subsets| {
+            near_field_terms((p, n, n), 20.0, eye, p, &vals, (subset, subsets), true, radius)
+        };
+        for side in INTERLEAVE_SIDES {
+            let (width, height) = (24u32, 12u32);
+            // The left half sees the floor, the right half the wall (not on the floor's plane).
+            let surface_of = |x: u32| if x < width / 2 { floor } else { wall };
+            let pixels: Vec<Option<NearPixel>> = (0..width * height)
+                .map(|i| {
+                    let (x, y) = (i % width, i / width);
+                    let (position, normal) = surface_of(x);
+                    let t = terms((position, normal), pixel_subset(x, y, side), side * side);
+                    Some(NearPixel { terms: t, position, normal })
+                })
+                .collect();
+            // The wall's terms a thousand times brighter: a floor pixel by the seam that took
+            // any wall pixel in would be far brighter than every floor pixel.
+            let marked: Vec<Option<NearPixel>> = pixels
+                .iter()
+                .map(|p| {
+                    p.map(|mut p| {
+                        if p.normal == wall.1 {
+                            p.terms.irradiance *= 1000.0;
+                        }
+                        p
+                    })
+                })
+                .collect();
+            let filtered = filter(&pixels, width, side, radius);
+            let brightest_floor = pixels.iter().flatten().filter(|p| p.normal == floor.1);
+            let brightest_floor = brightest_floor.map(|p| p.terms.irradiance.max_element()).fold(0.0, f32::max);
+            let by_seam = filter(&marked, width, side, radius);
+            for (i, f) in by_seam.iter().enumerate() {
+                if i as u32 % width < width / 2 {
+                    assert!(f.unwrap().irradiance.max_element() <= brightest_floor * 1.0001, "side {side}, pixel {i}");
+                }
+            }
+            let whole = [floor, wall].map(|s| terms(s, 0, 1));
+            let half = side / 2;
+            for (i, f) in filtered.iter().enumerate() {
+                let (x, y) = (i as u32 % width, i as u32 / width);
+                let inside = y >= half
+                    && y + half < height
+                    && (x >= half && x + half < width / 2 || x >= width / 2 + half && x + half < width);
+                let w = whole[usize::from(x >= width / 2)];
+                let f = f.unwrap();
+                let close = (f.irradiance - w.irradiance).abs().max_element() <= 1e-4 * w.irradiance.max_element()
+                    && (f.lobe - w.lobe).abs().max_element() <= 1e-4 * w.lobe.max_element() + 1e-9;
+                if inside || side == 1 {
+                    assert!(close, "side {side}, pixel ({x}, {y}): {f:?} vs {w:?}");
+                }
+            }
+            assert!(whole[0].irradiance.max_element() > 0.0 && whole[1].irradiance.max_element() > 0.0);
         }
     }
 

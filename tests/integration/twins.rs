@@ -11,6 +11,7 @@ use glam::{Mat4, Vec3};
 use relume::gpu::raw::RawPointLight;
 use relume::gpu::visibility::disks::twin::Combine;
 use relume::renderer::{Method, Renderer};
+use relume::twin::near_field::{NearPixel, near_field_terms};
 use relume::twin::{self, PointLight, Val};
 
 const REL: f32 = 1e-3;
@@ -410,7 +411,16 @@ fn assert_far_field_gather_matches_twin(
 /// Same tolerances as the rest of this file.
 #[test]
 fn near_field_matches_cpu_twins() {
-    near_field_matches_twins(None, 1.5, (40, 32));
+    near_field_matches_twins(None, 1.5, (40, 32), 1);
+}
+
+/// As [`near_field_matches_cpu_twins`], interleaved over blocks of 4 x 4 pixels: each pixel's
+/// subset of the near VALs, then the filter over its block
+/// (`twin::near_field::{near_field_terms, filter}`). The image's sides are no multiple of the
+/// block's or of a workgroup's, so that the sub-images the shade walks end inside both.
+#[test]
+fn interleaved_near_field_matches_cpu_twins() {
+    near_field_matches_twins(None, 1.5, (35, 30), 4);
 }
 
 /// As [`near_field_matches_cpu_twins`] with ~70k VALs and a radius of 8 spacings, so that many
@@ -418,13 +428,14 @@ fn near_field_matches_cpu_twins() {
 /// ranges of the per-pixel pass).
 #[test]
 fn near_field_takes_every_near_val_past_the_cpu_loop_limit() {
-    near_field_matches_twins(Some(300), 8.0, (10, 8));
+    near_field_matches_twins(Some(300), 8.0, (10, 8), 1);
 }
 
-fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h): (u32, u32)) {
+fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h): (u32, u32), side: u32) {
     let gpu = gpu();
     let mut scene = load_test_room();
     scene.settings.sparse.near_field = near_field;
+    scene.settings.sparse.near_field_interleave = side;
     if let Some(r) = rsm_resolution {
         scene.settings.rsm_resolution = r;
     }
@@ -440,17 +451,43 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
     let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
     let sparse = sparse_shading_twin(flat, (&flat.indices, &flat.triangle_materials), &hits, &mid, eye);
     let centres = vertex_centres(flat, scene.settings.sparse.kernel);
-    let near: Vec<Option<Vec3>> = hits
+    let subsets = side * side;
+    let receivers: Vec<Option<(NearPixel, relume::scene::Material)>> = hits
         .iter()
-        .map(|hit| {
+        .enumerate()
+        .map(|(i, hit)| {
             hit.map(|h| {
                 let r = flat.receiver_at(h.triangle, h.barycentrics, eye);
                 let c = [0, 1, 2].map(|k| centres[flat.indices[3 * h.triangle as usize + k] as usize]);
                 let centre = twin::barycentric(h.barycentrics, c[0], c[1], c[2]);
-                twin::shade_near_field(r.position, r.normal, r.geometric, &r.surface, eye, centre, &vals, true, radius)
+                let subset = twin::near_field::pixel_subset(i as u32 % w, i as u32 / w, side);
+                let receiver = (r.position, r.normal, r.geometric);
+                let exponent = r.surface.exponent;
+                let terms = near_field_terms(receiver, exponent, eye, centre, &vals, (subset, subsets), true, radius);
+                (NearPixel { terms, position: r.position, normal: r.normal }, r.surface)
             })
         })
         .collect();
+    let pixels: Vec<Option<NearPixel>> = receivers.iter().map(|r| r.as_ref().map(|(p, _)| *p)).collect();
+    let filtered = twin::near_field::filter(&pixels, w, side, radius);
+    let near: Vec<Option<Vec3>> = filtered
+        .iter()
+        .zip(&receivers)
+        .map(|(f, r)| f.zip(r.as_ref()).map(|(f, (_, m))| f.radiance(m, true)))
+        .collect();
+    if side == 1 {
+        // Not interleaved, the terms are the sum over every VAL.
+        for (i, hit) in hits.iter().enumerate() {
+            let Some(h) = hit else { continue };
+            let r = flat.receiver_at(h.triangle, h.barycentrics, eye);
+            let c = [0, 1, 2].map(|k| centres[flat.indices[3 * h.triangle as usize + k] as usize]);
+            let centre = twin::barycentric(h.barycentrics, c[0], c[1], c[2]);
+            let all =
+                twin::shade_near_field(r.position, r.normal, r.geometric, &r.surface, eye, centre, &vals, true, radius);
+            let n = near[i].unwrap();
+            assert!((all - n).abs().max_element() <= 1e-4 * all.max_element() + 1e-12, "pixel {i}: {all} vs {n}");
+        }
+    }
     let mut most_near = 0;
     if rsm_resolution.is_some() {
         for hit in hits.iter().flatten() {

@@ -31,6 +31,8 @@ pub struct SparseSettings {
     /// The near-field radius (m): VALs closer than it to a receiver are applied per pixel
     /// (`near_field` stage) rather than through the sparse points; 0 is off.
     pub near_radius: f32,
+    /// The near field's interleaving block side (`settings.sparse.near_field_interleave`).
+    pub near_interleave: u32,
     /// How pixels take the sparse points' glossy light (with `glossy` only).
     pub glossy_interpolation: GlossyInterpolation,
 }
@@ -127,7 +129,10 @@ impl SparseMethod {
             interpolate,
             shade,
             near_field: (settings.near_radius > 0.0)
-                .then(|| NearField::new(gpu, scene, glossy, settings.near_radius, interpolate_pass, &interpolate_body))
+                .then(|| {
+                    let near = (settings.near_radius, settings.near_interleave);
+                    NearField::new(gpu, scene, glossy, near, interpolate_pass, &interpolate_body)
+                })
                 .transpose()?,
             gathered: Lobes::new::<RawGathered>(gpu, "gather.gathered", n, glossy)?,
             sparse_lights: Lobes::new::<RawPointLight>(gpu, "renormalise.sparse_lights", n, glossy_lights)?,

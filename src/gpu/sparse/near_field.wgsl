@@ -10,12 +10,19 @@
 // other cells in a visited bucket are farther than the radius (weight 0).
 // Rust twins: `twin::near_field::ValGrid` (the grid), `twin::shade_near_field` (the sum).
 //
+//
+// Interleaved over blocks NEAR_FIELD_SIDE pixels wide (`settings.sparse.near_field_interleave`),
+// each cell bucket holds NEAR_FIELD_SUBSETS = side² slots, one per VAL subset (`val_subset`: a
+// hash of the VAL's index), and a pixel visits its own subset's slots only (`pixel_subset`);
+// `near_field_filter.wgsl` adds the subsets of the pixel's block up again.
+//
 // CPU adapters end a shader's loops after a fixed iteration count (llvmpipe), so there one
 // dispatch takes the pixel's near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) in visiting order and
 // the next adds the following ones; GPUs take them all at once.
-// This file holds what both share; NEAR_FIELD_RADIUS and NEAR_FIELD_CELL are prepended
-// (`near_field::head`), the grid passes (`near_field_grid.wgsl`) or the per-pixel pass
-// (`near_field_shade.wgsl`) follow.
+// This file holds what all share; NEAR_FIELD_RADIUS, NEAR_FIELD_CELL, NEAR_FIELD_SIDE and
+// NEAR_FIELD_SUBSETS are prepended
+// (`near_field::head`), the grid passes (`near_field_grid.wgsl`), the per-pixel pass
+// (`near_field_shade.wgsl`) or the filter (`near_field_filter.wgsl`) follow.
 
 // `twin::near_field::cell_of`: the grid cell holding `p`.
 fn cell_of(p: vec3<f32>) -> vec3<i32> {
@@ -28,3 +35,18 @@ fn bucket_of(cell: vec3<i32>, buckets: u32) -> u32 {
     return ((u.x * 73856093u) ^ (u.y * 19349663u) ^ (u.z * 83492791u)) & (buckets - 1u);
 }
 
+
+// `twin::near_field::val_subset`: the subset VAL `index` of the frame falls in.
+fn val_subset(index: u32) -> u32 {
+    return pcg_hash(index) & (NEAR_FIELD_SUBSETS - 1u);
+}
+
+// `twin::near_field::pixel_subset`: the subset pixel `id` sums.
+fn pixel_subset(id: vec2<u32>) -> u32 {
+    return id.x % NEAR_FIELD_SIDE + NEAR_FIELD_SIDE * (id.y % NEAR_FIELD_SIDE);
+}
+
+// The slot of `cell`'s bucket for `subset` among `slots` (`twin::near_field::ValGrid`).
+fn grid_slot(cell: vec3<i32>, subset: u32, slots: u32) -> u32 {
+    return bucket_of(cell, slots / NEAR_FIELD_SUBSETS) * NEAR_FIELD_SUBSETS + subset;
+}

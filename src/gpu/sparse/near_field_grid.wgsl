@@ -16,13 +16,13 @@ fn grid_count(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= frame_val_count() {
         return;
     }
-    let bucket = bucket_of(cell_of(vals[id.x].position), arrayLength(&grid_starts));
-    val_slots[id.x] = atomicAdd(&grid_counts[bucket], 1u);
+    let slot = grid_slot(cell_of(vals[id.x].position), val_subset(id.x), arrayLength(&grid_starts));
+    val_slots[id.x] = atomicAdd(&grid_counts[slot], 1u);
 }
 
 var<workgroup> chunk_sums: array<u32, WORKGROUP_X>;
 
-// One workgroup: each invocation sums its run of buckets, the runs' sums are scanned, then
+// One workgroup: each invocation sums its run of slots, the runs' sums are scanned, then
 // each invocation writes its run's starts.
 @compute @workgroup_size(WORKGROUP_X)
 fn grid_scan(@builtin(local_invocation_index) local: u32) {
@@ -56,6 +56,6 @@ fn grid_scatter(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let val = vals[id.x];
-    let bucket = bucket_of(cell_of(val.position), arrayLength(&grid_starts));
-    grid_vals[grid_starts[bucket] + val_slots[id.x]] = val;
+    let slot = grid_slot(cell_of(val.position), val_subset(id.x), arrayLength(&grid_starts));
+    grid_vals[grid_starts[slot] + val_slots[id.x]] = val;
 }

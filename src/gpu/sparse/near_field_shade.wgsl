@@ -1,64 +1,120 @@
-// The near field per pixel (`near_field.wgsl`): every VAL of the grid's buckets around the
-// pixel's near-field centre, scaled by its near-field share, added to the sparse shading in
-// `indirect`. The share is taken at the centre (the pixel's interpolated `vertex_centres`: where
-// the sparse points it interpolates lie, weighted as it weighs them), not at the pixel, so that
-// a VAL the gather left out at those points is the one added here: at a corner, where all of a
-// pixel's sparse points lie on one side of it, the pixel's own distance would count some VALs
-// twice and others not at all. The light is the pixel's own: its position, normal, material.
-// Rust twin: `twin::shade_near_field` over `twin::near_field::ValGrid::near_vals` (the buckets
-// around the centre).
+// The near field per pixel (`near_field.wgsl`): every VAL of the pixel's subset in the grid's
+// buckets around the pixel's near-field centre (and, interleaved, every VAL of the close grid's
+// buckets around it), scaled by its near-field share, summed before
+// the pixel's material into `near_pixels` for the filter (`near_field_filter.wgsl`), which adds
+// the light to the sparse shading in `indirect`. The share is taken at the centre (the pixel's
+// interpolated `vertex_centres`: where the sparse points it interpolates lie, weighted as it
+// weighs them), not at the pixel, so that a VAL the gather left out at those points is the one
+// added here: at a corner, where all of a pixel's sparse points lie on one side of it, the
+// pixel's own distance would count some VALs twice and others not at all. The light is the
+// pixel's own: its position and normal (the material comes in the filter).
+// Rust twin: `twin::near_field::near_field_terms` (`twin::near_field::ValGrid::near_vals`
+// visits the same VALs).
 
 override VAL_BEGIN: u32 = 0u;
 override VAL_SPAN: u32 = 0xffffffffu;
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
-@group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
+@group(0) @binding(1) var<storage, read_write> near_pixels: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> grid_counts: array<u32>;
 @group(0) @binding(3) var<storage, read> grid_starts: array<u32>;
 @group(0) @binding(4) var<storage, read> grid_vals: array<Val>;
 @group(0) @binding(5) var<storage, read> vertex_centres: array<vec4<f32>>;
+// The close grid (interleaved only; else the grid again, unread): every VAL in cells of
+// 2 NEAR_FIELD_CLOSE_RADIUS, no subsets.
+@group(0) @binding(6) var<storage, read> close_counts: array<u32>;
+@group(0) @binding(7) var<storage, read> close_starts: array<u32>;
+@group(0) @binding(8) var<storage, read> close_vals: array<Val>;
 
-// The radiance the near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order around
-// `centre` reflect at `s` toward the eye.
-fn near_field(s: Surface, centre: vec3<f32>, glossy: bool) -> vec3<f32> {
-    let buckets = arrayLength(&grid_starts);
+// `twin::near_field::NearTerms`: irradiance and lobe-weighted irradiance.
+struct NearTerms {
+    irradiance: vec3<f32>,
+    lobe: vec3<f32>,
+}
+
+// `val`'s terms at `s` times `weight` added to `terms`.
+fn add_val(terms: ptr<function, NearTerms>, s: Surface, w_o: vec3<f32>, val: Val, weight: f32, glossy: bool) {
+    let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
+    let e = val.flux * (geo.weight * geo.cos_receiver * weight);
+    (*terms).irradiance += e;
+    if glossy {
+        (*terms).lobe += phong_lobe(dot(mirror(geo.direction, s.normal), w_o), s.material.exponent) * e;
+    }
+}
+
+// Whether bucket `bucket`, the `c`-th of a pixel's eight, was among the first `c`.
+fn repeated_bucket(visited: ptr<function, array<u32, 8>>, c: u32, bucket: u32) -> bool {
+    var repeated = false;
+    for (var i = 0u; i < c; i++) {
+        repeated = repeated || (*visited)[i] == bucket;
+    }
+    (*visited)[c] = bucket;
+    return repeated;
+}
+
+// What the near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order around `centre`
+// deliver at `s` before its material (`twin::near_field::near_field_terms`): first, interleaved,
+// every VAL's close share through the close grid, then the rest of the near share of the VALs
+// of `subset` through the grid's slots, times the subsets.
+fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearTerms {
     let w_o = view_direction(s.position, s.normal, frame.eye);
-    let spec = s.material.specular * phong_normalisation(s.material.exponent);
-    // The 2 x 2 x 2 cells from the one holding `position - radius` on every axis.
-    let corner = cell_of(centre - vec3<f32>(NEAR_FIELD_RADIUS));
     var visited: array<u32, 8>;
     var seen = 0u;
-    var l = vec3<f32>(0.0);
     let end = VAL_BEGIN + min(VAL_SPAN, 0xffffffffu - VAL_BEGIN);
+    var close = NearTerms(vec3<f32>(0.0), vec3<f32>(0.0));
+    if NEAR_FIELD_CLOSE_RADIUS > 0.0 {
+        let buckets = arrayLength(&close_starts);
+        let corner = vec3<i32>(floor((centre - vec3<f32>(NEAR_FIELD_CLOSE_RADIUS)) / NEAR_FIELD_CLOSE_CELL));
+        for (var c = 0u; c < 8u; c++) {
+            let bucket = bucket_of(corner + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u)), buckets);
+            if repeated_bucket(&visited, c, bucket) {
+                continue;
+            }
+            let count = close_counts[bucket];
+            let first = max(seen, VAL_BEGIN) - seen;
+            let last = max(min(seen + count, end), seen) - seen;
+            seen += count;
+            let start = close_starts[bucket];
+            for (var k = first; k < last; k++) {
+                let val = close_vals[start + k];
+                let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_CLOSE_RADIUS);
+                if weight > 0.0 {
+                    add_val(&close, s, w_o, val, weight, glossy);
+                }
+            }
+        }
+    }
+    let buckets = arrayLength(&grid_starts) / NEAR_FIELD_SUBSETS;
+    // The 2 x 2 x 2 cells from the one holding `position - radius` on every axis.
+    let corner = cell_of(centre - vec3<f32>(NEAR_FIELD_RADIUS));
+    var rest = NearTerms(vec3<f32>(0.0), vec3<f32>(0.0));
     for (var c = 0u; c < 8u; c++) {
         let bucket = bucket_of(corner + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u)), buckets);
-        var repeated = false;
-        for (var i = 0u; i < c; i++) {
-            repeated = repeated || visited[i] == bucket;
-        }
-        visited[c] = bucket;
-        if repeated {
+        if repeated_bucket(&visited, c, bucket) {
             continue;
         }
-        // This bucket's VALs are [seen, seen + count) of the visiting order.
-        let count = grid_counts[bucket];
+        // This slot's VALs are [seen, seen + count) of the visiting order.
+        let slot = bucket * NEAR_FIELD_SUBSETS + subset;
+        let count = grid_counts[slot];
         let first = max(seen, VAL_BEGIN) - seen;
         let last = max(min(seen + count, end), seen) - seen;
         seen += count;
-        let start = grid_starts[bucket];
+        let start = grid_starts[slot];
         for (var k = first; k < last; k++) {
             let val = grid_vals[start + k];
-            let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_RADIUS);
-            if weight <= 0.0 {
-                continue;
+            let d = distance(val.position, centre);
+            let weight = near_field_weight(d, NEAR_FIELD_RADIUS) - near_field_weight(d, NEAR_FIELD_CLOSE_RADIUS);
+            if weight > 0.0 {
+                add_val(&rest, s, w_o, val, weight, glossy);
             }
-            let geo = val_geometry_sided(s.position, s.normal, s.geometric, val.position, val.normal, val.area);
-            l += reflected_radiance(s, spec, w_o, geo.direction, val.flux * (geo.weight * geo.cos_receiver * weight), glossy);
         }
     }
-    return l;
+    let scale = f32(NEAR_FIELD_SUBSETS);
+    return NearTerms(close.irradiance + scale * rest.irradiance, close.lobe + scale * rest.lobe);
 }
 
+// `near_pixels` holds four per pixel: irradiance (w: 1 where covered), lobe, position, normal
+// (toward the viewer). The stage clears it; each VAL range adds its share.
 fn shade(id: vec2<u32>, glossy: bool) {
     if id.x >= frame.width || id.y >= frame.height {
         return;
@@ -67,20 +123,38 @@ fn shade(id: vec2<u32>, glossy: bool) {
     if !hit.covered {
         return;
     }
-    let i = id.y * frame.width + id.x;
+    let i = 4u * (id.y * frame.width + id.x);
     let t = 3u * hit.triangle;
     let c = vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]);
     let centre = barycentric(hit.barycentrics, vertex_centres[c.x].xyz, vertex_centres[c.y].xyz, vertex_centres[c.z].xyz);
-    let before = indirect[i];
-    indirect[i] = vec4<f32>(before.rgb + near_field(facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye), centre, glossy), before.a);
+    let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
+    let terms = near_field(s, centre, pixel_subset(id), glossy);
+    near_pixels[i] = vec4<f32>(near_pixels[i].xyz + terms.irradiance, 1.0);
+    near_pixels[i + 1u] = vec4<f32>(near_pixels[i + 1u].xyz + terms.lobe, 0.0);
+    near_pixels[i + 2u] = vec4<f32>(s.position, 1.0);
+    near_pixels[i + 3u] = vec4<f32>(s.normal, 0.0);
+}
+
+// The pixel invocation `id` shades. Interleaved, the image is walked as NEAR_FIELD_SIDE²
+// sub-images, one per subset, each of every NEAR_FIELD_SIDE-th pixel (Segovia et al.'s
+// deinterleaving): the invocations of a workgroup then take the same subset at nearby pixels,
+// so they walk the same slots of the same buckets. The dispatch covers NEAR_FIELD_SIDE x
+// ceil(size / NEAR_FIELD_SIDE) invocations on each axis; the workgroups' invocations past them
+// map past the image (and are skipped there).
+fn pixel_of(id: vec2<u32>) -> vec2<u32> {
+    let sub = (vec2<u32>(frame.width, frame.height) + NEAR_FIELD_SIDE - 1u) / NEAR_FIELD_SIDE;
+    if any(id >= sub * NEAR_FIELD_SIDE) {
+        return vec2<u32>(frame.width, frame.height);
+    }
+    return (id % sub) * NEAR_FIELD_SIDE + id / sub;
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    shade(id.xy, false);
+    shade(pixel_of(id.xy), false);
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
 fn main_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
-    shade(id.xy, true);
+    shade(pixel_of(id.xy), true);
 }

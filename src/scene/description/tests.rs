@@ -328,6 +328,10 @@ fn settings_are_checked() {
     assert_eq!(message, "settings.tuning.sparse.near_field: must be in [0, 8], got 9");
     let message = error_of(&with_tuning(r#"{"sparse": {"near_field": -0.5}}"#));
     assert_eq!(message, "settings.tuning.sparse.near_field: must be in [0, 8], got -0.5");
+    let message = error_of(&with_tuning(r#"{"sparse": {"near_field_interleave": 3}}"#));
+    assert_eq!(message, "settings.tuning.sparse.near_field_interleave: must be one of [1, 2, 4, 8], got 3");
+    let message = error_of(&with_tuning(r#"{"sparse": {"near_field_interleave": 0}}"#));
+    assert_eq!(message, "settings.tuning.sparse.near_field_interleave: must be one of [1, 2, 4, 8], got 0");
     let message = error_of(&with_tuning(r#"{"sparse": {"points": 1.5}}"#));
     assert_eq!(message, "settings.tuning.sparse.points: must be in [0.0625, 1], got 1.5");
     let message = error_of(&with_tuning(r#"{"sparse": {"points": 0}}"#));
@@ -350,6 +354,7 @@ fn settings_are_checked() {
             bound: LightBound::Off,
             subdivision: 1.0,
             near_field: 0.0,
+            near_field_interleave: 1,
             glossy_interpolation: GlossyInterpolation::Lights,
             adaptive: 0.0,
             points: 1.0,

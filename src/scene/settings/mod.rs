@@ -27,8 +27,8 @@ pub use rgbd::RgbdSettings;
 pub use scene_file::{SettingsDescription, validate_exposure};
 pub use sparse::{
     ADAPTIVE_CANDIDATES, ADAPTIVE_RANGE, DEFAULT_ADAPTIVE, DEFAULT_NEAR_FIELD, DEFAULT_POINTS, DEFAULT_SUBDIVISION,
-    GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_RANGE, POINTS_RANGE, SUBDIVISION_RANGE,
-    SparseShading,
+    GlossyInterpolation, InterpolationKernel, LightBound, NEAR_FIELD_INTERLEAVE_SIDES, NEAR_FIELD_RANGE, POINTS_RANGE,
+    SUBDIVISION_RANGE, SparseShading,
 };
 pub use tuning::{DirectTuning, SecondBounceTuning, SparseTuning, Tuning};
 pub(crate) use tuning::{SetField, json_value, overrides};

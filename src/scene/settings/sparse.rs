@@ -25,6 +25,12 @@ pub struct SparseShading {
     /// sparse points, in [0, 8]; default [`DEFAULT_NEAR_FIELD`]. 0 is off (the paper's).
     #[serde(default = "default_near_field")]
     pub near_field: f32,
+    /// The near field interleaved over blocks this many pixels wide: each pixel of a block
+    /// shades one of `side²` subsets of the near VALs, and a filter over the block that keeps
+    /// to the pixel's surface adds them up again (1/side² of the near field's cost); one of
+    /// 1 (every pixel every near VAL), 2, 4, 8; default [`DEFAULT_NEAR_FIELD_INTERLEAVE`].
+    #[serde(default = "default_near_field_interleave")]
+    pub near_field_interleave: u32,
     /// How a pixel takes the glossy light of its sparse points; default `"radiance"`;
     /// `"lights"` is the paper's.
     #[serde(default)]
@@ -76,6 +82,19 @@ fn default_near_field() -> f32 {
     DEFAULT_NEAR_FIELD
 }
 
+/// Block sides the near field may be interleaved over (`near_field_interleave`): 1 (every pixel
+/// sums every near VAL) to 8.
+pub const NEAR_FIELD_INTERLEAVE_SIDES: [u32; 4] = [1, 2, 4, 8];
+
+/// Near-field interleaving block side unless a scene says otherwise: none, every pixel shades
+/// every near VAL (interleaving trades accuracy for speed, by how much depends on the scene:
+/// docs/measurements/sparse-real-scenes.md, the near field interleaved).
+pub const DEFAULT_NEAR_FIELD_INTERLEAVE: u32 = 1;
+
+fn default_near_field_interleave() -> u32 {
+    DEFAULT_NEAR_FIELD_INTERLEAVE
+}
+
 /// Subdivision edge length in sparse point spacings unless a scene says otherwise.
 pub const DEFAULT_SUBDIVISION: f32 = 2.0;
 
@@ -93,6 +112,7 @@ impl Default for SparseShading {
             bound: LightBound::default(),
             subdivision: DEFAULT_SUBDIVISION,
             near_field: DEFAULT_NEAR_FIELD,
+            near_field_interleave: DEFAULT_NEAR_FIELD_INTERLEAVE,
             glossy_interpolation: GlossyInterpolation::default(),
             adaptive: DEFAULT_ADAPTIVE,
             points: DEFAULT_POINTS,
@@ -115,6 +135,13 @@ impl SparseShading {
                     format!("must be in [{lo}, {hi}], got {value}"),
                 ));
             }
+        }
+        let sides = NEAR_FIELD_INTERLEAVE_SIDES;
+        if !sides.contains(&self.near_field_interleave) {
+            return Err(SceneError::field(
+                format!("{field}.near_field_interleave"),
+                format!("must be one of {sides:?}, got {}", self.near_field_interleave),
+            ));
         }
         Ok(())
     }

@@ -83,6 +83,8 @@ overrides! {
             subdivision: f32,
             /// Near-field radius in sparse point spacings, in [0, 8].
             near_field: f32,
+            /// Near-field interleaving block side: 1, 2, 4 or 8.
+            near_field_interleave: u32,
             /// `"radiance"` or `"lights"`.
             glossy_interpolation: GlossyInterpolation,
             /// Adaptive points as a fraction of each mesh's sparse points, in [0, 1].
