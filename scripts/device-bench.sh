@@ -103,12 +103,25 @@ scenes=fixtures/scenes
 # between its adaptive levels); is it still?
 mr_cpu="$scenes/.device-bench-mr-cpu.json"
 mr_fast="$scenes/.device-bench-mr-fast.json"
-trap 'rm -f "$mr_cpu" "$mr_fast"' EXIT
+# Sponza with the near field at four spacings, every pixel every near VAL, and interleaved over
+# 4 x 4 blocks: what the near field costs on a GPU against the sparse frame without it
+# (sponza_512), where lavapipe measured 7.3x and 2.1x the rest of the frame.
+near1="$scenes/.device-bench-sponza-near1.json"
+near4="$scenes/.device-bench-sponza-near4.json"
+trap 'rm -f "$mr_cpu" "$mr_fast" "$near1" "$near4"' EXIT
 python3 - "$scenes/mr_bunny_differential.json" "$mr_cpu" "$mr_fast" <<'PY'
 import json, sys
 for out, key, value in [(sys.argv[2], "device", "cpu"), (sys.argv[3], "differential_method", "fast")]:
     scene = json.load(open(sys.argv[1]))
     scene.setdefault("settings", {}).setdefault("mr", {})[key] = value
+    json.dump(scene, open(out, "w"), indent=2)
+PY
+python3 - "$scenes/sponza_bunny.json" "$near1" "$near4" <<'PY'
+import json, sys
+for out, side in [(sys.argv[2], 1), (sys.argv[3], 4)]:
+    scene = json.load(open(sys.argv[1]))
+    tuning = scene.setdefault("settings", {}).setdefault("tuning", {})
+    tuning["sparse"] = {"near_field": 4, "near_field_interleave": side}
     json.dump(scene, open(out, "w"), indent=2)
 PY
 if [ "$smoke" = 1 ]; then
@@ -125,6 +138,8 @@ if [ "$smoke" = 1 ]; then
     step exact 120 "$bin" compare "$scenes/cornell_bunny_small.json" --width 16 --height 16 --reference exact
     step sponza_512 120 "$bin" compare "$scenes/sponza_bunny.json" --width 32 --height 18
     step sponza_512_lanes1 120 env RELUME_GATHER_LANES=1 "$bin" compare "$scenes/sponza_bunny.json" --width 32 --height 18
+    step sponza_512_near1 120 "$bin" compare "$near1" --width 32 --height 18
+    step sponza_512_near4 120 "$bin" compare "$near4" --width 32 --height 18
     step levels_sponza 120 "$bin" bench "$scenes/cornell_bunny_small.json" --levels --width 16 --height 9 --gpu-estimator 4 --out "$work/levels_sponza"
     step load 60 "$bin" load --seconds 3 --streams 1 --http 1 --json
 else
@@ -152,6 +167,9 @@ else
     # (one invocation a point), side by side.
     step sponza_512 45 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288
     step sponza_512_lanes1 45 env RELUME_GATHER_LANES=1 "$bin" compare "$scenes/sponza_bunny.json" --width 512 --height 288
+    # The near field at four spacings, not interleaved and interleaved over 4 x 4 blocks.
+    step sponza_512_near1 45 "$bin" compare "$near1" --width 512 --height 288
+    step sponza_512_near4 45 "$bin" compare "$near4" --width 512 --height 288
     step exact 45 "$bin" compare "$scenes/cornell_bunny.json" --width 512 --height 512 --reference exact --reference-device gpu
     # Sponza's levels and their candidates on the GPU: on lavapipe balanced and accurate are
     # the estimator of the exact reference (16 and 64 draws, 0.070 and 0.035 from exact, 12x
