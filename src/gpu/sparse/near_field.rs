@@ -91,12 +91,13 @@ pub const GRID: PassDesc = PassDesc {
     default_source: |textured| GRID.source(&Wgsl::new().include(&head(0.25, 4)).include(GRID_WGSL).finish(), textured),
 };
 
-/// One invocation per pixel: the near VALs' terms into the pixel's `near_pixels`.
+/// One invocation per pixel: the near VALs' light added to `indirect`, or, interleaved, their
+/// terms and the pixel's surface point into `near_light` and `near_surface` for the filter.
 pub const SHADE: PassDesc = PassDesc {
     label: SHADE_STAGE,
     bindings: &[
         texture("visibility"),
-        read_write("near_pixels"),
+        read_write("near_light"),
         read("grid_counts"),
         read("grid_starts"),
         read("grid_vals"),
@@ -104,8 +105,10 @@ pub const SHADE: PassDesc = PassDesc {
         read("close_counts"),
         read("close_starts"),
         read("close_vals"),
+        read_write("indirect"),
+        read_write("near_surface"),
     ],
-    entries: &[Entry::first("main", 9), Entry::first("main_glossy", 9)],
+    entries: &[Entry::first("main", 11), Entry::first("main_glossy", 11)],
     workgroup: IMAGE_TILE,
     default_source: |textured| SHADE.source(&shade_body(0.25, 4), textured),
 };
@@ -114,8 +117,8 @@ pub const SHADE: PassDesc = PassDesc {
 /// `indirect` (the second part of the `near_field` stage).
 pub const FILTER: PassDesc = PassDesc {
     label: "near_field_filter",
-    bindings: &[texture("visibility"), read_write("indirect"), read("near_pixels")],
-    entries: &[Entry::first("main", 3), Entry::first("main_glossy", 3)],
+    bindings: &[texture("visibility"), read_write("indirect"), read("near_light"), read("near_surface")],
+    entries: &[Entry::first("main", 4), Entry::first("main_glossy", 4)],
     workgroup: IMAGE_TILE,
     default_source: |textured| {
         FILTER.source(&Wgsl::new().include(&head(0.25, 4)).include(FILTER_WGSL).finish(), textured)
@@ -147,6 +150,12 @@ impl GridBuffers {
             capacity,
         })
     }
+}
+
+/// The interleaved pass's per-pixel buffers.
+struct PixelBuffers {
+    light: wgpu::Buffer,
+    surface: wgpu::Buffer,
 }
 
 /// A grid's count, scan and scatter kernels and its buffers.
@@ -221,9 +230,11 @@ pub struct NearField {
     close: Option<Grid>,
     /// The interleaving block's side.
     side: u32,
-    /// `array<vec4<f32>>`, four per pixel (`near_field_shade.wgsl`), for the last frame's pixel
-    /// count: reallocated when the camera's size changes.
-    pixels: Mutex<Option<(u32, wgpu::Buffer)>>,
+    /// Interleaved: `near_light` and `near_surface` (`array<vec4<f32>>`, two per pixel each:
+    /// `near_field_shade.wgsl`), for the last frame's pixel count, reallocated when the camera's
+    /// size changes (two bindings, so that each stays within the device's largest storage
+    /// binding up to twice as many pixels). Not interleaved: one element each, unused.
+    pixels: Mutex<Option<(u32, PixelBuffers)>>,
 }
 
 impl NearField {
@@ -313,16 +324,19 @@ impl NearField {
         })?;
         let (g, c) = (&self.grid.buffers, &self.close.as_ref().unwrap_or(&self.grid).buffers);
         let camera = frame.camera;
-        let count = camera.view.width * camera.view.height;
+        let interleaved = self.side > 1;
+        let count = if interleaved { camera.view.width * camera.view.height } else { 0 };
         let mut held = self.pixels.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if held.as_ref().is_none_or(|(n, _)| *n != count) {
-            let b = gpu.storage_buffer_sized::<[f32; 4]>("near_field.pixels", 4 * count.max(1) as usize)?;
-            *held = Some((count, b));
+            let elements = 2 * count.max(1) as usize;
+            let light = gpu.storage_buffer_sized::<[f32; 4]>("near_field.light", elements)?;
+            let surface = gpu.storage_buffer_sized::<[f32; 4]>("near_field.surface", elements)?;
+            *held = Some((count, PixelBuffers { light, surface }));
         }
-        let near_pixels = &held.as_ref().expect("allocated above").1;
+        let near = &held.as_ref().expect("allocated above").1;
         let resources = [
             view("visibility", &camera.view.view),
-            buffer("near_pixels", near_pixels),
+            buffer("near_light", &near.light),
             buffer("grid_counts", &g.counts),
             buffer("grid_starts", &g.starts),
             buffer("grid_vals", &g.vals),
@@ -330,20 +344,27 @@ impl NearField {
             buffer("close_counts", &c.counts),
             buffer("close_starts", &c.starts),
             buffer("close_vals", &c.vals),
+            buffer("indirect", &camera.indirect),
+            buffer("near_surface", &near.surface),
         ];
         let filter = [
             view("visibility", &camera.view.view),
             buffer("indirect", &camera.indirect),
-            buffer("near_pixels", near_pixels),
+            buffer("near_light", &near.light),
+            buffer("near_surface", &near.surface),
         ];
         let pixels = [camera.view.width, camera.view.height, 1];
         // The shade walks the subsets' sub-images (`near_field_shade.wgsl`'s `pixel_of`).
         let deinterleaved = [0, 1].map(|a| pixels[a].div_ceil(self.side) * self.side);
         let triangles = frame.camera_triangles().0;
         rec.stage(SHADE_STAGE, |e, s| {
-            e.clear_buffer(near_pixels, 0, None);
-            let parts = self.shade.len() + 1;
             let shade = [deinterleaved[0], deinterleaved[1], 1];
+            if !interleaved {
+                self.shade.run_on(gpu, e, triangles, &resources, shade, s);
+                return;
+            }
+            e.clear_buffer(&near.light, 0, None);
+            let parts = self.shade.len() + 1;
             self.shade.run_on(gpu, e, triangles, &resources, shade, s.map(|s| s.share(0, parts)));
             self.filter.run_on(gpu, e, triangles, &filter, pixels, s.map(|s| s.share(parts - 1, parts)));
         })

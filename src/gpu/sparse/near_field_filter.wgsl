@@ -1,5 +1,5 @@
 // The interleaved near field's filter (`near_field.wgsl`): each covered pixel averages the
-// terms `near_field_shade.wgsl` left in `near_pixels` over the window of its block (2 side/2 + 1
+// terms `near_field_shade.wgsl` left in `near_light` over the window of its block (2 side/2 + 1
 // pixels a side, the two end rows and columns at half weight, so that every subset weighs 1)
 // among the pixels on its own surface, then adds them, through its material, to `indirect`.
 // Where the whole window lies on the pixel's surface, every subset counts once: the whole near
@@ -8,7 +8,8 @@
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
 @group(0) @binding(1) var<storage, read_write> indirect: array<vec4<f32>>;
-@group(0) @binding(2) var<storage, read> near_pixels: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> near_light: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> near_surface: array<vec4<f32>>;
 
 // `twin::near_field::FILTER_NORMAL_COS`, `FILTER_PLANE`, `FILTER_DISTANCE`.
 const FILTER_NORMAL_COS: f32 = 0.9;
@@ -23,11 +24,11 @@ fn window_weight(o: i32, half: i32) -> f32 {
 // `twin::near_field::filter_weight`: 1 where neighbour `j` lies on the surface of the pixel at
 // `p` with normal `n`, else 0 (and 0 where `j` is not covered).
 fn filter_weight(p: vec3<f32>, n: vec3<f32>, j: u32) -> f32 {
-    if near_pixels[4u * j].w == 0.0 {
+    if near_light[2u * j].w == 0.0 {
         return 0.0;
     }
-    let d = near_pixels[4u * j + 2u].xyz - p;
-    let same = dot(n, near_pixels[4u * j + 3u].xyz) >= FILTER_NORMAL_COS
+    let d = near_surface[2u * j].xyz - p;
+    let same = dot(n, near_surface[2u * j + 1u].xyz) >= FILTER_NORMAL_COS
         && abs(dot(n, d)) <= FILTER_PLANE * length(d)
         && dot(d, d) <= (FILTER_DISTANCE * NEAR_FIELD_RADIUS) * (FILTER_DISTANCE * NEAR_FIELD_RADIUS);
     return select(0.0, 1.0, same);
@@ -38,11 +39,11 @@ fn filter_pixel(id: vec2<u32>, glossy: bool) {
         return;
     }
     let i = id.y * frame.width + id.x;
-    if near_pixels[4u * i].w == 0.0 {
+    if near_light[2u * i].w == 0.0 {
         return;
     }
-    let p = near_pixels[4u * i + 2u].xyz;
-    let n = near_pixels[4u * i + 3u].xyz;
+    let p = near_surface[2u * i].xyz;
+    let n = near_surface[2u * i + 1u].xyz;
     let half = i32(NEAR_FIELD_SIDE / 2u);
     var irradiance = vec3<f32>(0.0);
     var lobe = vec3<f32>(0.0);
@@ -56,8 +57,8 @@ fn filter_pixel(id: vec2<u32>, glossy: bool) {
             let j = u32(q.y) * frame.width + u32(q.x);
             let w = window_weight(dx, half) * window_weight(dy, half) * filter_weight(p, n, j);
             if w > 0.0 {
-                irradiance += w * near_pixels[4u * j].xyz;
-                lobe += w * near_pixels[4u * j + 1u].xyz;
+                irradiance += w * near_light[2u * j].xyz;
+                lobe += w * near_light[2u * j + 1u].xyz;
                 total += w;
             }
         }

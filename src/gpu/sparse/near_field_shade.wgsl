@@ -1,13 +1,14 @@
 // The near field per pixel (`near_field.wgsl`): every VAL of the pixel's subset in the grid's
 // buckets around the pixel's near-field centre (and, interleaved, every VAL of the close grid's
-// buckets around it), scaled by its near-field share, summed before
-// the pixel's material into `near_pixels` for the filter (`near_field_filter.wgsl`), which adds
-// the light to the sparse shading in `indirect`. The share is taken at the centre (the pixel's
+// buckets around it), scaled by its near-field share, added to the sparse shading in
+// `indirect` (interleaved: summed before the pixel's material into `near_light` for the filter,
+// `near_field_filter.wgsl`, which adds it). The share is taken at the centre (the pixel's
 // interpolated `vertex_centres`: where the sparse points it interpolates lie, weighted as it
 // weighs them), not at the pixel, so that a VAL the gather left out at those points is the one
 // added here: at a corner, where all of a pixel's sparse points lie on one side of it, the
 // pixel's own distance would count some VALs twice and others not at all. The light is the
-// pixel's own: its position and normal (the material comes in the filter).
+// pixel's own: its position, normal and material (interleaved, the material comes in the
+// filter).
 // Rust twin: `twin::near_field::near_field_terms` (`twin::near_field::ValGrid::near_vals`
 // visits the same VALs).
 
@@ -15,7 +16,9 @@ override VAL_BEGIN: u32 = 0u;
 override VAL_SPAN: u32 = 0xffffffffu;
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
-@group(0) @binding(1) var<storage, read_write> near_pixels: array<vec4<f32>>;
+// Interleaved only (else one element, unused): per pixel, irradiance (w: 1 where covered) and
+// lobe, for the filter.
+@group(0) @binding(1) var<storage, read_write> near_light: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> grid_counts: array<u32>;
 @group(0) @binding(3) var<storage, read> grid_starts: array<u32>;
 @group(0) @binding(4) var<storage, read> grid_vals: array<Val>;
@@ -25,6 +28,11 @@ override VAL_SPAN: u32 = 0xffffffffu;
 @group(0) @binding(6) var<storage, read> close_counts: array<u32>;
 @group(0) @binding(7) var<storage, read> close_starts: array<u32>;
 @group(0) @binding(8) var<storage, read> close_vals: array<Val>;
+// Not interleaved: the light goes straight to the pixel's indirect light.
+@group(0) @binding(9) var<storage, read_write> indirect: array<vec4<f32>>;
+// Interleaved only (else one element, unused): per pixel, position and normal (toward the
+// viewer), for the filter.
+@group(0) @binding(10) var<storage, read_write> near_surface: array<vec4<f32>>;
 
 // `twin::near_field::NearTerms`: irradiance and lobe-weighted irradiance.
 struct NearTerms {
@@ -113,8 +121,9 @@ fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearT
     return NearTerms(close.irradiance + scale * rest.irradiance, close.lobe + scale * rest.lobe);
 }
 
-// `near_pixels` holds four per pixel: irradiance (w: 1 where covered), lobe, position, normal
-// (toward the viewer). The stage clears it; each VAL range adds its share.
+// Not interleaved, the light through the pixel's material is added to `indirect`; interleaved,
+// the terms go to `near_light` (cleared by the stage) and the surface point to `near_surface`,
+// for the filter. Each VAL range adds its share.
 fn shade(id: vec2<u32>, glossy: bool) {
     if id.x >= frame.width || id.y >= frame.height {
         return;
@@ -123,16 +132,25 @@ fn shade(id: vec2<u32>, glossy: bool) {
     if !hit.covered {
         return;
     }
-    let i = 4u * (id.y * frame.width + id.x);
+    let i = id.y * frame.width + id.x;
     let t = 3u * hit.triangle;
     let c = vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]);
     let centre = barycentric(hit.barycentrics, vertex_centres[c.x].xyz, vertex_centres[c.y].xyz, vertex_centres[c.z].xyz);
     let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
     let terms = near_field(s, centre, pixel_subset(id), glossy);
-    near_pixels[i] = vec4<f32>(near_pixels[i].xyz + terms.irradiance, 1.0);
-    near_pixels[i + 1u] = vec4<f32>(near_pixels[i + 1u].xyz + terms.lobe, 0.0);
-    near_pixels[i + 2u] = vec4<f32>(s.position, 1.0);
-    near_pixels[i + 3u] = vec4<f32>(s.normal, 0.0);
+    if NEAR_FIELD_SIDE == 1u {
+        var l = s.material.diffuse / PI * terms.irradiance;
+        if glossy {
+            l += s.material.specular * phong_normalisation(s.material.exponent) * terms.lobe;
+        }
+        let before = indirect[i];
+        indirect[i] = vec4<f32>(before.rgb + l, before.a);
+        return;
+    }
+    near_light[2u * i] = vec4<f32>(near_light[2u * i].xyz + terms.irradiance, 1.0);
+    near_light[2u * i + 1u] = vec4<f32>(near_light[2u * i + 1u].xyz + terms.lobe, 0.0);
+    near_surface[2u * i] = vec4<f32>(s.position, 1.0);
+    near_surface[2u * i + 1u] = vec4<f32>(s.normal, 0.0);
 }
 
 // The pixel invocation `id` shades. Interleaved, the image is walked as NEAR_FIELD_SIDE²
