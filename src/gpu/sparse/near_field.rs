@@ -24,7 +24,9 @@
 use std::sync::Mutex;
 
 use super::interpolate;
-use crate::gpu::pass::{Entry, Kernel, Kernels, PassDesc, buffer, module_from_source, read, read_write, texture, view};
+use crate::gpu::pass::{
+    Entry, Kernel, Kernels, PassDesc, Res, buffer, module_from_source, read, read_write, texture, view,
+};
 use crate::gpu::raw::RawVal;
 use crate::gpu::scene::GpuScene;
 use crate::gpu::shader::Wgsl;
@@ -38,6 +40,7 @@ pub const WGSL: &str = include_str!("near_field.wgsl");
 pub const GRID_WGSL: &str = include_str!("near_field_grid.wgsl");
 pub const SHADE_WGSL: &str = include_str!("near_field_shade.wgsl");
 pub const FILTER_WGSL: &str = include_str!("near_field_filter.wgsl");
+pub const WINDOW_WGSL: &str = include_str!("near_field_window.wgsl");
 
 /// The grid's stage.
 pub const GRID_STAGE: &str = "near_field_grid";
@@ -67,8 +70,14 @@ fn shade_body(radius: f32, side: u32) -> String {
         .include(&head(radius, side))
         .f32("NEAR_FIELD_CLOSE_RADIUS", close)
         .f32("NEAR_FIELD_CLOSE_CELL", cell)
+        .include(WINDOW_WGSL)
         .include(SHADE_WGSL)
         .finish()
+}
+
+/// The filter's constants and body: [`head`], `near_field_window.wgsl`, `near_field_filter.wgsl`.
+fn filter_body(radius: f32, side: u32) -> String {
+    Wgsl::new().include(&head(radius, side)).include(WINDOW_WGSL).include(FILTER_WGSL).finish()
 }
 
 /// The grid: one invocation per VAL for the count and the scatter, one workgroup for the scan.
@@ -108,7 +117,12 @@ pub const SHADE: PassDesc = PassDesc {
         read_write("indirect"),
         read_write("near_surface"),
     ],
-    entries: &[Entry::first("main", 11), Entry::first("main_glossy", 11)],
+    entries: &[
+        Entry::first("main", 11),
+        Entry::first("main_glossy", 11),
+        Entry { name: "main_redo", bindings: 11, except: &["close_counts", "close_starts", "close_vals"] },
+        Entry { name: "main_redo_glossy", bindings: 11, except: &["close_counts", "close_starts", "close_vals"] },
+    ],
     workgroup: IMAGE_TILE,
     default_source: |textured| SHADE.source(&shade_body(0.25, 4), textured),
 };
@@ -120,9 +134,7 @@ pub const FILTER: PassDesc = PassDesc {
     bindings: &[texture("visibility"), read_write("indirect"), read("near_light"), read("near_surface")],
     entries: &[Entry::first("main", 4), Entry::first("main_glossy", 4)],
     workgroup: IMAGE_TILE,
-    default_source: |textured| {
-        FILTER.source(&Wgsl::new().include(&head(0.25, 4)).include(FILTER_WGSL).finish(), textured)
-    },
+    default_source: |textured| FILTER.source(&filter_body(0.25, 4), textured),
 };
 
 /// The grid's buffers, sized for a VAL capacity.
@@ -225,6 +237,8 @@ pub struct NearField {
     vertex_centres: wgpu::Buffer,
     shade: Kernels,
     filter: Kernels,
+    /// Interleaved: every near VAL at the pixels the filter leaves (`main_redo`).
+    redo: Kernels,
     grid: Grid,
     /// Interleaved only: the close grid (`twin::near_field::close_radius`).
     close: Option<Grid>,
@@ -258,13 +272,16 @@ impl NearField {
         let source = SHADE.source(&shade_body(radius, side), textured);
         // One loop iteration per near VAL (the weight and the bucket loops are a few more).
         let shade = Kernels::val_ranges(gpu, scene, &SHADE, source, SHADE.lobe_entry(glossy), SHADE.workgroup, 1)?;
-        let filter_body = Wgsl::new().include(&head(radius, side)).include(FILTER_WGSL).finish();
-        let filter = Kernels::lobes(gpu, scene, &FILTER, &filter_body, glossy)?;
+        let filter = Kernels::lobes(gpu, scene, &FILTER, &filter_body(radius, side), glossy)?;
+        let redo_entry = SHADE.entry(if glossy { "main_redo_glossy" } else { "main_redo" });
+        let source = SHADE.source(&shade_body(radius, side), textured);
+        let redo = Kernels::val_ranges(gpu, scene, &SHADE, source, redo_entry, SHADE.workgroup, 1)?;
         Ok(Self {
             centres,
             vertex_centres: gpu.storage_buffer_sized::<[f32; 4]>("near_field.vertex_centres", vertices)?,
             shade,
             filter,
+            redo,
             grid: Grid::new(gpu, scene, radius, side)?,
             close: (side > 1)
                 .then(|| Grid::new(gpu, scene, crate::twin::near_field::close_radius(radius, side), 1))
@@ -280,6 +297,7 @@ impl NearField {
         if let Some(close) = &mut self.close {
             close.fit(gpu, max_vals)?;
         }
+        self.redo.fit(gpu, scene, max_vals)?;
         self.shade.fit(gpu, scene, max_vals)
     }
 
@@ -347,6 +365,11 @@ impl NearField {
             buffer("indirect", &camera.indirect),
             buffer("near_surface", &near.surface),
         ];
+        let redo: Vec<Res<'_>> = resources
+            .iter()
+            .filter(|r| !r.name.starts_with("close_"))
+            .map(|r| Res { name: r.name, resource: r.resource.clone() })
+            .collect();
         let filter = [
             view("visibility", &camera.view.view),
             buffer("indirect", &camera.indirect),
@@ -364,9 +387,10 @@ impl NearField {
                 return;
             }
             e.clear_buffer(&near.light, 0, None);
-            let parts = self.shade.len() + 1;
+            let (first, parts) = (self.shade.len(), self.shade.len() + 1 + self.redo.len());
             self.shade.run_on(gpu, e, triangles, &resources, shade, s.map(|s| s.share(0, parts)));
-            self.filter.run_on(gpu, e, triangles, &filter, pixels, s.map(|s| s.share(parts - 1, parts)));
+            self.filter.run_on(gpu, e, triangles, &filter, pixels, s.map(|s| s.share(first, parts)));
+            self.redo.run_on(gpu, e, triangles, &redo, pixels, s.map(|s| s.share(first + 1, parts)));
         })
     }
 }

@@ -121,6 +121,73 @@ fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearT
     return NearTerms(close.irradiance + scale * rest.irradiance, close.lobe + scale * rest.lobe);
 }
 
+// Every near VAL [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order around `centre` at `s`,
+// through the grid's buckets whole (a bucket's subsets' slots are one run of `grid_vals`): what
+// a pixel the filter leaves to the redo gets (`twin::near_field::terms_over`).
+fn near_field_whole(s: Surface, centre: vec3<f32>, glossy: bool) -> NearTerms {
+    let w_o = view_direction(s.position, s.normal, frame.eye);
+    var visited: array<u32, 8>;
+    var seen = 0u;
+    let end = VAL_BEGIN + min(VAL_SPAN, 0xffffffffu - VAL_BEGIN);
+    let buckets = arrayLength(&grid_starts) / NEAR_FIELD_SUBSETS;
+    let corner = cell_of(centre - vec3<f32>(NEAR_FIELD_RADIUS));
+    var terms = NearTerms(vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var c = 0u; c < 8u; c++) {
+        let bucket = bucket_of(corner + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u)), buckets);
+        if repeated_bucket(&visited, c, bucket) {
+            continue;
+        }
+        let last_slot = (bucket + 1u) * NEAR_FIELD_SUBSETS - 1u;
+        let start = grid_starts[bucket * NEAR_FIELD_SUBSETS];
+        let count = grid_starts[last_slot] + grid_counts[last_slot] - start;
+        let first = max(seen, VAL_BEGIN) - seen;
+        let last = max(min(seen + count, end), seen) - seen;
+        seen += count;
+        for (var k = first; k < last; k++) {
+            let val = grid_vals[start + k];
+            let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_RADIUS);
+            if weight > 0.0 {
+                add_val(&terms, s, w_o, val, weight, glossy);
+            }
+        }
+    }
+    return terms;
+}
+
+// Interleaved, after the filter: a covered pixel whose window the filter left to the redo
+// (`redone`, `near_field_window.wgsl`) gets every near VAL, through its material, in `indirect`.
+fn redo(id: vec2<u32>, glossy: bool) {
+    if id.x >= frame.width || id.y >= frame.height {
+        return;
+    }
+    let i = id.y * frame.width + id.x;
+    if near_light[2u * i].w == 0.0 || !redone(window_at(id)) {
+        return;
+    }
+    let hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
+    let t = 3u * hit.triangle;
+    let c = vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]);
+    let centre = barycentric(hit.barycentrics, vertex_centres[c.x].xyz, vertex_centres[c.y].xyz, vertex_centres[c.z].xyz);
+    let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
+    let terms = near_field_whole(s, centre, glossy);
+    var l = s.material.diffuse / PI * terms.irradiance;
+    if glossy {
+        l += s.material.specular * phong_normalisation(s.material.exponent) * terms.lobe;
+    }
+    let before = indirect[i];
+    indirect[i] = vec4<f32>(before.rgb + l, before.a);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main_redo(@builtin(global_invocation_id) id: vec3<u32>) {
+    redo(id.xy, false);
+}
+
+@compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
+fn main_redo_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
+    redo(id.xy, true);
+}
+
 // Not interleaved, the light through the pixel's material is added to `indirect`; interleaved,
 // the terms go to `near_light` (cleared by the stage) and the surface point to `near_surface`,
 // for the filter. Each VAL range adds its share.
