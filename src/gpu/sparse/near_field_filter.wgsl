@@ -30,13 +30,7 @@ fn filter_pixel(id: vec2<u32>, glossy: bool) {
     let lobe = window.lobe;
     // `total` holds the pixel's own weight, 1.
     let hit = decode_visibility(textureLoad(visibility, vec2<i32>(id), 0));
-    let s = surface_at(hit.triangle, hit.barycentrics);
-    var l = s.material.diffuse / PI * (irradiance / total);
-    if glossy {
-        l += s.material.specular * phong_normalisation(s.material.exponent) * (lobe / total);
-    }
-    let before = indirect[i];
-    indirect[i] = vec4<f32>(before.rgb + l, before.a);
+    add_near_light(i, surface_at(hit.triangle, hit.barycentrics), irradiance / total, lobe / total, glossy);
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)

@@ -170,12 +170,7 @@ fn redo(id: vec2<u32>, glossy: bool) {
     let centre = barycentric(hit.barycentrics, vertex_centres[c.x].xyz, vertex_centres[c.y].xyz, vertex_centres[c.z].xyz);
     let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
     let terms = near_field_whole(s, centre, glossy);
-    var l = s.material.diffuse / PI * terms.irradiance;
-    if glossy {
-        l += s.material.specular * phong_normalisation(s.material.exponent) * terms.lobe;
-    }
-    let before = indirect[i];
-    indirect[i] = vec4<f32>(before.rgb + l, before.a);
+    add_near_light(i, s, terms.irradiance, terms.lobe, glossy);
 }
 
 @compute @workgroup_size(WORKGROUP_X, WORKGROUP_Y)
@@ -206,12 +201,7 @@ fn shade(id: vec2<u32>, glossy: bool) {
     let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
     let terms = near_field(s, centre, pixel_subset(id), glossy);
     if NEAR_FIELD_SIDE == 1u {
-        var l = s.material.diffuse / PI * terms.irradiance;
-        if glossy {
-            l += s.material.specular * phong_normalisation(s.material.exponent) * terms.lobe;
-        }
-        let before = indirect[i];
-        indirect[i] = vec4<f32>(before.rgb + l, before.a);
+        add_near_light(i, s, terms.irradiance, terms.lobe, glossy);
         return;
     }
     near_light[2u * i] = vec4<f32>(near_light[2u * i].xyz + terms.irradiance, 1.0);

@@ -1,13 +1,25 @@
 // The interleaved near field's window over a pixel's block (`near_field.wgsl`), shared by the
 // filter (`near_field_filter.wgsl`) and the shade's redo entries (`near_field_shade.wgsl`),
-// which must agree on which pixels the filter leaves to the redo: the including file declares
-// `near_light` and `near_surface` (two per pixel each: `near_field_shade.wgsl`).
+// which must agree on which pixels the filter leaves to the redo, and the light they add: the
+// including file declares `near_light`, `near_surface` (two per pixel each:
+// `near_field_shade.wgsl`) and `indirect`.
 
 // `twin::near_field::FILTER_NORMAL_COS`, `FILTER_PLANE`, `FILTER_DISTANCE`, `FILTER_REDO_BELOW`.
 const FILTER_NORMAL_COS: f32 = 0.9;
 const FILTER_PLANE: f32 = 0.1;
 const FILTER_DISTANCE: f32 = 0.25;
 const FILTER_REDO_BELOW: f32 = 0.5;
+
+// `twin::near_field::NearTerms::radiance` at `s`, added to pixel `i` of `indirect` (which the
+// including file declares too).
+fn add_near_light(i: u32, s: Surface, irradiance: vec3<f32>, lobe: vec3<f32>, glossy: bool) {
+    var l = s.material.diffuse / PI * irradiance;
+    if glossy {
+        l += s.material.specular * phong_normalisation(s.material.exponent) * lobe;
+    }
+    let before = indirect[i];
+    indirect[i] = vec4<f32>(before.rgb + l, before.a);
+}
 
 // `twin::near_field::window_weight`.
 fn window_weight(o: i32, half: i32) -> f32 {
