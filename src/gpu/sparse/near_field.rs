@@ -236,9 +236,9 @@ pub struct NearField {
     /// `array<vec4<f32>>`, one per vertex: its near-field centre.
     vertex_centres: wgpu::Buffer,
     shade: Kernels,
-    filter: Kernels,
-    /// Interleaved: every near VAL at the pixels the filter leaves (`main_redo`).
-    redo: Kernels,
+    /// Interleaved only: the filter, then every near VAL at the pixels it leaves
+    /// (`main_redo`); not built otherwise (the shade then adds its light itself).
+    interleaved: Option<(Kernels, Kernels)>,
     grid: Grid,
     /// Interleaved only: the close grid (`twin::near_field::close_radius`).
     close: Option<Grid>,
@@ -272,16 +272,20 @@ impl NearField {
         let source = SHADE.source(&shade_body(radius, side), textured);
         // One loop iteration per near VAL (the weight and the bucket loops are a few more).
         let shade = Kernels::val_ranges(gpu, scene, &SHADE, source, SHADE.lobe_entry(glossy), SHADE.workgroup, 1)?;
-        let filter = Kernels::lobes(gpu, scene, &FILTER, &filter_body(radius, side), glossy)?;
-        let redo_entry = SHADE.entry(if glossy { "main_redo_glossy" } else { "main_redo" });
-        let source = SHADE.source(&shade_body(radius, side), textured);
-        let redo = Kernels::val_ranges(gpu, scene, &SHADE, source, redo_entry, SHADE.workgroup, 1)?;
+        let interleaved = (side > 1)
+            .then(|| -> Result<_, GpuError> {
+                let filter = Kernels::lobes(gpu, scene, &FILTER, &filter_body(radius, side), glossy)?;
+                let redo_entry = SHADE.entry(if glossy { "main_redo_glossy" } else { "main_redo" });
+                let source = SHADE.source(&shade_body(radius, side), textured);
+                let redo = Kernels::val_ranges(gpu, scene, &SHADE, source, redo_entry, SHADE.workgroup, 1)?;
+                Ok((filter, redo))
+            })
+            .transpose()?;
         Ok(Self {
             centres,
             vertex_centres: gpu.storage_buffer_sized::<[f32; 4]>("near_field.vertex_centres", vertices)?,
             shade,
-            filter,
-            redo,
+            interleaved,
             grid: Grid::new(gpu, scene, radius, side)?,
             close: (side > 1)
                 .then(|| Grid::new(gpu, scene, crate::twin::near_field::close_radius(radius, side), 1))
@@ -297,7 +301,9 @@ impl NearField {
         if let Some(close) = &mut self.close {
             close.fit(gpu, max_vals)?;
         }
-        self.redo.fit(gpu, scene, max_vals)?;
+        if let Some((_, redo)) = &mut self.interleaved {
+            redo.fit(gpu, scene, max_vals)?;
+        }
         self.shade.fit(gpu, scene, max_vals)
     }
 
@@ -342,8 +348,7 @@ impl NearField {
         })?;
         let (g, c) = (&self.grid.buffers, &self.close.as_ref().unwrap_or(&self.grid).buffers);
         let camera = frame.camera;
-        let interleaved = self.side > 1;
-        let count = if interleaved { camera.view.width * camera.view.height } else { 0 };
+        let count = if self.interleaved.is_some() { camera.view.width * camera.view.height } else { 0 };
         let mut held = self.pixels.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if held.as_ref().is_none_or(|(n, _)| *n != count) {
             let elements = 2 * count.max(1) as usize;
@@ -382,15 +387,15 @@ impl NearField {
         let triangles = frame.camera_triangles().0;
         rec.stage(SHADE_STAGE, |e, s| {
             let shade = [deinterleaved[0], deinterleaved[1], 1];
-            if !interleaved {
+            let Some((filter_kernels, redo_kernels)) = &self.interleaved else {
                 self.shade.run_on(gpu, e, triangles, &resources, shade, s);
                 return;
-            }
+            };
             e.clear_buffer(&near.light, 0, None);
-            let (first, parts) = (self.shade.len(), self.shade.len() + 1 + self.redo.len());
+            let (first, parts) = (self.shade.len(), self.shade.len() + 1 + redo_kernels.len());
             self.shade.run_on(gpu, e, triangles, &resources, shade, s.map(|s| s.share(0, parts)));
-            self.filter.run_on(gpu, e, triangles, &filter, pixels, s.map(|s| s.share(first, parts)));
-            self.redo.run_on(gpu, e, triangles, &redo, pixels, s.map(|s| s.share(first + 1, parts)));
+            filter_kernels.run_on(gpu, e, triangles, &filter, pixels, s.map(|s| s.share(first, parts)));
+            redo_kernels.run_on(gpu, e, triangles, &redo, pixels, s.map(|s| s.share(first + 1, parts)));
         })
     }
 }

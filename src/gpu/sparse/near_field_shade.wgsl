@@ -50,6 +50,15 @@ fn add_val(terms: ptr<function, NearTerms>, s: Surface, w_o: vec3<f32>, val: Val
     }
 }
 
+// The part [first, last) of a run of `count` VALs, the next `count` of the visiting order after
+// the `seen` before it, that falls in [VAL_BEGIN, `end`); `seen` moves past the run.
+fn visit_range(seen: ptr<function, u32>, count: u32, end: u32) -> vec2<u32> {
+    let first = max(*seen, VAL_BEGIN) - *seen;
+    let last = max(min(*seen + count, end), *seen) - *seen;
+    *seen += count;
+    return vec2<u32>(first, last);
+}
+
 // Whether bucket `bucket`, the `c`-th of a pixel's eight, was among the first `c`.
 fn repeated_bucket(visited: ptr<function, array<u32, 8>>, c: u32, bucket: u32) -> bool {
     var repeated = false;
@@ -79,11 +88,9 @@ fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearT
                 continue;
             }
             let count = close_counts[bucket];
-            let first = max(seen, VAL_BEGIN) - seen;
-            let last = max(min(seen + count, end), seen) - seen;
-            seen += count;
+            let range = visit_range(&seen, count, end);
             let start = close_starts[bucket];
-            for (var k = first; k < last; k++) {
+            for (var k = range.x; k < range.y; k++) {
                 let val = close_vals[start + k];
                 let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_CLOSE_RADIUS);
                 if weight > 0.0 {
@@ -104,11 +111,9 @@ fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearT
         // This slot's VALs are [seen, seen + count) of the visiting order.
         let slot = bucket * NEAR_FIELD_SUBSETS + subset;
         let count = grid_counts[slot];
-        let first = max(seen, VAL_BEGIN) - seen;
-        let last = max(min(seen + count, end), seen) - seen;
-        seen += count;
+        let range = visit_range(&seen, count, end);
         let start = grid_starts[slot];
-        for (var k = first; k < last; k++) {
+        for (var k = range.x; k < range.y; k++) {
             let val = grid_vals[start + k];
             let d = distance(val.position, centre);
             let weight = near_field_weight(d, NEAR_FIELD_RADIUS) - near_field_weight(d, NEAR_FIELD_CLOSE_RADIUS);
@@ -140,10 +145,8 @@ fn near_field_whole(s: Surface, centre: vec3<f32>, glossy: bool) -> NearTerms {
         let last_slot = (bucket + 1u) * NEAR_FIELD_SUBSETS - 1u;
         let start = grid_starts[bucket * NEAR_FIELD_SUBSETS];
         let count = grid_starts[last_slot] + grid_counts[last_slot] - start;
-        let first = max(seen, VAL_BEGIN) - seen;
-        let last = max(min(seen + count, end), seen) - seen;
-        seen += count;
-        for (var k = first; k < last; k++) {
+        let range = visit_range(&seen, count, end);
+        for (var k = range.x; k < range.y; k++) {
             let val = grid_vals[start + k];
             let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_RADIUS);
             if weight > 0.0 {
