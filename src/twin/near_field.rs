@@ -10,7 +10,8 @@
 //! ([`filter`]) averages the pixels that lie on the same surface as the pixel: where all of
 //! them do, every subset counts once, and the pixel gets the whole near field. The VALs within
 //! [`close_radius`] (the radius over N) light every pixel, through a second grid of cells that
-//! much smaller: about 1/8 of the per-pixel work at N = 4.
+//! much smaller (about 1/8 of the per-pixel work at N = 4), and their close share is the
+//! pixel's own, not filtered ([`NearParts`]): it changes fastest from pixel to pixel.
 
 use glam::{IVec3, Vec3};
 
@@ -82,8 +83,24 @@ pub fn close_radius(radius: f32, side: u32) -> f32 {
     if side > 1 { radius / side as f32 } else { 0.0 }
 }
 
+/// An interleaved pixel's near field in two parts: every VAL's close share ([`close_radius`]),
+/// which the pixel adds itself, and the rest of the near share of its subset's VALs times the
+/// subsets, which [`filter`] averages over the block. Not interleaved, the close share is 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NearParts {
+    pub close: NearTerms,
+    pub rest: NearTerms,
+}
+
+impl NearParts {
+    /// Both parts together: [`super::shade_near_field`]'s terms when not interleaved.
+    pub fn sum(&self) -> NearTerms {
+        NearTerms { irradiance: self.close.irradiance + self.rest.irradiance, lobe: self.close.lobe + self.rest.lobe }
+    }
+}
+
 /// [`super::shade_near_field`] before the material as an interleaved pixel of subset `subset` of
-/// `subsets` (side²) takes it: every VAL's close share ([`close_radius`]) plus, for the VALs of
+/// `subsets` (side²) takes it: every VAL's close share ([`close_radius`]) and, for the VALs of
 /// its subset (`vals` in the frame's order, whose index decides the subset), the rest of the
 /// near share times `subsets`.
 #[allow(clippy::too_many_arguments)]
@@ -96,7 +113,7 @@ pub fn near_field_terms(
     (subset, subsets): (u32, u32),
     glossy: bool,
     radius: f32,
-) -> NearTerms {
+) -> NearParts {
     let close = close_radius(radius, (subsets as f32).sqrt().round() as u32);
     let share = |v: &Val| near_field_weight(v.position.distance(centre), close);
     let close_terms = terms_weighted(receiver, exponent, eye, vals.iter().map(|v| (v, share(v))), glossy);
@@ -104,10 +121,7 @@ pub fn near_field_terms(
     let rest = mine.map(|(_, v)| (v, near_field_weight(v.position.distance(centre), radius) - share(v)));
     let rest = terms_weighted(receiver, exponent, eye, rest, glossy);
     let scale = subsets as f32;
-    NearTerms {
-        irradiance: close_terms.irradiance + scale * rest.irradiance,
-        lobe: close_terms.lobe + scale * rest.lobe,
-    }
+    NearParts { close: close_terms, rest: NearTerms { irradiance: scale * rest.irradiance, lobe: scale * rest.lobe } }
 }
 
 /// The terms of `vals` at receiver (`p`, shading normal `n` toward the viewer, geometric `n_g`)
@@ -149,12 +163,15 @@ pub fn terms_weighted<'a>(
     terms
 }
 
-/// A covered pixel's interleaved near field: its subset's terms and its surface point.
+/// A covered pixel's interleaved near field: its two parts ([`near_field_terms`]) and its
+/// surface point.
 #[derive(Clone, Copy, Debug)]
 pub struct NearPixel {
-    pub terms: NearTerms,
+    pub parts: NearParts,
     pub position: Vec3,
-    /// The shading normal, toward the viewer.
+    /// The geometric normal, toward the viewer: which neighbours lie on the pixel's surface is
+    /// a question of the facets' planes. (Shading normals bend across flat walls in meshes such
+    /// as Sponza's, which sent a tenth to two fifths of its pixels to the redo.)
     pub normal: Vec3,
 }
 
@@ -192,10 +209,10 @@ pub fn window_weight(o: i32, half: i32) -> f32 {
 pub const FILTER_REDO_BELOW: f32 = 0.5;
 
 /// The filter over blocks `side` wide of an image `width` pixels wide (row-major, `None` where
-/// not covered): each covered pixel's terms averaged over its window's pixels on the same
-/// surface ([`filter_weight`]), weighted by [`window_weight`]; a pixel whose window's weight
-/// falls under [`FILTER_REDO_BELOW`] of `side²` takes `whole(i)`, its every near VAL, instead.
-/// `side` 1 returns the terms.
+/// not covered): each covered pixel's close share plus its rest averaged over its window's
+/// pixels on the same surface ([`filter_weight`]), weighted by [`window_weight`]; a pixel whose
+/// window's weight falls under [`FILTER_REDO_BELOW`] of `side²` takes `whole(i)`, its every near
+/// VAL, instead. `side` 1 returns the terms.
 pub fn filter(
     pixels: &[Option<NearPixel>],
     width: u32,
@@ -219,8 +236,8 @@ pub fn filter(
                     let Some(q) = pixels[(qy * w + qx) as usize] else { continue };
                     let weight = window_weight(dx, half) * window_weight(dy, half) * filter_weight(&p, &q, radius);
                     if weight > 0.0 {
-                        sum.irradiance += weight * q.terms.irradiance;
-                        sum.lobe += weight * q.terms.lobe;
+                        sum.irradiance += weight * q.parts.rest.irradiance;
+                        sum.lobe += weight * q.parts.rest.lobe;
                         total += weight;
                     }
                 }
@@ -228,7 +245,11 @@ pub fn filter(
             if side > 1 && total < FILTER_REDO_BELOW * (side * side) as f32 {
                 return Some(whole(i));
             }
-            Some(NearTerms { irradiance: sum.irradiance / total, lobe: sum.lobe / total })
+            let close = p.parts.close;
+            Some(NearTerms {
+                irradiance: close.irradiance + sum.irradiance / total,
+                lobe: close.lobe + sum.lobe / total,
+            })
         })
         .collect()
 }
@@ -442,7 +463,7 @@ mod tests {
     #[test]
     fn filter_weight_rejects_each_other_surface() {
         let radius = 1.0;
-        let pixel = |position: Vec3, normal: Vec3| NearPixel { terms: NearTerms::default(), position, normal };
+        let pixel = |position: Vec3, normal: Vec3| NearPixel { parts: NearParts::default(), position, normal };
         let p = pixel(Vec3::ZERO, Vec3::Z);
         let tilted = |degrees: f32| Vec3::new(degrees.to_radians().sin(), 0.0, degrees.to_radians().cos());
         assert_eq!(filter_weight(&p, &p, radius), 1.0);
@@ -476,8 +497,8 @@ mod tests {
                 .map(|i| {
                     let (x, y) = (i % width, i / width);
                     let (position, normal) = surface_of(x);
-                    let t = terms((position, normal), pixel_subset(x, y, side), side * side);
-                    Some(NearPixel { terms: t, position, normal })
+                    let parts = terms((position, normal), pixel_subset(x, y, side), side * side);
+                    Some(NearPixel { parts, position, normal })
                 })
                 .collect();
             // The wall's terms a thousand times brighter: a floor pixel by the seam that took
@@ -487,17 +508,17 @@ mod tests {
                 .map(|p| {
                     p.map(|mut p| {
                         if p.normal == wall.1 {
-                            p.terms.irradiance *= 1000.0;
+                            p.parts.rest.irradiance *= 1000.0;
                         }
                         p
                     })
                 })
                 .collect();
-            let whole = [floor, wall].map(|s| terms(s, 0, 1));
+            let whole = [floor, wall].map(|s| terms(s, 0, 1).sum());
             let whole_of = |i: usize| whole[usize::from(i as u32 % width >= width / 2)];
             let filtered = filter(&pixels, width, side, radius, whole_of);
             let brightest_floor = pixels.iter().flatten().filter(|p| p.normal == floor.1);
-            let brightest_floor = brightest_floor.map(|p| p.terms.irradiance.max_element()).fold(0.0, f32::max);
+            let brightest_floor = brightest_floor.map(|p| p.parts.sum().irradiance.max_element()).fold(0.0, f32::max);
             let by_seam = filter(&marked, width, side, radius, whole_of);
             for (i, f) in by_seam.iter().enumerate() {
                 if i as u32 % width < width / 2 {

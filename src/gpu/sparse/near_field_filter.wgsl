@@ -1,7 +1,9 @@
 // The interleaved near field's filter (`near_field.wgsl`): each covered pixel averages the
-// terms `near_field_shade.wgsl` left in `near_light` over the window of its block (2 side/2 + 1
+// terms of the rest of the near share (past the close share, which the shade added itself)
+// that `near_field_shade.wgsl` left in `near_light` over the window of its block (2 side/2 + 1
 // pixels a side, the two end rows and columns at half weight, so that every subset weighs 1)
-// among the pixels on its own surface, then adds them, through its material, to `indirect`.
+// among the pixels on its own surface (by the geometric normals: the facet's plane), then adds
+// them, through its material, to `indirect`.
 // Where the whole window lies on the pixel's surface, every subset counts once: the whole near
 // field. A pixel whose window holds under half the subsets on its surface (corners, image
 // edges) is left to the shade's redo entries, which give it every near VAL (`redone`,

@@ -1,8 +1,8 @@
 // The near field per pixel (`near_field.wgsl`): every VAL of the pixel's subset in the grid's
 // buckets around the pixel's near-field centre (and, interleaved, every VAL of the close grid's
 // buckets around it), scaled by its near-field share, added to the sparse shading in
-// `indirect` (interleaved: summed before the pixel's material into `near_light` for the filter,
-// `near_field_filter.wgsl`, which adds it). The share is taken at the centre (the pixel's
+// `indirect` (interleaved: the close share so, the rest summed before the pixel's material into
+// `near_light` for the filter, `near_field_filter.wgsl`, which adds it). The share is taken at the centre (the pixel's
 // interpolated `vertex_centres`: where the sparse points it interpolates lie, weighted as it
 // weighs them), not at the pixel, so that a VAL the gather left out at those points is the one
 // added here: at a corner, where all of a pixel's sparse points lie on one side of it, the
@@ -30,8 +30,8 @@ override VAL_SPAN: u32 = 0xffffffffu;
 @group(0) @binding(8) var<storage, read> close_vals: array<Val>;
 // Not interleaved: the light goes straight to the pixel's indirect light.
 @group(0) @binding(9) var<storage, read_write> indirect: array<vec4<f32>>;
-// Interleaved only (else one element, unused): per pixel, position and normal (toward the
-// viewer), for the filter.
+// Interleaved only (else one element, unused): per pixel, position and geometric normal
+// (toward the viewer), for the filter.
 @group(0) @binding(10) var<storage, read_write> near_surface: array<vec4<f32>>;
 
 // `twin::near_field::NearTerms`: irradiance and lobe-weighted irradiance.
@@ -69,11 +69,19 @@ fn repeated_bucket(visited: ptr<function, array<u32, 8>>, c: u32, bucket: u32) -
     return repeated;
 }
 
+// A pixel's near field in two parts (`twin::near_field::NearParts`): interleaved, every VAL's
+// close share, which the pixel adds itself, and the rest of its subset's near share times the
+// subsets, which the filter averages; not interleaved, everything is the rest.
+struct NearParts {
+    close: NearTerms,
+    rest: NearTerms,
+}
+
 // What the near VALs [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order around `centre`
 // deliver at `s` before its material (`twin::near_field::near_field_terms`): first, interleaved,
 // every VAL's close share through the close grid, then the rest of the near share of the VALs
 // of `subset` through the grid's slots, times the subsets.
-fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearTerms {
+fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearParts {
     let w_o = view_direction(s.position, s.normal, frame.eye);
     var visited: array<u32, 8>;
     var seen = 0u;
@@ -123,12 +131,13 @@ fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearT
         }
     }
     let scale = f32(NEAR_FIELD_SUBSETS);
-    return NearTerms(close.irradiance + scale * rest.irradiance, close.lobe + scale * rest.lobe);
+    return NearParts(close, NearTerms(scale * rest.irradiance, scale * rest.lobe));
 }
 
-// Every near VAL [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order around `centre` at `s`,
-// through the grid's buckets whole (a bucket's subsets' slots are one run of `grid_vals`): what
-// a pixel the filter leaves to the redo gets (`twin::near_field::terms_over`).
+// The rest of the near share (past the close share, which the shade added) of every near VAL
+// [VAL_BEGIN, VAL_BEGIN + VAL_SPAN) of the visiting order around `centre` at `s`, through the
+// grid's buckets whole (a bucket's subsets' slots are one run of `grid_vals`): what a pixel the
+// filter leaves to the redo adds (with the close share, `twin::near_field::terms_over`).
 fn near_field_whole(s: Surface, centre: vec3<f32>, glossy: bool) -> NearTerms {
     let w_o = view_direction(s.position, s.normal, frame.eye);
     var visited: array<u32, 8>;
@@ -148,7 +157,8 @@ fn near_field_whole(s: Surface, centre: vec3<f32>, glossy: bool) -> NearTerms {
         let range = visit_range(&seen, count, end);
         for (var k = range.x; k < range.y; k++) {
             let val = grid_vals[start + k];
-            let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_RADIUS);
+            let d = distance(val.position, centre);
+            let weight = near_field_weight(d, NEAR_FIELD_RADIUS) - near_field_weight(d, NEAR_FIELD_CLOSE_RADIUS);
             if weight > 0.0 {
                 add_val(&terms, s, w_o, val, weight, glossy);
             }
@@ -158,7 +168,8 @@ fn near_field_whole(s: Surface, centre: vec3<f32>, glossy: bool) -> NearTerms {
 }
 
 // Interleaved, after the filter: a covered pixel whose window the filter left to the redo
-// (`redone`, `near_field_window.wgsl`) gets every near VAL, through its material, in `indirect`.
+// (`redone`, `near_field_window.wgsl`) adds the rest of every near VAL's share, through its
+// material, to `indirect` (the shade added the close share).
 fn redo(id: vec2<u32>, glossy: bool) {
     if id.x >= frame.width || id.y >= frame.height {
         return;
@@ -187,8 +198,8 @@ fn main_redo_glossy(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // Not interleaved, the light through the pixel's material is added to `indirect`; interleaved,
-// the terms go to `near_light` (cleared by the stage) and the surface point to `near_surface`,
-// for the filter. Each VAL range adds its share.
+// the close share's light too, and the rest's terms go to `near_light` (cleared by the stage)
+// and the surface point to `near_surface`, for the filter. Each VAL range adds its share.
 fn shade(id: vec2<u32>, glossy: bool) {
     if id.x >= frame.width || id.y >= frame.height {
         return;
@@ -202,15 +213,16 @@ fn shade(id: vec2<u32>, glossy: bool) {
     let c = vec3<u32>(indices[t], indices[t + 1u], indices[t + 2u]);
     let centre = barycentric(hit.barycentrics, vertex_centres[c.x].xyz, vertex_centres[c.y].xyz, vertex_centres[c.z].xyz);
     let s = facing_viewer(surface_at(hit.triangle, hit.barycentrics), frame.eye);
-    let terms = near_field(s, centre, pixel_subset(id), glossy);
+    let parts = near_field(s, centre, pixel_subset(id), glossy);
     if NEAR_FIELD_SIDE == 1u {
-        add_near_light(i, s, terms.irradiance, terms.lobe, glossy);
+        add_near_light(i, s, parts.rest.irradiance, parts.rest.lobe, glossy);
         return;
     }
-    near_light[2u * i] = vec4<f32>(near_light[2u * i].xyz + terms.irradiance, 1.0);
-    near_light[2u * i + 1u] = vec4<f32>(near_light[2u * i + 1u].xyz + terms.lobe, 0.0);
+    add_near_light(i, s, parts.close.irradiance, parts.close.lobe, glossy);
+    near_light[2u * i] = vec4<f32>(near_light[2u * i].xyz + parts.rest.irradiance, 1.0);
+    near_light[2u * i + 1u] = vec4<f32>(near_light[2u * i + 1u].xyz + parts.rest.lobe, 0.0);
     near_surface[2u * i] = vec4<f32>(s.position, 1.0);
-    near_surface[2u * i + 1u] = vec4<f32>(s.normal, 0.0);
+    near_surface[2u * i + 1u] = vec4<f32>(s.geometric, 0.0);
 }
 
 // The pixel invocation `id` shades. Interleaved, the image is walked as NEAR_FIELD_SIDE²
