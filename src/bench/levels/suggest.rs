@@ -193,4 +193,10 @@ fn set_changed_knobs(entry: &mut serde_json::Value, knobs: Knobs, was: Knobs, sp
             entry["sparse"][key] = value.into();
         }
     }
+    if knobs.near_field_interleave != was.near_field_interleave {
+        if !entry["sparse"].is_object() {
+            entry["sparse"] = serde_json::json!({});
+        }
+        entry["sparse"]["near_field_interleave"] = knobs.near_field_interleave.into();
+    }
 }

@@ -4,7 +4,7 @@
 use super::*;
 
 fn knobs(visibility: Occlusion, rsm_resolution: u32, points: f32, near_field: f32, subdivision: f32) -> Knobs {
-    Knobs { visibility, rsm_resolution, points, near_field, subdivision }
+    Knobs { visibility, rsm_resolution, points, near_field, near_field_interleave: 1, subdivision }
 }
 
 fn levels() -> Vec<(Quality, Knobs)> {
@@ -30,14 +30,17 @@ fn candidates_are_one_parameter_from_a_level_and_never_repeat() {
             "fast + rsm_resolution=128",
             "fast + sparse.points=1",
             "fast + sparse.near_field=4",
+            "fast + sparse.near_field=4 + sparse.near_field_interleave=4",
             "balanced + visibility=off",
             "balanced + visibility=clusters",
             "balanced + rsm_resolution=64",
             "balanced + sparse.points=0.5",
             "balanced + sparse.near_field=4",
+            "balanced + sparse.near_field=4 + sparse.near_field_interleave=4",
             "accurate + visibility=off",
             "accurate + rsm_resolution=64",
             "accurate + sparse.points=0.5",
+            "accurate + sparse.near_field_interleave=4",
         ]
     );
     for (base, _, k) in &c {
@@ -46,7 +49,8 @@ fn candidates_are_one_parameter_from_a_level_and_never_repeat() {
             k.visibility != from.visibility,
             k.rsm_resolution != from.rsm_resolution,
             k.points != from.points,
-            k.near_field != from.near_field,
+            // The near field and its interleaving: one choice.
+            k.near_field != from.near_field || k.near_field_interleave != from.near_field_interleave,
             k.subdivision != from.subdivision,
         ];
         assert_eq!(differ.iter().filter(|d| **d).count(), 1, "{k:?} from {from:?}");
@@ -202,6 +206,12 @@ fn a_level_missing_its_target_takes_the_fastest_configuration_meeting_it() {
     let existing = serde_json::json!({"accurate": {"measured": "kept", "technique": "brute_force_clusters"}});
     let s = suggest_levels(&rows, &candidates, &existing, true, "here");
     assert_eq!(s["balanced"]["sparse"], serde_json::json!({"near_field": 4.0}), "{s}");
+    // The near field interleaved, faster at the target: both parameters in the entry.
+    let interleaved = "balanced + sparse.near_field=4 + sparse.near_field_interleave=4";
+    let knobs_4x4 = Knobs { near_field_interleave: 4, ..knobs(Occlusion::Disks, 128, 1.0, 4.0, 2.0) };
+    let with_4x4 = [candidates[0].clone(), candidates[1].clone(), candidate(interleaved, knobs_4x4, 0.095, 150.0)];
+    let s4 = suggest_levels(&rows, &with_4x4, &existing, true, "here");
+    assert_eq!(s4["balanced"]["sparse"], serde_json::json!({"near_field": 4.0, "near_field_interleave": 4}), "{s4}");
     let text = s["balanced"]["measured"].as_str().unwrap();
     assert!(text.starts_with(&format!("`{near}`: rel RMSE 0.0900 at 460 ms")), "{text}");
     assert!(text.contains("within the level's target 0.10"), "{text}");
