@@ -347,7 +347,9 @@ fn assert_candidates(report: &serde_json::Value, table: &str, existing: &serde_j
             knobs["subdivision"] = base["knobs"]["subdivision"].clone();
             assert_eq!(knobs, base["knobs"], "{name}");
         } else {
-            let knob = ["visibility=", "sparse.points=", "sparse.near_field="].iter().any(|k| change.starts_with(k));
+            let knob = ["visibility=", "sparse.points=", "sparse.near_field=", "sparse.near_field_interleave="]
+                .iter()
+                .any(|k| change.starts_with(k));
             assert!(knob, "{name}");
             assert_eq!(c["method"], "sparse", "{name}");
             assert_ne!(c["knobs"], base["knobs"], "{name}");
