@@ -417,7 +417,7 @@ fn near_field_matches_cpu_twins() {
 /// As [`near_field_matches_cpu_twins`], interleaved over blocks of 4 x 4 pixels: each pixel's
 /// subset of the near VALs, then the filter over its block
 /// (`twin::near_field::{near_field_terms, filter}`), the close share added by each pixel, the
-/// pixels the filter lists redone. The image's sides are no multiple of the block's or of a
+/// redo of the pixels the filter leaves. The image's sides are no multiple of the block's or of a
 /// workgroup's, so that the sub-images the shade walks end inside both; the radius of 4
 /// spacings puts VALs within the close radius (1 spacing) of pixels.
 #[test]
@@ -454,14 +454,17 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
     let sparse = sparse_shading_twin(flat, (&flat.indices, &flat.triangle_materials), &hits, &mid, eye);
     let centres = vertex_centres(flat, scene.settings.sparse.kernel);
     let subsets = side * side;
+    // The receiver at a hit and its near-field centre (its triangle's corners' centres).
+    let receiver_at = |triangle: u32, b: glam::Vec2| {
+        let c = [0, 1, 2].map(|k| centres[flat.indices[3 * triangle as usize + k] as usize]);
+        (flat.receiver_at(triangle, b, eye), twin::barycentric(b, c[0], c[1], c[2]))
+    };
     let receivers: Vec<Option<(NearPixel, relume::scene::Material)>> = hits
         .iter()
         .enumerate()
         .map(|(i, hit)| {
             hit.map(|h| {
-                let r = flat.receiver_at(h.triangle, h.barycentrics, eye);
-                let c = [0, 1, 2].map(|k| centres[flat.indices[3 * h.triangle as usize + k] as usize]);
-                let centre = twin::barycentric(h.barycentrics, c[0], c[1], c[2]);
+                let (r, centre) = receiver_at(h.triangle, h.barycentrics);
                 let subset = twin::near_field::pixel_subset(i as u32 % w, i as u32 / w, side);
                 let receiver = (r.position, r.normal, r.geometric);
                 let exponent = r.surface.exponent;
@@ -477,9 +480,7 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
     // A pixel the filter leaves to the redo: every near VAL at the pixel.
     let whole = |i: usize| {
         let h = hits[i].expect("the filter hands on covered pixels only");
-        let r = flat.receiver_at(h.triangle, h.barycentrics, eye);
-        let c = [0, 1, 2].map(|k| centres[flat.indices[3 * h.triangle as usize + k] as usize]);
-        let centre = twin::barycentric(h.barycentrics, c[0], c[1], c[2]);
+        let (r, centre) = receiver_at(h.triangle, h.barycentrics);
         let receiver = (r.position, r.normal, r.geometric);
         twin::near_field::terms_over(receiver, r.surface.exponent, eye, centre, &vals, true, radius)
     };
@@ -501,9 +502,7 @@ fn near_field_matches_twins(rsm_resolution: Option<u32>, near_field: f32, (w, h)
         // Not interleaved, the terms are the sum over every VAL.
         for (i, hit) in hits.iter().enumerate() {
             let Some(h) = hit else { continue };
-            let r = flat.receiver_at(h.triangle, h.barycentrics, eye);
-            let c = [0, 1, 2].map(|k| centres[flat.indices[3 * h.triangle as usize + k] as usize]);
-            let centre = twin::barycentric(h.barycentrics, c[0], c[1], c[2]);
+            let (r, centre) = receiver_at(h.triangle, h.barycentrics);
             let all =
                 twin::shade_near_field(r.position, r.normal, r.geometric, &r.surface, eye, centre, &vals, true, radius);
             let n = near[i].unwrap();

@@ -6,8 +6,8 @@
 // them, through its material, to `indirect`.
 // Where the whole window lies on the pixel's surface, every subset counts once: the whole near
 // field. A pixel whose window holds under half the subsets on its surface (corners, image
-// edges) is left to the shade's redo entries, which give it every near VAL (`redone`,
-// `near_field_window.wgsl`).
+// edges) is left to the shade's redo entries, which add the rest of every near VAL's share
+// (`redone`, `near_field_window.wgsl`).
 // Rust twin: `twin::near_field::filter`, then `twin::near_field::NearTerms::radiance`.
 
 @group(0) @binding(0) var visibility: texture_2d<u32>;
