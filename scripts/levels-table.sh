@@ -48,7 +48,7 @@ done
     echo
     echo "Under each scene's levels, the configurations one parameter away from a level, each"
     echo "parameter at a value another level takes on that scene (visibility, also \`off\`; the spot"
-    echo "light's RSM, also the reference's; the fraction of sparse points; the near field; a parameter the scene file sets"
+    echo "light's RSM, also the reference's; the fraction of sparse points; the near field, also interleaved over 4 x 4 blocks; a parameter the scene file sets"
     echo "in its \`tuning\` is not varied), and the brute force through the clusters' maps with"
     echo "balanced's and accurate's VALs (\`technique=brute_force_clusters\`, also at the coarsest subdivision,"
     echo "\`sparse.subdivision=16\`: it splits only the triangles the maps draw, and there with the reference's VALs),"
