@@ -1,0 +1,117 @@
+//! The near field's rest (the VALs past the close radius of the interleaved form,
+//! `twin::near_field::close_radius` at N = 4) from VALs merged in small cells, against the same
+//! rest from every VAL: how far merging would move the near field, and how many VALs a pixel
+//! would visit instead. One sparse frame of the scene at 256 pixels wide (its own aspect), its
+//! VALs read back; at every second covered pixel on each axis (the receiver's surface point as
+//! its near-field centre) the terms of `twin::near_field::terms_weighted` over the grid's VALs
+//! (`ValGrid`, cells twice the radius), each weighted by its rest share; merged, the VALs of a
+//! cell of side `radius / k` become one (flux summed; position and normal weighted by the flux's
+//! sum over its channels; area summed), weighted by the rest share at its own position. The
+//! error is the RMSE of the irradiance's difference over the pixels, relative to the RMS of the
+//! whole near field (close share and rest) there. `settings.tuning.sparse.near_field` is set to
+//! 4 where the scene leaves it 0.
+//!   cargo run --release --example nf_merge -- <scene.json> [k ...]   (default k: 4 8 16)
+use std::collections::HashMap;
+
+use glam::{IVec3, Vec3};
+use relume::renderer::{Method, Renderer};
+use relume::twin::near_field::{ValGrid, bucket_count, cell_of, close_radius, terms_weighted};
+use relume::twin::near_field_weight;
+use relume::val::Val;
+
+fn merged(vals: &[Val], side: f32) -> Vec<Val> {
+    let mut cells: HashMap<IVec3, (Vec3, Vec3, Vec3, f32, f32)> = HashMap::new();
+    for v in vals {
+        let w = v.flux.x + v.flux.y + v.flux.z + 1e-20;
+        let e = cells.entry(cell_of(v.position, side)).or_default();
+        e.0 += v.flux;
+        e.1 += w * v.position;
+        e.2 += w * v.normal;
+        e.3 += v.area;
+        e.4 += w;
+    }
+    cells
+        .into_values()
+        .map(|(flux, p, n, area, w)| Val { position: p / w, normal: n.try_normalize().unwrap_or(Vec3::Y), area, flux })
+        .collect()
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let path = args.next().expect("a scene file");
+    let ks: Vec<f32> = args.map(|a| a.parse().expect("k: a number")).collect();
+    let ks = if ks.is_empty() { vec![4.0, 8.0, 16.0] } else { ks };
+    let mut scene = relume::scene::Scene::load(std::path::Path::new(&path)).unwrap();
+    if scene.settings.sparse.near_field <= 0.0 {
+        scene.settings.sparse.near_field = 4.0;
+    }
+    let gpu = relume::gpu::Gpu::new().unwrap();
+    let radius = scene.settings.sparse.near_field * scene.sparse_spacing();
+    let close = close_radius(radius, 4);
+    let mut renderer = Renderer::new(&gpu, &scene).unwrap();
+    let (w, h) = (256, (256 * scene.camera.height / scene.camera.width).max(1));
+    renderer.render(&gpu, Method::Sparse, w, h).unwrap();
+    let vals = renderer.read_vals(&gpu).unwrap();
+    let eye = renderer.view().eye();
+    let hits = renderer.camera_view().unwrap().read(&gpu).unwrap();
+    let flat = &renderer.scene.flat;
+    let receivers: Vec<_> = hits
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| (i % w as usize).is_multiple_of(2) && (i / w as usize).is_multiple_of(2))
+        .filter_map(|(_, h)| h.map(|h| flat.receiver_at(h.triangle, h.barycentrics, eye)))
+        .collect();
+    let rest = |d: f32| near_field_weight(d, radius) - near_field_weight(d, close);
+    let grid = ValGrid::build(&vals, radius, bucket_count(vals.len() as u32), 1);
+    let luminance = |e: Vec3| e.x + e.y + e.z;
+    // Every VAL: the close share, the rest, and how many VALs the rest takes (share > 0).
+    let (mut whole2, mut within) = (0.0f64, 0usize);
+    let exact: Vec<Vec3> = receivers
+        .iter()
+        .map(|r| {
+            let receiver = (r.position, r.normal, r.geometric);
+            let near: Vec<&Val> = grid.near_vals(r.position, 0).collect();
+            let d = |v: &Val| v.position.distance(r.position);
+            within += near.iter().filter(|v| rest(d(v)) > 0.0).count();
+            let close_terms = terms_weighted(
+                receiver,
+                r.surface.exponent,
+                eye,
+                near.iter().map(|v| (*v, near_field_weight(d(v), close))),
+                false,
+            );
+            let rest_terms =
+                terms_weighted(receiver, r.surface.exponent, eye, near.iter().map(|v| (*v, rest(d(v)))), false);
+            whole2 += f64::from(luminance(close_terms.irradiance + rest_terms.irradiance)).powi(2);
+            rest_terms.irradiance
+        })
+        .collect();
+    let n = receivers.len().max(1) as f64;
+    println!(
+        "{path}: {} VALs, radius {radius:.3} m, close radius {close:.3} m, {} receivers; every VAL: {:.1} in the rest \
+         per receiver",
+        vals.len(),
+        receivers.len(),
+        within as f64 / n
+    );
+    for k in ks {
+        let merged = merged(&vals, radius / k);
+        let grid = ValGrid::build(&merged, radius, bucket_count(merged.len() as u32), 1);
+        let (mut err2, mut used) = (0.0f64, 0usize);
+        for (r, e) in receivers.iter().zip(&exact) {
+            let receiver = (r.position, r.normal, r.geometric);
+            let near: Vec<&Val> = grid.near_vals(r.position, 0).collect();
+            let d = |v: &Val| v.position.distance(r.position);
+            used += near.iter().filter(|v| rest(d(v)) > 0.0).count();
+            let t = terms_weighted(receiver, r.surface.exponent, eye, near.iter().map(|v| (*v, rest(d(v)))), false);
+            err2 += f64::from(luminance(t.irradiance - *e)).powi(2);
+        }
+        println!(
+            "  merged in cells of radius/{k}: {} VALs; {:.1} in the rest per receiver; near field's irradiance moved by \
+             {:.4} (RMSE over the RMS of the whole near field)",
+            merged.len(),
+            used as f64 / n,
+            (err2 / whole2.max(1e-30)).sqrt()
+        );
+    }
+}
