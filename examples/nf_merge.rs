@@ -6,7 +6,8 @@
 //! its near-field centre) the terms of `twin::near_field::terms_weighted` over the grid's VALs
 //! (`ValGrid`, cells twice the radius), each weighted by its rest share; merged, the VALs of a
 //! cell of side `radius / k` become one (flux summed; position and normal weighted by the flux's
-//! sum over its channels; area summed), weighted by the rest share at its own position. The
+//! sum over its channels; area summed), weighted by the rest share at its own position; then
+//! the same per cell and per face of the cube the VAL's normal points through most. The
 //! error is the RMSE of the irradiance's difference over the pixels, relative to the RMS of the
 //! whole near field (close share and rest) there. `settings.tuning.sparse.near_field` is set to
 //! 4 where the scene leaves it 0.
@@ -19,11 +20,29 @@ use relume::twin::near_field::{ValGrid, bucket_count, cell_of, close_radius, ter
 use relume::twin::near_field_weight;
 use relume::val::Val;
 
-fn merged(vals: &[Val], side: f32) -> Vec<Val> {
-    let mut cells: HashMap<IVec3, (Vec3, Vec3, Vec3, f32, f32)> = HashMap::new();
+/// The face of the cube a unit normal points through most (0-5): VALs merged by cell and face
+/// keep walls apart from floors.
+fn face(n: Vec3) -> u8 {
+    let a = n.abs();
+    let (axis, c) = if a.x >= a.y && a.x >= a.z {
+        (0, n.x)
+    } else if a.y >= a.z {
+        (1, n.y)
+    } else {
+        (2, n.z)
+    };
+    2 * axis + u8::from(c < 0.0)
+}
+
+/// `vals` merged per cell of side `side`, and per normal's [`face`] too when `by_face`.
+fn merged(vals: &[Val], side: f32, by_face: bool) -> Vec<Val> {
+    // Per cell (and face): flux, weighted position and normal, area, weight.
+    type Sums = (Vec3, Vec3, Vec3, f32, f32);
+    let mut cells: HashMap<(IVec3, u8), Sums> = HashMap::new();
     for v in vals {
         let w = v.flux.x + v.flux.y + v.flux.z + 1e-20;
-        let e = cells.entry(cell_of(v.position, side)).or_default();
+        let key = (cell_of(v.position, side), if by_face { face(v.normal) } else { 0 });
+        let e = cells.entry(key).or_default();
         e.0 += v.flux;
         e.1 += w * v.position;
         e.2 += w * v.normal;
@@ -94,8 +113,8 @@ fn main() {
         receivers.len(),
         within as f64 / n
     );
-    for k in ks {
-        let merged = merged(&vals, radius / k);
+    for (k, by_face) in ks.iter().flat_map(|&k| [(k, false), (k, true)]) {
+        let merged = merged(&vals, radius / k, by_face);
         let grid = ValGrid::build(&merged, radius, bucket_count(merged.len() as u32), 1);
         let (mut err2, mut used) = (0.0f64, 0usize);
         for (r, e) in receivers.iter().zip(&exact) {
@@ -107,8 +126,9 @@ fn main() {
             err2 += f64::from(luminance(t.irradiance - *e)).powi(2);
         }
         println!(
-            "  merged in cells of radius/{k}: {} VALs; {:.1} in the rest per receiver; near field's irradiance moved by \
-             {:.4} (RMSE over the RMS of the whole near field)",
+            "  merged in cells of radius/{k}{}: {} VALs; {:.1} in the rest per receiver; near field's irradiance moved \
+             by {:.4} (RMSE over the RMS of the whole near field)",
+            if by_face { " and by the normal's face" } else { "" },
             merged.len(),
             used as f64 / n,
             (err2 / whole2.max(1e-30)).sqrt()
