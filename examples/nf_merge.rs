@@ -7,7 +7,9 @@
 //! (`ValGrid`, cells twice the radius), each weighted by its rest share; merged, the VALs of a
 //! cell of side `radius / k` become one (flux summed; position and normal weighted by the flux's
 //! sum over its channels; area summed), weighted by the rest share at its own position; then
-//! the same per cell and per face of the cube the VAL's normal points through most. The
+//! the same per cell and per face of the cube the VAL's normal points through most; last, cells
+//! sized with the distance ([`Tree::cut`]: cells from a radius over 4 to over 32, a cell's merged
+//! VAL taken where the cell's side is at most 1/alpha of its distance, for alpha 2, 4, 8). The
 //! error is the RMSE of the irradiance's difference over the pixels, relative to the RMS of the
 //! whole near field (close share and rest) there. `settings.tuning.sparse.near_field` is set to
 //! 4 where the scene leaves it 0.
