@@ -36,25 +36,29 @@ fn face(n: Vec3) -> u8 {
     2 * axis + u8::from(c < 0.0)
 }
 
-/// `vals` merged per cell of side `side`, and per normal's [`face`] too when `by_face`.
-fn merged(vals: &[Val], side: f32, by_face: bool) -> Vec<Val> {
-    // Per cell (and face): flux, weighted position and normal, area, weight.
-    type Sums = (Vec3, Vec3, Vec3, f32, f32);
-    let mut cells: HashMap<(IVec3, u8), Sums> = HashMap::new();
+/// `vals` as one VAL: flux and area summed, position and normal weighted by the flux's sum over
+/// its channels.
+fn merge<'a>(vals: impl IntoIterator<Item = &'a Val>) -> Val {
+    let (mut flux, mut p, mut n, mut area, mut total) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0, 0.0);
     for v in vals {
         let w = v.flux.x + v.flux.y + v.flux.z + 1e-20;
-        let key = (cell_of(v.position, side), if by_face { face(v.normal) } else { 0 });
-        let e = cells.entry(key).or_default();
-        e.0 += v.flux;
-        e.1 += w * v.position;
-        e.2 += w * v.normal;
-        e.3 += v.area;
-        e.4 += w;
+        flux += v.flux;
+        p += w * v.position;
+        n += w * v.normal;
+        area += v.area;
+        total += w;
     }
-    cells
-        .into_values()
-        .map(|(flux, p, n, area, w)| Val { position: p / w, normal: n.try_normalize().unwrap_or(Vec3::Y), area, flux })
-        .collect()
+    Val { position: p / total, normal: n.try_normalize().unwrap_or(Vec3::Y), area, flux }
+}
+
+/// `vals` merged per cell of side `side`, and per normal's [`face`] too when `by_face`.
+fn merged(vals: &[Val], side: f32, by_face: bool) -> Vec<Val> {
+    let mut cells: HashMap<(IVec3, u8), Vec<&Val>> = HashMap::new();
+    for v in vals {
+        let key = (cell_of(v.position, side), if by_face { face(v.normal) } else { 0 });
+        cells.entry(key).or_default().push(v);
+    }
+    cells.into_values().map(merge).collect()
 }
 
 /// VALs merged at every level of cells of side `sides[l]` (each half the one before), each
@@ -78,8 +82,7 @@ impl Tree {
             let level = cells
                 .into_iter()
                 .map(|(key, members)| {
-                    let group: Vec<Val> = members.iter().map(|&i| vals[i]).collect();
-                    let merged = merged(&group, f32::MAX, false)[0];
+                    let merged = merge(members.iter().map(|&i| &vals[i]));
                     let mut children: Vec<IVec3> = match sides.get(l + 1) {
                         Some(&next) => members.iter().map(|&i| cell_of(vals[i].position, next)).collect(),
                         None => Vec::new(),
