@@ -18,6 +18,7 @@ use std::collections::HashMap;
 
 use glam::{IVec3, Vec3};
 use relume::renderer::{Method, Renderer};
+use relume::twin::exact_cpu::Receiver;
 use relume::twin::near_field::{ValGrid, bucket_count, cell_of, close_radius, terms_weighted};
 use relume::twin::near_field_weight;
 use relume::val::Val;
@@ -147,26 +148,25 @@ fn main() {
     let rest = |d: f32| near_field_weight(d, radius) - near_field_weight(d, close);
     let grid = ValGrid::build(&vals, radius, bucket_count(vals.len() as u32), 1);
     let luminance = |e: Vec3| e.x + e.y + e.z;
+    // The irradiance at `r` of `near`, each VAL weighted by `share` of its distance, and how many
+    // of them have a share.
+    let terms_at = |r: &Receiver, near: &[Val], share: &dyn Fn(f32) -> f32| {
+        let weighted = near.iter().map(|v| (v, share(v.position.distance(r.position))));
+        let counted = weighted.clone().filter(|(_, w)| *w > 0.0).count();
+        let t = terms_weighted((r.position, r.normal, r.geometric), r.surface.exponent, eye, weighted, false);
+        (t.irradiance, counted)
+    };
     // Every VAL: the close share, the rest, and how many VALs the rest takes (share > 0).
     let (mut whole2, mut within) = (0.0f64, 0usize);
     let exact: Vec<Vec3> = receivers
         .iter()
         .map(|r| {
-            let receiver = (r.position, r.normal, r.geometric);
-            let near: Vec<&Val> = grid.near_vals(r.position, 0).collect();
-            let d = |v: &Val| v.position.distance(r.position);
-            within += near.iter().filter(|v| rest(d(v)) > 0.0).count();
-            let close_terms = terms_weighted(
-                receiver,
-                r.surface.exponent,
-                eye,
-                near.iter().map(|v| (*v, near_field_weight(d(v), close))),
-                false,
-            );
-            let rest_terms =
-                terms_weighted(receiver, r.surface.exponent, eye, near.iter().map(|v| (*v, rest(d(v)))), false);
-            whole2 += f64::from(luminance(close_terms.irradiance + rest_terms.irradiance)).powi(2);
-            rest_terms.irradiance
+            let near: Vec<Val> = grid.near_vals(r.position, 0).copied().collect();
+            let (close_irradiance, _) = terms_at(r, &near, &|d| near_field_weight(d, close));
+            let (rest_irradiance, counted) = terms_at(r, &near, &rest);
+            within += counted;
+            whole2 += f64::from(luminance(close_irradiance + rest_irradiance)).powi(2);
+            rest_irradiance
         })
         .collect();
     let n = receivers.len().max(1) as f64;
@@ -177,46 +177,40 @@ fn main() {
         receivers.len(),
         within as f64 / n
     );
+    // With the VALs `near_of` gives at a receiver's position instead: how far the near field
+    // moves (RMSE over the RMS of the whole near field) and the rest's VALs per receiver.
+    let moved = |near_of: &dyn Fn(Vec3) -> Vec<Val>| {
+        let (mut err2, mut used) = (0.0f64, 0usize);
+        for (r, e) in receivers.iter().zip(&exact) {
+            let (irradiance, counted) = terms_at(r, &near_of(r.position), &rest);
+            used += counted;
+            err2 += f64::from(luminance(irradiance - *e)).powi(2);
+        }
+        ((err2 / whole2.max(1e-30)).sqrt(), used as f64 / n)
+    };
     for (k, by_face) in ks.iter().flat_map(|&k| [(k, false), (k, true)]) {
         let merged = merged(&vals, radius / k, by_face);
         let grid = ValGrid::build(&merged, radius, bucket_count(merged.len() as u32), 1);
-        let (mut err2, mut used) = (0.0f64, 0usize);
-        for (r, e) in receivers.iter().zip(&exact) {
-            let receiver = (r.position, r.normal, r.geometric);
-            let near: Vec<&Val> = grid.near_vals(r.position, 0).collect();
-            let d = |v: &Val| v.position.distance(r.position);
-            used += near.iter().filter(|v| rest(d(v)) > 0.0).count();
-            let t = terms_weighted(receiver, r.surface.exponent, eye, near.iter().map(|v| (*v, rest(d(v)))), false);
-            err2 += f64::from(luminance(t.irradiance - *e)).powi(2);
-        }
+        let (error, used) = moved(&|p| grid.near_vals(p, 0).copied().collect());
         println!(
-            "  merged in cells of radius/{k}{}: {} VALs; {:.1} in the rest per receiver; near field's irradiance moved \
-             by {:.4} (RMSE over the RMS of the whole near field)",
+            "  merged in cells of radius/{k}{}: {} VALs; {used:.1} in the rest per receiver; near field's irradiance \
+             moved by {error:.4} (RMSE over the RMS of the whole near field)",
             if by_face { " and by the normal's face" } else { "" },
             merged.len(),
-            used as f64 / n,
-            (err2 / whole2.max(1e-30)).sqrt()
         );
     }
     // Cells sized with the distance: sides radius/4 to radius/32, a merged VAL taken where its
     // cell is at most 1/alpha of its distance.
     let tree = Tree::build(&vals, [4.0, 8.0, 16.0, 32.0].map(|k| radius / k).to_vec());
     for alpha in [2.0, 4.0, 8.0] {
-        let (mut err2, mut used) = (0.0f64, 0usize);
-        for (r, e) in receivers.iter().zip(&exact) {
-            let receiver = (r.position, r.normal, r.geometric);
+        let (error, used) = moved(&|p| {
             let mut near = Vec::new();
-            tree.cut(&vals, r.position, alpha, &mut near);
-            let d = |v: &Val| v.position.distance(r.position);
-            used += near.iter().filter(|v| rest(d(v)) > 0.0).count();
-            let t = terms_weighted(receiver, r.surface.exponent, eye, near.iter().map(|v| (*v, rest(d(v)))), false);
-            err2 += f64::from(luminance(t.irradiance - *e)).powi(2);
-        }
+            tree.cut(&vals, p, alpha, &mut near);
+            near.into_iter().copied().collect()
+        });
         println!(
             "  merged in cells sized with the distance (radius/4 to radius/32, a cell at most 1/{alpha} of its \
-             distance): {used_per:.1} in the rest per receiver; near field's irradiance moved by {:.4}",
-            (err2 / whole2.max(1e-30)).sqrt(),
-            used_per = used as f64 / n
+             distance): {used:.1} in the rest per receiver; near field's irradiance moved by {error:.4}"
         );
     }
 }

@@ -181,22 +181,22 @@ fn set_changed_knobs(entry: &mut serde_json::Value, knobs: Knobs, was: Knobs, sp
     if spot_light && knobs.rsm_resolution != was.rsm_resolution {
         entry["rsm_resolution"] = knobs.rsm_resolution.into();
     }
-    for (key, value, before) in [
-        ("points", knobs.points, was.points),
-        ("near_field", knobs.near_field, was.near_field),
-        ("subdivision", knobs.subdivision, was.subdivision),
-    ] {
-        if value != before {
+    let sparse: [(&str, bool, serde_json::Value); 4] = [
+        ("points", knobs.points != was.points, knobs.points.into()),
+        ("near_field", knobs.near_field != was.near_field, knobs.near_field.into()),
+        ("subdivision", knobs.subdivision != was.subdivision, knobs.subdivision.into()),
+        (
+            "near_field_interleave",
+            knobs.near_field_interleave != was.near_field_interleave,
+            knobs.near_field_interleave.into(),
+        ),
+    ];
+    for (key, changed, value) in sparse {
+        if changed {
             if !entry["sparse"].is_object() {
                 entry["sparse"] = serde_json::json!({});
             }
-            entry["sparse"][key] = value.into();
+            entry["sparse"][key] = value;
         }
-    }
-    if knobs.near_field_interleave != was.near_field_interleave {
-        if !entry["sparse"].is_object() {
-            entry["sparse"] = serde_json::json!({});
-        }
-        entry["sparse"]["near_field_interleave"] = knobs.near_field_interleave.into();
     }
 }
