@@ -1,6 +1,7 @@
 //! Twin of the near field's grid (`gpu/sparse/near_field*.wgsl`): the frame's VALs sorted into
-//! the buckets of a hashed uniform grid of cells twice the near-field radius wide, and the
-//! per-pixel sum over the buckets of the 2 x 2 x 2 cells around a receiver. The sum equals
+//! the buckets of a hashed uniform grid of cells twice the near-field radius wide, each cell's
+//! in [`COLUMNS`] columns along x, and the per-pixel sum over the columns of the 2 x 2 x 2
+//! cells around a receiver that its sphere reaches ([`ValGrid::runs_around`]). The sum equals
 //! [`super::shade_near_field`] over every VAL up to float order: a VAL left out lies farther
 //! than the radius, where its weight is 0 (`tests::grid_sum_equals_the_sum_over_every_val`).
 //!
@@ -33,12 +34,38 @@ pub fn bucket_count(max_vals: u32) -> u32 {
 
 pub use crate::scene::NEAR_FIELD_INTERLEAVE_SIDES as INTERLEAVE_SIDES;
 
-/// Slots of the grid (cell buckets x subsets) for up to `max_vals` VALs in `subsets` subsets:
-/// [`bucket_count`] of the VALs (the one-workgroup scan's cost grows with the slots), and at
-/// least 256 cell buckets. The cells are twice the near-field radius wide, so a frame's VALs
-/// occupy far fewer cells than there are VALs wherever the near field is worth its cost.
+/// Slots of the grid (cell buckets x subsets x [`COLUMNS`]) for up to `max_vals` VALs in
+/// `subsets` subsets: [`bucket_count`] of the VALs times the columns, at most
+/// `BUCKET_RANGE.1` (the one-workgroup scan's cost grows with the slots), and at least 256 cell
+/// buckets. The cells are twice the near-field radius wide, so a frame's VALs occupy far fewer
+/// cells than there are VALs wherever the near field is worth its cost.
 pub fn slot_count(max_vals: u32, subsets: u32) -> u32 {
-    bucket_count(max_vals).max(256 * subsets)
+    (bucket_count(max_vals) * COLUMNS).min(BUCKET_RANGE.1).max(256 * subsets * COLUMNS)
+}
+
+/// Columns per cell: each cell is split along x into this many slices, and each of a bucket's
+/// subsets into one slot per column, in column order, so that the VALs of a run of columns are
+/// one run of the grid's VALs. A receiver's sphere, as wide as a cell, reaches about half of the
+/// columns of the two cells it spans on x (plus the two it enters partly), so it reads about
+/// `1/2 + 1/COLUMNS` of their VALs instead of all of them.
+pub const COLUMNS: u32 = 8;
+
+/// The column (of [`COLUMNS`]) of the cell of side `cell` and index `cell_x` along x that the
+/// x coordinate `x` falls in, clamped to the cell's (`near_field.wgsl`'s `column_of`).
+pub fn column_of(x: f32, cell_x: i32, cell: f32) -> u32 {
+    let columns = COLUMNS as f32;
+    ((x / (cell / columns)).floor() - cell_x as f32 * columns).clamp(0.0, columns - 1.0) as u32
+}
+
+/// The columns `[first, end)` that the x extent [`lo`, `hi`] of a receiver's sphere reaches in
+/// the cells `corner_x` and `corner_x + 1` along x, of side `cell`; the second is empty where
+/// the extent ends in the first (`near_field_shade.wgsl`'s `column_runs`).
+pub fn column_runs(lo: f32, hi: f32, corner_x: i32, cell: f32) -> [(u32, u32); 2] {
+    let first = column_of(lo, corner_x, cell);
+    if ((hi / cell).floor() as i32) <= corner_x {
+        return [(first, column_of(hi, corner_x, cell) + 1), (0, 0)];
+    }
+    [(first, COLUMNS), (0, column_of(hi, corner_x + 1, cell) + 1)]
 }
 
 /// The subset (of `subsets`, a power of two) VAL `index` of the frame falls in.
@@ -288,8 +315,8 @@ pub fn vertex_centre(kernel: InterpolationKernel, position: Vec3, normal: Vec3, 
     neighbours.iter().zip(&w).map(|((p, _), w)| *p * (w / total)).sum()
 }
 
-/// The VALs sorted into hashed buckets, each bucket split into the subsets' slots: slot
-/// `bucket * subsets + subset`.
+/// The VALs sorted into hashed buckets, each bucket split into the subsets' slots and each of
+/// those into [`COLUMNS`] columns: slot `(bucket * subsets + subset) * COLUMNS + column`.
 pub struct ValGrid {
     pub radius: f32,
     /// VAL subsets (1 without interleaving).
@@ -303,12 +330,14 @@ pub struct ValGrid {
 
 impl ValGrid {
     /// Sort `vals` for near-field radius `radius` (m, > 0) into `slots` slots (a power of two, a
-    /// multiple of `subsets`), `subsets` of them per cell bucket.
+    /// multiple of `subsets` x [`COLUMNS`]), `subsets` x [`COLUMNS`] of them per cell bucket.
     pub fn build(vals: &[Val], radius: f32, slots: u32, subsets: u32) -> Self {
         let cell = cell_size(radius);
-        let buckets = slots / subsets;
+        let buckets = slots / (subsets * COLUMNS);
         let slot = |i: usize, v: &Val| {
-            (bucket_of(cell_of(v.position, cell), buckets) * subsets + val_subset(i as u32, subsets)) as usize
+            let c = cell_of(v.position, cell);
+            let column = column_of(v.position.x, c.x, cell);
+            ((bucket_of(c, buckets) * subsets + val_subset(i as u32, subsets)) * COLUMNS + column) as usize
         };
         let mut counts = vec![0u32; slots as usize];
         for (i, v) in vals.iter().enumerate() {
@@ -332,28 +361,50 @@ impl ValGrid {
         Self { radius, subsets, counts, starts, vals: sorted }
     }
 
-    /// The cell buckets a receiver at `p` visits, each once, in the shader's order: the cells
-    /// from the one holding `p - radius` on every axis, x fastest.
-    pub fn buckets_around(&self, p: Vec3) -> Vec<u32> {
-        let corner = cell_of(p - Vec3::splat(self.radius), cell_size(self.radius));
-        let mut visited: Vec<u32> = Vec::with_capacity(8);
+    /// The buckets a receiver at `p` reads and the columns `[first, end)` of each, in the
+    /// shader's order: the cells from the one holding `p - radius` on every axis, x fastest, the
+    /// columns that the sphere's x extent reaches ([`column_runs`]), less those an earlier cell
+    /// in the same bucket read (`near_field_shade.wgsl`'s `unread_columns`: two cells of one x
+    /// offset read the same columns; of the two offsets the first's run ends its cell and the
+    /// second's starts it, so what is left is one run).
+    pub fn runs_around(&self, p: Vec3) -> Vec<(u32, (u32, u32))> {
+        let cell = cell_size(self.radius);
+        let corner = cell_of(p - Vec3::splat(self.radius), cell);
+        let runs = column_runs(p.x - self.radius, p.x + self.radius, corner.x, cell);
+        let buckets = self.counts.len() as u32 / (self.subsets * COLUMNS);
+        let mut read: Vec<(u32, usize)> = Vec::with_capacity(8);
+        let mut out = Vec::with_capacity(8);
         for c in 0..8 {
             let offset = IVec3::new(c & 1, (c >> 1) & 1, c >> 2);
-            let b = bucket_of(corner + offset, self.counts.len() as u32 / self.subsets);
-            if !visited.contains(&b) {
-                visited.push(b);
+            let x = offset.x as usize;
+            let b = bucket_of(corner + offset, buckets);
+            let seen = |o: usize| read.contains(&(b, o));
+            let (mut first, mut end) = runs[x];
+            if first >= end || seen(x) {
+                continue;
+            }
+            if x == 1 && seen(0) {
+                end = end.min(runs[0].0);
+            }
+            if x == 0 && seen(1) {
+                first = first.max(runs[1].1);
+            }
+            read.push((b, x));
+            if first < end {
+                out.push((b, (first, end)));
             }
         }
-        visited
+        out
     }
 
-    /// The VALs of `subset` in the buckets around `p` (a superset of those of the subset
-    /// within the radius).
+    /// The VALs of `subset` in the columns around `p` that [`ValGrid::runs_around`] reads (a
+    /// superset of those of the subset within the radius).
     pub fn near_vals(&self, p: Vec3, subset: u32) -> impl Iterator<Item = &Val> {
-        self.buckets_around(p).into_iter().flat_map(move |b| {
-            let slot = (b * self.subsets + subset) as usize;
-            let start = self.starts[slot] as usize;
-            &self.vals[start..start + self.counts[slot] as usize]
+        self.runs_around(p).into_iter().flat_map(move |(b, (first, end))| {
+            let slots = ((b * self.subsets + subset) * COLUMNS) as usize;
+            let start = self.starts[slots + first as usize] as usize;
+            let last = slots + end as usize - 1;
+            &self.vals[start..(self.starts[last] + self.counts[last]) as usize]
         })
     }
 }
@@ -392,11 +443,13 @@ mod tests {
         }
     }
 
-    /// Every VAL within the radius of a receiver is in the buckets it visits, and none twice,
+    /// Every VAL within the radius of a receiver is in the columns it reads, and none twice,
     /// so the grid's sum is the sum over every VAL. Few buckets (8 for a scene 7 cells wide)
-    /// make cells share buckets, which the visit must not count twice; the tolerance is float
-    /// order (relative 1e-4). Interleaved, a subset's slots hold exactly that subset's VALs, and
-    /// the subsets' sums add up to the whole.
+    /// make cells share buckets, also cells of both x offsets, whose columns the visit must not
+    /// read twice; the tolerance is float order (relative 1e-4). Interleaved, a subset's slots
+    /// hold exactly that subset's VALs, and the subsets' sums add up to the whole. The columns
+    /// must save reads: under 3/4 of the VALs of the buckets' slots are read (about 1/2 +
+    /// 1/COLUMNS where cells do not share buckets).
     #[test]
     fn grid_sum_equals_the_sum_over_every_val() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
@@ -404,11 +457,15 @@ mod tests {
         let surface =
             Material { diffuse: Vec3::splat(0.7), specular: Vec3::splat(0.2), exponent: 30.0, diffuse_texture: None };
         let close = |a: Vec3, b: Vec3, scale: f32| (a - b).abs().max_element() <= 1e-4 * scale + 1e-12;
-        for (slots, subsets) in
-            [(8, 1), (BUCKET_RANGE.0, 1), (bucket_count(3000), 1), (64, 16), (slot_count(3000, 4), 4)]
-        {
+        for (slots, subsets) in [
+            (8 * COLUMNS, 1),
+            (BUCKET_RANGE.0, 1),
+            (bucket_count(3000) * COLUMNS, 1),
+            (64 * COLUMNS, 16),
+            (slot_count(3000, 4), 4),
+        ] {
             let grid = ValGrid::build(&vals, 0.3, slots, subsets);
-            let mut lit = 0;
+            let (mut lit, mut read, mut in_buckets) = (0, 0, 0);
             for _ in 0..300 {
                 let p = Vec3::new(rng.random(), rng.random(), rng.random()) * 4.0 - 2.0;
                 let n = Vec3::new(rng.random::<f32>() - 0.5, -1.0, rng.random::<f32>() - 0.5).normalize();
@@ -418,6 +475,11 @@ mod tests {
                 let all = shade_near_field(p, n, n, &surface, eye, centre, &vals, true, grid.radius);
                 let mut parts = Vec3::ZERO;
                 for subset in 0..subsets {
+                    read += grid.near_vals(centre, subset).count();
+                    for (b, _) in grid.runs_around(centre) {
+                        let slots = ((b * subsets + subset) * COLUMNS) as usize;
+                        in_buckets += grid.counts[slots..slots + COLUMNS as usize].iter().sum::<u32>() as usize;
+                    }
                     let mine = terms_over((p, n, n), 30.0, eye, centre, grid.near_vals(centre, subset), true, 0.3);
                     let of_subset = vals.iter().enumerate().filter(|(i, _)| val_subset(*i as u32, subsets) == subset);
                     let expected = terms_over((p, n, n), 30.0, eye, centre, of_subset.map(|(_, v)| v), true, 0.3);
@@ -429,6 +491,7 @@ mod tests {
                 lit += usize::from(all.max_element() > 0.0);
             }
             assert!(lit > 200, "only {lit} of 300 receivers had a VAL within the radius");
+            assert!(4 * read < 3 * in_buckets, "{slots} slots: {read} VALs read of {in_buckets} in the buckets read");
         }
     }
 
@@ -454,7 +517,8 @@ mod tests {
                 }
                 assert!(weights.iter().all(|&w| w == 1.0), "side {side} at ({x}, {y}): {weights:?}");
             }
-            assert!(slot_count(1000, subsets).is_power_of_two() && slot_count(1000, subsets) >= 256 * subsets);
+            let slots = slot_count(1000, subsets);
+            assert!(slots.is_power_of_two() && slots >= 256 * subsets * COLUMNS && slots <= BUCKET_RANGE.1);
         }
     }
 

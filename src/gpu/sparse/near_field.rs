@@ -181,7 +181,8 @@ struct Grid {
 }
 
 impl Grid {
-    /// The grid of cells twice `radius` wide, `side²` subsets per cell.
+    /// The grid of cells twice `radius` wide, `side²` subsets per cell, each split into
+    /// `twin::near_field::COLUMNS` columns along x.
     fn new(gpu: &Gpu, scene: &GpuScene, radius: f32, side: u32) -> Result<Self, GpuError> {
         let source =
             GRID.source(&Wgsl::new().include(&head(radius, side)).include(GRID_WGSL).finish(), scene.textured());

@@ -6,8 +6,9 @@
 // entry points rebuild every frame by a counting sort: `grid_count` (each VAL's bucket and its
 // slot in it), `grid_scan` (the buckets' starts, one workgroup), `grid_scatter` (the VALs in
 // bucket order). A sphere of the radius around a pixel lies in the 2 x 2 x 2 cells around the
-// cell corner nearest to it; buckets shared by two of those cells are visited once, and VALs of
-// other cells in a visited bucket are farther than the radius (weight 0).
+// cell corner nearest to it, and within them in the columns (NEAR_FIELD_COLUMNS slices of a
+// cell along x) that its x extent reaches; a bucket shared by two of those cells is read once,
+// and VALs of other cells in a visited bucket are farther than the radius (weight 0).
 // Rust twins: `twin::near_field::ValGrid` (the grid), `twin::shade_near_field` (the sum).
 //
 //
@@ -46,7 +47,21 @@ fn pixel_subset(id: vec2<u32>) -> u32 {
     return id.x % NEAR_FIELD_SIDE + NEAR_FIELD_SIDE * (id.y % NEAR_FIELD_SIDE);
 }
 
-// The slot of `cell`'s bucket for `subset` among `slots` (`twin::near_field::ValGrid`).
-fn grid_slot(cell: vec3<i32>, subset: u32, slots: u32) -> u32 {
-    return bucket_of(cell, slots / NEAR_FIELD_SUBSETS) * NEAR_FIELD_SUBSETS + subset;
+// `twin::near_field::COLUMNS`: each cell is split along x into this many columns, and each of
+// a bucket's subsets into one slot per column, in column order, so that the VALs of a run of
+// columns are one run of the grid's VALs: a pixel reads only the columns its sphere reaches.
+const NEAR_FIELD_COLUMNS: u32 = 8u;
+
+// `twin::near_field::column_of`: the column of the cell (of side `cell`, index `cell_x` on x)
+// that the x coordinate `x` falls in, clamped to the cell's.
+fn column_of(x: f32, cell_x: i32, cell: f32) -> u32 {
+    let columns = f32(NEAR_FIELD_COLUMNS);
+    return u32(clamp(floor(x / (cell / columns)) - f32(cell_x) * columns, 0.0, columns - 1.0));
+}
+
+// The slot of `cell`'s bucket for `subset` and `column` among `slots`
+// (`twin::near_field::ValGrid`).
+fn grid_slot(cell: vec3<i32>, subset: u32, column: u32, slots: u32) -> u32 {
+    let bucket = bucket_of(cell, slots / (NEAR_FIELD_SUBSETS * NEAR_FIELD_COLUMNS));
+    return (bucket * NEAR_FIELD_SUBSETS + subset) * NEAR_FIELD_COLUMNS + column;
 }

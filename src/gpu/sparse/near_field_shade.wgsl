@@ -69,6 +69,52 @@ fn repeated_bucket(visited: ptr<function, array<u32, 8>>, c: u32, bucket: u32) -
     return repeated;
 }
 
+// No bucket: what `visited` holds for a cell whose columns were all read before.
+const NO_BUCKET: u32 = 0xffffffffu;
+
+// `twin::near_field::column_runs`: the columns [first, end) that an x extent [`lo`, `hi`] (a
+// pixel's sphere) reaches in the cells `corner_x` (in xy) and `corner_x + 1` (in zw) along x, of
+// side `cell`; the second is empty where the extent ends in the first.
+fn column_runs(lo: f32, hi: f32, corner_x: i32, cell: f32) -> vec4<u32> {
+    let first = column_of(lo, corner_x, cell);
+    if i32(floor(hi / cell)) <= corner_x {
+        return vec4<u32>(first, column_of(hi, corner_x, cell) + 1u, 0u, 0u);
+    }
+    return vec4<u32>(first, NEAR_FIELD_COLUMNS, 0u, column_of(hi, corner_x + 1, cell) + 1u);
+}
+
+// The columns [first, end) of bucket `bucket`, the `c`-th of a pixel's eight cells (its x offset
+// `c & 1`), still to read: `runs`' for its x offset (`column_runs`), less what an earlier cell in
+// the same bucket read (`twin::near_field::ValGrid::runs_around`). Two cells of one x offset
+// read the same columns; of the two offsets, the first's run ends the cell and the second's
+// starts it, so what is left of either is one run.
+fn unread_columns(visited: ptr<function, array<u32, 8>>, c: u32, bucket: u32, runs: vec4<u32>) -> vec2<u32> {
+    var seen = vec2<bool>(false, false);
+    for (var i = 0u; i < c; i++) {
+        if (*visited)[i] == bucket {
+            if (i & 1u) == 0u {
+                seen.x = true;
+            } else {
+                seen.y = true;
+            }
+        }
+    }
+    let x = c & 1u;
+    var run = select(runs.xy, runs.zw, x == 1u);
+    if run.x >= run.y || (x == 0u && seen.x) || (x == 1u && seen.y) {
+        (*visited)[c] = NO_BUCKET;
+        return vec2<u32>(0u, 0u);
+    }
+    (*visited)[c] = bucket;
+    if x == 1u && seen.x {
+        run.y = min(run.y, runs.x);
+    }
+    if x == 0u && seen.y {
+        run.x = max(run.x, runs.w);
+    }
+    return run;
+}
+
 // A pixel's near field in two parts (`twin::near_field::NearParts`): interleaved, every VAL's
 // close share, which the pixel adds itself, and the rest of its subset's near share times the
 // subsets, which the filter averages; not interleaved, everything is the rest.
@@ -88,16 +134,26 @@ fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearP
     let end = VAL_BEGIN + min(VAL_SPAN, 0xffffffffu - VAL_BEGIN);
     var close = NearTerms(vec3<f32>(0.0), vec3<f32>(0.0));
     if NEAR_FIELD_CLOSE_RADIUS > 0.0 {
-        let buckets = arrayLength(&close_starts);
+        let buckets = arrayLength(&close_starts) / NEAR_FIELD_COLUMNS;
         let corner = vec3<i32>(floor((centre - vec3<f32>(NEAR_FIELD_CLOSE_RADIUS)) / NEAR_FIELD_CLOSE_CELL));
+        let runs = column_runs(
+            centre.x - NEAR_FIELD_CLOSE_RADIUS,
+            centre.x + NEAR_FIELD_CLOSE_RADIUS,
+            corner.x,
+            NEAR_FIELD_CLOSE_CELL,
+        );
         for (var c = 0u; c < 8u; c++) {
             let bucket = bucket_of(corner + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u)), buckets);
-            if repeated_bucket(&visited, c, bucket) {
+            let columns = unread_columns(&visited, c, bucket, runs);
+            if columns.x >= columns.y {
                 continue;
             }
-            let count = close_counts[bucket];
+            // The columns' slots are one run of `close_vals`.
+            let first = bucket * NEAR_FIELD_COLUMNS + columns.x;
+            let last = bucket * NEAR_FIELD_COLUMNS + columns.y - 1u;
+            let start = close_starts[first];
+            let count = close_starts[last] + close_counts[last] - start;
             let range = visit_range(&seen, count, end);
-            let start = close_starts[bucket];
             for (var k = range.x; k < range.y; k++) {
                 let val = close_vals[start + k];
                 let weight = near_field_weight(distance(val.position, centre), NEAR_FIELD_CLOSE_RADIUS);
@@ -107,20 +163,25 @@ fn near_field(s: Surface, centre: vec3<f32>, subset: u32, glossy: bool) -> NearP
             }
         }
     }
-    let buckets = arrayLength(&grid_starts) / NEAR_FIELD_SUBSETS;
-    // The 2 x 2 x 2 cells from the one holding `position - radius` on every axis.
+    let buckets = arrayLength(&grid_starts) / (NEAR_FIELD_SUBSETS * NEAR_FIELD_COLUMNS);
+    // The 2 x 2 x 2 cells from the one holding `position - radius` on every axis, the columns of
+    // each that the sphere's x extent reaches.
     let corner = cell_of(centre - vec3<f32>(NEAR_FIELD_RADIUS));
+    let runs = column_runs(centre.x - NEAR_FIELD_RADIUS, centre.x + NEAR_FIELD_RADIUS, corner.x, NEAR_FIELD_CELL);
     var rest = NearTerms(vec3<f32>(0.0), vec3<f32>(0.0));
     for (var c = 0u; c < 8u; c++) {
         let bucket = bucket_of(corner + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u)), buckets);
-        if repeated_bucket(&visited, c, bucket) {
+        let columns = unread_columns(&visited, c, bucket, runs);
+        if columns.x >= columns.y {
             continue;
         }
-        // This slot's VALs are [seen, seen + count) of the visiting order.
-        let slot = bucket * NEAR_FIELD_SUBSETS + subset;
-        let count = grid_counts[slot];
+        // The subset's slots of these columns are one run of `grid_vals`, [seen, seen + count)
+        // of the visiting order.
+        let slots = (bucket * NEAR_FIELD_SUBSETS + subset) * NEAR_FIELD_COLUMNS;
+        let start = grid_starts[slots + columns.x];
+        let last = slots + columns.y - 1u;
+        let count = grid_starts[last] + grid_counts[last] - start;
         let range = visit_range(&seen, count, end);
-        let start = grid_starts[slot];
         for (var k = range.x; k < range.y; k++) {
             let val = grid_vals[start + k];
             let d = distance(val.position, centre);
@@ -143,7 +204,8 @@ fn near_field_whole(s: Surface, centre: vec3<f32>, glossy: bool) -> NearTerms {
     var visited: array<u32, 8>;
     var seen = 0u;
     let end = VAL_BEGIN + min(VAL_SPAN, 0xffffffffu - VAL_BEGIN);
-    let buckets = arrayLength(&grid_starts) / NEAR_FIELD_SUBSETS;
+    let slots = NEAR_FIELD_SUBSETS * NEAR_FIELD_COLUMNS;
+    let buckets = arrayLength(&grid_starts) / slots;
     let corner = cell_of(centre - vec3<f32>(NEAR_FIELD_RADIUS));
     var terms = NearTerms(vec3<f32>(0.0), vec3<f32>(0.0));
     for (var c = 0u; c < 8u; c++) {
@@ -151,8 +213,8 @@ fn near_field_whole(s: Surface, centre: vec3<f32>, glossy: bool) -> NearTerms {
         if repeated_bucket(&visited, c, bucket) {
             continue;
         }
-        let last_slot = (bucket + 1u) * NEAR_FIELD_SUBSETS - 1u;
-        let start = grid_starts[bucket * NEAR_FIELD_SUBSETS];
+        let last_slot = (bucket + 1u) * slots - 1u;
+        let start = grid_starts[bucket * slots];
         let count = grid_starts[last_slot] + grid_counts[last_slot] - start;
         let range = visit_range(&seen, count, end);
         for (var k = range.x; k < range.y; k++) {
