@@ -59,9 +59,11 @@ fn column_of(x: f32, cell_x: i32, cell: f32) -> u32 {
     return u32(clamp(floor(x / (cell / columns)) - f32(cell_x) * columns, 0.0, columns - 1.0));
 }
 
-// The slot of `cell`'s bucket for `subset` and `column` among `slots`
-// (`twin::near_field::ValGrid`).
-fn grid_slot(cell: vec3<i32>, subset: u32, column: u32, slots: u32) -> u32 {
+// The slot among `slots` of the frame's VAL `index` at `position`: its cell's bucket, its
+// subset, its column (`twin::near_field::ValGrid::build`).
+fn grid_slot(position: vec3<f32>, index: u32, slots: u32) -> u32 {
+    let cell = cell_of(position);
     let bucket = bucket_of(cell, slots / (NEAR_FIELD_SUBSETS * NEAR_FIELD_COLUMNS));
-    return (bucket * NEAR_FIELD_SUBSETS + subset) * NEAR_FIELD_COLUMNS + column;
+    let column = column_of(position.x, cell.x, NEAR_FIELD_CELL);
+    return (bucket * NEAR_FIELD_SUBSETS + val_subset(index)) * NEAR_FIELD_COLUMNS + column;
 }

@@ -16,10 +16,7 @@ fn grid_count(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= frame_val_count() {
         return;
     }
-    let position = vals[id.x].position;
-    let cell = cell_of(position);
-    let column = column_of(position.x, cell.x, NEAR_FIELD_CELL);
-    let slot = grid_slot(cell, val_subset(id.x), column, arrayLength(&grid_starts));
+    let slot = grid_slot(vals[id.x].position, id.x, arrayLength(&grid_starts));
     val_slots[id.x] = atomicAdd(&grid_counts[slot], 1u);
 }
 
@@ -59,8 +56,6 @@ fn grid_scatter(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let val = vals[id.x];
-    let cell = cell_of(val.position);
-    let column = column_of(val.position.x, cell.x, NEAR_FIELD_CELL);
-    let slot = grid_slot(cell, val_subset(id.x), column, arrayLength(&grid_starts));
+    let slot = grid_slot(val.position, id.x, arrayLength(&grid_starts));
     grid_vals[grid_starts[slot] + val_slots[id.x]] = val;
 }

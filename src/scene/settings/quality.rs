@@ -639,8 +639,8 @@ pub fn resolve(quality: Quality, analysis: &SceneAnalysis, settings: &SettingsDe
         "sparse.near_field_interleave",
         crate::scene::settings::sparse::DEFAULT_NEAR_FIELD_INTERLEAVE,
         "not interleaved: every pixel shades every near VAL (interleaving at 4x4 cuts the near field's \
-         cost 1.8-3.3x where it is large and adds to it where it is small, at an accuracy that depends on the scene: against the brute force \
-         sponza_bunny 0.111 to 0.125, cornell_bunny_small 0.069 to 0.089; docs/measurements/ the near field \
+         cost 1.8-3.3x where it is large and adds to it where it is small, at an accuracy that depends on \
+         the scene: against the brute force sponza_bunny 0.111 to 0.125, cornell_bunny_small 0.069 to 0.089; docs/measurements/ the near field \
          interleaved)",
     );
     choices.level("sparse.adaptive", adaptive.0, adaptive.1);
